@@ -1,0 +1,226 @@
+"""The learning core of QL and nnQL, pure numpy, over a batch of independent learners.
+
+One learner holds two tables over the 441 egocentric states (``protocol.actions``):
+``Q_DS[s_goal, a]`` seeks the destination, ``Q_CA[s_i, a]`` avoids neighbours (one table shared by
+all neighbours). A batch of ``B`` learners, each with ``M`` neighbour slots, is driven step by step:
+
+1. :meth:`Learners.decide` completes each active learner's pending update (Eq. 9, 10) with the new
+   view as ``s'``, then picks the action (Eq. 6, 7, 8): ``Q_final = beta Q_DS + (1 - beta) Q_CA``,
+   ``Q_CA(a) = sum_i (1/d_i) Q_CA[s_i, a]`` over visible neighbours, argmax with ties broken by the
+   learner's own noise; every ``k``-th action (the paper's "random step") is random instead.
+2. :meth:`Learners.record` stores the rewards of that action.
+3. :meth:`Learners.finish` completes the pending update of learners leaving the episode.
+
+The neighbour state is where QL and nnQL differ (Eq. 6, DESIGN §2): QL reads
+``s_i = neighbour's current cell - own cell``; nnQL (n = 1) reads
+``s_i = neighbour's announced next cell - own cell`` wherever that announcement is known, and falls
+back to the QL state where it is not. ``s`` and ``s'`` are read the same way, so an nnQL update waits
+for the neighbours' next announcements: that is why updates complete at the next decision.
+At an episode's end nobody announces again, so ``s'`` falls back to the QL state there.
+
+A batch of one is an agent process; a batch of hundreds is the paper's experiment, each run exactly
+as it would be alone (every learner draws only from its own noise).
+"""
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from protocol.actions import N_ACTIONS, N_STATES, offset_state
+
+DEFAULT_ALPHA = 0.9
+DEFAULT_GAMMA = 0.6
+DEFAULT_BETA = 0.5
+"""beta is not given in the paper; README §Readings has the sweep behind this default."""
+
+
+@dataclass(frozen=True)
+class Hyper:
+    """Learning rate, discount and the DS / CA mixing weight of Eq. 7."""
+
+    alpha: float = DEFAULT_ALPHA
+    gamma: float = DEFAULT_GAMMA
+    beta: float = DEFAULT_BETA
+
+
+@dataclass
+class View:
+    """What each learner of a batch sees at one decision.
+
+    ``nb_*`` arrays have one slot per potential neighbour (``M`` slots). ``nb_next`` is read only
+    where ``nb_known`` is set; ``nb_visible`` says which slots are in view (and so count).
+    """
+
+    own: np.ndarray  # (B, 2) own cell
+    goal: np.ndarray  # (B, 2) goal cell
+    nb_cells: np.ndarray  # (B, M, 2) neighbours' current cells
+    nb_next: np.ndarray  # (B, M, 2) neighbours' announced next cells
+    nb_known: np.ndarray  # (B, M) bool: the announcement is known
+    nb_visible: np.ndarray  # (B, M) bool: the neighbour is in view
+
+    def without_intents(self) -> "View":
+        """The same view with no announcement known (the QL reading)."""
+        return View(
+            self.own, self.goal, self.nb_cells, self.nb_next,
+            np.zeros_like(self.nb_known), self.nb_visible,
+        )
+
+
+@dataclass(frozen=True)
+class EpisodeNoise:
+    """A learner's random draws for one episode: the exploring actions and the tie-breakers."""
+
+    random_actions: np.ndarray  # (max_steps,)
+    tie_breakers: np.ndarray  # (max_steps, N_ACTIONS) in [0, 1)
+
+    @staticmethod
+    def draw(rng: np.random.Generator, max_steps: int) -> "EpisodeNoise":
+        """Draw one episode's noise; the order of draws is part of the determinism contract."""
+        return EpisodeNoise(
+            random_actions=rng.integers(0, N_ACTIONS, size=max_steps, dtype=np.int64),
+            tie_breakers=rng.random((max_steps, N_ACTIONS)),
+        )
+
+
+def goal_state(view: View) -> np.ndarray:
+    """The destination-seeking state: the goal's offset from the learner."""
+    return offset_state(view.goal - view.own)
+
+
+def neighbour_states(view: View, use_intents: np.ndarray) -> np.ndarray:
+    """The collision-avoidance state of each neighbour slot ``(B, M)`` (QL or nnQL reading)."""
+    read_next = use_intents[:, None] & view.nb_known
+    cells = np.where(read_next[..., None], view.nb_next, view.nb_cells)
+    return offset_state(cells - view.own[:, None, :])
+
+
+def neighbour_weights(view: View) -> np.ndarray:
+    """``1 / d_i`` for visible neighbours (Euclidean distance now), 0 for the others."""
+    distance = np.sqrt(np.sum((view.nb_cells - view.own[:, None, :]) ** 2, axis=-1))
+    return np.where(view.nb_visible, 1.0 / np.maximum(distance, 1.0), 0.0)
+
+
+def argmax_ties(values: np.ndarray, tie_breakers: np.ndarray) -> np.ndarray:
+    """Row-wise argmax of ``(B, A)``; among exact ties, the one with the largest tie-breaker."""
+    best = values >= values.max(axis=1, keepdims=True)
+    return np.argmax(np.where(best, tie_breakers, -1.0), axis=1)
+
+
+def td_update(
+    table: np.ndarray,
+    rows: np.ndarray,
+    states: np.ndarray,
+    actions: np.ndarray,
+    rewards: np.ndarray,
+    next_states: np.ndarray,
+    bootstrap: np.ndarray,
+    hyper: Hyper,
+) -> None:
+    """Eq. 9 / 10 in place for the learners ``rows``: ``Q += alpha (r + gamma max Q' - Q)``.
+
+    ``bootstrap`` is 0 where the episode ended in a terminal state (the goal), else 1.
+    """
+    current = table[rows, states, actions]
+    future = table[rows, next_states].max(axis=1)
+    target = rewards + hyper.gamma * bootstrap * future
+    table[rows, states, actions] = current + hyper.alpha * (target - current)
+
+
+class Learners:
+    """A batch of independent QL / nnQL learners and their pending transitions."""
+
+    def __init__(
+        self,
+        random_step: np.ndarray,
+        use_intents: np.ndarray,
+        n_neighbours: int,
+        hyper: Hyper = Hyper(),
+    ) -> None:
+        self.random_step = np.asarray(random_step, dtype=np.int64)
+        self.use_intents = np.asarray(use_intents, dtype=bool)
+        if self.random_step.shape != self.use_intents.shape or self.random_step.ndim != 1:
+            raise ValueError("random_step and use_intents must be 1-D arrays of the same length")
+        if np.any(self.random_step < 1):
+            raise ValueError("the random step k must be at least 1")
+        batch = self.random_step.shape[0]
+        self.hyper = hyper
+        self.q_ds = np.zeros((batch, N_STATES, N_ACTIONS))
+        self.q_ca = np.zeros((batch, N_STATES, N_ACTIONS))
+        self.actions_taken = np.zeros(batch, dtype=np.int64)
+        self._pending = np.zeros(batch, dtype=bool)
+        self._p_goal = np.zeros(batch, dtype=np.int64)
+        self._p_action = np.zeros(batch, dtype=np.int64)
+        self._p_nb = np.zeros((batch, n_neighbours), dtype=np.int64)
+        self._p_visible = np.zeros((batch, n_neighbours), dtype=bool)
+        self._p_r_ds = np.zeros(batch)
+        self._p_r_ca = np.zeros(batch)
+        self._p_terminal = np.zeros(batch, dtype=bool)
+
+    @property
+    def batch(self) -> int:
+        return self.random_step.shape[0]
+
+    def q_final(self, view: View) -> np.ndarray:
+        """Eq. 6 and 7 for every learner: ``(B, A)``."""
+        rows = np.arange(self.batch)
+        q_ds = self.q_ds[rows, goal_state(view)]
+        nb_states = neighbour_states(view, self.use_intents)
+        q_ca = np.einsum("bm,bma->ba", neighbour_weights(view), self.q_ca[rows[:, None], nb_states])
+        return self.hyper.beta * q_ds + (1.0 - self.hyper.beta) * q_ca
+
+    def decide(
+        self,
+        view: View,
+        active: np.ndarray,
+        random_actions: np.ndarray,
+        tie_breakers: np.ndarray,
+    ) -> np.ndarray:
+        """Complete the active learners' pending updates with this view, then choose (Eq. 8).
+
+        Returns actions ``(B,)``; entries of inactive learners are meaningless.
+        """
+        active = np.asarray(active, dtype=bool)
+        self._complete(active & self._pending, view)
+        greedy = argmax_ties(self.q_final(view), tie_breakers)
+        explore = (self.actions_taken + 1) % self.random_step == 0
+        actions = np.where(explore, random_actions, greedy)
+        self.actions_taken += active
+        self._pending = active.copy()
+        self._p_goal = goal_state(view)
+        self._p_action = actions
+        self._p_nb = neighbour_states(view, self.use_intents)
+        self._p_visible = view.nb_visible.copy()
+        return actions
+
+    def record(self, r_ds: np.ndarray, r_ca: np.ndarray, arrived: np.ndarray) -> None:
+        """Store the rewards of the last decided actions; ``arrived`` marks terminal steps."""
+        self._p_r_ds = np.asarray(r_ds, dtype=float)
+        self._p_r_ca = np.asarray(r_ca, dtype=float)
+        self._p_terminal = np.asarray(arrived, dtype=bool)
+
+    def finish(self, mask: np.ndarray, view: View) -> None:
+        """Complete the pending updates of learners leaving the episode (QL reading of ``s'``)."""
+        self._complete(np.asarray(mask, dtype=bool) & self._pending, view.without_intents())
+
+    def _complete(self, mask: np.ndarray, view: View) -> None:
+        if not mask.any():
+            return
+        rows = np.flatnonzero(mask)
+        action = self._p_action[rows]
+        next_goal = goal_state(view)[rows]
+        bootstrap = (~self._p_terminal[rows]).astype(float)
+        td_update(
+            self.q_ds, rows, self._p_goal[rows], action, self._p_r_ds[rows],
+            next_goal, bootstrap, self.hyper,
+        )
+        next_nb = neighbour_states(view, self.use_intents)[rows]
+        for slot in range(self._p_nb.shape[1]):
+            seen = self._p_visible[rows, slot]
+            if not seen.any():
+                continue
+            sub = rows[seen]
+            td_update(
+                self.q_ca, sub, self._p_nb[sub, slot], action[seen], self._p_r_ca[sub],
+                next_nb[seen, slot], np.ones(sub.size), self.hyper,
+            )
+        self._pending[rows] = False

@@ -1,0 +1,1 @@
+"""The world: grid rules, scenarios and the world process that runs the lockstep clock."""
