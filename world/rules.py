@@ -92,3 +92,20 @@ def collision_reward(collided: np.ndarray) -> np.ndarray:
 def shortest_steps(start: np.ndarray, goal: np.ndarray) -> np.ndarray:
     """The fewest moves from start to goal on an empty grid (Manhattan distance)."""
     return np.sum(np.abs(np.asarray(goal) - np.asarray(start)), axis=-1)
+
+
+def invariant_violations(
+    before: np.ndarray, after: np.ndarray, count_swaps: bool
+) -> list[str]:
+    """What a tick broke, for one world (``(N, 2)`` cells): shared cells, swap-throughs."""
+    problems = []
+    cells = {tuple(cell) for cell in after.tolist()}
+    if len(cells) != len(after):
+        problems.append("two agents share a cell")
+    if count_swaps:
+        moved = np.any(before != after, axis=-1)
+        for i in np.flatnonzero(moved):
+            swapped = np.all(after == before[i], axis=-1) & np.all(before == after[i], axis=-1)
+            if swapped.any():
+                problems.append(f"agent {i} swapped through another agent")
+    return problems

@@ -1,0 +1,78 @@
+"""Atomic Q-table checkpoints of one agent: written to a temporary file, then renamed over.
+
+A checkpoint holds both tables, the exploration counter, the agent's generator state and the
+episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
+from another run shape is refused with a clear error naming the file.
+"""
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from agent.brain import AgentBrain
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be used: unreadable, corrupt or from another run shape."""
+
+
+def checkpoint_path(directory: Path, agent: int) -> Path:
+    return Path(directory) / f"agent-{agent}.npz"
+
+
+def save(path: Path, brain: AgentBrain, episode: int) -> None:
+    """Write the brain's learned state after ``episode``; readers see the old file or the new."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "wb") as f:
+        np.savez(
+            f,
+            q_ds=brain.learner.q_ds[0],
+            q_ca=brain.learner.q_ca[0],
+            actions_taken=brain.learner.actions_taken[0],
+            episode=episode,
+            agent=brain.agent,
+            n_agents=brain.config.n_agents,
+            algo=brain.config.algo,
+            rng_state=json.dumps(brain.rng.bit_generator.state),
+        )
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+def load(path: Path, brain: AgentBrain) -> int:
+    """Restore the brain from a checkpoint; returns the episode it completes."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            fields = {key: data[key] for key in data.files}
+    except Exception as error:  # numpy raises many kinds for a damaged file
+        raise CheckpointError(f"{path}: not a readable checkpoint ({error})") from None
+    expected = ("q_ds", "q_ca", "actions_taken", "episode", "agent", "n_agents", "algo", "rng_state")
+    missing = [key for key in expected if key not in fields]
+    if missing:
+        raise CheckpointError(f"{path}: corrupt checkpoint, missing {', '.join(missing)}")
+    shape = brain.learner.q_ds[0].shape
+    if fields["q_ds"].shape != shape or fields["q_ca"].shape != shape:
+        raise CheckpointError(f"{path}: Q-tables of shape {fields['q_ds'].shape}, expected {shape}")
+    if not (np.isfinite(fields["q_ds"]).all() and np.isfinite(fields["q_ca"]).all()):
+        raise CheckpointError(f"{path}: Q-tables hold non-finite values")
+    owner = (int(fields["agent"]), int(fields["n_agents"]), str(fields["algo"]))
+    mine = (brain.agent, brain.config.n_agents, brain.config.algo)
+    if owner != mine:
+        raise CheckpointError(
+            f"{path}: belongs to agent {owner[0]} of {owner[1]} ({owner[2]}), "
+            f"not agent {mine[0]} of {mine[1]} ({mine[2]})"
+        )
+    brain.learner.q_ds[0] = fields["q_ds"]
+    brain.learner.q_ca[0] = fields["q_ca"]
+    brain.learner.actions_taken[0] = int(fields["actions_taken"])
+    try:
+        brain.rng.bit_generator.state = json.loads(str(fields["rng_state"]))
+    except (ValueError, TypeError, KeyError) as error:
+        raise CheckpointError(f"{path}: bad generator state ({error})") from None
+    return int(fields["episode"])

@@ -1,0 +1,192 @@
+"""The agent process: one AgentBrain behind a Zenoh session.
+
+Per tick: receive the observation on ``world/obs/<id>``; ask the visible higher-ranked neighbours
+for their intent with one concurrent ``get`` each on ``agent/<j>/intent?tick=T``; decide; publish
+the intent on ``agent/<id>/intent`` and answer every query for it (queries that arrived early are
+held until then, and an announced intent never changes). At each episode's end, checkpoint the
+Q-tables atomically. Zenoh callbacks only hand events to a queue; all work is on the main thread.
+"""
+
+import logging
+import queue
+import signal
+from dataclasses import dataclass
+from pathlib import Path
+
+import zenoh
+
+from agent import checkpoint
+from agent.brain import AgentBrain
+from protocol import keys
+from protocol.config import SwarmConfig
+from protocol.messages import (
+    CONTROL_SHUTDOWN, Control, Inbox, Intent, Observation, agent_sender, encode,
+)
+from protocol.transport import TransportSettings
+
+log = logging.getLogger("nnql.agent")
+
+POLL_S = 0.2
+"""How often a waiting agent checks whether it was asked to stop."""
+
+
+@dataclass(frozen=True)
+class AgentOptions:
+    """How one agent process runs."""
+
+    agent: int
+    config: SwarmConfig
+    transport: TransportSettings
+    out_dir: Path
+    resume: bool = False
+
+    @property
+    def negotiation_timeout_s(self) -> float:
+        return self.config.tick_deadline_s / 2
+
+
+class AgentNode:
+    """The agent's event loop over its Zenoh session."""
+
+    def __init__(self, options: AgentOptions, session: zenoh.Session) -> None:
+        self.options = options
+        self.config = options.config
+        self.agent = options.agent
+        self.session = session
+        self.brain = AgentBrain(self.agent, self.config)
+        self.inbox = Inbox(self.config.run_id, log)
+        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.stopping = False
+        self.decided_tick = -1
+        self.decided_payload = b""
+        self.held_queries: list[tuple[int, zenoh.Query]] = []
+        self.checkpoint_file = checkpoint.checkpoint_path(options.out_dir / "checkpoints", self.agent)
+        if options.resume and self.checkpoint_file.exists():
+            episode = checkpoint.load(self.checkpoint_file, self.brain)
+            log.info("agent %d resumed from %s (episode %d)", self.agent, self.checkpoint_file, episode)
+
+    def stop(self) -> None:
+        self.stopping = True
+        self.events.put(("stop", None))
+
+    def run(self) -> None:
+        run_id, s = self.config.run_id, self.session
+        with (
+            s.declare_subscriber(keys.obs_key(run_id, self.agent),
+                                 lambda sample: self.events.put(("obs", sample))),
+            s.declare_subscriber(keys.control_key(run_id),
+                                 lambda sample: self.events.put(("control", sample))),
+            s.declare_queryable(keys.intent_key(run_id, self.agent),
+                                lambda query: self.events.put(("query", query))),
+            s.declare_publisher(keys.intent_key(run_id, self.agent)) as publisher,
+            s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
+        ):
+            self.publisher = publisher
+            while not self.stopping:
+                try:
+                    kind, item = self.events.get(timeout=POLL_S)
+                except queue.Empty:
+                    continue
+                if kind == "obs":
+                    self._on_observation(item.payload)
+                elif kind == "query":
+                    self._on_query(item)
+                elif kind == "control":
+                    self._on_control(item.payload)
+            self._drop_held_queries()
+
+    def _on_observation(self, payload) -> None:
+        obs = self.inbox.decode(payload, Observation)
+        if obs is None:
+            return
+        if obs.agent != self.agent:
+            self.inbox.reject("wrong-agent", f"observation for agent {obs.agent}")
+            return
+        if obs.tick <= self.decided_tick:
+            self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
+            return
+        answers = self._ask(self.brain.neighbours_to_ask(obs), obs.tick)
+        action = self.brain.act(obs, answers)
+        intent = Intent(run=self.config.run_id, tick=obs.tick, sender=agent_sender(self.agent),
+                        agent=self.agent, episode=obs.episode, action=action)
+        self.decided_tick, self.decided_payload = obs.tick, encode(intent)
+        if obs.episode_end:
+            checkpoint.save(self.checkpoint_file, self.brain, obs.episode)
+        self.publisher.put(self.decided_payload)
+        self._answer_held_queries()
+
+    def _ask(self, neighbours: list[int], tick: int) -> dict[int, int]:
+        """One concurrent query per neighbour; unanswered neighbours are left out."""
+        run_id = self.config.run_id
+        pending = [
+            (j, self.session.get(
+                f"{keys.intent_key(run_id, j)}?{keys.intent_query_params(tick)}",
+                timeout=self.options.negotiation_timeout_s,
+            ))
+            for j in neighbours
+        ]
+        answers = {}
+        for j, replies in pending:
+            for reply in replies:
+                if not reply.ok:
+                    continue
+                intent = self.inbox.decode(reply.ok.payload, Intent, key_agent=j)
+                if intent is None:
+                    continue
+                if intent.tick != tick:
+                    self.inbox.reject("stale-tick", f"answer for tick {intent.tick}, asked {tick}")
+                    continue
+                answers[j] = intent.action
+        return answers
+
+    def _on_query(self, query: zenoh.Query) -> None:
+        tick = keys.parse_intent_query(query.parameters)
+        if tick is None:
+            self.inbox.reject("bad-query", str(query.selector))
+            query.reply_err(b"bad query: expected ?tick=T")
+            query.drop()
+        elif tick <= self.decided_tick:
+            self._answer(tick, query)
+        else:
+            self.held_queries.append((tick, query))
+
+    def _answer_held_queries(self) -> None:
+        still_early = []
+        for tick, query in self.held_queries:
+            if tick <= self.decided_tick:
+                self._answer(tick, query)
+            else:
+                still_early.append((tick, query))
+        self.held_queries = still_early
+
+    def _answer(self, tick: int, query: zenoh.Query) -> None:
+        if tick == self.decided_tick:
+            query.reply(query.key_expr, self.decided_payload)
+        else:
+            self.inbox.reject("stale-query", f"tick {tick}, decided {self.decided_tick}")
+            query.reply_err(b"stale tick")
+        query.drop()
+
+    def _drop_held_queries(self) -> None:
+        for _, query in self.held_queries:
+            query.drop()
+        self.held_queries = []
+
+    def _on_control(self, payload) -> None:
+        control = self.inbox.decode(payload, Control)
+        if control is not None and control.command == CONTROL_SHUTDOWN:
+            log.info("agent %d: shutdown from the world", self.agent)
+            self.stopping = True
+
+
+def run_agent(options: AgentOptions) -> int:
+    """Entry point of an agent process; returns its exit code."""
+    with zenoh.open(options.transport.zenoh_config()) as session:
+        node = AgentNode(options, session)
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda *_: node.stop())
+        node.run()
+    if node.inbox.total_rejected:
+        log.warning("agent %d rejected %d messages: %s", options.agent,
+                    node.inbox.total_rejected, dict(node.inbox.rejections))
+    return 0

@@ -1,0 +1,50 @@
+"""The swarm in one process: the very same world and agent logic, with function calls for Zenoh.
+
+Agents decide in rank order, so every higher-ranked neighbour's intent is known when an agent
+asks for it: exactly what the distributed negotiation gives when nobody misses a deadline. That
+makes this runner the reference for the parity check (same config, same ``episodes.csv``).
+"""
+
+import time
+from pathlib import Path
+from typing import Callable
+
+from agent import checkpoint
+from agent.brain import AgentBrain
+from protocol.config import SwarmConfig
+from world.engine import SwarmWorld, TickReport
+from world.metrics import EpisodeWriter
+
+
+def run_in_process(
+    config: SwarmConfig,
+    out_dir: Path,
+    on_tick: Callable[[SwarmWorld, TickReport], None] | None = None,
+    checkpoints: bool = True,
+) -> SwarmWorld:
+    """Run every episode of ``config``; writes ``episodes.csv`` (and checkpoints) to ``out_dir``."""
+    out_dir = Path(out_dir)
+    world = SwarmWorld(config)
+    brains = [AgentBrain(i, config) for i in range(config.n_agents)]
+    episode_start, episode_tick = time.perf_counter(), world.tick
+    with EpisodeWriter(out_dir / "episodes.csv") as writer:
+        while not world.finished:
+            observations = world.observations()
+            actions: dict[int, int] = {}
+            for obs in sorted(observations, key=lambda o: o.rank):
+                brain = brains[obs.agent]
+                answers = {j: actions[j] for j in brain.neighbours_to_ask(obs)}
+                actions[obs.agent] = brain.act(obs, answers)
+                if obs.episode_end and checkpoints:
+                    checkpoint.save(
+                        checkpoint.checkpoint_path(out_dir / "checkpoints", obs.agent),
+                        brain, obs.episode,
+                    )
+            report = world.apply([actions[i] for i in range(config.n_agents)])
+            if report.episode_row is not None:
+                now = time.perf_counter()
+                writer.write(report.episode_row, now - episode_start, world.tick - episode_tick)
+                episode_start, episode_tick = now, world.tick
+            if on_tick is not None:
+                on_tick(world, report)
+    return world

@@ -1,0 +1,284 @@
+#!/usr/bin/env python3
+"""Start a swarm run: a world process and one process per agent, over Zenoh.
+
+    python launch/swarm.py --agents 8
+
+On one machine Zenoh is embedded in every process (peers on loopback, the world listening on a
+free port, no router, no multicast). ``--role world`` / ``--role agents --agent-ids 0-3`` start
+parts of a run on several machines; ``--in-process`` runs the very same logic in one process
+without Zenoh. The run directory (``--out``, default ``runs/<run-id>``) receives ``config.json``,
+``episodes.csv``, ``checkpoints/`` and the Rerun recording ``run.rrd``.
+"""
+
+import argparse
+import logging
+import multiprocessing as mp
+import os
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+if __package__ in (None, ""):
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from launch.progress import Progress  # noqa: E402
+from protocol.config import ALGOS, SwarmConfig  # noqa: E402
+from protocol.transport import MODES, EmbeddedLayout, TransportSettings  # noqa: E402
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+SHUTDOWN_GRACE_S = 2.5
+"""After the world ends (or Ctrl-C), children get this long to exit before they are killed."""
+
+log = logging.getLogger("nnql.launch")
+
+
+class UsageError(Exception):
+    """A bad option or value from the user: one line on stderr, exit code 2."""
+
+
+def parse_grid(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 11x11, not {text!r}") from None
+    return width, height
+
+
+def parse_ids(text: str) -> list[int]:
+    """``"0-3,6"`` -> ``[0, 1, 2, 3, 6]``."""
+    ids: list[int] = []
+    try:
+        for part in text.split(","):
+            low, _, high = part.partition("-")
+            ids.extend(range(int(low), int(high or low) + 1))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected ids such as 0-3,6, not {text!r}") from None
+    return ids
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="swarm.py", description=__doc__.split("\n\n")[0],
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    d = SwarmConfig()
+    run = p.add_argument_group("the run")
+    run.add_argument("--agents", type=int, default=d.n_agents, help="number of agents")
+    run.add_argument("--episodes", type=int, default=d.episodes)
+    run.add_argument("--max-steps", type=int, default=d.max_steps, help="steps per episode at most")
+    run.add_argument("--algo", choices=ALGOS, default=d.algo)
+    run.add_argument("--seed", type=int, default=d.seed)
+    run.add_argument("--grid", type=parse_grid, default=(d.width, d.height), help="WIDTHxHEIGHT")
+    run.add_argument("--random-step", type=int, default=d.random_step,
+                     help="every k-th action is random (the paper's random step)")
+    run.add_argument("--beta", type=float, default=d.beta, help="DS weight in Q_final (Eq. 7)")
+    run.add_argument("--count-swaps", action=argparse.BooleanOptionalAction, default=d.count_swaps,
+                     help="count two agents swapping cells as a collision")
+    run.add_argument("--deadline", type=float, default=d.tick_deadline_s,
+                     help="seconds the world waits for intents each tick")
+    run.add_argument("--run-id", default=None, help="default: <algo>-<agents>a-s<seed>-<time>")
+    run.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
+    run.add_argument("--in-process", action="store_true",
+                     help="run world and agents in this process, without Zenoh")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    z = p.add_argument_group("Zenoh (several machines)")
+    z.add_argument("--role", choices=("all", "world", "agents"), default="all",
+                   help="start everything, only the world, or only agents")
+    z.add_argument("--agent-ids", type=parse_ids, default=None,
+                   help="with --role agents: which agents to start, e.g. 0-3")
+    z.add_argument("--mode", choices=MODES, default="peer", help="Zenoh session mode")
+    z.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                   help="Zenoh listen endpoint, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    z.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                   help="Zenoh connect endpoint, e.g. tcp/192.0.2.1:7447 (repeatable)")
+    z.add_argument("--zenoh-config", default=None, metavar="FILE", help="a Zenoh JSON5 config file")
+    v = p.add_argument_group("Rerun")
+    v.add_argument("--no-record", action="store_true", help="do not write run.rrd")
+    return p
+
+
+def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
+    """The run's config and directory from the options; raises UsageError on bad values."""
+    run_id = args.run_id or f"{args.algo}-{args.agents}a-s{args.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        config = SwarmConfig(
+            run_id=run_id, n_agents=args.agents, episodes=args.episodes, max_steps=args.max_steps,
+            width=args.grid[0], height=args.grid[1], seed=args.seed, algo=args.algo,
+            random_step=args.random_step, beta=args.beta, count_swaps=args.count_swaps,
+            tick_deadline_s=args.deadline,
+        )
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    if args.zenoh_config and not Path(args.zenoh_config).is_file():
+        raise UsageError(f"no Zenoh config file at {args.zenoh_config}")
+    if args.agent_ids is not None:
+        if args.role != "agents":
+            raise UsageError("--agent-ids goes with --role agents")
+        bad = [i for i in args.agent_ids if not 0 <= i < config.n_agents]
+        if bad:
+            raise UsageError(f"agent ids {bad} out of range 0..{config.n_agents - 1}")
+    if args.role != "all" and not (args.listen or args.connect or args.zenoh_config):
+        raise UsageError(f"--role {args.role} needs --listen/--connect endpoints or --zenoh-config")
+    out = args.out or Path("runs") / run_id
+    return config, out
+
+
+def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
+    """Create the run directory; never overwrite a run that is already there."""
+    if role != "agents" and (out / "episodes.csv").exists():
+        raise UsageError(f"{out} already holds a run (episodes.csv); choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    if role != "agents":
+        (out / "config.json").write_text(config.to_json() + "\n")
+
+
+def transports(args: argparse.Namespace) -> tuple[TransportSettings, TransportSettings]:
+    """The world's and the agents' Zenoh settings: embedded, or what the options say."""
+    if args.role == "all" and not (args.listen or args.connect or args.zenoh_config):
+        layout = EmbeddedLayout()
+        return layout.world(), layout.agent()
+    explicit = TransportSettings(mode=args.mode, listen=tuple(args.listen),
+                                 connect=tuple(args.connect), config_file=args.zenoh_config)
+    return explicit, explicit
+
+
+def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record: bool,
+               progress: bool) -> int:
+    """The world process (spawned)."""
+    from world.node import WorldOptions, run_world
+
+    setup_logging("world")
+    bar = Progress(config.episodes, "episodes") if progress else None
+    collisions = 0
+
+    def on_tick(world, report) -> None:
+        nonlocal collisions
+        collisions += len(report.collided)
+        if bar is not None and report.episode_row is not None:
+            bar.update(1, collisions=collisions, missed=report.episode_row["missed_intents"],
+                       ticks_per_s=f"{world.tick / max(time.monotonic() - started, 1e-9):.0f}")
+
+    started = time.monotonic()
+    try:
+        return run_world(WorldOptions(config, transport, out, record=record), on_tick)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path) -> int:
+    """An agent process (spawned)."""
+    from agent.node import AgentOptions, run_agent
+
+    setup_logging(f"agent {agent}")
+    return run_agent(AgentOptions(agent, config, transport, out))
+
+
+def setup_logging(name: str) -> None:
+    logging.basicConfig(level=os.environ.get("NNQL_LOG", "WARNING").upper(),
+                        format=f"%(asctime)s {name}: %(message)s", stream=sys.stderr)
+
+
+def run_in_process(config: SwarmConfig, out: Path, record: bool, progress: bool) -> int:
+    from launch.inprocess import run_in_process as run
+
+    viz = None
+    if record:
+        from world.viz import WorldViz
+        viz = WorldViz.to_file(config, out / "run.rrd")
+    bar = Progress(config.episodes, "episodes") if progress else None
+    collisions = 0
+
+    def on_tick(world, report) -> None:
+        nonlocal collisions
+        collisions += len(report.collided)
+        if viz is not None:
+            viz.log_tick(world, report)
+        if bar is not None and report.episode_row is not None:
+            bar.update(1, collisions=collisions)
+
+    try:
+        world = run(config, out, on_tick)
+    finally:
+        if bar is not None:
+            bar.close()
+        if viz is not None:
+            viz.close()
+    return 1 if world.violations else 0
+
+
+def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path) -> int:
+    """Start the world and/or agents as spawned processes and wait for them."""
+    ctx = mp.get_context("spawn")
+    world_transport, agent_transport = transports(args)
+    record, progress = not args.no_record, not args.no_progress
+    world = None
+    if args.role in ("all", "world"):
+        world = ctx.Process(target=world_main, name="nnql-world",
+                            args=(config, world_transport, out, record, progress))
+        world.start()
+    agent_ids = args.agent_ids if args.agent_ids is not None else range(config.n_agents)
+    agents = []
+    if args.role in ("all", "agents"):
+        for i in agent_ids:
+            process = ctx.Process(target=agent_main, name=f"nnql-agent-{i}",
+                                  args=(i, config, agent_transport, out))
+            process.start()
+            agents.append(process)
+    children = ([world] if world else []) + agents
+    try:
+        leader = world or agents[0]
+        while leader.is_alive() and not (world is None and not any(a.is_alive() for a in agents)):
+            leader.join(0.2)
+            if world is None and all(not a.is_alive() for a in agents):
+                break
+    except KeyboardInterrupt:
+        print("\ninterrupted: stopping the swarm", file=sys.stderr)
+        stop_children(children)
+        return EXIT_INTERRUPTED
+    stop_children(children)
+    if world is not None:
+        return world.exitcode or 0
+    return max((a.exitcode or 0) for a in agents)
+
+
+def stop_children(children: list) -> None:
+    """Give children a grace period to exit by themselves, then terminate, then kill."""
+    deadline = time.monotonic() + SHUTDOWN_GRACE_S
+    for child in children:
+        child.join(max(0.0, deadline - time.monotonic()))
+    for child in children:
+        if child.is_alive():
+            child.terminate()
+    for child in children:
+        child.join(0.3)
+        if child.is_alive():
+            child.kill()
+            child.join()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        config, out = resolve(args)
+        prepare_out_dir(out, config, args.role)
+    except UsageError as error:
+        parser.exit(EXIT_USAGE, f"{parser.prog}: error: {error}\n")
+    if args.in_process:
+        try:
+            code = run_in_process(config, out, not args.no_record, not args.no_progress)
+        except KeyboardInterrupt:
+            print("\ninterrupted", file=sys.stderr)
+            return EXIT_INTERRUPTED
+    else:
+        code = run_processes(args, config, out)
+    if code == 0 and args.role != "agents":
+        print(f"run finished: {out}", file=sys.stderr)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,73 @@
+"""The configuration of a swarm run, shared by the world, the agents and the launcher.
+
+The launcher resolves it once, writes it to ``<out>/config.json``, and hands the same values to
+every process, so that a distributed run and an in-process run of one config are the same run.
+"""
+
+import json
+from dataclasses import asdict, dataclass, fields
+
+from protocol.keys import validate_run_id
+from protocol.messages import MAX_AGENTS, MAX_GRID
+
+ALGOS = ("nnql", "ql")
+
+
+def priority_rank(agent: int, tick: int, n_agents: int) -> int:
+    """The agent's negotiation rank at a tick, 0 the highest; the order rotates every tick."""
+    return (agent - tick) % n_agents
+
+
+@dataclass(frozen=True)
+class SwarmConfig:
+    """Every knob of a swarm run; the defaults are the swarm's (DESIGN §2, §3)."""
+
+    run_id: str = "run"
+    n_agents: int = 8
+    episodes: int = 50
+    max_steps: int = 100
+    width: int = 11
+    height: int = 11
+    seed: int = 0
+    algo: str = "nnql"
+    random_step: int = 20
+    alpha: float = 0.9
+    gamma: float = 0.6
+    beta: float = 0.5
+    goal_reward: float = 10.0
+    count_swaps: bool = True
+    tick_deadline_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        validate_run_id(self.run_id)
+        checks = [
+            (1 <= self.n_agents <= MAX_AGENTS, f"agents must be 1..{MAX_AGENTS}"),
+            (self.episodes >= 1, "episodes must be at least 1"),
+            (self.max_steps >= 1, "max steps must be at least 1"),
+            (2 <= self.width <= MAX_GRID and 2 <= self.height <= MAX_GRID,
+             f"the grid must be 2..{MAX_GRID} cells per side"),
+            (2 * self.n_agents <= self.width * self.height,
+             f"{self.n_agents} agents need {2 * self.n_agents} distinct start and goal cells, "
+             f"a {self.width}x{self.height} grid has {self.width * self.height}"),
+            (self.seed >= 0, "the seed must be non-negative"),
+            (self.algo in ALGOS, f"algo must be one of {', '.join(ALGOS)}"),
+            (self.random_step >= 1, "the random step k must be at least 1"),
+            (0 < self.alpha <= 1 and 0 <= self.gamma < 1 and 0 <= self.beta <= 1,
+             "alpha must be in (0, 1], gamma in [0, 1), beta in [0, 1]"),
+            (self.tick_deadline_s > 0, "the tick deadline must be positive"),
+        ]
+        for ok, message in checks:
+            if not ok:
+                raise ValueError(message)
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), indent=2, sort_keys=True)
+
+    @staticmethod
+    def from_json(text: str) -> "SwarmConfig":
+        data = json.loads(text)
+        known = {f.name for f in fields(SwarmConfig)}
+        unknown = set(data) - known
+        if unknown:
+            raise ValueError(f"unknown config keys: {', '.join(sorted(unknown))}")
+        return SwarmConfig(**data)

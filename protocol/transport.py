@@ -1,0 +1,77 @@
+"""Zenoh session settings for every process of a run: mode, endpoints, scouting, config file.
+
+The embedded default (one machine, no router): the world is a peer listening on a loopback port;
+agents are peers that listen on a free loopback port of their own and connect to the world, and
+gossip scouting joins them into a full mesh, so a negotiation query goes straight from agent to
+agent. Multicast scouting is always off unless a config file turns it on. Across machines, pass
+a Zenoh config file and/or listen and connect endpoints (README, "Several machines").
+"""
+
+import json
+import socket
+from dataclasses import dataclass, field
+
+import zenoh
+
+MODES = ("peer", "client", "router")
+
+
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that nobody listens on right now."""
+    with socket.socket() as s:
+        s.bind((host, 0))
+        return s.getsockname()[1]
+
+
+@dataclass(frozen=True)
+class TransportSettings:
+    """How one process opens its Zenoh session."""
+
+    mode: str = "peer"
+    listen: tuple[str, ...] = ()
+    connect: tuple[str, ...] = ()
+    config_file: str | None = None
+    multicast: bool = False
+
+    def to_dict(self) -> dict:
+        return {"mode": self.mode, "listen": list(self.listen), "connect": list(self.connect),
+                "config_file": self.config_file, "multicast": self.multicast}
+
+    @staticmethod
+    def from_dict(data: dict) -> "TransportSettings":
+        return TransportSettings(
+            mode=data["mode"], listen=tuple(data["listen"]), connect=tuple(data["connect"]),
+            config_file=data.get("config_file"), multicast=bool(data.get("multicast", False)),
+        )
+
+    def zenoh_config(self) -> zenoh.Config:
+        """The ``zenoh.Config``: the file first (if any), then these settings on top."""
+        if self.mode not in MODES:
+            raise ValueError(f"zenoh mode must be one of {', '.join(MODES)}, not {self.mode!r}")
+        config = zenoh.Config.from_file(self.config_file) if self.config_file else zenoh.Config()
+        config.insert_json5("mode", json.dumps(self.mode))
+        if self.listen or not self.config_file:
+            config.insert_json5("listen/endpoints", json.dumps(list(self.listen)))
+        if self.connect or not self.config_file:
+            config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
+        if not self.config_file or self.multicast:
+            config.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
+        return config
+
+
+@dataclass(frozen=True)
+class EmbeddedLayout:
+    """The one-machine layout: the world listens on ``port``; agents join through it."""
+
+    port: int = field(default_factory=free_port)
+    host: str = "127.0.0.1"
+
+    @property
+    def endpoint(self) -> str:
+        return f"tcp/{self.host}:{self.port}"
+
+    def world(self) -> TransportSettings:
+        return TransportSettings(mode="peer", listen=(self.endpoint,))
+
+    def agent(self) -> TransportSettings:
+        return TransportSettings(mode="peer", listen=(f"tcp/{self.host}:0",), connect=(self.endpoint,))

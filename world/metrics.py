@@ -1,0 +1,52 @@
+"""The run's ``episodes.csv``: one row per finished episode, flushed to disk as it ends.
+
+The deterministic columns come from the world (``world.engine.EPISODE_FIELDS``); wall-clock
+columns (``WALL_CLOCK_FIELDS``) follow them and are the only ones allowed to differ between two
+runs of the same config.
+"""
+
+import csv
+import os
+from pathlib import Path
+
+from world.engine import EPISODE_FIELDS
+
+WALL_CLOCK_FIELDS = ("duration_s", "ticks_per_s")
+COLUMNS = EPISODE_FIELDS + WALL_CLOCK_FIELDS
+
+
+class EpisodeWriter:
+    """Appends episode rows to a CSV file, each one flushed and synced before the next tick."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        fresh = not self.path.exists() or self.path.stat().st_size == 0
+        self._file = open(self.path, "a", newline="")
+        self._csv = csv.DictWriter(self._file, fieldnames=COLUMNS)
+        if fresh:
+            self._csv.writeheader()
+            self._sync()
+
+    def write(self, row: dict, duration_s: float, ticks: int) -> None:
+        rate = ticks / duration_s if duration_s > 0 else 0.0
+        self._csv.writerow({**row, "duration_s": f"{duration_s:.4f}", "ticks_per_s": f"{rate:.1f}"})
+        self._sync()
+
+    def _sync(self) -> None:
+        self._file.flush()
+        os.fsync(self._file.fileno())
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> "EpisodeWriter":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def read_episodes(path: Path) -> list[dict]:
+    """The rows of an ``episodes.csv`` as dicts of strings."""
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))

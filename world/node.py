@@ -1,0 +1,194 @@
+"""The world process: the lockstep clock over Zenoh.
+
+Per tick: publish every agent's observation on ``world/obs/<id>``; collect intents from
+``agent/*/intent`` until every live agent has answered or the tick deadline passes (a missing
+intent counts as STAY and as a missed intent); apply the tick with ``world.engine``; write the
+episode row and log to Rerun. Liveliness tokens under ``alive/agent/*`` tell who is live, so a
+dead agent costs nothing and a stalled one at most the deadline. Zenoh callbacks only hand events
+to a queue; all work is on the main thread.
+"""
+
+import logging
+import queue
+import signal
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import zenoh
+
+from protocol import keys
+from protocol.config import SwarmConfig
+from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
+from protocol.transport import TransportSettings
+from world.engine import SwarmWorld, TickReport
+from world.metrics import EpisodeWriter
+
+log = logging.getLogger("nnql.world")
+
+STARTUP_TIMEOUT_S = 60.0
+"""How long the world waits for every agent to come alive before it gives up."""
+
+
+class StartupTimeout(RuntimeError):
+    """Not every agent came alive in time."""
+
+
+@dataclass(frozen=True)
+class WorldOptions:
+    """How the world process runs."""
+
+    config: SwarmConfig
+    transport: TransportSettings
+    out_dir: Path
+    record: bool = True
+    startup_timeout_s: float = STARTUP_TIMEOUT_S
+
+
+class WorldNode:
+    """The world's event loop over its Zenoh session."""
+
+    def __init__(self, options: WorldOptions, session: zenoh.Session,
+                 on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> None:
+        self.options = options
+        self.config = options.config
+        self.session = session
+        self.world = SwarmWorld(self.config)
+        self.inbox = Inbox(self.config.run_id, log)
+        self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.alive: set[int] = set()
+        self.stopping = False
+        self.on_tick = on_tick
+        self.viz = None
+        if options.record:
+            from world.viz import WorldViz  # Rerun is loaded only by recording worlds
+            self.viz = WorldViz.to_file(self.config, options.out_dir / "run.rrd")
+
+    def stop(self) -> None:
+        self.stopping = True
+        self.events.put(("stop", None))
+
+    def run(self) -> bool:
+        """Run every episode; True if the run completed, False if it was stopped."""
+        run_id, s, n = self.config.run_id, self.session, self.config.n_agents
+        put = self.events.put
+        with (
+            s.declare_subscriber(keys.intent_key_all(run_id), lambda sample: put(("intent", sample))),
+            s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
+                                              lambda sample: put(("alive", sample)), history=True),
+            s.declare_publisher(keys.control_key(run_id)) as control,
+            s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_WORLD, 0)),
+        ):
+            publishers = [s.declare_publisher(keys.obs_key(run_id, i)) for i in range(n)]
+            try:
+                self._wait_for_agents()
+                completed = self._loop(publishers)
+            finally:
+                control.put(encode(Control(run=run_id, tick=self.world.tick, sender=WORLD_SENDER,
+                                           command=CONTROL_SHUTDOWN)))
+                for publisher in publishers:
+                    publisher.undeclare()
+                if self.viz is not None:
+                    self.viz.close()
+        return completed
+
+    def _wait_for_agents(self) -> None:
+        deadline = time.monotonic() + self.options.startup_timeout_s
+        while len(self.alive) < self.config.n_agents and not self.stopping:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                missing = sorted(set(range(self.config.n_agents)) - self.alive)
+                raise StartupTimeout(f"agents {missing} did not come alive within "
+                                     f"{self.options.startup_timeout_s:.0f} s")
+            self._handle(timeout=remaining, tick=-1, actions=None)
+
+    def _loop(self, publishers) -> bool:
+        world, n = self.world, self.config.n_agents
+        episode_start, episode_tick = time.perf_counter(), world.tick
+        with EpisodeWriter(self.options.out_dir / "episodes.csv") as writer:
+            while not world.finished:
+                if self.stopping:
+                    return False
+                tick = world.tick
+                for obs in world.observations():
+                    publishers[obs.agent].put(encode(obs))
+                actions: list[int | None] = [None] * n
+                deadline = time.monotonic() + self.config.tick_deadline_s
+                while not self.stopping and any(actions[i] is None for i in self.alive):
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0:
+                        break
+                    self._handle(timeout=remaining, tick=tick, actions=actions)
+                if self.stopping:
+                    return False
+                report = world.apply(actions)
+                if report.violations:
+                    log.error("tick %d broke the world's invariants: %s", tick, report.violations)
+                if self.viz is not None:
+                    self.viz.log_tick(world, report)
+                if report.episode_row is not None:
+                    now = time.perf_counter()
+                    writer.write(report.episode_row, now - episode_start, world.tick - episode_tick)
+                    episode_start, episode_tick = now, world.tick
+                if self.on_tick is not None:
+                    self.on_tick(world, report)
+        return True
+
+    def _handle(self, timeout: float, tick: int, actions: list[int | None] | None) -> None:
+        """Handle one event (or none, if ``timeout`` passes first)."""
+        try:
+            kind, sample = self.events.get(timeout=timeout)
+        except queue.Empty:
+            return
+        if kind == "alive":
+            agent = keys.agent_from_key(str(sample.key_expr), self.config.run_id)
+            if agent is None or agent >= self.config.n_agents:
+                self.inbox.reject("unknown-agent", str(sample.key_expr))
+            elif sample.kind == zenoh.SampleKind.PUT:
+                self.alive.add(agent)
+                log.info("agent %d is alive", agent)
+            else:
+                self.alive.discard(agent)
+                log.warning("agent %d left", agent)
+        elif kind == "intent":
+            self._on_intent(sample, tick, actions)
+
+    def _on_intent(self, sample: zenoh.Sample, tick: int, actions: list[int | None] | None) -> None:
+        key_agent = keys.agent_from_key(str(sample.key_expr), self.config.run_id)
+        intent = self.inbox.decode(sample.payload, Intent, key_agent=key_agent)
+        if intent is None:
+            return
+        if intent.agent >= self.config.n_agents:
+            self.inbox.reject("unknown-agent", f"agent {intent.agent}")
+        elif actions is None or intent.tick < tick:
+            self.inbox.reject("stale-tick", f"intent for tick {intent.tick} at tick {tick}")
+        elif intent.tick > tick:
+            self.inbox.reject("future-tick", f"intent for tick {intent.tick} at tick {tick}")
+        elif intent.episode != self.world.episode:
+            self.inbox.reject("wrong-episode", f"episode {intent.episode}")
+        elif actions[intent.agent] is not None:
+            self.inbox.reject("duplicate-intent", f"agent {intent.agent} tick {tick}")
+        else:
+            actions[intent.agent] = intent.action
+
+
+def run_world(options: WorldOptions,
+              on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> int:
+    """Entry point of the world process; returns its exit code."""
+    with zenoh.open(options.transport.zenoh_config()) as session:
+        node = WorldNode(options, session, on_tick)
+        for signum in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(signum, lambda *_: node.stop())
+        try:
+            completed = node.run()
+        except StartupTimeout as error:
+            log.error("%s", error)
+            return 1
+    if node.inbox.total_rejected:
+        log.warning("world rejected %d messages: %s", node.inbox.total_rejected,
+                    dict(node.inbox.rejections))
+    if node.world.violations:
+        log.error("the world's invariants were broken %d times", node.world.violations)
+        return 1
+    return 0 if completed else 130
