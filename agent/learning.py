@@ -162,9 +162,11 @@ class Learners:
 
     def q_final(self, view: View) -> np.ndarray:
         """Eq. 6 and 7 for every learner: ``(B, A)``."""
+        return self._q_final(view, goal_state(view), neighbour_states(view, self.use_intents))
+
+    def _q_final(self, view: View, goal_states: np.ndarray, nb_states: np.ndarray) -> np.ndarray:
         rows = np.arange(self.batch)
-        q_ds = self.q_ds[rows, goal_state(view)]
-        nb_states = neighbour_states(view, self.use_intents)
+        q_ds = self.q_ds[rows, goal_states]
         q_ca = np.einsum("bm,bma->ba", neighbour_weights(view), self.q_ca[rows[:, None], nb_states])
         return self.hyper.beta * q_ds + (1.0 - self.hyper.beta) * q_ca
 
@@ -180,15 +182,17 @@ class Learners:
         Returns actions ``(B,)``; entries of inactive learners are meaningless.
         """
         active = np.asarray(active, dtype=bool)
-        self._complete(active & self._pending, view)
-        greedy = argmax_ties(self.q_final(view), tie_breakers)
+        goal_states = goal_state(view)
+        nb_states = neighbour_states(view, self.use_intents)
+        self._complete(active & self._pending, goal_states, nb_states)
+        greedy = argmax_ties(self._q_final(view, goal_states, nb_states), tie_breakers)
         explore = (self.actions_taken + 1) % self.random_step == 0
         actions = np.where(explore, random_actions, greedy)
         self.actions_taken += active
         self._pending = active.copy()
-        self._p_goal = goal_state(view)
+        self._p_goal = goal_states
         self._p_action = actions
-        self._p_nb = neighbour_states(view, self.use_intents)
+        self._p_nb = nb_states
         self._p_visible = view.nb_visible.copy()
         return actions
 
@@ -200,27 +204,57 @@ class Learners:
 
     def finish(self, mask: np.ndarray, view: View) -> None:
         """Complete the pending updates of learners leaving the episode (QL reading of ``s'``)."""
-        self._complete(np.asarray(mask, dtype=bool) & self._pending, view.without_intents())
+        ql_view = view.without_intents()
+        self._complete(
+            np.asarray(mask, dtype=bool) & self._pending,
+            goal_state(ql_view), neighbour_states(ql_view, self.use_intents),
+        )
 
-    def _complete(self, mask: np.ndarray, view: View) -> None:
+    def _complete(self, mask: np.ndarray, goal_states: np.ndarray, nb_states: np.ndarray) -> None:
+        """Eq. 9 and 10 for the pending transitions of ``mask``, with ``s'`` read from the states."""
         if not mask.any():
             return
         rows = np.flatnonzero(mask)
         action = self._p_action[rows]
-        next_goal = goal_state(view)[rows]
+        next_goal = goal_states[rows]
         bootstrap = (~self._p_terminal[rows]).astype(float)
         td_update(
             self.q_ds, rows, self._p_goal[rows], action, self._p_r_ds[rows],
             next_goal, bootstrap, self.hyper,
         )
-        next_nb = neighbour_states(view, self.use_intents)[rows]
-        for slot in range(self._p_nb.shape[1]):
-            seen = self._p_visible[rows, slot]
-            if not seen.any():
-                continue
-            sub = rows[seen]
-            td_update(
-                self.q_ca, sub, self._p_nb[sub, slot], action[seen], self._p_r_ca[sub],
-                next_nb[seen, slot], np.ones(sub.size), self.hyper,
-            )
+        self._update_ca(rows, action, self._p_nb[rows], nb_states[rows], self._p_visible[rows])
         self._pending[rows] = False
+
+    def _update_ca(
+        self,
+        rows: np.ndarray,
+        action: np.ndarray,
+        states: np.ndarray,
+        next_states: np.ndarray,
+        visible: np.ndarray,
+    ) -> None:
+        """Eq. 10 once per visible neighbour, in slot order, for every learner of ``rows``.
+
+        The paper repeats the update neighbour by neighbour; where no update of a learner can see
+        another's effect (no repeated state, no ``s'`` equal to an earlier ``s``) all of them are
+        applied at once, and only the rare learners with such overlaps go slot by slot.
+        """
+        slots = states.shape[1]
+        earlier = np.tril(np.ones((slots, slots), dtype=bool), k=-1)[None]
+        both_seen = visible[:, :, None] & visible[:, None, :] & earlier
+        overlap = both_seen & (
+            (states[:, :, None] == states[:, None, :])
+            | (next_states[:, :, None] == states[:, None, :])
+        )
+        sequential = overlap.any(axis=(1, 2))
+        ones = np.ones(rows.size)
+        rewards = self._p_r_ca[rows]
+        fast = ~sequential[:, None] & visible
+        if fast.any():
+            at, slot = np.nonzero(fast)
+            td_update(self.q_ca, rows[at], states[at, slot], action[at], rewards[at],
+                      next_states[at, slot], ones[at], self.hyper)
+        for at in np.flatnonzero(sequential):
+            for slot in np.flatnonzero(visible[at]):
+                td_update(self.q_ca, rows[at:at + 1], states[at:at + 1, slot], action[at:at + 1],
+                          rewards[at:at + 1], next_states[at:at + 1, slot], ones[:1], self.hyper)

@@ -48,12 +48,13 @@ class AgentOptions:
 class AgentNode:
     """The agent's event loop over its Zenoh session."""
 
-    def __init__(self, options: AgentOptions, session: zenoh.Session) -> None:
+    def __init__(self, options: AgentOptions, session: zenoh.Session,
+                 brain: AgentBrain | None = None) -> None:
         self.options = options
         self.config = options.config
         self.agent = options.agent
         self.session = session
-        self.brain = AgentBrain(self.agent, self.config)
+        self.brain = brain or AgentBrain(self.agent, self.config)
         self.inbox = Inbox(self.config.run_id, log)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.stopping = False
@@ -78,7 +79,7 @@ class AgentNode:
                                  lambda sample: self.events.put(("control", sample))),
             s.declare_queryable(keys.intent_key(run_id, self.agent),
                                 lambda query: self.events.put(("query", query))),
-            s.declare_publisher(keys.intent_key(run_id, self.agent)) as publisher,
+            s.declare_publisher(keys.intent_key(run_id, self.agent), express=True) as publisher,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
         ):
             self.publisher = publisher
@@ -122,6 +123,7 @@ class AgentNode:
             (j, self.session.get(
                 f"{keys.intent_key(run_id, j)}?{keys.intent_query_params(tick)}",
                 timeout=self.options.negotiation_timeout_s,
+                express=True,
             ))
             for j in neighbours
         ]
@@ -161,7 +163,7 @@ class AgentNode:
 
     def _answer(self, tick: int, query: zenoh.Query) -> None:
         if tick == self.decided_tick:
-            query.reply(query.key_expr, self.decided_payload)
+            query.reply(query.key_expr, self.decided_payload, express=True)
         else:
             self.inbox.reject("stale-query", f"tick {tick}, decided {self.decided_tick}")
             query.reply_err(b"stale tick")
@@ -179,10 +181,10 @@ class AgentNode:
             self.stopping = True
 
 
-def run_agent(options: AgentOptions) -> int:
+def run_agent(options: AgentOptions, brain: AgentBrain | None = None) -> int:
     """Entry point of an agent process; returns its exit code."""
     with zenoh.open(options.transport.zenoh_config()) as session:
-        node = AgentNode(options, session)
+        node = AgentNode(options, session, brain)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
         node.run()

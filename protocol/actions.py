@@ -28,7 +28,7 @@ def offset_state(offset: np.ndarray) -> np.ndarray:
 
     Offsets beyond the window are clipped to its edge, which keeps their direction.
     """
-    clipped = np.clip(offset, -VIEW_RADIUS, VIEW_RADIUS) + VIEW_RADIUS
+    clipped = np.minimum(np.maximum(offset, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
     return clipped[..., 0] * WINDOW + clipped[..., 1]
 
 

@@ -80,7 +80,7 @@ class WorldNode:
             s.declare_publisher(keys.control_key(run_id)) as control,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_WORLD, 0)),
         ):
-            publishers = [s.declare_publisher(keys.obs_key(run_id, i)) for i in range(n)]
+            publishers = [s.declare_publisher(keys.obs_key(run_id, i), express=True) for i in range(n)]
             try:
                 self._wait_for_agents()
                 completed = self._loop(publishers)

@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Ticks per second of the swarm: distributed and in-process, against a bare Zenoh lockstep loop.
+
+For each agent count, in the same run and on the same machine:
+
+- ``distributed``: ``launch/swarm.py``'s processes (world + one process per agent, embedded Zenoh);
+- ``bare``: the very same processes and message pattern (observations, negotiation queries to the
+  higher-ranked visible neighbours, intents) with the learning taken out: every agent answers STAY;
+- ``in-process``: the same logic in one process, no Zenoh.
+
+Each figure is the median over ``--repeats`` runs of (ticks / seconds), timed by the world from the
+end of the first episode (start-up excluded). Rerun recording is off unless ``--record``.
+
+    python bench/swarm_ticks.py --agents 8,16,32 --repeats 3
+"""
+
+import argparse
+import multiprocessing as mp
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from agent.brain import AgentBrain  # noqa: E402
+from protocol.actions import STAY  # noqa: E402
+from protocol.config import SwarmConfig  # noqa: E402
+from protocol.transport import EmbeddedLayout, TransportSettings  # noqa: E402
+from world.metrics import read_episodes  # noqa: E402
+
+
+class BareBrain(AgentBrain):
+    """Negotiates exactly as the learning agent does, but learns nothing and always stays."""
+
+    def act(self, obs, answers) -> int:
+        return STAY
+
+
+def bare_agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path) -> int:
+    from agent.node import AgentOptions, run_agent
+
+    return run_agent(AgentOptions(agent, config, transport, out), BareBrain(agent, config))
+
+
+def measured_rate(out: Path) -> float:
+    """Ticks per second over every episode but the first (which includes start-up)."""
+    rows = read_episodes(out / "episodes.csv")[1:]
+    ticks = sum(int(r["steps"]) + 1 for r in rows)
+    seconds = sum(float(r["duration_s"]) for r in rows)
+    return ticks / seconds
+
+
+def run_distributed(config: SwarmConfig, out: Path, bare: bool, record: bool) -> float:
+    from launch.swarm import agent_main, stop_children, world_main
+
+    ctx = mp.get_context("spawn")
+    layout = EmbeddedLayout()
+    out.mkdir(parents=True)
+    target = bare_agent_main if bare else agent_main
+    world = ctx.Process(target=world_main, args=(config, layout.world(), out, record, False))
+    world.start()
+    agents = [ctx.Process(target=target, args=(i, config, layout.agent(), out))
+              for i in range(config.n_agents)]
+    for a in agents:
+        a.start()
+    world.join()
+    stop_children(agents)
+    if world.exitcode != 0:
+        raise RuntimeError(f"world exited with {world.exitcode}")
+    return measured_rate(out)
+
+
+def run_local(config: SwarmConfig, out: Path, record: bool) -> float:
+    from launch.swarm import run_in_process
+
+    out.mkdir(parents=True)
+    run_in_process(config, out, record, progress=False)
+    return measured_rate(out)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--agents", default="8,16,32", help="comma-separated agent counts")
+    p.add_argument("--episodes", type=int, default=6)
+    p.add_argument("--max-steps", type=int, default=100)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--algo", default="nnql", choices=("nnql", "ql"))
+    p.add_argument("--grid", default="11x11")
+    p.add_argument("--record", action="store_true", help="also write run.rrd (Rerun cost included)")
+    args = p.parse_args()
+    width, height = (int(v) for v in args.grid.split("x"))
+    print(f"{'agents':>6} {'mode':>12} {'ticks/s':>9} {'ms/tick':>8}  runs")
+    for n in (int(v) for v in args.agents.split(",")):
+        config = SwarmConfig(run_id=f"bench{n}", n_agents=n, episodes=args.episodes,
+                             max_steps=args.max_steps, width=max(width, 2 * n // height + 1),
+                             height=height, algo=args.algo)
+        results = {}
+        with tempfile.TemporaryDirectory() as tmp:
+            for r in range(args.repeats):
+                for mode in ("distributed", "bare", "in-process"):
+                    out = Path(tmp) / f"{mode}-{r}"
+                    if mode == "in-process":
+                        rate = run_local(config, out, args.record)
+                    else:
+                        rate = run_distributed(config, out, mode == "bare", args.record)
+                    results.setdefault(mode, []).append(rate)
+        for mode, rates in results.items():
+            median = statistics.median(rates)
+            runs = " ".join(f"{x:.0f}" for x in rates)
+            print(f"{n:>6} {mode:>12} {median:>9.0f} {1000 / median:>8.2f}  {runs}", flush=True)
+        ratio = statistics.median(results["distributed"]) / statistics.median(results["bare"])
+        print(f"{n:>6} {'ratio':>12} {ratio:>9.2f}  distributed / bare", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
