@@ -10,6 +10,7 @@ Q-tables atomically. Zenoh callbacks only hand events to a queue; all work is on
 import logging
 import queue
 import signal
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -28,6 +29,9 @@ log = logging.getLogger("nnql.agent")
 
 POLL_S = 0.2
 """How often a waiting agent checks whether it was asked to stop."""
+
+PEER_WAIT_S = 30.0
+"""How long an agent waits at start-up to see every other agent before it acts anyway."""
 
 
 @dataclass(frozen=True)
@@ -61,6 +65,7 @@ class AgentNode:
         self.decided_tick = -1
         self.decided_payload = b""
         self.held_queries: list[tuple[int, zenoh.Query]] = []
+        self.peers_seen: set[int] = set()
         self.checkpoint_file = checkpoint.checkpoint_path(options.out_dir / "checkpoints", self.agent)
         if options.resume and self.checkpoint_file.exists():
             episode = checkpoint.load(self.checkpoint_file, self.brain)
@@ -81,20 +86,64 @@ class AgentNode:
                                 lambda query: self.events.put(("query", query))),
             s.declare_publisher(keys.intent_key(run_id, self.agent), express=True) as publisher,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
+            s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
+                                              lambda sample: self.events.put(("alive", sample)),
+                                              history=True),
         ):
             self.publisher = publisher
+            for kind, item in self._wait_for_peers():
+                self._dispatch(kind, item)
             while not self.stopping:
                 try:
                     kind, item = self.events.get(timeout=POLL_S)
                 except queue.Empty:
                     continue
-                if kind == "obs":
-                    self._on_observation(item.payload)
-                elif kind == "query":
-                    self._on_query(item)
-                elif kind == "control":
-                    self._on_control(item.payload)
+                self._dispatch(kind, item)
             self._drop_held_queries()
+
+    def _wait_for_peers(self) -> list:
+        """Wait until every other agent's token is seen, so negotiation reaches all of them.
+
+        Peers join into a mesh a little after they reach the world; a query sent before that
+        would find nobody. Events that arrive meanwhile are kept and returned, in order.
+        """
+        backlog = []
+        others = self.config.n_agents - 1
+        deadline = time.monotonic() + PEER_WAIT_S
+        while len(self.peers_seen - {self.agent}) < others and not self.stopping:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                log.warning("agent %d: only saw agents %s; negotiating with whoever answers",
+                            self.agent, sorted(self.peers_seen))
+                break
+            try:
+                kind, item = self.events.get(timeout=min(remaining, POLL_S))
+            except queue.Empty:
+                continue
+            if kind == "alive":
+                self._on_alive(item)
+            else:
+                backlog.append((kind, item))
+        return backlog
+
+    def _dispatch(self, kind: str, item) -> None:
+        if kind == "obs":
+            self._on_observation(item.payload)
+        elif kind == "query":
+            self._on_query(item)
+        elif kind == "control":
+            self._on_control(item.payload)
+        elif kind == "alive":
+            self._on_alive(item)
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        agent = keys.agent_from_key(str(sample.key_expr), self.config.run_id)
+        if agent is None:
+            self.inbox.reject("unknown-agent", str(sample.key_expr))
+        elif sample.kind == zenoh.SampleKind.PUT:
+            self.peers_seen.add(agent)
+        else:
+            self.peers_seen.discard(agent)
 
     def _on_observation(self, payload) -> None:
         obs = self.inbox.decode(payload, Observation)

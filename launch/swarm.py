@@ -22,12 +22,11 @@ from pathlib import Path
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from launch.cli import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser  # noqa: E402
 from launch.progress import Progress  # noqa: E402
 from protocol.config import ALGOS, SwarmConfig  # noqa: E402
 from protocol.transport import MODES, EmbeddedLayout, TransportSettings  # noqa: E402
 
-EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
 SHUTDOWN_GRACE_S = 2.5
 """After the world ends (or Ctrl-C), children get this long to exit before they are killed."""
 
@@ -59,7 +58,7 @@ def parse_ids(text: str) -> list[int]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = OneLineParser(
         prog="swarm.py", description=__doc__.split("\n\n")[0],
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
@@ -266,7 +265,7 @@ def main(argv: list[str] | None = None) -> int:
         config, out = resolve(args)
         prepare_out_dir(out, config, args.role)
     except UsageError as error:
-        parser.exit(EXIT_USAGE, f"{parser.prog}: error: {error}\n")
+        parser.error(str(error))
     if args.in_process:
         try:
             code = run_in_process(config, out, not args.no_record, not args.no_progress)

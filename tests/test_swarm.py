@@ -1,0 +1,145 @@
+"""The distributed swarm end to end: real processes, real Zenoh sessions on loopback, real Rerun files."""
+
+import csv
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from agent import checkpoint
+from agent.brain import AgentBrain
+from protocol.config import SwarmConfig
+from tests.swarm_helpers import ROOT, group_pids, run_swarm, start_swarm
+from world.engine import EPISODE_FIELDS
+from world.metrics import COLUMNS, read_episodes
+
+RUN = ("--agents", "8", "--episodes", "4", "--max-steps", "40", "--seed", "3")
+
+
+def deterministic(rows: list[dict]) -> list[tuple]:
+    return [tuple(row[f] for f in EPISODE_FIELDS) for row in rows]
+
+
+@pytest.fixture(scope="module")
+def distributed_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("swarm") / "run"
+    result = run_swarm(out, *RUN, "--run-id", "dist")
+    return out, result
+
+
+def test_distributed_run_completes_and_writes_everything(distributed_run):
+    out, result = distributed_run
+    assert result.returncode == 0, result.stderr
+    rows = read_episodes(out / "episodes.csv")
+    assert list(rows[0]) == list(COLUMNS)
+    assert [int(r["episode"]) for r in rows] == [0, 1, 2, 3]
+    for row in rows:
+        assert 1 <= int(row["steps"]) <= 40
+        assert int(row["missed_intents"]) == 0
+        assert 0 <= int(row["arrived"]) <= 8
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    assert config.n_agents == 8 and config.run_id == "dist"
+    assert "invariants" not in result.stderr
+
+
+def test_recording_verifies(distributed_run):
+    out, _ = distributed_run
+    rerun = os.path.join(os.path.dirname(sys.executable), "rerun")
+    verify = subprocess.run([rerun, "rrd", "verify", str(out / "run.rrd")],
+                            capture_output=True, text=True, timeout=120)
+    assert verify.returncode == 0, verify.stderr
+
+
+def test_every_agent_checkpointed_its_last_episode(distributed_run):
+    out, _ = distributed_run
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    for agent in range(config.n_agents):
+        brain = AgentBrain(agent, config)
+        episode = checkpoint.load(checkpoint.checkpoint_path(out / "checkpoints", agent), brain)
+        assert episode == config.episodes - 1
+        assert np.abs(brain.learner.q_ds).sum() > 0
+
+
+def test_in_process_and_distributed_runs_are_identical(distributed_run, tmp_path):
+    out, result = distributed_run
+    assert result.returncode == 0, result.stderr
+    local = tmp_path / "local"
+    in_process = run_swarm(local, *RUN, "--run-id", "dist", "--in-process")
+    assert in_process.returncode == 0, in_process.stderr
+    assert deterministic(read_episodes(local / "episodes.csv")) == deterministic(
+        read_episodes(out / "episodes.csv"))
+    for agent in range(8):
+        a = np.load(local / "checkpoints" / f"agent-{agent}.npz")
+        b = np.load(out / "checkpoints" / f"agent-{agent}.npz")
+        assert np.array_equal(a["q_ds"], b["q_ds"]) and np.array_equal(a["q_ca"], b["q_ca"])
+
+
+def test_ql_swarm_runs_distributed(tmp_path):
+    result = run_swarm(tmp_path / "ql", "--agents", "4", "--episodes", "2", "--max-steps", "20",
+                       "--algo", "ql", "--no-record")
+    assert result.returncode == 0, result.stderr
+    assert len(read_episodes(tmp_path / "ql" / "episodes.csv")) == 2
+    assert not (tmp_path / "ql" / "run.rrd").exists()
+
+
+@pytest.mark.parametrize("options, message", [
+    (("--agents", "0"), "agents must be"),
+    (("--agents", "80"), "distinct start and goal cells"),
+    (("--grid", "11by11"), "WIDTHxHEIGHT"),
+    (("--algo", "dqn"), "invalid choice"),
+    (("--episodes", "-1"), "episodes must be"),
+    (("--role", "world"), "needs --listen"),
+    (("--zenoh-config", "/nonexistent.json5"), "no Zenoh config file"),
+    (("--run-id", "bad id!"), "invalid run id"),
+])
+def test_bad_options_give_one_line_and_exit_2(tmp_path, options, message):
+    result = run_swarm(tmp_path / "bad", *options, timeout=60)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip() and "usage:" not in line]
+    assert len(lines) == 1 and message in lines[0], result.stderr
+    assert "Traceback" not in result.stderr
+
+
+def test_an_existing_run_is_never_overwritten(distributed_run):
+    out, _ = distributed_run
+    before = (out / "episodes.csv").read_bytes()
+    result = run_swarm(out, *RUN, timeout=60)
+    assert result.returncode == 2 and "already holds a run" in result.stderr
+    assert (out / "episodes.csv").read_bytes() == before
+
+
+def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
+    out = tmp_path / "interrupted"
+    swarm = start_swarm(out, "--agents", "8", "--episodes", "1000")
+    try:
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline:
+            if (out / "episodes.csv").exists() and len(read_episodes(out / "episodes.csv")) >= 1:
+                break
+            time.sleep(0.2)
+        else:
+            pytest.fail("the swarm did not finish an episode in time")
+        assert len(group_pids(swarm.pid)) >= 10  # launcher, world, 8 agents (+ resource tracker)
+        os.killpg(swarm.pid, signal.SIGINT)  # what a terminal does on Ctrl-C
+        start = time.monotonic()
+        swarm.wait(timeout=10)
+        while group_pids(swarm.pid) and time.monotonic() - start < 3:
+            time.sleep(0.05)
+        assert time.monotonic() - start < 3
+        assert group_pids(swarm.pid) == []
+        assert swarm.returncode == 130
+        assert "Traceback" not in swarm.stderr.read()
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    rows = read_episodes(out / "episodes.csv")
+    assert [int(r["episode"]) for r in rows] == list(range(len(rows)))
+    with open(out / "episodes.csv", newline="") as f:
+        assert all(len(row) == len(COLUMNS) for row in csv.reader(f))
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    for agent in range(8):
+        checkpoint.load(checkpoint.checkpoint_path(out / "checkpoints", agent), AgentBrain(agent, config))
