@@ -13,6 +13,7 @@ import signal
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import zenoh
 
@@ -53,12 +54,14 @@ class AgentNode:
     """The agent's event loop over its Zenoh session."""
 
     def __init__(self, options: AgentOptions, session: zenoh.Session,
-                 brain: AgentBrain | None = None) -> None:
+                 brain: AgentBrain | None = None,
+                 on_episode_end: Callable[[AgentBrain, int], None] | None = None) -> None:
         self.options = options
         self.config = options.config
         self.agent = options.agent
         self.session = session
         self.brain = brain or AgentBrain(self.agent, self.config)
+        self.on_episode_end = on_episode_end
         self.inbox = Inbox(self.config.run_id, log)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.stopping = False
@@ -162,6 +165,8 @@ class AgentNode:
         self.decided_tick, self.decided_payload = obs.tick, encode(intent)
         if obs.episode_end:
             checkpoint.save(self.checkpoint_file, self.brain, obs.episode)
+            if self.on_episode_end is not None:
+                self.on_episode_end(self.brain, obs.episode)
         self.publisher.put(self.decided_payload)
         self._answer_held_queries()
 
@@ -230,10 +235,14 @@ class AgentNode:
             self.stopping = True
 
 
-def run_agent(options: AgentOptions, brain: AgentBrain | None = None) -> int:
-    """Entry point of an agent process; returns its exit code."""
+def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
+              on_episode_end: Callable[[AgentBrain, int], None] | None = None) -> int:
+    """Entry point of an agent process; returns its exit code.
+
+    ``on_episode_end(brain, episode)`` runs after each episode's checkpoint (e.g. Rerun heat maps).
+    """
     with zenoh.open(options.transport.zenoh_config()) as session:
-        node = AgentNode(options, session, brain)
+        node = AgentNode(options, session, brain, on_episode_end)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
         node.run()

@@ -21,6 +21,7 @@ def run_in_process(
     out_dir: Path,
     on_tick: Callable[[SwarmWorld, TickReport], None] | None = None,
     checkpoints: bool = True,
+    on_episode_end: Callable[[AgentBrain, int], None] | None = None,
 ) -> SwarmWorld:
     """Run every episode of ``config``; writes ``episodes.csv`` (and checkpoints) to ``out_dir``."""
     out_dir = Path(out_dir)
@@ -40,6 +41,8 @@ def run_in_process(
                         checkpoint.checkpoint_path(out_dir / "checkpoints", obs.agent),
                         brain, obs.episode,
                     )
+                if obs.episode_end and on_episode_end is not None:
+                    on_episode_end(brain, obs.episode)
             report = world.apply([actions[i] for i in range(config.n_agents)])
             if report.episode_row is not None:
                 now = time.perf_counter()
