@@ -1,0 +1,624 @@
+"""Keys and wire messages: round trips, every rejection reason, and fuzzing of the decode path."""
+
+import logging
+import math
+
+import msgpack
+import numpy as np
+import pytest
+import zenoh
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from protocol import keys, messages
+from protocol.actions import N_ACTIONS
+from protocol.keys import MAX_TICK
+from protocol.messages import (
+    CONTROL_SHUTDOWN,
+    MAX_AGENTS,
+    MAX_GRID,
+    MAX_PAYLOAD_BYTES,
+    PROTOCOL_VERSION,
+    SCHEMA,
+    WORLD_SENDER,
+    Control,
+    Inbox,
+    Intent,
+    Observation,
+    Rejected,
+    agent_sender,
+    encode,
+    parse,
+    to_wire,
+)
+
+RUN = "run-1"
+FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+KINDS = (Observation, Intent, Control)
+
+
+def obs(**change) -> Observation:
+    base = dict(
+        run=RUN, tick=7, sender=WORLD_SENDER, agent=2, episode=1, step=6, position=(3, 4),
+        goal=(9, 9), neighbours=((0, 3, 5), (5, 1, 1)), rank=1, reward_ds=0.25, reward_ca=10.0,
+        collided=False, arrived=False, episode_end=False,
+    )
+    return Observation(**{**base, **change})
+
+
+def intent(**change) -> Intent:
+    base = dict(run=RUN, tick=7, sender=agent_sender(2), agent=2, episode=1, action=3)
+    return Intent(**{**base, **change})
+
+
+def control(**change) -> Control:
+    base = dict(run=RUN, tick=7, sender=WORLD_SENDER, command=CONTROL_SHUTDOWN)
+    return Control(**{**base, **change})
+
+
+def wire_key(cls, name: str) -> str:
+    return next(f.wire for f in SCHEMA[cls].fields if f.name == name)
+
+
+def pack(obj) -> bytes:
+    return msgpack.packb(obj, use_bin_type=True)
+
+
+def reason_of(payload, kind, run=RUN, key_agent=None) -> str:
+    with pytest.raises(Rejected) as info:
+        parse(payload, kind, run, key_agent)
+    return info.value.reason
+
+
+def mutated(msg, name: str, value) -> bytes:
+    wire = to_wire(msg)
+    wire[wire_key(type(msg), name)] = value
+    return pack(wire)
+
+
+# ---------------------------------------------------------------- keys
+
+
+def test_key_builders():
+    assert keys.PREFIX == "nnql"
+    assert keys.obs_key(RUN, 3) == "nnql/run-1/world/obs/3"
+    assert keys.intent_key(RUN, 3) == "nnql/run-1/agent/3/intent"
+    assert keys.intent_key(RUN, np.int64(3)) == "nnql/run-1/agent/3/intent"
+    assert keys.intent_key_all(RUN) == "nnql/run-1/agent/*/intent"
+    assert keys.control_key(RUN) == "nnql/run-1/world/control"
+    assert keys.alive_key(RUN, keys.ROLE_AGENT, 5) == "nnql/run-1/alive/agent/5"
+    assert keys.alive_key(RUN, keys.ROLE_WORLD, "main") == "nnql/run-1/alive/world/main"
+    assert keys.alive_key_all(RUN, keys.ROLE_AGENT) == "nnql/run-1/alive/agent/*"
+    everyone = zenoh.KeyExpr(keys.intent_key_all(RUN))
+    assert everyone.intersects(zenoh.KeyExpr(keys.intent_key(RUN, 9)))
+
+
+@pytest.mark.parametrize("bad", ["", "a/b", "*", "**", "a b", "x" * 65, "é", "$*", None, 3])
+def test_invalid_run_ids(bad):
+    with pytest.raises(ValueError, match="run id"):
+        keys.validate_run_id(bad)
+    with pytest.raises(ValueError):
+        keys.obs_key(bad, 0)
+
+
+def test_invalid_agent_ids_and_roles():
+    for bad in (-1, MAX_AGENTS, True, 1.0, "3", None):
+        with pytest.raises(ValueError):
+            keys.intent_key(RUN, bad)
+        with pytest.raises(ValueError):
+            keys.alive_key(RUN, keys.ROLE_AGENT, bad)
+    with pytest.raises(ValueError):
+        keys.alive_key(RUN, "robot", 1)
+    with pytest.raises(ValueError):
+        keys.alive_key(RUN, keys.ROLE_WORLD, "a/b")
+    with pytest.raises(ValueError):
+        keys.alive_key_all(RUN, "robot")
+    assert keys.validate_run_id("A_b-9") == "A_b-9"
+
+
+def test_agent_from_key():
+    assert keys.agent_from_key(keys.intent_key(RUN, 0), RUN) == 0
+    assert keys.agent_from_key(keys.intent_key(RUN, 1023), RUN) == 1023
+    assert keys.agent_from_key(keys.alive_key(RUN, keys.ROLE_AGENT, 7), RUN) == 7
+    assert keys.agent_from_key(zenoh.KeyExpr(keys.intent_key(RUN, 4)), RUN) == 4
+    for bad in (
+        keys.intent_key("other", 4), keys.alive_key(RUN, keys.ROLE_WORLD, 4), keys.obs_key(RUN, 4),
+        "nnql/run-1/agent/04/intent", "nnql/run-1/agent/1024/intent", "nnql/run-1/agent/-1/intent",
+        "nnql/run-1/agent/*/intent", "nnql/run-1/agent/3/intent/x", "nnql/run-1/agent//intent",
+        "nnql/run-1/agent/３/intent", "xnql/run-1/agent/3/intent", "", None, 17,
+    ):
+        assert keys.agent_from_key(bad, RUN) is None, bad
+
+
+def test_intent_query_params_and_parse():
+    assert keys.INTENT_QUERY_TICK == "tick"
+    assert keys.intent_query_params(12) == "tick=12"
+    assert keys.parse_intent_query("tick=12") == 12
+    assert keys.parse_intent_query("?a=b;tick=0") == 0
+    assert keys.parse_intent_query({"tick": "5"}) == 5
+    assert keys.parse_intent_query({"tick": 5}) == 5
+    assert keys.parse_intent_query(f"tick={MAX_TICK - 1}") == MAX_TICK - 1
+    for bad in (
+        None, "", "tick", "tick=", "tick=-1", "tick=+1", "tick=1.0", "tick=1e3", "tick= 1",
+        "tick=abc", "tick=1|2", f"tick={MAX_TICK}", "tick=" + "9" * 40, "tock=3", {"tick": True},
+        {"tick": -1}, {"tick": 1.0}, {}, 12, object(), "tick=٣",
+    ):
+        assert keys.parse_intent_query(bad) is None, bad
+    for bad in (-1, MAX_TICK, True, 1.5):
+        with pytest.raises((ValueError, TypeError)):
+            keys.intent_query_params(bad)
+
+
+def test_parse_intent_query_zenoh_parameters():
+    assert keys.parse_intent_query(zenoh.Parameters(keys.intent_query_params(42))) == 42
+    assert keys.parse_intent_query(zenoh.Parameters({"tick": "8"})) == 8
+    selector = zenoh.Selector("nnql/r/agent/1/intent?x=1;tick=3")
+    assert keys.parse_intent_query(selector.parameters) == 3
+    for bad in ("", "tick=1|2", "tick=-4", "other=1", "tick=" + "1" * 30):
+        assert keys.parse_intent_query(zenoh.Parameters(bad)) is None
+
+
+@given(st.integers(0, MAX_TICK - 1))
+@FUZZ
+def test_intent_query_round_trip(tick):
+    assert keys.parse_intent_query(keys.intent_query_params(tick)) == tick
+    assert keys.parse_intent_query(zenoh.Parameters(keys.intent_query_params(tick))) == tick
+
+
+@given(st.text(max_size=40)
+       | st.dictionaries(st.text(max_size=5), st.text(max_size=5) | st.integers()))
+@FUZZ
+def test_parse_intent_query_never_raises(parameters):
+    tick = keys.parse_intent_query(parameters)
+    assert tick is None or 0 <= tick < MAX_TICK
+
+
+def test_intent_query_over_a_real_zenoh_session():
+    """A queryable answers ``?tick=T`` with the encoded intent; the getter decodes the ZBytes."""
+    conf = zenoh.Config()
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    seen = []
+
+    def answer(query):
+        tick = keys.parse_intent_query(query.parameters)
+        agent = keys.agent_from_key(query.key_expr, RUN)
+        seen.append((tick, agent))
+        reply = intent(tick=tick, agent=agent, sender=agent_sender(agent))
+        query.reply(query.key_expr, encode(reply))
+
+    inbox = Inbox(RUN)
+    with zenoh.open(conf) as session:
+        with session.declare_queryable(keys.intent_key(RUN, 4), answer):
+            selector = f"{keys.intent_key(RUN, 4)}?{keys.intent_query_params(21)}"
+            replies = [r for r in session.get(selector, timeout=5.0)]
+    assert seen == [(21, 4)]
+    assert replies and replies[0].ok is not None
+    sample = replies[0].ok
+    got = inbox.decode(sample.payload, Intent, keys.agent_from_key(sample.key_expr, RUN))
+    assert got == intent(tick=21, agent=4, sender=agent_sender(4))
+
+
+# ---------------------------------------------------------------- round trips and wire format
+
+
+@pytest.mark.parametrize("msg", [obs(), obs(neighbours=()), intent(), control()])
+def test_round_trip(msg):
+    payload = encode(msg)
+    assert isinstance(payload, bytes)
+    back = parse(payload, type(msg), RUN)
+    assert back == msg and type(back) is type(msg)
+    assert parse(zenoh.ZBytes(payload), type(msg), RUN) == msg
+    assert parse(bytearray(payload), type(msg), RUN) == msg
+    assert parse(memoryview(payload), type(msg), RUN) == msg
+
+
+def test_wire_format_is_short_keys_with_version_and_kind():
+    wire = msgpack.unpackb(encode(intent()))
+    assert wire == {"v": PROTOCOL_VERSION, "k": "intent", "r": RUN, "t": 7, "s": "agent/2", "a": 2,
+                    "e": 1, "x": 3}
+    assert msgpack.unpackb(encode(control()))["k"] == "control"
+    assert msgpack.unpackb(encode(obs()))["k"] == "obs"
+    for cls, kind in SCHEMA.items():
+        names = [f.name for f in kind.fields]
+        assert names == list(cls.__dataclass_fields__)
+        wires = [f.wire for f in kind.fields]
+        assert len(set(wires)) == len(wires) and not {"v", "k"} & set(wires)
+
+
+def test_encode_normalises_numpy_and_ints():
+    msg = obs(agent=np.int64(2), position=np.array([3, 4]), goal=(np.int32(9), 9),
+              neighbours=np.array([[0, 3, 5], [5, 1, 1]]), reward_ds=np.float32(0.25),
+              reward_ca=10, collided=np.bool_(False), tick=np.uint64(7))
+    back = parse(encode(msg), Observation, RUN)
+    assert back == obs()
+    assert type(back.reward_ca) is float and type(back.agent) is int and type(back.collided) is bool
+    assert back.neighbours == ((0, 3, 5), (5, 1, 1)) and type(back.position) is tuple
+
+
+@pytest.mark.parametrize("msg", [
+    obs(agent=True), obs(position=(1, 2, 3)), obs(reward_ds=math.nan), obs(neighbours=((2, 0, 0),)),
+    obs(sender="agent/2"), intent(action=N_ACTIONS), intent(sender="agent/3"), intent(action=1.0),
+    control(command="reboot"), control(run="a/b"), control(tick=-1),
+])
+def test_encode_rejects_invalid_messages(msg):
+    with pytest.raises(Rejected):
+        encode(msg)
+    with pytest.raises(ValueError):  # Rejected is a ValueError: a bug on the sending side
+        encode(msg)
+
+
+def test_encode_rejects_non_messages():
+    with pytest.raises(TypeError):
+        encode({"v": 1})
+    with pytest.raises(TypeError):
+        parse(encode(intent()), dict, RUN)
+
+
+# ---------------------------------------------------------------- every rejection reason
+
+
+def test_rejection_reasons():
+    good = encode(intent())
+    assert reason_of(None, Intent) == "not-bytes"
+    assert reason_of("text", Intent) == "not-bytes"
+    assert reason_of(12, Intent) == "not-bytes"
+    assert reason_of(b"\xc1", Intent) == "not-msgpack"  # never-used byte
+    assert reason_of(good[:-1], Intent) == "not-msgpack"  # truncated
+    assert reason_of(good + b"\x00", Intent) == "not-msgpack"  # trailing data
+    assert reason_of(pack(msgpack.ExtType(3, b"x")), Intent) == "not-msgpack"  # ext type
+    assert reason_of(pack(msgpack.Timestamp(1, 0)), Intent) == "not-msgpack"  # built-in ext -1
+    assert reason_of(pack({1: 2}), Intent) == "not-msgpack"  # non-str map key
+    assert reason_of(pack("a" * 1000), Intent) == "not-msgpack"  # over max_str_len
+    assert reason_of(b"\xa1\xff", Intent) == "not-msgpack"  # invalid UTF-8
+    assert reason_of(pack([0] * (MAX_AGENTS + 1)), Intent) == "not-msgpack"  # over max_array_len
+    assert reason_of(b"\x91" * 5000 + b"\x00", Intent) == "not-msgpack"  # nesting too deep
+    assert reason_of(pack([1, 2]), Intent) == "not-map"
+    assert reason_of(pack(None), Intent) == "not-map"
+    wire = to_wire(intent())
+    assert reason_of(pack({**wire, "v": 2}), Intent) == "bad-version"
+    assert reason_of(pack({**wire, "v": True}), Intent) == "bad-version"  # True == 1, not an int
+    assert reason_of(pack({k: v for k, v in wire.items() if k != "v"}), Intent) == "bad-version"
+    assert reason_of(encode(control()), Intent) == "wrong-kind"
+    assert reason_of(pack({**wire, "k": ["intent"]}), Intent) == "wrong-kind"
+    no_action = {k: v for k, v in wire.items() if k != "x"}
+    assert reason_of(pack(no_action), Intent) == "missing-field:action"
+    assert reason_of(pack({**wire, "zz": 1}), Intent) == "extra-field"
+    assert reason_of(pack({**wire, b"zz": 1}), Intent) == "extra-field"
+    assert reason_of(good, Intent, run="run-2") == "wrong-run"
+    assert reason_of(pack({**wire, "r": 1}), Intent) == "wrong-run"
+    assert reason_of(mutated(intent(), "action", 5), Intent) == "bad-field:action"
+    assert reason_of(mutated(intent(), "sender", "agent/3"), Intent) == "forged-sender"
+    assert reason_of(mutated(intent(), "sender", "world"), Intent) == "forged-sender"
+    assert reason_of(mutated(intent(), "sender", 2), Intent) == "bad-field:sender"
+    assert reason_of(good, Intent, key_agent=3) == "forged-sender"
+    assert parse(good, Intent, RUN, key_agent=2) == intent()
+    assert reason_of(mutated(obs(), "sender", "agent/2"), Observation) == "forged-sender"
+    assert reason_of(mutated(control(), "sender", "agent/0"), Control) == "forged-sender"
+    assert reason_of(mutated(control(), "command", "reboot"), Control) == "bad-field:command"
+
+
+def test_oversize_rejected_before_unpacking(monkeypatch):
+    def boom(*args, **kwargs):
+        raise AssertionError("unpacked an oversized payload")
+
+    monkeypatch.setattr(messages.msgpack, "unpackb", boom)
+    huge = b"\x00" * (MAX_PAYLOAD_BYTES + 1)
+    assert reason_of(huge, Intent) == "oversize"
+    assert reason_of(bytearray(huge), Intent) == "oversize"
+    assert reason_of(zenoh.ZBytes(huge), Intent) == "oversize"
+
+
+def test_largest_observation_fits():
+    crowd = tuple((a, a % MAX_GRID, MAX_GRID - 1) for a in range(1, MAX_AGENTS))
+    msg = obs(agent=0, neighbours=crowd, tick=MAX_TICK - 1, episode=MAX_TICK - 1, step=MAX_TICK - 1,
+              reward_ds=-1e6, reward_ca=1e6)
+    payload = encode(msg)
+    assert len(payload) < MAX_PAYLOAD_BYTES // 4
+    assert parse(payload, Observation, RUN) == msg
+
+
+@pytest.mark.parametrize("name,value", [
+    ("tick", -1), ("tick", MAX_TICK), ("tick", 1.0), ("tick", True), ("tick", "7"), ("tick", None),
+    ("agent", MAX_AGENTS), ("agent", -1), ("episode", -1), ("step", MAX_TICK), ("rank", MAX_AGENTS),
+    ("position", [MAX_GRID, 0]), ("position", [0, -1]), ("position", [1]), ("position", [1, 2, 3]),
+    ("position", [True, 0]), ("position", [1.0, 2]), ("position", "ab"), ("goal", {"x": 1}),
+    ("neighbours", [[2, 1, 1]]), ("neighbours", [[MAX_AGENTS, 0, 0]]),
+    ("neighbours", [[1, 0, MAX_GRID]]), ("neighbours", [[1, 0, 0], [1, 2, 2]]),
+    ("neighbours", [[1, 0]]), ("neighbours", [1, 2, 3]), ("neighbours", None),
+    ("reward_ds", math.nan), ("reward_ds", math.inf), ("reward_ca", -math.inf),
+    ("reward_ca", 1e6 + 1), ("reward_ds", -(10**7)), ("reward_ds", True), ("reward_ds", "1"),
+    ("collided", 1), ("arrived", 0), ("episode_end", None), ("collided", 1.0),
+])
+def test_observation_bad_fields(name, value):
+    assert reason_of(mutated(obs(), name, value), Observation) == f"bad-field:{name}"
+
+
+def test_float_fields_accept_ints():
+    assert parse(mutated(obs(), "reward_ca", 10), Observation, RUN).reward_ca == 10.0
+
+
+# ---------------------------------------------------------------- Inbox
+
+
+def test_inbox_never_raises_counts_and_accepts():
+    inbox = Inbox(RUN)
+    assert inbox.decode(encode(intent()), Intent, key_agent=2) == intent()
+    assert inbox.decode(zenoh.ZBytes(encode(obs())), Observation) == obs()
+    assert inbox.accepted == 2
+    for junk in (None, "str", 3, 2.5, [1], b"", object(), zenoh.ZBytes(b"\x00"), encode(control())):
+        assert inbox.decode(junk, Intent) is None
+    assert inbox.rejections["not-bytes"] == 6
+    assert inbox.rejections["not-msgpack"] == 1
+    assert inbox.rejections["not-map"] == 1
+    assert inbox.rejections["wrong-kind"] == 1
+    assert inbox.reject("stale-tick", "tick 3 < 7") is None
+    assert inbox.rejections["stale-tick"] == 1
+    assert inbox.total_rejected == 10
+    assert inbox.accepted == 2
+    with pytest.raises(ValueError):
+        Inbox("bad/run")
+
+
+def test_inbox_survives_a_payload_whose_to_bytes_fails():
+    class Weird:
+        def to_bytes(self):
+            raise RuntimeError("nope")
+
+        def __len__(self):
+            raise RuntimeError("nope either")
+
+    inbox = Inbox(RUN)
+    assert inbox.decode(Weird(), Intent) is None
+    assert inbox.total_rejected == 1
+
+
+def test_inbox_log_is_rate_limited(caplog):
+    logger = logging.getLogger("test.inbox")
+    inbox = Inbox(RUN, logger=logger)
+    with caplog.at_level(logging.WARNING, logger="test.inbox"):
+        for _ in range(2500):
+            inbox.decode(b"\xc1", Intent)
+        inbox.reject("stale-tick")
+    records = [r for r in caplog.records if r.name == "test.inbox"]
+    assert len(records) == Inbox.LOG_FIRST + 2 + 1  # first 10, 1000th, 2000th, and stale-tick
+    assert all(r.levelno == logging.WARNING for r in records)
+    assert "not-msgpack" in records[0].getMessage() and "stale-tick" in records[-1].getMessage()
+    assert inbox.rejections["not-msgpack"] == 2500
+
+
+# ---------------------------------------------------------------- hypothesis
+
+run_ids = st.from_regex(keys.RUN_ID_PATTERN, fullmatch=True)
+counts = st.integers(0, MAX_TICK - 1)
+agents = st.integers(0, MAX_AGENTS - 1)
+coords = st.integers(0, MAX_GRID - 1)
+cells = st.tuples(coords, coords)
+rewards = st.floats(-1e6, 1e6, allow_nan=False) | st.integers(-(10**6), 10**6).map(float)
+
+
+@st.composite
+def observations(draw, run=None):
+    agent = draw(agents)
+    ids = draw(st.lists(agents.filter(lambda a: a != agent), unique=True, max_size=12))
+    return Observation(
+        run=run or draw(run_ids), tick=draw(counts), sender=WORLD_SENDER, agent=agent,
+        episode=draw(counts), step=draw(counts), position=draw(cells), goal=draw(cells),
+        neighbours=tuple((i, draw(coords), draw(coords)) for i in ids), rank=draw(agents),
+        reward_ds=draw(rewards), reward_ca=draw(rewards), collided=draw(st.booleans()),
+        arrived=draw(st.booleans()), episode_end=draw(st.booleans()),
+    )
+
+
+@st.composite
+def intents(draw, run=None):
+    agent = draw(agents)
+    return Intent(run=run or draw(run_ids), tick=draw(counts), sender=agent_sender(agent),
+                  agent=agent, episode=draw(counts), action=draw(st.integers(0, N_ACTIONS - 1)))
+
+
+def controls(run=None):
+    commands = st.sampled_from(sorted(messages.CONTROL_COMMANDS))
+    return st.builds(Control, run=st.just(run) if run else run_ids, tick=counts,
+                     sender=st.just(WORLD_SENDER), command=commands)
+
+
+any_message = observations() | intents() | controls()
+
+
+@given(st.binary(max_size=300), st.sampled_from(KINDS))
+@FUZZ
+def test_fuzz_arbitrary_bytes_never_raise(payload, kind):
+    inbox = Inbox(RUN)
+    assert inbox.decode(payload, kind) is None
+    assert inbox.total_rejected == 1
+
+
+@given(any_message, st.data())
+@FUZZ
+def test_fuzz_corrupted_valid_bytes_never_raise(msg, data):
+    payload = bytearray(encode(msg))
+    for _ in range(data.draw(st.integers(1, 3))):
+        payload[data.draw(st.integers(0, len(payload) - 1))] = data.draw(st.integers(0, 255))
+    cut = data.draw(st.integers(0, len(payload)))
+    inbox = Inbox(msg.run)
+    got = inbox.decode(bytes(payload[:cut]), type(msg))
+    if got is not None:  # a corruption can still be a valid message (another tick, say)
+        assert type(got) is type(msg) and parse(encode(got), type(msg), msg.run) == got
+    assert inbox.accepted + inbox.total_rejected == 1
+
+
+@given(any_message)
+@FUZZ
+def test_fuzz_valid_messages_round_trip_exactly(msg):
+    back = parse(encode(msg), type(msg), msg.run)
+    assert back == msg
+    assert [type(getattr(back, f)) for f in msg.__dataclass_fields__] == [
+        type(getattr(msg, f)) for f in msg.__dataclass_fields__
+    ]
+    assert encode(back) == encode(msg)
+
+
+# Single-field mutations: a value that is wrong for the field (type or range) names that field.
+
+_small_ints = st.integers(-99, 99)
+_wrong_types = (
+    st.none() | st.text(max_size=8) | st.binary(max_size=8) | st.lists(_small_ints, max_size=2)
+    | st.dictionaries(st.text(max_size=2), _small_ints, max_size=2)
+)
+_bad_int = _wrong_types | st.booleans() | st.floats()
+
+
+def _out_of(lo: int, hi: int):
+    """Ints msgpack can carry but outside [lo, hi)."""
+    return st.integers(-(2**63), lo - 1) | st.integers(hi, 2**64 - 1)
+
+
+_bad_coord = _bad_int | _out_of(0, MAX_GRID)
+_bad_cell = (
+    _wrong_types.filter(lambda v: not isinstance(v, list))
+    | st.lists(coords, max_size=5).filter(lambda v: len(v) != 2)
+    | st.tuples(_bad_coord, coords).map(list)
+    | st.tuples(coords, _bad_coord).map(list)
+)
+_bad_neighbours = (
+    _wrong_types.filter(lambda v: not isinstance(v, list) or v)  # [] is valid
+    | st.lists(_wrong_types | st.lists(coords, max_size=5).filter(lambda v: len(v) != 3),
+               min_size=1, max_size=3)
+    | st.tuples(_bad_int | _out_of(0, MAX_AGENTS), coords, coords).map(lambda t: [list(t)])
+    | st.tuples(coords, _bad_coord).map(lambda t: [[t[0], t[0], t[1]]])
+    | st.tuples(agents, coords).map(lambda t: [[t[0], t[1], t[1]], [t[0], 0, 0]])  # duplicate id
+)
+_bad_reward = (
+    _wrong_types | st.booleans() | st.sampled_from([math.nan, math.inf, -math.inf])
+    | st.floats(min_value=1e6, exclude_min=True) | st.floats(max_value=-1e6, exclude_max=True)
+    | st.integers(10**6 + 1, 2**63) | st.integers(-(2**63), -(10**6) - 1)
+)
+_bad_bool = _wrong_types | _small_ints | st.floats()
+_bad_command = st.text(max_size=10).filter(lambda c: c not in messages.CONTROL_COMMANDS)
+
+BAD = {
+    "run": _wrong_types | run_ids, "sender": _wrong_types | st.text(max_size=12),
+    "tick": _bad_int | _out_of(0, MAX_TICK), "episode": _bad_int | _out_of(0, MAX_TICK),
+    "step": _bad_int | _out_of(0, MAX_TICK), "agent": _bad_int | _out_of(0, MAX_AGENTS),
+    "rank": _bad_int | _out_of(0, MAX_AGENTS), "action": _bad_int | _out_of(0, N_ACTIONS),
+    "position": _bad_cell, "goal": _bad_cell, "neighbours": _bad_neighbours,
+    "reward_ds": _bad_reward, "reward_ca": _bad_reward,
+    "collided": _bad_bool, "arrived": _bad_bool, "episode_end": _bad_bool,
+    "command": _wrong_types | _bad_command,
+}
+
+
+@given(any_message, st.data())
+@FUZZ
+def test_fuzz_single_field_mutations_are_rejected_naming_the_field(msg, data):
+    cls = type(msg)
+    name = data.draw(st.sampled_from([f.name for f in SCHEMA[cls].fields]))
+    value = data.draw(BAD[name])
+    if name == "run":
+        expected = {"wrong-run"}
+        if value == msg.run:
+            return
+    elif name == "sender":
+        if value == msg.sender:
+            return
+        expected = {"forged-sender"} if isinstance(value, str) else {"bad-field:sender"}
+    else:
+        expected = {f"bad-field:{name}"}
+    assert reason_of(mutated(msg, name, value), cls, msg.run) in expected
+
+
+def test_neighbour_equal_to_self_is_rejected():
+    for name, value in (("neighbours", [[2, 0, 0]]), ("agent", 5)):  # obs() is agent 2 seeing 5
+        assert reason_of(mutated(obs(), name, value), Observation) == "bad-field:neighbours"
+
+
+# Arbitrary msgpack structures, and near-valid maps, against an independent reading of the rules.
+
+scalars = st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | st.floats() \
+    | st.text(max_size=20) | st.binary(max_size=20)
+structures = st.recursive(
+    scalars,
+    lambda inner: st.lists(inner, max_size=4)
+    | st.dictionaries(st.text(max_size=3), inner, max_size=4),
+    max_leaves=20,
+)
+
+
+def _is_int(v, lo, hi):
+    return type(v) is int and lo <= v < hi
+
+
+def _is_cell(v):
+    return type(v) is list and len(v) == 2 and all(_is_int(c, 0, MAX_GRID) for c in v)
+
+
+def _is_reward(v):
+    return type(v) in (int, float) and math.isfinite(v) and abs(v) <= 1e6
+
+
+def reference_valid(d, cls, run) -> bool:
+    """The protocol's rules written out again, independently of messages.py."""
+    tags = {Observation: "obs", Intent: "intent", Control: "control"}
+    wires = {f.wire: f.name for f in SCHEMA[cls].fields}
+    if type(d) is not dict or set(d) != set(wires) | {"v", "k"}:
+        return False
+    m = {wires[k]: v for k, v in d.items() if k in wires}
+    if not (type(d["v"]) is int and d["v"] == 1 and d["k"] == tags[cls] and m["run"] == run):
+        return False
+    if not (_is_int(m["tick"], 0, MAX_TICK) and type(m["sender"]) is str):
+        return False
+    if cls is Control:
+        return m["sender"] == "world" and m["command"] == "shutdown"
+    if not (_is_int(m["agent"], 0, MAX_AGENTS) and _is_int(m["episode"], 0, MAX_TICK)):
+        return False
+    if cls is Intent:
+        return _is_int(m["action"], 0, 5) and m["sender"] == f"agent/{m['agent']}"
+    nb = m["neighbours"]
+    return (
+        m["sender"] == "world" and _is_int(m["step"], 0, MAX_TICK) and _is_cell(m["position"])
+        and _is_cell(m["goal"]) and _is_int(m["rank"], 0, MAX_AGENTS)
+        and _is_reward(m["reward_ds"]) and _is_reward(m["reward_ca"])
+        and all(type(m[b]) is bool for b in ("collided", "arrived", "episode_end"))
+        and type(nb) is list and len(nb) <= MAX_AGENTS
+        and all(type(n) is list and len(n) == 3 and _is_int(n[0], 0, MAX_AGENTS) and _is_cell(n[1:])
+                for n in nb)
+        and len({n[0] for n in nb}) == len(nb) and all(n[0] != m["agent"] for n in nb)
+    )
+
+
+@given(structures, st.sampled_from(KINDS))
+@FUZZ
+def test_fuzz_arbitrary_structures_never_raise(obj, kind):
+    inbox = Inbox(RUN)
+    assert (inbox.decode(pack(obj), kind) is not None) == reference_valid(obj, kind, RUN)
+
+
+@st.composite
+def near_valid_maps(draw):
+    """A valid message's wire map with each value, at random, kept, replaced by junk, or dropped."""
+    msg = draw(any_message)
+    wire = to_wire(msg)
+    wire = {k: (list(map(list, v)) if k == "nb" else list(v) if isinstance(v, tuple) else v)
+            for k, v in wire.items()}
+    out = {}
+    for k, v in wire.items():
+        choice = draw(st.sampled_from(["keep"] * 6 + ["junk", "drop"]))
+        if choice == "keep":
+            out[k] = v
+        elif choice == "junk":
+            out[k] = draw(structures | st.integers(-3, 1100))
+    if draw(st.booleans()) and draw(st.booleans()):
+        out[draw(st.text(max_size=3))] = draw(scalars)
+    return type(msg), msg.run, out
+
+
+@given(near_valid_maps())
+@FUZZ
+def test_fuzz_near_valid_maps_accepted_exactly_when_valid(case):
+    cls, run, obj = case
+    inbox = Inbox(run)
+    got = inbox.decode(pack(obj), cls)
+    assert (got is not None) == reference_valid(obj, cls, run), inbox.rejections
+    if got is not None:
+        assert msgpack.unpackb(encode(got)) == obj
