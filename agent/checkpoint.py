@@ -5,6 +5,7 @@ episode it completes, plus what it belongs to (agent id, agent count, algorithm)
 from another run shape is refused with a clear error naming the file.
 """
 
+import hashlib
 import json
 import os
 from pathlib import Path
@@ -16,6 +17,13 @@ from agent.brain import AgentBrain
 
 class CheckpointError(ValueError):
     """A checkpoint that cannot be used: unreadable, corrupt or from another run shape."""
+
+
+def fingerprint(brain: AgentBrain) -> str:
+    """A short digest of the brain's Q-tables: equal digests, equal learned values."""
+    digest = hashlib.sha256(brain.learner.q_ds[0].tobytes())
+    digest.update(brain.learner.q_ca[0].tobytes())
+    return digest.hexdigest()[:16]
 
 
 def checkpoint_path(directory: Path, agent: int) -> Path:

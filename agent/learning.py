@@ -210,6 +210,10 @@ class Learners:
             goal_state(ql_view), neighbour_states(ql_view, self.use_intents),
         )
 
+    def forget_pending(self) -> None:
+        """Drop every pending transition (its episode was abandoned, e.g. the world restarted)."""
+        self._pending[:] = False
+
     def _complete(self, mask: np.ndarray, goal_states: np.ndarray, nb_states: np.ndarray) -> None:
         """Eq. 9 and 10 for the pending transitions of ``mask``, with ``s'`` read from the states."""
         if not mask.any():

@@ -24,12 +24,16 @@ from protocol.config import SwarmConfig
 from protocol.messages import (
     CONTROL_SHUTDOWN, Control, Inbox, Intent, Observation, agent_sender, encode,
 )
+from protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
 from protocol.transport import TransportSettings
 
 log = logging.getLogger("nnql.agent")
 
 POLL_S = 0.2
 """How often a waiting agent checks whether it was asked to stop."""
+
+EXIT_STOPPED = 130
+"""Exit code of an agent stopped by a signal rather than by the world's shutdown."""
 
 PEER_WAIT_S = 30.0
 """How long an agent waits at start-up to see every other agent before it acts anyway."""
@@ -69,10 +73,14 @@ class AgentNode:
         self.decided_payload = b""
         self.held_queries: list[tuple[int, zenoh.Query]] = []
         self.peers_seen: set[int] = set()
-        self.checkpoint_file = checkpoint.checkpoint_path(options.out_dir / "checkpoints", self.agent)
+        self.shutdown = False
+        self.resumed: dict | None = None
+        self.checkpoint_file = checkpoint.checkpoint_path(options.out_dir / CHECKPOINT_DIR, self.agent)
         if options.resume and self.checkpoint_file.exists():
             episode = checkpoint.load(self.checkpoint_file, self.brain)
-            log.info("agent %d resumed from %s (episode %d)", self.agent, self.checkpoint_file, episode)
+            self.resumed = {"episode": episode, "fingerprint": checkpoint.fingerprint(self.brain)}
+            log.warning("agent %d resumed from %s (episode %d, tables %s)", self.agent,
+                        self.checkpoint_file, episode, self.resumed["fingerprint"])
 
     def stop(self) -> None:
         self.stopping = True
@@ -92,6 +100,8 @@ class AgentNode:
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               lambda sample: self.events.put(("alive", sample)),
                                               history=True),
+            s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_WORLD),
+                                              lambda sample: self.events.put(("world", sample))),
         ):
             self.publisher = publisher
             for kind, item in self._wait_for_peers():
@@ -138,6 +148,16 @@ class AgentNode:
             self._on_control(item.payload)
         elif kind == "alive":
             self._on_alive(item)
+        elif kind == "world":
+            self._on_world_alive(item)
+
+    def _on_world_alive(self, sample: zenoh.Sample) -> None:
+        """A world that leaves may come back (``--resume``) with its own clock: start afresh."""
+        if sample.kind == zenoh.SampleKind.DELETE:
+            log.warning("agent %d: the world left; waiting for it to come back", self.agent)
+            self.decided_tick = -1
+            self.brain.learner.forget_pending()
+            self._drop_held_queries()
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
         agent = keys.agent_from_key(str(sample.key_expr), self.config.run_id)
@@ -157,6 +177,9 @@ class AgentNode:
             return
         if obs.tick <= self.decided_tick:
             self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
+            return
+        if self.decided_tick >= 0 and obs.tick != self.decided_tick + 1:
+            self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
         answers = self._ask(self.brain.neighbours_to_ask(obs), obs.tick)
         action = self.brain.act(obs, answers)
@@ -232,7 +255,14 @@ class AgentNode:
         control = self.inbox.decode(payload, Control)
         if control is not None and control.command == CONTROL_SHUTDOWN:
             log.info("agent %d: shutdown from the world", self.agent)
-            self.stopping = True
+            self.shutdown = self.stopping = True
+
+    def stats(self) -> dict:
+        return {
+            "agent": self.agent, "decided_tick": self.decided_tick, "resumed": self.resumed,
+            "accepted": self.inbox.accepted, "rejected": dict(self.inbox.rejections),
+            "shutdown_by_world": self.shutdown,
+        }
 
 
 def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
@@ -246,7 +276,8 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
         node.run()
+    write_json_atomic(stats_path(options.out_dir, f"agent-{options.agent}"), node.stats())
     if node.inbox.total_rejected:
         log.warning("agent %d rejected %d messages: %s", options.agent,
                     node.inbox.total_rejected, dict(node.inbox.rejections))
-    return 0
+    return 0 if node.shutdown else EXIT_STOPPED

@@ -12,6 +12,7 @@ from typing import Callable
 from agent import checkpoint
 from agent.brain import AgentBrain
 from protocol.config import SwarmConfig
+from protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
 from world.engine import SwarmWorld, TickReport
 from world.metrics import EpisodeWriter
 
@@ -27,9 +28,10 @@ def run_in_process(
     out_dir = Path(out_dir)
     world = SwarmWorld(config)
     brains = [AgentBrain(i, config) for i in range(config.n_agents)]
-    episode_start, episode_tick = time.perf_counter(), world.tick
-    with EpisodeWriter(out_dir / "episodes.csv") as writer:
+    episode_start, episode_tick, slowest = time.perf_counter(), world.tick, 0.0
+    with EpisodeWriter(out_dir / EPISODES_FILE) as writer:
         while not world.finished:
+            tick_start = time.perf_counter()
             observations = world.observations()
             actions: dict[int, int] = {}
             for obs in sorted(observations, key=lambda o: o.rank):
@@ -38,16 +40,18 @@ def run_in_process(
                 actions[obs.agent] = brain.act(obs, answers)
                 if obs.episode_end and checkpoints:
                     checkpoint.save(
-                        checkpoint.checkpoint_path(out_dir / "checkpoints", obs.agent),
+                        checkpoint.checkpoint_path(out_dir / CHECKPOINT_DIR, obs.agent),
                         brain, obs.episode,
                     )
                 if obs.episode_end and on_episode_end is not None:
                     on_episode_end(brain, obs.episode)
             report = world.apply([actions[i] for i in range(config.n_agents)])
+            now = time.perf_counter()
+            slowest = max(slowest, now - tick_start)
             if report.episode_row is not None:
-                now = time.perf_counter()
-                writer.write(report.episode_row, now - episode_start, world.tick - episode_tick)
-                episode_start, episode_tick = now, world.tick
+                writer.write(report.episode_row, now - episode_start, world.tick - episode_tick,
+                             slowest)
+                episode_start, episode_tick, slowest = now, world.tick, 0.0
             if on_tick is not None:
                 on_tick(world, report)
     return world

@@ -28,7 +28,7 @@ from world.scenario import swarm_episode
 
 EPISODE_FIELDS = (
     "episode", "steps", "collisions", "missed_intents", "reward_sum", "arrived", "shortest_sum",
-    "agent_steps",
+    "agent_steps", "end_tick",
 )
 """The deterministic columns of ``episodes.csv``, one row per episode."""
 
@@ -50,9 +50,10 @@ class TickReport:
 class SwarmWorld:
     """The lockstep world of a swarm run (every agent learns, each has its own goal)."""
 
-    def __init__(self, config: SwarmConfig, first_episode: int = 0) -> None:
+    def __init__(self, config: SwarmConfig, first_episode: int = 0, first_tick: int = 0) -> None:
+        """A world at the start of ``first_episode`` (``--resume`` starts after the last row)."""
         self.config = config
-        self.tick = 0
+        self.tick = first_tick
         self.finished = False
         self.violations = 0
         self._start_episode(first_episode)
@@ -108,6 +109,7 @@ class SwarmWorld:
         c = self.config
         missed = tuple(i for i, a in enumerate(actions) if a is None)
         if self.ending:
+            self._row["end_tick"] = self.tick
             stays = (STAY,) * c.n_agents
             report = TickReport(self.tick, self.episode, False, stays, (), missed, (), dict(self._row))
             self.tick += 1

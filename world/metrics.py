@@ -11,15 +11,22 @@ from pathlib import Path
 
 from world.engine import EPISODE_FIELDS
 
-WALL_CLOCK_FIELDS = ("duration_s", "ticks_per_s")
+WALL_CLOCK_FIELDS = ("duration_s", "ticks_per_s", "max_tick_ms", "rejected")
+"""Wall-clock columns: the episode's duration, its tick rate, its slowest tick, and how many
+malformed or out-of-place messages the world had rejected by its end."""
 COLUMNS = EPISODE_FIELDS + WALL_CLOCK_FIELDS
 
 
 class EpisodeWriter:
-    """Appends episode rows to a CSV file, each one flushed and synced before the next tick."""
+    """Appends episode rows to a CSV file, each one flushed and synced before the next tick.
+
+    Opening an existing file (``--resume``) first cuts off a last line that a crash left half
+    written, so the file holds whole rows only.
+    """
 
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
+        drop_partial_line(self.path)
         fresh = not self.path.exists() or self.path.stat().st_size == 0
         self._file = open(self.path, "a", newline="")
         self._csv = csv.DictWriter(self._file, fieldnames=COLUMNS)
@@ -27,9 +34,13 @@ class EpisodeWriter:
             self._csv.writeheader()
             self._sync()
 
-    def write(self, row: dict, duration_s: float, ticks: int) -> None:
+    def write(self, row: dict, duration_s: float, ticks: int, max_tick_s: float = 0.0,
+              rejected: int = 0) -> None:
         rate = ticks / duration_s if duration_s > 0 else 0.0
-        self._csv.writerow({**row, "duration_s": f"{duration_s:.4f}", "ticks_per_s": f"{rate:.1f}"})
+        self._csv.writerow({
+            **row, "duration_s": f"{duration_s:.4f}", "ticks_per_s": f"{rate:.1f}",
+            "max_tick_ms": f"{max_tick_s * 1000:.1f}", "rejected": rejected,
+        })
         self._sync()
 
     def _sync(self) -> None:
@@ -44,6 +55,16 @@ class EpisodeWriter:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def drop_partial_line(path: Path) -> None:
+    """Cut a trailing line that has no newline (a write interrupted by a crash)."""
+    if not path.exists():
+        return
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        with open(path, "r+b") as f:
+            f.truncate(data.rfind(b"\n") + 1)
 
 
 def read_episodes(path: Path) -> list[dict]:

@@ -21,6 +21,7 @@ import zenoh
 from protocol import keys
 from protocol.config import SwarmConfig
 from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
+from protocol.runfiles import EPISODES_FILE, RECORDING_FILE, stats_path, write_json_atomic
 from protocol.transport import TransportSettings
 from world.engine import SwarmWorld, TickReport
 from world.metrics import EpisodeWriter
@@ -44,6 +45,8 @@ class WorldOptions:
     out_dir: Path
     record: bool = True
     startup_timeout_s: float = STARTUP_TIMEOUT_S
+    first_episode: int = 0
+    first_tick: int = 0
 
 
 class WorldNode:
@@ -54,7 +57,7 @@ class WorldNode:
         self.options = options
         self.config = options.config
         self.session = session
-        self.world = SwarmWorld(self.config)
+        self.world = SwarmWorld(self.config, options.first_episode, options.first_tick)
         self.inbox = Inbox(self.config.run_id, log)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.alive: set[int] = set()
@@ -63,7 +66,7 @@ class WorldNode:
         self.viz = None
         if options.record:
             from world.viz import WorldViz  # Rerun is loaded only by recording worlds
-            self.viz = WorldViz.to_file(self.config, options.out_dir / "run.rrd")
+            self.viz = WorldViz.to_file(self.config, options.out_dir / RECORDING_FILE)
 
     def stop(self) -> None:
         self.stopping = True
@@ -105,11 +108,12 @@ class WorldNode:
 
     def _loop(self, publishers) -> bool:
         world, n = self.world, self.config.n_agents
-        episode_start, episode_tick = time.perf_counter(), world.tick
-        with EpisodeWriter(self.options.out_dir / "episodes.csv") as writer:
+        episode_start, episode_tick, slowest = time.perf_counter(), world.tick, 0.0
+        with EpisodeWriter(self.options.out_dir / EPISODES_FILE) as writer:
             while not world.finished:
                 if self.stopping:
                     return False
+                tick_start = time.perf_counter()
                 tick = world.tick
                 for obs in world.observations():
                     publishers[obs.agent].put(encode(obs))
@@ -123,14 +127,16 @@ class WorldNode:
                 if self.stopping:
                     return False
                 report = world.apply(actions)
+                now = time.perf_counter()
+                slowest = max(slowest, now - tick_start)
                 if report.violations:
                     log.error("tick %d broke the world's invariants: %s", tick, report.violations)
                 if self.viz is not None:
                     self.viz.log_tick(world, report)
                 if report.episode_row is not None:
-                    now = time.perf_counter()
-                    writer.write(report.episode_row, now - episode_start, world.tick - episode_tick)
-                    episode_start, episode_tick = now, world.tick
+                    writer.write(report.episode_row, now - episode_start, world.tick - episode_tick,
+                                 slowest, self.inbox.total_rejected)
+                    episode_start, episode_tick, slowest = now, world.tick, 0.0
                 if self.on_tick is not None:
                     self.on_tick(world, report)
         return True
@@ -185,6 +191,11 @@ def run_world(options: WorldOptions,
         except StartupTimeout as error:
             log.error("%s", error)
             return 1
+    write_json_atomic(stats_path(options.out_dir, "world"), {
+        "completed": completed, "ticks": node.world.tick, "episode": node.world.episode,
+        "accepted": node.inbox.accepted, "rejected": dict(node.inbox.rejections),
+        "violations": node.world.violations,
+    })
     if node.inbox.total_rejected:
         log.warning("world rejected %d messages: %s", node.inbox.total_rejected,
                     dict(node.inbox.rejections))

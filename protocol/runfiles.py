@@ -1,0 +1,32 @@
+"""The layout of a run directory, and the one atomic way to write a small file into it.
+
+    <out>/config.json          the resolved SwarmConfig
+    <out>/episodes.csv         one row per finished episode (world.metrics)
+    <out>/checkpoints/agent-<id>.npz   each agent's Q-tables (agent.checkpoint)
+    <out>/stats/world.json, <out>/stats/agent-<id>.json   closing statistics of each process
+    <out>/run.rrd              the Rerun recording
+"""
+
+import json
+import os
+from pathlib import Path
+
+CONFIG_FILE = "config.json"
+EPISODES_FILE = "episodes.csv"
+RECORDING_FILE = "run.rrd"
+CHECKPOINT_DIR = "checkpoints"
+STATS_DIR = "stats"
+
+
+def stats_path(out_dir: Path, name: str) -> Path:
+    """``<out>/stats/<name>.json``, e.g. name ``world`` or ``agent-3``."""
+    return Path(out_dir) / STATS_DIR / f"{name}.json"
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    """Write JSON to a temporary file and rename it over ``path``: readers never see half."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    os.replace(tmp, path)
