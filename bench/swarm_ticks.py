@@ -53,7 +53,7 @@ def measured_rate(out: Path) -> float:
 
 
 def run_distributed(config: SwarmConfig, out: Path, bare: bool, record: bool) -> float:
-    from launch.swarm import agent_main, stop_children, world_main
+    from launch.swarm import agent_main, world_main
 
     ctx = mp.get_context("spawn")
     layout = EmbeddedLayout()
@@ -66,7 +66,10 @@ def run_distributed(config: SwarmConfig, out: Path, bare: bool, record: bool) ->
     for a in agents:
         a.start()
     world.join()
-    stop_children(agents)
+    for a in agents:
+        a.join(5)
+        if a.is_alive():
+            a.kill()
     if world.exitcode != 0:
         raise RuntimeError(f"world exited with {world.exitcode}")
     return measured_rate(out)

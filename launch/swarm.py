@@ -16,19 +16,18 @@ import multiprocessing as mp
 import os
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from launch.cli import EXIT_INTERRUPTED, EXIT_USAGE, OneLineParser  # noqa: E402
+from launch.cli import EXIT_INTERRUPTED, OneLineParser  # noqa: E402
 from launch.progress import Progress  # noqa: E402
+from launch.resume import ResumeError, ResumePoint, check_checkpoints, resume_point  # noqa: E402
+from launch.supervisor import Supervisor, describe_exit  # noqa: E402
 from protocol.config import ALGOS, SwarmConfig  # noqa: E402
+from protocol.runfiles import CONFIG_FILE, EPISODES_FILE  # noqa: E402
 from protocol.transport import MODES, EmbeddedLayout, TransportSettings  # noqa: E402
-
-SHUTDOWN_GRACE_S = 2.5
-"""After the world ends (or Ctrl-C), children get this long to exit before they are killed."""
 
 log = logging.getLogger("nnql.launch")
 
@@ -79,6 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help="seconds the world waits for intents each tick")
     run.add_argument("--run-id", default=None, help="default: <algo>-<agents>a-s<seed>-<time>")
     run.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
+    run.add_argument("--resume", action="store_true",
+                     help="continue the run in --out after its last complete episode "
+                          "(its config.json is the config)")
     run.add_argument("--in-process", action="store_true",
                      help="run world and agents in this process, without Zenoh")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -126,11 +128,27 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
 
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
     """Create the run directory; never overwrite a run that is already there."""
-    if role != "agents" and (out / "episodes.csv").exists():
-        raise UsageError(f"{out} already holds a run (episodes.csv); choose another --out")
+    if role != "agents" and (out / EPISODES_FILE).exists():
+        raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
+                         f"or continue it with --resume")
     out.mkdir(parents=True, exist_ok=True)
     if role != "agents":
-        (out / "config.json").write_text(config.to_json() + "\n")
+        (out / CONFIG_FILE).write_text(config.to_json() + "\n")
+
+
+def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
+    """The config, start point and directory of a run to continue; raises ResumeError."""
+    if args.out is None:
+        raise UsageError("--resume needs --out DIR, the run directory to continue")
+    if args.in_process:
+        raise UsageError("--resume continues distributed runs only")
+    config, start = resume_point(args.out)
+    if args.role != "world":
+        check_checkpoints(args.out, config, agent_ids(args, config))
+    if start.episode < config.episodes:
+        print(f"resuming {config.run_id} at episode {start.episode} (tick {start.tick})",
+              file=sys.stderr)
+    return config, start, args.out
 
 
 def transports(args: argparse.Namespace) -> tuple[TransportSettings, TransportSettings]:
@@ -144,12 +162,13 @@ def transports(args: argparse.Namespace) -> tuple[TransportSettings, TransportSe
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record: bool,
-               progress: bool) -> int:
+               progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> int:
     """The world process (spawned)."""
     from world.node import WorldOptions, run_world
 
+    name_process("nnql-world", config)
     setup_logging("world")
-    bar = Progress(config.episodes, "episodes") if progress else None
+    bar = Progress(config.episodes - start.episode, "episodes") if progress else None
     collisions = 0
 
     def on_tick(world, report) -> None:
@@ -161,18 +180,28 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
 
     started = time.monotonic()
     try:
-        return run_world(WorldOptions(config, transport, out, record=record), on_tick)
+        return run_world(WorldOptions(config, transport, out, record=record,
+                                      first_episode=start.episode, first_tick=start.tick), on_tick)
     finally:
         if bar is not None:
             bar.close()
 
 
-def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path) -> int:
-    """An agent process (spawned)."""
+def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
+               resume: bool = False) -> int:
+    """An agent process (spawned); ``resume`` reloads its checkpoint if there is one."""
     from agent.node import AgentOptions, run_agent
 
+    name_process(f"nnql-agent {agent}", config)
     setup_logging(f"agent {agent}")
-    return run_agent(AgentOptions(agent, config, transport, out))
+    return run_agent(AgentOptions(agent, config, transport, out, resume=resume))
+
+
+def name_process(title: str, config: SwarmConfig) -> None:
+    """Make the process recognisable in ps / pgrep: e.g. ``nnql-agent 3 <run-id>``."""
+    import setproctitle
+
+    setproctitle.setproctitle(f"{title} {config.run_id}")
 
 
 def setup_logging(name: str) -> None:
@@ -208,63 +237,49 @@ def run_in_process(config: SwarmConfig, out: Path, record: bool, progress: bool)
     return 1 if world.violations else 0
 
 
-def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path) -> int:
-    """Start the world and/or agents as spawned processes and wait for them."""
-    ctx = mp.get_context("spawn")
+def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
+                  start: ResumePoint) -> int:
+    """Start the world and/or agents as supervised processes and wait for the run to end."""
     world_transport, agent_transport = transports(args)
     record, progress = not args.no_record, not args.no_progress
+    supervisor = Supervisor(mp.get_context("spawn"))
     world = None
     if args.role in ("all", "world"):
-        world = ctx.Process(target=world_main, name="nnql-world",
-                            args=(config, world_transport, out, record, progress))
-        world.start()
-    agent_ids = args.agent_ids if args.agent_ids is not None else range(config.n_agents)
-    agents = []
+        world = supervisor.add("nnql-world", world_main, restartable=False, make_args=lambda _: (
+            config, world_transport, out, record, progress, start))
     if args.role in ("all", "agents"):
-        for i in agent_ids:
-            process = ctx.Process(target=agent_main, name=f"nnql-agent-{i}",
-                                  args=(i, config, agent_transport, out))
-            process.start()
-            agents.append(process)
-    children = ([world] if world else []) + agents
-    try:
-        leader = world or agents[0]
-        while leader.is_alive() and not (world is None and not any(a.is_alive() for a in agents)):
-            leader.join(0.2)
-            if world is None and all(not a.is_alive() for a in agents):
-                break
-    except KeyboardInterrupt:
-        print("\ninterrupted: stopping the swarm", file=sys.stderr)
-        stop_children(children)
-        return EXIT_INTERRUPTED
-    stop_children(children)
-    if world is not None:
-        return world.exitcode or 0
-    return max((a.exitcode or 0) for a in agents)
+        for i in agent_ids(args, config):
+            supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True,
+                           make_args=lambda restarted, i=i: (
+                               i, config, agent_transport, out, restarted or args.resume))
+    code = supervisor.run(leader=world)
+    if code == EXIT_INTERRUPTED:
+        print("\ninterrupted: the swarm stopped; continue it with --resume", file=sys.stderr)
+    elif world is not None and code != 0:
+        print(f"the world ended with {describe_exit(code)}; continue the run with "
+              f"--resume --out {out}", file=sys.stderr)
+    return code
 
 
-def stop_children(children: list) -> None:
-    """Give children a grace period to exit by themselves, then terminate, then kill."""
-    deadline = time.monotonic() + SHUTDOWN_GRACE_S
-    for child in children:
-        child.join(max(0.0, deadline - time.monotonic()))
-    for child in children:
-        if child.is_alive():
-            child.terminate()
-    for child in children:
-        child.join(0.3)
-        if child.is_alive():
-            child.kill()
-            child.join()
+def agent_ids(args: argparse.Namespace, config: SwarmConfig) -> list[int]:
+    return list(args.agent_ids) if args.agent_ids is not None else list(range(config.n_agents))
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    start = ResumePoint(0, 0)
     try:
-        config, out = resolve(args)
-        prepare_out_dir(out, config, args.role)
-    except UsageError as error:
+        if args.resume:
+            config, start, out = resume(args)
+            if start.episode >= config.episodes:
+                print(f"{out}: the run is already complete ({config.episodes} episodes)",
+                      file=sys.stderr)
+                return 0
+        else:
+            config, out = resolve(args)
+            prepare_out_dir(out, config, args.role)
+    except (UsageError, ResumeError) as error:
         parser.error(str(error))
     if args.in_process:
         try:
@@ -273,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
             print("\ninterrupted", file=sys.stderr)
             return EXIT_INTERRUPTED
     else:
-        code = run_processes(args, config, out)
+        code = run_processes(args, config, out, start)
     if code == 0 and args.role != "agents":
         print(f"run finished: {out}", file=sys.stderr)
     return code

@@ -43,3 +43,36 @@ def group_pids(pgid: int) -> list[int]:
         if pgrp == pgid and state != "Z":
             pids.append(int(entry.name))
     return pids
+
+
+def find_process(title: str) -> list[int]:
+    """Pids whose command line (process title) is exactly ``title``, like ``pgrep -fx``."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").strip().decode()
+            state = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
+        except OSError:
+            continue
+        if cmdline == title and state != "Z":
+            pids.append(int(entry.name))
+    return pids
+
+
+def wait_for_rows(csv_path: Path, rows: int, timeout: float, process=None) -> None:
+    """Wait until ``csv_path`` holds at least ``rows`` episode rows."""
+    import time
+
+    from world.metrics import read_episodes
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if process is not None and process.poll() is not None:
+            raise AssertionError(f"the swarm exited early ({process.returncode}): "
+                                 f"{process.stderr.read() if process.stderr else ''}")
+        if csv_path.exists() and len(read_episodes(csv_path)) >= rows:
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"{csv_path} did not reach {rows} rows in {timeout} s")

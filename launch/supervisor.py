@@ -1,0 +1,147 @@
+"""Keeps a swarm's processes running: starts them, restarts agents that die, stops them all.
+
+An agent that exits while the world still runs (killed, crashed) is restarted after a backoff
+(0.5 s, doubling up to 8 s; reset once it has lived 30 s) with ``resume=True``, so it reloads its
+last checkpoint and rejoins at the next tick. The world is not restarted: it owns the run's
+files, so a dead world ends the run and ``--resume`` continues it. Stopping (Ctrl-C, SIGTERM)
+sends SIGTERM to every child, waits a grace period, then kills what is left.
+"""
+
+import logging
+import multiprocessing as mp
+import signal
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+log = logging.getLogger("nnql.supervisor")
+
+POLL_S = 0.1
+SHUTDOWN_GRACE_S = 2.5
+"""Children get this long to exit by themselves before they are killed."""
+BACKOFF_FIRST_S = 0.5
+BACKOFF_MAX_S = 8.0
+HEALTHY_AFTER_S = 30.0
+
+
+@dataclass
+class Child:
+    """One supervised process; ``make_args(restarted)`` gives its target's arguments."""
+
+    name: str
+    target: Callable
+    make_args: Callable[[bool], tuple]
+    restartable: bool
+    process: mp.Process | None = None
+    started_at: float = 0.0
+    restarts: int = 0
+    failures_in_a_row: int = 0
+    restart_at: float | None = None
+    exit_codes: list[int] = field(default_factory=list)
+
+
+class Supervisor:
+    """Runs children until the leader (the world, or else every agent) is done."""
+
+    def __init__(self, context: mp.context.BaseContext) -> None:
+        self.context = context
+        self.children: list[Child] = []
+        self.stop_requested = False
+
+    def add(self, name: str, target: Callable, make_args: Callable[[bool], tuple],
+            restartable: bool) -> Child:
+        child = Child(name, target, make_args, restartable)
+        self.children.append(child)
+        return child
+
+    def request_stop(self, *_signal) -> None:
+        """Signal handler: stop everything at the next poll."""
+        self.stop_requested = True
+
+    def run(self, leader: Child | None) -> int:
+        """Start every child and supervise; returns the leader's exit code (130 on a stop)."""
+        previous = {s: signal.signal(s, self.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            for child in self.children:
+                self._start(child, restarted=False)
+            while not self.stop_requested:
+                if self._leader_done(leader):
+                    break
+                self._restart_dead_agents(leader)
+                time.sleep(POLL_S)
+        finally:
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+        if self.stop_requested:
+            self.stop_all(signal_first=True)
+            return 130
+        leader_failed = leader is not None and leader.process.exitcode != 0
+        if leader_failed:
+            log.error("%s exited (%s)", leader.name, describe_exit(leader.process.exitcode))
+        self.stop_all(signal_first=leader_failed)
+        if leader is not None:
+            return leader.process.exitcode if leader.process.exitcode is not None else 1
+        return max((abs(c.process.exitcode or 0) for c in self.children), default=0)
+
+    def _leader_done(self, leader: Child | None) -> bool:
+        if leader is not None:
+            return not leader.process.is_alive()
+        return all(not c.process.is_alive() and c.process.exitcode == 0 for c in self.children)
+
+    def _start(self, child: Child, restarted: bool) -> None:
+        child.process = self.context.Process(
+            target=child.target, name=child.name, args=child.make_args(restarted)
+        )
+        child.process.start()
+        child.started_at = time.monotonic()
+        child.restart_at = None
+
+    def _restart_dead_agents(self, leader: Child | None) -> None:
+        now = time.monotonic()
+        for child in self.children:
+            if not child.restartable or child.process.is_alive():
+                continue
+            if child.process.exitcode == 0:
+                continue  # told by the world that the run is over
+            if child.restart_at is None:
+                code = child.process.exitcode
+                child.exit_codes.append(code)
+                lived = now - child.started_at
+                child.failures_in_a_row = 1 if lived > HEALTHY_AFTER_S else child.failures_in_a_row + 1
+                delay = min(BACKOFF_FIRST_S * 2 ** (child.failures_in_a_row - 1), BACKOFF_MAX_S)
+                child.restart_at = now + delay
+                log.warning("%s exited (%s) after %.1f s; restarting in %.1f s",
+                            child.name, describe_exit(code), lived, delay)
+            elif now >= child.restart_at:
+                child.restarts += 1
+                self._start(child, restarted=True)
+
+    def stop_all(self, signal_first: bool) -> None:
+        """Let children exit (after SIGTERM if ``signal_first``); kill those still there."""
+        alive = [c.process for c in self.children if c.process is not None]
+        if signal_first:
+            for process in alive:
+                if process.is_alive():
+                    process.terminate()
+        deadline = time.monotonic() + SHUTDOWN_GRACE_S
+        for process in alive:
+            process.join(max(0.0, deadline - time.monotonic()))
+        for process in alive:
+            if process.is_alive():
+                if not signal_first:
+                    process.terminate()
+                    process.join(0.3)
+                if process.is_alive():
+                    process.kill()
+                    process.join()
+
+
+def describe_exit(code: int | None) -> str:
+    if code is None:
+        return "still running"
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit code {code}"

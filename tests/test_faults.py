@@ -1,0 +1,185 @@
+"""Faults with real processes: agents killed, stalled and restarted; the world killed and resumed.
+
+Every test checks what the issue promises: the run completes, every episode is recorded exactly
+once, no tick waits longer than the deadline, and no learned value is lost.
+"""
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import time
+
+import numpy as np
+
+from agent import checkpoint
+from agent.brain import AgentBrain
+from protocol.config import SwarmConfig
+from protocol.transport import free_port
+from tests.swarm_helpers import (
+    ROOT, find_process, group_pids, run_swarm, start_swarm, swarm_command, wait_for_rows,
+)
+from world.metrics import read_episodes
+
+DEADLINE_S = 0.5
+
+
+def episodes_once(out, n: int) -> list[dict]:
+    rows = read_episodes(out / "episodes.csv")
+    assert [int(r["episode"]) for r in rows] == list(range(n))
+    return rows
+
+
+def stats(out, name: str) -> dict:
+    return json.loads((out / "stats" / f"{name}.json").read_text())
+
+
+def test_processes_are_named_for_ps_and_pgrep(tmp_path):
+    swarm = start_swarm(tmp_path / "named", "--agents", "3", "--episodes", "400", "--max-steps", "30",
+                        "--run-id", "named", "--no-record")
+    try:
+        wait_for_rows(tmp_path / "named" / "episodes.csv", 1, 90, swarm)
+        assert len(find_process("nnql-world named")) == 1
+        for agent in range(3):
+            assert len(find_process(f"nnql-agent {agent} named")) == 1
+        found = subprocess.run(["pgrep", "-f", "nnql-agent 1 named"], capture_output=True, text=True)
+        assert found.stdout.split() == [str(p) for p in find_process("nnql-agent 1 named")]
+    finally:
+        os.killpg(swarm.pid, signal.SIGINT)
+        swarm.wait(timeout=10)
+
+
+def test_a_killed_agent_is_restarted_from_its_checkpoint(tmp_path):
+    out = tmp_path / "killed"
+    swarm = start_swarm(out, "--agents", "8", "--episodes", "30", "--max-steps", "40",
+                        "--run-id", "killed", "--deadline", str(DEADLINE_S), "--no-record")
+    try:
+        wait_for_rows(out / "episodes.csv", 3, 120, swarm)
+        [victim] = find_process("nnql-agent 3 killed")
+        os.kill(victim, signal.SIGKILL)
+        saved = out / "agent-3-at-kill.npz"
+        shutil.copy(out / "checkpoints" / "agent-3.npz", saved)
+        stdout, stderr = swarm.communicate(timeout=240)
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode == 0, stderr
+    assert "nnql-agent-3 exited (killed by SIGKILL)" in stderr
+    rows = episodes_once(out, 30)
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    at_kill = AgentBrain(3, config)
+    checkpoint.load(saved, at_kill)
+    assert np.abs(at_kill.learner.q_ca).sum() > 0, "the checkpoint held learned values"
+    resumed = stats(out, "agent-3")["resumed"]
+    assert resumed is not None, "the restarted agent loaded a checkpoint"
+    assert resumed["fingerprint"] == checkpoint.fingerprint(at_kill), "and it was the one at the kill"
+    assert sum(int(r["missed_intents"]) for r in rows) > 0, "the dead agent's ticks were missed"
+    assert stats(out, "world")["violations"] == 0
+
+
+def test_a_stalled_agent_costs_at_most_the_deadline_and_its_stale_intents_are_rejected(tmp_path):
+    out = tmp_path / "stalled"
+    swarm = start_swarm(out, "--agents", "8", "--episodes", "12", "--max-steps", "40",
+                        "--run-id", "stalled", "--deadline", str(DEADLINE_S), "--no-record")
+    try:
+        wait_for_rows(out / "episodes.csv", 2, 120, swarm)
+        [victim] = find_process("nnql-agent 5 stalled")
+        os.kill(victim, signal.SIGSTOP)
+        time.sleep(3.0)
+        os.kill(victim, signal.SIGCONT)
+        stdout, stderr = swarm.communicate(timeout=240)
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode == 0, stderr
+    rows = episodes_once(out, 12)
+    slowest = max(float(r["max_tick_ms"]) for r in rows)
+    assert slowest <= DEADLINE_S * 1000 + 250, f"a tick took {slowest} ms"
+    assert slowest >= DEADLINE_S * 1000, "the stall did make the world wait for the deadline"
+    assert sum(int(r["missed_intents"]) for r in rows) >= 3
+    world = stats(out, "world")
+    assert world["rejected"].get("stale-tick", 0) >= 1
+    assert world["violations"] == 0
+    assert find_process("nnql-agent 5 stalled") == []
+
+
+def test_a_killed_world_resumes_without_duplicate_or_missing_episodes(tmp_path):
+    out = tmp_path / "resumed"
+    options = ("--agents", "8", "--episodes", "40", "--max-steps", "30", "--run-id", "resumed")
+    swarm = start_swarm(out, *options)
+    try:
+        wait_for_rows(out / "episodes.csv", 3, 120, swarm)
+        [world] = find_process("nnql-world resumed")
+        os.kill(world, signal.SIGKILL)
+        stdout, stderr = swarm.communicate(timeout=30)
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode != 0
+    assert "--resume" in stderr
+    done = len(read_episodes(out / "episodes.csv"))
+    assert done < 40
+    resumed = run_swarm(out, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"resuming resumed at episode {done}" in resumed.stderr
+    rows = episodes_once(out, 40)
+    ticks = [int(r["end_tick"]) for r in rows]
+    assert ticks == sorted(ticks) and len(set(ticks)) == 40
+    again = run_swarm(out, "--resume")
+    assert again.returncode == 0 and "already complete" in again.stderr
+
+
+def test_sigterm_to_the_launcher_stops_everything_within_3_s(tmp_path):
+    out = tmp_path / "terminated"
+    swarm = start_swarm(out, "--agents", "8", "--episodes", "1000", "--run-id", "terminated")
+    try:
+        wait_for_rows(out / "episodes.csv", 2, 120, swarm)
+        swarm.send_signal(signal.SIGTERM)  # the launcher alone, as a service manager would
+        start = time.monotonic()
+        swarm.wait(timeout=10)
+        while group_pids(swarm.pid) and time.monotonic() - start < 3:
+            time.sleep(0.05)
+        assert time.monotonic() - start < 3
+        assert group_pids(swarm.pid) == []
+        assert swarm.returncode == 130
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    for agent in range(8):
+        checkpoint.load(out / "checkpoints" / f"agent-{agent}.npz", AgentBrain(agent, config))
+    episodes_once(out, len(read_episodes(out / "episodes.csv")))
+
+
+def test_agents_reconnect_to_a_restarted_world(tmp_path):
+    out = tmp_path / "reconnect"
+    port = free_port()
+    common = ("--agents", "6", "--episodes", "300", "--max-steps", "30", "--run-id", "reconnect")
+    agents = subprocess.Popen(
+        swarm_command(out, *common, "--role", "agents", "--connect", f"tcp/127.0.0.1:{port}",
+                      "--listen", "tcp/127.0.0.1:0"),
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    world_command = swarm_command(out, *common, "--role", "world", "--no-record",
+                                  "--listen", f"tcp/127.0.0.1:{port}")
+    world = subprocess.Popen(world_command, cwd=ROOT, stdout=subprocess.PIPE,
+                             stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        wait_for_rows(out / "episodes.csv", 5, 120, world)
+        [world_pid] = find_process("nnql-world reconnect")
+        os.kill(world_pid, signal.SIGKILL)
+        world.wait(timeout=30)
+        assert world.returncode != 0
+        resumed = subprocess.run(
+            [*world_command[:-4], "--resume", "--listen", f"tcp/127.0.0.1:{port}"],
+            cwd=ROOT, capture_output=True, text=True, timeout=240, start_new_session=True)
+        assert resumed.returncode == 0, resumed.stderr
+        agents.wait(timeout=30)
+        assert agents.returncode == 0, agents.stderr.read()
+    finally:
+        for process in (agents, world):
+            if group_pids(process.pid):
+                os.killpg(process.pid, signal.SIGKILL)
+    episodes_once(out, 300)
+    for agent in range(6):
+        assert stats(out, f"agent-{agent}")["shutdown_by_world"]
