@@ -155,7 +155,7 @@ def test_sigterm_to_the_launcher_stops_everything_within_3_s(tmp_path):
 def test_agents_reconnect_to_a_restarted_world(tmp_path):
     out = tmp_path / "reconnect"
     port = free_port()
-    common = ("--agents", "6", "--episodes", "300", "--max-steps", "30", "--run-id", "reconnect")
+    common = ("--agents", "6", "--episodes", "80", "--max-steps", "30", "--run-id", "reconnect")
     agents = subprocess.Popen(
         swarm_command(out, *common, "--role", "agents", "--connect", f"tcp/127.0.0.1:{port}",
                       "--listen", "tcp/127.0.0.1:0"),
@@ -165,13 +165,13 @@ def test_agents_reconnect_to_a_restarted_world(tmp_path):
     world = subprocess.Popen(world_command, cwd=ROOT, stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True, start_new_session=True)
     try:
-        wait_for_rows(out / "episodes.csv", 5, 120, world)
+        wait_for_rows(out / "episodes.csv", 3, 120, world)
         [world_pid] = find_process("nnql-world reconnect")
         os.kill(world_pid, signal.SIGKILL)
         world.wait(timeout=30)
         assert world.returncode != 0
         resumed = subprocess.run(
-            [*world_command[:-4], "--resume", "--listen", f"tcp/127.0.0.1:{port}"],
+            [*world_command[:-2], "--resume", "--listen", f"tcp/127.0.0.1:{port}"],
             cwd=ROOT, capture_output=True, text=True, timeout=240, start_new_session=True)
         assert resumed.returncode == 0, resumed.stderr
         agents.wait(timeout=30)
@@ -180,6 +180,6 @@ def test_agents_reconnect_to_a_restarted_world(tmp_path):
         for process in (agents, world):
             if group_pids(process.pid):
                 os.killpg(process.pid, signal.SIGKILL)
-    episodes_once(out, 300)
+    episodes_once(out, 80)
     for agent in range(6):
         assert stats(out, f"agent-{agent}")["shutdown_by_world"]
