@@ -4,16 +4,20 @@ Every run is one learner (QL or nnQL, random step k, seed) among ``n_obstacles``
 whose starts and every action come from :mod:`world.scenario`; the obstacles announce their
 pre-generated next action, which only nnQL reads. All runs advance episode by episode in lockstep
 through the same array code (``agent.learning``, ``world.rules``); a run whose learner has arrived
-sits out the rest of that episode. Each run gives exactly what it would give alone.
+sits out the rest of that episode. Each run gives exactly what it would give alone, so a batch may
+also be split over worker processes (``workers``) without changing a single number.
 """
 
-from dataclasses import dataclass, field
+import multiprocessing
+import queue
+import signal
+from dataclasses import dataclass, field, fields
 from typing import Callable
 
 import numpy as np
 
 from agent.learning import EpisodeNoise, Hyper, Learners, View
-from protocol.actions import STAY, in_view, intended_cell
+from protocol.actions import STAY, VIEW_RADIUS, intended_cell
 from protocol.seeding import AGENT_STREAM, stream_rng
 from world.rules import GOAL_REWARD, arbitrate, collision_reward, destination_reward, shortest_steps
 from world.scenario import paper_episode
@@ -67,18 +71,36 @@ class EpisodeMetrics:
             arrived=np.zeros((runs, episodes), dtype=bool),
         )
 
+    def put_rows(self, rows: np.ndarray | list[int], part: "EpisodeMetrics") -> None:
+        """Copy ``part``'s runs into the given rows of this one."""
+        for name in (f.name for f in fields(self)):
+            getattr(self, name)[rows] = getattr(part, name)
+
 
 def run_batch(
     specs: list[RunSpec],
     settings: PaperSettings = PaperSettings(),
     on_episode: Callable[[int], None] | None = None,
+    workers: int = 1,
 ) -> EpisodeMetrics:
-    """Run every spec through every episode; ``on_episode(e)`` is called after each episode."""
+    """Run every spec through every episode; ``on_episode(e)`` is called after each episode.
+
+    With ``workers > 1`` the specs are shared out over that many processes; ``on_episode(e)`` is
+    then called once every worker has finished episode ``e``. The results are the same either way.
+    """
     for spec in specs:
         if spec.algo not in ALGOS:
             raise ValueError(f"unknown algorithm {spec.algo!r}; choose from {', '.join(ALGOS)}")
+    workers = max(1, min(int(workers), len(specs)))
+    if workers == 1:
+        return _run_in_process(specs, settings, on_episode)
+    return _run_in_workers(specs, settings, on_episode, workers)
+
+
+def _run_in_process(
+    specs: list[RunSpec], s: PaperSettings, on_episode: Callable[[int], None] | None
+) -> EpisodeMetrics:
     runs = len(specs)
-    s = settings
     learners = Learners(
         random_step=np.array([spec.random_step for spec in specs]),
         use_intents=np.array([spec.algo == "nnql" for spec in specs]),
@@ -87,65 +109,146 @@ def run_batch(
     )
     rngs = [stream_rng(spec.seed, AGENT_STREAM, LEARNER_ID) for spec in specs]
     seeds = sorted({spec.seed for spec in specs})
-    seed_row = np.array([seeds.index(spec.seed) for spec in specs])
+    seed_row = np.array([seeds.index(spec.seed) for spec in specs], dtype=np.int64)
     metrics = EpisodeMetrics.empty(runs, s.episodes)
-    rows = np.arange(runs)
+    everyone_known = np.ones((runs, s.n_obstacles), dtype=bool)
+    actions = np.empty((runs, 1 + s.n_obstacles), dtype=np.int64)
 
     for episode in range(s.episodes):
         scenarios = [paper_episode(seed, episode, s.width, s.height, s.n_obstacles, s.max_steps)
                      for seed in seeds]
-        positions = np.stack([scenarios[i].starts for i in seed_row])
-        goal = np.stack([scenarios[i].goal for i in seed_row])
-        script = np.stack([scenarios[i].obstacle_actions for i in seed_row])
+        positions = np.stack([sc.starts for sc in scenarios])[seed_row]
+        goal = np.stack([sc.goal for sc in scenarios])[seed_row]
+        script = np.stack([sc.obstacle_actions for sc in scenarios])[seed_row]
         noise = [EpisodeNoise.draw(rng, s.max_steps) for rng in rngs]
         random_actions = np.stack([n.random_actions for n in noise])
         tie_breakers = np.stack([n.tie_breakers for n in noise])
         metrics.shortest[:, episode] = shortest_steps(positions[:, LEARNER_ID], goal)
         running = np.ones(runs, dtype=bool)
+        steps = np.zeros(runs, dtype=np.int64)
+        collisions = np.zeros(runs, dtype=np.int64)
+        reward_ds = np.zeros(runs)
+        reward_ca = np.zeros(runs)
+        arrived_ever = np.zeros(runs, dtype=bool)
 
         for t in range(s.max_steps):
-            view = _learner_view(positions, goal, script[:, t], s)
+            obstacles_next = intended_cell(positions[:, 1:], script[:, t], s.width, s.height)
+            view = _learner_view(positions, goal, obstacles_next, everyone_known)
             action = learners.decide(view, running, random_actions[:, t], tie_breakers[:, t])
-            actions = np.concatenate(
-                [np.where(running, action, STAY)[:, None], script[:, t]], axis=1
-            )
+            actions[:, LEARNER_ID] = np.where(running, action, STAY)
+            actions[:, 1:] = script[:, t]
             moved, collided = arbitrate(positions, actions, s.width, s.height, s.count_swaps)
-            own_before, own_after = positions[:, LEARNER_ID], moved[:, LEARNER_ID]
-            r_ds = destination_reward(own_before, own_after, goal, s.goal_reward)
-            r_ca = collision_reward(collided[:, LEARNER_ID])
-            arrived = np.all(own_after == goal, axis=-1) & running
+            own_after = moved[:, LEARNER_ID]
+            r_ds = destination_reward(positions[:, LEARNER_ID], own_after, goal, s.goal_reward)
+            learner_collided = collided[:, LEARNER_ID]
+            r_ca = collision_reward(learner_collided)
+            arrived = (own_after[:, 0] == goal[:, 0]) & (own_after[:, 1] == goal[:, 1]) & running
             learners.record(r_ds, r_ca, arrived)
 
-            metrics.steps[running, episode] += 1
-            metrics.collisions[running, episode] += collided[running, LEARNER_ID]
-            metrics.reward_ds[running, episode] += r_ds[running]
-            metrics.reward_ca[running, episode] += r_ca[running]
-            metrics.arrived[rows[arrived], episode] = True
+            steps += running
+            collisions += learner_collided & running
+            reward_ds += np.where(running, r_ds, 0.0)
+            reward_ca += np.where(running, r_ca, 0.0)
+            arrived_ever |= arrived
             positions = np.where(running[:, None, None], moved, positions)
 
-            leaving = arrived | (running & (t == s.max_steps - 1))
+            last_step = t == s.max_steps - 1
+            leaving = running if last_step else arrived
             if leaving.any():
-                next_script = script[:, min(t + 1, s.max_steps - 1)]
-                learners.finish(leaving, _learner_view(positions, goal, next_script, s))
-            running &= ~arrived
+                # s' of a leaving learner is read without intents, so nobody's next cell matters.
+                learners.finish(leaving, _learner_view(positions, goal, positions[:, 1:], everyone_known))
+            running = running & ~arrived
             if not running.any():
                 break
+
+        metrics.steps[:, episode] = steps
+        metrics.collisions[:, episode] = collisions
+        metrics.reward_ds[:, episode] = reward_ds
+        metrics.reward_ca[:, episode] = reward_ca
+        metrics.arrived[:, episode] = arrived_ever
         if on_episode is not None:
             on_episode(episode)
     return metrics
 
 
 def _learner_view(
-    positions: np.ndarray, goal: np.ndarray, obstacle_actions: np.ndarray, s: PaperSettings
+    positions: np.ndarray, goal: np.ndarray, obstacles_next: np.ndarray, known: np.ndarray
 ) -> View:
     """The learner's view: obstacles' cells, their announced next cells, who is in view."""
     own = positions[:, LEARNER_ID]
     obstacles = positions[:, LEARNER_ID + 1:]
+    offset = np.abs(obstacles - own[:, None, :])
     return View(
         own=own,
         goal=goal,
         nb_cells=obstacles,
-        nb_next=intended_cell(obstacles, obstacle_actions, s.width, s.height),
-        nb_known=np.ones(obstacles.shape[:2], dtype=bool),
-        nb_visible=in_view(obstacles - own[:, None, :]),
+        nb_next=obstacles_next,
+        nb_known=known,
+        nb_visible=(offset[..., 0] <= VIEW_RADIUS) & (offset[..., 1] <= VIEW_RADIUS),
     )
+
+
+def _worker(
+    index: int, specs: list[RunSpec], settings: PaperSettings, outbox: multiprocessing.Queue
+) -> None:
+    """A worker process: run its share of specs, report each episode, then send the metrics."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    try:
+        metrics = _run_in_process(specs, settings, lambda e: outbox.put(("episode", index, e)))
+        outbox.put(("done", index, metrics))
+    except BaseException as error:  # noqa: BLE001 - handed to the parent, which re-raises
+        outbox.put(("error", index, repr(error)))
+
+
+def _run_in_workers(
+    specs: list[RunSpec],
+    settings: PaperSettings,
+    on_episode: Callable[[int], None] | None,
+    workers: int,
+) -> EpisodeMetrics:
+    # Interleaved shares, so every worker gets a similar mix of slow (small k) and fast runs.
+    shares = [list(range(i, len(specs), workers)) for i in range(workers)]
+    context = multiprocessing.get_context("spawn")
+    outbox = context.Queue()
+    processes = [
+        context.Process(
+            target=_worker, args=(i, [specs[r] for r in share], settings, outbox), daemon=True
+        )
+        for i, share in enumerate(shares)
+    ]
+    metrics = EpisodeMetrics.empty(len(specs), settings.episodes)
+    episodes_done = [0] * workers
+    reported = 0
+    finished: set[int] = set()
+    try:
+        for process in processes:
+            process.start()
+        while len(finished) < workers:
+            try:
+                kind, index, payload = outbox.get(timeout=1.0)
+            except queue.Empty:
+                for i, process in enumerate(processes):
+                    if i not in finished and process.exitcode is not None:
+                        raise RuntimeError(
+                            f"paper worker {i} exited early with code {process.exitcode}"
+                        )
+                continue
+            if kind == "error":
+                raise RuntimeError(f"worker {index} failed: {payload}")
+            if kind == "done":
+                metrics.put_rows(shares[index], payload)
+                finished.add(index)
+                continue
+            episodes_done[index] = payload + 1
+            while reported < min(episodes_done):
+                if on_episode is not None:
+                    on_episode(reported)
+                reported += 1
+    finally:
+        for process in processes:
+            if process.pid is None:
+                continue
+            if process.is_alive():
+                process.terminate()
+            process.join()
+    return metrics

@@ -1,0 +1,246 @@
+"""The paper's comparison of QL and nnQL (Section 4: Table 1, Figs. 5-13) as a command line.
+
+    python launch/experiment.py                      # the paper's settings, 10 seeds, k = 1..10
+    python launch/experiment.py --episodes 50 --seeds 3 --ks 1,5 --out runs/quick
+
+Writes ``table1.csv``, ``table1.md``, ``episodes.csv``, ``config.json`` and the figures into
+``--out`` (README "The paper's experiment" describes every file and column).
+"""
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+if __package__ in (None, ""):  # run as a script: make the repository's packages importable
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from agent.learning import Hyper  # noqa: E402
+from launch.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
+from launch.progress import Progress  # noqa: E402
+from launch.report import (  # noqa: E402
+    ResultGrid, summarize, table1_markdown, table1_rows, write_episodes_csv, write_table1_csv,
+)
+
+RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
+RUN_EPISODES_PER_WORKER = 20_000
+"""With ``--workers auto``, one worker process per this many (run, episode) pairs, up to the cores."""
+
+EXIT_USAGE = 2
+EXIT_INTERRUPTED = 130
+DEFAULTS = PaperSettings()
+DEFAULT_HYPER = Hyper()
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one line on stderr (exit code 2), usage left to --help."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def parse_ks(text: str) -> list[int]:
+    """``"1-10"``, ``"1,2,5"`` or ``"1-3,7"`` -> sorted distinct random steps, each at least 1."""
+    ks: set[int] = set()
+    for part in text.split(","):
+        part = part.strip()
+        try:
+            if "-" in part:
+                first, last = (int(p) for p in part.split("-", 1))
+                if first > last:
+                    raise ValueError
+                ks.update(range(first, last + 1))
+            else:
+                ks.add(int(part))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a list or range of integers: {text!r}") from None
+    if min(ks) < 1:
+        raise argparse.ArgumentTypeError(f"every random step k must be at least 1: {text!r}")
+    return sorted(ks)
+
+
+def parse_algos(text: str) -> list[str]:
+    algos = [a.strip().lower() for a in text.split(",") if a.strip()]
+    unknown = [a for a in algos if a not in ALGOS]
+    if unknown or not algos:
+        raise argparse.ArgumentTypeError(f"choose algorithms from {','.join(ALGOS)}, got {text!r}")
+    return [a for a in ALGOS if a in algos]
+
+
+def parse_grid(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(p) for p in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"grid must look like 11x11, got {text!r}") from None
+    if width < 1 or height < 1:
+        raise argparse.ArgumentTypeError(f"grid sides must be at least 1, got {text!r}")
+    return width, height
+
+
+def bounded(kind: type, low: float | None = None, high: float | None = None):
+    """An argparse type: ``kind`` within ``[low, high]``."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a valid {kind.__name__}: {text!r}") from None
+        if isinstance(value, float) and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+        if (low is not None and value < low) or (high is not None and value > high):
+            bounds = f"at least {low}" if high is None else f"between {low} and {high}"
+            raise argparse.ArgumentTypeError(f"must be {bounds}, got {text}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+def parse_workers(text: str) -> int | None:
+    """``auto`` (None) or a positive number of worker processes."""
+    return None if text == "auto" else bounded(int, 1)(text)
+
+
+def build_parser() -> OneLineParser:
+    parser = OneLineParser(
+        prog="experiment.py",
+        description="QL vs nnQL, the paper's experiment: one learner among scripted obstacles "
+        "that announce their next action. The paper's settings are the defaults.",
+    )
+    add = parser.add_argument
+    add("--seeds", type=bounded(int, 1), default=10, help="independent runs per (algo, k) (default 10)")
+    add("--seed-base", type=bounded(int, 0), default=0, help="first seed; seeds are S, S+1, ... (default 0)")
+    add("--episodes", type=bounded(int, 1), default=DEFAULTS.episodes,
+        help=f"episodes per run (default {DEFAULTS.episodes})")
+    add("--max-steps", type=bounded(int, 1), default=DEFAULTS.max_steps,
+        help=f"steps per episode at most (default {DEFAULTS.max_steps})")
+    add("--ks", type=parse_ks, default=list(range(1, 11)),
+        help="random steps k: every k-th action is random; a range or list (default 1-10)")
+    add("--algos", type=parse_algos, default=list(ALGOS), help="algorithms to compare (default ql,nnql)")
+    add("--alpha", type=bounded(float, 0.0, 1.0), default=DEFAULT_HYPER.alpha,
+        help=f"learning rate (default {DEFAULT_HYPER.alpha})")
+    add("--gamma", type=bounded(float, 0.0, 1.0), default=DEFAULT_HYPER.gamma,
+        help=f"discount factor (default {DEFAULT_HYPER.gamma})")
+    add("--beta", type=bounded(float, 0.0, 1.0), default=DEFAULT_HYPER.beta,
+        help=f"weight of destination seeking in Eq. 7 (default {DEFAULT_HYPER.beta})")
+    add("--goal-reward", type=bounded(float, 0.0), default=DEFAULTS.goal_reward,
+        help=f"destination-seeking reward on arriving (default {DEFAULTS.goal_reward:g})")
+    add("--obstacles", type=bounded(int, 0), default=DEFAULTS.n_obstacles,
+        help=f"scripted obstacles (default {DEFAULTS.n_obstacles}, calibrated on Table 1's k = 1 row)")
+    add("--grid", type=parse_grid, default=(DEFAULTS.width, DEFAULTS.height), metavar="WxH",
+        help=f"grid size (default {DEFAULTS.width}x{DEFAULTS.height})")
+    add("--count-swaps", action="store_true",
+        help="count two agents swapping cells as a collision (the paper does not)")
+    add("--out", type=Path, default=None, help="output directory (default runs/experiment-<time>)")
+    add("--force", action="store_true", help="overwrite results already in --out")
+    add("--figure-k", type=bounded(int, 1), default=None,
+        help="random step k of the per-episode figures (default: the largest k run)")
+    add("--no-plots", action="store_true", help="skip the figures (no matplotlib needed)")
+    add("--workers", type=parse_workers, default=None, metavar="N|auto",
+        help="worker processes (default auto: by run size, at most the number of cores)")
+    return parser
+
+
+def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespace:
+    """Cross-option checks and defaults that depend on other options."""
+    width, height = args.grid
+    if width * height < args.obstacles + 2:
+        parser.error(
+            f"a {width}x{height} grid has {width * height} cells; {args.obstacles} obstacles, "
+            f"the learner and its goal need {args.obstacles + 2}"
+        )
+    if args.figure_k is None:
+        args.figure_k = max(args.ks)
+    elif args.figure_k not in args.ks:
+        parser.error(f"--figure-k {args.figure_k} is not among the random steps run ({args.ks})")
+    if args.out is None:
+        args.out = Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")
+    if args.out.exists() and not args.out.is_dir():
+        parser.error(f"--out {args.out} exists and is not a directory")
+    held = [name for name in RESULT_FILES if (args.out / name).exists()]
+    if held and not args.force:
+        parser.error(f"{args.out} already holds results ({', '.join(held)}); pass --force to overwrite")
+    if not args.no_plots:
+        try:
+            from launch.figures import require_matplotlib
+
+            require_matplotlib()
+        except RuntimeError as error:
+            parser.error(str(error))
+    runs = len(args.algos) * len(args.ks) * args.seeds
+    if args.workers is None:
+        args.workers = max(1, min(os.cpu_count() or 1, runs * args.episodes // RUN_EPISODES_PER_WORKER))
+    return args
+
+
+def settings_from(args: argparse.Namespace) -> PaperSettings:
+    return PaperSettings(
+        episodes=args.episodes,
+        max_steps=args.max_steps,
+        width=args.grid[0],
+        height=args.grid[1],
+        n_obstacles=args.obstacles,
+        count_swaps=args.count_swaps,
+        goal_reward=args.goal_reward,
+        hyper=Hyper(alpha=args.alpha, gamma=args.gamma, beta=args.beta),
+    )
+
+
+def run(args: argparse.Namespace) -> Path:
+    """Run the experiment and write every result file; returns the output directory."""
+    settings = settings_from(args)
+    seeds = list(range(args.seed_base, args.seed_base + args.seeds))
+    specs = [RunSpec(algo, k, seed) for algo in args.algos for k in args.ks for seed in seeds]
+    args.out.mkdir(parents=True, exist_ok=True)
+    started = time.monotonic()
+    label = f"{len(specs)} runs x {settings.episodes} episodes"
+    with Progress(total=len(specs) * settings.episodes, label=label) as bar:
+        metrics = run_batch(
+            specs, settings, on_episode=lambda e: bar.update(len(specs)), workers=args.workers
+        )
+    elapsed = time.monotonic() - started
+
+    grid = ResultGrid(specs, metrics)
+    rows = table1_rows(grid)
+    summary = summarize(grid, args.figure_k)
+    write_table1_csv(args.out / "table1.csv", rows)
+    markdown = table1_markdown(rows, summary)
+    (args.out / "table1.md").write_text(markdown)
+    write_episodes_csv(args.out / "episodes.csv", specs, metrics)
+    config = {
+        "settings": asdict(settings),
+        "algos": args.algos,
+        "random_steps": args.ks,
+        "seeds": seeds,
+        "figure_k": args.figure_k,
+        "workers": args.workers,
+        "elapsed_seconds": round(elapsed, 3),
+        "command": [Path(sys.argv[0]).name, *sys.argv[1:]],
+    }
+    (args.out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    if not args.no_plots:
+        from launch.figures import write_figures
+
+        write_figures(args.out, grid, args.figure_k)
+    print(markdown)
+    print(f"wrote {args.out}/ in {elapsed:.1f} s of simulation")
+    return args.out
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    try:
+        args = resolve(parser.parse_args(argv), parser)
+        run(args)
+    except KeyboardInterrupt:
+        print("\ninterrupted: stopped before writing results", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
