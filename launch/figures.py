@@ -81,17 +81,22 @@ def _steps(plt, grid: ResultGrid, k: int):
 
 
 def _rewards(plt, grid: ResultGrid, k: int):
-    """Figs. 7 and 8: the sum of rewards per episode (destination seeking + collision avoidance)."""
-    figure, axes = _panels(plt, grid, f"Sum of rewards per episode, k = {k} ({_seeds_note(grid)})")
+    """Figs. 7 and 8: rewards per episode, and the destination-seeking reward summed over learning."""
+    figure, (total_ax, ds_ax, cumulative_ax) = plt.subplots(1, 3, figsize=(16, 4))
+    figure.suptitle(f"Rewards, k = {k} ({_seeds_note(grid)})")
     m = grid.metrics
     episodes = np.arange(1, m.steps.shape[1] + 1)
-    for algo, ax in axes.items():
+    for algo in grid.algos:
         ds = _per_episode_mean(grid, algo, k, m.reward_ds)
         ca = _per_episode_mean(grid, algo, k, m.reward_ca)
-        ax.plot(episodes, ds + ca, color=ALGO_COLOURS[algo], lw=0.8, label="total")
-        ax.plot(episodes, ca, color="gray", lw=0.6, label="collision avoidance")
-        ax.plot(episodes, ds, color="black", lw=0.6, label="destination seeking")
-        ax.set(title=ALGO_LABELS[algo], xlabel="episode", ylabel="reward")
+        style = dict(color=ALGO_COLOURS[algo], label=ALGO_LABELS[algo])
+        total_ax.plot(episodes, ds + ca, lw=0.8, **style)
+        ds_ax.plot(episodes, ds, lw=0.8, **style)
+        cumulative_ax.plot(episodes, np.cumsum(ds), **style)
+    total_ax.set(title="sum of rewards per episode (DS + CA)", xlabel="episode", ylabel="reward")
+    ds_ax.set(title="destination-seeking reward per episode", xlabel="episode")
+    cumulative_ax.set(title="destination-seeking reward, cumulative", xlabel="episode")
+    for ax in (total_ax, ds_ax, cumulative_ax):
         ax.legend()
     return figure
 

@@ -1,0 +1,116 @@
+"""The PettingZoo adapter: the library's API and seed tests, and the world rules seen through it."""
+
+import numpy as np
+import pytest
+from pettingzoo.test import parallel_api_test, parallel_seed_test
+
+from protocol.actions import LEFT, N_STATES, RIGHT, STAY, UP, offset_state
+from world.pettingzoo_env import NOT_IN_VIEW, SwarmGridEnv
+from world.rules import CA_REWARD, GOAL_REWARD
+
+
+@pytest.mark.filterwarnings("error::UserWarning")  # the API test reports problems as warnings
+@pytest.mark.parametrize("n_agents, size, count_swaps", [(1, 5, True), (4, 11, True), (6, 7, False)])
+def test_parallel_api(n_agents, size, count_swaps):
+    env = SwarmGridEnv(n_agents=n_agents, width=size, height=size, max_steps=40, count_swaps=count_swaps)
+    parallel_api_test(env, num_cycles=200)
+
+
+def test_parallel_seed():
+    parallel_seed_test(lambda: SwarmGridEnv(n_agents=5, max_steps=60), num_cycles=200)
+
+
+def rollout(env: SwarmGridEnv, seed: int, policy_seed: int) -> list:
+    """Every (observations, rewards, terminations, truncations, infos) of one seeded episode."""
+    observations, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(policy_seed)
+    trace = [observations]
+    while env.agents:
+        actions = {agent: int(rng.integers(5)) for agent in env.agents}
+        trace.append(env.step(actions))
+    return trace
+
+
+def same(a, b) -> bool:
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(same(x, y) for x, y in zip(a, b))
+    return np.array_equal(a, b)
+
+
+def test_same_seed_same_trajectory_and_other_seed_another():
+    first = rollout(SwarmGridEnv(n_agents=4, max_steps=50), seed=7, policy_seed=1)
+    again = rollout(SwarmGridEnv(n_agents=4, max_steps=50), seed=7, policy_seed=1)
+    other = rollout(SwarmGridEnv(n_agents=4, max_steps=50), seed=8, policy_seed=1)
+    assert same(first, again)
+    assert not same(first, other)
+
+
+def test_reset_without_seed_moves_on_to_the_next_episode_of_the_seed():
+    env = SwarmGridEnv(n_agents=3)
+    first, _ = env.reset(seed=3)
+    second, _ = env.reset()
+    assert not same(first, second)
+    again, _ = env.reset(seed=3)
+    assert same(first, again)
+
+
+def place(env: SwarmGridEnv, positions, goals) -> None:
+    """Put a reset env into a hand-made state."""
+    env._positions = np.array(positions, dtype=np.int64)
+    env._goals = np.array(goals, dtype=np.int64)
+
+
+def test_observation_holds_goal_offset_and_neighbour_offsets():
+    env = SwarmGridEnv(n_agents=3, width=15, height=15)
+    env.reset(seed=0)
+    place(env, [(0, 0), (2, 1), (14, 0)], [(3, 4), (9, 9), (10, 10)])
+    observation = env._observe(0)
+    assert observation.tolist() == [offset_state(np.array([3, 4])), offset_state(np.array([2, 1])), NOT_IN_VIEW]
+    assert env.observation_space("agent_0").contains(observation)
+    assert env.observation_space("agent_0").nvec.tolist() == [N_STATES, N_STATES + 1, N_STATES + 1]
+
+
+def test_rewards_collisions_arrival_and_removal():
+    env = SwarmGridEnv(n_agents=3, width=5, height=5, count_swaps=True)
+    env.reset(seed=0)
+    # agent_0 steps onto its goal; agent_1 and agent_2 try to swap cells.
+    place(env, [(0, 0), (3, 3), (4, 3)], [(1, 0), (0, 4), (4, 0)])
+    _, rewards, terminations, truncations, infos = env.step({"agent_0": RIGHT, "agent_1": RIGHT, "agent_2": LEFT})
+    assert rewards["agent_0"] == pytest.approx(GOAL_REWARD + CA_REWARD)
+    assert terminations == {"agent_0": True, "agent_1": False, "agent_2": False}
+    assert not any(truncations.values())
+    assert infos["agent_1"]["collided"] and infos["agent_2"]["collided"]
+    assert infos["agent_1"]["reward_ca"] == 0.0
+    # Staying put: same distance, 0.5 / d.
+    assert infos["agent_1"]["reward_ds"] == pytest.approx(0.5 / np.hypot(3, 1))
+    assert env.agents == ["agent_1", "agent_2"]
+    # The arrived agent stays parked on its goal, and running into it is a collision.
+    place(env, [(1, 0), (1, 1), (4, 3)], [(1, 0), (0, 4), (4, 0)])
+    _, _, _, _, infos = env.step({"agent_1": UP, "agent_2": STAY})
+    assert infos["agent_1"]["collided"] and "agent_0" not in infos
+    assert env._positions[0].tolist() == [1, 0]
+
+
+def test_truncation_after_max_steps():
+    env = SwarmGridEnv(n_agents=2, max_steps=3)
+    env.reset(seed=1)
+    for _ in range(2):
+        _, _, terminations, truncations, _ = env.step({a: STAY for a in env.agents})
+        assert not any(truncations.values())
+    _, _, terminations, truncations, _ = env.step({a: STAY for a in env.agents})
+    assert all(truncations.values()) and not any(terminations.values())
+    assert env.agents == []
+
+
+def test_ansi_render_draws_agents_and_goals():
+    env = SwarmGridEnv(n_agents=2, width=4, height=3, render_mode="ansi")
+    env.reset(seed=0)
+    place(env, [(0, 0), (3, 2)], [(1, 0), (0, 2)])
+    assert env.render() == "Aa..\n....\nb..B"
+
+
+def test_too_many_agents_for_the_grid_is_refused():
+    with pytest.raises(ValueError):
+        SwarmGridEnv(n_agents=5, width=3, height=3)

@@ -1,0 +1,171 @@
+"""A PettingZoo ``ParallelEnv`` over the world rules: N learning agents, each seeking its own goal.
+
+## Description
+A swarm episode (:func:`world.scenario.swarm_episode`): ``n_agents`` agents start on distinct cells
+of a ``width x height`` grid, each with its own goal cell, all starts and goals distinct. Every
+step all agents move at once and :func:`world.rules.arbitrate` resolves the moves: two agents
+trying to occupy one cell collide and stay where they were (DESIGN §3), and so do two agents
+swapping cells when ``count_swaps`` is set (the default here, as in swarm mode).
+
+## Action space
+``Discrete(5)`` per agent, the paper's actions (:mod:`protocol.actions`):
+
+- 0: UP (y - 1)
+- 1: DOWN (y + 1)
+- 2: LEFT (x - 1)
+- 3: RIGHT (x + 1)
+- 4: STAY
+
+A move off the grid leaves the agent where it is, without a collision.
+
+## Observation space
+``MultiDiscrete`` of length ``n_agents``, the egocentric states of the paper (one of 441 relative
+offsets ``(dx, dy)`` in ``[-10, 10]^2``, :func:`protocol.actions.offset_state`):
+
+- ``obs[0]``: the goal's offset from the agent (clipped to the window's edge on large grids);
+- ``obs[1:]``: one slot per other agent, in agent-id order: that agent's offset from this one, or
+  ``441`` (``NOT_IN_VIEW``) when it is more than 10 cells away along an axis.
+
+This is the QL reading of the neighbour state: a parallel step has no moment at which neighbours
+could announce their next actions, so nnQL's negotiation lives in the swarm runtime, not here.
+Agents that have arrived stay parked on their goals and are still seen (and can still be run into).
+
+## Rewards
+Per step, the paper's two rewards added (:mod:`world.rules`): destination seeking ``1/d`` if the
+Euclidean distance ``d`` to the goal decreased, ``0.5/d`` if it stayed, 0 if it grew, and
+``GOAL_REWARD`` on arriving; plus collision avoidance ``CA_REWARD`` (10) without a collision, 0 with
+one. ``infos[agent]`` holds the two parts (``reward_ds``, ``reward_ca``) and ``collided``.
+
+## Episode end
+An agent is terminated when it reaches its goal, and then leaves ``agents``. Every agent still on its
+way is truncated after ``max_steps`` steps.
+
+## Seeding
+``reset(seed=S)`` starts episode 0 of seed ``S``; each later ``reset()`` without a seed moves on to the
+next episode of the same seed. Scenarios come from :mod:`protocol.seeding` streams, and the
+dynamics draw nothing, so the same seed and actions give the same trajectory.
+"""
+
+import functools
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+
+from protocol.actions import N_ACTIONS, N_STATES, STAY, in_view, offset_state
+from world.rules import GOAL_REWARD, arbitrate, collision_reward, destination_reward
+from world.scenario import swarm_episode
+
+NOT_IN_VIEW = N_STATES
+"""The observation slot value of another agent out of view."""
+
+
+class SwarmGridEnv(ParallelEnv):
+    """N agents on a grid, each reaching for its own goal while avoiding the others."""
+
+    metadata = {"name": "nnql_swarm_grid_v0", "render_modes": ["ansi"], "is_parallelizable": True}
+
+    def __init__(
+        self,
+        n_agents: int = 4,
+        width: int = 11,
+        height: int = 11,
+        max_steps: int = 100,
+        count_swaps: bool = True,
+        goal_reward: float = GOAL_REWARD,
+        render_mode: str | None = None,
+    ) -> None:
+        if n_agents < 1:
+            raise ValueError(f"need at least one agent, got {n_agents}")
+        if 2 * n_agents > width * height:
+            raise ValueError(f"{n_agents} agents need {2 * n_agents} cells; {width}x{height} has fewer")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"unsupported render mode {render_mode!r}")
+        self.n_agents = n_agents
+        self.width, self.height = width, height
+        self.max_steps = max_steps
+        self.count_swaps = count_swaps
+        self.goal_reward = goal_reward
+        self.render_mode = render_mode
+        self.possible_agents = [f"agent_{i}" for i in range(n_agents)]
+        self.agents: list[str] = []
+        self._index = {name: i for i, name in enumerate(self.possible_agents)}
+        self._seed: int | None = None
+        self._episode = -1
+        self._positions = np.zeros((n_agents, 2), dtype=np.int64)
+        self._goals = np.zeros((n_agents, 2), dtype=np.int64)
+        self._steps = 0
+
+    @functools.lru_cache(maxsize=None)
+    def observation_space(self, agent: str) -> spaces.MultiDiscrete:
+        return spaces.MultiDiscrete([N_STATES] + [N_STATES + 1] * (self.n_agents - 1), dtype=np.int64)
+
+    @functools.lru_cache(maxsize=None)
+    def action_space(self, agent: str) -> spaces.Discrete:
+        return spaces.Discrete(N_ACTIONS)
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        if seed is not None:
+            self._seed, self._episode = int(seed), 0
+        else:
+            if self._seed is None:
+                self._seed = int(np.random.SeedSequence().entropy % 2**63)
+            self._episode += 1
+        scenario = swarm_episode(self._seed, self._episode, self.width, self.height, self.n_agents)
+        self._positions = scenario.starts.copy()
+        self._goals = scenario.goals.copy()
+        self._steps = 0
+        self.agents = list(self.possible_agents)
+        observations = {agent: self._observe(self._index[agent]) for agent in self.agents}
+        return observations, {agent: {} for agent in self.agents}
+
+    def step(self, actions: dict):
+        live = list(self.agents)
+        chosen = np.full(self.n_agents, STAY, dtype=np.int64)  # parked agents stay
+        for agent in live:
+            chosen[self._index[agent]] = int(actions.get(agent, STAY))
+        before = self._positions
+        after, collided = arbitrate(
+            before[None], chosen[None], self.width, self.height, self.count_swaps
+        )
+        self._positions = after[0]
+        self._steps += 1
+        reward_ds = destination_reward(before, self._positions, self._goals, self.goal_reward)
+        reward_ca = collision_reward(collided[0])
+        arrived = np.all(self._positions == self._goals, axis=1)
+
+        observations, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
+        for agent in live:
+            i = self._index[agent]
+            observations[agent] = self._observe(i)
+            rewards[agent] = float(reward_ds[i] + reward_ca[i])
+            terminations[agent] = bool(arrived[i])
+            truncations[agent] = bool(self._steps >= self.max_steps and not arrived[i])
+            infos[agent] = {
+                "reward_ds": float(reward_ds[i]),
+                "reward_ca": float(reward_ca[i]),
+                "collided": bool(collided[0, i]),
+            }
+        self.agents = [a for a in live if not (terminations[a] or truncations[a])]
+        return observations, rewards, terminations, truncations, infos
+
+    def render(self) -> str | None:
+        if self.render_mode != "ansi":
+            return None
+        rows = [["." for _ in range(self.width)] for _ in range(self.height)]
+        for i, (x, y) in enumerate(self._goals.tolist()):
+            rows[y][x] = chr(ord("a") + i % 26)
+        for i, (x, y) in enumerate(self._positions.tolist()):
+            rows[y][x] = chr(ord("A") + i % 26)
+        return "\n".join("".join(row) for row in rows)
+
+    def close(self) -> None:
+        pass
+
+    def _observe(self, i: int) -> np.ndarray:
+        own = self._positions[i]
+        others = np.delete(self._positions, i, axis=0)
+        offsets = others - own
+        neighbours = np.where(in_view(offsets), offset_state(offsets), NOT_IN_VIEW)
+        goal = offset_state(self._goals[i] - own)
+        return np.concatenate([[goal], neighbours]).astype(np.int64)
