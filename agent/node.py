@@ -32,6 +32,9 @@ log = logging.getLogger("nnql.agent")
 POLL_S = 0.2
 """How often a waiting agent checks whether it was asked to stop."""
 
+MAX_HELD_QUERIES = 4 * 1024
+"""Queries for the coming tick held at once; legitimately at most one per other agent."""
+
 EXIT_STOPPED = 130
 """Exit code of an agent stopped by a signal rather than by the world's shutdown."""
 
@@ -226,6 +229,14 @@ class AgentNode:
             query.drop()
         elif tick <= self.decided_tick:
             self._answer(tick, query)
+        elif self.decided_tick >= 0 and tick > self.decided_tick + 1:
+            self.inbox.reject("future-query", f"tick {tick}, decided {self.decided_tick}")
+            query.reply_err(b"future tick")
+            query.drop()
+        elif len(self.held_queries) >= MAX_HELD_QUERIES:
+            self.inbox.reject("query-flood", f"{len(self.held_queries)} queries held")
+            query.reply_err(b"too many queries")
+            query.drop()
         else:
             self.held_queries.append((tick, query))
 

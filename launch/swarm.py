@@ -23,6 +23,7 @@ if __package__ in (None, ""):
 
 from launch.cli import EXIT_INTERRUPTED, OneLineParser  # noqa: E402
 from launch.progress import Progress  # noqa: E402
+from launch.recording import RecordingSession, check_viewer_url  # noqa: E402
 from launch.resume import ResumeError, ResumePoint, check_checkpoints, resume_point  # noqa: E402
 from launch.supervisor import Supervisor, describe_exit  # noqa: E402
 from protocol.config import ALGOS, SwarmConfig  # noqa: E402
@@ -89,6 +90,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="start everything, only the world, or only agents")
     z.add_argument("--agent-ids", type=parse_ids, default=None,
                    help="with --role agents: which agents to start, e.g. 0-3")
+    z.add_argument("--port", type=int, default=None,
+                   help="one machine: the loopback port the world listens on (default: a free one)")
     z.add_argument("--mode", choices=MODES, default="peer", help="Zenoh session mode")
     z.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh listen endpoint, e.g. tcp/0.0.0.0:7447 (repeatable)")
@@ -97,6 +100,18 @@ def build_parser() -> argparse.ArgumentParser:
     z.add_argument("--zenoh-config", default=None, metavar="FILE", help="a Zenoh JSON5 config file")
     v = p.add_argument_group("Rerun")
     v.add_argument("--no-record", action="store_true", help="do not write run.rrd")
+    viewer = v.add_mutually_exclusive_group()
+    viewer.add_argument("--rerun-spawn", action="store_true",
+                        help="spawn the native Rerun viewer; every process streams to it")
+    viewer.add_argument("--rerun-connect", type=check_viewer_url, default=None, metavar="URL",
+                        help="stream to a running viewer, e.g. rerun+http://127.0.0.1:9876/proxy")
+    viewer.add_argument("--rerun-serve-web", action="store_true",
+                        help="serve the web viewer (for another machine); prints its URL and "
+                             "keeps serving after the run until Ctrl-C")
+    v.add_argument("--rerun-port", type=int, default=9876,
+                   help="gRPC port of the viewer that --rerun-spawn / --rerun-serve-web start")
+    v.add_argument("--rerun-web-port", type=int, default=9090,
+                   help="HTTP port of the web viewer of --rerun-serve-web")
     return p
 
 
@@ -120,6 +135,11 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
         bad = [i for i in args.agent_ids if not 0 <= i < config.n_agents]
         if bad:
             raise UsageError(f"agent ids {bad} out of range 0..{config.n_agents - 1}")
+    if args.port is not None and (args.role != "all" or args.listen or args.connect):
+        raise UsageError("--port sets the one-machine layout; with --role, --listen or --connect "
+                         "give endpoints instead")
+    if args.port is not None and not 1 <= args.port <= 65535:
+        raise UsageError(f"--port must be 1..65535, not {args.port}")
     if args.role != "all" and not (args.listen or args.connect or args.zenoh_config):
         raise UsageError(f"--role {args.role} needs --listen/--connect endpoints or --zenoh-config")
     out = args.out or Path("runs") / run_id
@@ -154,16 +174,17 @@ def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
 def transports(args: argparse.Namespace) -> tuple[TransportSettings, TransportSettings]:
     """The world's and the agents' Zenoh settings: embedded, or what the options say."""
     if args.role == "all" and not (args.listen or args.connect or args.zenoh_config):
-        layout = EmbeddedLayout()
+        layout = EmbeddedLayout() if args.port is None else EmbeddedLayout(port=args.port)
         return layout.world(), layout.agent()
     explicit = TransportSettings(mode=args.mode, listen=tuple(args.listen),
                                  connect=tuple(args.connect), config_file=args.zenoh_config)
     return explicit, explicit
 
 
-def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record: bool,
+def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
                progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> int:
-    """The world process (spawned)."""
+    """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
+    from launch.recording import open_world_viz
     from world.node import WorldOptions, run_world
 
     name_process("nnql-world", config)
@@ -174,27 +195,39 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
     def on_tick(world, report) -> None:
         nonlocal collisions
         collisions += len(report.collided)
+        if viz is not None:
+            viz.log_tick(world, report)
         if bar is not None and report.episode_row is not None:
             bar.update(1, collisions=collisions, missed=report.episode_row["missed_intents"],
                        ticks_per_s=f"{world.tick / max(time.monotonic() - started, 1e-9):.0f}")
 
+    viz = open_world_viz(record, config, out)
     started = time.monotonic()
     try:
-        return run_world(WorldOptions(config, transport, out, record=record,
+        return run_world(WorldOptions(config, transport, out, record=False,
                                       first_episode=start.episode, first_tick=start.tick), on_tick)
     finally:
         if bar is not None:
             bar.close()
+        if viz is not None:
+            viz.close()
 
 
 def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
-               resume: bool = False) -> int:
+               resume: bool = False, recording=None) -> int:
     """An agent process (spawned); ``resume`` reloads its checkpoint if there is one."""
     from agent.node import AgentOptions, run_agent
+    from launch.recording import open_agent_viz
 
     name_process(f"nnql-agent {agent}", config)
     setup_logging(f"agent {agent}")
-    return run_agent(AgentOptions(agent, config, transport, out, resume=resume))
+    brain, on_episode_end, viz = open_agent_viz(recording, agent, config)
+    try:
+        return run_agent(AgentOptions(agent, config, transport, out, resume=resume), brain,
+                         on_episode_end)
+    finally:
+        if viz is not None:
+            viz.close()
 
 
 def name_process(title: str, config: SwarmConfig) -> None:
@@ -209,31 +242,31 @@ def setup_logging(name: str) -> None:
                         format=f"%(asctime)s {name}: %(message)s", stream=sys.stderr)
 
 
-def run_in_process(config: SwarmConfig, out: Path, record: bool, progress: bool) -> int:
+def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> int:
+    """``record``: a RecordingSession, or True / False for run.rrd or nothing."""
     from launch.inprocess import run_in_process as run
+    from launch.recording import InProcessRecorder, RecordingSession
 
-    viz = None
-    if record:
-        from world.viz import WorldViz
-        viz = WorldViz.to_file(config, out / "run.rrd")
+    session = record if isinstance(record, RecordingSession) else \
+        RecordingSession.files_only(record, config, out)
+    viz = InProcessRecorder(session.plan, config, out)
     bar = Progress(config.episodes, "episodes") if progress else None
     collisions = 0
 
     def on_tick(world, report) -> None:
         nonlocal collisions
         collisions += len(report.collided)
-        if viz is not None:
-            viz.log_tick(world, report)
+        viz.on_tick(world, report)
         if bar is not None and report.episode_row is not None:
             bar.update(1, collisions=collisions)
 
     try:
-        world = run(config, out, on_tick)
+        world = run(config, out, on_tick, on_episode_end=viz.on_episode_end)
     finally:
         if bar is not None:
             bar.close()
-        if viz is not None:
-            viz.close()
+        viz.close()
+        session.finish()
     return 1 if world.violations else 0
 
 
@@ -241,7 +274,8 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
                   start: ResumePoint) -> int:
     """Start the world and/or agents as supervised processes and wait for the run to end."""
     world_transport, agent_transport = transports(args)
-    record, progress = not args.no_record, not args.no_progress
+    recording = RecordingSession.start(args, config, out)
+    record, progress = recording.plan or False, not args.no_progress
     supervisor = Supervisor(mp.get_context("spawn"))
     world = None
     if args.role in ("all", "world"):
@@ -251,8 +285,10 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
         for i in agent_ids(args, config):
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True,
                            make_args=lambda restarted, i=i: (
-                               i, config, agent_transport, out, restarted or args.resume))
+                               i, config, agent_transport, out, restarted or args.resume,
+                               recording.plan))
     code = supervisor.run(leader=world)
+    recording.finish()
     if code == EXIT_INTERRUPTED:
         print("\ninterrupted: the swarm stopped; continue it with --resume", file=sys.stderr)
     elif world is not None and code != 0:
@@ -283,7 +319,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(str(error))
     if args.in_process:
         try:
-            code = run_in_process(config, out, not args.no_record, not args.no_progress)
+            code = run_in_process(config, out, RecordingSession.start(args, config, out),
+                                  not args.no_progress)
         except KeyboardInterrupt:
             print("\ninterrupted", file=sys.stderr)
             return EXIT_INTERRUPTED

@@ -21,12 +21,29 @@ def run_swarm(out: Path, *options: str, timeout: float = 240) -> subprocess.Comp
     )
 
 
-def start_swarm(out: Path, *options: str) -> subprocess.Popen:
+class SwarmProcess(subprocess.Popen):
+    """A launched swarm whose output goes to files (a pipe nobody reads would block its logs)."""
+
+    def __init__(self, command: list[str], log_dir: Path) -> None:
+        log_dir.mkdir(parents=True, exist_ok=True)
+        self.stdout_path = log_dir / "stdout.log"
+        self.stderr_path = log_dir / "stderr.log"
+        with open(self.stdout_path, "w") as out, open(self.stderr_path, "w") as err:
+            super().__init__(command, cwd=ROOT, stdout=out, stderr=err, text=True,
+                             start_new_session=True)
+
+    def stderr_text(self) -> str:
+        return self.stderr_path.read_text()
+
+    def finish(self, timeout: float) -> str:
+        """Wait for the swarm to exit; returns its stderr."""
+        self.wait(timeout=timeout)
+        return self.stderr_text()
+
+
+def start_swarm(out: Path, *options: str) -> SwarmProcess:
     """Start a swarm in its own process group (so a test can signal it like a terminal would)."""
-    return subprocess.Popen(
-        swarm_command(out, *options), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-        text=True, start_new_session=True,
-    )
+    return SwarmProcess(swarm_command(out, *options), Path(str(out) + "-logs"))
 
 
 def group_pids(pgid: int) -> list[int]:
@@ -70,8 +87,8 @@ def wait_for_rows(csv_path: Path, rows: int, timeout: float, process=None) -> No
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         if process is not None and process.poll() is not None:
-            raise AssertionError(f"the swarm exited early ({process.returncode}): "
-                                 f"{process.stderr.read() if process.stderr else ''}")
+            log = process.stderr_text() if hasattr(process, "stderr_text") else ""
+            raise AssertionError(f"the swarm exited early ({process.returncode}): {log}")
         if csv_path.exists() and len(read_episodes(csv_path)) >= rows:
             return
         time.sleep(0.1)

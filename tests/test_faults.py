@@ -18,7 +18,8 @@ from agent.brain import AgentBrain
 from protocol.config import SwarmConfig
 from protocol.transport import free_port
 from tests.swarm_helpers import (
-    ROOT, find_process, group_pids, run_swarm, start_swarm, swarm_command, wait_for_rows,
+    ROOT, SwarmProcess, find_process, group_pids, run_swarm, start_swarm, swarm_command,
+    wait_for_rows,
 )
 from world.metrics import read_episodes
 
@@ -60,7 +61,7 @@ def test_a_killed_agent_is_restarted_from_its_checkpoint(tmp_path):
         os.kill(victim, signal.SIGKILL)
         saved = out / "agent-3-at-kill.npz"
         shutil.copy(out / "checkpoints" / "agent-3.npz", saved)
-        stdout, stderr = swarm.communicate(timeout=240)
+        stderr = swarm.finish(timeout=240)
     finally:
         if group_pids(swarm.pid):
             os.killpg(swarm.pid, signal.SIGKILL)
@@ -88,7 +89,7 @@ def test_a_stalled_agent_costs_at_most_the_deadline_and_its_stale_intents_are_re
         os.kill(victim, signal.SIGSTOP)
         time.sleep(3.0)
         os.kill(victim, signal.SIGCONT)
-        stdout, stderr = swarm.communicate(timeout=240)
+        stderr = swarm.finish(timeout=240)
     finally:
         if group_pids(swarm.pid):
             os.killpg(swarm.pid, signal.SIGKILL)
@@ -112,7 +113,7 @@ def test_a_killed_world_resumes_without_duplicate_or_missing_episodes(tmp_path):
         wait_for_rows(out / "episodes.csv", 3, 120, swarm)
         [world] = find_process("nnql-world resumed")
         os.kill(world, signal.SIGKILL)
-        stdout, stderr = swarm.communicate(timeout=30)
+        stderr = swarm.finish(timeout=30)
     finally:
         if group_pids(swarm.pid):
             os.killpg(swarm.pid, signal.SIGKILL)
@@ -156,14 +157,12 @@ def test_agents_reconnect_to_a_restarted_world(tmp_path):
     out = tmp_path / "reconnect"
     port = free_port()
     common = ("--agents", "6", "--episodes", "80", "--max-steps", "30", "--run-id", "reconnect")
-    agents = subprocess.Popen(
+    agents = SwarmProcess(
         swarm_command(out, *common, "--role", "agents", "--connect", f"tcp/127.0.0.1:{port}",
-                      "--listen", "tcp/127.0.0.1:0"),
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                      "--listen", "tcp/127.0.0.1:0"), tmp_path / "agents-logs")
     world_command = swarm_command(out, *common, "--role", "world", "--no-record",
                                   "--listen", f"tcp/127.0.0.1:{port}")
-    world = subprocess.Popen(world_command, cwd=ROOT, stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True, start_new_session=True)
+    world = SwarmProcess(world_command, tmp_path / "world-logs")
     try:
         wait_for_rows(out / "episodes.csv", 3, 120, world)
         [world_pid] = find_process("nnql-world reconnect")
@@ -175,7 +174,7 @@ def test_agents_reconnect_to_a_restarted_world(tmp_path):
             cwd=ROOT, capture_output=True, text=True, timeout=240, start_new_session=True)
         assert resumed.returncode == 0, resumed.stderr
         agents.wait(timeout=30)
-        assert agents.returncode == 0, agents.stderr.read()
+        assert agents.returncode == 0, agents.stderr_text()
     finally:
         for process in (agents, world):
             if group_pids(process.pid):

@@ -132,7 +132,7 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
         assert time.monotonic() - start < 3
         assert group_pids(swarm.pid) == []
         assert swarm.returncode == 130
-        assert "Traceback" not in swarm.stderr.read()
+        assert "Traceback" not in swarm.stderr_text()
     finally:
         if group_pids(swarm.pid):
             os.killpg(swarm.pid, signal.SIGKILL)

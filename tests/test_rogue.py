@@ -1,0 +1,137 @@
+"""Bad input on the wire: a rogue Zenoh session floods every key the swarm listens on.
+
+The swarm runs with a fixed world port; once it is under way a rogue peer joins the mesh and
+sends garbage bytes, wrong types, oversized payloads, forged senders, other run ids, stale and
+future ticks, bad and future intent queries, unknown liveliness tokens, and floods of all that.
+The run must complete with exactly the metrics of a clean in-process run of the same config (the
+state is unchanged), and every rejection must be counted with its reason.
+"""
+
+import json
+import os
+import signal
+
+import msgpack
+import zenoh
+
+from protocol import keys
+from protocol.messages import (
+    WORLD_SENDER, Control, Intent, Observation, agent_sender, encode, to_wire,
+)
+from protocol.transport import TransportSettings, free_port
+from tests.swarm_helpers import group_pids, run_swarm, start_swarm, wait_for_rows
+from world.engine import EPISODE_FIELDS
+from world.metrics import read_episodes
+
+RUN_ID = "rogue"
+AGENTS = 6
+OPTIONS = ("--agents", str(AGENTS), "--episodes", "10", "--max-steps", "40", "--seed", "5",
+           "--run-id", RUN_ID, "--deadline", "5", "--no-record")
+
+
+def forged_payloads(agent: int) -> dict[str, list[bytes]]:
+    """Every kind of bad message, for an observation key and an intent key of ``agent``."""
+    obs = Observation(run=RUN_ID, tick=1, sender=WORLD_SENDER, agent=agent, episode=0, step=0,
+                      position=(1, 1), goal=(2, 2), neighbours=(), rank=0, reward_ds=0.0,
+                      reward_ca=0.0, collided=False, arrived=False, episode_end=False)
+    intent = Intent(run=RUN_ID, tick=1, sender=agent_sender(agent), agent=agent, episode=0, action=1)
+    garbage = [b"", b"\x00\xff\xfe garbage", b"\xc1", os.urandom(64), b"\x92\x01", b"x" * 100_000]
+    wrong_types = [msgpack.packb(v) for v in ([1, 2, 3], "obs", 3.5, None, {"v": "1"}, {1: 2})]
+
+    def mutated(msg, **changes) -> bytes:
+        wire = to_wire(msg)
+        wire.update(changes)
+        return msgpack.packb(wire)
+
+    bad_obs = [
+        mutated(obs, s="agent/3"),  # forged sender
+        mutated(obs, r="another-run"),
+        mutated(obs, t=0),  # stale tick
+        mutated(obs, t=10**12),  # future tick
+        mutated(obs, a=(agent + 1) % AGENTS),  # someone else's observation
+        mutated(obs, p=[True, 2]), mutated(obs, rd=float("nan")), mutated(obs, v=99),
+        mutated(obs, nb=[[agent, 1, 1]]),
+    ]
+    bad_intents = [
+        mutated(intent, s=agent_sender((agent + 1) % AGENTS)),  # forged sender
+        mutated(intent, a=(agent + 1) % AGENTS, s=agent_sender((agent + 1) % AGENTS)),  # wrong key
+        mutated(intent, r="another-run"),
+        mutated(intent, t=0), mutated(intent, t=10**12),  # stale and future ticks
+        mutated(intent, x=7), mutated(intent, x=True), mutated(intent, k="obs"),
+        encode(Control(run=RUN_ID, tick=1, sender=WORLD_SENDER, command="shutdown")),
+    ]
+    bad_control = [mutated(Control(run=RUN_ID, tick=1, sender=WORLD_SENDER, command="shutdown"),
+                           s=agent_sender(agent)),
+                   mutated(Control(run=RUN_ID, tick=1, sender=WORLD_SENDER, command="shutdown"),
+                           r="another-run"),
+                   msgpack.packb({"v": 1, "k": "control", "c": "reboot"})]
+    return {
+        "obs": garbage + wrong_types + bad_obs,
+        "intent": garbage + wrong_types + bad_intents,
+        "control": garbage + wrong_types + bad_control,
+    }
+
+
+def attack(port: int, rounds: int) -> int:
+    """Join the swarm's mesh and send every bad message ``rounds`` times; returns messages sent."""
+    transport = TransportSettings(mode="peer", listen=("tcp/127.0.0.1:0",),
+                                  connect=(f"tcp/127.0.0.1:{port}",))
+    sent = 0
+    with zenoh.open(transport.zenoh_config()) as session:
+        tokens = [session.liveliness().declare_token(f"{keys.PREFIX}/{RUN_ID}/alive/agent/{name}")
+                  for name in ("999", "x", "0042")]
+        for _ in range(rounds):
+            for agent in range(AGENTS):
+                payloads = forged_payloads(agent)
+                for payload in payloads["obs"]:
+                    session.put(keys.obs_key(RUN_ID, agent), payload)
+                for payload in payloads["intent"]:
+                    session.put(keys.intent_key(RUN_ID, agent), payload)
+                for payload in payloads["control"]:
+                    session.put(keys.control_key(RUN_ID), payload)
+                sent += sum(len(p) for p in payloads.values())
+                for params in ("tick=abc", "", "tick=-1", "tick=99999999999", "tick=1;tick=2"):
+                    for reply in session.get(f"{keys.intent_key(RUN_ID, agent)}?{params}",
+                                             timeout=0.5):
+                        pass
+                    sent += 1
+        for token in tokens:
+            token.undeclare()
+    return sent
+
+
+def test_a_rogue_session_changes_nothing_and_every_rejection_is_counted(tmp_path):
+    port = free_port()
+    out = tmp_path / "attacked"
+    swarm = start_swarm(out, *OPTIONS, "--port", str(port))
+    try:
+        wait_for_rows(out / "episodes.csv", 1, 120, swarm)
+        sent = attack(port, rounds=5)
+        stderr = swarm.finish(timeout=240)
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode == 0, stderr
+    assert "Traceback" not in stderr
+    clean = run_swarm(tmp_path / "clean", *OPTIONS, "--in-process")
+    assert clean.returncode == 0, clean.stderr
+
+    def metrics(path):
+        return [tuple(r[f] for f in EPISODE_FIELDS) for r in read_episodes(path / "episodes.csv")]
+
+    assert metrics(out) == metrics(tmp_path / "clean"), "the rogue changed the run"
+    world = json.loads((out / "stats" / "world.json").read_text())
+    agents = [json.loads((out / "stats" / f"agent-{i}.json").read_text()) for i in range(AGENTS)]
+    rejected_by_agents = sum(sum(a["rejected"].values()) for a in agents)
+    rejected_by_world = sum(world["rejected"].values())
+    assert sent > 1000
+    assert rejected_by_world >= 5 * AGENTS * 20, world["rejected"]
+    assert rejected_by_agents >= 5 * AGENTS * 30, [a["rejected"] for a in agents]
+    for reason in ("not-msgpack", "oversize", "forged-sender", "wrong-run", "stale-tick",
+                   "future-tick", "unknown-agent"):
+        assert world["rejected"].get(reason, 0) > 0, (reason, world["rejected"])
+    seen_by_agents = set().union(*(a["rejected"] for a in agents))
+    for reason in ("not-msgpack", "oversize", "forged-sender", "wrong-run", "stale-tick",
+                   "future-tick", "wrong-agent", "bad-query", "future-query"):
+        assert reason in seen_by_agents, (reason, seen_by_agents)
+    assert all(a["shutdown_by_world"] for a in agents), "no forged shutdown was obeyed"
