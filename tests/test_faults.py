@@ -182,3 +182,24 @@ def test_agents_reconnect_to_a_restarted_world(tmp_path):
     episodes_once(out, 80)
     for agent in range(6):
         assert stats(out, f"agent-{agent}")["shutdown_by_world"]
+
+
+def test_resume_refuses_corrupt_or_foreign_checkpoints_naming_the_file(tmp_path):
+    out = tmp_path / "broken"
+    done = run_swarm(out, "--agents", "3", "--episodes", "4", "--max-steps", "20", "--in-process",
+                     "--no-record")
+    assert done.returncode == 0, done.stderr
+    lines = (out / "episodes.csv").read_text().splitlines(keepends=True)
+    (out / "episodes.csv").write_text("".join(lines[:3]) + lines[3][:7])  # a crash mid-row
+    shutil.copy(out / "checkpoints" / "agent-0.npz", out / "checkpoints" / "agent-1.npz")
+    foreign = run_swarm(out, "--resume", timeout=60)
+    assert foreign.returncode == 2
+    assert "agent-1.npz: belongs to agent 0" in foreign.stderr
+    (out / "checkpoints" / "agent-1.npz").write_bytes(b"not a checkpoint")
+    corrupt = run_swarm(out, "--resume", timeout=60)
+    assert corrupt.returncode == 2
+    assert "agent-1.npz: not a readable checkpoint" in corrupt.stderr
+    assert len(corrupt.stderr.strip().splitlines()) == 1
+    assert len(read_episodes(out / "episodes.csv")) == 2, "the half-written row was dropped"
+    nothing = run_swarm(tmp_path / "nothing-here", "--resume", timeout=60)
+    assert nothing.returncode == 2 and "no run to resume here" in nothing.stderr
