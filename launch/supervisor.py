@@ -17,7 +17,7 @@ from typing import Callable
 log = logging.getLogger("nnql.supervisor")
 
 POLL_S = 0.1
-SHUTDOWN_GRACE_S = 2.5
+SHUTDOWN_GRACE_S = 2.0
 """Children get this long to exit by themselves before they are killed."""
 BACKOFF_FIRST_S = 0.5
 BACKOFF_MAX_S = 8.0

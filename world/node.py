@@ -107,28 +107,21 @@ class WorldNode:
             self._handle(timeout=remaining, tick=-1, actions=None)
 
     def _loop(self, publishers) -> bool:
-        world, n = self.world, self.config.n_agents
+        world = self.world
         episode_start, episode_tick, slowest = time.perf_counter(), world.tick, 0.0
         with EpisodeWriter(self.options.out_dir / EPISODES_FILE) as writer:
+            tick_start = self._publish_observations(publishers)
             while not world.finished:
-                if self.stopping:
-                    return False
-                tick_start = time.perf_counter()
                 tick = world.tick
-                for obs in world.observations():
-                    publishers[obs.agent].put(encode(obs))
-                actions: list[int | None] = [None] * n
-                deadline = time.monotonic() + self.config.tick_deadline_s
-                while not self.stopping and any(actions[i] is None for i in self.alive):
-                    remaining = deadline - time.monotonic()
-                    if remaining <= 0:
-                        break
-                    self._handle(timeout=remaining, tick=tick, actions=actions)
+                actions = self._collect_intents(tick)
                 if self.stopping:
                     return False
                 report = world.apply(actions)
                 now = time.perf_counter()
                 slowest = max(slowest, now - tick_start)
+                if not world.finished:
+                    # The next tick starts before this one is logged: agents think meanwhile.
+                    tick_start = self._publish_observations(publishers)
                 if report.violations:
                     log.error("tick %d broke the world's invariants: %s", tick, report.violations)
                 if self.viz is not None:
@@ -140,6 +133,24 @@ class WorldNode:
                 if self.on_tick is not None:
                     self.on_tick(world, report)
         return True
+
+    def _publish_observations(self, publishers) -> float:
+        """Send every agent its observation of the current tick; returns when the tick began."""
+        start = time.perf_counter()
+        for obs in self.world.observations():
+            publishers[obs.agent].put(encode(obs))
+        return start
+
+    def _collect_intents(self, tick: int) -> list[int | None]:
+        """Every live agent's action for ``tick``, or None where none came by the deadline."""
+        actions: list[int | None] = [None] * self.config.n_agents
+        deadline = time.monotonic() + self.config.tick_deadline_s
+        while not self.stopping and any(actions[i] is None for i in self.alive):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                break
+            self._handle(timeout=remaining, tick=tick, actions=actions)
+        return actions
 
     def _handle(self, timeout: float, tick: int, actions: list[int | None] | None) -> None:
         """Handle one event (or none, if ``timeout`` passes first)."""
