@@ -82,7 +82,7 @@ class AgentNode:
         if options.resume and self.checkpoint_file.exists():
             episode = checkpoint.load(self.checkpoint_file, self.brain)
             self.resumed = {"episode": episode, "fingerprint": checkpoint.fingerprint(self.brain)}
-            log.warning("agent %d resumed from %s (episode %d, tables %s)", self.agent,
+            log.warning("resumed from %s (episode %d, tables %s)",
                         self.checkpoint_file, episode, self.resumed["fingerprint"])
 
     def stop(self) -> None:
@@ -129,8 +129,8 @@ class AgentNode:
         while len(self.peers_seen - {self.agent}) < others and not self.stopping:
             remaining = deadline - time.monotonic()
             if remaining <= 0:
-                log.warning("agent %d: only saw agents %s; negotiating with whoever answers",
-                            self.agent, sorted(self.peers_seen))
+                log.warning("only saw agents %s; negotiating with whoever answers",
+                            sorted(self.peers_seen))
                 break
             try:
                 kind, item = self.events.get(timeout=min(remaining, POLL_S))
@@ -157,7 +157,7 @@ class AgentNode:
     def _on_world_alive(self, sample: zenoh.Sample) -> None:
         """A world that leaves may come back (``--resume``) with its own clock: start afresh."""
         if sample.kind == zenoh.SampleKind.DELETE:
-            log.warning("agent %d: the world left; waiting for it to come back", self.agent)
+            log.warning("the world left; waiting for it to come back")
             self.decided_tick = -1
             self.brain.learner.forget_pending()
             self._drop_held_queries()
@@ -265,7 +265,7 @@ class AgentNode:
     def _on_control(self, payload) -> None:
         control = self.inbox.decode(payload, Control)
         if control is not None and control.command == CONTROL_SHUTDOWN:
-            log.info("agent %d: shutdown from the world", self.agent)
+            log.info("shutdown from the world")
             self.shutdown = self.stopping = True
 
     def stats(self) -> dict:
@@ -289,6 +289,6 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
         node.run()
     write_json_atomic(stats_path(options.out_dir, f"agent-{options.agent}"), node.stats())
     if node.inbox.total_rejected:
-        log.warning("agent %d rejected %d messages: %s", options.agent,
-                    node.inbox.total_rejected, dict(node.inbox.rejections))
+        log.warning("rejected %d messages: %s", node.inbox.total_rejected,
+                    dict(node.inbox.rejections))
     return 0 if node.shutdown else EXIT_STOPPED
