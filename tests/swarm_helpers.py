@@ -46,36 +46,39 @@ def start_swarm(out: Path, *options: str) -> SwarmProcess:
     return SwarmProcess(swarm_command(out, *options), Path(str(out) + "-logs"))
 
 
-def group_pids(pgid: int) -> list[int]:
-    """The live (non-zombie) processes of a process group."""
-    pids = []
+def _live_processes():
+    """(pid, process group, command line) of every live, non-zombie process."""
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
         try:
             fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").strip().decode()
         except OSError:
             continue
-        state, pgrp = fields[0], int(fields[2])
-        if pgrp == pgid and state != "Z":
-            pids.append(int(entry.name))
-    return pids
+        if fields[0] != "Z":
+            yield int(entry.name), int(fields[2]), cmdline
+
+
+def group_pids(pgid: int) -> list[int]:
+    """The live (non-zombie) processes of a process group."""
+    return [pid for pid, group, _ in _live_processes() if group == pgid]
 
 
 def find_process(title: str) -> list[int]:
     """Pids whose command line (process title) is exactly ``title``, like ``pgrep -fx``."""
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").strip().decode()
-            state = (entry / "stat").read_text().rsplit(")", 1)[1].split()[0]
-        except OSError:
-            continue
-        if cmdline == title and state != "Z":
-            pids.append(int(entry.name))
-    return pids
+    return [pid for pid, _, cmdline in _live_processes() if cmdline == title]
+
+
+def stops_within(swarm: subprocess.Popen, seconds: float) -> float:
+    """Wait until the swarm's whole process group is gone; returns how long that took."""
+    import time
+
+    start = time.monotonic()
+    swarm.wait(timeout=10)
+    while group_pids(swarm.pid) and time.monotonic() - start < seconds:
+        time.sleep(0.05)
+    return time.monotonic() - start
 
 
 def wait_for_rows(csv_path: Path, rows: int, timeout: float, process=None) -> None:
