@@ -11,6 +11,7 @@ import argparse
 import json
 import math
 import os
+import signal
 import sys
 import time
 from dataclasses import asdict
@@ -32,6 +33,7 @@ RUN_EPISODES_PER_WORKER = 20_000
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
 DEFAULTS = PaperSettings()
 DEFAULT_HYPER = Hyper()
 
@@ -231,14 +233,26 @@ def run(args: argparse.Namespace) -> Path:
     return args.out
 
 
+class Terminated(Exception):
+    """SIGTERM arrived: stop like Ctrl-C, workers included."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
+    signal.signal(signal.SIGTERM, _raise_terminated)
     try:
         args = resolve(parser.parse_args(argv), parser)
         run(args)
     except KeyboardInterrupt:
         print("\ninterrupted: stopped before writing results", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except Terminated:
+        print("\nterminated: stopped before writing results", file=sys.stderr)
+        return EXIT_TERMINATED
     return 0
 
 

@@ -8,9 +8,11 @@ sits out the rest of that episode. Each run gives exactly what it would give alo
 also be split over worker processes (``workers``) without changing a single number.
 """
 
+import contextlib
 import multiprocessing
 import queue
 import signal
+import threading
 from dataclasses import dataclass, field, fields
 from typing import Callable
 
@@ -188,16 +190,43 @@ def _learner_view(
     )
 
 
+class _Orphaned(Exception):
+    """The parent of a worker is gone: nobody will read its results."""
+
+
 def _worker(
     index: int, specs: list[RunSpec], settings: PaperSettings, outbox: multiprocessing.Queue
 ) -> None:
     """A worker process: run its share of specs, report each episode, then send the metrics."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    if signal.getsignal(signal.SIGINT) is not signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C and stops us
+    parent = multiprocessing.parent_process()
+
+    def report(episode: int) -> None:
+        if parent is not None and not parent.is_alive():
+            raise _Orphaned
+        outbox.put(("episode", index, episode))
+
     try:
-        metrics = _run_in_process(specs, settings, lambda e: outbox.put(("episode", index, e)))
+        metrics = _run_in_process(specs, settings, report)
         outbox.put(("done", index, metrics))
-    except BaseException as error:  # noqa: BLE001 - handed to the parent, which re-raises
+    except _Orphaned:
+        outbox.cancel_join_thread()
+    except Exception as error:  # handed to the parent, which raises it
         outbox.put(("error", index, repr(error)))
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    """Ignore SIGINT inside the block (when this is the main thread, where handlers can be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _run_in_workers(
@@ -221,8 +250,9 @@ def _run_in_workers(
     reported = 0
     finished: set[int] = set()
     try:
-        for process in processes:
-            process.start()
+        with _sigint_ignored():  # children inherit it, so Ctrl-C reaches only this process
+            for process in processes:
+                process.start()
         while len(finished) < workers:
             try:
                 kind, index, payload = outbox.get(timeout=1.0)

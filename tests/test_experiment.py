@@ -1,0 +1,222 @@
+"""The experiment CLI end to end (files, columns, determinism, bad options, Ctrl-C), its progress
+bar, its statistics and its tables."""
+
+import csv
+import io
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from launch.paper import EpisodeMetrics, RunSpec
+from launch.progress import Progress, format_duration
+from launch.report import (
+    EPISODE_COLUMNS, PAPER_TABLE1, TABLE1_COLUMNS, ResultGrid, summarize, table1_markdown, table1_rows,
+)
+from launch.stats import mean_interval, t_quantile
+
+REPO = Path(__file__).resolve().parent.parent
+SCRIPT = "launch/experiment.py"
+SHORT = ["--episodes", "20", "--seeds", "2", "--ks", "1,2"]
+
+
+def experiment(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, SCRIPT, *args], cwd=REPO, capture_output=True, text=True, timeout=timeout
+    )
+
+
+def read_csv(path: Path) -> list[dict]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def test_short_run_writes_every_file(tmp_path):
+    out = tmp_path / "tmp"
+    done = experiment(*SHORT, "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr
+
+    table = read_csv(out / "table1.csv")
+    assert list(table[0].keys()) == list(TABLE1_COLUMNS)
+    assert [row["random_step"] for row in table] == ["1", "2"]
+    for row in table:
+        for column in ("ql_collisions", "nnql_collisions", "decrease_pct", "diff_ci_low", "diff_ci_high"):
+            float(row[column])
+
+    episodes = read_csv(out / "episodes.csv")
+    assert list(episodes[0].keys()) == list(EPISODE_COLUMNS)
+    assert len(episodes) == 2 * 2 * 2 * 20  # algos x ks x seeds x episodes
+    assert {(r["algo"], r["random_step"], r["seed"]) for r in episodes} == {
+        (a, k, s) for a in ("ql", "nnql") for k in ("1", "2") for s in ("0", "1")
+    }
+    first = episodes[0]
+    assert float(first["reward_total"]) == pytest.approx(float(first["reward_ds"]) + float(first["reward_ca"]))
+    # Table 1's numbers are the per-run totals of episodes.csv, averaged over seeds.
+    totals = [sum(int(r["collisions"]) for r in episodes if (r["algo"], r["random_step"], r["seed"]) == ("ql", "2", s))
+              for s in ("0", "1")]
+    assert float(table[1]["ql_collisions"]) == pytest.approx(np.mean(totals))
+
+    config = json.loads((out / "config.json").read_text())
+    assert config["settings"]["episodes"] == 20 and config["settings"]["max_steps"] == 100
+    assert config["settings"]["hyper"] == {"alpha": 0.9, "gamma": 0.6, "beta": 0.5}
+    assert config["seeds"] == [0, 1] and config["random_steps"] == [1, 2]
+
+    markdown = (out / "table1.md").read_text()
+    assert "| 860.4 | 849.5 | 1.27 |" in markdown and "40.18" in markdown
+    for name in ("steps", "rewards", "cumulative_collisions", "collisions", "collisions_vs_k"):
+        assert (out / f"{name}.png").stat().st_size > 1000
+
+
+def test_same_seed_gives_byte_identical_results(tmp_path):
+    outputs = []
+    for name in ("a", "b"):
+        done = experiment(*SHORT, "--seed-base", "5", "--no-plots", "--out", str(tmp_path / name))
+        assert done.returncode == 0, done.stderr
+        outputs.append(tmp_path / name)
+    for file in ("episodes.csv", "table1.csv", "table1.md"):
+        assert (outputs[0] / file).read_bytes() == (outputs[1] / file).read_bytes(), file
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--seeds", "0"],
+        ["--seeds", "two"],
+        ["--ks", "0-3"],
+        ["--ks", "5-2"],
+        ["--ks", "a,b"],
+        ["--algos", "ql,sarsa"],
+        ["--beta", "1.5"],
+        ["--beta", "nan"],
+        ["--episodes", "-1"],
+        ["--grid", "11by11"],
+        ["--grid", "2x1", "--obstacles", "3"],
+        ["--figure-k", "7", "--ks", "1,2"],
+        ["--workers", "0"],
+        ["--no-such-option"],
+    ],
+)
+def test_bad_options_exit_2_with_one_line(args, tmp_path):
+    done = experiment(*args, "--out", str(tmp_path / "never"), timeout=30)
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("experiment.py: error:"), done.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_refuses_to_overwrite_results_unless_forced(tmp_path):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "table1.csv").write_text("old\n")
+    refused = experiment("--episodes", "2", "--seeds", "1", "--ks", "2", "--no-plots", "--out", str(out))
+    assert refused.returncode == 2 and "--force" in refused.stderr
+    assert (out / "table1.csv").read_text() == "old\n"
+    forced = experiment("--episodes", "2", "--seeds", "1", "--ks", "2", "--no-plots", "--force", "--out", str(out))
+    assert forced.returncode == 0, forced.stderr
+    assert (out / "table1.csv").read_text() != "old\n"
+
+
+def test_ctrl_c_stops_cleanly_with_exit_130(tmp_path):
+    process = subprocess.Popen(
+        [sys.executable, SCRIPT, "--no-plots", "--workers", "2", "--out", str(tmp_path / "big")],
+        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+    )
+    deadline = time.monotonic() + 60
+    first_line = process.stderr.readline()  # the progress bar's first line: the run has started
+    assert "episodes" in first_line, first_line
+    time.sleep(0.5)
+    assert time.monotonic() < deadline
+    os.killpg(process.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
+    _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 130
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    assert not (tmp_path / "big" / "table1.csv").exists()
+
+
+class FakeStream(io.StringIO):
+    def __init__(self, tty: bool) -> None:
+        super().__init__()
+        self.tty = tty
+
+    def isatty(self) -> bool:
+        return self.tty
+
+
+def test_progress_on_a_terminal_redraws_in_place():
+    stream = FakeStream(tty=True)
+    with Progress(total=10, label="work", stream=stream) as bar:
+        for _ in range(10):
+            bar.update(collisions=3)
+    text = stream.getvalue()
+    assert text.startswith("\rwork [") and text.endswith("\n")
+    assert text.count("\n") == 1
+    assert "10/10 100%" in text and "collisions=3" in text
+
+
+def test_progress_elsewhere_prints_few_plain_lines():
+    stream = FakeStream(tty=False)
+    bar = Progress(total=1000, label="plain", stream=stream)
+    for _ in range(1000):
+        bar.update()
+    bar.close()
+    bar.close()  # idempotent
+    lines = stream.getvalue().splitlines()
+    assert "\r" not in stream.getvalue()
+    assert len(lines) == 2  # the first update, then the final state
+    assert lines[-1].startswith("plain [########################] 1000/1000")
+
+
+def test_format_duration():
+    assert format_duration(75) == "1:15" and format_duration(3725) == "1:02:05"
+
+
+@pytest.mark.parametrize(
+    "df, quantile",
+    [(1, 12.706204736), (2, 4.302652730), (4, 2.776445105), (9, 2.262157163), (29, 2.045229642),
+     (120, 1.979930405)],
+)
+def test_t_quantile_matches_tables(df, quantile):
+    assert t_quantile(0.975, df) == pytest.approx(quantile, rel=1e-8)
+    assert t_quantile(0.025, df) == pytest.approx(-quantile, rel=1e-8)
+
+
+def test_mean_interval():
+    interval = mean_interval(np.array([1.0, 2.0, 3.0, 4.0]))
+    half = t_quantile(0.975, 3) * np.std([1, 2, 3, 4], ddof=1) / 2
+    assert (interval.mean, interval.low, interval.high) == pytest.approx((2.5, 2.5 - half, 2.5 + half))
+    assert math.isnan(mean_interval(np.array([3.0])).low)
+
+
+def synthetic_grid() -> ResultGrid:
+    """Two seeds, k = 1 and 2, with hand-made collisions: nnQL halves QL at k = 2."""
+    specs = [RunSpec(a, k, s) for a in ("ql", "nnql") for k in (1, 2) for s in (0, 1)]
+    metrics = EpisodeMetrics.empty(len(specs), 2)
+    per_run = {("ql", 1): (50, 52), ("nnql", 1): (50, 52), ("ql", 2): (40, 44), ("nnql", 2): (20, 22)}
+    for row, spec in enumerate(specs):
+        metrics.collisions[row] = [per_run[spec.algo, spec.random_step][spec.seed], 0]
+        metrics.steps[row] = [10, 6]
+        metrics.shortest[row] = [4, 3]
+    return ResultGrid(specs, metrics)
+
+
+def test_table1_rows_and_summary_by_hand():
+    grid = synthetic_grid()
+    rows = table1_rows(grid)
+    assert rows[1]["ql_collisions"] == 42 and rows[1]["nnql_collisions"] == 21
+    assert rows[1]["decrease_pct"] == pytest.approx(50.0)
+    assert rows[1]["diff_collisions"] == 21
+    assert rows[0]["diff_ci_low"] == rows[0]["diff_ci_high"] == 0
+    summary = summarize(grid, figure_k=2)
+    assert summary.learning_ks == [2] and summary.decrease_pct == pytest.approx(50.0)
+    assert summary.steps_learned == {"ql": 8.0, "nnql": 8.0} and summary.shortest_learned == 3.5
+    assert summary.diff.mean == 21 and summary.diff.above_zero
+    markdown = table1_markdown(rows, summary)
+    assert "| 2 | 42.0 |" in markdown and f"{PAPER_TABLE1[2][0]:.1f}" in markdown
