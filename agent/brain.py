@@ -14,7 +14,7 @@ import numpy as np
 
 from agent.learning import EpisodeNoise, Hyper, Learners, View
 from protocol.actions import STAY, intended_cell
-from protocol.config import SwarmConfig, priority_rank
+from protocol.config import NEGOTIATING_ALGOS, SwarmConfig, priority_rank
 from protocol.messages import Observation
 from protocol.seeding import AGENT_STREAM, stream_rng
 
@@ -27,9 +27,10 @@ class AgentBrain:
         self.config = config
         self.learner = Learners(
             random_step=np.array([config.random_step]),
-            use_intents=np.array([config.algo == "nnql"]),
+            use_intents=np.array([config.algo in NEGOTIATING_ALGOS]),
             n_neighbours=config.n_agents,
             hyper=Hyper(config.alpha, config.gamma, config.beta),
+            with_direction=np.array([config.algo == "nnql-dir"]),
         )
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
         self._noise: EpisodeNoise | None = None
@@ -37,7 +38,7 @@ class AgentBrain:
 
     def neighbours_to_ask(self, obs: Observation) -> list[int]:
         """The visible higher-ranked neighbours whose intents this agent waits for."""
-        if self.config.algo != "nnql" or obs.arrived or obs.episode_end:
+        if self.config.algo not in NEGOTIATING_ALGOS or obs.arrived or obs.episode_end:
             return []
         n = self.config.n_agents
         return [j for j, _, _ in obs.neighbours if priority_rank(j, obs.tick, n) < obs.rank]

@@ -64,9 +64,10 @@ def load(path: Path, brain: AgentBrain) -> int:
     missing = [key for key in expected if key not in fields]
     if missing:
         raise CheckpointError(f"{path}: corrupt checkpoint, missing {', '.join(missing)}")
-    shape = brain.learner.q_ds[0].shape
-    if fields["q_ds"].shape != shape or fields["q_ca"].shape != shape:
-        raise CheckpointError(f"{path}: Q-tables of shape {fields['q_ds'].shape}, expected {shape}")
+    for table in ("q_ds", "q_ca"):
+        shape = getattr(brain.learner, table)[0].shape
+        if fields[table].shape != shape:
+            raise CheckpointError(f"{path}: {table} of shape {fields[table].shape}, expected {shape}")
     if not (np.isfinite(fields["q_ds"]).all() and np.isfinite(fields["q_ca"]).all()):
         raise CheckpointError(f"{path}: Q-tables hold non-finite values")
     owner = (int(fields["agent"]), int(fields["n_agents"]), str(fields["algo"]))

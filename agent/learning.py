@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.actions import N_ACTIONS, N_STATES, offset_state
+from protocol.actions import MOVES, N_ACTIONS, N_STATES, STAY, offset_state
 
 DEFAULT_ALPHA = 0.9
 DEFAULT_GAMMA = 0.6
@@ -87,11 +87,35 @@ def goal_state(view: View) -> np.ndarray:
     return offset_state(view.goal - view.own)
 
 
-def neighbour_states(view: View, use_intents: np.ndarray) -> np.ndarray:
-    """The collision-avoidance state of each neighbour slot ``(B, M)`` (QL or nnQL reading)."""
+UNKNOWN_MOVE = N_ACTIONS
+"""The move code of a neighbour whose announcement is unknown (direction-aware reading)."""
+
+DIRECTION_STATES = N_STATES * (N_ACTIONS + 1)
+"""Collision-avoidance states of the direction-aware reading: offset x (5 moves + unknown)."""
+
+_MOVE_CODE = np.full((3, 3), STAY, dtype=np.int64)
+for _action, (_dx, _dy) in enumerate(MOVES):
+    _MOVE_CODE[_dx + 1, _dy + 1] = _action
+
+
+def neighbour_states(
+    view: View, use_intents: np.ndarray, with_direction: np.ndarray | None = None
+) -> np.ndarray:
+    """The collision-avoidance state of each neighbour slot ``(B, M)``.
+
+    QL reads the neighbour's current cell, nnQL its announced next cell (where known). The
+    direction-aware reading (``with_direction``, beyond the paper) adds the announced move, so
+    that a neighbour about to step into this agent's cell from the left differs from one coming
+    from the right: it can see a swap coming, which the announced cell alone cannot.
+    """
     read_next = use_intents[:, None] & view.nb_known
     cells = np.where(read_next[..., None], view.nb_next, view.nb_cells)
-    return offset_state(cells - view.own[:, None, :])
+    states = offset_state(cells - view.own[:, None, :])
+    if with_direction is None or not with_direction.any():
+        return states
+    step = np.where(read_next[..., None], view.nb_next - view.nb_cells, 0)
+    moves = np.where(read_next, _MOVE_CODE[step[..., 0] + 1, step[..., 1] + 1], UNKNOWN_MOVE)
+    return np.where(with_direction[:, None], states + N_STATES * moves, states)
 
 
 def neighbour_weights(view: View) -> np.ndarray:
@@ -135,9 +159,12 @@ class Learners:
         use_intents: np.ndarray,
         n_neighbours: int,
         hyper: Hyper = Hyper(),
+        with_direction: np.ndarray | None = None,
     ) -> None:
         self.random_step = np.asarray(random_step, dtype=np.int64)
         self.use_intents = np.asarray(use_intents, dtype=bool)
+        self.with_direction = (np.zeros_like(self.use_intents) if with_direction is None
+                               else np.asarray(with_direction, dtype=bool))
         if self.random_step.shape != self.use_intents.shape or self.random_step.ndim != 1:
             raise ValueError("random_step and use_intents must be 1-D arrays of the same length")
         if np.any(self.random_step < 1):
@@ -145,7 +172,8 @@ class Learners:
         batch = self.random_step.shape[0]
         self.hyper = hyper
         self.q_ds = np.zeros((batch, N_STATES, N_ACTIONS))
-        self.q_ca = np.zeros((batch, N_STATES, N_ACTIONS))
+        ca_states = DIRECTION_STATES if self.with_direction.any() else N_STATES
+        self.q_ca = np.zeros((batch, ca_states, N_ACTIONS))
         self.actions_taken = np.zeros(batch, dtype=np.int64)
         self._pending = np.zeros(batch, dtype=bool)
         self._p_goal = np.zeros(batch, dtype=np.int64)
@@ -162,7 +190,7 @@ class Learners:
 
     def q_final(self, view: View) -> np.ndarray:
         """Eq. 6 and 7 for every learner: ``(B, A)``."""
-        return self._q_final(view, goal_state(view), neighbour_states(view, self.use_intents))
+        return self._q_final(view, goal_state(view), neighbour_states(view, self.use_intents, self.with_direction))
 
     def _q_final(self, view: View, goal_states: np.ndarray, nb_states: np.ndarray) -> np.ndarray:
         rows = np.arange(self.batch)
@@ -183,7 +211,7 @@ class Learners:
         """
         active = np.asarray(active, dtype=bool)
         goal_states = goal_state(view)
-        nb_states = neighbour_states(view, self.use_intents)
+        nb_states = neighbour_states(view, self.use_intents, self.with_direction)
         self._complete(active & self._pending, goal_states, nb_states)
         greedy = argmax_ties(self._q_final(view, goal_states, nb_states), tie_breakers)
         explore = (self.actions_taken + 1) % self.random_step == 0
@@ -207,7 +235,7 @@ class Learners:
         ql_view = view.without_intents()
         self._complete(
             np.asarray(mask, dtype=bool) & self._pending,
-            goal_state(ql_view), neighbour_states(ql_view, self.use_intents),
+            goal_state(ql_view), neighbour_states(ql_view, self.use_intents, self.with_direction),
         )
 
     def forget_pending(self) -> None:

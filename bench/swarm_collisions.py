@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""nnQL against QL in the swarm (every agent learns, each its own goal): collisions and steps.
+"""nnQL (and its direction-aware variant) against QL in the swarm (every agent learns, each its own goal): collisions and steps.
 
 Runs the in-process swarm (the same logic as the distributed one, see tests/test_swarm.py's
 parity test) for both algorithms over the same seeds and reports, per algorithm, the mean over
@@ -46,21 +46,25 @@ def main() -> int:
     p.add_argument("--max-steps", type=int, default=100)
     p.add_argument("--seeds", type=int, default=5)
     p.add_argument("--no-swaps", action="store_true", help="do not count swaps as collisions")
+    p.add_argument("--algos", default="ql,nnql", help="the first is the baseline")
     args = p.parse_args()
-    results = {algo: [run(algo, s, args) for s in range(args.seeds)] for algo in ("ql", "nnql")}
+    algos = args.algos.split(",")
+    results = {algo: [run(algo, s, args) for s in range(args.seeds)] for algo in algos}
     print(f"{args.agents} agents, {args.episodes} episodes, {args.seeds} seeds, "
           f"swaps {'not ' if args.no_swaps else ''}counted")
     for key in ("collisions", "late_collisions", "steps_ratio", "arrived"):
         line = [key.ljust(16)]
-        for algo in ("ql", "nnql"):
+        for algo in algos:
             i = mean_interval([r[key] for r in results[algo]])
             line.append(f"{algo} {i.mean:9.2f} [{i.low:.2f}, {i.high:.2f}]")
         print("  ".join(line))
-    diff = [q["collisions"] - n["collisions"] for q, n in zip(results["ql"], results["nnql"])]
-    i = mean_interval(diff)
-    ql_mean = statistics.mean(r["collisions"] for r in results["ql"])
-    print(f"ql - nnql total collisions: {i.mean:.1f} [{i.low:.1f}, {i.high:.1f}]  "
-          f"({100 * i.mean / ql_mean:.1f} % fewer with nnQL)")
+    base = algos[0]
+    base_mean = statistics.mean(r["collisions"] for r in results[base])
+    for algo in algos[1:]:
+        diff = [b["collisions"] - o["collisions"] for b, o in zip(results[base], results[algo])]
+        i = mean_interval(diff)
+        print(f"{base} - {algo} total collisions: {i.mean:.1f} [{i.low:.1f}, {i.high:.1f}]  "
+              f"({100 * i.mean / base_mean:.1f} % fewer with {algo})")
     return 0
 
 

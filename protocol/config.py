@@ -10,7 +10,9 @@ from dataclasses import asdict, dataclass, fields
 from protocol.keys import validate_run_id
 from protocol.messages import MAX_AGENTS, MAX_GRID
 
-ALGOS = ("nnql", "ql")
+ALGOS = ("nnql", "ql", "nnql-dir")
+"""nnQL (the paper), plain QL, and nnQL whose neighbour state also holds the announced move."""
+NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
 
 
 def priority_rank(agent: int, tick: int, n_agents: int) -> int:
