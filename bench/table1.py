@@ -57,7 +57,8 @@ def main() -> int:
         print(f"  run {repeat + 1}: {times[-1]:.2f} s wall, {cpu_seconds() - cpu_started:.2f} s CPU")
         if first is None:
             first = metrics
-        elif not all(np.array_equal(getattr(first, n), getattr(metrics, n)) for n in ("steps", "collisions")):
+        elif not all(np.array_equal(getattr(first, name), getattr(metrics, name))
+                     for name in ("steps", "collisions", "reward_ds", "arrived")):
             print("  results differ between repeats: the runner is not deterministic")
             return 1
     median = statistics.median(times)

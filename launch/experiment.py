@@ -114,13 +114,15 @@ def build_parser() -> OneLineParser:
         "that announce their next action. The paper's settings are the defaults.",
     )
     add = parser.add_argument
-    add("--seeds", type=bounded(int, 1), default=10, help="independent runs per (algo, k) (default 10)")
-    add("--seed-base", type=bounded(int, 0), default=0, help="first seed; seeds are S, S+1, ... (default 0)")
-    add("--episodes", type=bounded(int, 1), default=DEFAULTS.episodes,
+    add("--seeds", type=bounded(int, 1), default=10, metavar="N",
+        help="independent runs per (algo, k) (default 10)")
+    add("--seed-base", type=bounded(int, 0), default=0, metavar="S",
+        help="first seed; seeds are S, S+1, ... (default 0)")
+    add("--episodes", type=bounded(int, 1), default=DEFAULTS.episodes, metavar="N",
         help=f"episodes per run (default {DEFAULTS.episodes})")
-    add("--max-steps", type=bounded(int, 1), default=DEFAULTS.max_steps,
+    add("--max-steps", type=bounded(int, 1), default=DEFAULTS.max_steps, metavar="N",
         help=f"steps per episode at most (default {DEFAULTS.max_steps})")
-    add("--ks", type=parse_ks, default=list(range(1, 11)),
+    add("--ks", type=parse_ks, default=list(range(1, 11)), metavar="KS",
         help="random steps k: every k-th action is random; a range or list (default 1-10)")
     add("--algos", type=parse_algos, default=list(ALGOS), help="algorithms to compare (default ql,nnql)")
     add("--alpha", type=bounded(float, 0.0, 1.0), default=DEFAULT_HYPER.alpha,
@@ -131,15 +133,16 @@ def build_parser() -> OneLineParser:
         help=f"weight of destination seeking in Eq. 7 (default {DEFAULT_HYPER.beta})")
     add("--goal-reward", type=bounded(float, 0.0), default=DEFAULTS.goal_reward,
         help=f"destination-seeking reward on arriving (default {DEFAULTS.goal_reward:g})")
-    add("--obstacles", type=bounded(int, 0), default=DEFAULTS.n_obstacles,
+    add("--obstacles", type=bounded(int, 0), default=DEFAULTS.n_obstacles, metavar="N",
         help=f"scripted obstacles (default {DEFAULTS.n_obstacles}, calibrated on Table 1's k = 1 row)")
     add("--grid", type=parse_grid, default=(DEFAULTS.width, DEFAULTS.height), metavar="WxH",
         help=f"grid size (default {DEFAULTS.width}x{DEFAULTS.height})")
     add("--count-swaps", action="store_true",
         help="count two agents swapping cells as a collision (the paper does not)")
-    add("--out", type=Path, default=None, help="output directory (default runs/experiment-<time>)")
+    add("--out", type=Path, default=None, metavar="DIR",
+        help="output directory (default runs/experiment-<time>)")
     add("--force", action="store_true", help="overwrite results already in --out")
-    add("--figure-k", type=bounded(int, 1), default=None,
+    add("--figure-k", type=bounded(int, 1), default=None, metavar="K",
         help="random step k of the per-episode figures (default: the largest k run)")
     add("--no-plots", action="store_true", help="skip the figures (no matplotlib needed)")
     add("--workers", type=parse_workers, default=None, metavar="N|auto",

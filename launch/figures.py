@@ -123,7 +123,8 @@ def _collisions(plt, grid: ResultGrid, k: int):
     m = grid.metrics
     episodes = np.arange(1, m.steps.shape[1] + 1)
     for algo, ax in axes.items():
-        ax.plot(episodes, _per_episode_mean(grid, algo, k, m.collisions), color=ALGO_COLOURS[algo], lw=0.8)
+        per_episode = _per_episode_mean(grid, algo, k, m.collisions)
+        ax.plot(episodes, per_episode, color=ALGO_COLOURS[algo], lw=0.8)
         ax.set(title=ALGO_LABELS[algo], xlabel="episode", ylabel="collisions")
     return figure
 

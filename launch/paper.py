@@ -158,7 +158,8 @@ def _run_in_process(
             leaving = running if last_step else arrived
             if leaving.any():
                 # s' of a leaving learner is read without intents, so nobody's next cell matters.
-                learners.finish(leaving, _learner_view(positions, goal, positions[:, 1:], everyone_known))
+                last_view = _learner_view(positions, goal, positions[:, 1:], everyone_known)
+                learners.finish(leaving, last_view)
             running = running & ~arrived
             if not running.any():
                 break

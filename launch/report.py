@@ -224,9 +224,9 @@ def summary_lines(summary: Summary) -> list[str]:
     ]
     for algo, steps in summary.steps_learned.items():
         lines.append(
-            f"{ALGO_NAMES[algo]} at k = {summary.figure_k}, last "
-            f"{summary.learned_episodes} episodes: {steps:.2f} steps per episode vs {summary.shortest_learned:.2f} "
-            f"shortest possible ({summary.steps_ratio(algo):.2f}x)."
+            f"{ALGO_NAMES[algo]} at k = {summary.figure_k}, last {summary.learned_episodes} "
+            f"episodes: {steps:.2f} steps per episode vs {summary.shortest_learned:.2f} shortest "
+            f"possible ({summary.steps_ratio(algo):.2f}x)."
         )
     return lines
 
@@ -245,7 +245,8 @@ def table1_markdown(rows: list[dict], summary: Summary) -> str:
     ]
     body = []
     for row in rows:
-        diff = f"{_cell(row['diff_collisions'], 1)} {_interval_cell(row['diff_ci_low'], row['diff_ci_high'])}"
+        diff_interval = _interval_cell(row["diff_ci_low"], row["diff_ci_high"])
+        diff = f"{_cell(row['diff_collisions'], 1)} {diff_interval}"
         body.append([
             str(row["random_step"]),
             _cell(row["ql_collisions"], 1),
@@ -292,17 +293,22 @@ def _interval_cell(low: float, high: float) -> str:
 
 def write_episodes_csv(path: Path, specs: list[RunSpec], metrics: EpisodeMetrics) -> None:
     """One row per (algo, k, seed, episode), in that order; floats in shortest round-trip form."""
-    order = sorted(range(len(specs)), key=lambda i: (ALGOS.index(specs[i].algo), specs[i].random_step, specs[i].seed))
+
+    def spec_order(i: int) -> tuple[int, int, int]:
+        return ALGOS.index(specs[i].algo), specs[i].random_step, specs[i].seed
+
     m = metrics
     with open(path, "w", newline="") as out:
         writer = csv.writer(out, lineterminator="\n")
         writer.writerow(EPISODE_COLUMNS)
-        for i in order:
+        for i in sorted(range(len(specs)), key=spec_order):
             spec = specs[i]
-            total = m.reward_ds[i] + m.reward_ca[i]
+            ds, ca = m.reward_ds[i].tolist(), m.reward_ca[i].tolist()
             writer.writerows(
-                (spec.algo, spec.random_step, spec.seed, e, int(m.steps[i, e]), int(m.shortest[i, e]),
-                 int(m.collisions[i, e]), repr(float(m.reward_ds[i, e])), repr(float(m.reward_ca[i, e])),
-                 repr(float(total[e])), int(m.arrived[i, e]))
-                for e in range(m.steps.shape[1])
+                (spec.algo, spec.random_step, spec.seed, e, steps, shortest, collisions,
+                 repr(ds[e]), repr(ca[e]), repr(ds[e] + ca[e]), int(arrived))
+                for e, (steps, shortest, collisions, arrived) in enumerate(zip(
+                    m.steps[i].tolist(), m.shortest[i].tolist(), m.collisions[i].tolist(),
+                    m.arrived[i].tolist(),
+                ))
             )
