@@ -184,7 +184,7 @@ def transports(args: argparse.Namespace) -> tuple[TransportSettings, TransportSe
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
                progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> int:
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
-    from launch.recording import open_world_viz
+    from launch.recording import exit_without_teardown, open_world_viz
     from world.node import WorldOptions, run_world
 
     name_process("nnql-world", config)
@@ -204,30 +204,36 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
     viz = open_world_viz(record, config, out)
     started = time.monotonic()
     try:
-        return run_world(WorldOptions(config, transport, out, record=False,
+        code = run_world(WorldOptions(config, transport, out, record=False,
                                       first_episode=start.episode, first_tick=start.tick), on_tick)
     finally:
         if bar is not None:
             bar.close()
         if viz is not None:
             viz.close()
+    if viz is not None:
+        exit_without_teardown()
+    return code
 
 
 def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
                resume: bool = False, recording=None) -> int:
     """An agent process (spawned); ``resume`` reloads its checkpoint if there is one."""
     from agent.node import AgentOptions, run_agent
-    from launch.recording import open_agent_viz
+    from launch.recording import exit_without_teardown, open_agent_viz
 
     name_process(f"nnql-agent {agent}", config)
     setup_logging(f"agent {agent}")
     brain, on_episode_end, viz = open_agent_viz(recording, agent, config)
     try:
-        return run_agent(AgentOptions(agent, config, transport, out, resume=resume), brain,
+        code = run_agent(AgentOptions(agent, config, transport, out, resume=resume), brain,
                          on_episode_end)
     finally:
         if viz is not None:
             viz.close()
+    if viz is not None:
+        exit_without_teardown()
+    return code
 
 
 def name_process(title: str, config: SwarmConfig) -> None:

@@ -1,19 +1,69 @@
-"""The world's Rerun recording: grid, agents, goals, intents, collisions and metrics per tick.
+"""The world's Rerun recording: what happens each tick and why, and the run's metrics per episode.
 
-Entity paths are stable (``world/agents``, ``world/goals``, ``metrics/collisions``); timelines are
-``tick`` and ``episode``. Every process of a run logs into the recording whose id is the run id.
+At time ``tick = t`` the viewer shows the state in which the agents decided tick ``t``: their cells
+(``world/agents``), their goals (``world/goals``), the last cells they came through
+(``world/trails``), the move each announced (``world/intents``), who asked whom for its intent
+(``world/negotiation``) and who collided as a result (``world/collisions``, plus a warning in
+``events``). The next tick shows where everybody ended up.
+
+The negotiation is derived by the world, not reported by the agents: at tick ``t`` an nnQL agent
+that has not arrived asks every visible neighbour of higher rank
+(``protocol.config.priority_rank``), which is exactly what
+``agent.brain.AgentBrain.neighbours_to_ask`` does. Whether each query was answered in time is
+known only to the asker; the agents log that themselves (``agent.viz``).
+
+Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
+Timelines are ``tick`` and ``episode``; static things (grid, colours, labels) are logged once.
+
+Cost: the per-tick entities are buffered and sent every :data:`FLUSH_EVERY` ticks (and at each
+episode's end) with ``send_columns``, one call per entity, which costs about a tenth of logging
+them tick by tick (``bench/recording_cost.py``).
 """
 
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import rerun as rr
 
-from protocol.actions import MOVES
+from protocol.actions import MOVES, in_view
 from protocol.config import SwarmConfig
 from world.engine import SwarmWorld, TickReport
+from world.scenario import swarm_episode
 
 APP_ID = "nnql-swarm"
+
+GRID = "world/grid"
+AGENTS = "world/agents"
+GOALS = "world/goals"
+TRAILS = "world/trails"
+INTENTS = "world/intents"
+NEGOTIATION = "world/negotiation"
+COLLISIONS = "world/collisions"
+EVENTS = "events"
+
+METRICS = {
+    "metrics/collisions/per_episode": "collisions in the episode (each colliding agent counts one)",
+    "metrics/collisions/cumulative": "collisions since the run started",
+    "metrics/steps/per_agent": "mean steps an agent took until it arrived (agent_steps / agents)",
+    "metrics/steps/shortest_per_agent": "mean shortest path, start to goal (shortest_sum / agents)",
+    "metrics/steps/episode": "ticks until every agent arrived, or max steps",
+    "metrics/arrived": "agents on their goal when the episode ended",
+    "metrics/reward_sum": "sum of every agent's DS and CA rewards in the episode",
+    "metrics/missed_intents": "intents that missed the tick deadline (counted as STAY)",
+    "metrics/ticks_per_s": "wall-clock ticks per second of the world's clock in the episode",
+    "metrics/negotiation/queries_per_tick": "mean intent queries per tick (derived by the world)",
+}
+"""Every per-episode series the world logs, with what it means (the README repeats this)."""
+
+TRAIL_LENGTH = 10
+"""How many cells of each agent's recent path the trail shows."""
+
+FLUSH_EVERY = 50
+"""Ticks buffered before the per-tick entities are sent (a live viewer lags by at most this)."""
+
+COLLISION_RED = (230, 40, 40)
 
 
 def agent_colors(n: int) -> np.ndarray:
@@ -24,15 +74,62 @@ def agent_colors(n: int) -> np.ndarray:
     return (rgb * 255).astype(np.uint8)
 
 
-class WorldViz:
-    """Logs a swarm run, tick by tick, into one Rerun recording stream."""
+def with_alpha(colors: np.ndarray, alpha: int) -> np.ndarray:
+    return np.concatenate([colors, np.full((len(colors), 1), alpha, dtype=np.uint8)], axis=1)
 
-    def __init__(self, config: SwarmConfig, stream: rr.RecordingStream) -> None:
+
+def negotiation_pairs(positions: np.ndarray, arrived: np.ndarray, tick: int,
+                      algo: str) -> np.ndarray:
+    """``(asker, asked)`` pairs of a tick: nnQL agents ask visible higher-ranked neighbours."""
+    asks = negotiation_mask(positions[None], arrived[None], np.array([tick]), algo)[0]
+    return np.argwhere(asks)
+
+
+def negotiation_mask(positions: np.ndarray, arrived: np.ndarray, ticks: np.ndarray,
+                     algo: str) -> np.ndarray:
+    """``asks[t, i, j]``: at tick ``ticks[t]`` agent i asks j (positions ``(T, n, 2)``)."""
+    n = positions.shape[1]
+    if algo != "nnql":
+        return np.zeros((len(ticks), n, n), dtype=bool)
+    rank = (np.arange(n)[None, :] - np.asarray(ticks)[:, None]) % n
+    offsets = positions[:, None, :, :] - positions[:, :, None, :]
+    return (in_view(offsets) & (rank[:, None, :] < rank[:, :, None])
+            & ~np.asarray(arrived)[:, :, None])
+
+
+class WorldViz:
+    """Logs a swarm run, tick by tick, into one Rerun recording stream.
+
+    :meth:`log_tick` only copies the tick's state into preallocated buffers; :meth:`flush`
+    computes the geometry of every buffered tick at once and sends one chunk per entity.
+    """
+
+    def __init__(self, config: SwarmConfig, stream: rr.RecordingStream,
+                 flush_every: int = FLUSH_EVERY) -> None:
         self.config = config
         self.rec = stream
-        self.colors = agent_colors(config.n_agents)
-        self.labels = [str(i) for i in range(config.n_agents)]
+        self.flush_every = flush_every
+        n = config.n_agents
+        self.colors = agent_colors(n)
         self.cumulative_collisions = 0
+        self.next_tick = 0
+        self._before: np.ndarray | None = None  # cells at the start of the next tick
+        self._arrived = np.zeros(n, dtype=bool)
+        self._trail = np.zeros((n, TRAIL_LENGTH, 2), dtype=np.float32)
+        self._goals_episode = -1
+        self._episode_clock: float | None = None
+        self._episode_first_tick = 0
+        self._queries = 0
+        self._count = 0
+        self._ticks = np.zeros(flush_every, dtype=np.int64)
+        self._episodes = np.zeros(flush_every, dtype=np.int64)
+        self._moved = np.zeros(flush_every, dtype=bool)
+        self._positions = np.zeros((flush_every, n, 2), dtype=np.int64)
+        self._actions = np.zeros((flush_every, n), dtype=np.int64)
+        self._asking = np.zeros((flush_every, n), dtype=bool)  # not arrived: may ask
+        self._collided = np.zeros((flush_every, n), dtype=bool)
+        self._trails = np.zeros((flush_every, n, TRAIL_LENGTH, 2), dtype=np.float32)
+        self._warnings: list[tuple[int, int, str]] = []
         self._log_static()
 
     @staticmethod
@@ -42,39 +139,167 @@ class WorldViz:
         return WorldViz(config, stream)
 
     def _log_static(self) -> None:
-        c = self.config
+        c, rec = self.config, self.rec
         xs = np.arange(c.width + 1) - 0.5
         ys = np.arange(c.height + 1) - 0.5
         lines = [[(x, ys[0]), (x, ys[-1])] for x in xs] + [[(xs[0], y), (xs[-1], y)] for y in ys]
-        self.rec.log("world/grid", rr.LineStrips2D(lines, colors=[80, 80, 80], radii=0.02), static=True)
+        rec.log(GRID, rr.LineStrips2D(lines, colors=[90, 90, 90], radii=0.02, draw_order=0.0),
+                static=True)
+        labels = [str(i) for i in range(c.n_agents)]
+        rec.log(AGENTS, rr.Points2D.from_fields(colors=self.colors, labels=labels, radii=0.33,
+                                                show_labels=True, draw_order=30.0), static=True)
+        rec.log(GOALS, rr.Boxes2D.from_fields(colors=self.colors, radii=0.06, draw_order=10.0),
+                static=True)
+        rec.log(TRAILS, rr.LineStrips2D.from_fields(colors=with_alpha(self.colors, 140), radii=0.07,
+                                                    draw_order=15.0), static=True)
+        rec.log(INTENTS, rr.Arrows2D.from_fields(colors=self.colors, radii=0.07, draw_order=40.0),
+                static=True)
+        rec.log(NEGOTIATION, rr.Arrows2D.from_fields(radii=0.025, draw_order=35.0), static=True)
+        rec.log(COLLISIONS, rr.Points2D.from_fields(colors=[COLLISION_RED], radii=0.5,
+                                                    draw_order=20.0), static=True)
+        for path in METRICS:
+            rec.log(path, rr.SeriesLines(names=path.rsplit("/", 1)[1], widths=2.0), static=True)
 
     def log_tick(self, world: SwarmWorld, report: TickReport) -> None:
+        """Log one applied tick (call it right after ``world.apply``)."""
+        c = self.config
+        if self._episode_clock is None:
+            self._episode_clock = time.perf_counter()
+            self._episode_first_tick = report.tick
+            self.rec.set_time("tick", sequence=report.tick)
+            self.rec.set_time("episode", sequence=report.episode)
+            self.rec.log(EVENTS, rr.TextLog(
+                f"run {c.run_id}: {c.n_agents} {c.algo} agents on a {c.width}x{c.height} grid, "
+                f"{c.episodes} episodes of at most {c.max_steps} steps, seed {c.seed}; "
+                f"from episode {report.episode}", level=rr.TextLogLevel.INFO))
+        before = self._before
+        if before is None:  # the first tick seen: it starts an episode (fresh run or resume)
+            before = swarm_episode(c.seed, report.episode, c.width, c.height, c.n_agents).starts
+        if report.episode != self._goals_episode:
+            self._start_episode(report)
+        i = self._count
+        self._ticks[i] = report.tick
+        self._episodes[i] = report.episode
+        self._moved[i] = report.moved
+        self._positions[i] = before
+        self._actions[i] = report.actions
+        self._asking[i] = ~self._arrived
+        self._collided[i] = False
+        trail = self._trail
+        trail[:, :-1] = trail[:, 1:]
+        trail[:, -1] = before
+        self._trails[i] = trail
+        if report.collided:
+            hit = list(report.collided)
+            self._collided[i, hit] = True
+            step = f"step {world.step}" if report.moved else "end"
+            self._warnings.append((report.tick, report.episode,
+                                   f"episode {report.episode}, {step}: collision of agents "
+                                   f"{', '.join(map(str, hit))}"))
+        self._count = i + 1
+        self._before = world.positions.copy()
+        self._arrived = world.arrived.copy()
+        self.next_tick = report.tick + 1
+        if report.episode_row is not None:
+            self.flush()
+            self._end_episode(report)
+        elif self._count >= self.flush_every:
+            self.flush()
+
+    def _start_episode(self, report: TickReport) -> None:
+        self._goals_episode = report.episode
+        starts = swarm_episode(self.config.seed, report.episode, self.config.width,
+                               self.config.height, self.config.n_agents)
+        self._trail[:] = starts.starts.astype(np.float32)[:, None, :]
         rec = self.rec
         rec.set_time("tick", sequence=report.tick)
         rec.set_time("episode", sequence=report.episode)
-        positions = world.positions.astype(np.float32)
-        rec.log("world/agents", rr.Points2D(positions, colors=self.colors, labels=self.labels, radii=0.35))
-        rec.log("world/goals", rr.Boxes2D(centers=world.goals, sizes=[[0.8, 0.8]], colors=self.colors))
-        moves = MOVES[list(report.actions)].astype(np.float32)
-        rec.log("world/intents", rr.Arrows2D(origins=positions, vectors=moves * 0.8, colors=self.colors))
-        if report.collided:
-            cells = world.positions[list(report.collided)]
-            rec.log("world/collisions", rr.Points2D(cells, colors=[255, 0, 0], radii=0.5))
-            rec.log("events", rr.TextLog(
-                f"tick {report.tick}: collision of agents {list(report.collided)}",
-                level=rr.TextLogLevel.WARN))
-        else:
-            rec.log("world/collisions", rr.Clear(recursive=False))
-        if report.episode_row is not None:
-            row = report.episode_row
-            self.cumulative_collisions += row["collisions"]
-            rec.log("metrics/collisions", rr.Scalars(row["collisions"]))
-            rec.log("metrics/cumulative_collisions", rr.Scalars(self.cumulative_collisions))
-            rec.log("metrics/steps", rr.Scalars(row["steps"]))
-            rec.log("metrics/missed_intents", rr.Scalars(row["missed_intents"]))
-            rec.log("metrics/reward_sum", rr.Scalars(row["reward_sum"]))
-            rec.log("events", rr.TextLog(f"episode {row['episode']} done: {row}"))
+        goals = starts.goals
+        rec.log(GOALS, rr.Boxes2D.from_fields(centers=goals.astype(np.float32),
+                                              half_sizes=np.full(goals.shape, 0.42, np.float32)))
+
+    def _end_episode(self, report: TickReport) -> None:
+        row, n = report.episode_row, self.config.n_agents
+        now = time.perf_counter()
+        ticks = report.tick + 1 - self._episode_first_tick
+        rate = ticks / max(now - self._episode_clock, 1e-9)
+        self._episode_clock, self._episode_first_tick = now, report.tick + 1
+        self.cumulative_collisions += row["collisions"]
+        values = {
+            "metrics/collisions/per_episode": row["collisions"],
+            "metrics/collisions/cumulative": self.cumulative_collisions,
+            "metrics/steps/per_agent": row["agent_steps"] / n,
+            "metrics/steps/shortest_per_agent": row["shortest_sum"] / n,
+            "metrics/steps/episode": row["steps"],
+            "metrics/arrived": row["arrived"],
+            "metrics/reward_sum": row["reward_sum"],
+            "metrics/missed_intents": row["missed_intents"],
+            "metrics/ticks_per_s": rate,
+            "metrics/negotiation/queries_per_tick": self._queries / max(row["steps"], 1),
+        }
+        self._queries = 0
+        rec = self.rec
+        rec.set_time("tick", sequence=report.tick)
+        rec.set_time("episode", sequence=report.episode)
+        for path, value in values.items():
+            rec.log(path, rr.Scalars(float(value)))
+        rec.log(EVENTS, rr.TextLog(
+            f"episode {row['episode']} ended after {row['steps']} steps: {row['arrived']}/{n} "
+            f"arrived, {row['collisions']} collisions, {row['missed_intents']} missed intents, "
+            f"reward {row['reward_sum']:.1f}, {rate:.0f} ticks/s", level=rr.TextLogLevel.INFO))
+
+    def flush(self) -> None:
+        """Send the buffered ticks: their geometry computed at once, one chunk per entity."""
+        k, n = self._count, self.config.n_agents
+        if k == 0:
+            return
+        rec = self.rec
+        # Rerun may keep (not copy) what it is given until it is written: send copies, never views
+        # of the buffers that the next ticks overwrite.
+        ticks, episodes = self._ticks[:k].copy(), self._episodes[:k].copy()
+        index = [rr.TimeColumn("tick", sequence=ticks), rr.TimeColumn("episode", sequence=episodes)]
+        each = [n] * k
+        cells = self._positions[:k].astype(np.float32)
+        flat = cells.reshape(-1, 2)
+        rec.send_columns(AGENTS, index, rr.Points2D.columns(positions=flat).partition(each))
+        moves = (MOVES[self._actions[:k]] * 0.7).astype(np.float32).reshape(-1, 2)
+        rec.send_columns(INTENTS, index,
+                         rr.Arrows2D.columns(origins=flat, vectors=moves).partition(each))
+        rec.send_columns(TRAILS, index, rr.LineStrips2D.columns(
+            strips=self._trails[:k].reshape(-1, TRAIL_LENGTH, 2).copy()).partition(each))
+
+        asks = negotiation_mask(self._positions[:k], self._asking[:k], ticks, self.config.algo)
+        asks &= self._moved[:k, None, None]
+        t, asker, asked = np.nonzero(asks)
+        self._queries += len(t)
+        start, end = cells[t, asker], cells[t, asked]
+        gap = end - start
+        unit = gap / np.maximum(np.linalg.norm(gap, axis=-1, keepdims=True), 1e-6)
+        rec.send_columns(NEGOTIATION, index, rr.Arrows2D.columns(
+            origins=start + unit * 0.36, vectors=gap - unit * 0.72,
+            colors=with_alpha(self.colors[asker], 150)).partition(asks.sum(axis=(1, 2))))
+
+        hit_t, hit_agent = np.nonzero(self._collided[:k])
+        rec.send_columns(COLLISIONS, index, rr.Points2D.columns(
+            positions=cells[hit_t, hit_agent]).partition(self._collided[:k].sum(axis=1)))
+        if self._warnings:
+            w_ticks, w_episodes, texts = zip(*self._warnings)
+            rec.send_columns(EVENTS, [rr.TimeColumn("tick", sequence=w_ticks),
+                                      rr.TimeColumn("episode", sequence=w_episodes)],
+                             rr.TextLog.columns(text=texts, level=["WARN"] * len(texts)))
+            self._warnings = []
+        self._count = 0
 
     def close(self) -> None:
-        self.rec.flush()
-        self.rec.disconnect()
+        self.flush()
+        close_stream(self.rec)
+
+
+def close_stream(stream: rr.RecordingStream, timeout_s: float = 3.0) -> None:
+    """Flush and close a stream; a viewer that went away costs a warning, not the run."""
+    try:
+        stream.flush(timeout_sec=timeout_s)
+    except Exception as error:  # noqa: BLE001 - rerun raises RuntimeError for an unreachable viewer
+        print(f"rerun: could not flush the recording: {error}", file=sys.stderr)
+    stream.disconnect()
+

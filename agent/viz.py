@@ -1,0 +1,194 @@
+"""What one agent learned, in Rerun: its Q-tables as 21 x 21 heat maps, and its negotiation timing.
+
+Once per episode (from the ``on_episode_end`` hook of ``agent.node.run_agent`` and
+``launch.inprocess.run_in_process``) each agent logs, under ``agents/<id>/``:
+
+- ``q_ds/value``: an image, one pixel per egocentric offset ``(dx, dy)`` of the *goal* from the
+  agent (the agent sits at the centre pixel, marked by ``q_ds/self``); its colour is
+  ``log(1 + max_a Q_DS[s, a])`` (viridis, dark low, bright high; grey where the state was never
+  updated; Q values are never negative here, as no reward is);
+- ``q_ds/policy``: an arrow per pixel for ``argmax_a Q_DS[s, a]``, ``q_ds/stay`` a dot where STAY
+  is best (nothing where every action ties, e.g. never visited);
+- ``q_ca/value``, ``q_ca/policy``, ``q_ca/stay``, ``q_ca/self``: the same for ``Q_CA``, whose
+  state is a *neighbour's* offset (nnQL: its announced next cell, QL: its current cell).
+
+Pixel ``(column, row) = (dx + 10, dy + 10)``; rows grow downwards, like the world's ``y``, so an
+arrow points the way the agent would move on the grid. The colour scale is per image (from its
+visited minimum to its maximum), so compare shapes across episodes, not colours.
+
+Negotiation timing (distributed agents only, :class:`TimedBrain`): the wall time from the agent's
+first intent query of a tick to its last answer or time-out, i.e. how long it waited for its
+higher-ranked neighbours, averaged per episode over the ticks where it asked anyone
+(``metrics/negotiation/latency_ms/<id>``), and the queries left unanswered
+(``metrics/negotiation/unanswered/<id>``). The in-process runner has no such wait to measure.
+"""
+
+import sys
+import time
+from typing import Callable
+
+import numpy as np
+import rerun as rr
+
+from agent.brain import AgentBrain
+from protocol.actions import MOVES, N_ACTIONS, STAY, VIEW_RADIUS, WINDOW
+from protocol.config import SwarmConfig
+from protocol.messages import Observation
+
+TABLES = ("q_ds", "q_ca")
+
+_VIRIDIS = np.array([
+    (68, 1, 84), (72, 40, 120), (62, 74, 137), (49, 104, 142), (38, 130, 142),
+    (31, 158, 137), (53, 183, 121), (109, 205, 89), (180, 222, 44), (253, 231, 37),
+], dtype=np.float64)
+UNVISITED = (45, 45, 45)
+
+
+def agent_path(agent: int) -> str:
+    return f"agents/{agent}"
+
+
+def latency_path(agent: int) -> str:
+    return f"metrics/negotiation/latency_ms/{agent}"
+
+
+def unanswered_path(agent: int) -> str:
+    return f"metrics/negotiation/unanswered/{agent}"
+
+
+def viridis(t: np.ndarray) -> np.ndarray:
+    """Map values in [0, 1] to viridis RGB bytes."""
+    x = np.clip(t, 0.0, 1.0) * (len(_VIRIDIS) - 1)
+    low = np.floor(x).astype(int)
+    high = np.minimum(low + 1, len(_VIRIDIS) - 1)
+    frac = (x - low)[..., None]
+    return (_VIRIDIS[low] * (1 - frac) + _VIRIDIS[high] * frac).astype(np.uint8)
+
+
+def table_picture(q: np.ndarray) -> dict:
+    """One Q-table ``(441, 5)`` as a heat map and a policy over the 21 x 21 offset window.
+
+    Returns ``value`` (max over actions, ``[row, column] = [dy + 10, dx + 10]``), ``best``
+    (argmax), ``visited`` (some action's value moved off 0), ``decided`` (not every action tied)
+    and ``image`` (RGB bytes).
+    """
+    grid = np.asarray(q).reshape(WINDOW, WINDOW, N_ACTIONS).transpose(1, 0, 2)
+    value = grid.max(axis=-1)
+    best = grid.argmax(axis=-1)
+    visited = np.any(grid != 0, axis=-1)
+    decided = value > grid.min(axis=-1)
+    image = np.empty((WINDOW, WINDOW, 3), dtype=np.uint8)
+    image[:] = UNVISITED
+    if visited.any():
+        # log scale: Q_DS spans 0.1 far from the goal to 10 next to it, Q_CA 0 to 25
+        shade = np.log1p(np.maximum(value, 0.0))
+        low, high = shade[visited].min(), shade[visited].max()
+        scaled = (shade - low) / (high - low) if high > low else np.ones_like(shade)
+        image[visited] = viridis(scaled[visited])
+    return {"value": value, "best": best, "visited": visited, "decided": decided, "image": image}
+
+
+def policy_marks(picture: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Arrow origins, vectors and colours for the decided non-STAY cells; STAY cell centres."""
+    rows, cols = np.nonzero(picture["decided"])
+    actions = picture["best"][rows, cols]
+    centres = np.stack([cols + 0.5, rows + 0.5], axis=-1).astype(np.float32)
+    moving = actions != STAY
+    vectors = (MOVES[actions[moving]] * 0.42).astype(np.float32)
+    origins = centres[moving] - vectors / 2
+    shade = picture["image"][rows, cols].astype(float) @ np.array([0.299, 0.587, 0.114])
+    colors = np.where((shade[moving] > 140)[:, None], [[20, 20, 20]], [[245, 245, 245]])
+    return origins, vectors, colors.astype(np.uint8), centres[~moving]
+
+
+class TimedBrain(AgentBrain):
+    """An AgentBrain that times its negotiation: from choosing whom to ask to deciding.
+
+    ``agent.node`` calls :meth:`neighbours_to_ask`, sends the queries and waits for them, then
+    calls :meth:`act` with the answers: the time between the two calls is the negotiation wait.
+    Decisions are exactly those of AgentBrain.
+    """
+
+    def __init__(self, agent: int, config: SwarmConfig) -> None:
+        super().__init__(agent, config)
+        self.last_tick = 0
+        self.latencies_s: list[float] = []
+        self.unanswered = 0
+        self._asked = 0
+        self._asked_at = 0.0
+
+    def neighbours_to_ask(self, obs: Observation) -> list[int]:
+        asked = super().neighbours_to_ask(obs)
+        self._asked = len(asked)
+        self._asked_at = time.perf_counter()
+        return asked
+
+    def act(self, obs: Observation, answers: dict[int, int]) -> int:
+        if self._asked:
+            self.latencies_s.append(time.perf_counter() - self._asked_at)
+            self.unanswered += self._asked - len(answers)
+            self._asked = 0
+        self.last_tick = obs.tick
+        return super().act(obs, answers)
+
+    def take_timings(self) -> tuple[list[float], int]:
+        """The episode's latencies and unanswered count, reset for the next episode."""
+        timings = (self.latencies_s, self.unanswered)
+        self.latencies_s, self.unanswered = [], 0
+        return timings
+
+
+class AgentViz:
+    """Logs one agent's Q-tables (and negotiation timing) at the end of every episode."""
+
+    def __init__(self, agent: int, config: SwarmConfig, stream: rr.RecordingStream,
+                 tick_of_episode_end: Callable[[], int] | None = None) -> None:
+        self.agent = agent
+        self.config = config
+        self.rec = stream
+        self.tick_of_episode_end = tick_of_episode_end
+        root = agent_path(agent)
+        centre = np.array([[VIEW_RADIUS + 0.5, VIEW_RADIUS + 0.5]], dtype=np.float32)
+        for table in TABLES:
+            stream.log(f"{root}/{table}/self", rr.Boxes2D(
+                centers=centre, sizes=[[1.0, 1.0]], colors=[[255, 60, 60]], radii=0.06,
+                draw_order=50.0), static=True)
+            stream.log(f"{root}/{table}/policy",
+                       rr.Arrows2D.from_fields(radii=0.045, draw_order=40.0), static=True)
+            stream.log(f"{root}/{table}/stay", rr.Points2D.from_fields(
+                radii=0.11, colors=[[235, 235, 235]], draw_order=40.0), static=True)
+        stream.log(latency_path(agent), rr.SeriesLines(names=f"agent {agent}"), static=True)
+        stream.log(unanswered_path(agent), rr.SeriesLines(names=f"agent {agent}"), static=True)
+
+    def on_episode_end(self, brain: AgentBrain, episode: int) -> None:
+        """The ``on_episode_end(brain, episode)`` hook of the agent process and in-process run."""
+        rec = self.rec
+        if isinstance(brain, TimedBrain):
+            tick = brain.last_tick
+        elif self.tick_of_episode_end is not None:
+            tick = self.tick_of_episode_end()
+        else:
+            tick = 0
+        rec.set_time("tick", sequence=tick)
+        rec.set_time("episode", sequence=episode)
+        root = agent_path(self.agent)
+        for table in TABLES:
+            picture = table_picture(getattr(brain.learner, table)[0])
+            origins, vectors, colors, stays = policy_marks(picture)
+            rec.log(f"{root}/{table}/value", rr.Image(picture["image"]))
+            rec.log(f"{root}/{table}/policy",
+                    rr.Arrows2D.from_fields(origins=origins, vectors=vectors, colors=colors))
+            rec.log(f"{root}/{table}/stay", rr.Points2D.from_fields(positions=stays))
+        if isinstance(brain, TimedBrain):
+            latencies, unanswered = brain.take_timings()
+            if latencies:
+                rec.log(latency_path(self.agent), rr.Scalars(1000.0 * float(np.mean(latencies))))
+            rec.log(unanswered_path(self.agent), rr.Scalars(float(unanswered)))
+
+    def close(self) -> None:
+        try:
+            self.rec.flush(timeout_sec=3.0)
+        except Exception as error:  # noqa: BLE001 - rerun raises RuntimeError for a lost viewer
+            print(f"rerun: agent {self.agent} could not flush its recording: {error}",
+                  file=sys.stderr)
+        self.rec.disconnect()

@@ -1,0 +1,112 @@
+#!/usr/bin/env python3
+"""What Rerun recording costs the swarm: ticks per second with and without it, in the same run.
+
+Each repeat runs the same config twice, recording off and on (alternating which goes first, so
+drift in the machine's load hits both alike): a world process and one process per agent over
+embedded Zenoh, exactly as ``launch/swarm.py`` starts them. Recording on means the full default
+recording: the world logs every tick (``world.viz``), every agent logs its heat maps and
+negotiation timing each episode (``agent.viz``), each process saves its part of ``run.rrd``.
+The rate is ticks / seconds over every episode but the first (which includes start-up), from
+``episodes.csv``; the figure is the median over repeats; the merge into ``run.rrd`` after the
+run is timed separately. ``--in-process`` measures the one-process runner instead.
+
+    python bench/recording_cost.py --agents 8 --repeats 5
+"""
+
+import argparse
+import multiprocessing as mp
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from launch.recording import RecordingPlan, merge_parts  # noqa: E402
+from protocol.config import SwarmConfig  # noqa: E402
+from protocol.transport import EmbeddedLayout  # noqa: E402
+from world.metrics import read_episodes  # noqa: E402
+
+TARGET = 0.10
+"""DESIGN §6: logging may cost at most 10 % of the tick rate."""
+
+
+def measured_rate(out: Path) -> float:
+    rows = read_episodes(out / "episodes.csv")[1:]
+    return sum(int(r["steps"]) + 1 for r in rows) / sum(float(r["duration_s"]) for r in rows)
+
+
+def run_distributed(config: SwarmConfig, out: Path, record: bool) -> float:
+    from launch.swarm import agent_main, world_main
+
+    ctx = mp.get_context("spawn")
+    layout = EmbeddedLayout()
+    out.mkdir(parents=True)
+    plan = RecordingPlan.to_files(config, out) if record else False
+    world = ctx.Process(target=world_main, args=(config, layout.world(), out, plan, False))
+    agents = [ctx.Process(target=agent_main,
+                          args=(i, config, layout.agent(), out, False, plan or None))
+              for i in range(config.n_agents)]
+    world.start()
+    for agent in agents:
+        agent.start()
+    world.join()
+    for agent in agents:
+        agent.join(10)
+        if agent.is_alive():
+            agent.kill()
+    if world.exitcode != 0:
+        raise RuntimeError(f"world exited with {world.exitcode}")
+    return measured_rate(out)
+
+
+def run_local(config: SwarmConfig, out: Path, record: bool) -> float:
+    from launch.swarm import run_in_process
+
+    out.mkdir(parents=True)
+    run_in_process(config, out, record, progress=False)
+    return measured_rate(out)
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--agents", type=int, default=8)
+    p.add_argument("--episodes", type=int, default=6)
+    p.add_argument("--max-steps", type=int, default=100)
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--in-process", action="store_true", help="the one-process runner instead")
+    args = p.parse_args()
+    config = SwarmConfig(run_id="recording-cost", n_agents=args.agents, episodes=args.episodes,
+                         max_steps=args.max_steps)
+    run = run_local if args.in_process else run_distributed
+    rates: dict[bool, list[float]] = {False: [], True: []}
+    merges, sizes = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for r in range(args.repeats):
+            for record in ((False, True) if r % 2 == 0 else (True, False)):
+                out = Path(tmp) / f"{r}-{'on' if record else 'off'}"
+                rates[record].append(run(config, out, record))
+                if record and not args.in_process:
+                    start = time.perf_counter()
+                    merged = merge_parts(out)
+                    merges.append(time.perf_counter() - start)
+                    sizes.append(merged.stat().st_size / 1e6 if merged else float("nan"))
+                print(f"repeat {r}: recording {'on ' if record else 'off'} "
+                      f"{rates[record][-1]:7.1f} ticks/s", file=sys.stderr, flush=True)
+    off, on = statistics.median(rates[False]), statistics.median(rates[True])
+    cost = 1 - on / off
+    mode = "in-process" if args.in_process else "distributed"
+    print(f"{args.agents} agents, {mode}, {args.episodes} episodes x {args.max_steps} steps, "
+          f"median of {args.repeats}")
+    print(f"  recording off: {off:7.1f} ticks/s  ({' '.join(f'{x:.0f}' for x in rates[False])})")
+    print(f"  recording on:  {on:7.1f} ticks/s  ({' '.join(f'{x:.0f}' for x in rates[True])})")
+    print(f"  cost: {100 * cost:.1f} % of the tick rate (target at most {100 * TARGET:.0f} %)")
+    if merges:
+        print(f"  merge into run.rrd after the run: median {statistics.median(merges):.2f} s, "
+              f"{statistics.median(sizes):.1f} MB")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,493 @@
+"""Rerun for a run: where each process's recording goes, the viewer's blueprint, the final merge.
+
+Every process of a run (the world, each agent, or the one in-process runner) logs into the same
+recording, whose id is the run id. Sinks (a :class:`RecordingPlan`, handed to each process):
+
+- by default each process saves its own part, ``<out>/rerun-parts/<role>.<pid>.rrd``, and the
+  launcher merges the parts into ``<out>/run.rrd`` when the run ends, Ctrl-C included
+  (:func:`merge_parts`; an existing ``run.rrd`` of a resumed run is merged in too; the parts are
+  kept if merging fails);
+- ``--rerun-spawn`` starts the native viewer, ``--rerun-connect URL`` uses a running one,
+  ``--rerun-serve-web`` serves the web viewer; every process then also streams to that viewer
+  (:class:`RecordingSession`).
+
+:func:`blueprint` is the first view: the grid on the left, the metrics in the middle, each
+agent's heat maps on the right. :func:`log_experiment` puts the paper experiment's learning
+curves into a recording of their own.
+"""
+
+import argparse
+import importlib.util
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import quote, urlparse
+
+import numpy as np
+
+from protocol.config import SwarmConfig
+
+APP_ID = "nnql-swarm"
+PARTS_DIR = "rerun-parts"
+RECORDING_FILE = "run.rrd"
+DEFAULT_GRPC_PORT = 9876
+DEFAULT_WEB_PORT = 9090
+VIEWER_START_S = 15.0
+"""How long the launcher waits for a viewer it started to accept connections."""
+
+class RecordingError(RuntimeError):
+    """The recording cannot go where it was asked to (no viewer at the URL, bad URL)."""
+
+
+def rerun_binary() -> list[str]:
+    """The ``rerun`` command of this environment: the native binary of the ``rerun_cli`` package
+    (no Python start-up), else the script next to the interpreter, else on PATH."""
+    spec = importlib.util.find_spec("rerun_cli")
+    if spec is not None and spec.origin:
+        native = Path(spec.origin).parent / "rerun"
+        if native.is_file() and os.access(native, os.X_OK):
+            return [str(native)]
+    beside = Path(sys.executable).parent / "rerun"
+    if beside.exists():
+        return [str(beside)]
+    found = shutil.which("rerun")
+    return [found] if found else [sys.executable, "-m", "rerun_cli"]
+
+
+def grpc_url(port: int, host: str = "127.0.0.1") -> str:
+    return f"rerun+http://{host}:{port}/proxy"
+
+
+def check_viewer_url(url: str) -> str:
+    """A viewer URL as ``--rerun-connect`` takes it; raises ArgumentTypeError otherwise."""
+    parsed = urlparse(url)
+    if parsed.scheme not in ("rerun", "rerun+http", "rerun+https") or not parsed.hostname \
+            or parsed.path.rstrip("/") != "/proxy":
+        raise argparse.ArgumentTypeError(
+            f"expected a viewer URL such as {grpc_url(DEFAULT_GRPC_PORT)}, not {url!r}")
+    return url
+
+
+def reachable(url: str, timeout: float = 1.0) -> bool:
+    """Whether something accepts TCP connections where the viewer URL points."""
+    parsed = urlparse(url)
+    default = 443 if parsed.scheme == "rerun+https" else DEFAULT_GRPC_PORT
+    try:
+        with socket.create_connection((parsed.hostname, parsed.port or default), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+@dataclass(frozen=True)
+class RecordingPlan:
+    """Where every process of a run sends its part of the recording (picklable, for spawn)."""
+
+    run_id: str
+    parts_dir: Path | None = None  # save a part here (None: no file)
+    url: str | None = None  # also stream to this viewer
+
+    @staticmethod
+    def to_files(config: SwarmConfig, out: Path) -> "RecordingPlan":
+        return RecordingPlan(config.run_id, parts_dir=Path(out) / PARTS_DIR)
+
+    @property
+    def enabled(self) -> bool:
+        return self.parts_dir is not None or self.url is not None
+
+    def open(self, role: str, default_blueprint=None):
+        """This process's ``rr.RecordingStream`` into the run's recording; ``role`` names its
+        part file."""
+        import rerun as rr
+
+        stream = rr.RecordingStream(APP_ID, recording_id=self.run_id)
+        sinks = []
+        if self.parts_dir is not None:
+            Path(self.parts_dir).mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(str(Path(self.parts_dir) / f"{role}.{os.getpid()}.rrd")))
+        if self.url is not None:
+            sinks.append(rr.GrpcSink(self.url))
+        stream.set_sinks(*sinks, default_blueprint=default_blueprint)
+        return stream
+
+
+def exit_without_teardown() -> None:
+    """End a spawned process that has closed its recording, skipping the interpreter's teardown.
+
+    With Rerun loaded, Python's own teardown takes about 0.5 s (more on a busy machine), which
+    every process of a run pays on Ctrl-C. A process that returns normally from its target exits
+    with code 0; so does this, after flushing the log handlers and standard streams.
+    """
+    import logging
+
+    logging.shutdown()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(0)
+
+
+def plan_of(record, config: SwarmConfig, out: Path) -> RecordingPlan | None:
+    """A plan from what a launcher function was given: a plan, True (files), False/None (off)."""
+    if isinstance(record, RecordingPlan):
+        return record if record.enabled else None
+    return RecordingPlan.to_files(config, out) if record else None
+
+
+def open_world_viz(record, config: SwarmConfig, out: Path):
+    """The world's logger (``world.viz.WorldViz``) with the blueprint, or None if not recording."""
+    from world.viz import WorldViz
+
+    plan = plan_of(record, config, out)
+    if plan is None:
+        return None
+    return WorldViz(config, plan.open("world", blueprint(config)))
+
+
+def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):
+    """``(brain, on_episode_end, viz)`` for an agent process; all None if not recording."""
+    if plan is None or not plan.enabled:
+        return None, None, None
+    from agent.viz import AgentViz, TimedBrain
+
+    viz = AgentViz(agent, config, plan.open(f"agent-{agent}"))
+    return TimedBrain(agent, config), viz.on_episode_end, viz
+
+
+class InProcessRecorder:
+    """World and agents of the in-process runner logging into one stream."""
+
+    def __init__(self, record, config: SwarmConfig, out: Path) -> None:
+        from agent.viz import AgentViz
+
+        self.world = open_world_viz(record, config, out)
+        self.agents = []
+        if self.world is not None:
+            self.agents = [AgentViz(i, config, self.world.rec, lambda: self.world.next_tick)
+                           for i in range(config.n_agents)]
+
+    def on_tick(self, world, report) -> None:
+        if self.world is not None:
+            self.world.log_tick(world, report)
+
+    def on_episode_end(self, brain, episode: int) -> None:
+        if self.agents:
+            self.agents[brain.agent].on_episode_end(brain, episode)
+
+    def close(self) -> None:
+        if self.world is not None:
+            self.world.close()
+
+
+def blueprint(config: SwarmConfig):
+    """The first view: grid and events | metrics | each agent's Q_DS and Q_CA heat maps."""
+    import rerun.blueprint as rrb
+
+    from world import viz as world_viz
+
+    world_view = rrb.Spatial2DView(
+        origin="world", name="World: agents, goals, trails, intents, negotiation, collisions",
+        visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
+                                         y_range=[-0.6, config.height - 0.4]),
+    )
+    events = rrb.TextLogView(origin=world_viz.EVENTS, name="Events")
+    plot = rrb.TimeSeriesView
+    metrics = rrb.Grid(
+        plot(origin="metrics/collisions/per_episode", name="Collisions per episode"),
+        plot(origin="metrics/collisions/cumulative", name="Cumulative collisions"),
+        plot(origin="metrics/steps", name="Steps per agent vs shortest (mean)",
+             contents=["metrics/steps/per_agent", "metrics/steps/shortest_per_agent"]),
+        plot(origin="metrics/reward_sum", name="Reward sum"),
+        plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms, per agent)"),
+        plot(origin="metrics/ticks_per_s", name="Ticks per second"),
+        grid_columns=2, name="Metrics (per episode)",
+    )
+    heat_maps = rrb.Tabs(*[
+        rrb.Vertical(
+            rrb.Spatial2DView(origin=f"agents/{i}/q_ds",
+                              name=f"Agent {i} Q_DS by goal offset (best move)"),
+            rrb.Spatial2DView(origin=f"agents/{i}/q_ca",
+                              name=f"Agent {i} Q_CA by neighbour offset (best move)"),
+            name=f"agent {i}",
+        )
+        for i in range(config.n_agents)
+    ], active_tab=0, name="What each agent learned")
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(world_view, events, row_shares=[3, 1]),
+            metrics,
+            heat_maps,
+            column_shares=[4, 4, 3],
+        ),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline="tick", play_state="following", state="collapsed"),
+        collapse_panels=False,
+    )
+
+
+def merge_parts(out: Path) -> Path | None:
+    """Merge ``<out>/rerun-parts/*.rrd`` (and an existing ``run.rrd``) into ``<out>/run.rrd``.
+
+    Returns the recording's path, or None if there was nothing to merge or merging failed (then
+    the parts stay where they are, and a line on stderr says so).
+    """
+    out = Path(out)
+    parts_dir = out / PARTS_DIR
+    parts = sorted(parts_dir.glob("*.rrd")) if parts_dir.is_dir() else []
+    if not parts:
+        return None
+    target = out / RECORDING_FILE
+    inputs = ([target] if target.exists() else []) + parts
+    tmp = target.with_name(target.name + ".tmp")
+    result = None
+    for extra in ([], ["--continue-on-error"]):
+        try:
+            result = subprocess.run(
+                [*rerun_binary(), "rrd", "merge", *extra, *map(str, inputs), "-o", str(tmp)],
+                capture_output=True, text=True, timeout=600)
+        except (OSError, subprocess.TimeoutExpired) as error:
+            print(f"rerun: merging the recording failed ({error}); the parts are in {parts_dir}",
+                  file=sys.stderr)
+            return None
+        if result.returncode == 0:
+            break
+    if result.returncode != 0:
+        tmp.unlink(missing_ok=True)
+        reason = result.stderr.strip().splitlines()[-1:] or ["unknown error"]
+        print(f"rerun: merging the recording failed ({reason[0]}); the parts are in {parts_dir}",
+              file=sys.stderr)
+        return None
+    os.replace(tmp, target)
+    if extra:
+        print(f"rerun: some parts were damaged; merged what was readable into {target}, "
+              f"kept the parts in {parts_dir}", file=sys.stderr)
+        return target
+    for part in parts:
+        part.unlink()
+    try:
+        parts_dir.rmdir()
+    except OSError:
+        pass
+    return target
+
+
+class RecordingSession:
+    """The launcher's side of the recording: viewer start-up, the plan for each process, merge."""
+
+    def __init__(self, plan: RecordingPlan | None, out: Path,
+                 server: subprocess.Popen | None = None, web_url: str | None = None) -> None:
+        self.plan = plan
+        self.out = Path(out)
+        self.server = server
+        self.web_url = web_url
+
+    @staticmethod
+    def start(args, config: SwarmConfig, out: Path) -> "RecordingSession":
+        """From the launcher's Rerun options. A viewer that cannot be reached or started costs a
+        warning on stderr: the run goes on, recording to file (unless ``--no-record``)."""
+        parts = None if args.no_record else Path(out) / PARTS_DIR
+        url, server, web_url = None, None, None
+        if args.rerun_connect:
+            url = args.rerun_connect
+            if not reachable(url):
+                print(f"rerun: no viewer answers at {url}; not streaming to it", file=sys.stderr)
+                url = None
+        elif args.rerun_spawn:
+            try:
+                url = spawn_viewer(args.rerun_port)
+            except RecordingError as error:
+                print(f"rerun: {error}; not streaming to a viewer", file=sys.stderr)
+        elif args.rerun_serve_web:
+            try:
+                server, url, web_url = serve_web(args.rerun_port, args.rerun_web_port)
+            except RecordingError as error:
+                print(f"rerun: {error}; not serving the web viewer", file=sys.stderr)
+        plan = RecordingPlan(config.run_id, parts, url)
+        return RecordingSession(plan if plan.enabled else None, out, server, web_url)
+
+    @staticmethod
+    def files_only(record: bool, config: SwarmConfig, out: Path) -> "RecordingSession":
+        """Parts saved under ``out`` and merged at the end (``record``), or nothing."""
+        return RecordingSession(RecordingPlan.to_files(config, out) if record else None, out)
+
+    def finish(self, wait_for_viewers: bool = True) -> Path | None:
+        """Merge the parts into ``run.rrd``; keep serving the web viewer until Ctrl-C if asked."""
+        merged = merge_parts(self.out) if self.plan and self.plan.parts_dir else None
+        if self.server is not None:
+            previous = {s: signal.signal(s, _stop_waiting) for s in (signal.SIGINT, signal.SIGTERM)}
+            try:
+                if wait_for_viewers and self.server.poll() is None:
+                    print(f"rerun: still serving the run at {self.web_url} ; press Ctrl-C to stop",
+                          file=sys.stderr)
+                    self.server.wait()
+            except _StopWaiting:
+                pass
+            finally:
+                for s, handler in previous.items():
+                    signal.signal(s, handler)
+                stop_process(self.server)
+        return merged
+
+
+class _StopWaiting(Exception):
+    """Ctrl-C or SIGTERM while the launcher keeps the web viewer up after the run."""
+
+
+def _stop_waiting(*_signal) -> None:
+    raise _StopWaiting
+
+
+def wait_until_reachable(url: str, timeout: float = VIEWER_START_S) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if reachable(url, timeout=0.5):
+            return True
+        time.sleep(0.2)
+    return False
+
+
+def spawn_viewer(port: int) -> str:
+    """Start the native viewer on ``port`` (or use the one already there); returns its URL.
+
+    The viewer is detached (its own session): it stays open after the run and Ctrl-C.
+    """
+    url = grpc_url(port)
+    if reachable(url):
+        return url
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        raise RecordingError("no display for the native viewer (DISPLAY and WAYLAND_DISPLAY are "
+                             "unset); --rerun-serve-web serves a web viewer instead")
+    viewer = subprocess.Popen([*rerun_binary(), "--port", str(port), "--expect-data-soon"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                              start_new_session=True)
+    deadline = time.monotonic() + VIEWER_START_S
+    while time.monotonic() < deadline:
+        if viewer.poll() is not None:
+            raise RecordingError(f"the viewer exited at start-up (exit code {viewer.returncode})")
+        if reachable(url, timeout=0.5):
+            time.sleep(0.5)  # a viewer that cannot open its window listens briefly, then exits
+            if viewer.poll() is None:
+                return url
+        time.sleep(0.2)
+    raise RecordingError(f"the viewer did not answer on port {port} within {VIEWER_START_S:.0f} s")
+
+
+def serve_web(grpc_port: int, web_port: int) -> tuple[subprocess.Popen, str, str]:
+    """Start ``rerun --serve-web`` (gRPC proxy + web viewer on every interface); print its URL."""
+    server = subprocess.Popen(
+        [*rerun_binary(), "--serve-web", "--port", str(grpc_port), "--web-viewer-port",
+         str(web_port)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )
+    url = grpc_url(grpc_port)
+    if not wait_until_reachable(url):
+        stop_process(server)
+        raise RecordingError(f"rerun --serve-web did not start on ports {grpc_port}/{web_port}")
+    host = public_host()
+    web_url = f"http://{host}:{web_port}/?url={quote(grpc_url(grpc_port, host), safe='')}"
+    print(f"rerun: web viewer at {web_url}", file=sys.stderr)
+    return server, url, web_url
+
+
+def public_host() -> str:
+    """This machine's address as another machine would reach it (the outgoing interface's IP)."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("8.8.8.8", 53))  # UDP: no packet is sent, this only picks a route
+            address = probe.getsockname()[0]
+        if not address.startswith("127."):
+            return address
+    except OSError:
+        pass
+    return socket.gethostname() or "localhost"
+
+
+def stop_process(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=3)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+
+
+def log_experiment(specs, metrics, target, *, recording_id: str = "experiment"):
+    """Log the paper experiment's learning curves, averaged over seeds, on the ``episode`` timeline.
+
+    ``specs`` are ``launch.paper.RunSpec`` (``algo``, ``random_step``, ``seed``); ``metrics`` is the
+    matching ``launch.paper.EpisodeMetrics`` (arrays ``(runs, episodes)``: ``steps``,
+    ``collisions``, ``reward_ds``, ``reward_ca``, ``shortest``, ``arrived``). ``target`` is a path
+    (a new ``.rrd`` file with its own blueprint is written there), or an open
+    ``rr.RecordingStream``. Entities: ``experiment/<metric>/<algo>/k<k>`` for metric in
+    ``collisions``, ``cumulative_collisions``, ``steps``, ``extra_steps`` (steps - shortest),
+    ``reward_sum``, ``arrived``; one ``send_columns`` call each.
+    """
+    import rerun as rr
+
+    from world.viz import close_stream
+
+    groups: dict[tuple[str, int], list[int]] = {}
+    for row, spec in enumerate(specs):
+        groups.setdefault((spec.algo, int(spec.random_step)), []).append(row)
+    if isinstance(target, rr.RecordingStream):
+        stream, own = target, False
+    else:
+        stream, own = rr.RecordingStream(APP_ID, recording_id=recording_id), True
+        stream.set_sinks(rr.FileSink(str(target)), default_blueprint=experiment_blueprint())
+    curves = {
+        "collisions": np.asarray(metrics.collisions, dtype=float),
+        "cumulative_collisions": np.cumsum(np.asarray(metrics.collisions, dtype=float), axis=1),
+        "steps": np.asarray(metrics.steps, dtype=float),
+        "extra_steps": np.asarray(metrics.steps, dtype=float) - np.asarray(metrics.shortest),
+        "reward_sum": np.asarray(metrics.reward_ds) + np.asarray(metrics.reward_ca),
+        "arrived": np.asarray(metrics.arrived, dtype=float),
+    }
+    episodes = np.arange(curves["steps"].shape[1])
+    for (algo, k), rows in sorted(groups.items()):
+        for name, values in curves.items():
+            path = f"experiment/{name}/{algo}/k{k}"
+            stream.log(path, rr.SeriesLines(names=f"{algo} k={k} ({len(rows)} seeds)",
+                                            colors=[_series_color(algo, k)]), static=True)
+            stream.send_columns(path, [rr.TimeColumn("episode", sequence=episodes)],
+                                rr.Scalars.columns(scalars=values[rows].mean(axis=0)))
+    if own:
+        close_stream(stream)
+        return None
+    return stream
+
+
+_ALGO_COLORS = {"ql": (230, 120, 40), "nnql": (40, 140, 230)}
+
+
+def _series_color(algo: str, k: int) -> tuple[int, int, int]:
+    """QL in oranges, nnQL in blues; larger k (less exploration) darker."""
+    base = np.array(_ALGO_COLORS.get(algo, (160, 160, 160)), dtype=float)
+    shade = 1.25 - 0.6 * min(max(k, 1), 20) / 20
+    return tuple(int(v) for v in np.clip(base * shade, 0, 255))
+
+
+def experiment_blueprint():
+    import rerun.blueprint as rrb
+
+    plot = rrb.TimeSeriesView
+    return rrb.Blueprint(
+        rrb.Grid(
+            plot(origin="experiment/collisions", name="Collisions per episode (mean over seeds)"),
+            plot(origin="experiment/cumulative_collisions", name="Cumulative collisions"),
+            plot(origin="experiment/steps", name="Steps per episode"),
+            plot(origin="experiment/extra_steps", name="Steps above the shortest path"),
+            plot(origin="experiment/reward_sum", name="Reward sum"),
+            plot(origin="experiment/arrived", name="Share of episodes arriving"),
+            grid_columns=3,
+        ),
+        rrb.TimePanel(timeline="episode", state="collapsed"),
+        collapse_panels=False,
+    )

@@ -1,0 +1,285 @@
+"""Rerun recordings of real runs, read back with Rerun's reader: entities, metrics, heat maps."""
+
+import os
+import signal
+import subprocess
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rerun as rr
+
+from agent.brain import AgentBrain
+from agent.viz import TABLES, table_picture
+from launch.recording import PARTS_DIR, log_experiment, rerun_binary
+from protocol.actions import RIGHT, STAY, UP, offset_state
+from protocol.config import SwarmConfig
+from protocol.transport import free_port
+from tests.swarm_helpers import group_pids, run_swarm, start_swarm
+from world.engine import SwarmWorld
+from world.metrics import read_episodes
+from world.scenario import swarm_episode
+from world.viz import METRICS, negotiation_pairs
+
+AGENTS, EPISODES = 8, 3
+RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5")
+WORLD_ENTITIES = ("world/grid", "world/agents", "world/goals", "world/trails", "world/intents",
+                  "world/negotiation", "world/collisions", "events")
+PER_TICK = ("world/agents", "world/trails", "world/intents", "world/negotiation",
+            "world/collisions")
+
+
+class Recording:
+    """A loaded .rrd: every chunk's rows by entity path, and the stores the file holds."""
+
+    def __init__(self, path: Path) -> None:
+        reader = rr.chunk.RrdReader(path)
+        self.recordings = reader.recordings()
+        self.blueprints = reader.blueprints()
+        self.temporal: dict[str, list] = defaultdict(list)
+        self.static: set[str] = set()
+        for chunk in reader.stream():
+            entity = chunk.entity_path.lstrip("/")
+            if chunk.is_static:
+                self.static.add(entity)
+            else:
+                self.temporal[entity].append(chunk.to_record_batch())
+
+    @property
+    def entities(self) -> set[str]:
+        return self.static | set(self.temporal)
+
+    def column(self, entity: str, name: str) -> list:
+        return [v for batch in self.temporal[entity] for v in batch.column(name).to_pylist()]
+
+    def scalars(self, entity: str) -> dict[int, tuple[int, float]]:
+        """episode -> (tick, value) of a per-episode series."""
+        episodes = self.column(entity, "episode")
+        ticks = self.column(entity, "tick")
+        values = [v[0] for v in self.column(entity, "Scalars:scalars")]
+        return {e: (t, v) for e, t, v in zip(episodes, ticks, values)}
+
+    def rows(self, entity: str) -> int:
+        return sum(batch.num_rows for batch in self.temporal[entity])
+
+
+def verify(path: Path) -> None:
+    result = subprocess.run([*rerun_binary(), "rrd", "verify", str(path)], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+
+
+@pytest.fixture(scope="module")
+def distributed(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec") / "dist"
+    result = run_swarm(out, *RUN, "--run-id", "rec-dist")
+    assert result.returncode == 0, result.stderr
+    return out, Recording(out / "run.rrd")
+
+
+@pytest.fixture(scope="module")
+def in_process(tmp_path_factory):
+    """An in-process run that also streams to a viewer (a gRPC server saving what it receives)."""
+    base = tmp_path_factory.mktemp("rec")
+    port = free_port()
+    received = base / "received.rrd"
+    server = subprocess.Popen([*rerun_binary(), "--serve-grpc", "--port", str(port),
+                               "--save", str(received)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        out = base / "local"
+        result = run_swarm(out, *RUN, "--run-id", "rec-local", "--in-process",
+                           "--rerun-connect", f"rerun+http://127.0.0.1:{port}/proxy")
+        assert result.returncode == 0, result.stderr
+        time.sleep(0.5)
+    finally:
+        server.terminate()
+        server.wait(10)
+    return out, Recording(out / "run.rrd"), received
+
+
+@pytest.fixture(params=["distributed", "in_process"])
+def run(request):
+    out, recording, *_ = request.getfixturevalue(request.param)
+    return request.param, out, recording
+
+
+def test_one_verified_recording_with_the_run_id_and_a_blueprint(run):
+    mode, out, recording = run
+    verify(out / "run.rrd")
+    run_id = {"distributed": "rec-dist", "in_process": "rec-local"}[mode]
+    assert [s.recording_id for s in recording.recordings] == [run_id]
+    assert len(recording.blueprints) == 1
+    assert not (out / PARTS_DIR).exists()  # merged, parts removed
+
+
+def test_the_world_is_there_every_tick(run):
+    _, out, recording = run
+    assert set(WORLD_ENTITIES) <= recording.entities
+    ticks = int(read_episodes(out / "episodes.csv")[-1]["end_tick"]) + 1
+    for entity in PER_TICK:
+        assert sorted(recording.column(entity, "tick")) == list(range(ticks)), entity
+    assert recording.rows("world/goals") == EPISODES
+
+
+def test_positions_and_trails_are_the_worlds(run):
+    _, out, recording = run
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    ticks = recording.column("world/agents", "tick")
+    cells = dict(zip(ticks, recording.column("world/agents", "Points2D:positions")))
+    trails = dict(zip(recording.column("world/trails", "tick"),
+                      recording.column("world/trails", "LineStrips2D:strips")))
+    first_tick = 0
+    for row in read_episodes(out / "episodes.csv"):
+        starts = swarm_episode(config.seed, int(row["episode"]), config.width, config.height,
+                               config.n_agents).starts
+        assert np.array_equal(np.array(cells[first_tick]), starts), row["episode"]
+        first_tick = int(row["end_tick"]) + 1
+    for tick, strips in trails.items():
+        assert np.array_equal(np.array([strip[-1] for strip in strips]), np.array(cells[tick]))
+
+
+def test_metrics_match_episodes_csv(run):
+    _, out, recording = run
+    rows = read_episodes(out / "episodes.csv")
+    assert set(METRICS) <= recording.entities
+    expected = {
+        "metrics/collisions/per_episode": [float(r["collisions"]) for r in rows],
+        "metrics/collisions/cumulative": list(np.cumsum([float(r["collisions"]) for r in rows])),
+        "metrics/steps/episode": [float(r["steps"]) for r in rows],
+        "metrics/steps/per_agent": [int(r["agent_steps"]) / AGENTS for r in rows],
+        "metrics/steps/shortest_per_agent": [int(r["shortest_sum"]) / AGENTS for r in rows],
+        "metrics/arrived": [float(r["arrived"]) for r in rows],
+        "metrics/reward_sum": [float(r["reward_sum"]) for r in rows],
+        "metrics/missed_intents": [float(r["missed_intents"]) for r in rows],
+    }
+    for entity, values in expected.items():
+        logged = recording.scalars(entity)
+        assert sorted(logged) == list(range(EPISODES)), entity
+        assert [logged[e][1] for e in range(EPISODES)] == pytest.approx(values), entity
+        assert [logged[e][0] for e in range(EPISODES)] == [int(r["end_tick"]) for r in rows]
+    assert all(v > 0 for _, v in recording.scalars("metrics/ticks_per_s").values())
+    assert sum(int(r["collisions"]) for r in rows) > 0  # the run did show collisions
+    assert recording.rows("world/collisions") > 0
+
+
+def test_every_agent_logged_what_it_learned_each_episode(run):
+    mode, out, recording = run
+    for agent in range(AGENTS):
+        for table in TABLES:
+            for part in ("value", "policy", "stay"):
+                entity = f"agents/{agent}/{table}/{part}"
+                assert sorted(recording.column(entity, "episode")) == list(range(EPISODES)), entity
+        if mode == "distributed":  # the negotiation wait exists only over the wire
+            latency = recording.scalars(f"metrics/negotiation/latency_ms/{agent}")
+            assert sorted(latency) == list(range(EPISODES))
+            assert all(0 < v < 2000 for _, v in latency.values())
+    # the last heat map is the picture of the agent's checkpointed table
+    agent = 3
+    with np.load(out / "checkpoints" / f"agent-{agent}.npz") as data:
+        q_ds = data["q_ds"]
+    batches = recording.temporal[f"agents/{agent}/q_ds/value"]
+    last = max(((b, i) for b in batches for i in range(b.num_rows)),
+               key=lambda bi: bi[0].column("episode")[bi[1]].as_py())
+    buffer = np.array(last[0].column("Image:buffer")[last[1]].as_py()[0], dtype=np.uint8)
+    assert np.array_equal(buffer.reshape(21, 21, 3), table_picture(q_ds)["image"])
+
+
+def test_the_negotiation_is_logged_as_the_agents_ask(distributed):
+    _, recording = distributed
+    counts = [len(v or []) for v in recording.column("world/negotiation", "Arrows2D:vectors")]
+    assert max(counts) > 0
+    assert max(counts) <= AGENTS * (AGENTS - 1) // 2
+
+
+@pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server was stopped, not closed
+def test_streaming_to_a_viewer_sends_the_same_recording(in_process):
+    out, recording, received = in_process
+    streamed = Recording(received)
+    assert [s.recording_id for s in streamed.recordings] == ["rec-local"]
+    assert set(WORLD_ENTITIES) | set(METRICS) <= streamed.entities
+    assert {f"agents/{i}/q_ca/value" for i in range(AGENTS)} <= streamed.entities
+    assert streamed.scalars("metrics/reward_sum") == recording.scalars("metrics/reward_sum")
+
+
+def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
+    out = tmp_path / "stopped"
+    swarm = start_swarm(out, "--agents", "4", "--episodes", "1000", "--max-steps", "20")
+    try:
+        deadline = time.monotonic() + 90
+        while not ((out / "episodes.csv").exists() and read_episodes(out / "episodes.csv")):
+            assert time.monotonic() < deadline, "no episode finished in time"
+            time.sleep(0.2)
+        os.killpg(swarm.pid, signal.SIGINT)
+        swarm.wait(timeout=30)
+        assert swarm.returncode == 130
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    verify(out / "run.rrd")
+    assert not (out / PARTS_DIR).exists()
+    recording = Recording(out / "run.rrd")
+    rows = read_episodes(out / "episodes.csv")
+    logged = recording.scalars("metrics/collisions/per_episode")
+    assert [logged[e][1] for e in range(len(rows))] == [float(r["collisions"]) for r in rows]
+    assert {"world/agents", "agents/0/q_ds/value", "agents/3/q_ca/value"} <= recording.entities
+
+
+def test_a_bad_viewer_url_is_a_one_line_usage_error(tmp_path):
+    result = run_swarm(tmp_path / "bad", "--rerun-connect", "http://nowhere", timeout=60)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "viewer URL" in lines[0], result.stderr
+
+
+def test_world_negotiation_is_what_the_agents_ask():
+    config = SwarmConfig(run_id="nego", n_agents=6, width=5, height=5, episodes=1)
+    world = SwarmWorld(config)
+    brains = [AgentBrain(i, config) for i in range(config.n_agents)]
+    for _ in range(12):
+        observations = world.observations()
+        asked = {(o.agent, j) for o in observations for j in brains[o.agent].neighbours_to_ask(o)}
+        derived = negotiation_pairs(world.positions, world.arrived, world.tick, config.algo)
+        assert {tuple(p) for p in derived.tolist()} == asked
+        actions = [brains[o.agent].act(o, {}) for o in observations]
+        world.apply(actions)
+
+
+def test_heat_map_pixels_are_egocentric_offsets():
+    q = np.zeros((441, 5))
+    q[offset_state(np.array([3, -2])), RIGHT] = 2.0  # goal 3 right, 2 up: move right
+    q[offset_state(np.array([-1, 0])), UP] = 1.0
+    q[offset_state(np.array([0, 4])), STAY] = 0.5
+    picture = table_picture(q)
+    assert picture["visited"].sum() == 3
+    row, col = 10 - 2, 10 + 3  # row = dy + 10, column = dx + 10
+    assert picture["best"][row, col] == RIGHT and picture["value"][row, col] == 2.0
+    assert picture["best"][10, 9] == UP
+    assert tuple(picture["image"][row, col]) == (253, 231, 37)  # the maximum: brightest
+    assert tuple(picture["image"][14, 10]) == (68, 1, 84)  # the minimum: darkest
+
+
+def test_experiment_curves_go_into_a_recording(tmp_path):
+    from types import SimpleNamespace
+
+    specs = [SimpleNamespace(algo=a, random_step=k, seed=s)
+             for a in ("ql", "nnql") for k in (2, 5) for s in (0, 1)]
+    runs, episodes = len(specs), 7
+    rng = np.random.default_rng(0)
+    metrics = SimpleNamespace(
+        steps=rng.integers(5, 100, (runs, episodes)),
+        collisions=rng.integers(0, 9, (runs, episodes)),
+        reward_ds=rng.random((runs, episodes)), reward_ca=rng.random((runs, episodes)),
+        shortest=rng.integers(1, 10, (runs, episodes)), arrived=rng.random((runs, episodes)) > 0.5,
+    )
+    path = tmp_path / "experiment.rrd"
+    log_experiment(specs, metrics, path)
+    verify(path)
+    recording = Recording(path)
+    assert len(recording.blueprints) == 1
+    curve = recording.column("experiment/collisions/nnql/k5", "Scalars:scalars")
+    assert [v[0] for v in curve] == pytest.approx(metrics.collisions[[6, 7]].mean(axis=0))
+    cumulative = recording.column("experiment/cumulative_collisions/ql/k2", "Scalars:scalars")
+    assert cumulative[-1][0] == pytest.approx(metrics.collisions[[0, 1]].sum(axis=1).mean())
