@@ -4,11 +4,14 @@ Every run is one learner (QL or nnQL, random step k, seed) among ``n_obstacles``
 whose starts and every action come from :mod:`world.scenario`; the obstacles announce their
 pre-generated next action, which only nnQL reads. All runs advance episode by episode in lockstep
 through the same array code (``agent.learning``, ``world.rules``); a run whose learner has arrived
-sits out the rest of that episode. Each run gives exactly what it would give alone, so a batch may
-also be split over worker processes (``workers``) without changing a single number.
+sits out the rest of that episode, and once most of the batch has finished, the finished runs leave
+the arrays (``COMPACT_BELOW``), so late steps cost what the runs still going cost. Each run gives
+exactly what it would give alone, so a batch may also be split over worker processes (``workers``)
+without changing a single number.
 """
 
 import contextlib
+import copy
 import multiprocessing
 import queue
 import signal
@@ -113,65 +116,139 @@ def _run_in_process(
     seeds = sorted({spec.seed for spec in specs})
     seed_row = np.array([seeds.index(spec.seed) for spec in specs], dtype=np.int64)
     metrics = EpisodeMetrics.empty(runs, s.episodes)
-    everyone_known = np.ones((runs, s.n_obstacles), dtype=bool)
-    actions = np.empty((runs, 1 + s.n_obstacles), dtype=np.int64)
 
     for episode in range(s.episodes):
         scenarios = [paper_episode(seed, episode, s.width, s.height, s.n_obstacles, s.max_steps)
                      for seed in seeds]
-        positions = np.stack([sc.starts for sc in scenarios])[seed_row]
-        goal = np.stack([sc.goal for sc in scenarios])[seed_row]
-        script = np.stack([sc.obstacle_actions for sc in scenarios])[seed_row]
         noise = [EpisodeNoise.draw(rng, s.max_steps) for rng in rngs]
-        random_actions = np.stack([n.random_actions for n in noise])
-        tie_breakers = np.stack([n.tie_breakers for n in noise])
-        metrics.shortest[:, episode] = shortest_steps(positions[:, LEARNER_ID], goal)
-        running = np.ones(runs, dtype=bool)
-        steps = np.zeros(runs, dtype=np.int64)
-        collisions = np.zeros(runs, dtype=np.int64)
-        reward_ds = np.zeros(runs)
-        reward_ca = np.zeros(runs)
-        arrived_ever = np.zeros(runs, dtype=bool)
-
+        batch = _EpisodeBatch(
+            rows=np.arange(runs),
+            learners=learners,
+            positions=np.stack([sc.starts for sc in scenarios])[seed_row],
+            goal=np.stack([sc.goal for sc in scenarios])[seed_row],
+            script=np.stack([sc.obstacle_actions for sc in scenarios])[seed_row],
+            random_actions=np.stack([n.random_actions for n in noise]),
+            tie_breakers=np.stack([n.tie_breakers for n in noise]),
+        )
+        metrics.shortest[:, episode] = shortest_steps(batch.positions[:, LEARNER_ID], batch.goal)
         for t in range(s.max_steps):
-            obstacles_next = intended_cell(positions[:, 1:], script[:, t], s.width, s.height)
-            view = _learner_view(positions, goal, obstacles_next, everyone_known)
-            action = learners.decide(view, running, random_actions[:, t], tie_breakers[:, t])
-            actions[:, LEARNER_ID] = np.where(running, action, STAY)
-            actions[:, 1:] = script[:, t]
-            moved, collided = arbitrate(positions, actions, s.width, s.height, s.count_swaps)
-            own_after = moved[:, LEARNER_ID]
-            r_ds = destination_reward(positions[:, LEARNER_ID], own_after, goal, s.goal_reward)
-            learner_collided = collided[:, LEARNER_ID]
-            r_ca = collision_reward(learner_collided)
-            arrived = (own_after[:, 0] == goal[:, 0]) & (own_after[:, 1] == goal[:, 1]) & running
-            learners.record(r_ds, r_ca, arrived)
-
-            steps += running
-            collisions += learner_collided & running
-            reward_ds += np.where(running, r_ds, 0.0)
-            reward_ca += np.where(running, r_ca, 0.0)
-            arrived_ever |= arrived
-            positions = np.where(running[:, None, None], moved, positions)
-
-            last_step = t == s.max_steps - 1
-            leaving = running if last_step else arrived
-            if leaving.any():
-                # s' of a leaving learner is read without intents, so nobody's next cell matters.
-                last_view = _learner_view(positions, goal, positions[:, 1:], everyone_known)
-                learners.finish(leaving, last_view)
-            running = running & ~arrived
-            if not running.any():
+            batch.step(t, s)
+            if not batch.running.any():
                 break
-
-        metrics.steps[:, episode] = steps
-        metrics.collisions[:, episode] = collisions
-        metrics.reward_ds[:, episode] = reward_ds
-        metrics.reward_ca[:, episode] = reward_ca
-        metrics.arrived[:, episode] = arrived_ever
+            if batch.running.sum() <= COMPACT_BELOW * batch.rows.size:
+                batch = batch.compact(learners, metrics, episode)
+        batch.close(learners, metrics, episode)
         if on_episode is not None:
             on_episode(episode)
     return metrics
+
+
+COMPACT_BELOW = 0.5
+"""Once no more than this fraction of an episode's working batch still runs, the finished runs
+leave the batch, so the per-step array work follows the runs still going. 0 never compacts."""
+
+
+class _EpisodeBatch:
+    """The runs still taking part in one episode: their learners, world state and sums so far.
+
+    ``rows`` are the runs' indices in the whole batch; every other array is indexed by position in
+    ``rows``. ``learners`` is the whole batch's :class:`Learners` until the first compaction, then
+    a copy of just these runs' learners, written back on the next compaction or at the end.
+    """
+
+    def __init__(self, rows, learners, positions, goal, script, random_actions, tie_breakers):
+        n = rows.size
+        self.rows, self.learners = rows, learners
+        self.positions, self.goal, self.script = positions, goal, script
+        self.random_actions, self.tie_breakers = random_actions, tie_breakers
+        self.running = np.ones(n, dtype=bool)
+        self.steps = np.zeros(n, dtype=np.int64)
+        self.collisions = np.zeros(n, dtype=np.int64)
+        self.reward_ds = np.zeros(n)
+        self.reward_ca = np.zeros(n)
+        self.arrived = np.zeros(n, dtype=bool)
+
+    def step(self, t: int, s: PaperSettings) -> None:
+        """One step of every run: decide, arbitrate, reward, learn, and let arrived runs leave."""
+        running, positions, goal, learners = self.running, self.positions, self.goal, self.learners
+        script = self.script[:, t]
+        known = np.ones(script.shape, dtype=bool)
+        obstacles_next = intended_cell(positions[:, 1:], script, s.width, s.height)
+        view = _learner_view(positions, goal, obstacles_next, known)
+        action = learners.decide(view, running, self.random_actions[:, t], self.tie_breakers[:, t])
+        actions = np.concatenate([np.where(running, action, STAY)[:, None], script], axis=1)
+        moved, collided = arbitrate(positions, actions, s.width, s.height, s.count_swaps)
+        own_after = moved[:, LEARNER_ID]
+        r_ds = destination_reward(positions[:, LEARNER_ID], own_after, goal, s.goal_reward)
+        learner_collided = collided[:, LEARNER_ID]
+        r_ca = collision_reward(learner_collided)
+        arrived = (own_after[:, 0] == goal[:, 0]) & (own_after[:, 1] == goal[:, 1]) & running
+        learners.record(r_ds, r_ca, arrived)
+
+        self.steps += running
+        self.collisions += learner_collided & running
+        self.reward_ds += np.where(running, r_ds, 0.0)
+        self.reward_ca += np.where(running, r_ca, 0.0)
+        self.arrived |= arrived
+        self.positions = np.where(running[:, None, None], moved, positions)
+
+        leaving = running if t == s.max_steps - 1 else arrived
+        if leaving.any():
+            # s' of a leaving learner is read without intents, so nobody's next cell matters.
+            learners.finish(leaving, _learner_view(self.positions, goal, self.positions[:, 1:], known))
+        self.running = running & ~arrived
+
+    def compact(self, everyone: Learners, metrics: EpisodeMetrics, episode: int) -> "_EpisodeBatch":
+        """A batch of just the runs still going; the finished ones' results go home."""
+        keep, done = np.flatnonzero(self.running), np.flatnonzero(~self.running)
+        self._store(done, everyone, metrics, episode)
+        part = _EpisodeBatch(
+            self.rows[keep], _take_learners(self.learners, keep), self.positions[keep],
+            self.goal[keep], self.script[keep], self.random_actions[keep], self.tie_breakers[keep],
+        )
+        for name in ("steps", "collisions", "reward_ds", "reward_ca", "arrived"):
+            setattr(part, name, getattr(self, name)[keep])
+        return part
+
+    def close(self, everyone: Learners, metrics: EpisodeMetrics, episode: int) -> None:
+        """Store every run's results and learners at the episode's end."""
+        self._store(np.arange(self.rows.size), everyone, metrics, episode)
+
+    def _store(self, at: np.ndarray, everyone: Learners, metrics: EpisodeMetrics, episode: int):
+        rows = self.rows[at]
+        if self.learners is not everyone:
+            _put_learners(everyone, rows, _take_learners(self.learners, at))
+        metrics.steps[rows, episode] = self.steps[at]
+        metrics.collisions[rows, episode] = self.collisions[at]
+        metrics.reward_ds[rows, episode] = self.reward_ds[at]
+        metrics.reward_ca[rows, episode] = self.reward_ca[at]
+        metrics.arrived[rows, episode] = self.arrived[at]
+
+
+def _per_learner_arrays(learners: Learners) -> dict[str, np.ndarray]:
+    """Every array of a :class:`Learners` that holds one entry per learner (leading batch axis).
+
+    ``agent.learning`` keeps a batch of independent learners as arrays over the batch, so a subset
+    of learners is those arrays' rows; the other attributes (the hyper-parameters) are shared.
+    """
+    return {
+        name: value for name, value in vars(learners).items()
+        if isinstance(value, np.ndarray) and value.ndim >= 1 and value.shape[0] == learners.batch
+    }
+
+
+def _take_learners(learners: Learners, rows: np.ndarray) -> Learners:
+    """A copy of the learners ``rows``, pending updates included."""
+    part = copy.copy(learners)
+    for name, value in _per_learner_arrays(learners).items():
+        setattr(part, name, value[rows])
+    return part
+
+
+def _put_learners(learners: Learners, rows: np.ndarray, part: Learners) -> None:
+    """Write ``part`` (a :func:`_take_learners` copy, since advanced) back into ``rows``."""
+    for name, value in _per_learner_arrays(part).items():
+        getattr(learners, name)[rows] = value
 
 
 def _learner_view(

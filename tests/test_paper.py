@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from launch import paper
 from launch.paper import EpisodeMetrics, PaperSettings, RunSpec, run_batch
 from world.rules import CA_REWARD
 
@@ -25,6 +26,17 @@ def test_worker_processes_give_the_same_metrics_and_report_every_episode():
     split = run_batch(SPECS, SHORT, on_episode=seen.append, workers=2)
     assert seen == list(range(SHORT.episodes))
     assert_same(split, run_batch(SPECS, SHORT))
+
+
+@pytest.mark.parametrize("compact_below", [0.0, 1.0])
+def test_dropping_finished_runs_from_the_batch_changes_nothing(monkeypatch, compact_below):
+    """Compaction off (0) or after every step (1) gives what the default gives."""
+    settings = PaperSettings(episodes=25, max_steps=60)
+    specs = [RunSpec(algo, k, seed) for algo in ("ql", "nnql") for k in (1, 4, 9) for seed in (2, 3)]
+    default = run_batch(specs, settings)
+    assert default.arrived.any() and not default.arrived.all()
+    monkeypatch.setattr(paper, "COMPACT_BELOW", compact_below)
+    assert_same(run_batch(specs, settings), default)
 
 
 def test_on_episode_in_process():
