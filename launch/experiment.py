@@ -28,8 +28,9 @@ from launch.report import (  # noqa: E402
 )
 
 RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
-RUN_EPISODES_PER_WORKER = 20_000
-"""With ``--workers auto``, one worker process per this many (run, episode) pairs, up to the cores."""
+RUNS_PER_WORKER = 1000
+"""With ``--workers auto``, one worker process per this many runs, up to the cores. Every worker
+pays the fixed cost of a step of the array code, which dominates below about a thousand runs."""
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
@@ -178,7 +179,7 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
             parser.error(str(error))
     runs = len(args.algos) * len(args.ks) * args.seeds
     if args.workers is None:
-        args.workers = max(1, min(os.cpu_count() or 1, runs * args.episodes // RUN_EPISODES_PER_WORKER))
+        args.workers = max(1, min(os.cpu_count() or 1, runs // RUNS_PER_WORKER))
     return args
 
 
