@@ -98,7 +98,8 @@ class AgentNode:
                                  lambda sample: self.events.put(("control", sample))),
             s.declare_queryable(keys.intent_key(run_id, self.agent),
                                 lambda query: self.events.put(("query", query))),
-            s.declare_publisher(keys.intent_key(run_id, self.agent), express=True) as publisher,
+            s.declare_publisher(keys.intent_key(run_id, self.agent), express=True,
+                                congestion_control=zenoh.CongestionControl.BLOCK) as publisher,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               lambda sample: self.events.put(("alive", sample)),
@@ -157,7 +158,7 @@ class AgentNode:
     def _on_world_alive(self, sample: zenoh.Sample) -> None:
         """A world that leaves may come back (``--resume``) with its own clock: start afresh."""
         if sample.kind == zenoh.SampleKind.DELETE:
-            log.warning("the world left; waiting for it to come back")
+            log.info("the world left; waiting for it to come back")
             self.decided_tick = -1
             self.brain.learner.forget_pending()
             self._drop_held_queries()

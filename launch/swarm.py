@@ -21,6 +21,7 @@ from pathlib import Path
 if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
+from launch import zenoh_files  # noqa: E402
 from launch.cli import EXIT_INTERRUPTED, OneLineParser  # noqa: E402
 from launch.progress import Progress  # noqa: E402
 from launch.recording import RecordingSession, check_viewer_url  # noqa: E402
@@ -92,12 +93,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --role agents: which agents to start, e.g. 0-3")
     z.add_argument("--port", type=int, default=None,
                    help="one machine: the loopback port the world listens on (default: a free one)")
-    z.add_argument("--mode", choices=MODES, default="peer", help="Zenoh session mode")
+    z.add_argument("--mode", choices=MODES, default=None,
+                   help="Zenoh session mode (default: the config file's, else peer)")
     z.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh listen endpoint, e.g. tcp/0.0.0.0:7447 (repeatable)")
     z.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh connect endpoint, e.g. tcp/192.0.2.1:7447 (repeatable)")
     z.add_argument("--zenoh-config", default=None, metavar="FILE", help="a Zenoh JSON5 config file")
+    z.add_argument("--zenoh-config-dir", default=None, metavar="DIR",
+                   help="one Zenoh config per process: DIR/world.json5, DIR/agent-<id>.json5 "
+                        "(launch/secure.py writes them)")
     v = p.add_argument_group("Rerun")
     v.add_argument("--no-record", action="store_true", help="do not write run.rrd")
     viewer = v.add_mutually_exclusive_group()
@@ -140,8 +145,12 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
                          "give endpoints instead")
     if args.port is not None and not 1 <= args.port <= 65535:
         raise UsageError(f"--port must be 1..65535, not {args.port}")
-    if args.role != "all" and not (args.listen or args.connect or args.zenoh_config):
+    check_zenoh_files(args, config)
+    if args.role != "all" and not (args.listen or args.connect or args.zenoh_config
+                                   or args.zenoh_config_dir):
         raise UsageError(f"--role {args.role} needs --listen/--connect endpoints or --zenoh-config")
+    if args.role != "all" and args.run_id is None:
+        raise UsageError(f"--role {args.role} needs --run-id, the same on every host")
     out = args.out or Path("runs") / run_id
     return config, out
 
@@ -163,6 +172,7 @@ def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
     if args.in_process:
         raise UsageError("--resume continues distributed runs only")
     config, start = resume_point(args.out)
+    check_zenoh_files(args, config)
     if args.role != "world":
         check_checkpoints(args.out, config, agent_ids(args, config))
     if start.episode < config.episodes:
@@ -171,14 +181,38 @@ def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
     return config, start, args.out
 
 
-def transports(args: argparse.Namespace) -> tuple[TransportSettings, TransportSettings]:
-    """The world's and the agents' Zenoh settings: embedded, or what the options say."""
-    if args.role == "all" and not (args.listen or args.connect or args.zenoh_config):
+def check_zenoh_files(args: argparse.Namespace, config: SwarmConfig) -> None:
+    """Every Zenoh config file this launcher will hand out exists and reads; else UsageError."""
+    if args.zenoh_config and args.zenoh_config_dir:
+        raise UsageError("give --zenoh-config or --zenoh-config-dir, not both")
+    try:
+        if args.zenoh_config_dir:
+            agents = agent_ids(args, config) if args.role != "world" else []
+            files = zenoh_files.config_files(args.zenoh_config_dir, args.role != "agents", agents)
+        else:
+            files = {"all": args.zenoh_config} if args.zenoh_config else {}
+        for path in files.values():
+            zenoh_files.file_mode(path)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+
+
+def transports(args: argparse.Namespace):
+    """The world's Zenoh settings and a function giving agent i's: embedded, or from the options."""
+    if args.role == "all" and not (args.listen or args.connect or args.zenoh_config
+                                   or args.zenoh_config_dir):
         layout = EmbeddedLayout() if args.port is None else EmbeddedLayout(port=args.port)
-        return layout.world(), layout.agent()
-    explicit = TransportSettings(mode=args.mode, listen=tuple(args.listen),
-                                 connect=tuple(args.connect), config_file=args.zenoh_config)
-    return explicit, explicit
+        return layout.world(), lambda _agent: layout.agent()
+
+    def explicit(config_file) -> TransportSettings:
+        return zenoh_files.settings(args.mode, args.listen, args.connect, config_file)
+
+    if args.zenoh_config_dir:
+        directory = Path(args.zenoh_config_dir)
+        world = explicit(directory / zenoh_files.WORLD_FILE) if args.role != "agents" else None
+        return world, lambda agent: explicit(directory / zenoh_files.agent_file_name(agent))
+    shared = explicit(args.zenoh_config)
+    return shared, lambda _agent: shared
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
@@ -291,7 +325,7 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
         for i in agent_ids(args, config):
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True,
                            make_args=lambda restarted, i=i: (
-                               i, config, agent_transport, out, restarted or args.resume,
+                               i, config, agent_transport(i), out, restarted or args.resume,
                                recording.plan))
     code = supervisor.run(leader=world)
     recording.finish()

@@ -28,6 +28,10 @@ from world.metrics import EpisodeWriter
 
 log = logging.getLogger("nnql.world")
 
+BLOCK = zenoh.CongestionControl.BLOCK
+"""Lockstep messages are never dropped: through a router one link carries every observation, and
+under load Zenoh's default (DROP) lost some, which stalled agents (README, "Several machines")."""
+
 STARTUP_TIMEOUT_S = 60.0
 """How long the world waits for every agent to come alive before it gives up."""
 
@@ -80,10 +84,11 @@ class WorldNode:
             s.declare_subscriber(keys.intent_key_all(run_id), lambda sample: put(("intent", sample))),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               lambda sample: put(("alive", sample)), history=True),
-            s.declare_publisher(keys.control_key(run_id)) as control,
+            s.declare_publisher(keys.control_key(run_id), congestion_control=BLOCK) as control,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_WORLD, 0)),
         ):
-            publishers = [s.declare_publisher(keys.obs_key(run_id, i), express=True) for i in range(n)]
+            publishers = [s.declare_publisher(keys.obs_key(run_id, i), express=True,
+                                              congestion_control=BLOCK) for i in range(n)]
             try:
                 self._wait_for_agents()
                 completed = self._loop(publishers)
