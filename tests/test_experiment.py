@@ -124,9 +124,10 @@ def test_refuses_to_overwrite_results_unless_forced(tmp_path):
     assert (out / "table1.csv").read_text() != "old\n"
 
 
-def test_ctrl_c_stops_cleanly_with_exit_130(tmp_path):
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_ctrl_c_stops_cleanly_with_exit_130(tmp_path, workers):
     process = subprocess.Popen(
-        [sys.executable, SCRIPT, "--no-plots", "--workers", "2", "--out", str(tmp_path / "big")],
+        [sys.executable, SCRIPT, "--no-plots", "--workers", workers, "--out", str(tmp_path / "big")],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
     deadline = time.monotonic() + 60
