@@ -25,12 +25,15 @@ from protocol.messages import (
     CONTROL_SHUTDOWN, Control, Inbox, Intent, Observation, agent_sender, encode,
 )
 from protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
-from protocol.transport import TransportSettings
+from protocol.transport import EXIT_TRANSPORT, TransportError, TransportSettings, open_session
 
 log = logging.getLogger("nnql.agent")
 
 POLL_S = 0.2
 """How often a waiting agent checks whether it was asked to stop."""
+
+RESYNC_AFTER = 3
+"""Consecutive observations past a gap in the ticks after which an agent follows them."""
 
 MAX_HELD_QUERIES = 4 * 1024
 """Queries for the coming tick held at once; legitimately at most one per other agent."""
@@ -76,6 +79,7 @@ class AgentNode:
         self.decided_payload = b""
         self.held_queries: list[tuple[int, zenoh.Query]] = []
         self.peers_seen: set[int] = set()
+        self.gap_tick, self.gap_run = -1, 0
         self.shutdown = False
         self.resumed: dict | None = None
         self.checkpoint_file = checkpoint.checkpoint_path(options.out_dir / CHECKPOINT_DIR, self.agent)
@@ -182,7 +186,7 @@ class AgentNode:
         if obs.tick <= self.decided_tick:
             self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
-        if self.decided_tick >= 0 and obs.tick != self.decided_tick + 1:
+        if self.decided_tick >= 0 and obs.tick != self.decided_tick + 1 and not self._resync(obs):
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
         answers = self._ask(self.brain.neighbours_to_ask(obs), obs.tick)
@@ -196,6 +200,22 @@ class AgentNode:
                 self.on_episode_end(self.brain, obs.episode)
         self.publisher.put(self.decided_payload)
         self._answer_held_queries()
+
+    def _resync(self, obs: Observation) -> bool:
+        """After a gap (an observation lost on the way), follow the clock again once
+        ``RESYNC_AFTER`` observations in a row continue one another; a lone message with a far
+        tick (forged, or stale from another run of the world) never moves this agent's clock."""
+        if obs.tick == self.gap_tick + 1:
+            self.gap_run += 1
+        else:
+            self.gap_run = 1
+        self.gap_tick = obs.tick
+        if self.gap_run < RESYNC_AFTER:
+            return False
+        log.warning("lost observations before tick %d; following the world's clock again",
+                    obs.tick)
+        self.gap_run = 0
+        return True
 
     def _ask(self, neighbours: list[int], tick: int) -> dict[int, int]:
         """One concurrent query per neighbour; unanswered neighbours are left out."""
@@ -283,7 +303,12 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
 
     ``on_episode_end(brain, episode)`` runs after each episode's checkpoint (e.g. Rerun heat maps).
     """
-    with zenoh.open(options.transport.zenoh_config()) as session:
+    try:
+        session = open_session(options.transport)
+    except TransportError as error:
+        log.error("%s", error)
+        return EXIT_TRANSPORT
+    with session:
         node = AgentNode(options, session, brain, on_episode_end)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())

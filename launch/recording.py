@@ -117,19 +117,19 @@ class RecordingPlan:
         return stream
 
 
-def exit_without_teardown() -> None:
+def exit_without_teardown(code: int = 0) -> None:
     """End a spawned process that has closed its recording, skipping the interpreter's teardown.
 
     With Rerun loaded, Python's own teardown takes about 0.5 s (more on a busy machine), which
-    every process of a run pays on Ctrl-C. A process that returns normally from its target exits
-    with code 0; so does this, after flushing the log handlers and standard streams.
+    every process of a run pays on Ctrl-C. This exits with ``code`` after flushing the log
+    handlers and standard streams.
     """
     import logging
 
     logging.shutdown()
     sys.stdout.flush()
     sys.stderr.flush()
-    os._exit(0)
+    os._exit(code)
 
 
 def plan_of(record, config: SwarmConfig, out: Path) -> RecordingPlan | None:
@@ -196,7 +196,12 @@ def blueprint(config: SwarmConfig):
                                          y_range=[-0.6, config.height - 0.4]),
     )
     events = rrb.TextLogView(origin=world_viz.EVENTS, name="Events")
-    plot = rrb.TimeSeriesView
+    whole_run = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
+                                                      end=rrb.TimeRangeBoundary.infinite()))
+
+    def plot(**view) -> rrb.TimeSeriesView:
+        return rrb.TimeSeriesView(axis_x=whole_run, **view)
+
     metrics = rrb.Grid(
         plot(origin="metrics/collisions/per_episode", name="Collisions per episode"),
         plot(origin="metrics/collisions/cumulative", name="Cumulative collisions"),
@@ -464,7 +469,7 @@ def log_experiment(specs, metrics, target, *, recording_id: str = "experiment"):
     return stream
 
 
-_ALGO_COLORS = {"ql": (230, 120, 40), "nnql": (40, 140, 230)}
+_ALGO_COLORS = {"ql": (230, 120, 40), "nnql": (40, 140, 230), "nnql-dir": (60, 180, 90)}
 
 
 def _series_color(algo: str, k: int) -> tuple[int, int, int]:

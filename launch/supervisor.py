@@ -14,6 +14,8 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
+from protocol.transport import EXIT_TRANSPORT
+
 log = logging.getLogger("nnql.supervisor")
 
 POLL_S = 0.1
@@ -22,6 +24,7 @@ SHUTDOWN_GRACE_S = 2.0
 BACKOFF_FIRST_S = 0.5
 BACKOFF_MAX_S = 8.0
 HEALTHY_AFTER_S = 30.0
+FATAL_EXIT_CODES = (EXIT_TRANSPORT,)
 
 
 @dataclass
@@ -47,6 +50,7 @@ class Supervisor:
         self.context = context
         self.children: list[Child] = []
         self.stop_requested = False
+        self.fatal: Child | None = None
 
     def add(self, name: str, target: Callable, make_args: Callable[[bool], tuple],
             restartable: bool) -> Child:
@@ -65,7 +69,7 @@ class Supervisor:
             for child in self.children:
                 self._start(child, restarted=False)
             while not self.stop_requested:
-                if self._leader_done(leader):
+                if self._leader_done(leader) or self._fatal_exit():
                     break
                 self._restart_dead_agents(leader)
                 time.sleep(POLL_S)
@@ -75,6 +79,11 @@ class Supervisor:
         if self.stop_requested:
             self.stop_all(signal_first=True)
             return 130
+        if self.fatal is not None:
+            log.error("%s could not start (%s); stopping the run", self.fatal.name,
+                      describe_exit(self.fatal.process.exitcode))
+            self.stop_all(signal_first=True)
+            return self.fatal.process.exitcode
         leader_failed = leader is not None and leader.process.exitcode != 0
         if leader_failed:
             log.error("%s exited (%s)", leader.name, describe_exit(leader.process.exitcode))
@@ -82,6 +91,14 @@ class Supervisor:
         if leader is not None:
             return leader.process.exitcode if leader.process.exitcode is not None else 1
         return max((abs(c.process.exitcode or 0) for c in self.children), default=0)
+
+    def _fatal_exit(self) -> Child | None:
+        """A child that cannot work at all (e.g. no Zenoh session): restarting would not help."""
+        for child in self.children:
+            if child.process.exitcode in FATAL_EXIT_CODES:
+                self.fatal = child
+                return child
+        return None
 
     def _leader_done(self, leader: Child | None) -> bool:
         if leader is not None:

@@ -216,7 +216,7 @@ def transports(args: argparse.Namespace):
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
-               progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> int:
+               progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> None:
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
     from launch.recording import exit_without_teardown, open_world_viz
     from world.node import WorldOptions, run_world
@@ -246,12 +246,12 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
         if viz is not None:
             viz.close()
     if viz is not None:
-        exit_without_teardown()
-    return code
+        exit_without_teardown(code)
+    sys.exit(code)  # a spawned process's exit code is its target's SystemExit, not its return
 
 
 def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
-               resume: bool = False, recording=None) -> int:
+               resume: bool = False, recording=None) -> None:
     """An agent process (spawned); ``resume`` reloads its checkpoint if there is one."""
     from agent.node import AgentOptions, run_agent
     from launch.recording import exit_without_teardown, open_agent_viz
@@ -266,8 +266,8 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
         if viz is not None:
             viz.close()
     if viz is not None:
-        exit_without_teardown()
-    return code
+        exit_without_teardown(code)
+    sys.exit(code)
 
 
 def name_process(title: str, config: SwarmConfig) -> None:

@@ -16,6 +16,24 @@ import zenoh
 MODES = ("peer", "client", "router")
 
 
+EXIT_TRANSPORT = 3
+"""Exit code of a process that could not open its Zenoh session (the supervisor gives up)."""
+
+
+class TransportError(RuntimeError):
+    """A Zenoh session could not be opened: no router to reach, bad credentials, bad config."""
+
+
+def open_session(settings: "TransportSettings") -> zenoh.Session:
+    """Open the process's Zenoh session; a failure becomes one clear TransportError."""
+    try:
+        return zenoh.open(settings.zenoh_config())
+    except zenoh.ZError as error:
+        where = ", ".join(settings.connect or settings.listen) or settings.config_file or "defaults"
+        reason = str(error).split(" at /")[0]  # drop the Rust source location
+        raise TransportError(f"cannot open a Zenoh {settings.mode or 'session'} ({where}): {reason}") from None
+
+
 def free_port(host: str = "127.0.0.1") -> int:
     """A TCP port that nobody listens on right now."""
     with socket.socket() as s:

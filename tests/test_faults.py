@@ -199,3 +199,14 @@ def test_resume_refuses_corrupt_or_foreign_checkpoints_naming_the_file(tmp_path)
     assert len(read_episodes(out / "episodes.csv")) == 2, "the half-written row was dropped"
     nothing = run_swarm(tmp_path / "nothing-here", "--resume", timeout=60)
     assert nothing.returncode == 2 and "no run to resume here" in nothing.stderr
+
+
+def test_an_unreachable_router_ends_the_run_with_one_clear_line_per_process(tmp_path):
+    port = free_port()  # nobody listens there
+    result = run_swarm(tmp_path / "nowhere", "--role", "agents", "--run-id", "nowhere",
+                       "--agents", "2", "--mode", "client", "--connect", f"tcp/127.0.0.1:{port}",
+                       timeout=60)
+    assert result.returncode == 3
+    assert "Traceback" not in result.stderr
+    assert result.stderr.count(f"cannot open a Zenoh client (tcp/127.0.0.1:{port})") == 2
+    assert "could not start" in result.stderr

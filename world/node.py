@@ -22,7 +22,7 @@ from protocol import keys
 from protocol.config import SwarmConfig
 from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
 from protocol.runfiles import EPISODES_FILE, RECORDING_FILE, stats_path, write_json_atomic
-from protocol.transport import TransportSettings
+from protocol.transport import EXIT_TRANSPORT, TransportError, TransportSettings, open_session
 from world.engine import SwarmWorld, TickReport
 from world.metrics import EpisodeWriter
 
@@ -198,7 +198,12 @@ class WorldNode:
 def run_world(options: WorldOptions,
               on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> int:
     """Entry point of the world process; returns its exit code."""
-    with zenoh.open(options.transport.zenoh_config()) as session:
+    try:
+        session = open_session(options.transport)
+    except TransportError as error:
+        log.error("%s", error)
+        return EXIT_TRANSPORT
+    with session:
         node = WorldNode(options, session, on_tick)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
