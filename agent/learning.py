@@ -217,11 +217,12 @@ class Learners:
         explore = (self.actions_taken + 1) % self.random_step == 0
         actions = np.where(explore, random_actions, greedy)
         self.actions_taken += active
-        self._pending = active.copy()
-        self._p_goal = goal_states
-        self._p_action = actions
-        self._p_nb = nb_states
-        self._p_visible = view.nb_visible.copy()
+        # An inactive learner keeps whatever transition it still has pending.
+        self._pending = active | self._pending
+        self._p_goal = np.where(active, goal_states, self._p_goal)
+        self._p_action = np.where(active, actions, self._p_action)
+        self._p_nb = np.where(active[:, None], nb_states, self._p_nb)
+        self._p_visible = np.where(active[:, None], view.nb_visible, self._p_visible)
         return actions
 
     def record(self, r_ds: np.ndarray, r_ca: np.ndarray, arrived: np.ndarray) -> None:
@@ -286,7 +287,8 @@ class Learners:
             at, slot = np.nonzero(fast)
             td_update(self.q_ca, rows[at], states[at, slot], action[at], rewards[at],
                       next_states[at, slot], ones[at], self.hyper)
-        for at in np.flatnonzero(sequential):
-            for slot in np.flatnonzero(visible[at]):
-                td_update(self.q_ca, rows[at:at + 1], states[at:at + 1, slot], action[at:at + 1],
-                          rewards[at:at + 1], next_states[at:at + 1, slot], ones[:1], self.hyper)
+        for slot in range(slots):
+            at = np.flatnonzero(sequential & visible[:, slot])
+            if at.size:
+                td_update(self.q_ca, rows[at], states[at, slot], action[at], rewards[at],
+                          next_states[at, slot], ones[at], self.hyper)

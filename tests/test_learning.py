@@ -194,3 +194,15 @@ def test_learners_reject_a_random_step_below_one():
 
 def test_actions_are_the_papers_five():
     assert (UP, DOWN, LEFT, RIGHT, STAY) == (0, 1, 2, 3, 4) and N_ACTIONS == 5 and N_STATES == 441
+
+
+def test_a_learner_that_sits_out_a_decision_keeps_its_pending_update():
+    learners = Learners(np.array([NEVER]), np.array([False]), n_neighbours=1)
+    v = view((1, 1), (3, 3), [(5, 5)])
+    learners.decide(v, np.array([True]), np.array([0]), np.zeros((1, N_ACTIONS)))
+    learners.record(np.array([0.5]), np.array([10.0]), np.array([False]))
+    learners.decide(v, np.array([False]), np.array([0]), np.zeros((1, N_ACTIONS)))
+    assert not learners.q_ds.any(), "nothing is learned by a learner that sits out"
+    learners.decide(v, np.array([True]), np.array([0]), np.zeros((1, N_ACTIONS)))
+    assert learners.q_ds.sum() == pytest.approx(DEFAULT_ALPHA * 0.5)
+    assert learners.q_ca.sum() == pytest.approx(DEFAULT_ALPHA * 10.0)

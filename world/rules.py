@@ -12,7 +12,7 @@ Collision rules (DESIGN §3):
   cell, or one moving into a cell whose occupant stays or is blocked. Blocking propagates along
   chains until nothing changes (a fixed point): A -> B's cell, B -> C's cell, C stays blocks B,
   which then blocks A.
-- Rotations of three or more agents all move. Two agents swapping cells pass through each other
+- Rotations (cycles of four or more agents; a grid has no cycle of three) all move. Two agents swapping cells pass through each other
   unless ``count_swaps`` is set; then both are blocked and both collide.
 - Colliding agents stay where they were. Every agent in a conflicting pair is marked collided,
   the one that stays included (it was hit); each counts one collision per step, however many
