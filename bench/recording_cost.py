@@ -7,8 +7,9 @@ embedded Zenoh, exactly as ``launch/swarm.py`` starts them. Recording on means t
 recording: the world logs every tick (``world.viz``), every agent logs its heat maps and
 negotiation timing each episode (``agent.viz``), each process saves its part of ``run.rrd``.
 The rate is ticks / seconds over every episode but the first (which includes start-up), from
-``episodes.csv``; the figure is the median over repeats; the merge into ``run.rrd`` after the
-run is timed separately. ``--in-process`` measures the one-process runner instead.
+``episodes.csv``; the figures are the medians over repeats (and the median of each repeat's
+own off/on difference, which drift in the machine's load disturbs less); the merge into
+``run.rrd`` after the run is timed separately. ``--in-process`` measures the one-process runner instead.
 
     python bench/recording_cost.py --agents 8 --repeats 5
 """
@@ -96,12 +97,14 @@ def main() -> int:
                       f"{rates[record][-1]:7.1f} ticks/s", file=sys.stderr, flush=True)
     off, on = statistics.median(rates[False]), statistics.median(rates[True])
     cost = 1 - on / off
+    paired = statistics.median(1 - b / a for a, b in zip(rates[False], rates[True]))
     mode = "in-process" if args.in_process else "distributed"
     print(f"{args.agents} agents, {mode}, {args.episodes} episodes x {args.max_steps} steps, "
           f"median of {args.repeats}")
     print(f"  recording off: {off:7.1f} ticks/s  ({' '.join(f'{x:.0f}' for x in rates[False])})")
     print(f"  recording on:  {on:7.1f} ticks/s  ({' '.join(f'{x:.0f}' for x in rates[True])})")
-    print(f"  cost: {100 * cost:.1f} % of the tick rate (target at most {100 * TARGET:.0f} %)")
+    print(f"  cost: {100 * cost:.1f} % of the tick rate (target at most {100 * TARGET:.0f} %); "
+          f"median of the paired repeats: {100 * paired:.1f} %")
     if merges:
         print(f"  merge into run.rrd after the run: median {statistics.median(merges):.2f} s, "
               f"{statistics.median(sizes):.1f} MB")

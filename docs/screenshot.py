@@ -5,7 +5,10 @@ Needs Debian's ``chromium`` and Playwright for Python (``pip install playwright`
 script, not a project dependency). DESIGN §8: the web viewer renders with SwiftShader after about
 20 s of loading.
 
-    python docs/screenshot.py runs/<id>/run.rrd docs/viewer.png
+    python docs/screenshot.py runs/<id>/run.rrd docs/viewer.png --wait 320 --click 1375,886
+
+A saved recording opens at its end (the blueprint follows the newest data); ``--click`` on the
+time slider moves the time cursor (1375,886 at the default size is about 90 % of the run).
 """
 
 import argparse
@@ -31,10 +34,11 @@ def main() -> int:
     p.add_argument("recording", type=Path)
     p.add_argument("png", type=Path)
     p.add_argument("--size", default="1600x900", help="viewport WIDTHxHEIGHT")
-    p.add_argument("--wait", type=float, default=25.0, help="seconds to let the viewer load")
+    p.add_argument("--wait", type=float, default=25.0,
+                   help="seconds to let the viewer load (minutes for a few MB on SwiftShader)")
     p.add_argument("--chromium", default="/usr/bin/chromium")
-    p.add_argument("--when", default=None, metavar="TIMELINE@VALUE",
-                   help="put the time cursor there, e.g. tick@1200 (default: the end)")
+    p.add_argument("--click", default=None, metavar="X,Y",
+                   help="once loaded, click there (e.g. on the time slider to move the cursor)")
     args = p.parse_args()
     from playwright.sync_api import sync_playwright
 
@@ -47,13 +51,16 @@ def main() -> int:
     try:
         if not wait_until_reachable(grpc_url(grpc_port)):
             raise SystemExit("rerun --serve-web did not start")
-        viewer_url = grpc_url(grpc_port) + (f"#when={args.when}" if args.when else "")
-        url = f"http://127.0.0.1:{web_port}/?url={quote(viewer_url, safe='')}"
+        url = f"http://127.0.0.1:{web_port}/?url={quote(grpc_url(grpc_port), safe='')}"
         with sync_playwright() as pw:
             browser = pw.chromium.launch(executable_path=args.chromium, args=CHROMIUM_ARGS)
             page = browser.new_page(viewport={"width": width, "height": height})
             page.goto(url)
             time.sleep(args.wait)
+            if args.click:
+                x, y = (float(v) for v in args.click.split(","))
+                page.mouse.click(x, y)  # e.g. on the time panel, to move the time cursor there
+                time.sleep(5)
             args.png.parent.mkdir(parents=True, exist_ok=True)
             page.screenshot(path=str(args.png))
             browser.close()

@@ -187,11 +187,29 @@ def test_every_agent_logged_what_it_learned_each_episode(run):
     assert np.array_equal(buffer.reshape(21, 21, 3), table_picture(q_ds)["image"])
 
 
-def test_the_negotiation_is_logged_as_the_agents_ask(distributed):
-    _, recording = distributed
-    counts = [len(v or []) for v in recording.column("world/negotiation", "Arrows2D:vectors")]
-    assert max(counts) > 0
-    assert max(counts) <= AGENTS * (AGENTS - 1) // 2
+def test_the_negotiation_is_logged_as_the_agents_ask(run):
+    """Each tick's arrows are the queries the brains make, from the logged cells and goals."""
+    _, out, recording = run
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    rows = read_episodes(out / "episodes.csv")
+    end_ticks = {int(r["end_tick"]) for r in rows}
+    cells = dict(zip(recording.column("world/agents", "tick"),
+                     recording.column("world/agents", "Points2D:positions")))
+    episode_of = dict(zip(recording.column("world/agents", "tick"),
+                          recording.column("world/agents", "episode")))
+    arrows = dict(zip(recording.column("world/negotiation", "tick"),
+                      recording.column("world/negotiation", "Arrows2D:origins")))
+    total = 0
+    for tick, logged in arrows.items():
+        positions = np.array(cells[tick], dtype=np.int64)
+        goals = swarm_episode(config.seed, episode_of[tick], config.width, config.height,
+                              config.n_agents).goals
+        arrived = np.all(positions == goals, axis=1)
+        expected = [] if tick in end_ticks else \
+            negotiation_pairs(positions, arrived, tick, config.algo).tolist()
+        assert len(logged or []) == len(expected), tick
+        total += len(expected)
+    assert total > 0
 
 
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server was stopped, not closed
@@ -262,18 +280,10 @@ def test_heat_map_pixels_are_egocentric_offsets():
 
 
 def test_experiment_curves_go_into_a_recording(tmp_path):
-    from types import SimpleNamespace
+    from launch.paper import PaperSettings, RunSpec, run_batch
 
-    specs = [SimpleNamespace(algo=a, random_step=k, seed=s)
-             for a in ("ql", "nnql") for k in (2, 5) for s in (0, 1)]
-    runs, episodes = len(specs), 7
-    rng = np.random.default_rng(0)
-    metrics = SimpleNamespace(
-        steps=rng.integers(5, 100, (runs, episodes)),
-        collisions=rng.integers(0, 9, (runs, episodes)),
-        reward_ds=rng.random((runs, episodes)), reward_ca=rng.random((runs, episodes)),
-        shortest=rng.integers(1, 10, (runs, episodes)), arrived=rng.random((runs, episodes)) > 0.5,
-    )
+    specs = [RunSpec(algo, k, seed) for algo in ("ql", "nnql") for k in (2, 5) for seed in (0, 1)]
+    metrics = run_batch(specs, PaperSettings(episodes=6, max_steps=30))
     path = tmp_path / "experiment.rrd"
     log_experiment(specs, metrics, path)
     verify(path)
@@ -283,3 +293,6 @@ def test_experiment_curves_go_into_a_recording(tmp_path):
     assert [v[0] for v in curve] == pytest.approx(metrics.collisions[[6, 7]].mean(axis=0))
     cumulative = recording.column("experiment/cumulative_collisions/ql/k2", "Scalars:scalars")
     assert cumulative[-1][0] == pytest.approx(metrics.collisions[[0, 1]].sum(axis=1).mean())
+    extra = recording.column("experiment/extra_steps/ql/k5", "Scalars:scalars")
+    assert [v[0] for v in extra] == pytest.approx(
+        (metrics.steps[[2, 3]] - metrics.shortest[[2, 3]]).mean(axis=0))

@@ -126,7 +126,7 @@ class WorldViz:
         self._moved = np.zeros(flush_every, dtype=bool)
         self._positions = np.zeros((flush_every, n, 2), dtype=np.int64)
         self._actions = np.zeros((flush_every, n), dtype=np.int64)
-        self._asking = np.zeros((flush_every, n), dtype=bool)  # not arrived: may ask
+        self._arrived_then = np.zeros((flush_every, n), dtype=bool)  # at the tick's start
         self._collided = np.zeros((flush_every, n), dtype=bool)
         self._trails = np.zeros((flush_every, n, TRAIL_LENGTH, 2), dtype=np.float32)
         self._warnings: list[tuple[int, int, str]] = []
@@ -183,7 +183,7 @@ class WorldViz:
         self._moved[i] = report.moved
         self._positions[i] = before
         self._actions[i] = report.actions
-        self._asking[i] = ~self._arrived
+        self._arrived_then[i] = self._arrived
         self._collided[i] = False
         trail = self._trail
         trail[:, :-1] = trail[:, 1:]
@@ -268,7 +268,8 @@ class WorldViz:
         rec.send_columns(TRAILS, index, rr.LineStrips2D.columns(
             strips=self._trails[:k].reshape(-1, TRAIL_LENGTH, 2).copy()).partition(each))
 
-        asks = negotiation_mask(self._positions[:k], self._asking[:k], ticks, self.config.algo)
+        asks = negotiation_mask(self._positions[:k], self._arrived_then[:k], ticks,
+                                self.config.algo)
         asks &= self._moved[:k, None, None]
         t, asker, asked = np.nonzero(asks)
         self._queries += len(t)
