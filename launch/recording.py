@@ -141,12 +141,16 @@ def plan_of(record, config: SwarmConfig, out: Path) -> RecordingPlan | None:
 
 def open_world_viz(record, config: SwarmConfig, out: Path):
     """The world's logger (``world.viz.WorldViz``) with the blueprint, or None if not recording."""
+    from world.metrics import read_episodes
     from world.viz import WorldViz
 
     plan = plan_of(record, config, out)
     if plan is None:
         return None
-    return WorldViz(config, plan.open("world", blueprint(config)))
+    episodes = Path(out) / "episodes.csv"  # a resumed run's complete episodes so far
+    before = sum(int(row["collisions"]) for row in read_episodes(episodes)) \
+        if episodes.exists() else 0
+    return WorldViz(config, plan.open("world", blueprint(config)), collisions_before=before)
 
 
 def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):

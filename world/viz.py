@@ -105,13 +105,14 @@ class WorldViz:
     """
 
     def __init__(self, config: SwarmConfig, stream: rr.RecordingStream,
-                 flush_every: int = FLUSH_EVERY) -> None:
+                 flush_every: int = FLUSH_EVERY, collisions_before: int = 0) -> None:
+        """``collisions_before``: the collisions of the episodes a resumed run already has."""
         self.config = config
         self.rec = stream
         self.flush_every = flush_every
         n = config.n_agents
         self.colors = agent_colors(n)
-        self.cumulative_collisions = 0
+        self.cumulative_collisions = collisions_before
         self.next_tick = 0
         self._before: np.ndarray | None = None  # cells at the start of the next tick
         self._arrived = np.zeros(n, dtype=bool)
