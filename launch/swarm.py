@@ -238,7 +238,7 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
     viz = open_world_viz(record, config, out)
     started = time.monotonic()
     try:
-        code = run_world(WorldOptions(config, transport, out, record=False,
+        code = run_world(WorldOptions(config, transport, out,
                                       first_episode=start.episode, first_tick=start.tick), on_tick)
     finally:
         if bar is not None:

@@ -3,7 +3,7 @@
 Per tick: publish every agent's observation on ``world/obs/<id>``; collect intents from
 ``agent/*/intent`` until every live agent has answered or the tick deadline passes (a missing
 intent counts as STAY and as a missed intent); apply the tick with ``world.engine``; write the
-episode row and log to Rerun. Liveliness tokens under ``alive/agent/*`` tell who is live, so a
+episode row; hand each tick to ``on_tick`` (the launcher logs it to Rerun there). Liveliness tokens under ``alive/agent/*`` tell who is live, so a
 dead agent costs nothing and a stalled one at most the deadline. Zenoh callbacks only hand events
 to a queue; all work is on the main thread.
 """
@@ -21,7 +21,7 @@ import zenoh
 from protocol import keys
 from protocol.config import SwarmConfig
 from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
-from protocol.runfiles import EPISODES_FILE, RECORDING_FILE, stats_path, write_json_atomic
+from protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
 from protocol.transport import EXIT_TRANSPORT, TransportError, TransportSettings, open_session
 from world.engine import SwarmWorld, TickReport
 from world.metrics import EpisodeWriter
@@ -47,7 +47,6 @@ class WorldOptions:
     config: SwarmConfig
     transport: TransportSettings
     out_dir: Path
-    record: bool = True
     startup_timeout_s: float = STARTUP_TIMEOUT_S
     first_episode: int = 0
     first_tick: int = 0
@@ -67,10 +66,6 @@ class WorldNode:
         self.alive: set[int] = set()
         self.stopping = False
         self.on_tick = on_tick
-        self.viz = None
-        if options.record:
-            from world.viz import WorldViz  # Rerun is loaded only by recording worlds
-            self.viz = WorldViz.to_file(self.config, options.out_dir / RECORDING_FILE)
 
     def stop(self) -> None:
         self.stopping = True
@@ -97,8 +92,6 @@ class WorldNode:
                                            command=CONTROL_SHUTDOWN)))
                 for publisher in publishers:
                     publisher.undeclare()
-                if self.viz is not None:
-                    self.viz.close()
         return completed
 
     def _wait_for_agents(self) -> None:
@@ -129,8 +122,6 @@ class WorldNode:
                     tick_start = self._publish_observations(publishers)
                 if report.violations:
                     log.error("tick %d broke the world's invariants: %s", tick, report.violations)
-                if self.viz is not None:
-                    self.viz.log_tick(world, report)
                 if report.episode_row is not None:
                     writer.write(report.episode_row, now - episode_start, world.tick - episode_tick,
                                  slowest, self.inbox.total_rejected)
