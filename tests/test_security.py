@@ -94,18 +94,39 @@ def make_secured(base: Path, variant: str) -> Secured:
     return secured
 
 
+@pytest.fixture(scope="module")
+def routers(tmp_path_factory):
+    """One running router per variant, made on first use and shared by the module's tests."""
+    made: dict[str, Secured] = {}
+
+    def get(variant: str) -> Secured:
+        if variant not in made:
+            made[variant] = make_secured(tmp_path_factory.mktemp("secure"), variant)
+        return made[variant]
+
+    yield get
+    for router in made.values():
+        router.stop()
+
+
 @pytest.fixture(scope="module", params=list(VARIANTS))
-def secured(request, tmp_path_factory):
-    s = make_secured(tmp_path_factory.mktemp("secure"), request.param)
-    yield s
-    s.stop()
+def secured(request, routers):
+    return routers(request.param)
+
+
+@pytest.fixture(scope="module", params=[v for v, o in VARIANTS.items() if o["password"]])
+def with_password(request, routers):
+    return routers(request.param)
+
+
+@pytest.fixture(scope="module", params=[v for v, o in VARIANTS.items() if o["tls"]])
+def with_certificates(request, routers):
+    return routers(request.param)
 
 
 @pytest.fixture(scope="module")
-def full(tmp_path_factory):
-    s = make_secured(tmp_path_factory.mktemp("secure-full"), "mtls+password")
-    yield s
-    s.stop()
+def full(routers):
+    return routers("mtls+password")
 
 
 class Inbox:
@@ -168,22 +189,18 @@ def test_a_session_without_credentials_cannot_join(secured):
                                        "transport/link/tls/enable_mtls": False})
 
 
-def test_a_wrong_password_cannot_join(secured):
-    if not secured.password:
-        pytest.skip("this variant has no passwords")
+def test_a_wrong_password_cannot_join(with_password):
     with pytest.raises(zenoh.ZError):
-        secured.open("agent-0", **{"transport/auth/usrpwd/password": "not-the-password"})
+        with_password.open("agent-0", **{"transport/auth/usrpwd/password": "not-the-password"})
     with pytest.raises(zenoh.ZError):
-        secured.open("agent-0", **{"transport/auth/usrpwd": {}})
+        with_password.open("agent-0", **{"transport/auth/usrpwd": {}})
 
 
-def test_a_certificate_from_another_ca_cannot_join(secured, tmp_path):
-    if not secured.tls:
-        pytest.skip("this variant has no certificates")
+def test_a_certificate_from_another_ca_cannot_join(with_certificates, tmp_path):
     secure.make_ca(tmp_path)
     secure.make_certificate(tmp_path, "agent-0", ["agent-0"], server=False)
     with pytest.raises(zenoh.ZError):
-        secured.open("agent-0", **{
+        with_certificates.open("agent-0", **{
             "transport/link/tls/connect_certificate": str(tmp_path / "agent-0.pem"),
             "transport/link/tls/connect_private_key": str(tmp_path / "agent-0.key")})
 
