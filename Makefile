@@ -29,6 +29,8 @@ experiment: $(STAMP)
 bench: $(STAMP)
 	$(PY) bench/table1.py
 	$(PY) bench/swarm_ticks.py
+	$(PY) bench/recording_cost.py
+	$(PY) bench/swarm_collisions.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis
