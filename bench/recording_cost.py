@@ -15,7 +15,6 @@ own off/on difference, which drift in the machine's load disturbs less); the mer
 """
 
 import argparse
-import multiprocessing as mp
 import statistics
 import sys
 import tempfile
@@ -24,50 +23,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from launch.recording import RecordingPlan, merge_parts  # noqa: E402
+from bench.harness import run_distributed, run_local  # noqa: E402
+from launch.recording import merge_parts  # noqa: E402
 from protocol.config import SwarmConfig  # noqa: E402
-from protocol.transport import EmbeddedLayout  # noqa: E402
-from world.metrics import read_episodes  # noqa: E402
 
 TARGET = 0.10
 """DESIGN §6: logging may cost at most 10 % of the tick rate."""
-
-
-def measured_rate(out: Path) -> float:
-    rows = read_episodes(out / "episodes.csv")[1:]
-    return sum(int(r["steps"]) + 1 for r in rows) / sum(float(r["duration_s"]) for r in rows)
-
-
-def run_distributed(config: SwarmConfig, out: Path, record: bool) -> float:
-    from launch.swarm import agent_main, world_main
-
-    ctx = mp.get_context("spawn")
-    layout = EmbeddedLayout()
-    out.mkdir(parents=True)
-    plan = RecordingPlan.to_files(config, out) if record else False
-    world = ctx.Process(target=world_main, args=(config, layout.world(), out, plan, False))
-    agents = [ctx.Process(target=agent_main,
-                          args=(i, config, layout.agent(), out, False, plan or None))
-              for i in range(config.n_agents)]
-    world.start()
-    for agent in agents:
-        agent.start()
-    world.join()
-    for agent in agents:
-        agent.join(10)
-        if agent.is_alive():
-            agent.kill()
-    if world.exitcode != 0:
-        raise RuntimeError(f"world exited with {world.exitcode}")
-    return measured_rate(out)
-
-
-def run_local(config: SwarmConfig, out: Path, record: bool) -> float:
-    from launch.swarm import run_in_process
-
-    out.mkdir(parents=True)
-    run_in_process(config, out, record, progress=False)
-    return measured_rate(out)
 
 
 def main() -> int:

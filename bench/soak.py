@@ -30,6 +30,10 @@ from tests.swarm_helpers import find_process, group_pids, swarm_command  # noqa:
 from world.metrics import read_episodes  # noqa: E402
 
 
+WARM_UP_S = 20.0
+"""Memory is compared from this long after a process started (imports and first episodes done)."""
+
+
 def rss_kib(pid: int) -> int:
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
         if line.startswith("VmRSS:"):
@@ -58,7 +62,7 @@ def main() -> int:
                "--deadline", "0.5", "--no-record"]
     swarm = start(out, options, log)
     faults = {"agent-kill": 0, "agent-stall": 0, "world-kill": 0}
-    memory: dict[str, list[int]] = {}
+    memory: dict[tuple[str, int], list[tuple[float, int]]] = {}
     end = time.monotonic() + args.minutes * 60
     next_fault = time.monotonic() + args.every
     try:
@@ -66,7 +70,7 @@ def main() -> int:
             time.sleep(1.0)
             for role in ["nnql-world"] + [f"nnql-agent {i}" for i in range(args.agents)]:
                 for pid in find_process(f"{role} {run_id}"):
-                    memory.setdefault(role, []).append(rss_kib(pid))
+                    memory.setdefault((role, pid), []).append((time.monotonic(), rss_kib(pid)))
             if swarm.poll() is not None and faults["world-kill"] == 0 and swarm.returncode != 0:
                 raise SystemExit(f"the swarm died unexpectedly ({swarm.returncode}); see {tmp}")
             if time.monotonic() < next_fault:
@@ -109,10 +113,15 @@ def main() -> int:
     print(f"agents whose learned values were lost: {zeroed}")
     print(f"missed intents: {sum(int(r['missed_intents']) for r in rows)}, "
           f"slowest tick {max(float(r['max_tick_ms']) for r in rows):.0f} ms")
-    for role, samples in memory.items():
-        if len(samples) >= 2:
-            print(f"RSS {role:>14}: first {samples[0] / 1024:.1f} MiB, last {samples[-1] / 1024:.1f} MiB, "
-                  f"max {max(samples) / 1024:.1f} MiB")
+    print(f"memory (RSS) of each role's longest-lived process, {WARM_UP_S:.0f} s after it started "
+          f"and at its last sample:")
+    for role in sorted({role for role, _ in memory}):
+        samples = max((v for (r, _), v in memory.items() if r == role), key=len)
+        warm = [rss for t, rss in samples if t - samples[0][0] >= WARM_UP_S]
+        if len(warm) >= 2:
+            lived = samples[-1][0] - samples[0][0]
+            print(f"  {role:>14}: {warm[0] / 1024:.1f} MiB -> {warm[-1] / 1024:.1f} MiB "
+                  f"over {lived:.0f} s ({(warm[-1] - warm[0]) / 1024:+.1f} MiB)")
     print(f"run directory: {out}")
     return 0 if lost == 0 and zeroed == 0 else 1
 

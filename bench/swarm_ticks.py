@@ -15,7 +15,6 @@ end of the first episode (start-up excluded). Rerun recording is off unless ``--
 """
 
 import argparse
-import multiprocessing as mp
 import statistics
 import sys
 import tempfile
@@ -24,10 +23,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agent.brain import AgentBrain  # noqa: E402
+from bench.harness import run_distributed, run_local  # noqa: E402
 from protocol.actions import STAY  # noqa: E402
 from protocol.config import SwarmConfig  # noqa: E402
-from protocol.transport import EmbeddedLayout, TransportSettings  # noqa: E402
-from world.metrics import read_episodes  # noqa: E402
+from protocol.transport import TransportSettings  # noqa: E402
 
 
 class BareBrain(AgentBrain):
@@ -37,49 +36,11 @@ class BareBrain(AgentBrain):
         return STAY
 
 
-def bare_agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path) -> int:
+def bare_agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
+                    resume: bool = False, recording=None) -> None:
     from agent.node import AgentOptions, run_agent
 
-    return run_agent(AgentOptions(agent, config, transport, out), BareBrain(agent, config))
-
-
-def measured_rate(out: Path) -> float:
-    """Ticks per second over every episode but the first (which includes start-up)."""
-    rows = read_episodes(out / "episodes.csv")[1:]
-    ticks = sum(int(r["steps"]) + 1 for r in rows)
-    seconds = sum(float(r["duration_s"]) for r in rows)
-    return ticks / seconds
-
-
-def run_distributed(config: SwarmConfig, out: Path, bare: bool, record: bool) -> float:
-    from launch.swarm import agent_main, world_main
-
-    ctx = mp.get_context("spawn")
-    layout = EmbeddedLayout()
-    out.mkdir(parents=True)
-    target = bare_agent_main if bare else agent_main
-    world = ctx.Process(target=world_main, args=(config, layout.world(), out, record, False))
-    world.start()
-    agents = [ctx.Process(target=target, args=(i, config, layout.agent(), out))
-              for i in range(config.n_agents)]
-    for a in agents:
-        a.start()
-    world.join()
-    for a in agents:
-        a.join(5)
-        if a.is_alive():
-            a.kill()
-    if world.exitcode != 0:
-        raise RuntimeError(f"world exited with {world.exitcode}")
-    return measured_rate(out)
-
-
-def run_local(config: SwarmConfig, out: Path, record: bool) -> float:
-    from launch.swarm import run_in_process
-
-    out.mkdir(parents=True)
-    run_in_process(config, out, record, progress=False)
-    return measured_rate(out)
+    sys.exit(run_agent(AgentOptions(agent, config, transport, out), BareBrain(agent, config)))
 
 
 def main() -> int:
@@ -106,7 +67,8 @@ def main() -> int:
                     if mode == "in-process":
                         rate = run_local(config, out, args.record)
                     else:
-                        rate = run_distributed(config, out, mode == "bare", args.record)
+                        rate = run_distributed(config, out, args.record,
+                                               bare_agent_main if mode == "bare" else None)
                     results.setdefault(mode, []).append(rate)
         for mode, rates in results.items():
             median = statistics.median(rates)

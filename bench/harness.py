@@ -1,0 +1,54 @@
+"""What the swarm benchmarks share: run a swarm (distributed or in-process) and time its ticks."""
+
+import multiprocessing as mp
+from pathlib import Path
+from typing import Callable
+
+from launch.recording import RecordingPlan
+from protocol.config import SwarmConfig
+from protocol.transport import EmbeddedLayout
+from world.metrics import read_episodes
+
+
+def measured_rate(out: Path) -> float:
+    """Ticks per second over every episode but the first (which includes start-up)."""
+    rows = read_episodes(out / "episodes.csv")[1:]
+    ticks = sum(int(r["steps"]) + 1 for r in rows)
+    seconds = sum(float(r["duration_s"]) for r in rows)
+    return ticks / seconds
+
+
+def run_distributed(config: SwarmConfig, out: Path, record: bool,
+                    agent_target: Callable | None = None) -> float:
+    """The launcher's world and agent processes on one machine; ``agent_target`` replaces the
+    agents' entry point (same arguments as ``launch.swarm.agent_main``)."""
+    from launch.swarm import agent_main, world_main
+
+    ctx = mp.get_context("spawn")
+    layout = EmbeddedLayout()
+    out.mkdir(parents=True)
+    plan = RecordingPlan.to_files(config, out) if record else False
+    world = ctx.Process(target=world_main, args=(config, layout.world(), out, plan, False))
+    agents = [ctx.Process(target=agent_target or agent_main,
+                          args=(i, config, layout.agent(), out, False, plan or None))
+              for i in range(config.n_agents)]
+    world.start()
+    for agent in agents:
+        agent.start()
+    world.join()
+    for agent in agents:
+        agent.join(10)
+        if agent.is_alive():
+            agent.kill()
+    if world.exitcode != 0:
+        raise RuntimeError(f"world exited with {world.exitcode}")
+    return measured_rate(out)
+
+
+def run_local(config: SwarmConfig, out: Path, record: bool) -> float:
+    """The same logic in one process (``--in-process``)."""
+    from launch.swarm import run_in_process
+
+    out.mkdir(parents=True)
+    run_in_process(config, out, record, progress=False)
+    return measured_rate(out)
