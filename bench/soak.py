@@ -81,7 +81,7 @@ def main() -> int:
                 for pid in find_process(f"nnql-world {run_id}"):
                     os.kill(pid, signal.SIGKILL)
                 swarm.wait(timeout=30)
-                swarm = start(out, ["--resume"], log)
+                swarm = start(out, ["--resume", "--no-record"], log)
             else:
                 victims = find_process(f"nnql-agent {rng.randrange(args.agents)} {run_id}")
                 if not victims:
