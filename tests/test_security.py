@@ -10,7 +10,6 @@ a whole run (world + 8 agents, all clients of the secured router) completes like
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -30,8 +29,6 @@ from protocol.transport import free_port
 from tests.swarm_helpers import ROOT, run_swarm
 from world.engine import EPISODE_FIELDS
 from world.metrics import read_episodes
-
-pytestmark = pytest.mark.skipif(shutil.which("openssl") is None, reason="needs the openssl command")
 
 RUN_ID = "sec"
 AGENTS = 8
