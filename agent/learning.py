@@ -287,8 +287,8 @@ class Learners:
             at, slot = np.nonzero(fast)
             td_update(self.q_ca, rows[at], states[at, slot], action[at], rewards[at],
                       next_states[at, slot], ones[at], self.hyper)
-        for slot in range(slots):
-            at = np.flatnonzero(sequential & visible[:, slot])
-            if at.size:
-                td_update(self.q_ca, rows[at], states[at, slot], action[at], rewards[at],
-                          next_states[at, slot], ones[at], self.hyper)
+        slow = sequential[:, None] & visible
+        for slot in np.flatnonzero(slow.any(axis=0)):
+            at = np.flatnonzero(slow[:, slot])
+            td_update(self.q_ca, rows[at], states[at, slot], action[at], rewards[at],
+                      next_states[at, slot], ones[at], self.hyper)

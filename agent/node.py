@@ -1,10 +1,13 @@
 """The agent process: one AgentBrain behind a Zenoh session.
 
-Per tick: receive the observation on ``world/obs/<id>``; ask the visible higher-ranked neighbours
-for their intent with one concurrent ``get`` each on ``agent/<j>/intent?tick=T``; decide; publish
-the intent on ``agent/<id>/intent`` and answer every query for it (queries that arrived early are
-held until then, and an announced intent never changes). At each episode's end, checkpoint the
-Q-tables atomically. Zenoh callbacks only hand events to a queue; all work is on the main thread.
+Per tick: receive the observation on ``world/obs/<id>``; learn the intents of the visible
+higher-ranked neighbours as ``agent.negotiation`` plans it: from the standing query this agent keeps
+open on its predecessor's intent key (``agent/<id-1>/intent?since=T;from=<id>``), and, where the
+plan needs more, with one ``get`` each on ``agent/<j>/intent?tick=T;from=<id>`` (answers relay what
+their senders learned); decide; answer the standing and held queries this tick owes, the next in
+rank first, and publish the intent on ``agent/<id>/intent`` for the world. An announced intent
+never changes. At each episode's end, checkpoint the Q-tables atomically. Zenoh callbacks only
+hand events to a queue; all work is on the main thread.
 """
 
 import logging
@@ -17,17 +20,22 @@ from typing import Callable
 
 import zenoh
 
-from agent import checkpoint
+from agent import checkpoint, negotiation
 from agent.brain import AgentBrain
 from protocol import keys
-from protocol.config import SwarmConfig
+from protocol.config import NEGOTIATING_ALGOS, SwarmConfig, priority_rank
 from protocol.messages import (
-    CONTROL_SHUTDOWN, Control, Inbox, Intent, Observation, agent_sender, encode,
+    CONTROL_SHUTDOWN, Answer, Control, Inbox, Intent, Observation, agent_sender, encode,
 )
 from protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
-from protocol.transport import EXIT_TRANSPORT, TransportError, TransportSettings, open_session
+from protocol.transport import (
+    EXIT_TRANSPORT, TransportError, TransportSettings, enqueue, open_session,
+)
 
 log = logging.getLogger("nnql.agent")
+
+NO_CONSOLIDATION = zenoh.ConsolidationMode.NONE
+"""Answers are delivered as they come; Zenoh's default would hold them until the query ends."""
 
 POLL_S = 0.2
 """How often a waiting agent checks whether it was asked to stop."""
@@ -40,6 +48,16 @@ MAX_HELD_QUERIES = 4 * 1024
 
 EXIT_STOPPED = 130
 """Exit code of an agent stopped by a signal rather than by the world's shutdown."""
+
+AHEAD_TICKS = 2
+"""How far past its last decision an agent holds queries and keeps answers: a neighbour that has
+decided this tick may ask for, or answer, the next one before this agent decides this one."""
+
+STANDING_QUERY_S = 600.0
+"""Lifetime of a standing query; when it ends, the agent opens another after its next decision."""
+
+STREAM_BUFFER = 64
+"""Answers a standing query keeps unread at most (a ring: the oldest go first, nothing blocks)."""
 
 PEER_WAIT_S = 30.0
 """How long an agent waits at start-up to see every other agent before it acts anyway."""
@@ -77,7 +95,14 @@ class AgentNode:
         self.stopping = False
         self.decided_tick = -1
         self.decided_payload = b""
-        self.held_queries: list[tuple[int, zenoh.Query]] = []
+        self.decided_obs: Observation | None = None
+        self.held_queries: list[tuple[int, int, zenoh.Query]] = []  # (tick, asker's rank, query)
+        self.standing: dict[int, zenoh.Query] = {}  # asker -> its standing query on this agent
+        self.intents: dict[int, negotiation.TickIntents] = {}  # tick -> what was learned of it
+        self.predecessor = (self.agent - 1) % self.config.n_agents
+        self.stream_open = False
+        self.stream_generation = 0
+        self.backlog: list[tuple[str, object]] = []
         self.peers_seen: set[int] = set()
         self.gap_tick, self.gap_run = -1, 0
         self.shutdown = False
@@ -97,30 +122,33 @@ class AgentNode:
         run_id, s = self.config.run_id, self.session
         with (
             s.declare_subscriber(keys.obs_key(run_id, self.agent),
-                                 lambda sample: self.events.put(("obs", sample))),
+                                 enqueue(self.events, "obs")),
             s.declare_subscriber(keys.control_key(run_id),
-                                 lambda sample: self.events.put(("control", sample))),
+                                 enqueue(self.events, "control")),
             s.declare_queryable(keys.intent_key(run_id, self.agent),
-                                lambda query: self.events.put(("query", query))),
+                                enqueue(self.events, "query")),
             s.declare_publisher(keys.intent_key(run_id, self.agent), express=True,
                                 congestion_control=zenoh.CongestionControl.BLOCK) as publisher,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
-                                              lambda sample: self.events.put(("alive", sample)),
+                                              enqueue(self.events, "alive"),
                                               history=True),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_WORLD),
-                                              lambda sample: self.events.put(("world", sample))),
+                                              enqueue(self.events, "world")),
         ):
             self.publisher = publisher
-            for kind, item in self._wait_for_peers():
-                self._dispatch(kind, item)
+            self.backlog = self._wait_for_peers()
             while not self.stopping:
-                try:
-                    kind, item = self.events.get(timeout=POLL_S)
-                except queue.Empty:
-                    continue
+                if self.backlog:
+                    kind, item = self.backlog.pop(0)
+                else:
+                    try:
+                        kind, item = self.events.get(timeout=POLL_S)
+                    except queue.Empty:
+                        continue
                 self._dispatch(kind, item)
             self._drop_held_queries()
+            self._drop_standing_queries()
 
     def _wait_for_peers(self) -> list:
         """Wait until every other agent's token is seen, so negotiation reaches all of them.
@@ -152,6 +180,11 @@ class AgentNode:
             self._on_observation(item.payload)
         elif kind == "query":
             self._on_query(item)
+        elif kind == "answer":
+            self._on_answer(*item)
+        elif kind == "stream-end":
+            if item == self.stream_generation:
+                self.stream_open = False
         elif kind == "control":
             self._on_control(item.payload)
         elif kind == "alive":
@@ -165,6 +198,7 @@ class AgentNode:
             log.info("the world left; waiting for it to come back")
             self.decided_tick = -1
             self.brain.learner.forget_pending()
+            self.intents = {}
             self._drop_held_queries()
 
     def _on_alive(self, sample: zenoh.Sample) -> None:
@@ -175,6 +209,11 @@ class AgentNode:
             self.peers_seen.add(agent)
         else:
             self.peers_seen.discard(agent)
+            if agent == self.predecessor:
+                self.stream_open = False  # ask its next incarnation afresh
+            query = self.standing.pop(agent, None)
+            if query is not None:
+                query.drop()
 
     def _on_observation(self, payload) -> None:
         obs = self.inbox.decode(payload, Observation)
@@ -189,17 +228,27 @@ class AgentNode:
         if self.decided_tick >= 0 and obs.tick != self.decided_tick + 1 and not self._resync(obs):
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
-        answers = self._ask(self.brain.neighbours_to_ask(obs), obs.tick)
-        action = self.brain.act(obs, answers)
+        needed = self.brain.neighbours_to_ask(obs)
+        known = self._negotiate(obs)
+        if self.stopping:
+            return
+        action = self.brain.act(obs, {j: known[j] for j in needed if j in known})
         intent = Intent(run=self.config.run_id, tick=obs.tick, sender=agent_sender(self.agent),
                         agent=self.agent, episode=obs.episode, action=action)
-        self.decided_tick, self.decided_payload = obs.tick, encode(intent)
-        if obs.episode_end:
+        answer = Answer(run=self.config.run_id, tick=obs.tick, sender=intent.sender,
+                        agent=self.agent, episode=obs.episode, action=action,
+                        relayed=tuple(sorted(known.items())))
+        self.decided_tick, self.decided_obs, self.decided_payload = obs.tick, obs, encode(answer)
+        self.intents = {t: got for t, got in self.intents.items() if t > obs.tick}
+        self._answer_standing_queries()
+        self._answer_held_queries()
+        if obs.episode_end:  # saved before the world hears of the decision: nothing to lose
             checkpoint.save(self.checkpoint_file, self.brain, obs.episode)
             if self.on_episode_end is not None:
                 self.on_episode_end(self.brain, obs.episode)
-        self.publisher.put(self.decided_payload)
-        self._answer_held_queries()
+        self.publisher.put(encode(intent))
+        if not self.stream_open:
+            self._open_stream(obs.tick + 1)
 
     def _resync(self, obs: Observation) -> bool:
         """After a gap (an observation lost on the way), follow the clock again once
@@ -217,40 +266,105 @@ class AgentNode:
         self.gap_run = 0
         return True
 
-    def _ask(self, neighbours: list[int], tick: int) -> dict[int, int]:
-        """One concurrent query per neighbour; unanswered neighbours are left out."""
-        run_id = self.config.run_id
-        pending = [
-            (j, self.session.get(
-                f"{keys.intent_key(run_id, j)}?{keys.intent_query_params(tick)}",
-                timeout=self.options.negotiation_timeout_s,
-                express=True,
-            ))
-            for j in neighbours
-        ]
-        answers = {}
-        for j, replies in pending:
-            for reply in replies:
-                if not reply.ok:
-                    continue
-                intent = self.inbox.decode(reply.ok.payload, Intent, key_agent=j)
-                if intent is None:
-                    continue
-                if intent.tick != tick:
-                    self.inbox.reject("stale-tick", f"answer for tick {intent.tick}, asked {tick}")
-                    continue
-                answers[j] = intent.action
-        return answers
+    def _answers_to_queue(self, sender: int, generation: int | None = None):
+        """The handler of a query to ``sender``: its replies become ``answer`` events, and, for
+        a standing query, its end a ``stream-end`` event."""
+        put = self.events.put
+        end = None if generation is None else (lambda: put(("stream-end", generation)))
+        return zenoh.handlers.Callback(lambda reply: put(("answer", (sender, reply))), end,
+                                       indirect=False)
+
+    def _ask(self, neighbour: int, tick: int, timeout_s: float) -> None:
+        """Ask one neighbour for its intent at ``tick``; its answer comes as an event."""
+        selector = (f"{keys.intent_key(self.config.run_id, neighbour)}"
+                    f"?{keys.intent_query_params(tick, self.agent)}")
+        self.session.get(selector, self._answers_to_queue(neighbour), express=True,
+                         consolidation=NO_CONSOLIDATION, timeout=timeout_s)
+
+    def _open_stream(self, since: int) -> None:
+        """Open the standing query on the predecessor's intent key (nnQL only)."""
+        if (self.config.algo not in NEGOTIATING_ALGOS or self.config.n_agents < 2
+                or self.predecessor not in self.peers_seen or since >= keys.MAX_TICK):
+            return
+        self.stream_generation += 1
+        selector = (f"{keys.intent_key(self.config.run_id, self.predecessor)}"
+                    f"?{keys.standing_query_params(since, self.agent)}")
+        self.session.get(selector,
+                         self._answers_to_queue(self.predecessor, self.stream_generation),
+                         express=True, consolidation=NO_CONSOLIDATION, timeout=STANDING_QUERY_S)
+        self.stream_open = True
+
+    def _negotiate(self, obs: Observation) -> dict[int, int]:
+        """Every intent this agent learns for the tick, by agent: the awaited ones, asked for by
+        ``agent.negotiation``'s plan (the predecessor's comes on the standing query), then
+        directly any an answer should have brought and did not. Unanswered neighbours are left
+        out; negotiation ends within its timeout, or as soon as the agent is asked to stop."""
+        tick = obs.tick
+        got = self.intents.setdefault(tick, negotiation.TickIntents())
+        waiting_for, asks = negotiation.plan_for(obs, self.config.n_agents, self.config.algo)
+        if not waiting_for:
+            return got.actions
+        deadline = time.monotonic() + self.options.negotiation_timeout_s
+        for j in asks:
+            if j not in got.answered and not (j == self.predecessor and self.stream_open):
+                self._ask(j, tick, self.options.negotiation_timeout_s)
+        self._wait_until(lambda: all(j in got.answered for j in asks), deadline)
+        if self.predecessor in asks and self.predecessor not in got.answered:
+            self.stream_open = False  # it did not answer in time: open a fresh one
+        missing = [j for j in waiting_for if j not in got.actions]
+        remaining = deadline - time.monotonic()
+        if missing and remaining > 0 and not self.stopping:
+            for j in missing:
+                self._ask(j, tick, remaining)
+            self._wait_until(lambda: all(j in got.actions for j in missing), deadline)
+        return got.actions
+
+    def _wait_until(self, done: Callable[[], bool], deadline: float) -> None:
+        """Handle answers and queries until ``done()`` or the deadline; other events wait in
+        the backlog for the main loop, in order."""
+        while not done() and not self.stopping:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                return
+            try:
+                kind, item = self.events.get(timeout=remaining)
+            except queue.Empty:
+                return
+            if kind in ("answer", "query", "stream-end", "alive", "control"):
+                self._dispatch(kind, item)
+            elif kind != "stop":
+                self.backlog.append((kind, item))
+
+    def _on_answer(self, sender: int, reply: zenoh.Reply) -> None:
+        """Keep an answer for the coming ticks; answers for decided ticks are of no more use
+        (a standing query also brings those this agent did not need)."""
+        if not reply.ok:
+            return  # the query's end: a timeout, or a neighbour that is gone
+        answer = self.inbox.decode(reply.ok.payload, Answer, key_agent=sender)
+        if answer is None or answer.tick <= self.decided_tick:
+            return
+        if self.decided_tick >= 0 and answer.tick > self.decided_tick + AHEAD_TICKS:
+            self.inbox.reject("future-tick", f"answer for tick {answer.tick}, "
+                                             f"decided {self.decided_tick}")
+            return
+        got = self.intents.setdefault(answer.tick, negotiation.TickIntents())
+        if not got.add(sender, answer.action, answer.relayed, self.agent):
+            self.inbox.reject("conflicting-relay", f"agent {sender} at tick {answer.tick}")
+        while len(self.intents) > AHEAD_TICKS + 1:  # a flood of forged ticks stays bounded
+            del self.intents[min(self.intents)]
 
     def _on_query(self, query: zenoh.Query) -> None:
         tick = keys.parse_intent_query(query.parameters)
-        if tick is None:
+        since = keys.parse_standing_since(query.parameters) if tick is None else None
+        if since is not None:
+            self._on_standing_query(query, since, keys.parse_intent_asker(query.parameters))
+        elif tick is None:
             self.inbox.reject("bad-query", str(query.selector))
-            query.reply_err(b"bad query: expected ?tick=T")
+            query.reply_err(b"bad query: expected ?tick=T or ?since=T;from=A")
             query.drop()
         elif tick <= self.decided_tick:
             self._answer(tick, query)
-        elif self.decided_tick >= 0 and tick > self.decided_tick + 1:
+        elif self.decided_tick >= 0 and tick > self.decided_tick + AHEAD_TICKS:
             self.inbox.reject("future-query", f"tick {tick}, decided {self.decided_tick}")
             query.reply_err(b"future tick")
             query.drop()
@@ -259,29 +373,69 @@ class AgentNode:
             query.reply_err(b"too many queries")
             query.drop()
         else:
-            self.held_queries.append((tick, query))
+            asker = keys.parse_intent_asker(query.parameters)
+            order = self.config.n_agents if asker is None else priority_rank(
+                asker, tick, self.config.n_agents)
+            self.held_queries.append((tick, order, query))
+
+    def _on_standing_query(self, query: zenoh.Query, since: int, asker: int | None) -> None:
+        """Keep a neighbour's standing query (one per asker: a newer one replaces it), and
+        answer it at once if the tick it starts from is already decided."""
+        if asker is None or asker == self.agent or asker >= self.config.n_agents:
+            self.inbox.reject("bad-query", str(query.selector))
+            query.reply_err(b"bad standing query: expected ?since=T;from=<another agent>")
+            query.drop()
+            return
+        old = self.standing.pop(asker, None)
+        if old is not None:
+            old.drop()
+        self.standing[asker] = query
+        if since <= self.decided_tick and self.decided_obs is not None:
+            self._answer_standing(asker, query)
+
+    def _answer_standing_queries(self) -> None:
+        """Answer the standing queries owed at the decided tick, the next in rank first."""
+        n = self.config.n_agents
+        for asker in sorted(self.standing, key=lambda a: priority_rank(a, self.decided_tick, n)):
+            self._answer_standing(asker, self.standing[asker])
+
+    def _answer_standing(self, asker: int, query: zenoh.Query) -> None:
+        if not negotiation.answers_standing(self.decided_obs, asker, self.config.n_agents,
+                                            self.config.algo):
+            return
+        try:
+            query.reply(query.key_expr, self.decided_payload)
+        except zenoh.ZError as error:  # the asker is gone; it opens a new one if it comes back
+            log.info("standing query of agent %d ended: %s", asker, error)
+            self.standing.pop(asker, None)
+            query.drop()
 
     def _answer_held_queries(self) -> None:
-        still_early = []
-        for tick, query in self.held_queries:
-            if tick <= self.decided_tick:
-                self._answer(tick, query)
-            else:
-                still_early.append((tick, query))
-        self.held_queries = still_early
+        """Answer what was asked for the decided tick, the next in rank first: its decision
+        is the one the rest of the chain waits for."""
+        due = sorted((h for h in self.held_queries if h[0] <= self.decided_tick),
+                     key=lambda h: h[1])
+        self.held_queries = [h for h in self.held_queries if h[0] > self.decided_tick]
+        for tick, _, query in due:
+            self._answer(tick, query)
 
     def _answer(self, tick: int, query: zenoh.Query) -> None:
         if tick == self.decided_tick:
-            query.reply(query.key_expr, self.decided_payload, express=True)
+            query.reply(query.key_expr, self.decided_payload)
         else:
             self.inbox.reject("stale-query", f"tick {tick}, decided {self.decided_tick}")
             query.reply_err(b"stale tick")
         query.drop()
 
     def _drop_held_queries(self) -> None:
-        for _, query in self.held_queries:
+        for _, _, query in self.held_queries:
             query.drop()
         self.held_queries = []
+
+    def _drop_standing_queries(self) -> None:
+        for query in self.standing.values():
+            query.drop()
+        self.standing = {}
 
     def _on_control(self, payload) -> None:
         control = self.inbox.decode(payload, Control)

@@ -43,6 +43,12 @@ def in_view(offset: np.ndarray) -> np.ndarray:
     return np.all(np.abs(offset) <= VIEW_RADIUS, axis=-1)
 
 
+def sees(a: tuple[int, int], b: tuple[int, int]) -> bool:
+    """Whether an agent at cell ``a`` sees cell ``b``: :func:`in_view` for one pair, in plain
+    Python (it runs on the negotiation's critical path, where numpy's call overhead shows)."""
+    return abs(b[0] - a[0]) <= VIEW_RADIUS and abs(b[1] - a[1]) <= VIEW_RADIUS
+
+
 def intended_cell(position: np.ndarray, action: np.ndarray, width: int, height: int) -> np.ndarray:
     """The cell an action aims at; a move off the grid aims at the current cell."""
     target = position + MOVES[action]

@@ -5,7 +5,8 @@ All keys live under ``nnql/<run-id>/`` so that several runs can share one Zenoh 
 - ``world/obs/<agent>``        world -> one agent: its observation of a tick
 - ``world/control``            world -> everyone: control commands (shutdown)
 - ``agent/<agent>/intent``     an agent's announced action (published), and the queryable that
-                               answers a neighbour's ``?tick=T`` once that tick's intent is decided
+                               answers a neighbour's ``?tick=T;from=A`` once that tick's intent is
+                               decided, and a standing ``?since=T;from=A`` at every tick from T on
 - ``alive/<role>/<id>``        liveliness tokens (role ``world`` or ``agent``)
 
 Builders validate their arguments and raise ValueError (a bug on our side); parsers of what arrives
@@ -32,7 +33,12 @@ ROLE_AGENT = "agent"
 ROLES = frozenset({ROLE_WORLD, ROLE_AGENT})
 
 INTENT_QUERY_TICK = "tick"
-"""Selector parameter of an intent query: ``nnql/<run>/agent/<id>/intent?tick=12``."""
+"""Selector parameter of an intent query: ``nnql/<run>/agent/<id>/intent?tick=12;from=3``."""
+INTENT_QUERY_ASKER = "from"
+"""Selector parameter naming the asking agent, so that answers go out in negotiation order."""
+INTENT_QUERY_SINCE = "since"
+"""Selector parameter of a standing intent query, answered at every tick from this one on:
+``nnql/<run>/agent/<id>/intent?since=12;from=3``."""
 
 
 def validate_run_id(run_id: str) -> str:
@@ -123,14 +129,22 @@ def agent_from_key(key, run_id: str) -> int | None:
     return agent if agent < MAX_AGENTS else None
 
 
-def intent_query_params(tick: int) -> str:
-    """The selector parameters asking for one tick's intent: ``"tick=12"``."""
+def intent_query_params(tick: int, asker: int | None = None) -> str:
+    """The selector parameters asking for one tick's intent: ``"tick=12;from=3"``."""
     if isinstance(tick, bool):
         raise ValueError(f"invalid tick {tick!r}")
     tick = operator.index(tick)
     if not 0 <= tick < MAX_TICK:
         raise ValueError(f"invalid tick {tick}: expected 0 .. 2**53 - 1")
-    return f"{INTENT_QUERY_TICK}={tick}"
+    if asker is None:
+        return f"{INTENT_QUERY_TICK}={tick}"
+    return f"{INTENT_QUERY_TICK}={tick};{INTENT_QUERY_ASKER}={validate_agent(asker)}"
+
+
+def standing_query_params(since: int, asker: int) -> str:
+    """The selector parameters of a standing query: ``"since=12;from=3"``."""
+    return (f"{INTENT_QUERY_SINCE}={intent_query_params(since).partition('=')[2]};"
+            f"{INTENT_QUERY_ASKER}={validate_agent(asker)}")
 
 
 def _param_from_str(text: str, name: str):
@@ -141,19 +155,48 @@ def _param_from_str(text: str, name: str):
     return None
 
 
+def parse_intent_asker(parameters) -> int | None:
+    """The asking agent named by an intent query, or None if absent or malformed. Never raises.
+
+    The asker only orders the answers (the next in rank first); nothing trusts it beyond that.
+    """
+    try:
+        if isinstance(parameters, str):
+            value = _param_from_str(parameters, INTENT_QUERY_ASKER)
+        elif parameters is None:
+            return None
+        else:
+            value = parameters.get(INTENT_QUERY_ASKER)
+        if not isinstance(value, str) or not _AGENT_ID_RE.fullmatch(value):
+            return None
+        agent = int(value)
+    except Exception:
+        return None
+    return agent if agent < MAX_AGENTS else None
+
+
 def parse_intent_query(parameters) -> int | None:
     """The tick asked for by an intent query, or None if missing, malformed, negative or huge.
 
     ``parameters`` is zenoh's ``Parameters`` (``query.parameters``), a str such as ``"tick=12"``
     (``;``-separated, as zenoh writes them) or a dict-like. Never raises.
     """
+    return _parse_tick_param(parameters, INTENT_QUERY_TICK)
+
+
+def parse_standing_since(parameters) -> int | None:
+    """The first tick of a standing query (``since``), or None as :func:`parse_intent_query`."""
+    return _parse_tick_param(parameters, INTENT_QUERY_SINCE)
+
+
+def _parse_tick_param(parameters, name: str) -> int | None:
     try:
         if isinstance(parameters, str):
-            value = _param_from_str(parameters, INTENT_QUERY_TICK)
+            value = _param_from_str(parameters, name)
         elif parameters is None:
             return None
         else:
-            value = parameters.get(INTENT_QUERY_TICK)
+            value = parameters.get(name)
         if type(value) is int:
             tick = value
         elif isinstance(value, str) and _TICK_RE.fullmatch(value):

@@ -40,7 +40,8 @@ CONTROL_COMMANDS = frozenset({CONTROL_SHUTDOWN})
 
 __all__ = [
     "PROTOCOL_VERSION", "MAX_AGENTS", "MAX_GRID", "MAX_PAYLOAD_BYTES", "WORLD_SENDER",
-    "CONTROL_SHUTDOWN", "CONTROL_COMMANDS", "agent_sender", "Observation", "Intent", "Control",
+    "CONTROL_SHUTDOWN", "CONTROL_COMMANDS", "agent_sender", "Observation", "Intent", "Answer",
+    "Control",
     "SCHEMA", "Rejected", "encode", "to_wire", "parse", "Inbox",
 ]
 
@@ -81,6 +82,24 @@ class Intent:
     agent: int
     episode: int
     action: int  # 0 .. N_ACTIONS - 1, see protocol.actions
+
+
+@dataclass(frozen=True, slots=True)
+class Answer:
+    """Agent -> a neighbour that asked for its intent: its action at this tick, and the actions
+    of the higher-ranked agents it learned while negotiating (relayed: ``(agent, action)``).
+
+    The relayed intents spare the asker from asking each of those agents itself
+    (``agent.negotiation``); they are what those agents announced, which never changes.
+    """
+
+    run: str
+    tick: int
+    sender: str
+    agent: int
+    episode: int
+    action: int
+    relayed: tuple[tuple[int, int], ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -143,6 +162,7 @@ def _command(x):
 
 
 _agent = _int(0, MAX_AGENTS)
+_action = _int(0, N_ACTIONS)
 _coord = _int(0, MAX_GRID)
 _count = _int(0, MAX_TICK)
 _SEQ = (list, tuple, np.ndarray)
@@ -164,6 +184,19 @@ def _neighbours(x):
         out.append((_agent(item[0]), _coord(item[1]), _coord(item[2])))
     if len({n[0] for n in out}) != len(out):
         raise ValueError("duplicate neighbour id")
+    return tuple(out)
+
+
+def _relayed(x):
+    if not isinstance(x, _SEQ) or len(x) > MAX_AGENTS:
+        raise ValueError(f"expected a list of at most {MAX_AGENTS} [id, action]")
+    out = []
+    for item in x:
+        if not isinstance(item, _SEQ) or len(item) != 2:
+            raise ValueError("expected [id, action]")
+        out.append((_agent(item[0]), _action(item[1])))
+    if len({n[0] for n in out}) != len(out):
+        raise ValueError("duplicate relayed agent")
     return tuple(out)
 
 
@@ -198,7 +231,13 @@ SCHEMA: dict[type, Kind] = {
     Intent: Kind("intent", _HEADER + (
         Field("agent", "a", _agent),
         Field("episode", "e", _count),
-        Field("action", "x", _int(0, N_ACTIONS)),
+        Field("action", "x", _action),
+    )),
+    Answer: Kind("answer", _HEADER + (
+        Field("agent", "a", _agent),
+        Field("episode", "e", _count),
+        Field("action", "x", _action),
+        Field("relayed", "rl", _relayed),
     )),
     Control: Kind("control", _HEADER + (
         Field("command", "c", _command),
@@ -225,7 +264,7 @@ def _checked(cls: type, values: dict, key_agent: int | None) -> object:
         except (ValueError, TypeError) as e:
             raise Rejected(f"bad-field:{f.name}", str(e)) from None
     sender = out["sender"]
-    if cls is Intent:
+    if cls is Intent or cls is Answer:
         if sender != agent_sender(out["agent"]):
             raise Rejected("forged-sender", f"intent of agent {out['agent']} sent by {sender!r}")
         if key_agent is not None and out["agent"] != key_agent:
@@ -234,6 +273,8 @@ def _checked(cls: type, values: dict, key_agent: int | None) -> object:
         raise Rejected("forged-sender", f"{cls.__name__} sent by {sender!r}")
     if cls is Observation and any(n[0] == out["agent"] for n in out["neighbours"]):
         raise Rejected("bad-field:neighbours", "the observing agent is among its neighbours")
+    if cls is Answer and any(r[0] == out["agent"] for r in out["relayed"]):
+        raise Rejected("bad-field:relayed", "an agent relays its own intent")
     return cls(**out)
 
 

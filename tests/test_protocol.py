@@ -14,6 +14,7 @@ from protocol import keys, messages
 from protocol.actions import N_ACTIONS
 from protocol.keys import MAX_TICK
 from protocol.messages import (
+    Answer,
     CONTROL_SHUTDOWN,
     MAX_AGENTS,
     MAX_GRID,
@@ -34,7 +35,7 @@ from protocol.messages import (
 
 RUN = "run-1"
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-KINDS = (Observation, Intent, Control)
+KINDS = (Observation, Intent, Answer, Control)
 
 
 def obs(**change) -> Observation:
@@ -423,7 +424,16 @@ def controls(run=None):
                      sender=st.just(WORLD_SENDER), command=commands)
 
 
-any_message = observations() | intents() | controls()
+@st.composite
+def answers(draw, run=None):
+    agent = draw(agents)
+    others = draw(st.lists(agents.filter(lambda a: a != agent), unique=True, max_size=12))
+    return Answer(run=run or draw(run_ids), tick=draw(counts), sender=agent_sender(agent),
+                  agent=agent, episode=draw(counts), action=draw(st.integers(0, N_ACTIONS - 1)),
+                  relayed=tuple((j, draw(st.integers(0, N_ACTIONS - 1))) for j in others))
+
+
+any_message = observations() | intents() | answers() | controls()
 
 
 @given(st.binary(max_size=300), st.sampled_from(KINDS))
@@ -489,6 +499,15 @@ _bad_neighbours = (
     | st.tuples(coords, _bad_coord).map(lambda t: [[t[0], t[0], t[1]]])
     | st.tuples(agents, coords).map(lambda t: [[t[0], t[1], t[1]], [t[0], 0, 0]])  # duplicate id
 )
+_bad_relayed = (
+    _wrong_types.filter(lambda v: not isinstance(v, list) or v)  # [] is valid
+    | st.lists(_wrong_types | st.lists(coords, max_size=5).filter(lambda v: len(v) != 2),
+               min_size=1, max_size=3)
+    | st.tuples(_bad_int | _out_of(0, MAX_AGENTS), st.integers(0, N_ACTIONS - 1))
+      .map(lambda t: [list(t)])
+    | st.tuples(agents, _bad_int | _out_of(0, N_ACTIONS)).map(lambda t: [list(t)])
+    | st.tuples(agents, st.integers(0, N_ACTIONS - 1)).map(lambda t: [list(t), list(t)])
+)
 _bad_reward = (
     _wrong_types | st.booleans() | st.sampled_from([math.nan, math.inf, -math.inf])
     | st.floats(min_value=1e6, exclude_min=True) | st.floats(max_value=-1e6, exclude_max=True)
@@ -505,7 +524,7 @@ BAD = {
     "position": _bad_cell, "goal": _bad_cell, "neighbours": _bad_neighbours,
     "reward_ds": _bad_reward, "reward_ca": _bad_reward,
     "collided": _bad_bool, "arrived": _bad_bool, "episode_end": _bad_bool,
-    "command": _wrong_types | _bad_command,
+    "command": _wrong_types | _bad_command, "relayed": _bad_relayed,
 }
 
 
@@ -559,7 +578,7 @@ def _is_reward(v):
 
 def reference_valid(d, cls, run) -> bool:
     """The protocol's rules written out again, independently of messages.py."""
-    tags = {Observation: "obs", Intent: "intent", Control: "control"}
+    tags = {Observation: "obs", Intent: "intent", Answer: "answer", Control: "control"}
     wires = {f.wire: f.name for f in SCHEMA[cls].fields}
     if type(d) is not dict or set(d) != set(wires) | {"v", "k"}:
         return False
@@ -574,6 +593,15 @@ def reference_valid(d, cls, run) -> bool:
         return False
     if cls is Intent:
         return _is_int(m["action"], 0, 5) and m["sender"] == f"agent/{m['agent']}"
+    if cls is Answer:
+        rl = m["relayed"]
+        return (
+            _is_int(m["action"], 0, 5) and m["sender"] == f"agent/{m['agent']}"
+            and type(rl) is list and len(rl) <= MAX_AGENTS
+            and all(type(r) is list and len(r) == 2 and _is_int(r[0], 0, MAX_AGENTS)
+                    and _is_int(r[1], 0, 5) for r in rl)
+            and len({r[0] for r in rl}) == len(rl) and all(r[0] != m["agent"] for r in rl)
+        )
     nb = m["neighbours"]
     return (
         m["sender"] == "world" and _is_int(m["step"], 0, MAX_TICK) and _is_cell(m["position"])
@@ -599,7 +627,7 @@ def near_valid_maps(draw):
     """A valid message's wire map with each value, at random, kept, replaced by junk, or dropped."""
     msg = draw(any_message)
     wire = to_wire(msg)
-    wire = {k: (list(map(list, v)) if k == "nb" else list(v) if isinstance(v, tuple) else v)
+    wire = {k: (list(map(list, v)) if k in ("nb", "rl") else list(v) if isinstance(v, tuple) else v)
             for k, v in wire.items()}
     out = {}
     for k, v in wire.items():
@@ -622,3 +650,38 @@ def test_fuzz_near_valid_maps_accepted_exactly_when_valid(case):
     assert (got is not None) == reference_valid(obj, cls, run), inbox.rejections
     if got is not None:
         assert msgpack.unpackb(encode(got)) == obj
+
+
+def test_answer_rejects_relaying_itself_duplicates_and_forged_senders():
+    good = Answer(run=RUN, tick=3, sender=agent_sender(2), agent=2, episode=0, action=1,
+                  relayed=((0, 4), (1, 0)))
+    assert parse(encode(good), Answer, RUN, key_agent=2) == good
+    for bad, reason in [
+        ({"relayed": ((2, 4),)}, "bad-field:relayed"),
+        ({"relayed": ((0, 4), (0, 1))}, "bad-field:relayed"),
+        ({"relayed": ((0, 9),)}, "bad-field:relayed"),
+        ({"sender": agent_sender(5)}, "forged-sender"),
+    ]:
+        wire = messages.to_wire(good)
+        if "relayed" in bad:
+            wire["rl"] = [list(pair) for pair in bad["relayed"]]
+        else:
+            wire["s"] = bad["sender"]
+        with pytest.raises(Rejected) as caught:
+            parse(msgpack.packb(wire), Answer, RUN)
+        assert caught.value.reason == reason, bad
+    with pytest.raises(Rejected) as caught:
+        parse(encode(good), Answer, RUN, key_agent=3)
+    assert caught.value.reason == "forged-sender"
+
+
+def test_standing_query_params():
+    params = keys.standing_query_params(12, 3)
+    assert params == "since=12;from=3"
+    assert keys.parse_standing_since(params) == 12
+    assert keys.parse_intent_asker(params) == 3
+    assert keys.parse_intent_query(params) is None
+    assert keys.parse_standing_since(zenoh.Parameters(params)) == 12
+    assert keys.parse_intent_asker(zenoh.Parameters(keys.intent_query_params(5, 7))) == 7
+    for bad in ("since=-1;from=3", "since=x", "from=01", f"from={keys.MAX_AGENTS}", None, 5):
+        assert keys.parse_standing_since(bad) is None or keys.parse_intent_asker(bad) is None

@@ -22,7 +22,9 @@ from protocol import keys
 from protocol.config import SwarmConfig
 from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
 from protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
-from protocol.transport import EXIT_TRANSPORT, TransportError, TransportSettings, open_session
+from protocol.transport import (
+    EXIT_TRANSPORT, TransportError, TransportSettings, enqueue, open_session,
+)
 from world.engine import SwarmWorld, TickReport
 from world.metrics import EpisodeWriter
 
@@ -76,9 +78,9 @@ class WorldNode:
         run_id, s, n = self.config.run_id, self.session, self.config.n_agents
         put = self.events.put
         with (
-            s.declare_subscriber(keys.intent_key_all(run_id), lambda sample: put(("intent", sample))),
+            s.declare_subscriber(keys.intent_key_all(run_id), enqueue(self.events, "intent")),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
-                                              lambda sample: put(("alive", sample)), history=True),
+                                              enqueue(self.events, "alive"), history=True),
             s.declare_publisher(keys.control_key(run_id), congestion_control=BLOCK) as control,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_WORLD, 0)),
         ):
@@ -133,7 +135,8 @@ class WorldNode:
     def _publish_observations(self, publishers) -> float:
         """Send every agent its observation of the current tick; returns when the tick began."""
         start = time.perf_counter()
-        for obs in self.world.observations():
+        # In rank order: the first to decide is the first to know.
+        for obs in sorted(self.world.observations(), key=lambda o: o.rank):
             publishers[obs.agent].put(encode(obs))
         return start
 

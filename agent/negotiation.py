@@ -1,0 +1,102 @@
+"""Whom an nnQL agent asks for intents, so that it learns every intent it must wait for. Pure.
+
+At each tick an nnQL agent waits for the intents of its visible higher-ranked neighbours
+(:func:`awaited`; the paper's hierarchical negotiation, DESIGN §2). It need not ask each of them:
+an answer relays every intent its sender learned while negotiating (``protocol.messages.Answer``),
+and that sender waited for *its* visible higher-ranked neighbours in turn. Positions are in the
+observation, so an agent can tell exactly whom a neighbour sees, and so what its answer will bring.
+
+:func:`plan_asks` walks the awaited neighbours from the lowest rank up (the nearest in the chain,
+who decides last and knows the most) and asks each one that no earlier ask covers. When everyone
+sees everyone, as on the default 11 x 11 grid, that is one query, to the agent ranked just above:
+the negotiation becomes a chain of N - 1 answers a tick instead of N (N - 1) / 2, and every agent
+knows exactly the intents it would have known by asking each neighbour. Should an answer lack an
+intent it was expected to bring (its sender missed it, or died), the agent asks for the missing
+ones directly (``agent.node``). Why a chain: ``README.md``, "How fast".
+
+An agent that has arrived still waits for the awaited intents, although it needs none of them,
+so that it can relay them down the chain; only at an episode's end does nobody negotiate.
+
+Since an agent's predecessor in rank is always the same agent (``id - 1``; ranks rotate, the order
+does not), each agent keeps one *standing* query open on its predecessor's intent key, answered at
+every tick where the predecessor outranks it and sees it (:func:`answers_standing`): the chain
+then costs one message per hop instead of a query, an answer and the query's end.
+"""
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+from protocol.actions import sees
+from protocol.config import NEGOTIATING_ALGOS, priority_rank
+from protocol.messages import Observation
+
+
+def awaited(obs: Observation, n_agents: int, algo: str) -> list[int]:
+    """The visible neighbours that outrank the observing agent at this tick: whose intents it
+    waits for (none for QL, and none at an episode's end, where everybody stays)."""
+    if algo not in NEGOTIATING_ALGOS or obs.episode_end:
+        return []
+    return [j for j, _, _ in obs.neighbours if priority_rank(j, obs.tick, n_agents) < obs.rank]
+
+
+def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
+              rank: Callable[[int], int]) -> list[int]:
+    """The fewest neighbours to ask, lowest-ranked first, whose answers (with what they relay)
+    bring every intent of ``waiting_for``; ``cells`` holds each one's cell, ``rank`` its rank."""
+    asks: list[int] = []
+    covered: set[int] = set()
+    for q in sorted(waiting_for, key=rank, reverse=True):
+        if q in covered:
+            continue
+        asks.append(q)
+        covered.add(q)
+        covered.update(x for x in waiting_for
+                       if rank(x) < rank(q) and sees(cells[q], cells[x]))
+    return asks
+
+
+def plan_for(obs: Observation, n_agents: int, algo: str) -> tuple[list[int], list[int]]:
+    """``(awaited, asks)`` for one observation: whose intents to learn, and whom to ask."""
+    waiting_for = awaited(obs, n_agents, algo)
+    cells = {j: (x, y) for j, x, y in obs.neighbours}
+    return waiting_for, plan_asks(waiting_for, cells,
+                                  lambda j: priority_rank(j, obs.tick, n_agents))
+
+
+def predecessor(agent: int, tick: int, n_agents: int) -> int | None:
+    """The agent ranked just above ``agent`` at ``tick`` (None for the top rank)."""
+    rank = priority_rank(agent, tick, n_agents)
+    return None if rank == 0 else (agent - 1) % n_agents
+
+
+def answers_standing(obs: Observation, asker: int, n_agents: int, algo: str) -> bool:
+    """Whether the agent that observed ``obs`` answers ``asker``'s standing query at this tick:
+    exactly when the asker waits for its intent (visibility is symmetric, so the asker is in view
+    of whoever it sees; see :func:`awaited`)."""
+    if algo not in NEGOTIATING_ALGOS or obs.episode_end:
+        return False
+    n = n_agents
+    return (priority_rank(obs.agent, obs.tick, n) < priority_rank(asker, obs.tick, n)
+            and any(j == asker for j, _, _ in obs.neighbours))
+
+
+@dataclass
+class TickIntents:
+    """What an agent has learned of one tick's intents: actions by agent, and who answered."""
+
+    actions: dict[int, int] = field(default_factory=dict)
+    answered: set[int] = field(default_factory=set)
+
+    def add(self, sender: int, action: int, relayed, me: int) -> bool:
+        """Record ``sender``'s answer and what it relays; False if it contradicts an intent
+        already known (an announced intent never changes, so someone lied). The sender's own
+        word wins over a relay of it."""
+        consistent = self.actions.get(sender, action) == action
+        consistent &= all(self.actions.get(other, a) == a
+                          for other, a in relayed if other in self.answered)
+        self.actions[sender] = action
+        self.answered.add(sender)
+        for other, a in relayed:
+            if other != me:
+                self.actions.setdefault(other, a)
+        return consistent

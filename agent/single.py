@@ -1,0 +1,130 @@
+"""One learner at a time: :class:`agent.learning.Learners` for an agent process, bit for bit.
+
+``Learners`` is written over a batch, so that the paper's experiment runs hundreds of learners at
+once. An agent process is a batch of one, where each of the sixty-odd small numpy calls of a
+decision costs more than its arithmetic, and every microsecond is on the negotiation's critical
+path: the agents ranked below wait for this one's decision. :class:`SingleLearner` keeps the
+state of ``Learners`` (so checkpoints, heat maps and ``forget_pending`` are unchanged) and makes
+the same decisions and updates in plain Python: the same floating-point operations in the same
+order, and the one sum whose order numpy chooses (Eq. 6) through the very same ``einsum`` call.
+``tests/test_single.py`` checks that whole swarm runs give identical actions and tables.
+
+Inputs are an agent's own terms: its cell, its goal, the visible neighbours' cells by agent id
+(one slot per id, as ``agent.brain`` lays them out) and the announced next cells it knows.
+"""
+
+import math
+
+import numpy as np
+
+from agent.learning import UNKNOWN_MOVE, Hyper, Learners
+from protocol.actions import MOVES, N_STATES, VIEW_RADIUS, WINDOW
+
+Cell = tuple[int, int]
+
+
+def offset_state_of(dx: int, dy: int) -> int:
+    """``protocol.actions.offset_state`` for one offset."""
+    dx = min(max(dx, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
+    dy = min(max(dy, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
+    return dx * WINDOW + dy
+
+
+_MOVE_OF_STEP = {(int(dx), int(dy)): a for a, (dx, dy) in enumerate(MOVES)}
+
+
+class SingleLearner(Learners):
+    """A batch of one ``Learners`` whose steps take scalars instead of a :class:`View`."""
+
+    def __init__(self, random_step: int, use_intents: bool, n_neighbours: int,
+                 hyper: Hyper = Hyper(), with_direction: bool = False) -> None:
+        super().__init__(np.array([random_step]), np.array([use_intents]), n_neighbours, hyper,
+                         np.array([with_direction]))
+        self.k = int(random_step)
+        self.reads_intents = bool(use_intents)
+        self.reads_direction = bool(with_direction)
+        self.slots = n_neighbours
+
+    def record_one(self, r_ds: float, r_ca: float, arrived: bool) -> None:
+        """:meth:`Learners.record` for the one learner."""
+        self.record(np.array([r_ds], dtype=float), np.array([r_ca], dtype=float),
+                    np.array([arrived], dtype=bool))
+
+    def decide_one(self, own: Cell, goal: Cell, cells: dict[int, Cell],
+                   next_cells: dict[int, Cell], random_action: int,
+                   tie_breakers: np.ndarray) -> int:
+        """:meth:`Learners.decide` for the one (active) learner; returns its action."""
+        goal_s = offset_state_of(goal[0] - own[0], goal[1] - own[1])
+        nb_states = self._nb_states(own, cells, next_cells)
+        if self._pending[0]:
+            self._complete_one(goal_s, nb_states)
+        values = self._q_final_one(own, goal_s, cells, nb_states)
+        best = max(values)
+        ties = tie_breakers.tolist()
+        greedy = max((a for a in range(len(values)) if values[a] >= best),
+                     key=lambda a: (ties[a], -a))
+        taken = int(self.actions_taken[0])
+        action = int(random_action) if (taken + 1) % self.k == 0 else greedy
+        self.actions_taken[0] = taken + 1
+        self._pending[0] = True
+        self._p_goal[0] = goal_s
+        self._p_action[0] = action
+        self._p_nb[0] = nb_states
+        self._p_visible[0] = False
+        self._p_visible[0, list(cells)] = True
+        return action
+
+    def finish_one(self, own: Cell, goal: Cell, cells: dict[int, Cell]) -> None:
+        """:meth:`Learners.finish` for the one learner (the QL reading of ``s'``)."""
+        if self._pending[0]:
+            goal_s = offset_state_of(goal[0] - own[0], goal[1] - own[1])
+            self._complete_one(goal_s, self._nb_states(own, cells, {}))
+
+    def _nb_states(self, own: Cell, cells: dict[int, Cell],
+                   next_cells: dict[int, Cell]) -> list[int]:
+        """``neighbour_states`` for every slot; a slot out of view reads cell (0, 0) there."""
+        states = []
+        for slot in range(self.slots):
+            cell = cells.get(slot, (0, 0))
+            ahead = next_cells.get(slot) if self.reads_intents else None
+            seen = ahead if ahead is not None else cell
+            state = offset_state_of(seen[0] - own[0], seen[1] - own[1])
+            if self.reads_direction:
+                move = (UNKNOWN_MOVE if ahead is None
+                        else _MOVE_OF_STEP[(ahead[0] - cell[0], ahead[1] - cell[1])])
+                state += N_STATES * move
+            states.append(state)
+        return states
+
+    def _q_final_one(self, own: Cell, goal_s: int, cells: dict[int, Cell],
+                     nb_states: list[int]) -> list[float]:
+        """Eq. 6 and 7 as ``Learners._q_final`` computes them."""
+        weights = np.zeros((1, self.slots))
+        for slot, (x, y) in cells.items():
+            dx, dy = x - own[0], y - own[1]
+            weights[0, slot] = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
+        q_ca = np.einsum("bm,bma->ba", weights, self.q_ca[0][nb_states][None])
+        beta = self.hyper.beta
+        return (beta * self.q_ds[0, goal_s] + (1.0 - beta) * q_ca[0]).tolist()
+
+    def _complete_one(self, next_goal: int, next_nb: list[int]) -> None:
+        """``Learners._complete`` for the one learner: Eq. 9, then Eq. 10 slot by slot."""
+        action = int(self._p_action[0])
+        self._td(self.q_ds[0], int(self._p_goal[0]), action, float(self._p_r_ds[0]), next_goal,
+                 0.0 if self._p_terminal[0] else 1.0)
+        states = self._p_nb[0].tolist()
+        reward_ca = float(self._p_r_ca[0])
+        for slot in np.flatnonzero(self._p_visible[0]).tolist():
+            self._td(self.q_ca[0], states[slot], action, reward_ca, next_nb[slot], 1.0)
+        self._pending[0] = False
+
+    def _td(self, table: np.ndarray, state: int, action: int, reward: float, next_state: int,
+            bootstrap: float) -> None:
+        """``agent.learning.td_update`` for one entry, in the same order of operations."""
+        h = self.hyper
+        current = float(table[state, action])
+        target = reward + h.gamma * bootstrap * float(table[next_state].max())
+        table[state, action] = current + h.alpha * (target - current)
+
+
+

@@ -1,0 +1,81 @@
+"""The negotiation plan (agent.negotiation): whom to ask so as to learn every awaited intent."""
+
+import itertools
+
+import pytest
+
+from agent import negotiation
+from protocol.config import priority_rank
+from protocol.messages import WORLD_SENDER, Observation
+
+
+def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
+            episode_end: bool = False) -> Observation:
+    """Agent ``agent``'s observation when the agents stand on ``cells`` (view radius 10)."""
+    me = cells[agent]
+    seen = tuple((j, x, y) for j, (x, y) in sorted(cells.items())
+                 if j != agent and negotiation.sees(me, (x, y)))
+    return Observation(run="neg", tick=tick, sender=WORLD_SENDER, agent=agent, episode=0, step=0,
+                       position=me, goal=(0, 0), neighbours=seen,
+                       rank=priority_rank(agent, tick, n), reward_ds=0.0, reward_ca=0.0,
+                       collided=False, arrived=False, episode_end=episode_end)
+
+
+def learned(agent: int, tick: int, n: int, cells, asked_by: dict[int, list[int]]) -> set[int]:
+    """Whose intents ``agent`` ends up knowing when everyone answers with what it learned."""
+    known: set[int] = set()
+    for j in asked_by[agent]:
+        known |= {j} | learned(j, tick, n, cells, asked_by)
+    return known
+
+
+def test_everyone_in_view_makes_a_chain_of_one_query_each():
+    n, tick = 8, 5
+    cells = {i: (i, i % 3) for i in range(n)}
+    for agent in range(n):
+        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), n, "nnql")
+        rank = priority_rank(agent, tick, n)
+        assert len(waiting_for) == rank
+        assert asks == ([] if rank == 0 else [negotiation.predecessor(agent, tick, n)])
+
+
+@pytest.mark.parametrize("seed", range(30))
+def test_the_plan_covers_every_awaited_intent_on_sparse_grids(seed):
+    import random
+
+    rng = random.Random(seed)
+    n, tick = 12, rng.randrange(100)
+    spots = rng.sample(list(itertools.product(range(40), range(12))), n)
+    cells = dict(enumerate(spots))
+    asked_by = {a: negotiation.plan_for(observe(a, tick, n, cells), n, "nnql")[1] for a in cells}
+    for agent in cells:
+        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), n, "nnql")
+        assert set(asks) <= set(waiting_for)
+        assert set(waiting_for) <= learned(agent, tick, n, cells, asked_by)
+
+
+def test_nobody_negotiates_for_ql_or_at_an_episode_end():
+    cells = {0: (0, 0), 1: (1, 0)}
+    assert negotiation.plan_for(observe(1, 0, 2, cells), 2, "nnql") == ([0], [0])
+    assert negotiation.plan_for(observe(1, 0, 2, cells), 2, "ql") == ([], [])
+    assert negotiation.plan_for(observe(1, 0, 2, cells, episode_end=True), 2, "nnql") == ([], [])
+
+
+def test_standing_answers_go_exactly_to_those_who_wait_for_them():
+    n, tick = 6, 3
+    cells = {0: (0, 0), 1: (5, 5), 2: (30, 0), 3: (12, 3), 4: (2, 9), 5: (25, 11)}
+    for p, asker in itertools.permutations(cells, 2):
+        waits = p in negotiation.awaited(observe(asker, tick, n, cells), n, "nnql")
+        assert negotiation.answers_standing(observe(p, tick, n, cells), asker, n, "nnql") == waits
+
+
+def test_tick_intents_prefer_the_senders_word_and_flag_contradictions():
+    got = negotiation.TickIntents()
+    assert got.add(3, 1, ((0, 2), (1, 4)), me=5)
+    assert got.actions == {3: 1, 0: 2, 1: 4} and got.answered == {3}
+    assert not got.add(1, 0, (), me=5)  # 1 says 0, 3 had relayed 4: the sender wins
+    assert got.actions[1] == 0
+    assert not got.add(2, 3, ((1, 4),), me=5)  # relays 4 for 1, whose own answer was 0
+    assert got.actions[1] == 0
+    assert got.add(4, 2, ((5, 1),), me=5)  # this agent's own intent is never taken from others
+    assert 5 not in got.actions
