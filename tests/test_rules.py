@@ -7,7 +7,8 @@ from hypothesis import strategies as st
 
 from protocol.actions import DOWN, LEFT, MOVES, N_ACTIONS, RIGHT, STAY, UP, intended_cell
 from world.rules import (
-    CA_REWARD, GOAL_REWARD, arbitrate, collision_reward, destination_reward, shortest_steps,
+    CA_REWARD, GOAL_REWARD, arbitrate, collision_reward, destination_reward,
+    invariant_violations, shortest_steps,
 )
 
 WIDTH, HEIGHT = 5, 4
@@ -223,3 +224,37 @@ def test_move_table_matches_action_names():
     assert MOVES[UP].tolist() == [0, -1] and MOVES[DOWN].tolist() == [0, 1]
     assert MOVES[LEFT].tolist() == [-1, 0] and MOVES[RIGHT].tolist() == [1, 0]
     assert MOVES[STAY].tolist() == [0, 0]
+
+
+def _violations_by_numpy(before, after, count_swaps):
+    """The invariants written over arrays, as a reference for the plain-Python check."""
+    problems = []
+    if len({tuple(c) for c in after.tolist()}) != len(after):
+        problems.append("two agents share a cell")
+    if count_swaps:
+        for i in np.flatnonzero(np.any(before != after, axis=-1)):
+            if (np.all(after == before[i], axis=-1) & np.all(before == after[i], axis=-1)).any():
+                problems.append(f"agent {i} swapped through another agent")
+    return problems
+
+
+def test_invariant_violations_name_shared_cells_and_swaps():
+    before = np.array([[0, 0], [1, 0], [5, 5]])
+    assert invariant_violations(before, np.array([[1, 0], [0, 0], [5, 5]]), True) == [
+        "agent 0 swapped through another agent", "agent 1 swapped through another agent"]
+    assert invariant_violations(before, np.array([[1, 0], [0, 0], [5, 5]]), False) == []
+    assert invariant_violations(before, np.array([[0, 1], [0, 1], [5, 5]]), True) == [
+        "two agents share a cell"]
+    assert invariant_violations(before, np.array([[1, 0], [2, 0], [5, 6]]), True) == []
+
+
+def test_invariant_violations_agree_with_the_array_definition():
+    rng = np.random.default_rng(5)
+    for _ in range(2000):
+        n = int(rng.integers(2, 7))
+        cells = rng.choice(16, size=n, replace=False)
+        before = np.stack([cells % 4, cells // 4], axis=-1)
+        after = before + rng.integers(-1, 2, size=(n, 2)) * (rng.random((n, 1)) < 0.7)
+        for swaps in (True, False):
+            assert invariant_violations(before, after, swaps) == _violations_by_numpy(
+                before, after, swaps)
