@@ -102,11 +102,12 @@ def policy_marks(picture: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.
 
 
 class TimedBrain(AgentBrain):
-    """An AgentBrain that times its negotiation: from choosing whom to ask to deciding.
+    """An AgentBrain that times its negotiation: from choosing whose intents to wait for to
+    deciding.
 
-    ``agent.node`` calls :meth:`neighbours_to_ask`, sends the queries and waits for them, then
-    calls :meth:`act` with the answers: the time between the two calls is the negotiation wait.
-    Decisions are exactly those of AgentBrain.
+    ``agent.node`` calls :meth:`neighbours_to_ask`, learns those intents (its queries, and what
+    the answers relay), then calls :meth:`act` with them: the time between the two calls is the
+    negotiation wait. Decisions are exactly those of AgentBrain.
     """
 
     def __init__(self, agent: int, config: SwarmConfig) -> None:

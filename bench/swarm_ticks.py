@@ -4,8 +4,8 @@
 For each agent count, in the same run and on the same machine:
 
 - ``distributed``: ``launch/swarm.py``'s processes (world + one process per agent, embedded Zenoh);
-- ``bare``: the very same processes and message pattern (observations, negotiation queries to the
-  higher-ranked visible neighbours, intents) with the learning taken out: every agent answers STAY;
+- ``bare``: the very same processes and message pattern (observations, the negotiation of
+  ``agent.negotiation``, intents) with the learning taken out: every agent answers STAY;
 - ``in-process``: the same logic in one process, no Zenoh.
 
 Each figure is the median over ``--repeats`` runs of (ticks / seconds), timed by the world from the

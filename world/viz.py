@@ -2,15 +2,16 @@
 
 At time ``tick = t`` the viewer shows the state in which the agents decided tick ``t``: their cells
 (``world/agents``), their goals (``world/goals``), the last cells they came through
-(``world/trails``), the move each announced (``world/intents``), who asked whom for its intent
-(``world/negotiation``) and who collided as a result (``world/collisions``, plus a warning in
+(``world/trails``), the move each announced (``world/intents``), whose intent each agent waited
+for (``world/negotiation``) and who collided as a result (``world/collisions``, plus a warning in
 ``events``). The next tick shows where everybody ended up.
 
 The negotiation is derived by the world, not reported by the agents: at tick ``t`` an nnQL agent
-that has not arrived asks every visible neighbour of higher rank
+that has not arrived decides with the intent of every visible neighbour of higher rank
 (``protocol.config.priority_rank``), which is exactly what
-``agent.brain.AgentBrain.neighbours_to_ask`` does. Whether each query was answered in time is
-known only to the asker; the agents log that themselves (``agent.viz``).
+``agent.brain.AgentBrain.neighbours_to_ask`` says. How each intent reached it (its own query, or
+relayed down the chain, ``agent.negotiation``) and whether it came in time is known only to the
+agent; the agents log that themselves (``agent.viz``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, colours, labels) are logged once.
@@ -53,7 +54,7 @@ METRICS = {
     "metrics/reward_sum": "sum of every agent's DS and CA rewards in the episode",
     "metrics/missed_intents": "intents that missed the tick deadline (counted as STAY)",
     "metrics/ticks_per_s": "wall-clock ticks per second of the world's clock in the episode",
-    "metrics/negotiation/queries_per_tick": "mean intent queries per tick (derived by the world)",
+    "metrics/negotiation/awaited_per_tick": "intents waited for per tick, all agents (world-derived)",
 }
 """Every per-episode series the world logs, with what it means (the README repeats this)."""
 
@@ -120,7 +121,7 @@ class WorldViz:
         self._goals_episode = -1
         self._episode_clock: float | None = None
         self._episode_first_tick = 0
-        self._queries = 0
+        self._awaited = 0
         self._count = 0
         self._ticks = np.zeros(flush_every, dtype=np.int64)
         self._episodes = np.zeros(flush_every, dtype=np.int64)
@@ -236,9 +237,9 @@ class WorldViz:
             "metrics/reward_sum": row["reward_sum"],
             "metrics/missed_intents": row["missed_intents"],
             "metrics/ticks_per_s": rate,
-            "metrics/negotiation/queries_per_tick": self._queries / max(row["steps"], 1),
+            "metrics/negotiation/awaited_per_tick": self._awaited / max(row["steps"], 1),
         }
-        self._queries = 0
+        self._awaited = 0
         rec = self.rec
         rec.set_time("tick", sequence=report.tick)
         rec.set_time("episode", sequence=report.episode)
@@ -273,7 +274,7 @@ class WorldViz:
                                 self.config.algo)
         asks &= self._moved[:k, None, None]
         t, asker, asked = np.nonzero(asks)
-        self._queries += len(t)
+        self._awaited += len(t)
         start, end = cells[t, asker], cells[t, asked]
         gap = end - start
         unit = gap / np.maximum(np.linalg.norm(gap, axis=-1, keepdims=True), 1e-6)
