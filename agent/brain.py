@@ -16,7 +16,7 @@ import numpy as np
 from agent.learning import EpisodeNoise, Hyper
 from agent.negotiation import awaited
 from agent.single import SingleLearner
-from protocol.actions import STAY, intended_cell
+from protocol.actions import STAY, intended_cell_of
 from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from protocol.messages import Observation
 from protocol.seeding import AGENT_STREAM, stream_rng
@@ -64,10 +64,5 @@ class AgentBrain:
     def _next_cells(self, cells: dict[int, tuple[int, int]],
                     answers: dict[int, int]) -> dict[int, tuple[int, int]]:
         """The cells the answering neighbours announced they are heading for."""
-        if not answers:
-            return {}
-        ids = list(answers)
-        targets = intended_cell(np.array([cells[j] for j in ids]),
-                                np.array([answers[j] for j in ids]),
-                                self.config.width, self.config.height)
-        return {j: (x, y) for j, (x, y) in zip(ids, targets.tolist())}
+        w, h = self.config.width, self.config.height
+        return {j: intended_cell_of(*cells[j], action, w, h) for j, action in answers.items()}

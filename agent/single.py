@@ -44,11 +44,13 @@ class SingleLearner(Learners):
         self.reads_intents = bool(use_intents)
         self.reads_direction = bool(with_direction)
         self.slots = n_neighbours
+        self._visible_slots: list[int] = []  # the slots of _p_visible, as a list
 
     def record_one(self, r_ds: float, r_ca: float, arrived: bool) -> None:
         """:meth:`Learners.record` for the one learner."""
-        self.record(np.array([r_ds], dtype=float), np.array([r_ca], dtype=float),
-                    np.array([arrived], dtype=bool))
+        self._p_r_ds[0] = r_ds
+        self._p_r_ca[0] = r_ca
+        self._p_terminal[0] = arrived
 
     def decide_one(self, own: Cell, goal: Cell, cells: dict[int, Cell],
                    next_cells: dict[int, Cell], random_action: int,
@@ -72,6 +74,7 @@ class SingleLearner(Learners):
         self._p_nb[0] = nb_states
         self._p_visible[0] = False
         self._p_visible[0, list(cells)] = True
+        self._visible_slots = sorted(cells)
         return action
 
     def finish_one(self, own: Cell, goal: Cell, cells: dict[int, Cell]) -> None:
@@ -83,12 +86,16 @@ class SingleLearner(Learners):
     def _nb_states(self, own: Cell, cells: dict[int, Cell],
                    next_cells: dict[int, Cell]) -> list[int]:
         """``neighbour_states`` for every slot; a slot out of view reads cell (0, 0) there."""
+        ox, oy, r = own[0], own[1], VIEW_RADIUS
+        if not self.reads_intents:
+            next_cells = {}
         states = []
         for slot in range(self.slots):
             cell = cells.get(slot, (0, 0))
-            ahead = next_cells.get(slot) if self.reads_intents else None
-            seen = ahead if ahead is not None else cell
-            state = offset_state_of(seen[0] - own[0], seen[1] - own[1])
+            ahead = next_cells.get(slot)
+            x, y = cell if ahead is None else ahead
+            dx, dy = x - ox, y - oy
+            state = ((min(max(dx, -r), r) + r) * WINDOW) + min(max(dy, -r), r) + r
             if self.reads_direction:
                 move = (UNKNOWN_MOVE if ahead is None
                         else _MOVE_OF_STEP[(ahead[0] - cell[0], ahead[1] - cell[1])])
@@ -98,14 +105,15 @@ class SingleLearner(Learners):
 
     def _q_final_one(self, own: Cell, goal_s: int, cells: dict[int, Cell],
                      nb_states: list[int]) -> list[float]:
-        """Eq. 6 and 7 as ``Learners._q_final`` computes them."""
-        weights = np.zeros((1, self.slots))
+        """Eq. 6 and 7 as ``Learners._q_final`` computes them (the same products and sums)."""
+        weights = [0.0] * self.slots
         for slot, (x, y) in cells.items():
             dx, dy = x - own[0], y - own[1]
-            weights[0, slot] = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
-        q_ca = np.einsum("bm,bma->ba", weights, self.q_ca[0][nb_states][None])
-        beta = self.hyper.beta
-        return (beta * self.q_ds[0, goal_s] + (1.0 - beta) * q_ca[0]).tolist()
+            weights[slot] = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
+        q_ca = np.einsum("bm,bma->ba", np.array([weights]), self.q_ca[0][nb_states][None])
+        beta, rest = self.hyper.beta, 1.0 - self.hyper.beta
+        return [beta * ds + rest * ca for ds, ca in zip(self.q_ds[0, goal_s].tolist(),
+                                                          q_ca[0].tolist())]
 
     def _complete_one(self, next_goal: int, next_nb: list[int]) -> None:
         """``Learners._complete`` for the one learner: Eq. 9, then Eq. 10 slot by slot."""
@@ -114,7 +122,7 @@ class SingleLearner(Learners):
                  0.0 if self._p_terminal[0] else 1.0)
         states = self._p_nb[0].tolist()
         reward_ca = float(self._p_r_ca[0])
-        for slot in np.flatnonzero(self._p_visible[0]).tolist():
+        for slot in self._visible_slots:
             self._td(self.q_ca[0], states[slot], action, reward_ca, next_nb[slot], 1.0)
         self._pending[0] = False
 
@@ -122,9 +130,10 @@ class SingleLearner(Learners):
             bootstrap: float) -> None:
         """``agent.learning.td_update`` for one entry, in the same order of operations."""
         h = self.hyper
-        current = float(table[state, action])
-        target = reward + h.gamma * bootstrap * float(table[next_state].max())
-        table[state, action] = current + h.alpha * (target - current)
+        row = table[state]
+        current = float(row[action])
+        target = reward + h.gamma * bootstrap * max(table[next_state].tolist())
+        row[action] = current + h.alpha * (target - current)
 
 
 

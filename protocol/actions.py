@@ -59,3 +59,13 @@ def intended_cell(position: np.ndarray, action: np.ndarray, width: int, height: 
         & (target[..., 1] < height)
     )
     return np.where(on_grid[..., None], target, position)
+
+
+_STEPS = tuple((int(dx), int(dy)) for dx, dy in MOVES)
+
+
+def intended_cell_of(x: int, y: int, action: int, width: int, height: int) -> tuple[int, int]:
+    """:func:`intended_cell` for one cell, in plain Python (on the negotiation's critical path)."""
+    dx, dy = _STEPS[action]
+    tx, ty = x + dx, y + dy
+    return (tx, ty) if 0 <= tx < width and 0 <= ty < height else (x, y)

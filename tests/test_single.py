@@ -96,3 +96,13 @@ def test_single_learner_is_the_batch_learner_bit_for_bit(algo, grid, agents):
                      "_p_nb", "_p_visible"):
             assert np.array_equal(getattr(a.learner, name), getattr(b.learner, name)), name
         assert np.any(a.learner.q_ca != 0)
+
+
+def test_intended_cell_of_is_intended_cell_for_one_cell():
+    from protocol.actions import N_ACTIONS, intended_cell_of
+
+    for x in range(-1, 6):
+        for y in range(-1, 5):
+            for action in range(N_ACTIONS):
+                expected = tuple(intended_cell(np.array([x, y]), action, 5, 4).tolist())
+                assert intended_cell_of(x, y, action, 5, 4) == expected
