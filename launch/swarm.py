@@ -271,10 +271,35 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
 
 
 def name_process(title: str, config: SwarmConfig) -> None:
-    """Make the process recognisable in ps / pgrep: e.g. ``nnql-agent 3 <run-id>``."""
+    """Make the process recognisable in ps / pgrep: e.g. ``nnql-agent 3 <run-id>``; and make it
+    end with the launcher (:func:`die_with_launcher`)."""
     import setproctitle
 
     setproctitle.setproctitle(f"{title} {config.run_id}")
+    die_with_launcher()
+
+
+PR_SET_PDEATHSIG = 1
+"""prctl(2): the signal a process gets when the thread that started it ends."""
+
+
+def die_with_launcher() -> None:
+    """Have Linux send SIGTERM to this process when the launcher dies, even by ``kill -9``.
+
+    Otherwise a launcher killed outright leaves its agents waiting for a world that never comes
+    back, and they would join the next ``--resume`` of the same run as a second copy of each
+    agent. SIGTERM stops a process as Ctrl-C does (checkpoints and stats intact). Elsewhere than
+    Linux this does nothing.
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+    parent = mp.parent_process()
+    if parent is not None and os.getppid() != parent.pid:  # it died before prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 def setup_logging(name: str) -> None:

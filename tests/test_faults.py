@@ -10,6 +10,7 @@ import shutil
 import signal
 import subprocess
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -210,3 +211,30 @@ def test_an_unreachable_router_ends_the_run_with_one_clear_line_per_process(tmp_
     assert "Traceback" not in result.stderr
     assert result.stderr.count(f"cannot open a Zenoh client (tcp/127.0.0.1:{port})") == 2
     assert "could not start" in result.stderr
+
+
+def test_a_launcher_killed_outright_takes_its_processes_with_it(tmp_path):
+    out = tmp_path / "orphans"
+    swarm = start_swarm(out, "--agents", "4", "--episodes", "1000", "--run-id", "orphans",
+                        "--no-record")
+    try:
+        wait_for_rows(out / "episodes.csv", 1, 120, swarm)
+        children = [p for title in ["nnql-world orphans"] + [f"nnql-agent {i} orphans"
+                                                            for i in range(4)]
+                    for p in find_process(title)]
+        assert len(children) == 5
+        os.kill(swarm.pid, signal.SIGKILL)
+        swarm.wait(timeout=10)
+        deadline = time.monotonic() + 10
+        while any(find_process(t) for t in ["nnql-world orphans", "nnql-agent 0 orphans"]) \
+                and time.monotonic() < deadline:
+            time.sleep(0.1)
+        left = [p for p in children if Path(f"/proc/{p}").exists()
+                and Path(f"/proc/{p}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"]
+        assert left == [], "processes outlived their launcher"
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    for agent in range(4):  # they stopped as on Ctrl-C: checkpoints intact
+        checkpoint.load(out / "checkpoints" / f"agent-{agent}.npz", AgentBrain(agent, config))
