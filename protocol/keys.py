@@ -160,18 +160,10 @@ def parse_intent_asker(parameters) -> int | None:
 
     The asker only orders the answers (the next in rank first); nothing trusts it beyond that.
     """
-    try:
-        if isinstance(parameters, str):
-            value = _param_from_str(parameters, INTENT_QUERY_ASKER)
-        elif parameters is None:
-            return None
-        else:
-            value = parameters.get(INTENT_QUERY_ASKER)
-        if not isinstance(value, str) or not _AGENT_ID_RE.fullmatch(value):
-            return None
-        agent = int(value)
-    except Exception:
+    value = _param(parameters, INTENT_QUERY_ASKER)
+    if not isinstance(value, str) or not _AGENT_ID_RE.fullmatch(value):
         return None
+    agent = int(value)
     return agent if agent < MAX_AGENTS else None
 
 
@@ -181,28 +173,30 @@ def parse_intent_query(parameters) -> int | None:
     ``parameters`` is zenoh's ``Parameters`` (``query.parameters``), a str such as ``"tick=12"``
     (``;``-separated, as zenoh writes them) or a dict-like. Never raises.
     """
-    return _parse_tick_param(parameters, INTENT_QUERY_TICK)
+    return _tick_param(parameters, INTENT_QUERY_TICK)
 
 
 def parse_standing_since(parameters) -> int | None:
     """The first tick of a standing query (``since``), or None as :func:`parse_intent_query`."""
-    return _parse_tick_param(parameters, INTENT_QUERY_SINCE)
+    return _tick_param(parameters, INTENT_QUERY_SINCE)
 
 
-def _parse_tick_param(parameters, name: str) -> int | None:
+def _param(parameters, name: str):
+    """The raw value of one selector parameter (str, dict-like or zenoh's), or None. Never raises."""
     try:
         if isinstance(parameters, str):
-            value = _param_from_str(parameters, name)
-        elif parameters is None:
-            return None
-        else:
-            value = parameters.get(name)
-        if type(value) is int:
-            tick = value
-        elif isinstance(value, str) and _TICK_RE.fullmatch(value):
-            tick = int(value)
-        else:
-            return None
+            return _param_from_str(parameters, name)
+        return None if parameters is None else parameters.get(name)
     except Exception:
+        return None
+
+
+def _tick_param(parameters, name: str) -> int | None:
+    value = _param(parameters, name)
+    if type(value) is int:
+        tick = value
+    elif isinstance(value, str) and _TICK_RE.fullmatch(value):
+        tick = int(value)
+    else:
         return None
     return tick if 0 <= tick < MAX_TICK else None

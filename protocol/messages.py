@@ -174,30 +174,26 @@ def _cell(x):
     return (_coord(x[0]), _coord(x[1]))
 
 
-def _neighbours(x):
-    if not isinstance(x, _SEQ) or len(x) > MAX_AGENTS:
-        raise ValueError(f"expected a list of at most {MAX_AGENTS} [id, x, y]")
-    out = []
-    for item in x:
-        if not isinstance(item, _SEQ) or len(item) != 3:
-            raise ValueError("expected [id, x, y]")
-        out.append((_agent(item[0]), _coord(item[1]), _coord(item[2])))
-    if len({n[0] for n in out}) != len(out):
-        raise ValueError("duplicate neighbour id")
-    return tuple(out)
+def _per_agent(what: str, *rest):
+    """A check of a list with one ``[agent id, *rest]`` entry per agent (at most MAX_AGENTS)."""
+    width = 1 + len(rest)
+
+    def check(x):
+        if not isinstance(x, _SEQ) or len(x) > MAX_AGENTS:
+            raise ValueError(f"expected a list of at most {MAX_AGENTS} {what}")
+        out = []
+        for item in x:
+            if not isinstance(item, _SEQ) or len(item) != width:
+                raise ValueError(f"expected {what}")
+            out.append((_agent(item[0]), *(c(v) for c, v in zip(rest, item[1:]))))
+        if len({entry[0] for entry in out}) != len(out):
+            raise ValueError(f"the same agent twice in {what}")
+        return tuple(out)
+    return check
 
 
-def _relayed(x):
-    if not isinstance(x, _SEQ) or len(x) > MAX_AGENTS:
-        raise ValueError(f"expected a list of at most {MAX_AGENTS} [id, action]")
-    out = []
-    for item in x:
-        if not isinstance(item, _SEQ) or len(item) != 2:
-            raise ValueError("expected [id, action]")
-        out.append((_agent(item[0]), _action(item[1])))
-    if len({n[0] for n in out}) != len(out):
-        raise ValueError("duplicate relayed agent")
-    return tuple(out)
+_neighbours = _per_agent("[id, x, y]", _coord, _coord)
+_relayed = _per_agent("[id, action]", _action)
 
 
 class Field(NamedTuple):
