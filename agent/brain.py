@@ -11,8 +11,6 @@ then answers for itself. A neighbour whose intent did not come is read the QL wa
 current cell. A QL agent asks nobody.
 """
 
-import numpy as np
-
 from agent.learning import EpisodeNoise, Hyper
 from agent.negotiation import awaited
 from agent.single import SingleLearner
