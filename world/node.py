@@ -144,11 +144,11 @@ class WorldNode:
         return start
 
     def _keep_intent(self, sample: zenoh.Sample) -> None:
-        """Zenoh callback: keep an intent; wake the loop once as many have come as it awaits.
+        """Zenoh callback: keep an intent; wake the loop once ``wake_at`` intents are kept.
 
         Intents come one per agent, spread over the tick; the loop needs them all, so it sleeps
-        until then rather than waking for each one (waking the world eight times a tick slowed
-        the negotiation chain it runs beside)."""
+        until nearly all are in rather than waking for each one (waking the world eight times a
+        tick slowed the negotiation chain it runs beside)."""
         self.intent_samples.append(sample)
         if len(self.intent_samples) >= self.wake_at:
             self.events.put(("intents", None))
@@ -161,8 +161,10 @@ class WorldNode:
             missing = sum(actions[i] is None for i in self.alive)
             if not missing:
                 break
-            self.wake_at = missing
-            if len(self.intent_samples) < missing:  # checked after setting wake_at: no lost wake
+            # Wake when all but one are in, so that only the last one's decoding is left for the
+            # moment it comes; then for the last.
+            self.wake_at = max(missing - 1, 1)
+            if len(self.intent_samples) < self.wake_at:  # checked after setting: no lost wake
                 remaining = deadline - time.monotonic()
                 if remaining <= 0:
                     break
