@@ -56,9 +56,6 @@ decided this tick may ask for, or answer, the next one before this agent decides
 STANDING_QUERY_S = 600.0
 """Lifetime of a standing query; when it ends, the agent opens another after its next decision."""
 
-STREAM_BUFFER = 64
-"""Answers a standing query keeps unread at most (a ring: the oldest go first, nothing blocks)."""
-
 PEER_WAIT_S = 30.0
 """How long an agent waits at start-up to see every other agent before it acts anyway."""
 
@@ -233,9 +230,7 @@ class AgentNode:
         if self.stopping:
             return
         action = self.brain.act(obs, {j: known[j] for j in needed if j in known})
-        intent = Intent(run=self.config.run_id, tick=obs.tick, sender=agent_sender(self.agent),
-                        agent=self.agent, episode=obs.episode, action=action)
-        answer = Answer(run=self.config.run_id, tick=obs.tick, sender=intent.sender,
+        answer = Answer(run=self.config.run_id, tick=obs.tick, sender=agent_sender(self.agent),
                         agent=self.agent, episode=obs.episode, action=action,
                         relayed=tuple(sorted(known.items())))
         self.decided_tick, self.decided_obs, self.decided_payload = obs.tick, obs, encode(answer)
@@ -246,7 +241,8 @@ class AgentNode:
             checkpoint.save(self.checkpoint_file, self.brain, obs.episode)
             if self.on_episode_end is not None:
                 self.on_episode_end(self.brain, obs.episode)
-        self.publisher.put(encode(intent))
+        self.publisher.put(encode(Intent(run=answer.run, tick=answer.tick, sender=answer.sender,
+                                         agent=self.agent, episode=obs.episode, action=action)))
         if not self.stream_open:
             self._open_stream(obs.tick + 1)
 
