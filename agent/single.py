@@ -18,16 +18,9 @@ import math
 import numpy as np
 
 from agent.learning import UNKNOWN_MOVE, Hyper, Learners
-from protocol.actions import MOVES, N_STATES, VIEW_RADIUS, WINDOW
+from protocol.actions import MOVES, N_STATES, offset_state_of
 
 Cell = tuple[int, int]
-
-
-def offset_state_of(dx: int, dy: int) -> int:
-    """``protocol.actions.offset_state`` for one offset."""
-    dx = min(max(dx, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
-    dy = min(max(dy, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
-    return dx * WINDOW + dy
 
 
 _MOVE_OF_STEP = {(int(dx), int(dy)): a for a, (dx, dy) in enumerate(MOVES)}
@@ -86,7 +79,7 @@ class SingleLearner(Learners):
     def _nb_states(self, own: Cell, cells: dict[int, Cell],
                    next_cells: dict[int, Cell]) -> list[int]:
         """``neighbour_states`` for every slot; a slot out of view reads cell (0, 0) there."""
-        ox, oy, r = own[0], own[1], VIEW_RADIUS
+        ox, oy = own
         if not self.reads_intents:
             next_cells = {}
         states = []
@@ -95,7 +88,7 @@ class SingleLearner(Learners):
             ahead = next_cells.get(slot)
             x, y = cell if ahead is None else ahead
             dx, dy = x - ox, y - oy
-            state = ((min(max(dx, -r), r) + r) * WINDOW) + min(max(dy, -r), r) + r
+            state = offset_state_of(dx, dy)
             if self.reads_direction:
                 move = (UNKNOWN_MOVE if ahead is None
                         else _MOVE_OF_STEP[(ahead[0] - cell[0], ahead[1] - cell[1])])

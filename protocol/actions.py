@@ -32,6 +32,13 @@ def offset_state(offset: np.ndarray) -> np.ndarray:
     return clipped[..., 0] * WINDOW + clipped[..., 1]
 
 
+def offset_state_of(dx: int, dy: int) -> int:
+    """:func:`offset_state` for one offset, in plain Python (an agent's decision path)."""
+    dx = min(max(dx, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
+    dy = min(max(dy, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
+    return dx * WINDOW + dy
+
+
 def state_offset(state: np.ndarray) -> np.ndarray:
     """Inverse of :func:`offset_state` on the window: state indices to offsets ``(..., 2)``."""
     state = np.asarray(state)

@@ -106,3 +106,11 @@ def test_intended_cell_of_is_intended_cell_for_one_cell():
             for action in range(N_ACTIONS):
                 expected = tuple(intended_cell(np.array([x, y]), action, 5, 4).tolist())
                 assert intended_cell_of(x, y, action, 5, 4) == expected
+
+
+def test_offset_state_of_is_offset_state_for_one_offset():
+    from protocol.actions import offset_state, offset_state_of
+
+    for dx in range(-14, 15):
+        for dy in range(-14, 15):
+            assert offset_state_of(dx, dy) == int(offset_state(np.array([dx, dy])))
