@@ -25,6 +25,9 @@ BACKOFF_FIRST_S = 0.5
 BACKOFF_MAX_S = 8.0
 HEALTHY_AFTER_S = 30.0
 FATAL_EXIT_CODES = (EXIT_TRANSPORT,)
+FATAL_GRACE_S = 1.5
+"""After one child could not start, the others get this long to fail the same way and say so
+(every process that cannot reach Zenoh prints its own line) before the run is stopped."""
 
 
 @dataclass
@@ -73,6 +76,8 @@ class Supervisor:
                     break
                 self._restart_dead_agents(leader)
                 time.sleep(POLL_S)
+            if self.fatal is not None:
+                self._let_the_others_report()
         finally:
             for s, handler in previous.items():
                 signal.signal(s, handler)
@@ -91,6 +96,13 @@ class Supervisor:
         if leader is not None:
             return leader.process.exitcode if leader.process.exitcode is not None else 1
         return max((abs(c.process.exitcode or 0) for c in self.children), default=0)
+
+    def _let_the_others_report(self) -> None:
+        """Give the other children :data:`FATAL_GRACE_S` to fail the same way and say so."""
+        deadline = time.monotonic() + FATAL_GRACE_S
+        while (any(c.process.is_alive() for c in self.children)
+               and time.monotonic() < deadline and not self.stop_requested):
+            time.sleep(POLL_S)
 
     def _fatal_exit(self) -> Child | None:
         """A child that cannot work at all (e.g. no Zenoh session): restarting would not help."""
