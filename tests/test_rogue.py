@@ -10,6 +10,7 @@ state is unchanged), and every rejection must be counted with its reason.
 import json
 import os
 import signal
+import time
 
 import msgpack
 import zenoh
@@ -78,6 +79,16 @@ def attack(port: int, rounds: int) -> int:
                                   connect=(f"tcp/127.0.0.1:{port}",))
     sent = 0
     with zenoh.open(transport.zenoh_config()) as session:
+        # Peers do not forward for each other: wait until the mesh has linked the rogue to every
+        # agent (their liveliness tokens arrive over those links), as an agent itself does.
+        seen = set()
+        with session.liveliness().declare_subscriber(
+                keys.alive_key_all(RUN_ID, keys.ROLE_AGENT),
+                lambda sample: seen.add(str(sample.key_expr)), history=True):
+            deadline = time.monotonic() + 30
+            while len(seen) < AGENTS and time.monotonic() < deadline:
+                time.sleep(0.05)
+        assert len(seen) == AGENTS, f"the rogue saw only {sorted(seen)}"
         tokens = [session.liveliness().declare_token(f"{keys.PREFIX}/{RUN_ID}/alive/agent/{name}")
                   for name in ("999", "x", "0042")]
         for _ in range(rounds):
