@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 
 from protocol.actions import DOWN, LEFT, MOVES, N_ACTIONS, RIGHT, STAY, UP, intended_cell
 from world.rules import (
-    CA_REWARD, GOAL_REWARD, arbitrate, collision_reward, destination_reward,
+    CA_REWARD, GOAL_REWARD, arbitrate, arbitrate_one, collision_reward, destination_reward,
     invariant_violations, shortest_steps,
 )
 
@@ -15,11 +15,14 @@ WIDTH, HEIGHT = 5, 4
 
 
 def tick(cells, actions, count_swaps=False, width=WIDTH, height=HEIGHT):
-    """One world of the batch: returns (new cells as tuples, collided as bools)."""
+    """One world of the batch: returns (new cells as tuples, collided as bools), after checking
+    that the one-world twin agrees."""
     moved, collided = arbitrate(
         np.array([cells]), np.array([actions]), width, height, count_swaps
     )
-    return [tuple(c) for c in moved[0].tolist()], collided[0].tolist()
+    result = [tuple(c) for c in moved[0].tolist()], collided[0].tolist()
+    assert arbitrate_one(cells, actions, width, height, count_swaps) == result
+    return result
 
 
 def test_free_moves_go_through():
