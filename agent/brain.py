@@ -13,7 +13,7 @@ current cell. A QL agent asks nobody.
 
 from agent.learning import EpisodeNoise, Hyper
 from agent.negotiation import awaited
-from agent.single import SingleLearner
+from agent.single import SingleLearner, Situation
 from protocol.actions import STAY, intended_cell_of
 from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from protocol.messages import Observation
@@ -36,6 +36,7 @@ class AgentBrain:
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
         self._noise: EpisodeNoise | None = None
         self._noise_episode = -1
+        self._prepared: tuple[Observation, Situation] | None = None
 
     def neighbours_to_ask(self, obs: Observation) -> list[int]:
         """The visible higher-ranked neighbours whose intents this agent decides with (none once
@@ -44,18 +45,27 @@ class AgentBrain:
             return []
         return awaited(obs, self.config.n_agents, self.config.algo)
 
+    def prepare(self, obs: Observation) -> None:
+        """Work out what the decision on ``obs`` needs that no intent changes; :meth:`act` on
+        the same observation then only adds the intents (an agent prepares while it waits)."""
+        cells = {j: (x, y) for j, x, y in obs.neighbours}
+        self._prepared = (obs, self.learner.situation(obs.position, obs.goal, cells))
+
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
         """Learn from the last action's rewards and choose this tick's action (STAY if done)."""
+        if self._prepared is None or self._prepared[0] is not obs:
+            self.prepare(obs)
+        situation = self._prepared[1]
+        self._prepared = None
         learner = self.learner
         learner.record_one(obs.reward_ds, obs.reward_ca, obs.arrived)
-        cells = {j: (x, y) for j, x, y in obs.neighbours}
         if obs.arrived or obs.episode_end:
-            learner.finish_one(obs.position, obs.goal, cells)
+            learner.finish_one(situation)
             return STAY
         if self._noise_episode != obs.episode:
             self._noise = EpisodeNoise.draw(self.rng, self.config.max_steps)
             self._noise_episode = obs.episode
-        return learner.decide_one(obs.position, obs.goal, cells, self._next_cells(cells, answers),
+        return learner.decide_one(situation, self._next_cells(situation.cells, answers),
                                   self._noise.random_actions[obs.step],
                                   self._noise.tie_breakers[obs.step])
 

@@ -10,10 +10,13 @@ order, and the one sum whose order numpy chooses (Eq. 6) through the very same `
 ``tests/test_single.py`` checks that whole swarm runs give identical actions and tables.
 
 Inputs are an agent's own terms: its cell, its goal, the visible neighbours' cells by agent id
-(one slot per id, as ``agent.brain`` lays them out) and the announced next cells it knows.
+(one slot per id, as ``agent.brain`` lays them out) and the announced next cells it knows. What
+needs no intent is computed first, as a :class:`Situation`, so that an agent can do it while it
+waits for the intents ranked above it, and only the rest once they are in.
 """
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -24,6 +27,18 @@ Cell = tuple[int, int]
 
 
 _MOVE_OF_STEP = {(int(dx), int(dy)): a for a, (dx, dy) in enumerate(MOVES)}
+
+
+@dataclass(frozen=True, slots=True)
+class Situation:
+    """One observation in a learner's terms: its cell, the goal's state, the visible neighbours'
+    cells by slot, every slot's state read from the current cells, and Eq. 6's weights."""
+
+    own: Cell
+    goal_state: int
+    cells: dict[int, Cell]
+    states: list[int]
+    weights: list[float]
 
 
 class SingleLearner(Learners):
@@ -45,15 +60,27 @@ class SingleLearner(Learners):
         self._p_r_ca[0] = r_ca
         self._p_terminal[0] = arrived
 
-    def decide_one(self, own: Cell, goal: Cell, cells: dict[int, Cell],
-                   next_cells: dict[int, Cell], random_action: int,
-                   tie_breakers: np.ndarray) -> int:
-        """:meth:`Learners.decide` for the one (active) learner; returns its action."""
-        goal_s = offset_state_of(goal[0] - own[0], goal[1] - own[1])
-        nb_states = self._nb_states(own, cells, next_cells)
+    def situation(self, own: Cell, goal: Cell, cells: dict[int, Cell]) -> "Situation":
+        """What a decision reads that no neighbour's intent changes: computed as soon as the
+        observation is in, while the agent still waits for the intents ranked above it."""
+        ox, oy = own
+        state_of_cell = self._state_of_cell
+        states = [state_of_cell(cells.get(slot, (0, 0)), ox, oy) for slot in range(self.slots)]
+        weights = [0.0] * self.slots
+        for slot, (x, y) in cells.items():
+            dx, dy = x - ox, y - oy
+            weights[slot] = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
+        return Situation(own, offset_state_of(goal[0] - ox, goal[1] - oy), cells, states,
+                         weights)
+
+    def decide_one(self, situation: "Situation", next_cells: dict[int, Cell],
+                   random_action: int, tie_breakers: np.ndarray) -> int:
+        """:meth:`Learners.decide` for the one (active) learner; returns its action.
+        ``next_cells``: the announced next cells of the neighbours whose intents are known."""
+        nb_states = self._nb_states(situation, next_cells)
         if self._pending[0]:
-            self._complete_one(goal_s, nb_states)
-        values = self._q_final_one(own, goal_s, cells, nb_states)
+            self._complete_one(situation.goal_state, nb_states)
+        values = self._q_final_one(situation, nb_states)
         best = max(values)
         ties = tie_breakers.tolist()
         greedy = max((a for a in range(len(values)) if values[a] >= best),
@@ -62,51 +89,46 @@ class SingleLearner(Learners):
         action = int(random_action) if (taken + 1) % self.k == 0 else greedy
         self.actions_taken[0] = taken + 1
         self._pending[0] = True
-        self._p_goal[0] = goal_s
+        self._p_goal[0] = situation.goal_state
         self._p_action[0] = action
         self._p_nb[0] = nb_states
         self._p_visible[0] = False
-        self._p_visible[0, list(cells)] = True
-        self._visible_slots = sorted(cells)
+        self._p_visible[0, list(situation.cells)] = True
+        self._visible_slots = sorted(situation.cells)
         return action
 
-    def finish_one(self, own: Cell, goal: Cell, cells: dict[int, Cell]) -> None:
+    def finish_one(self, situation: "Situation") -> None:
         """:meth:`Learners.finish` for the one learner (the QL reading of ``s'``)."""
         if self._pending[0]:
-            goal_s = offset_state_of(goal[0] - own[0], goal[1] - own[1])
-            self._complete_one(goal_s, self._nb_states(own, cells, {}))
+            self._complete_one(situation.goal_state, self._nb_states(situation, {}))
 
-    def _nb_states(self, own: Cell, cells: dict[int, Cell],
-                   next_cells: dict[int, Cell]) -> list[int]:
-        """``neighbour_states`` for every slot; a slot out of view reads cell (0, 0) there."""
-        ox, oy = own
-        if not self.reads_intents:
-            next_cells = {}
-        states = []
-        for slot in range(self.slots):
-            cell = cells.get(slot, (0, 0))
-            ahead = next_cells.get(slot)
-            x, y = cell if ahead is None else ahead
-            dx, dy = x - ox, y - oy
-            state = offset_state_of(dx, dy)
+    def _state_of_cell(self, cell: Cell, ox: int, oy: int) -> int:
+        """A neighbour slot's state from the cell it is in (no intent known)."""
+        state = offset_state_of(cell[0] - ox, cell[1] - oy)
+        return state + N_STATES * UNKNOWN_MOVE if self.reads_direction else state
+
+    def _nb_states(self, situation: "Situation", next_cells: dict[int, Cell]) -> list[int]:
+        """``neighbour_states`` for every slot: the situation's, with each known intent's
+        announced cell in place of the current one (a slot out of view reads cell (0, 0))."""
+        if not self.reads_intents or not next_cells:
+            return situation.states
+        ox, oy = situation.own
+        states = list(situation.states)
+        for slot, (x, y) in next_cells.items():
+            state = offset_state_of(x - ox, y - oy)
             if self.reads_direction:
-                move = (UNKNOWN_MOVE if ahead is None
-                        else _MOVE_OF_STEP[(ahead[0] - cell[0], ahead[1] - cell[1])])
-                state += N_STATES * move
-            states.append(state)
+                cx, cy = situation.cells[slot]
+                state += N_STATES * _MOVE_OF_STEP[(x - cx, y - cy)]
+            states[slot] = state
         return states
 
-    def _q_final_one(self, own: Cell, goal_s: int, cells: dict[int, Cell],
-                     nb_states: list[int]) -> list[float]:
+    def _q_final_one(self, situation: "Situation", nb_states: list[int]) -> list[float]:
         """Eq. 6 and 7 as ``Learners._q_final`` computes them (the same products and sums)."""
-        weights = [0.0] * self.slots
-        for slot, (x, y) in cells.items():
-            dx, dy = x - own[0], y - own[1]
-            weights[slot] = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
-        q_ca = np.einsum("bm,bma->ba", np.array([weights]), self.q_ca[0][nb_states][None])
+        q_ca = np.einsum("bm,bma->ba", np.array([situation.weights]),
+                         self.q_ca[0][nb_states][None])
         beta, rest = self.hyper.beta, 1.0 - self.hyper.beta
-        return [beta * ds + rest * ca for ds, ca in zip(self.q_ds[0, goal_s].tolist(),
-                                                          q_ca[0].tolist())]
+        return [beta * ds + rest * ca
+                for ds, ca in zip(self.q_ds[0, situation.goal_state].tolist(), q_ca[0].tolist())]
 
     def _complete_one(self, next_goal: int, next_nb: list[int]) -> None:
         """``Learners._complete`` for the one learner: Eq. 9, then Eq. 10 slot by slot."""
