@@ -6,15 +6,23 @@ open on its predecessor's intent key (``agent/<id-1>/intent?since=T;from=<id>``)
 plan needs more, with one ``get`` each on ``agent/<j>/intent?tick=T;from=<id>`` (answers relay what
 their senders learned); decide; answer the standing and held queries this tick owes, the next in
 rank first, and publish the intent on ``agent/<id>/intent`` for the world. An announced intent
-never changes. At each episode's end, checkpoint the Q-tables atomically. Zenoh callbacks only
-hand events to a queue; all work is on the main thread.
+never changes. At each episode's end, checkpoint the Q-tables atomically.
+
+The node is a set of event handlers over one state, each run under the node's lock. Observations,
+answers and queries are handled where Zenoh delivers them, on its network thread: the moment the
+last awaited intent arrives, the agent decides and answers there, without waking another thread
+(that hand-over cost about 50 us a hop, more on a busy machine; README, "How fast"). Nothing there
+blocks: an agent waiting for intents is only a :class:`Pending` record. The main thread handles
+the rest (liveliness, the world's control messages), the negotiation's time-outs and each
+episode's end, whose checkpoint writes a file.
 """
 
 import logging
 import queue
 import signal
+import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
@@ -37,8 +45,9 @@ log = logging.getLogger("nnql.agent")
 NO_CONSOLIDATION = zenoh.ConsolidationMode.NONE
 """Answers are delivered as they come; Zenoh's default would hold them until the query ends."""
 
-POLL_S = 0.2
-"""How often a waiting agent checks whether it was asked to stop."""
+POLL_S = 0.05
+"""How often the main thread checks whether it was asked to stop and whether a negotiation ran out
+of time (a time-out is noticed up to this late)."""
 
 RESYNC_AFTER = 3
 """Consecutive observations past a gap in the ticks after which an agent follows them."""
@@ -59,6 +68,9 @@ STANDING_QUERY_S = 600.0
 PEER_WAIT_S = 30.0
 """How long an agent waits at start-up to see every other agent before it acts anyway."""
 
+_NOTHING = negotiation.TickIntents()
+"""What an agent knows of a tick nobody answered for (never written to)."""
+
 
 @dataclass(frozen=True)
 class AgentOptions:
@@ -75,8 +87,22 @@ class AgentOptions:
         return self.config.tick_deadline_s / 2
 
 
+@dataclass
+class Pending:
+    """An observation whose decision waits for intents: whose (``awaited``), whom this agent
+    asked (``asks``), until when, and, once the answers are in, the ones it then asked for
+    directly because no answer brought them (``missing``)."""
+
+    obs: Observation
+    awaited: list[int]
+    asks: list[int]
+    deadline: float
+    missing: list[int] | None = None
+    needed: list[int] = field(default_factory=list)  # what the brain decides with
+
+
 class AgentNode:
-    """The agent's event loop over its Zenoh session."""
+    """The agent's event handlers over its Zenoh session (see the module docstring)."""
 
     def __init__(self, options: AgentOptions, session: zenoh.Session,
                  brain: AgentBrain | None = None,
@@ -89,7 +115,12 @@ class AgentNode:
         self.on_episode_end = on_episode_end
         self.inbox = Inbox(self.config.run_id, log)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.lock = threading.RLock()
         self.stopping = False
+        self.failure: BaseException | None = None
+        self.ready = False  # every peer seen (or given up on): observations are handled
+        self.early_observations: list = []
+        self.pending: Pending | None = None
         self.decided_tick = -1
         self.decided_payload = b""
         self.decided_obs: Observation | None = None
@@ -99,7 +130,6 @@ class AgentNode:
         self.predecessor = (self.agent - 1) % self.config.n_agents
         self.stream_open = False
         self.stream_generation = 0
-        self.backlog: list[tuple[str, object]] = []
         self.peers_seen: set[int] = set()
         self.gap_tick, self.gap_run = -1, 0
         self.shutdown = False
@@ -115,15 +145,31 @@ class AgentNode:
         self.stopping = True
         self.events.put(("stop", None))
 
+    def _guarded(self, handler: Callable, *args) -> Callable:
+        """``handler(*args, item)`` as a Zenoh callback: under the lock, and a bug in it stops
+        the agent (``run`` raises it) instead of vanishing into Zenoh's thread."""
+        def callback(*item) -> None:
+            with self.lock:
+                if self.stopping:
+                    return
+                try:
+                    handler(*args, *item)
+                except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
+                    self.failure = error
+                    self.stop()
+        return callback
+
     def run(self) -> None:
         run_id, s = self.config.run_id, self.session
+        callback = zenoh.handlers.Callback
         with (
             s.declare_subscriber(keys.obs_key(run_id, self.agent),
-                                 enqueue(self.events, "obs")),
+                                 callback(self._guarded(self._on_observation_sample),
+                                          indirect=False)),
             s.declare_subscriber(keys.control_key(run_id),
                                  enqueue(self.events, "control")),
             s.declare_queryable(keys.intent_key(run_id, self.agent),
-                                enqueue(self.events, "query")),
+                                callback(self._guarded(self._on_query), indirect=False)),
             s.declare_publisher(keys.intent_key(run_id, self.agent), express=True,
                                 congestion_control=zenoh.CongestionControl.BLOCK) as publisher,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
@@ -134,26 +180,33 @@ class AgentNode:
                                               enqueue(self.events, "world")),
         ):
             self.publisher = publisher
-            self.backlog = self._wait_for_peers()
-            while not self.stopping:
-                if self.backlog:
-                    kind, item = self.backlog.pop(0)
-                else:
+            try:
+                self._wait_for_peers()
+                while not self.stopping:
                     try:
                         kind, item = self.events.get(timeout=POLL_S)
                     except queue.Empty:
-                        continue
-                self._dispatch(kind, item)
-            self._drop_held_queries()
-            self._drop_standing_queries()
+                        kind, item = None, None
+                    with self.lock:
+                        if kind is not None:
+                            self._dispatch(kind, item)
+                        if self.pending is not None and not self.stopping:
+                            self._advance()  # a negotiation may have run out of time
+            finally:
+                with self.lock:
+                    self.stopping = True
+                    self._drop_held_queries()
+                    self._drop_standing_queries()
+        if self.failure is not None:
+            raise self.failure
 
-    def _wait_for_peers(self) -> list:
-        """Wait until every other agent's token is seen, so negotiation reaches all of them.
+    def _wait_for_peers(self) -> None:
+        """Wait until every other agent's token is seen, so negotiation reaches all of them;
+        then handle the observations that came meanwhile, in order.
 
         Peers join into a mesh a little after they reach the world; a query sent before that
-        would find nobody. Events that arrive meanwhile are kept and returned, in order.
+        would find nobody.
         """
-        backlog = []
         others = self.config.n_agents - 1
         deadline = time.monotonic() + PEER_WAIT_S
         while len(self.peers_seen - {self.agent}) < others and not self.stopping:
@@ -166,23 +219,17 @@ class AgentNode:
                 kind, item = self.events.get(timeout=min(remaining, POLL_S))
             except queue.Empty:
                 continue
-            if kind == "alive":
-                self._on_alive(item)
-            else:
-                backlog.append((kind, item))
-        return backlog
+            with self.lock:
+                self._dispatch(kind, item)
+        with self.lock:
+            self.ready = True
+            early, self.early_observations = self.early_observations, []
+            for payload in early:
+                self._on_observation(payload)
 
     def _dispatch(self, kind: str, item) -> None:
-        if kind == "obs":
-            self._on_observation(item.payload)
-        elif kind == "query":
-            self._on_query(item)
-        elif kind == "answer":
-            self._on_answer(*item)
-        elif kind == "stream-end":
-            if item == self.stream_generation:
-                self.stream_open = False
-        elif kind == "control":
+        """A main-thread event (under the lock)."""
+        if kind == "control":
             self._on_control(item.payload)
         elif kind == "alive":
             self._on_alive(item)
@@ -194,6 +241,7 @@ class AgentNode:
         if sample.kind == zenoh.SampleKind.DELETE:
             log.info("the world left; waiting for it to come back")
             self.decided_tick = -1
+            self.pending = None
             self.brain.learner.forget_pending()
             self.intents = {}
             self._drop_held_queries()
@@ -212,13 +260,22 @@ class AgentNode:
             if query is not None:
                 query.drop()
 
+    def _on_observation_sample(self, sample: zenoh.Sample) -> None:
+        if self.ready:
+            self._on_observation(sample.payload)
+        else:
+            self.early_observations.append(sample.payload)
+
     def _on_observation(self, payload) -> None:
+        """Start a tick: decide at once if no intent is awaited, else ask and wait for them."""
         obs = self.inbox.decode(payload, Observation)
         if obs is None:
             return
         if obs.agent != self.agent:
             self.inbox.reject("wrong-agent", f"observation for agent {obs.agent}")
             return
+        if self.pending is not None and obs.tick == self.pending.obs.tick + 1:
+            self._decide_pending()  # the world has moved on (this agent stalled): decide now
         if obs.tick <= self.decided_tick:
             self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
@@ -226,13 +283,57 @@ class AgentNode:
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
         needed = self.brain.neighbours_to_ask(obs)
-        known = self._negotiate(obs)
-        if self.stopping:
+        awaited, asks = negotiation.plan_for(obs, self.config.n_agents, self.config.algo)
+        on_main_thread = threading.current_thread() is threading.main_thread()
+        if not awaited and not (obs.episode_end and not on_main_thread):
+            self._decide(obs, {})
             return
-        action = self.brain.act(obs, {j: known[j] for j in needed if j in known})
+        tick, timeout = obs.tick, self.options.negotiation_timeout_s
+        got = self.intents.setdefault(tick, negotiation.TickIntents())
+        for j in asks:
+            if j not in got.answered and not (j == self.predecessor and self.stream_open):
+                self._ask(j, tick, timeout)
+        self.pending = Pending(obs, awaited, asks, time.monotonic() + timeout, needed=needed)
+        if obs.episode_end:
+            self.events.put(("wake", None))  # the main thread decides it: its checkpoint is a file
+        else:
+            self.brain.prepare(obs)  # while the answers are on their way
+            self._advance()
+
+    def _advance(self) -> None:
+        """Move the pending negotiation on: once every asked neighbour answered (or time ran
+        out), ask directly for any awaited intent that no answer brought; once those are in
+        too (or time ran out), decide. Unanswered neighbours are left out."""
+        p = self.pending
+        got = self.intents.setdefault(p.obs.tick, negotiation.TickIntents())
+        remaining = p.deadline - time.monotonic()
+        if p.missing is None:
+            if remaining > 0 and not all(j in got.answered for j in p.asks):
+                return
+            if self.predecessor in p.asks and self.predecessor not in got.answered:
+                self.stream_open = False  # it did not answer in time: open a fresh one
+            p.missing = [j for j in p.awaited if j not in got.actions]
+            if p.missing and remaining > 0:
+                for j in p.missing:
+                    self._ask(j, p.obs.tick, remaining)
+                return
+        elif remaining > 0 and not all(j in got.actions for j in p.missing):
+            return
+        self._decide_pending()
+
+    def _decide_pending(self) -> None:
+        p, self.pending = self.pending, None
+        known = self.intents.get(p.obs.tick, _NOTHING).actions
+        self._decide(p.obs, {j: known[j] for j in p.needed if j in known})
+
+    def _decide(self, obs: Observation, answers: dict[int, int]) -> None:
+        """Decide ``obs`` with the ``answers`` of the neighbours the brain waits for; answer
+        for it, relaying every intent learned for the tick; checkpoint at an episode's end;
+        tell the world."""
+        action = self.brain.act(obs, answers)
         answer = Answer(run=self.config.run_id, tick=obs.tick, sender=agent_sender(self.agent),
                         agent=self.agent, episode=obs.episode, action=action,
-                        relayed=tuple(sorted(known.items())))
+                        relayed=tuple(sorted(self.intents.get(obs.tick, _NOTHING).actions.items())))
         self.decided_tick, self.decided_obs, self.decided_payload = obs.tick, obs, encode(answer)
         self.intents = {t: got for t, got in self.intents.items() if t > obs.tick}
         self._answer_standing_queries()
@@ -262,19 +363,22 @@ class AgentNode:
         self.gap_run = 0
         return True
 
-    def _answers_to_queue(self, sender: int, generation: int | None = None):
-        """The handler of a query to ``sender``: its replies become ``answer`` events, and, for
-        a standing query, its end a ``stream-end`` event."""
-        put = self.events.put
-        end = None if generation is None else (lambda: put(("stream-end", generation)))
-        return zenoh.handlers.Callback(lambda reply: put(("answer", (sender, reply))), end,
+    def _answer_handler(self, sender: int, generation: int | None = None):
+        """The handler of a query to ``sender``: its replies are handled as answers and, for a
+        standing query, its end closes the stream."""
+        end = None if generation is None else self._guarded(self._on_stream_end, generation)
+        return zenoh.handlers.Callback(self._guarded(self._on_answer, sender), end,
                                        indirect=False)
 
+    def _on_stream_end(self, generation: int) -> None:
+        if generation == self.stream_generation:
+            self.stream_open = False
+
     def _ask(self, neighbour: int, tick: int, timeout_s: float) -> None:
-        """Ask one neighbour for its intent at ``tick``; its answer comes as an event."""
+        """Ask one neighbour for its intent at ``tick``; its answer comes to ``_on_answer``."""
         selector = (f"{keys.intent_key(self.config.run_id, neighbour)}"
                     f"?{keys.intent_query_params(tick, self.agent)}")
-        self.session.get(selector, self._answers_to_queue(neighbour), express=True,
+        self.session.get(selector, self._answer_handler(neighbour), express=True,
                          consolidation=NO_CONSOLIDATION, timeout=timeout_s)
 
     def _open_stream(self, since: int) -> None:
@@ -285,55 +389,14 @@ class AgentNode:
         self.stream_generation += 1
         selector = (f"{keys.intent_key(self.config.run_id, self.predecessor)}"
                     f"?{keys.standing_query_params(since, self.agent)}")
-        self.session.get(selector,
-                         self._answers_to_queue(self.predecessor, self.stream_generation),
+        self.session.get(selector, self._answer_handler(self.predecessor, self.stream_generation),
                          express=True, consolidation=NO_CONSOLIDATION, timeout=STANDING_QUERY_S)
         self.stream_open = True
 
-    def _negotiate(self, obs: Observation) -> dict[int, int]:
-        """Every intent this agent learns for the tick, by agent: the awaited ones, asked for by
-        ``agent.negotiation``'s plan (the predecessor's comes on the standing query), then
-        directly any an answer should have brought and did not. Unanswered neighbours are left
-        out; negotiation ends within its timeout, or as soon as the agent is asked to stop."""
-        tick = obs.tick
-        got = self.intents.setdefault(tick, negotiation.TickIntents())
-        waiting_for, asks = negotiation.plan_for(obs, self.config.n_agents, self.config.algo)
-        if not waiting_for:
-            return got.actions
-        deadline = time.monotonic() + self.options.negotiation_timeout_s
-        for j in asks:
-            if j not in got.answered and not (j == self.predecessor and self.stream_open):
-                self._ask(j, tick, self.options.negotiation_timeout_s)
-        self._wait_until(lambda: all(j in got.answered for j in asks), deadline)
-        if self.predecessor in asks and self.predecessor not in got.answered:
-            self.stream_open = False  # it did not answer in time: open a fresh one
-        missing = [j for j in waiting_for if j not in got.actions]
-        remaining = deadline - time.monotonic()
-        if missing and remaining > 0 and not self.stopping:
-            for j in missing:
-                self._ask(j, tick, remaining)
-            self._wait_until(lambda: all(j in got.actions for j in missing), deadline)
-        return got.actions
-
-    def _wait_until(self, done: Callable[[], bool], deadline: float) -> None:
-        """Handle answers and queries until ``done()`` or the deadline; other events wait in
-        the backlog for the main loop, in order."""
-        while not done() and not self.stopping:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return
-            try:
-                kind, item = self.events.get(timeout=remaining)
-            except queue.Empty:
-                return
-            if kind in ("answer", "query", "stream-end", "alive", "control"):
-                self._dispatch(kind, item)
-            elif kind != "stop":
-                self.backlog.append((kind, item))
-
     def _on_answer(self, sender: int, reply: zenoh.Reply) -> None:
-        """Keep an answer for the coming ticks; answers for decided ticks are of no more use
-        (a standing query also brings those this agent did not need)."""
+        """Keep an answer for the coming ticks, and move the negotiation on if it waits for it;
+        answers for decided ticks are of no more use (a standing query also brings those this
+        agent did not need)."""
         if not reply.ok:
             return  # the query's end: a timeout, or a neighbour that is gone
         answer = self.inbox.decode(reply.ok.payload, Answer, key_agent=sender)
@@ -348,6 +411,9 @@ class AgentNode:
             self.inbox.reject("conflicting-relay", f"agent {sender} at tick {answer.tick}")
         while len(self.intents) > AHEAD_TICKS + 1:  # a flood of forged ticks stays bounded
             del self.intents[min(self.intents)]
+        p = self.pending
+        if p is not None and p.obs.tick == answer.tick and not p.obs.episode_end:
+            self._advance()
 
     def _on_query(self, query: zenoh.Query) -> None:
         tick = keys.parse_intent_query(query.parameters)

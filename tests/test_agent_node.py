@@ -1,7 +1,10 @@
 """The agent process's event handling, on a real (unconnected) Zenoh session: tick order rules."""
 
+import threading
+
 import zenoh
 
+from agent.brain import AgentBrain
 from agent.node import RESYNC_AFTER, AgentNode, AgentOptions
 from protocol import keys
 from protocol.config import SwarmConfig
@@ -39,3 +42,22 @@ def test_ticks_must_follow_on_and_a_gap_is_crossed_only_by_a_run_of_observations
             node._on_observation(observation(gap[-1]))
             assert node.decided_tick == gap[-1]
             assert node.inbox.rejections["future-tick"] == RESYNC_AFTER
+
+
+def test_a_bug_in_a_handler_on_zenohs_thread_stops_the_agent_instead_of_vanishing(tmp_path):
+    class BrokenBrain(AgentBrain):
+        def act(self, obs, answers):
+            raise RuntimeError("a bug in the brain")
+
+    settings = TransportSettings(mode="peer")
+    with zenoh.open(settings.zenoh_config()) as session:
+        node = AgentNode(AgentOptions(0, CONFIG, settings, tmp_path), session,
+                         BrokenBrain(0, CONFIG))
+        handler = node._guarded(node._on_observation)
+        zenoh_thread = threading.Thread(target=handler, args=(observation(0),))
+        zenoh_thread.start()
+        zenoh_thread.join()
+        assert node.stopping
+        assert isinstance(node.failure, RuntimeError)
+        handler(observation(1))  # a stopping agent handles nothing more
+        assert node.decided_tick == -1 and node.inbox.accepted == 1
