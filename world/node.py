@@ -2,16 +2,23 @@
 
 Per tick: publish every agent's observation on ``world/obs/<id>``, in rank order; collect intents
 from ``agent/*/intent`` until every live agent has answered or the tick deadline passes (a missing
-intent counts as STAY and as a missed intent); apply the tick with ``world.engine``; write the
-episode row; hand each tick to ``on_tick`` (the launcher logs it to Rerun there). Liveliness
-tokens under ``alive/agent/*`` tell who is live, so a dead agent costs nothing and a stalled one
-at most the deadline. Zenoh callbacks only keep what arrives (intents in a list, other events in
-a queue); all work is on the main thread.
+intent counts as STAY and as a missed intent); apply the tick with ``world.engine``; publish the
+next observations; then write the episode row and hand the tick to ``on_tick`` (the launcher logs
+it to Rerun there) while the agents already negotiate the next one. Liveliness tokens under
+``alive/agent/*`` tell who is live, so a dead agent costs nothing and a stalled one at most the
+deadline.
+
+Intents are handled where Zenoh delivers them, on its network thread, under the node's lock: the
+last one of a tick closes it there and sends the next observations at once, without waking
+another thread (README, "How fast"). The main thread does the rest: liveliness, the deadline,
+and the bookkeeping of each closed tick. A tick is closed only once the one before it is written
+and logged, so ``on_tick`` always sees the world as that tick left it.
 """
 
 import logging
 import queue
 import signal
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -35,6 +42,9 @@ BLOCK = zenoh.CongestionControl.BLOCK
 """Lockstep messages are never dropped: through a router one link carries every observation, and
 under load Zenoh's default (DROP) lost some, which stalled agents (README, "Several machines")."""
 
+POLL_S = 0.2
+"""How often the main thread checks whether it was asked to stop."""
+
 STARTUP_TIMEOUT_S = 60.0
 """How long the world waits for every agent to come alive before it gives up."""
 
@@ -56,7 +66,7 @@ class WorldOptions:
 
 
 class WorldNode:
-    """The world's event loop over its Zenoh session."""
+    """The world's event handlers over its Zenoh session (see the module docstring)."""
 
     def __init__(self, options: WorldOptions, session: zenoh.Session,
                  on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> None:
@@ -66,11 +76,16 @@ class WorldNode:
         self.world = SwarmWorld(self.config, options.first_episode, options.first_tick)
         self.inbox = Inbox(self.config.run_id, log)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
+        self.lock = threading.RLock()
         self.alive: set[int] = set()
         self.stopping = False
+        self.failure: BaseException | None = None
         self.on_tick = on_tick
-        self.intent_samples: list[zenoh.Sample] = []
-        self.wake_at = 1
+        self.publishers: list = []
+        self.actions: list[int | None] | None = None  # the open tick's intents, by agent
+        self.tick_start = 0.0
+        self.tick_deadline = 0.0
+        self.unlogged = 0  # closed ticks not yet written and logged
 
     def stop(self) -> None:
         self.stopping = True
@@ -81,22 +96,26 @@ class WorldNode:
         run_id, s, n = self.config.run_id, self.session, self.config.n_agents
         with (
             s.declare_subscriber(keys.intent_key_all(run_id),
-                                 zenoh.handlers.Callback(self._keep_intent, indirect=False)),
+                                 zenoh.handlers.Callback(self._on_intent_sample, indirect=False)),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               enqueue(self.events, "alive"), history=True),
             s.declare_publisher(keys.control_key(run_id), congestion_control=BLOCK) as control,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_WORLD, 0)),
         ):
-            publishers = [s.declare_publisher(keys.obs_key(run_id, i), express=True,
-                                              congestion_control=BLOCK) for i in range(n)]
+            self.publishers = [s.declare_publisher(keys.obs_key(run_id, i), express=True,
+                                                   congestion_control=BLOCK) for i in range(n)]
             try:
                 self._wait_for_agents()
-                completed = self._loop(publishers)
+                completed = self._loop()
             finally:
+                with self.lock:
+                    self.stopping = True
                 control.put(encode(Control(run=run_id, tick=self.world.tick, sender=WORLD_SENDER,
                                            command=CONTROL_SHUTDOWN)))
-                for publisher in publishers:
+                for publisher in self.publishers:
                     publisher.undeclare()
+        if self.failure is not None:
+            raise self.failure
         return completed
 
     def _wait_for_agents(self) -> None:
@@ -107,96 +126,114 @@ class WorldNode:
                 missing = sorted(set(range(self.config.n_agents)) - self.alive)
                 raise StartupTimeout(f"agents {missing} did not come alive within "
                                      f"{self.options.startup_timeout_s:.0f} s")
-            self._handle(timeout=remaining, tick=-1, actions=None)
+            self._handle(timeout=remaining)
 
-    def _loop(self, publishers) -> bool:
+    def _loop(self) -> bool:
+        """Open the first tick, then handle closed ticks, liveliness and deadlines until the
+        last tick is written and logged."""
         world = self.world
         episode_start, episode_tick, slowest = time.perf_counter(), world.tick, 0.0
         with EpisodeWriter(self.options.out_dir / EPISODES_FILE) as writer:
-            tick_start = self._publish_observations(publishers)
-            while not world.finished:
-                tick = world.tick
-                actions = self._collect_intents(tick)
-                if self.stopping:
-                    return False
-                report = world.apply(actions)
-                now = time.perf_counter()
-                slowest = max(slowest, now - tick_start)
-                if not world.finished:
-                    # The next tick starts before this one is logged: agents think meanwhile.
-                    tick_start = self._publish_observations(publishers)
+            with self.lock:
+                self._open_tick()
+            while not self.stopping:
+                with self.lock:
+                    if world.finished and not self.unlogged:
+                        return True
+                    self._close_if_due()
+                    timeout = min(max(self.tick_deadline - time.monotonic(), 0.0), POLL_S)
+                closed = self._handle(timeout)
+                if closed is None:
+                    continue
+                report, took, now = closed
+                # Unlocked: no tick closes until this one is logged, so the world stays put.
+                slowest = max(slowest, took)
                 if report.violations:
-                    log.error("tick %d broke the world's invariants: %s", tick, report.violations)
+                    log.error("tick %d broke the world's invariants: %s", report.tick,
+                              report.violations)
                 if report.episode_row is not None:
                     writer.write(report.episode_row, now - episode_start, world.tick - episode_tick,
                                  slowest, self.inbox.total_rejected)
                     episode_start, episode_tick, slowest = now, world.tick, 0.0
                 if self.on_tick is not None:
                     self.on_tick(world, report)
-        return True
+                with self.lock:
+                    self.unlogged -= 1
+        return False
 
-    def _publish_observations(self, publishers) -> float:
-        """Send every agent its observation of the current tick; returns when the tick began."""
-        start = time.perf_counter()
+    def _open_tick(self) -> None:
+        """Send every agent its observation of the current tick; start waiting for intents."""
+        self.actions = [None] * self.config.n_agents
+        self.tick_start = time.perf_counter()
+        self.tick_deadline = time.monotonic() + self.config.tick_deadline_s
         # In rank order: the first to decide is the first to know.
         for obs in sorted(self.world.observations(), key=lambda o: o.rank):
-            publishers[obs.agent].put(encode(obs))
-        return start
+            self.publishers[obs.agent].put(encode(obs))
 
-    def _keep_intent(self, sample: zenoh.Sample) -> None:
-        """Zenoh callback: keep an intent; wake the loop once ``wake_at`` intents are kept.
-
-        Intents come one per agent, spread over the tick; the loop needs them all, so it sleeps
-        until nearly all are in rather than waking for each one (waking the world eight times a
-        tick slowed the negotiation chain it runs beside)."""
-        self.intent_samples.append(sample)
-        if len(self.intent_samples) >= self.wake_at:
-            self.events.put(("intents", None))
-
-    def _collect_intents(self, tick: int) -> list[int | None]:
-        """Every live agent's action for ``tick``, or None where none came by the deadline."""
-        actions: list[int | None] = [None] * self.config.n_agents
-        deadline = time.monotonic() + self.config.tick_deadline_s
-        while not self.stopping:
-            missing = sum(actions[i] is None for i in self.alive)
-            if not missing:
-                break
-            # Wake when all but one are in, so that only the last one's decoding is left for the
-            # moment it comes; then for the last.
-            self.wake_at = max(missing - 1, 1)
-            if len(self.intent_samples) < self.wake_at:  # checked after setting: no lost wake
-                remaining = deadline - time.monotonic()
-                if remaining <= 0:
-                    break
-                self._handle(timeout=remaining, tick=tick, actions=actions)
-            samples, self.intent_samples = self.intent_samples, []
-            for sample in samples:
-                self._on_intent(sample, tick, actions)
-        self.wake_at = 1
-        return actions
-
-    def _handle(self, timeout: float, tick: int, actions: list[int | None] | None) -> None:
-        """Handle one event (or none, if ``timeout`` passes first)."""
-        try:
-            kind, sample = self.events.get(timeout=timeout)
-        except queue.Empty:
+    def _close_if_due(self) -> None:
+        """Close the open tick if every live agent's intent is in or its deadline passed, and
+        the tick before it is logged."""
+        if self.actions is None or self.unlogged or self.stopping:
             return
-        if kind == "alive":
-            agent = keys.agent_from_key(str(sample.key_expr), self.config.run_id)
-            if agent is None or agent >= self.config.n_agents:
-                self.inbox.reject("unknown-agent", str(sample.key_expr))
-            elif sample.kind == zenoh.SampleKind.PUT:
-                self.alive.add(agent)
-                log.info("agent %d is alive", agent)
-            else:
-                self.alive.discard(agent)
-                log.warning("agent %d left", agent)
+        if (time.monotonic() >= self.tick_deadline
+                or all(self.actions[i] is not None for i in self.alive)):
+            self._close_tick()
 
-    def _on_intent(self, sample: zenoh.Sample, tick: int, actions: list[int | None] | None) -> None:
+    def _close_tick(self) -> None:
+        """Apply the open tick, open the next (the agents think while this one is logged), and
+        hand the report to the main thread."""
+        report = self.world.apply(self.actions)
+        now = time.perf_counter()
+        took = now - self.tick_start
+        self.actions = None
+        if not self.world.finished:
+            self._open_tick()
+        self.unlogged += 1
+        self.events.put(("closed", (report, took, now)))
+
+    def _on_intent_sample(self, sample: zenoh.Sample) -> None:
+        """Zenoh callback: keep an intent; the last one of the tick closes it."""
+        with self.lock:
+            if self.stopping:
+                return
+            try:
+                self._on_intent(sample)
+                self._close_if_due()
+            except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
+                self.failure = error
+                self.stop()
+
+    def _handle(self, timeout: float):
+        """Handle one main-thread event (or none, if ``timeout`` passes first); returns a
+        closed tick's ``(report, its duration, when it closed)``, else None."""
+        try:
+            kind, item = self.events.get(timeout=timeout)
+        except queue.Empty:
+            return None
+        if kind == "closed":
+            return item
+        if kind == "alive":
+            with self.lock:
+                self._on_alive(item)
+        return None
+
+    def _on_alive(self, sample: zenoh.Sample) -> None:
+        agent = keys.agent_from_key(str(sample.key_expr), self.config.run_id)
+        if agent is None or agent >= self.config.n_agents:
+            self.inbox.reject("unknown-agent", str(sample.key_expr))
+        elif sample.kind == zenoh.SampleKind.PUT:
+            self.alive.add(agent)
+            log.info("agent %d is alive", agent)
+        else:
+            self.alive.discard(agent)
+            log.warning("agent %d left", agent)
+
+    def _on_intent(self, sample: zenoh.Sample) -> None:
         key_agent = keys.agent_from_key(str(sample.key_expr), self.config.run_id)
         intent = self.inbox.decode(sample.payload, Intent, key_agent=key_agent)
         if intent is None:
             return
+        tick, actions = self.world.tick, self.actions
         if intent.agent >= self.config.n_agents:
             self.inbox.reject("unknown-agent", f"agent {intent.agent}")
         elif actions is None or intent.tick < tick:
