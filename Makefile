@@ -31,6 +31,7 @@ bench: $(STAMP)
 	$(PY) bench/swarm_ticks.py
 	$(PY) bench/recording_cost.py
 	$(PY) bench/swarm_collisions.py
+	$(PY) bench/codec.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

@@ -13,11 +13,19 @@ only place that maps fields to wire keys.
 int is not a bool; float fields take ints but must be finite. :class:`Inbox` turns a rejection
 into a counted, rate-limited log line and None, and never raises. :func:`encode` runs the same
 checks (accepting numpy scalars and arrays), so a malformed message fails where it is made.
+
+Both first try a fast path, compiled at import from :data:`SCHEMA` (each check has a fast form):
+it tests every field inline and answers only for a valid message of plain built-in types; at any
+doubt (numpy, lists, an int for a float, anything invalid) it steps aside and the generic checks
+decide, so every rejection, its reason and its order are theirs.
 """
 
 import logging
+import threading
 from collections import Counter
 from dataclasses import dataclass
+from functools import lru_cache
+from operator import attrgetter, itemgetter
 from typing import NamedTuple
 
 import msgpack
@@ -122,6 +130,9 @@ class Rejected(ValueError):
 
 
 # Field checks: a decoded (or to-be-encoded) value in, the normalised value out, or ValueError.
+# Each has a fast form for the fast path: ``check.fast(v)``, the source of a test (an ``and`` chain)
+# of the expression ``v``, true only where the check would return ``v`` itself or its equal (so:
+# exact built-in types, tuples and not lists).
 
 def _int(lo: int, hi: int):
     def check(x):
@@ -132,6 +143,7 @@ def _int(lo: int, hi: int):
         if not lo <= x < hi:
             raise ValueError(f"{x} not in [{lo}, {hi})")
         return x
+    check.fast = lambda v: f"type({v}) is int and {lo} <= {v} < {hi}"
     return check
 
 
@@ -139,6 +151,9 @@ def _bool(x):
     if not isinstance(x, (bool, np.bool_)):
         raise ValueError(f"expected bool, got {type(x).__name__}")
     return bool(x)
+
+
+_bool.fast = lambda v: f"type({v}) is bool"
 
 
 def _reward(x):
@@ -149,16 +164,25 @@ def _reward(x):
     return float(x)
 
 
+_reward.fast = lambda v: f"type({v}) is float and {-MAX_REWARD!r} <= {v} <= {MAX_REWARD!r}"
+
+
 def _str(x):
     if not isinstance(x, str) or len(x) > MAX_STR_LEN:
         raise ValueError(f"expected str, got {type(x).__name__}")
     return x
 
 
+_str.fast = lambda v: f"type({v}) is str and len({v}) <= {MAX_STR_LEN}"
+
+
 def _command(x):
     if _str(x) not in CONTROL_COMMANDS:
         raise ValueError(f"unknown command {x!r}")
     return x
+
+
+_command.fast = lambda v: f"{_str.fast(v)} and {v} in CONTROL_COMMANDS"
 
 
 _agent = _int(0, MAX_AGENTS)
@@ -168,10 +192,19 @@ _count = _int(0, MAX_TICK)
 _SEQ = (list, tuple, np.ndarray)
 
 
+def _fast_tuple(v: str, checks: tuple) -> str:
+    """The fast form of a check that ``v`` is a tuple of ``len(checks)`` values, one a check."""
+    each = " and ".join(check.fast(f"{v}[{i}]") for i, check in enumerate(checks))
+    return f"type({v}) is tuple and len({v}) == {len(checks)} and {each}"
+
+
 def _cell(x):
     if not isinstance(x, _SEQ) or len(x) != 2:
         raise ValueError("expected [x, y]")
     return (_coord(x[0]), _coord(x[1]))
+
+
+_cell.fast = lambda v: _fast_tuple(v, (_coord, _coord))
 
 
 def _per_agent(what: str, *rest):
@@ -189,6 +222,11 @@ def _per_agent(what: str, *rest):
         if len({entry[0] for entry in out}) != len(out):
             raise ValueError(f"the same agent twice in {what}")
         return tuple(out)
+
+    check.fast = lambda v: (  # as many distinct ids as entries, counting only valid entries
+        f"type({v}) is tuple and len({v}) <= {MAX_AGENTS} and len({v}) == "
+        f"len({{item[0] for item in {v} if {_fast_tuple('item', (_agent, *rest))}}})"
+    )
     return check
 
 
@@ -251,6 +289,27 @@ def _schema(kind: type) -> Kind:
         raise TypeError(f"not a message class: {kind!r}") from None
 
 
+_AGENT_SENDERS = tuple(map(agent_sender, range(MAX_AGENTS)))
+"""The sender of every agent, looked up rather than formatted for each message."""
+
+
+def _related(msg, key_agent: int | None):
+    """``msg`` if the rules between its (valid) fields hold: its sender, whom its lists name."""
+    cls = type(msg)
+    if cls is Intent or cls is Answer:
+        if msg.sender != _AGENT_SENDERS[msg.agent]:
+            raise Rejected("forged-sender", f"intent of agent {msg.agent} sent by {msg.sender!r}")
+        if key_agent is not None and msg.agent != key_agent:
+            raise Rejected("forged-sender", f"agent {msg.agent}'s intent on {key_agent}'s key")
+    elif msg.sender != WORLD_SENDER:
+        raise Rejected("forged-sender", f"{cls.__name__} sent by {msg.sender!r}")
+    if cls is Observation and any(n[0] == msg.agent for n in msg.neighbours):
+        raise Rejected("bad-field:neighbours", "the observing agent is among its neighbours")
+    if cls is Answer and any(r[0] == msg.agent for r in msg.relayed):
+        raise Rejected("bad-field:relayed", "an agent relays its own intent")
+    return msg
+
+
 def _checked(cls: type, values: dict, key_agent: int | None) -> object:
     """Build a message from field values (by name), checking every field, then the sender."""
     out = {}
@@ -259,23 +318,11 @@ def _checked(cls: type, values: dict, key_agent: int | None) -> object:
             out[f.name] = f.check(values[f.name])
         except (ValueError, TypeError) as e:
             raise Rejected(f"bad-field:{f.name}", str(e)) from None
-    sender = out["sender"]
-    if cls is Intent or cls is Answer:
-        if sender != agent_sender(out["agent"]):
-            raise Rejected("forged-sender", f"intent of agent {out['agent']} sent by {sender!r}")
-        if key_agent is not None and out["agent"] != key_agent:
-            raise Rejected("forged-sender", f"agent {out['agent']}'s intent on {key_agent}'s key")
-    elif sender != WORLD_SENDER:
-        raise Rejected("forged-sender", f"{cls.__name__} sent by {sender!r}")
-    if cls is Observation and any(n[0] == out["agent"] for n in out["neighbours"]):
-        raise Rejected("bad-field:neighbours", "the observing agent is among its neighbours")
-    if cls is Answer and any(r[0] == out["agent"] for r in out["relayed"]):
-        raise Rejected("bad-field:relayed", "an agent relays its own intent")
-    return cls(**out)
+    return _related(cls(**out), key_agent)
 
 
-def to_wire(msg) -> dict:
-    """The validated wire map of a message (what :func:`encode` packs); Rejected if invalid."""
+def _generic_to_wire(msg) -> dict:
+    """:func:`to_wire` by the generic checks (where the fast path steps aside)."""
     cls = type(msg)
     kind = _schema(cls)
     try:
@@ -289,13 +336,36 @@ def to_wire(msg) -> dict:
     return wire
 
 
+def to_wire(msg) -> dict:
+    """The validated wire map of a message (what :func:`encode` packs); Rejected if invalid."""
+    fast = _FAST_TO_WIRE.get(type(msg))
+    return (fast and fast(msg)) or _generic_to_wire(msg)
+
+
+class _PerThread(threading.local):
+    def __init__(self):
+        self.packer = msgpack.Packer(use_bin_type=True)  # what msgpack.packb makes at each call
+
+
+_PER_THREAD = _PerThread()
+
+
 def encode(msg) -> bytes:
     """msgpack bytes of a message; raises Rejected (a ValueError) if the message is invalid."""
-    return msgpack.packb(to_wire(msg), use_bin_type=True)
+    return _PER_THREAD.packer.pack(to_wire(msg))
 
 
 def _no_ext(code, data):
     raise ValueError(f"ext type {code} not allowed")
+
+
+def _unpackb(payload: bytes, max_map_len: int, use_list: bool = True):
+    """``msgpack.unpackb`` with strict limits (and arrays as tuples if not ``use_list``)."""
+    return msgpack.unpackb(
+        payload, use_list=use_list, raw=False, strict_map_key=True, ext_hook=_no_ext,
+        max_ext_len=0, max_str_len=MAX_STR_LEN, max_bin_len=MAX_STR_LEN,
+        max_array_len=MAX_AGENTS, max_map_len=max_map_len,
+    )
 
 
 def _as_bytes(payload) -> bytes:
@@ -321,22 +391,14 @@ def _as_bytes(payload) -> bytes:
     raise Rejected("not-bytes", f"payload of type {type(payload).__name__}")
 
 
-def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None):
-    """Decode and validate one message of class ``kind`` for run ``run_id``; raises Rejected.
-
-    ``payload`` is bytes (or bytearray, memoryview, or zenoh ZBytes). ``key_agent`` is the agent id
-    parsed from the key an Intent arrived on: the intent must be that agent's own.
-    """
+def _generic_parse(payload, kind: type, run_id: str, key_agent: int | None = None):
+    """:func:`parse` by the generic checks (where the fast path steps aside)."""
     schema = _schema(kind)
     payload = _as_bytes(payload)
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise Rejected("oversize", f"{len(payload)} bytes")
     try:
-        data = msgpack.unpackb(
-            payload, raw=False, strict_map_key=True, ext_hook=_no_ext, max_ext_len=0,
-            max_str_len=MAX_STR_LEN, max_bin_len=MAX_STR_LEN,
-            max_array_len=MAX_AGENTS, max_map_len=4 * len(schema.fields),
-        )
+        data = _unpackb(payload, 4 * len(schema.fields))
     except Exception as e:
         raise Rejected("not-msgpack", f"{type(e).__name__}: {e}") from None
     if not isinstance(data, dict):
@@ -355,6 +417,95 @@ def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None)
     if type(run) is not str or run != run_id:
         raise Rejected("wrong-run", f"expected {run_id!r}, got {run!r}")
     return _checked(kind, {f.name: data[f.wire] for f in schema.fields}, key_agent)
+
+
+def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None):
+    """Decode and validate one message of class ``kind`` for run ``run_id``; raises Rejected.
+
+    ``payload`` is bytes (or bytearray, memoryview, or zenoh ZBytes). ``key_agent`` is the agent id
+    parsed from the key an Intent arrived on: the intent must be that agent's own.
+    """
+    try:
+        msg = _FAST_PARSE[kind](payload, run_id, key_agent)
+    except (KeyError, TypeError):  # not a message class: the generic path raises the TypeError
+        msg = None
+    return msg or _generic_parse(payload, kind, run_id, key_agent)
+
+
+# The fast path: for each message class, a parser and an encoder compiled from its SCHEMA entry,
+# which test each field inline with the fast form of its check. They answer only for a valid
+# message of plain built-in types (numpy and lists go the generic way), and None at any doubt or
+# broken rule; the generic functions above then decide, and word the rejection.
+
+@lru_cache(maxsize=64)
+def _valid_run_id(run: str) -> bool:
+    try:
+        validate_run_id(run)
+    except ValueError:
+        return False
+    return True
+
+
+_FAST_CODEC = """
+def fast_codec(cls, wire_values, attributes, setters):
+    {setter_names} = setters
+    new = object.__new__
+
+    def parse(payload, run_id, key_agent):
+        try:
+            if type(payload) is not bytes:
+                payload = _as_bytes(payload)
+            if len(payload) > MAX_PAYLOAD_BYTES:
+                return None
+            data = _unpackb(payload, {max_map_len}, use_list=False)
+            if type(data) is not dict or len(data) != {n_keys}:
+                return None
+            version, tag, {names} = wire_values(data)  # KeyError unless exactly its keys
+            if (type(version) is int and version == PROTOCOL_VERSION and tag == {tag!r}
+                    and run == run_id and {test}):
+                msg = new(cls)  # what the dataclass's __init__ does, in half the time
+                {set_fields}
+                return _related(msg, key_agent)
+        except Exception:  # any doubt
+            pass
+        return None
+
+    def to_wire(msg):
+        try:
+            {names} = attributes(msg)
+            if {test} and _valid_run_id(run):
+                _related(msg, None)
+                return {{"v": PROTOCOL_VERSION, "k": {tag!r}, {wire_map}}}
+        except (AttributeError, Rejected):
+            pass
+        return None
+
+    return parse, to_wire
+"""
+
+
+def _compile_fast_codec(cls: type) -> tuple:
+    """``parse(payload, run_id, key_agent)`` and ``to_wire(msg)`` of the fast path of ``cls``."""
+    kind = SCHEMA[cls]
+    names = [f.name for f in kind.fields]
+    source = _FAST_CODEC.format(
+        tag=kind.tag, n_keys=2 + len(names), max_map_len=4 * len(names), names=", ".join(names),
+        test=" and ".join(f.check.fast(f.name) for f in kind.fields),
+        wire_map=", ".join(f"{f.wire!r}: {f.name}" for f in kind.fields),
+        setter_names=", ".join(f"set_{name}" for name in names),
+        set_fields="; ".join(f"set_{name}(msg, {name})" for name in names),
+    )
+    namespace = {}
+    exec(compile(source, f"<fast codec of {cls.__name__}>", "exec"), globals(), namespace)
+    return namespace["fast_codec"](
+        cls, itemgetter("v", "k", *(f.wire for f in kind.fields)), attrgetter(*names),
+        [getattr(cls, name).__set__ for name in names],  # its slots: all its __init__ sets
+    )
+
+
+_FAST_PARSE, _FAST_TO_WIRE = {}, {}
+for _cls in SCHEMA:
+    _FAST_PARSE[_cls], _FAST_TO_WIRE[_cls] = _compile_fast_codec(_cls)
 
 
 class Inbox:

@@ -1,5 +1,6 @@
 """Keys and wire messages: round trips, every rejection reason, and fuzzing of the decode path."""
 
+import dataclasses
 import logging
 import math
 
@@ -685,3 +686,253 @@ def test_standing_query_params():
     assert keys.parse_intent_asker(zenoh.Parameters(keys.intent_query_params(5, 7))) == 7
     for bad in ("since=-1;from=3", "since=x", "from=01", f"from={keys.MAX_AGENTS}", None, 5):
         assert keys.parse_standing_since(bad) is None or keys.parse_intent_asker(bad) is None
+
+
+# ---------------------------------------------------------------- the fast path against the generic
+
+
+AGREE = settings(max_examples=600, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+
+
+def answer(**change) -> Answer:
+    base = dict(run=RUN, tick=7, sender=agent_sender(2), agent=2, episode=1, action=3,
+                relayed=((0, 4), (5, 0)))
+    return Answer(**{**base, **change})
+
+
+def outcome(fn, *args):
+    """Exactly what ``fn(*args)`` gives: the repr of its result (it tells 1, 1.0, True, (1,) and
+    [1] apart), or the reason and detail of its rejection."""
+    try:
+        return "ok", repr(fn(*args))
+    except Rejected as e:
+        return e.reason, e.detail
+
+
+def generic_encode(msg) -> bytes:
+    return msgpack.packb(messages._generic_to_wire(msg), use_bin_type=True)
+
+
+def assert_encode_agrees(msg):
+    assert outcome(encode, msg) == outcome(generic_encode, msg)
+    assert outcome(to_wire, msg) == outcome(messages._generic_to_wire, msg)
+
+
+def assert_parse_agrees(payload, cls, run=RUN, key_agent=None):
+    assert outcome(parse, payload, cls, run, key_agent) == outcome(
+        messages._generic_parse, payload, cls, run, key_agent)
+
+
+def test_wire_bytes_are_pinned():
+    """The exact bytes, so that neither path can drift (key order, int / float / bool types)."""
+    pinned = {
+        obs():
+            "de0011a17601a16ba36f6273a172a572756e2d31a17407a173a5776f726c64a16102a16501a16e06a170"
+            "920304a167920909a26e62929300030593050101a2726b01a27264cb3fd0000000000000a27263cb40"
+            "24000000000000a163c2a26172c2a26565c2",
+        answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
+            "89a17601a16ba6616e73776572a172a572756e2d31a17403a173a76167656e742f32a16102a16500a178"
+            "01a2726c92920004920100",
+        intent():
+            "88a17601a16ba6696e74656e74a172a572756e2d31a17407a173a76167656e742f32a16102a16501a1"
+            "7803",
+        control():
+            "86a17601a16ba7636f6e74726f6ca172a572756e2d31a17407a173a5776f726c64a163a873687574646f"
+            "776e",
+        control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
+            "86a17601a16ba7636f6e74726f6ca172d940" + "72" * 64
+            + "a174cf0000010000000000a173a5776f726c64a163a873687574646f776e",
+    }
+    for msg, hexed in pinned.items():
+        assert encode(msg).hex() == hexed == generic_encode(msg).hex()
+
+
+@given(any_message, st.sampled_from(["bytes", "bytearray", "memoryview", "zbytes"]))
+@FUZZ
+def test_fast_path_takes_every_plain_valid_message(msg, form):
+    """Valid messages of plain types never fall back, however the payload comes."""
+    cls, key_agent = type(msg), getattr(msg, "agent", None)
+    wire = messages._FAST_TO_WIRE[cls](msg)
+    assert wire is not None and repr(wire) == repr(messages._generic_to_wire(msg))
+    payload = encode(msg)
+    payload = {"bytes": bytes, "bytearray": bytearray, "memoryview": memoryview,
+               "zbytes": zenoh.ZBytes}[form](payload)
+    back = messages._FAST_PARSE[cls](payload, msg.run, key_agent)
+    assert back is not None
+    generic = messages._generic_parse(payload, cls, msg.run, key_agent)
+    assert repr(back) == repr(generic) == repr(msg)
+    assert hash(back) == hash(msg)
+
+
+def test_fast_path_steps_aside_for_numpy_lists_and_ints_for_floats():
+    for msg in (obs(agent=np.int64(2)), obs(position=[3, 4]), obs(neighbours=np.array([[0, 3, 5]])),
+                obs(reward_ca=10), obs(collided=np.bool_(False)), answer(relayed=[(0, 4)])):
+        assert messages._FAST_TO_WIRE[type(msg)](msg) is None
+        assert_encode_agrees(msg)
+    payload = mutated(obs(), "reward_ca", 10)
+    assert messages._FAST_PARSE[Observation](payload, RUN, None) is None
+    assert parse(payload, Observation, RUN).reward_ca == 10.0
+
+
+def test_fast_path_is_compiled_from_schema(monkeypatch):
+    kind = SCHEMA[Intent]
+    fields = tuple(f._replace(wire="xx", check=messages._int(0, 3)) if f.name == "action" else f
+                   for f in kind.fields)
+    monkeypatch.setitem(SCHEMA, Intent, kind._replace(fields=fields))
+    fast_parse, fast_to_wire = messages._compile_fast_codec(Intent)
+    assert fast_to_wire(intent(action=2))["xx"] == 2
+    assert fast_to_wire(intent(action=3)) is None
+    wire = fast_to_wire(intent(action=2))
+    assert fast_parse(pack(wire), RUN, None) == intent(action=2)
+    assert fast_parse(pack({**wire, "xx": 3}), RUN, None) is None
+    assert fast_parse(pack({**wire, "x": 2}), RUN, None) is None  # an extra key now
+
+
+# Values a field may be given, valid or not, each tried in every field of every kind, both ways.
+_EDGES = [
+    None, "", "x", "world", "agent/2", "shutdown", "x" * messages.MAX_STR_LEN,
+    "x" * (messages.MAX_STR_LEN + 1), b"x",
+    0, 1, 2, 4, 5, -1, MAX_GRID - 1, MAX_GRID, MAX_AGENTS - 1, MAX_AGENTS, MAX_TICK - 1, MAX_TICK,
+    2**63, 2**64 - 1, -(2**63), True, False, 0.0, -0.0, 1.0, 2.0, 0.25, 1e6, -1e6,
+    math.nextafter(1e6, math.inf), -(10**6) - 1, math.nan, math.inf, -math.inf,
+    (), [], (1, 2), [1, 2], (1.0, 2), (True, 0), (MAX_GRID, 0), (1, 2, 3), ((1, 2),), ((1, 2, 3),),
+    ((2, 0, 0),), ((1, 0, 0), (1, 2, 2)), ((1, 0, 0), (3, 2, 2)), ((1, 4), (3, 4)), ((1, 5),),
+    ((1, 4), (1, 0)), ((True, 4),), ([1, 4],), [[1, 4]], ((1, 4, 0),), {"a": 1},
+]
+
+
+def _numpy_twin(value):
+    """``value`` as a numpy scalar or array, where it has one."""
+    if isinstance(value, bool):
+        return np.bool_(value)
+    if isinstance(value, int) and -(2**63) <= value < 2**63:
+        return np.int64(value)
+    if isinstance(value, float):
+        return np.float32(value) if abs(value) < 1e30 else np.float64(value)
+    if isinstance(value, tuple):
+        try:
+            return np.array(value)
+        except ValueError:  # ragged
+            return value
+    return value
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")  # abs(np.int64 min)
+@pytest.mark.parametrize("msg", [obs(), obs(neighbours=()), answer(), answer(relayed=()), intent(),
+                                 control(), control(run="r" * 64)])
+def test_fast_and_generic_agree_on_every_edge_value_in_every_field(msg):
+    cls, key_agent = type(msg), getattr(msg, "agent", None)
+    for name in msg.__dataclass_fields__:
+        for value in _EDGES:
+            for form in (value, _numpy_twin(value)):
+                assert_encode_agrees(dataclasses.replace(msg, **{name: form}))
+    wire = to_wire(msg)
+    maps = [{**wire, "zz": 1}] + [{k: v for k, v in wire.items() if k != key} for key in wire]
+    for key in wire:  # "v" and "k" too; and the run field parsed for that run
+        maps += [{**wire, key: value} for value in _EDGES]
+    for changed in maps:
+        for run in {RUN, changed.get("r")} if type(changed.get("r")) is str else {RUN}:
+            for key in (None, key_agent, 9):
+                assert_parse_agrees(pack(changed), cls, run, key)
+
+
+def test_fast_path_does_not_unpack_oversized_payloads(monkeypatch):
+    unpacked = []
+    monkeypatch.setattr(messages.msgpack, "unpackb", lambda *args, **kwargs: unpacked.append(1))
+    for form in (bytes, bytearray, zenoh.ZBytes):
+        huge = form(b"\0" * (MAX_PAYLOAD_BYTES + 1))
+        assert messages._FAST_PARSE[Intent](huge, RUN, None) is None
+    assert not unpacked
+
+
+def _twins(value) -> list:
+    """Values like ``value`` but of other types (numpy too), or just out of range."""
+    if isinstance(value, bool):
+        return [np.bool_(value), int(value), float(value), not value]
+    if isinstance(value, int):
+        return [np.int64(value % 2**63), np.uint64(value % 2**64), np.int32(value % 2**31),
+                float(value), bool(value % 2), value - 1, value + 1, -value - 1, value * 2**40 + 1]
+    if isinstance(value, float):
+        return [np.float64(value), np.float32(value), int(value) if math.isfinite(value) else 0,
+                -value, value * 1e7 + 1e6 + 1, math.nan, math.inf, -math.inf, True]
+    if isinstance(value, str):
+        return [value + "x", value[:-1], value * 40, value.encode(), type("S", (str,), {})(value)]
+    if isinstance(value, tuple):
+        lists = [list(v) if isinstance(v, tuple) else v for v in value]
+        return [list(value), lists, _numpy_twin(value), value[:-1], value + value[:1], value * 2,
+                value[::-1]]
+    return []
+
+
+_JUNK = [None, "x", b"x", [], {}, {"a": 1}, 1.5, -1, 2**64 - 1, True, "a" * 300]
+
+
+@st.composite
+def _reshaped(draw, value):
+    """``value`` in another form, maybe invalid: a twin, junk, or (a tuple) with one item so."""
+    if isinstance(value, tuple) and value and draw(st.booleans()):
+        items = list(value)
+        i = draw(st.integers(0, len(items) - 1))
+        items[i] = draw(_reshaped(items[i]))
+        return tuple(items)
+    return draw(st.sampled_from(_twins(value) + _JUNK))
+
+
+@st.composite
+def odd_messages(draw):
+    """A valid message with up to three fields (or items of them) in another form, maybe invalid,
+    and maybe the agent listed among its neighbours or relayed intents."""
+    msg = draw(any_message)
+    names = list(msg.__dataclass_fields__)
+    changes = {name: draw(_reshaped(getattr(msg, name)))
+               for name in draw(st.lists(st.sampled_from(names), max_size=3))}
+    listed = getattr(msg, "neighbours", ()) or getattr(msg, "relayed", ())
+    if listed and draw(st.booleans()):
+        changes["agent"] = listed[0][0]
+    return dataclasses.replace(msg, **changes)
+
+
+@given(odd_messages())
+@AGREE
+def test_fuzz_fast_and_generic_encode_agree(msg):
+    assert_encode_agrees(msg)
+
+
+def _packable(value) -> bool:
+    try:
+        pack(value)
+        return True
+    except (TypeError, ValueError, OverflowError):
+        return False
+
+
+@st.composite
+def odd_payloads(draw):
+    """A valid message's wire map with up to three values (or items of them) in another form or
+    dropped, maybe an extra key, maybe the bytes cut or flipped; and a run and key to parse with."""
+    msg = draw(any_message)
+    wire = to_wire(msg)
+    for key in draw(st.lists(st.sampled_from(list(wire)), max_size=3)):
+        if draw(st.integers(0, 4)) == 0:
+            wire.pop(key, None)
+        elif key in wire:
+            value = draw(_reshaped(wire[key]))
+            if _packable(value):
+                wire[key] = value
+    if draw(st.integers(0, 5)) == 0:
+        wire[draw(st.text(max_size=3))] = draw(scalars)
+    payload = pack(wire)
+    if draw(st.integers(0, 5)) == 0:
+        payload = bytearray(payload)
+        payload[draw(st.integers(0, len(payload) - 1))] = draw(st.integers(0, 255))
+        payload = bytes(payload[:draw(st.integers(0, len(payload)))])
+    form = draw(st.sampled_from([bytes, bytes, bytes, bytearray, memoryview, zenoh.ZBytes]))
+    run = draw(st.sampled_from([msg.run, msg.run, "other"]))
+    key_agent = draw(st.sampled_from([None, getattr(msg, "agent", None), 3]))
+    return form(payload), type(msg), run, key_agent
+
+
+@given(odd_payloads())
+@AGREE
+def test_fuzz_fast_and_generic_parse_agree(case):
+    assert_parse_agrees(*case)
