@@ -133,22 +133,18 @@ class SingleLearner(Learners):
     def _complete_one(self, next_goal: int, next_nb: list[int]) -> None:
         """``Learners._complete`` for the one learner: Eq. 9, then Eq. 10 slot by slot."""
         action = int(self._p_action[0])
-        self._td(self.q_ds[0], int(self._p_goal[0]), action, float(self._p_r_ds[0]), next_goal,
-                 0.0 if self._p_terminal[0] else 1.0)
-        states = self._p_nb[0].tolist()
-        reward_ca = float(self._p_r_ca[0])
+        td = self._td
+        td(self.q_ds[0], int(self._p_goal[0]), action, float(self._p_r_ds[0]), next_goal,
+           0.0 if self._p_terminal[0] else 1.0)
+        q_ca, states, reward_ca = self.q_ca[0], self._p_nb[0].tolist(), float(self._p_r_ca[0])
         for slot in self._visible_slots:
-            self._td(self.q_ca[0], states[slot], action, reward_ca, next_nb[slot], 1.0)
+            td(q_ca, states[slot], action, reward_ca, next_nb[slot], 1.0)
         self._pending[0] = False
 
     def _td(self, table: np.ndarray, state: int, action: int, reward: float, next_state: int,
             bootstrap: float) -> None:
         """``agent.learning.td_update`` for one entry, in the same order of operations."""
         h = self.hyper
-        row = table[state]
-        current = float(row[action])
+        current = table.item(state, action)
         target = reward + h.gamma * bootstrap * max(table[next_state].tolist())
-        row[action] = current + h.alpha * (target - current)
-
-
-
+        table[state, action] = current + h.alpha * (target - current)
