@@ -4,7 +4,8 @@
 once. An agent process is a batch of one, where each of the sixty-odd small numpy calls of a
 decision costs more than its arithmetic, and every microsecond is on the negotiation's critical
 path: the agents ranked below wait for this one's decision. :class:`SingleLearner` keeps the
-state of ``Learners`` (so checkpoints, heat maps and ``forget_pending`` are unchanged) and makes
+tables and counters of ``Learners`` (so checkpoints and heat maps are unchanged), holds the
+pending transition (decided, its outcome not yet learned) as a plain :class:`Transition`, and makes
 the same decisions and updates in plain Python: the same floating-point operations in the same
 order, and the one sum whose order numpy chooses (Eq. 6) through the very same ``einsum`` call.
 ``tests/test_single.py`` checks that whole swarm runs give identical actions and tables.
@@ -16,7 +17,7 @@ waits for the intents ranked above it, and only the rest once they are in.
 """
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -41,6 +42,20 @@ class Situation:
     weights: list[float]
 
 
+@dataclass(slots=True)
+class Transition:
+    """The last decision, whose TD update waits for the next observation: the goal's state, the
+    action, every slot's state, the visible slots; then the rewards it earned."""
+
+    goal_state: int = 0
+    action: int = 0
+    nb_states: list[int] = field(default_factory=list)
+    visible: list[int] = field(default_factory=list)
+    r_ds: float = 0.0
+    r_ca: float = 0.0
+    terminal: bool = False
+
+
 class SingleLearner(Learners):
     """A batch of one ``Learners`` whose steps take scalars instead of a :class:`View`."""
 
@@ -52,13 +67,26 @@ class SingleLearner(Learners):
         self.reads_intents = bool(use_intents)
         self.reads_direction = bool(with_direction)
         self.slots = n_neighbours
-        self._visible_slots: list[int] = []  # the slots of _p_visible, as a list
+        self.last = Transition(nb_states=[0] * n_neighbours)
+        self.pending = False  # ``last`` awaits its update
 
     def record_one(self, r_ds: float, r_ca: float, arrived: bool) -> None:
         """:meth:`Learners.record` for the one learner."""
-        self._p_r_ds[0] = r_ds
-        self._p_r_ca[0] = r_ca
-        self._p_terminal[0] = arrived
+        last = self.last
+        last.r_ds, last.r_ca, last.terminal = float(r_ds), float(r_ca), bool(arrived)
+
+    def forget_pending(self) -> None:
+        """:meth:`Learners.forget_pending` for the one learner."""
+        self.pending = False
+
+    def pending_as_batch(self) -> dict[str, np.ndarray]:
+        """The pending transition as the arrays of ``Learners`` hold it (for comparison)."""
+        last = self.last
+        visible = np.zeros((1, self.slots), dtype=bool)
+        visible[0, last.visible] = True
+        return {"_pending": np.array([self.pending]), "_p_goal": np.array([last.goal_state]),
+                "_p_action": np.array([last.action]), "_p_nb": np.array([last.nb_states]),
+                "_p_visible": visible}
 
     def situation(self, own: Cell, goal: Cell, cells: dict[int, Cell]) -> "Situation":
         """What a decision reads that no neighbour's intent changes: computed as soon as the
@@ -78,7 +106,7 @@ class SingleLearner(Learners):
         """:meth:`Learners.decide` for the one (active) learner; returns its action.
         ``next_cells``: the announced next cells of the neighbours whose intents are known."""
         nb_states = self._nb_states(situation, next_cells)
-        if self._pending[0]:
+        if self.pending:
             self._complete_one(situation.goal_state, nb_states)
         values = self._q_final_one(situation, nb_states)
         best = max(values)
@@ -88,18 +116,13 @@ class SingleLearner(Learners):
         taken = int(self.actions_taken[0])
         action = int(random_action) if (taken + 1) % self.k == 0 else greedy
         self.actions_taken[0] = taken + 1
-        self._pending[0] = True
-        self._p_goal[0] = situation.goal_state
-        self._p_action[0] = action
-        self._p_nb[0] = nb_states
-        self._p_visible[0] = False
-        self._p_visible[0, list(situation.cells)] = True
-        self._visible_slots = sorted(situation.cells)
+        self.last = Transition(situation.goal_state, action, nb_states, sorted(situation.cells))
+        self.pending = True
         return action
 
     def finish_one(self, situation: "Situation") -> None:
         """:meth:`Learners.finish` for the one learner (the QL reading of ``s'``)."""
-        if self._pending[0]:
+        if self.pending:
             self._complete_one(situation.goal_state, self._nb_states(situation, {}))
 
     def _state_of_cell(self, cell: Cell, ox: int, oy: int) -> int:
@@ -132,14 +155,13 @@ class SingleLearner(Learners):
 
     def _complete_one(self, next_goal: int, next_nb: list[int]) -> None:
         """``Learners._complete`` for the one learner: Eq. 9, then Eq. 10 slot by slot."""
-        action = int(self._p_action[0])
-        td = self._td
-        td(self.q_ds[0], int(self._p_goal[0]), action, float(self._p_r_ds[0]), next_goal,
-           0.0 if self._p_terminal[0] else 1.0)
-        q_ca, states, reward_ca = self.q_ca[0], self._p_nb[0].tolist(), float(self._p_r_ca[0])
-        for slot in self._visible_slots:
-            td(q_ca, states[slot], action, reward_ca, next_nb[slot], 1.0)
-        self._pending[0] = False
+        last, td = self.last, self._td
+        td(self.q_ds[0], last.goal_state, last.action, last.r_ds, next_goal,
+           0.0 if last.terminal else 1.0)
+        q_ca, states = self.q_ca[0], last.nb_states
+        for slot in last.visible:
+            td(q_ca, states[slot], last.action, last.r_ca, next_nb[slot], 1.0)
+        self.pending = False
 
     def _td(self, table: np.ndarray, state: int, action: int, reward: float, next_state: int,
             bootstrap: float) -> None:
