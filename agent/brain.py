@@ -36,7 +36,7 @@ class AgentBrain:
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
         self._noise: EpisodeNoise | None = None
         self._noise_episode = -1
-        self._prepared: tuple[Observation, Situation] | None = None
+        self._prepared: tuple[Observation, Situation, tuple | None] | None = None
 
     def neighbours_to_ask(self, obs: Observation) -> list[int]:
         """The visible higher-ranked neighbours whose intents this agent decides with (none once
@@ -49,25 +49,31 @@ class AgentBrain:
         """Work out what the decision on ``obs`` needs that no intent changes; :meth:`act` on
         the same observation then only adds the intents (an agent prepares while it waits)."""
         cells = {j: (x, y) for j, x, y in obs.neighbours}
-        self._prepared = (obs, self.learner.situation(obs.position, obs.goal, cells))
+        situation = self.learner.situation(obs.position, obs.goal, cells)
+        if obs.arrived or obs.episode_end:
+            self._prepared = (obs, situation, None)
+            return
+        if self._noise_episode != obs.episode:
+            self._noise = EpisodeNoise.draw(self.rng, self.config.max_steps)
+            self._noise_episode = obs.episode
+        noise = (int(self._noise.random_actions[obs.step]),
+                 self._noise.tie_breakers[obs.step].tolist())
+        self._prepared = (obs, situation, noise)
 
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
         """Learn from the last action's rewards and choose this tick's action (STAY if done)."""
         if self._prepared is None or self._prepared[0] is not obs:
             self.prepare(obs)
-        situation = self._prepared[1]
+        _, situation, noise = self._prepared
         self._prepared = None
         learner = self.learner
         learner.record_one(obs.reward_ds, obs.reward_ca, obs.arrived)
-        if obs.arrived or obs.episode_end:
+        if noise is None:  # arrived, or the episode's end
             learner.finish_one(situation)
             return STAY
-        if self._noise_episode != obs.episode:
-            self._noise = EpisodeNoise.draw(self.rng, self.config.max_steps)
-            self._noise_episode = obs.episode
+        random_action, ties = noise
         return learner.decide_one(situation, self._next_cells(situation.cells, answers),
-                                  self._noise.random_actions[obs.step],
-                                  self._noise.tie_breakers[obs.step])
+                                  random_action, ties)
 
     def _next_cells(self, cells: dict[int, tuple[int, int]],
                     answers: dict[int, int]) -> dict[int, tuple[int, int]]:

@@ -39,7 +39,7 @@ class Situation:
     goal_state: int
     cells: dict[int, Cell]
     states: list[int]
-    weights: list[float]
+    weights: np.ndarray  # (1, slots)
 
 
 @dataclass(slots=True)
@@ -99,10 +99,10 @@ class SingleLearner(Learners):
             dx, dy = x - ox, y - oy
             weights[slot] = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
         return Situation(own, offset_state_of(goal[0] - ox, goal[1] - oy), cells, states,
-                         weights)
+                         np.array([weights]))
 
     def decide_one(self, situation: "Situation", next_cells: dict[int, Cell],
-                   random_action: int, tie_breakers: np.ndarray) -> int:
+                   random_action: int, ties: list[float]) -> int:
         """:meth:`Learners.decide` for the one (active) learner; returns its action.
         ``next_cells``: the announced next cells of the neighbours whose intents are known."""
         nb_states = self._nb_states(situation, next_cells)
@@ -110,7 +110,6 @@ class SingleLearner(Learners):
             self._complete_one(situation.goal_state, nb_states)
         values = self._q_final_one(situation, nb_states)
         best = max(values)
-        ties = tie_breakers.tolist()
         greedy = max((a for a in range(len(values)) if values[a] >= best),
                      key=lambda a: (ties[a], -a))
         taken = int(self.actions_taken[0])
@@ -147,8 +146,7 @@ class SingleLearner(Learners):
 
     def _q_final_one(self, situation: "Situation", nb_states: list[int]) -> list[float]:
         """Eq. 6 and 7 as ``Learners._q_final`` computes them (the same products and sums)."""
-        q_ca = np.einsum("bm,bma->ba", np.array([situation.weights]),
-                         self.q_ca[0][nb_states][None])
+        q_ca = np.einsum("bm,bma->ba", situation.weights, self.q_ca[0][nb_states][None])
         beta, rest = self.hyper.beta, 1.0 - self.hyper.beta
         return [beta * ds + rest * ca
                 for ds, ca in zip(self.q_ds[0, situation.goal_state].tolist(), q_ca[0].tolist())]
