@@ -172,3 +172,16 @@ def test_swarm_world_equals_the_batch_rules_world(n_agents, width, height, count
     assert seen["rows"] == config.episodes
     assert seen["arrived"] and seen["collided"] and seen["missed"], seen
     assert bool(seen["hidden"]) == (max(width, height) > 11), seen
+
+
+@pytest.mark.parametrize("agents,grid", [(8, (11, 11)), (9, (40, 40))])
+def test_observations_by_rank_are_the_observations_in_rank_order(agents, grid):
+    config = SwarmConfig(run_id="ranked", n_agents=agents, width=grid[0], height=grid[1],
+                         episodes=2, max_steps=6, seed=4)
+    world = SwarmWorld(config)
+    rng = np.random.default_rng(0)
+    while not world.finished:
+        by_rank = list(world.observations_by_rank())
+        assert [o.rank for o in by_rank] == list(range(agents))
+        assert by_rank == sorted(world.observations(), key=lambda o: o.rank)
+        world.apply(rng.integers(0, 5, size=agents).tolist())

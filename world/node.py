@@ -166,8 +166,7 @@ class WorldNode:
         self.actions = [None] * self.config.n_agents
         self.tick_start = time.perf_counter()
         self.tick_deadline = time.monotonic() + self.config.tick_deadline_s
-        # In rank order: the first to decide is the first to know.
-        for obs in sorted(self.world.observations(), key=lambda o: o.rank):
+        for obs in self.world.observations_by_rank():  # the first to decide is the first to know
             self.publishers[obs.agent].put(encode(obs))
 
     def _close_if_due(self) -> None:
