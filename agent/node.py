@@ -11,10 +11,10 @@ never changes. At each episode's end, checkpoint the Q-tables atomically.
 The node is a set of event handlers over one state, each run under the node's lock. Observations,
 answers and queries are handled where Zenoh delivers them, on its network thread: the moment the
 last awaited intent arrives, the agent decides and answers there, without waking another thread
-(that hand-over cost about 50 us a hop, more on a busy machine; README, "How fast"). Nothing there
-blocks: an agent waiting for intents is only a :class:`Pending` record. The main thread handles
-the rest (liveliness, the world's control messages), the negotiation's time-outs and each
-episode's end, whose checkpoint writes a file.
+(that hand-over cost about 50 us a hop; README, "where the time goes"). Nothing there blocks: an
+agent waiting for intents is only a :class:`Pending` record. The main thread handles the rest
+(liveliness, the world's control messages), the negotiation's time-outs and each episode's end,
+whose checkpoint writes a file.
 """
 
 import logging

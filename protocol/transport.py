@@ -35,11 +35,11 @@ def open_session(settings: "TransportSettings") -> zenoh.Session:
 
 
 def enqueue(events, kind: str) -> zenoh.handlers.Callback:
-    """A Zenoh handler that puts ``(kind, item)`` on the queue ``events`` and does nothing else.
+    """A Zenoh handler that puts ``(kind, item)`` on the queue ``events`` and does nothing else:
+    how the nodes hand their main thread the events off the tick's path (liveliness, control).
 
     It runs on Zenoh's network thread (``indirect=False``) rather than on a Python thread of its
-    own: a put never blocks, and every event reaches the node's loop one thread switch sooner,
-    which is most of a negotiation hop on a busy machine (README, "How fast").
+    own: a put never blocks, and the event reaches the main thread one thread switch sooner.
     """
     put = events.put
     return zenoh.handlers.Callback(lambda item: put((kind, item)), indirect=False)

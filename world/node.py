@@ -10,9 +10,9 @@ deadline.
 
 Intents are handled where Zenoh delivers them, on its network thread, under the node's lock: the
 last one of a tick closes it there and sends the next observations at once, without waking
-another thread (README, "How fast"). The main thread does the rest: liveliness, the deadline,
-and the bookkeeping of each closed tick. A tick is closed only once the one before it is written
-and logged, so ``on_tick`` always sees the world as that tick left it.
+another thread (README, "where the time goes"). The main thread does the rest: liveliness, the
+deadline, and the bookkeeping of each closed tick. A tick is closed only once the one before it
+is written and logged, so ``on_tick`` always sees the world as that tick left it.
 """
 
 import logging
