@@ -14,7 +14,9 @@ last awaited intent arrives, the agent decides and answers there, without waking
 (that hand-over cost about 50 us a hop; README, "where the time goes"). Nothing there blocks: an
 agent waiting for intents is only a :class:`Pending` record. The main thread handles the rest
 (liveliness, the world's control messages), the negotiation's time-outs and each episode's end,
-whose checkpoint writes a file.
+whose checkpoint writes a file. Liveliness callbacks only enqueue and never take the lock: Zenoh
+has called them holding its own tables lock (eclipse-zenoh/zenoh#1092), and a callback waiting for
+ours while we call into Zenoh would deadlock.
 """
 
 import logging
