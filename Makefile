@@ -32,6 +32,7 @@ bench: $(STAMP)
 	$(PY) bench/recording_cost.py
 	$(PY) bench/swarm_collisions.py
 	$(PY) bench/codec.py
+	$(PY) bench/world_tick.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis
