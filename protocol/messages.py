@@ -159,9 +159,10 @@ _bool.fast = lambda v: f"type({v}) is bool"
 def _reward(x):
     if type(x) not in (float, int) and not isinstance(x, (np.integer, np.floating)):
         raise ValueError(f"expected float, got {type(x).__name__}")
-    if not abs(x) <= MAX_REWARD:  # also false for NaN
+    value = float(x)  # before abs(): abs(np.int64(-2**63)) overflows to a negative number
+    if not abs(value) <= MAX_REWARD:  # also false for NaN
         raise ValueError(f"{x!r} not finite or beyond {MAX_REWARD:g}")
-    return float(x)
+    return value
 
 
 _reward.fast = lambda v: f"type({v}) is float and {-MAX_REWARD!r} <= {v} <= {MAX_REWARD!r}"

@@ -936,3 +936,14 @@ def odd_payloads(draw):
 @AGREE
 def test_fuzz_fast_and_generic_parse_agree(case):
     assert_parse_agrees(*case)
+
+
+def test_a_reward_whose_abs_overflows_is_rejected_on_encode_as_on_parse():
+    from protocol.messages import Rejected
+
+    base = dict(run="run-1", tick=0, sender=WORLD_SENDER, agent=0, episode=0, step=0,
+                position=(0, 0), goal=(1, 1), neighbours=(), rank=0, reward_ca=10.0,
+                collided=False, arrived=False, episode_end=False)
+    with pytest.raises(Rejected) as rejected:
+        encode(Observation(**base, reward_ds=np.int64(-2**63)))  # abs() of it is negative
+    assert rejected.value.reason == "bad-field:reward_ds"
