@@ -514,7 +514,8 @@ class Inbox:
 
     ``rejections`` is a Counter of reasons, ``accepted`` the number of messages decoded. Each reason
     is logged (WARNING) for its first 10 occurrences, then every 1000th, so a flood cannot flood the
-    log. Not locked: use it from one thread (the node's loop, not a Zenoh callback).
+    log. Not locked: use it from one thread at a time (the nodes call it under their own lock,
+    from Zenoh's callbacks and their main thread).
     """
 
     LOG_FIRST = 10
