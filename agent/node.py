@@ -32,7 +32,7 @@ import zenoh
 
 from agent import checkpoint, negotiation
 from agent.brain import AgentBrain
-from protocol import keys
+from protocol import keys, trace
 from protocol.config import NEGOTIATING_ALGOS, SwarmConfig, priority_rank
 from protocol.messages import (
     CONTROL_SHUTDOWN, Answer, Control, Inbox, Intent, Observation, agent_sender, encode,
@@ -116,6 +116,7 @@ class AgentNode:
         self.brain = brain or AgentBrain(self.agent, self.config)
         self.on_episode_end = on_episode_end
         self.inbox = Inbox(self.config.run_id, log)
+        self.trace = trace.TickTrace.from_env(f"agent-{self.agent}")
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False
@@ -270,9 +271,11 @@ class AgentNode:
 
     def _on_observation(self, payload) -> None:
         """Start a tick: decide at once if no intent is awaited, else ask and wait for them."""
+        arrived = self.trace.now()
         obs = self.inbox.decode(payload, Observation)
         if obs is None:
             return
+        self.trace.mark(trace.OBS_IN, obs.tick, at=arrived)
         if obs.agent != self.agent:
             self.inbox.reject("wrong-agent", f"observation for agent {obs.agent}")
             return
@@ -332,20 +335,26 @@ class AgentNode:
         """Decide ``obs`` with the ``answers`` of the neighbours the brain waits for; answer
         for it, relaying every intent learned for the tick; checkpoint at an episode's end;
         tell the world."""
+        self.trace.mark(trace.DECIDE, obs.tick)
         action = self.brain.act(obs, answers)
+        self.trace.mark(trace.ACTED, obs.tick)
         answer = Answer(run=self.config.run_id, tick=obs.tick, sender=agent_sender(self.agent),
                         agent=self.agent, episode=obs.episode, action=action,
                         relayed=tuple(sorted(self.intents.get(obs.tick, _NOTHING).actions.items())))
         self.decided_tick, self.decided_obs, self.decided_payload = obs.tick, obs, encode(answer)
+        self.trace.mark(trace.ENCODED, obs.tick)
         self.intents = {t: got for t, got in self.intents.items() if t > obs.tick}
         self._answer_standing_queries()
+        self.trace.mark(trace.ANSWERED, obs.tick)
         self._answer_held_queries()
         if obs.episode_end:  # saved before the world hears of the decision: nothing to lose
             checkpoint.save(self.checkpoint_file, self.brain, obs.episode)
             if self.on_episode_end is not None:
                 self.on_episode_end(self.brain, obs.episode)
-        self.publisher.put(encode(Intent(run=answer.run, tick=answer.tick, sender=answer.sender,
-                                         agent=self.agent, episode=obs.episode, action=action)))
+        intent = encode(Intent(run=answer.run, tick=answer.tick, sender=answer.sender,
+                               agent=self.agent, episode=obs.episode, action=action))
+        self.trace.mark(trace.INTENT_SENT, obs.tick)
+        self.publisher.put(intent)
         if not self.stream_open:
             self._open_stream(obs.tick + 1)
 
@@ -401,9 +410,11 @@ class AgentNode:
         agent did not need)."""
         if not reply.ok:
             return  # the query's end: a timeout, or a neighbour that is gone
+        arrived = self.trace.now()
         answer = self.inbox.decode(reply.ok.payload, Answer, key_agent=sender)
         if answer is None or answer.tick <= self.decided_tick:
             return
+        self.trace.mark(trace.ANSWER_IN, answer.tick, at=arrived)
         if self.decided_tick >= 0 and answer.tick > self.decided_tick + AHEAD_TICKS:
             self.inbox.reject("future-tick", f"answer for tick {answer.tick}, "
                                              f"decided {self.decided_tick}")
@@ -531,6 +542,7 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
         node.run()
+    node.trace.save()
     write_json_atomic(stats_path(options.out_dir, f"agent-{options.agent}"), node.stats())
     if node.inbox.total_rejected:
         log.warning("rejected %d messages: %s", node.inbox.total_rejected,

@@ -26,7 +26,7 @@ from typing import Callable
 
 import zenoh
 
-from protocol import keys
+from protocol import keys, trace
 from protocol.config import SwarmConfig
 from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
 from protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
@@ -75,6 +75,7 @@ class WorldNode:
         self.session = session
         self.world = SwarmWorld(self.config, options.first_episode, options.first_tick)
         self.inbox = Inbox(self.config.run_id, log)
+        self.trace = trace.TickTrace.from_env("world")
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.alive: set[int] = set()
@@ -167,7 +168,9 @@ class WorldNode:
         self.tick_start = time.perf_counter()
         self.tick_deadline = time.monotonic() + self.config.tick_deadline_s
         for obs in self.world.observations_by_rank():  # the first to decide is the first to know
-            self.publishers[obs.agent].put(encode(obs))
+            payload = encode(obs)
+            self.trace.mark(trace.OBS_SENT, obs.tick)
+            self.publishers[obs.agent].put(payload)
 
     def _close_if_due(self) -> None:
         """Close the open tick if every live agent's intent is in or its deadline passed, and
@@ -181,6 +184,7 @@ class WorldNode:
     def _close_tick(self) -> None:
         """Apply the open tick, open the next (the agents think while this one is logged), and
         hand the report to the main thread."""
+        self.trace.mark(trace.CLOSE, self.world.tick)
         report = self.world.apply(self.actions)
         now = time.perf_counter()
         took = now - self.tick_start
@@ -264,6 +268,7 @@ def run_world(options: WorldOptions,
         except StartupTimeout as error:
             log.error("%s", error)
             return 1
+    node.trace.save()
     write_json_atomic(stats_path(options.out_dir, "world"), {
         "completed": completed, "ticks": node.world.tick, "episode": node.world.episode,
         "accepted": node.inbox.accepted, "rejected": dict(node.inbox.rejections),

@@ -1,0 +1,121 @@
+#!/usr/bin/env python3
+"""Where a tick's time goes: the distributed swarm, with every process marking each step it takes.
+
+Runs the launcher's world and agent processes (embedded Zenoh, recording off) with ``NNQL_TRACE``
+set (``protocol.trace``), then lines up the marks of every tick after the first episode: the
+chain from the world's first observation through each agent's answer to the next, to the world
+closing the tick. Medians and 90th percentiles in microseconds. Meant for the default grid, where
+everyone sees everyone and the negotiation is one chain (README, "where the time goes").
+
+    python bench/tick_trace.py --agents 8 --episodes 15
+"""
+
+import argparse
+import json
+import os
+import statistics
+import sys
+import tempfile
+from collections import defaultdict
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from bench.harness import measured_rate, run_distributed  # noqa: E402
+from protocol import trace  # noqa: E402
+from protocol.config import SwarmConfig  # noqa: E402
+from world.metrics import read_episodes  # noqa: E402
+
+FIRST_OBS = "world: first observation handed to Zenoh -> its agent has it"
+FIRST_DECIDES = "that agent: observation in -> deciding"
+LEARNING = "each agent: deciding -> action chosen (the learning)"
+ENCODING = "each agent: action chosen -> answer encoded"
+REPLYING = "each agent: answer encoded -> the agents below answered"
+HOP = "each hop: answer encoded -> the next agent has it"
+ANSWER_IN = "each agent: answer in -> deciding"
+INTENT = "each agent: answered -> intent handed to Zenoh"
+LAST_INTENT = "last intent handed over -> the world closes the tick"
+NEXT_OBS = "the world: closing -> next tick's first observation handed over"
+TICK = "a whole tick"
+STEPS = (FIRST_OBS, FIRST_DECIDES, LEARNING, ENCODING, REPLYING, HOP, ANSWER_IN, INTENT,
+         LAST_INTENT, NEXT_OBS, TICK)
+AGENT_MARKS = (trace.OBS_IN, trace.DECIDE, trace.ACTED, trace.ENCODED, trace.ANSWERED,
+               trace.INTENT_SENT)
+
+
+def by_tick(marks: list) -> dict[int, dict[str, float]]:
+    """One process's marks as tick -> step -> the first time it was marked."""
+    ticks: dict[int, dict[str, float]] = defaultdict(dict)
+    for step, tick, at in marks:
+        ticks[tick].setdefault(step, at)
+    return ticks
+
+
+def tick_steps(world: dict[int, dict[str, float]], agents: dict[int, dict[int, dict[str, float]]],
+               ticks: list[int]) -> dict[str, list[float]]:
+    """Each step of :data:`STEPS` for every tick in ``ticks`` that has all its marks, in seconds."""
+    n = len(agents)
+    out: dict[str, list[float]] = {step: [] for step in STEPS}
+    for tick in ticks:
+        w, after = world.get(tick, {}), world.get(tick + 1, {})
+        chain = [agents[(rank + tick) % n].get(tick, {}) for rank in range(n)]  # by rank
+        if (trace.OBS_SENT not in w or trace.CLOSE not in w or trace.OBS_SENT not in after
+                or not all(step in a for a in chain for step in AGENT_MARKS)):
+            continue
+        first, last = chain[0], chain[-1]
+        out[FIRST_OBS].append(first[trace.OBS_IN] - w[trace.OBS_SENT])
+        out[FIRST_DECIDES].append(first[trace.DECIDE] - first[trace.OBS_IN])
+        for rank, a in enumerate(chain):
+            out[LEARNING].append(a[trace.ACTED] - a[trace.DECIDE])
+            out[ENCODING].append(a[trace.ENCODED] - a[trace.ACTED])
+            out[REPLYING].append(a[trace.ANSWERED] - a[trace.ENCODED])
+            out[INTENT].append(a[trace.INTENT_SENT] - a[trace.ANSWERED])
+            if rank and trace.ANSWER_IN in a:
+                out[HOP].append(a[trace.ANSWER_IN] - chain[rank - 1][trace.ENCODED])
+                out[ANSWER_IN].append(a[trace.DECIDE] - a[trace.ANSWER_IN])
+        out[LAST_INTENT].append(w[trace.CLOSE] - last[trace.INTENT_SENT])
+        out[NEXT_OBS].append(after[trace.OBS_SENT] - w[trace.CLOSE])
+        out[TICK].append(after[trace.OBS_SENT] - w[trace.OBS_SENT])
+    return out
+
+
+def read_trace(directory: Path, n_agents: int) -> tuple[dict, dict]:
+    """The world's and every agent's marks, by tick, from ``directory``."""
+    def load(name: str):
+        return by_tick(json.loads((directory / f"{name}.json").read_text()))
+    return load("world"), {i: load(f"agent-{i}") for i in range(n_agents)}
+
+
+def percentile(values: list[float], q: float) -> float:
+    return sorted(values)[min(int(len(values) * q), len(values) - 1)]
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--agents", type=int, default=8)
+    p.add_argument("--episodes", type=int, default=15)
+    p.add_argument("--max-steps", type=int, default=100)
+    args = p.parse_args()
+    if args.agents < 2 or args.episodes < 2:
+        p.error("need at least 2 agents and 2 episodes (the first one is warm-up)")
+    config = SwarmConfig(run_id="trace", n_agents=args.agents, episodes=args.episodes,
+                         max_steps=args.max_steps)
+    with tempfile.TemporaryDirectory() as tmp:
+        marks, out = Path(tmp) / "marks", Path(tmp) / "run"
+        os.environ[trace.TRACE_ENV] = str(marks)  # the spawned processes inherit it
+        run_distributed(config, out, record=False)
+        world, agents = read_trace(marks, args.agents)
+        warm_up = int(read_episodes(out / "episodes.csv")[0]["end_tick"])
+        steps = tick_steps(world, agents, [t for t in sorted(world) if t > warm_up])
+        rate = measured_rate(out)
+    print(f"{args.agents} agents, {rate:.0f} ticks/s after the first episode; microseconds:")
+    print(f"{'step':<66} {'median':>7} {'p90':>7} {'n':>6}")
+    for step, values in steps.items():
+        if values:
+            print(f"{step:<66} {1e6 * statistics.median(values):>7.0f} "
+                  f"{1e6 * percentile(values, 0.9):>7.0f} {len(values):>6}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,49 @@
+"""Tick traces (protocol.trace, bench/tick_trace.py): off by default, and lined up tick by tick."""
+
+import json
+
+from bench.harness import run_distributed
+from bench.tick_trace import (
+    FIRST_OBS, HOP, LAST_INTENT, LEARNING, NEXT_OBS, TICK, read_trace, tick_steps,
+)
+from protocol import trace
+from protocol.config import SwarmConfig
+
+
+def test_a_trace_is_off_unless_it_has_a_directory(tmp_path):
+    off = trace.TickTrace("agent-0", None)
+    off.mark(trace.DECIDE, 3)
+    off.save()
+    assert off.marks == [] and off.now() == 0.0
+    on = trace.TickTrace("agent-0", tmp_path / "marks")
+    on.mark(trace.DECIDE, 3, at=1.5)
+    on.mark(trace.ACTED, 3)
+    on.save()
+    saved = json.loads((tmp_path / "marks" / "agent-0.json").read_text())
+    assert saved[0] == [trace.DECIDE, 3, 1.5] and saved[1][:2] == [trace.ACTED, 3]
+
+
+def test_the_steps_of_a_tick_are_lined_up_down_the_ranks():
+    # Two agents; at tick 4 agent 0 ranks first ((0 - 4) mod 2 == 0), agent 1 second.
+    world = {4: {trace.OBS_SENT: 0.0, trace.CLOSE: 9.0}, 5: {trace.OBS_SENT: 10.0}}
+    first = {trace.OBS_IN: 1.0, trace.DECIDE: 1.5, trace.ACTED: 2.0, trace.ENCODED: 2.5,
+             trace.ANSWERED: 3.0, trace.INTENT_SENT: 3.5}
+    second = {trace.OBS_IN: 1.2, trace.ANSWER_IN: 4.0, trace.DECIDE: 4.5, trace.ACTED: 6.0,
+              trace.ENCODED: 6.5, trace.ANSWERED: 7.0, trace.INTENT_SENT: 8.0}
+    steps = tick_steps(world, {0: {4: first}, 1: {4: second}}, [4])
+    assert steps[FIRST_OBS] == [1.0]
+    assert steps[LEARNING] == [0.5, 1.5]
+    assert steps[HOP] == [1.5]  # agent 0 started replying at 2.5, agent 1 had it at 4.0
+    assert steps[LAST_INTENT] == [1.0] and steps[NEXT_OBS] == [1.0] and steps[TICK] == [10.0]
+    assert tick_steps(world, {0: {4: first}, 1: {}}, [4])[TICK] == [], "incomplete ticks are left out"
+
+
+def test_a_traced_swarm_marks_every_step_of_every_tick(tmp_path, monkeypatch):
+    monkeypatch.setenv(trace.TRACE_ENV, str(tmp_path / "marks"))
+    config = SwarmConfig(run_id="traced", n_agents=3, episodes=2, max_steps=15)
+    run_distributed(config, tmp_path / "run", record=False)
+    world, agents = read_trace(tmp_path / "marks", 3)
+    steps = tick_steps(world, agents, sorted(world))
+    assert len(steps[TICK]) >= 20, "almost every tick of the run is complete"
+    assert len(steps[HOP]) >= 2 * 20 - 5, "every agent below the first got an answer"
+    assert all(value > 0 for values in steps.values() for value in values)
