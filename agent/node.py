@@ -24,7 +24,7 @@ import queue
 import signal
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
@@ -91,16 +91,17 @@ class AgentOptions:
 
 @dataclass
 class Pending:
-    """An observation whose decision waits for intents: whose (``awaited``), whom this agent
-    asked (``asks``), until when, and, once the answers are in, the ones it then asked for
-    directly because no answer brought them (``missing``)."""
+    """An observation whose decision waits for intents: whose (``awaited``), which of them the
+    brain decides with (``needed``), whom this agent asked (``asks``), until when, and, once the
+    answers are in, the ones it then asked for directly because no answer brought them
+    (``missing``)."""
 
     obs: Observation
     awaited: list[int]
+    needed: list[int]
     asks: list[int]
     deadline: float
     missing: list[int] | None = None
-    needed: list[int] = field(default_factory=list)  # what the brain decides with
 
 
 class AgentNode:
@@ -289,8 +290,9 @@ class AgentNode:
             return
         needed = self.brain.neighbours_to_ask(obs)
         awaited, asks = negotiation.plan_for(obs, self.config.n_agents, self.config.algo)
-        on_main_thread = threading.current_thread() is threading.main_thread()
-        if not awaited and not (obs.episode_end and not on_main_thread):
+        # An episode's end is decided on the main thread: its checkpoint writes a file.
+        decide_here = not obs.episode_end or threading.current_thread() is threading.main_thread()
+        if not awaited and decide_here:
             self._decide(obs, {})
             return
         tick, timeout = obs.tick, self.options.negotiation_timeout_s
@@ -298,9 +300,9 @@ class AgentNode:
         for j in asks:
             if j not in got.answered and not (j == self.predecessor and self.stream_open):
                 self._ask(j, tick, timeout)
-        self.pending = Pending(obs, awaited, asks, time.monotonic() + timeout, needed=needed)
+        self.pending = Pending(obs, awaited, needed, asks, time.monotonic() + timeout)
         if obs.episode_end:
-            self.events.put(("wake", None))  # the main thread decides it: its checkpoint is a file
+            self.events.put(("wake", None))  # for the main thread to decide it
         else:
             self.brain.prepare(obs)  # while the answers are on their way
             self._advance()
