@@ -77,9 +77,7 @@ def load(path: Path, brain: AgentBrain) -> int:
             f"{path}: belongs to agent {owner[0]} of {owner[1]} ({owner[2]}), "
             f"not agent {mine[0]} of {mine[1]} ({mine[2]})"
         )
-    brain.learner.q_ds[0] = fields["q_ds"]
-    brain.learner.q_ca[0] = fields["q_ca"]
-    brain.learner.actions_taken[0] = int(fields["actions_taken"])
+    brain.learner.restore(fields["q_ds"], fields["q_ca"], int(fields["actions_taken"]))
     try:
         brain.rng.bit_generator.state = json.loads(str(fields["rng_state"]))
     except (ValueError, TypeError, KeyError) as error:

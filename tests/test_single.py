@@ -115,3 +115,18 @@ def test_offset_state_of_is_offset_state_for_one_offset():
     for dx in range(-14, 15):
         for dy in range(-14, 15):
             assert offset_state_of(dx, dy) == int(offset_state(np.array([dx, dy])))
+
+
+def test_sum_like_einsum_adds_as_einsum_does_bit_for_bit():
+    """Eq. 6's sum: if numpy ever sums ``bm,bma->ba`` in another order, this fails rather than
+    the agent processes drifting from the batch learner (and from the in-process swarm)."""
+    from agent.single import sum_like_einsum
+
+    rng = np.random.default_rng(7)
+    for slots in (1, 2, 7, 8, 9, 16, 33):
+        for _ in range(300):
+            weights = rng.random(slots) * (rng.random(slots) < 0.8)
+            rows = rng.normal(size=(slots, 5)) * 10.0 ** rng.integers(-3, 4, size=(slots, 5))
+            expected = np.einsum("bm,bma->ba", weights[None], rows[None])[0].tolist()
+            visible = [(m, float(w)) for m, w in enumerate(weights) if w != 0.0]
+            assert sum_like_einsum(visible, rows.tolist(), list(range(slots))) == expected
