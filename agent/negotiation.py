@@ -43,24 +43,27 @@ def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
               rank: Callable[[int], int]) -> list[int]:
     """The fewest neighbours to ask, lowest-ranked first, whose answers (with what they relay)
     bring every intent of ``waiting_for``; ``cells`` holds each one's cell, ``rank`` its rank."""
+    ranked = sorted(((rank(j), j) for j in waiting_for), reverse=True)
     asks: list[int] = []
     covered: set[int] = set()
-    for q in sorted(waiting_for, key=rank, reverse=True):
+    for r, q in ranked:
         if q in covered:
             continue
         asks.append(q)
         covered.add(q)
-        covered.update(x for x in waiting_for
-                       if rank(x) < rank(q) and sees(cells[q], cells[x]))
+        cell = cells[q]
+        covered.update(x for rx, x in ranked if rx < r and sees(cell, cells[x]))
     return asks
 
 
 def plan_for(obs: Observation, n_agents: int, algo: str) -> tuple[list[int], list[int]]:
     """``(awaited, asks)`` for one observation: whose intents to learn, and whom to ask."""
     waiting_for = awaited(obs, n_agents, algo)
+    if not waiting_for:
+        return waiting_for, []
     cells = {j: (x, y) for j, x, y in obs.neighbours}
-    return waiting_for, plan_asks(waiting_for, cells,
-                                  lambda j: priority_rank(j, obs.tick, n_agents))
+    tick = obs.tick
+    return waiting_for, plan_asks(waiting_for, cells, lambda j: priority_rank(j, tick, n_agents))
 
 
 def predecessor(agent: int, tick: int, n_agents: int) -> int | None:

@@ -8,6 +8,7 @@ a Zenoh config file and/or listen and connect endpoints (README, "Several machin
 """
 
 import json
+import os
 import socket
 from dataclasses import dataclass, field
 
@@ -24,8 +25,19 @@ class TransportError(RuntimeError):
     """A Zenoh session could not be opened: no router to reach, bad credentials, bad config."""
 
 
+RUNTIME_ENV = "ZENOH_RUNTIME"
+RUNTIME_DEFAULT = "(rx: (worker_threads: 1))"
+"""Zenoh's runtime threads, unless ``ZENOH_RUNTIME`` says otherwise: one network receiving
+thread instead of two. Our handlers run on that thread (``indirect=False``); with two, each
+message woke the idle one too (tokio's work stealing), and the handlers hopped between threads:
+24 % more ticks a second with one, on 2 cores and 9 processes (README, "where the time goes")."""
+
+
 def open_session(settings: "TransportSettings") -> zenoh.Session:
-    """Open the process's Zenoh session; a failure becomes one clear TransportError."""
+    """Open the process's Zenoh session; a failure becomes one clear TransportError.
+
+    Zenoh reads :data:`RUNTIME_ENV` when its first session opens, so it is set here."""
+    os.environ.setdefault(RUNTIME_ENV, RUNTIME_DEFAULT)
     try:
         return zenoh.open(settings.zenoh_config())
     except zenoh.ZError as error:

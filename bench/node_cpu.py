@@ -1,0 +1,198 @@
+#!/usr/bin/env python3
+"""The Python cost of a tick in the nodes themselves, with Zenoh taken out: one process, no noise.
+
+The real ``AgentNode`` and ``WorldNode`` handlers run in one thread, over a stand-in for Zenoh that
+delivers every message (observation, standing query, answer, intent) in the order it was sent, by
+calling the receiver's handler directly. What is timed is exactly our code on each message:
+decoding, checks, negotiation, learning, encoding, the world's rules; not Zenoh, the kernel or
+the scheduler. Each handler is timed apart, so the tick's critical path (world -> rank 0 -> ... ->
+rank N-1 -> world) can be added up from them.
+
+On this 2-core machine the swarm's speed drifts by a third within minutes; this figure does not,
+so it is the one to compare two versions of the code by (``--repeats``, median).
+
+    python bench/node_cpu.py --agents 8 --episodes 20 --repeats 5
+"""
+
+import argparse
+import collections
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import zenoh  # noqa: E402
+
+from agent.brain import AgentBrain  # noqa: E402
+from agent.node import AgentNode, AgentOptions  # noqa: E402
+from protocol import keys  # noqa: E402
+from protocol.actions import STAY  # noqa: E402
+from protocol.config import SwarmConfig  # noqa: E402
+from protocol.transport import TransportSettings  # noqa: E402
+from world.node import WorldNode, WorldOptions  # noqa: E402
+
+
+class _Callback:
+    """Stands in for ``zenoh.handlers.Callback``: keeps the function."""
+
+    def __init__(self, callback, drop=None, indirect=True) -> None:
+        self.callback, self.drop = callback, drop
+
+
+class _Ok:
+    def __init__(self, payload: bytes) -> None:
+        self.payload = payload
+
+
+class _Reply:
+    def __init__(self, payload: bytes) -> None:
+        self.ok = _Ok(payload)
+
+
+class _Sample:
+    def __init__(self, key: str, payload: bytes) -> None:
+        self.key_expr, self.payload = key, payload
+
+
+class Wire:
+    """Every message sent, delivered in order; each delivery timed by the handler's kind."""
+
+    def __init__(self) -> None:
+        self.queue: collections.deque = collections.deque()
+        self.subscribers: dict[str, list] = collections.defaultdict(list)
+        self.queryables: dict[str, object] = {}
+        self.seconds: collections.Counter = collections.Counter()
+        self.count: collections.Counter = collections.Counter()
+
+    def send(self, kind: str, handler, item) -> None:
+        self.queue.append((kind, handler, item))
+
+    def drain(self) -> None:
+        clock = time.perf_counter
+        while self.queue:
+            kind, handler, item = self.queue.popleft()
+            start = clock()
+            handler(item)
+            self.seconds[kind] += clock() - start
+            self.count[kind] += 1
+
+
+class _Publisher:
+    def __init__(self, wire: Wire, key: str, kind: str) -> None:
+        self.wire, self.key, self.kind = wire, key, kind
+
+    def put(self, payload: bytes) -> None:
+        for handler in self.wire.subscribers[self.key]:
+            self.wire.send(self.kind, handler, _Sample(self.key, payload))
+
+    def undeclare(self) -> None:
+        pass
+
+
+class _Query:
+    def __init__(self, wire: Wire, key: str, parameters: str, handler) -> None:
+        self.wire, self.key_expr, self.parameters, self.handler = wire, key, parameters, handler
+        self.selector = f"{key}?{parameters}"
+
+    def reply(self, key, payload: bytes) -> None:
+        self.wire.send("answer", self.handler, _Reply(payload))
+
+    def reply_err(self, payload: bytes) -> None:
+        pass
+
+    def drop(self) -> None:
+        pass
+
+
+class _Session:
+    """What the nodes call on their session, in the harness: ``get`` and nothing else."""
+
+    def __init__(self, wire: Wire) -> None:
+        self.wire = wire
+
+    def get(self, selector: str, handler, **_) -> None:
+        key, _, parameters = selector.partition("?")
+        self.wire.send("query", self.wire.queryables[key],
+                       _Query(self.wire, key, parameters, handler.callback))
+
+
+class _LearnNothing(AgentBrain):
+    def act(self, obs, answers) -> int:
+        return STAY
+
+
+def run(config: SwarmConfig, out: Path, bare: bool) -> tuple[int, Wire]:
+    """Run ``config`` through the real handlers over a :class:`Wire`; (ticks, the wire)."""
+    zenoh.handlers.Callback = _Callback  # the nodes build their handlers at call time
+    wire = Wire()
+    transport = TransportSettings()
+    world = WorldNode(WorldOptions(config, transport, out), _Session(wire))
+    world.alive = set(range(config.n_agents))
+    world.publishers = [_Publisher(wire, keys.obs_key(config.run_id, i), "observation")
+                        for i in range(config.n_agents)]
+    wire.subscribers[keys.intent_key_all(config.run_id)]  # noqa: B018 - documents the route
+    agents = []
+    for i in range(config.n_agents):
+        brain = (_LearnNothing if bare else AgentBrain)(i, config)
+        node = AgentNode(AgentOptions(i, config, transport, out), _Session(wire), brain)
+        node.ready, node.peers_seen = True, set(range(config.n_agents))
+        intent_key = keys.intent_key(config.run_id, i)
+        node.publisher = _Publisher(wire, intent_key, "intent")
+        wire.subscribers[intent_key].append(world._on_intent_sample)
+        wire.subscribers[keys.obs_key(config.run_id, i)].append(
+            node._guarded(node._on_observation_sample))
+        wire.queryables[intent_key] = node._guarded(node._on_query)
+        agents.append(node)
+    with world.lock:
+        world._open_tick()
+    while not world.world.finished:
+        wire.drain()
+        kind, _ = world.events.get_nowait()
+        assert kind == "closed", kind
+        with world.lock:
+            world.unlogged -= 1
+            world._close_if_due()
+    for node in agents:
+        if node.failure is not None:
+            raise node.failure
+    if world.failure is not None:
+        raise world.failure
+    return world.world.tick, wire
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--agents", type=int, default=8)
+    p.add_argument("--episodes", type=int, default=20)
+    p.add_argument("--max-steps", type=int, default=100)
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--algo", default="nnql", choices=("nnql", "ql"))
+    p.add_argument("--bare", action="store_true", help="agents learn nothing and stay")
+    args = p.parse_args()
+    n = args.agents
+    config = SwarmConfig(run_id="cpu", n_agents=n, episodes=args.episodes,
+                         max_steps=args.max_steps, width=max(11, 2 * n // 11 + 1), height=11,
+                         algo=args.algo)
+    per_tick: dict[str, list[float]] = collections.defaultdict(list)
+    for r in range(args.repeats):
+        with tempfile.TemporaryDirectory() as tmp:
+            ticks, wire = run(config, Path(tmp), args.bare)
+        for kind in wire.seconds:
+            per_tick[kind].append(1e6 * wire.seconds[kind] / ticks)
+        per_tick["whole tick"].append(1e6 * sum(wire.seconds.values()) / ticks)
+        per_message = {k: 1e6 * wire.seconds[k] / wire.count[k] for k in wire.seconds}
+        for kind, us in per_message.items():
+            per_tick[f"one {kind}"].append(us)
+    print(f"{n} agents, {ticks} ticks a repeat, {args.repeats} repeats; us (median over repeats)")
+    for kind in sorted(per_tick, key=lambda k: (not k.startswith("one "), k)):
+        values = per_tick[kind]
+        print(f"  {kind:<22} {statistics.median(values):8.1f}  "
+              f"({' '.join(f'{v:.1f}' for v in values)})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
