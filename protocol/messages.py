@@ -1,31 +1,38 @@
 """Every wire message of the swarm, and the one msgpack codec that encodes and validates them.
 
-On the wire a message is a msgpack map with short keys: ``v`` (protocol version), ``k`` (kind tag),
-``r`` (run id), ``t`` (tick), ``s`` (sender), then the fields of its kind; :data:`SCHEMA` is the
-only place that maps fields to wire keys.
+On the wire a message is a msgpack array: ``[version, kind tag, run id, tick, sender, ...]``, then
+the other fields of its kind, in the order of :data:`SCHEMA` (its class's field order). An array,
+not a map with a short key per field (protocol version 1), because the codec is on the critical
+path of the lockstep loop: no keys to pack, unpack, hash and match, a smaller payload, and one
+shape to check (exactly as many items as the kind has fields). The version and the kind lead, so
+that a message of another version or kind says so whatever its length.
 
 :func:`parse` checks, in order, and raises :class:`Rejected` with the reason in brackets: bytes
 (``not-bytes``); size, before unpacking (``oversize``; it stands in for ``max_buffer_size``, which
-``msgpack.unpackb`` lacks); msgpack with strict limits and no ext types (``not-msgpack``); a map
-(``not-map``); version (``bad-version``); kind (``wrong-kind``); exactly the expected keys
-(``missing-field:<name>``, ``extra-field``); run id (``wrong-run``); each field's type and range
-(``bad-field:<name>``); the sender (``forged-sender``). Types are strict: a bool is not an int, an
-int is not a bool; float fields take ints but must be finite. :class:`Inbox` turns a rejection
-into a counted, rate-limited log line and None, and never raises. :func:`encode` runs the same
-checks (accepting numpy scalars and arrays), so a malformed message fails where it is made.
+``msgpack.unpackb`` lacks); msgpack with strict limits, no ext types and no maps anywhere
+(``not-msgpack``); an array at the top level (``not-array``; a map there is told by its first byte,
+whatever follows, so a version-1 message is ``not-array``, never ``not-msgpack``); the version, if
+the array has an item (``bad-version``); the kind, if it has two (``wrong-kind``); exactly the
+kind's number of items (``wrong-length``); run id (``wrong-run``); each field's type and range
+(``bad-field:<name>``); then the rules between fields: the sender (``forged-sender``), an agent
+neither among its own neighbours nor relaying its own intent (``bad-field:<name>``). Types are
+strict: a bool is not an int, an int is not a bool; float fields take ints but must be finite.
+:class:`Inbox` turns a rejection into a counted, rate-limited log line and None, and never raises.
+:func:`encode` runs the same checks (accepting numpy scalars and arrays), so a malformed message
+fails where it is made.
 
-Both first try a fast path, compiled at import from :data:`SCHEMA` (each check has a fast form):
-it tests every field inline and answers only for a valid message of plain built-in types; at any
-doubt (numpy, lists, an int for a float, anything invalid) it steps aside and the generic checks
-decide, so every rejection, its reason and its order are theirs.
+Messages are :class:`typing.NamedTuple` classes: immutable, built by one ``tuple.__new__``, read
+by unpacking. Both :func:`parse` and :func:`encode` first try a fast path, compiled at import from
+:data:`SCHEMA` (each check has a fast form): it tests every field inline and answers only for a
+valid message of plain built-in types; at any doubt (numpy, lists, an int for a float, anything
+invalid) it steps aside and the generic checks decide, so every rejection, its reason and its
+order are theirs.
 """
 
 import logging
 import threading
 from collections import Counter
-from dataclasses import dataclass
 from functools import lru_cache
-from operator import attrgetter, itemgetter
 from typing import NamedTuple
 
 import msgpack
@@ -34,7 +41,7 @@ import numpy as np
 from protocol.actions import N_ACTIONS
 from protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -59,8 +66,7 @@ def agent_sender(agent: int) -> str:
     return f"agent/{agent}"
 
 
-@dataclass(frozen=True, slots=True)
-class Observation:
+class Observation(NamedTuple):
     """World -> one agent, each tick: where it is, what it sees, how its previous action went."""
 
     run: str
@@ -80,8 +86,7 @@ class Observation:
     episode_end: bool
 
 
-@dataclass(frozen=True, slots=True)
-class Intent:
+class Intent(NamedTuple):
     """Agent -> world and neighbours: its action at this tick (never changed once sent)."""
 
     run: str
@@ -92,8 +97,7 @@ class Intent:
     action: int  # 0 .. N_ACTIONS - 1, see protocol.actions
 
 
-@dataclass(frozen=True, slots=True)
-class Answer:
+class Answer(NamedTuple):
     """Agent -> a neighbour that asked for its intent: its action at this tick, and the actions
     of the higher-ranked agents it learned while negotiating (relayed: ``(agent, action)``).
 
@@ -110,8 +114,7 @@ class Answer:
     relayed: tuple[tuple[int, int], ...]
 
 
-@dataclass(frozen=True, slots=True)
-class Control:
+class Control(NamedTuple):
     """World -> everyone: a command from CONTROL_COMMANDS."""
 
     run: str
@@ -224,10 +227,14 @@ def _per_agent(what: str, *rest):
             raise ValueError(f"the same agent twice in {what}")
         return tuple(out)
 
-    check.fast = lambda v: (  # as many distinct ids as entries, counting only valid entries
-        f"type({v}) is tuple and len({v}) <= {MAX_AGENTS} and len({v}) == "
-        f"len({{item[0] for item in {v} if {_fast_tuple('item', (_agent, *rest))}}})"
-    )
+    def fast(v: str) -> str:  # as many distinct ids as entries, counting only valid entries
+        assert v.isidentifier(), v  # the ids are kept in ``<v>_ids``, for the fast form of _related
+        return (
+            f"type({v}) is tuple and len({v}) <= {MAX_AGENTS} and len({v}) == "
+            f"len({v}_ids := {{item[0] for item in {v} if {_fast_tuple('item', (_agent, *rest))}}})"
+        )
+
+    check.fast = fast
     return check
 
 
@@ -237,7 +244,6 @@ _relayed = _per_agent("[id, action]", _action)
 
 class Field(NamedTuple):
     name: str
-    wire: str
     check: object
 
 
@@ -246,41 +252,42 @@ class Kind(NamedTuple):
     fields: tuple[Field, ...]
 
 
-_HEADER = (Field("run", "r", _str), Field("tick", "t", _count), Field("sender", "s", _str))
+_HEADER = (Field("run", _str), Field("tick", _count), Field("sender", _str))
 
 SCHEMA: dict[type, Kind] = {
     Observation: Kind("obs", _HEADER + (
-        Field("agent", "a", _agent),
-        Field("episode", "e", _count),
-        Field("step", "n", _count),
-        Field("position", "p", _cell),
-        Field("goal", "g", _cell),
-        Field("neighbours", "nb", _neighbours),
-        Field("rank", "rk", _agent),
-        Field("reward_ds", "rd", _reward),
-        Field("reward_ca", "rc", _reward),
-        Field("collided", "c", _bool),
-        Field("arrived", "ar", _bool),
-        Field("episode_end", "ee", _bool),
+        Field("agent", _agent),
+        Field("episode", _count),
+        Field("step", _count),
+        Field("position", _cell),
+        Field("goal", _cell),
+        Field("neighbours", _neighbours),
+        Field("rank", _agent),
+        Field("reward_ds", _reward),
+        Field("reward_ca", _reward),
+        Field("collided", _bool),
+        Field("arrived", _bool),
+        Field("episode_end", _bool),
     )),
     Intent: Kind("intent", _HEADER + (
-        Field("agent", "a", _agent),
-        Field("episode", "e", _count),
-        Field("action", "x", _action),
+        Field("agent", _agent),
+        Field("episode", _count),
+        Field("action", _action),
     )),
     Answer: Kind("answer", _HEADER + (
-        Field("agent", "a", _agent),
-        Field("episode", "e", _count),
-        Field("action", "x", _action),
-        Field("relayed", "rl", _relayed),
+        Field("agent", _agent),
+        Field("episode", _count),
+        Field("action", _action),
+        Field("relayed", _relayed),
     )),
     Control: Kind("control", _HEADER + (
-        Field("command", "c", _command),
+        Field("command", _command),
     )),
 }
-"""Message class -> its kind tag and its fields (name, wire key, check), in wire order."""
+"""Message class -> its kind tag and its fields (name, check), in wire order: the class's order."""
 
-_WIRE_KEYS = {cls: frozenset({"v", "k", *(f.wire for f in k.fields)}) for cls, k in SCHEMA.items()}
+_MAX_ARRAY_LEN = max(MAX_AGENTS, 2 + max(len(kind.fields) for kind in SCHEMA.values()))
+"""The longest array: a list of one entry per agent, or the top level (version, kind, fields)."""
 
 
 def _schema(kind: type) -> Kind:
@@ -311,34 +318,43 @@ def _related(msg, key_agent: int | None):
     return msg
 
 
-def _checked(cls: type, values: dict, key_agent: int | None) -> object:
-    """Build a message from field values (by name), checking every field, then the sender."""
+_related.fast = {  # true exactly where _related returns the message, given its fields valid (as
+    # locals, with ``<list>_ids`` the set of the ids in a list, which the list's fast check binds)
+    Observation: "sender == WORLD_SENDER and agent not in neighbours_ids",
+    Intent: "sender == _AGENT_SENDERS[agent] and (key_agent is None or key_agent == agent)",
+    Answer: "sender == _AGENT_SENDERS[agent] and (key_agent is None or key_agent == agent)"
+            " and agent not in relayed_ids",
+    Control: "sender == WORLD_SENDER",
+}
+
+
+def _checked(cls: type, values, key_agent: int | None) -> object:
+    """Build a message from field values (in SCHEMA order), checking each, then their rules."""
     out = {}
-    for f in SCHEMA[cls].fields:
+    for f, value in zip(SCHEMA[cls].fields, values, strict=True):
         try:
-            out[f.name] = f.check(values[f.name])
+            out[f.name] = f.check(value)
         except (ValueError, TypeError) as e:
             raise Rejected(f"bad-field:{f.name}", str(e)) from None
     return _related(cls(**out), key_agent)
 
 
-def _generic_to_wire(msg) -> dict:
+def _generic_to_wire(msg) -> list:
     """:func:`to_wire` by the generic checks (where the fast path steps aside)."""
     cls = type(msg)
     kind = _schema(cls)
+    if len(msg) != len(kind.fields):  # only tuple.__new__ can make one so
+        raise TypeError(f"a {cls.__name__} of {len(msg)} fields, not {len(kind.fields)}")
     try:
         validate_run_id(msg.run)
     except ValueError as e:
         raise Rejected("bad-field:run", str(e)) from None
-    msg = _checked(cls, {f.name: getattr(msg, f.name) for f in kind.fields}, None)
-    wire = {"v": PROTOCOL_VERSION, "k": kind.tag}
-    for f in kind.fields:
-        wire[f.wire] = getattr(msg, f.name)
-    return wire
+    msg = _checked(cls, [getattr(msg, f.name) for f in kind.fields], None)
+    return [PROTOCOL_VERSION, kind.tag, *(getattr(msg, f.name) for f in kind.fields)]
 
 
-def to_wire(msg) -> dict:
-    """The validated wire map of a message (what :func:`encode` packs); Rejected if invalid."""
+def to_wire(msg) -> list:
+    """The validated wire array of a message (what :func:`encode` packs); Rejected if invalid."""
     fast = _FAST_TO_WIRE.get(type(msg))
     return (fast and fast(msg)) or _generic_to_wire(msg)
 
@@ -353,43 +369,64 @@ _PER_THREAD = _PerThread()
 
 def encode(msg) -> bytes:
     """msgpack bytes of a message; raises Rejected (a ValueError) if the message is invalid."""
-    return _PER_THREAD.packer.pack(to_wire(msg))
+    fast = _FAST_TO_WIRE.get(type(msg))  # to_wire(msg), a call less
+    return _PER_THREAD.packer.pack((fast and fast(msg)) or _generic_to_wire(msg))
 
 
 def _no_ext(code, data):
     raise ValueError(f"ext type {code} not allowed")
 
 
-def _unpackb(payload: bytes, max_map_len: int, use_list: bool = True):
+def _no_map(obj):
+    raise ValueError("map not allowed")  # only an empty one gets here, past max_map_len=0
+
+
+_UNPACK_KEYWORDS = (
+    "raw=False, ext_hook=_no_ext, max_ext_len=0, object_hook=_no_map, max_map_len=0, "
+    "max_str_len=MAX_STR_LEN, max_bin_len=MAX_STR_LEN, max_array_len=_MAX_ARRAY_LEN"
+)
+"""The keywords of every ``msgpack.unpackb`` call, as source: strict limits, no ext types, no maps.
+The fast path compiles them into its call: passed as ``**options``, they cost a third of it."""
+
+_UNPACK_OPTIONS = eval(f"dict({_UNPACK_KEYWORDS})")
+
+_MAP_HEADS = frozenset({*range(0x80, 0x90), 0xDE, 0xDF})
+"""The first bytes of a msgpack map (fixmap, map 16, map 32)."""
+
+
+def _unpackb(payload: bytes, use_list: bool = True):
     """``msgpack.unpackb`` with strict limits (and arrays as tuples if not ``use_list``)."""
-    return msgpack.unpackb(
-        payload, use_list=use_list, raw=False, strict_map_key=True, ext_hook=_no_ext,
-        max_ext_len=0, max_str_len=MAX_STR_LEN, max_bin_len=MAX_STR_LEN,
-        max_array_len=MAX_AGENTS, max_map_len=max_map_len,
-    )
+    return msgpack.unpackb(payload, use_list=use_list, **_UNPACK_OPTIONS)
+
+
+_VIA_TO_BYTES: set[type] = set()
+"""The types of the payloads read with their ``to_bytes()`` (zenoh.ZBytes): the first ones tried."""
 
 
 def _as_bytes(payload) -> bytes:
-    if isinstance(payload, bytes):
-        return payload
-    if isinstance(payload, (bytearray, memoryview)):
-        if len(payload) > MAX_PAYLOAD_BYTES:  # a memoryview's len counts items: checked again below
-            raise Rejected("oversize", f"{len(payload)} items")
-        return bytes(payload)
-    if hasattr(payload, "to_bytes") and not isinstance(payload, (int, bool)):  # zenoh.ZBytes
-        try:
-            size = len(payload)
-        except Exception:
-            size = 0
-        if size > MAX_PAYLOAD_BYTES:
-            raise Rejected("oversize", f"{size} bytes")
-        try:
-            data = payload.to_bytes()
-        except Exception as e:
-            raise Rejected("not-bytes", f"to_bytes() failed: {type(e).__name__}") from None
-        if isinstance(data, bytes):
-            return data
-    raise Rejected("not-bytes", f"payload of type {type(payload).__name__}")
+    if type(payload) not in _VIA_TO_BYTES:
+        if isinstance(payload, bytes):
+            return payload
+        if isinstance(payload, (bytearray, memoryview)):
+            if len(payload) > MAX_PAYLOAD_BYTES:  # a memoryview's len counts items: checked again
+                raise Rejected("oversize", f"{len(payload)} items")
+            return bytes(payload)
+        if not hasattr(payload, "to_bytes") or isinstance(payload, (int, bool)):
+            raise Rejected("not-bytes", f"payload of type {type(payload).__name__}")
+        _VIA_TO_BYTES.add(type(payload))  # a zenoh.ZBytes: and so will be all of that type
+    try:
+        size = len(payload)
+    except Exception:
+        size = 0
+    if size > MAX_PAYLOAD_BYTES:
+        raise Rejected("oversize", f"{size} bytes")
+    try:
+        data = payload.to_bytes()
+    except Exception as e:
+        raise Rejected("not-bytes", f"to_bytes() failed: {type(e).__name__}") from None
+    if not isinstance(data, bytes):
+        raise Rejected("not-bytes", f"to_bytes() gave a {type(data).__name__}")
+    return data
 
 
 def _generic_parse(payload, kind: type, run_id: str, key_agent: int | None = None):
@@ -399,25 +436,25 @@ def _generic_parse(payload, kind: type, run_id: str, key_agent: int | None = Non
     if len(payload) > MAX_PAYLOAD_BYTES:
         raise Rejected("oversize", f"{len(payload)} bytes")
     try:
-        data = _unpackb(payload, 4 * len(schema.fields))
+        data = _unpackb(payload)
     except Exception as e:
+        if payload and payload[0] in _MAP_HEADS:  # the top level is a map, whatever follows
+            raise Rejected("not-array", "top level is a map") from None
         raise Rejected("not-msgpack", f"{type(e).__name__}: {e}") from None
-    if not isinstance(data, dict):
-        raise Rejected("not-map", f"top level is {type(data).__name__}")
-    version = data.get("v")
-    if type(version) is not int or version != PROTOCOL_VERSION:
-        raise Rejected("bad-version", f"expected {PROTOCOL_VERSION}, got {version!r}")
-    if data.get("k") != schema.tag:
-        raise Rejected("wrong-kind", f"expected {schema.tag!r}, got {data.get('k')!r}")
-    if data.keys() != _WIRE_KEYS[kind]:
-        for f in schema.fields:
-            if f.wire not in data:
-                raise Rejected(f"missing-field:{f.name}", f"no key {f.wire!r}")
-        raise Rejected("extra-field", f"{len(data.keys() - _WIRE_KEYS[kind])} unexpected keys")
-    run = data["r"]
+    if type(data) is not list:
+        raise Rejected("not-array", f"top level is {type(data).__name__}")
+    if data:
+        version = data[0]
+        if type(version) is not int or version != PROTOCOL_VERSION:
+            raise Rejected("bad-version", f"expected {PROTOCOL_VERSION}, got {version!r}")
+    if len(data) > 1 and data[1] != schema.tag:
+        raise Rejected("wrong-kind", f"expected {schema.tag!r}, got {data[1]!r}")
+    if len(data) != 2 + len(schema.fields):
+        raise Rejected("wrong-length", f"expected {2 + len(schema.fields)} items, got {len(data)}")
+    run = data[2]
     if type(run) is not str or run != run_id:
         raise Rejected("wrong-run", f"expected {run_id!r}, got {run!r}")
-    return _checked(kind, {f.name: data[f.wire] for f in schema.fields}, key_agent)
+    return _checked(kind, data[2:], key_agent)
 
 
 def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None):
@@ -434,9 +471,11 @@ def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None)
 
 
 # The fast path: for each message class, a parser and an encoder compiled from its SCHEMA entry,
-# which test each field inline with the fast form of its check. They answer only for a valid
-# message of plain built-in types (numpy and lists go the generic way), and None at any doubt or
-# broken rule; the generic functions above then decide, and word the rejection.
+# which test each field inline with the fast form of its check, then the rules between fields
+# with the fast form of _related. They answer only for a valid message of plain built-in types
+# (numpy and lists go the generic way), and None at any doubt or broken rule; the generic
+# functions above then decide, and word the rejection. A message is a tuple of its fields in
+# wire order, so the encoder unpacks it, and the parser builds it from a slice of the array.
 
 @lru_cache(maxsize=64)
 def _valid_run_id(run: str) -> bool:
@@ -448,9 +487,8 @@ def _valid_run_id(run: str) -> bool:
 
 
 _FAST_CODEC = """
-def fast_codec(cls, wire_values, attributes, setters):
-    {setter_names} = setters
-    new = object.__new__
+def fast_codec(cls):
+    new = tuple.__new__
 
     def parse(payload, run_id, key_agent):
         try:
@@ -458,27 +496,24 @@ def fast_codec(cls, wire_values, attributes, setters):
                 payload = _as_bytes(payload)
             if len(payload) > MAX_PAYLOAD_BYTES:
                 return None
-            data = _unpackb(payload, {max_map_len}, use_list=False)
-            if type(data) is not dict or len(data) != {n_keys}:
-                return None
-            version, tag, {names} = wire_values(data)  # KeyError unless exactly its keys
-            if (type(version) is int and version == PROTOCOL_VERSION and tag == {tag!r}
-                    and run == run_id and {test}):
-                msg = new(cls)  # what the dataclass's __init__ does, in half the time
-                {set_fields}
-                return _related(msg, key_agent)
+            data = msgpack.unpackb(payload, use_list=False, {unpack_keywords})  # arrays as tuples
+            if type(data) is tuple and len(data) == {n_items}:
+                version, tag, {names} = data
+                if (type(version) is int and version == PROTOCOL_VERSION and tag == {tag!r}
+                        and run == run_id and {test} and {related}):
+                    return new(cls, data[2:])  # what cls(...) does, without its arguments
         except Exception:  # any doubt
             pass
         return None
 
     def to_wire(msg):
+        key_agent = None
         try:
-            {names} = attributes(msg)
-            if {test} and _valid_run_id(run):
-                _related(msg, None)
-                return {{"v": PROTOCOL_VERSION, "k": {tag!r}, {wire_map}}}
-        except (AttributeError, Rejected):
-            pass
+            {names} = msg
+        except ValueError:  # a message of the wrong length: only tuple.__new__ makes one
+            return None
+        if {test} and _valid_run_id(run) and {related}:
+            return [PROTOCOL_VERSION, {tag!r}, {names}]
         return None
 
     return parse, to_wire
@@ -488,20 +523,17 @@ def fast_codec(cls, wire_values, attributes, setters):
 def _compile_fast_codec(cls: type) -> tuple:
     """``parse(payload, run_id, key_agent)`` and ``to_wire(msg)`` of the fast path of ``cls``."""
     kind = SCHEMA[cls]
-    names = [f.name for f in kind.fields]
+    names = tuple(f.name for f in kind.fields)
+    if names != cls._fields:  # the fast path reads and builds a message as the tuple on the wire
+        raise TypeError(f"{cls.__name__}'s fields are not those of its SCHEMA, in order")
     source = _FAST_CODEC.format(
-        tag=kind.tag, n_keys=2 + len(names), max_map_len=4 * len(names), names=", ".join(names),
-        test=" and ".join(f.check.fast(f.name) for f in kind.fields),
-        wire_map=", ".join(f"{f.wire!r}: {f.name}" for f in kind.fields),
-        setter_names=", ".join(f"set_{name}" for name in names),
-        set_fields="; ".join(f"set_{name}(msg, {name})" for name in names),
+        tag=kind.tag, n_items=2 + len(names), names=", ".join(names),
+        test=" and ".join(f.check.fast(f.name) for f in kind.fields), related=_related.fast[cls],
+        unpack_keywords=_UNPACK_KEYWORDS,
     )
     namespace = {}
     exec(compile(source, f"<fast codec of {cls.__name__}>", "exec"), globals(), namespace)
-    return namespace["fast_codec"](
-        cls, itemgetter("v", "k", *(f.wire for f in kind.fields)), attrgetter(*names),
-        [getattr(cls, name).__set__ for name in names],  # its slots: all its __init__ sets
-    )
+    return namespace["fast_codec"](cls)
 
 
 _FAST_PARSE, _FAST_TO_WIRE = {}, {}
@@ -533,13 +565,19 @@ class Inbox:
 
     def decode(self, payload, kind: type, key_agent: int | None = None):
         """The message of class ``kind`` in ``payload``, or None (counted, logged) if rejected."""
-        _schema(kind)  # a wrong class is a bug in the caller, not bad input: that one raises
-        try:
-            msg = parse(payload, kind, self.run_id, key_agent)
-        except Rejected as e:
-            return self.reject(e.reason, f"{kind.__name__}: {e.detail}")
-        except Exception as e:  # parse raises only Rejected; this guards the event loop anyway
-            return self.reject("decode-error", f"{kind.__name__}: {type(e).__name__}: {e}")
+        try:  # what parse() does, with two calls fewer: the fast path (it never raises), then
+            # the generic checks
+            fast = _FAST_PARSE[kind]
+        except (KeyError, TypeError):  # a wrong class is a bug in the caller, not bad input
+            raise TypeError(f"not a message class: {kind!r}") from None
+        msg = fast(payload, self.run_id, key_agent)
+        if msg is None:
+            try:
+                msg = _generic_parse(payload, kind, self.run_id, key_agent)
+            except Rejected as e:
+                return self.reject(e.reason, f"{kind.__name__}: {e.detail}")
+            except Exception as e:  # it raises only Rejected; this guards the event loop anyway
+                return self.reject("decode-error", f"{kind.__name__}: {type(e).__name__}: {e}")
         self.accepted += 1
         return msg
 

@@ -1,6 +1,5 @@
 """Keys and wire messages: round trips, every rejection reason, and fuzzing of the decode path."""
 
-import dataclasses
 import logging
 import math
 
@@ -58,8 +57,9 @@ def control(**change) -> Control:
     return Control(**{**base, **change})
 
 
-def wire_key(cls, name: str) -> str:
-    return next(f.wire for f in SCHEMA[cls].fields if f.name == name)
+def wire_index(cls, name: str) -> int:
+    """Where a field is in the wire array: after the version and the kind, in SCHEMA order."""
+    return 2 + [f.name for f in SCHEMA[cls].fields].index(name)
 
 
 def pack(obj) -> bytes:
@@ -74,7 +74,7 @@ def reason_of(payload, kind, run=RUN, key_agent=None) -> str:
 
 def mutated(msg, name: str, value) -> bytes:
     wire = to_wire(msg)
-    wire[wire_key(type(msg), name)] = value
+    wire[wire_index(type(msg), name)] = value
     return pack(wire)
 
 
@@ -215,17 +215,31 @@ def test_round_trip(msg):
     assert parse(memoryview(payload), type(msg), RUN) == msg
 
 
-def test_wire_format_is_short_keys_with_version_and_kind():
+def test_wire_format_is_an_array_of_version_kind_and_fields_in_order():
+    assert PROTOCOL_VERSION == 2
     wire = msgpack.unpackb(encode(intent()))
-    assert wire == {"v": PROTOCOL_VERSION, "k": "intent", "r": RUN, "t": 7, "s": "agent/2", "a": 2,
-                    "e": 1, "x": 3}
-    assert msgpack.unpackb(encode(control()))["k"] == "control"
-    assert msgpack.unpackb(encode(obs()))["k"] == "obs"
+    assert wire == [PROTOCOL_VERSION, "intent", RUN, 7, "agent/2", 2, 1, 3]
+    assert msgpack.unpackb(encode(control())) == [2, "control", RUN, 7, WORLD_SENDER, "shutdown"]
+    assert msgpack.unpackb(encode(obs()))[:2] == [2, "obs"]
+    assert msgpack.unpackb(encode(answer()))[-1] == [[0, 4], [5, 0]]
     for cls, kind in SCHEMA.items():
         names = [f.name for f in kind.fields]
-        assert names == list(cls.__dataclass_fields__)
-        wires = [f.wire for f in kind.fields]
-        assert len(set(wires)) == len(wires) and not {"v", "k"} & set(wires)
+        assert names == list(cls._fields) and names[:3] == ["run", "tick", "sender"]
+        msg = {Observation: obs, Intent: intent, Answer: answer, Control: control}[cls]()
+        assert msgpack.unpackb(encode(msg), use_list=False) == (PROTOCOL_VERSION, kind.tag, *msg)
+    assert len({kind.tag for kind in SCHEMA.values()}) == len(SCHEMA)
+
+
+def test_messages_are_immutable_named_tuples():
+    msg = intent()
+    assert isinstance(msg, tuple) and msg == Intent(RUN, 7, "agent/2", 2, 1, 3)
+    assert tuple.__new__(Intent, (RUN, 7, "agent/2", 2, 1, 3)) == msg
+    assert (msg.run, msg.tick, msg.sender, msg.agent, msg.episode, msg.action) == tuple(msg)
+    with pytest.raises(AttributeError):
+        msg.action = 4
+    assert msg._replace(action=4).action == 4 and msg.action == 3
+    assert hash(msg) == hash(intent()) and Intent.__doc__.startswith("Agent -> world")
+    assert obs() == Observation(*obs()) == Observation(**obs()._asdict())
 
 
 def test_encode_normalises_numpy_and_ints():
@@ -254,7 +268,14 @@ def test_encode_rejects_non_messages():
     with pytest.raises(TypeError):
         encode({"v": 1})
     with pytest.raises(TypeError):
+        encode(tuple(intent()))  # the same values, but not a message
+    with pytest.raises(TypeError):
+        to_wire(tuple.__new__(Intent, (RUN, 7)))  # a message of too few fields: a bug
+    with pytest.raises(TypeError):
         parse(encode(intent()), dict, RUN)
+    for kind in (dict, tuple, [Intent], None):
+        with pytest.raises(TypeError, match="not a message class"):
+            Inbox(RUN).decode(encode(intent()), kind)  # a bug in the caller: raised, not counted
 
 
 # ---------------------------------------------------------------- every rejection reason
@@ -270,25 +291,27 @@ def test_rejection_reasons():
     assert reason_of(good + b"\x00", Intent) == "not-msgpack"  # trailing data
     assert reason_of(pack(msgpack.ExtType(3, b"x")), Intent) == "not-msgpack"  # ext type
     assert reason_of(pack(msgpack.Timestamp(1, 0)), Intent) == "not-msgpack"  # built-in ext -1
-    assert reason_of(pack({1: 2}), Intent) == "not-msgpack"  # non-str map key
+    assert reason_of(pack([2, "intent", {1: 2}]), Intent) == "not-msgpack"  # a map inside
     assert reason_of(pack("a" * 1000), Intent) == "not-msgpack"  # over max_str_len
     assert reason_of(b"\xa1\xff", Intent) == "not-msgpack"  # invalid UTF-8
     assert reason_of(pack([0] * (MAX_AGENTS + 1)), Intent) == "not-msgpack"  # over max_array_len
     assert reason_of(b"\x91" * 5000 + b"\x00", Intent) == "not-msgpack"  # nesting too deep
-    assert reason_of(pack([1, 2]), Intent) == "not-map"
-    assert reason_of(pack(None), Intent) == "not-map"
+    assert reason_of(pack(None), Intent) == "not-array"
+    assert reason_of(pack("intent"), Intent) == "not-array"
+    assert reason_of(pack({1: 2}), Intent) == "not-array"  # a map, whatever its keys
     wire = to_wire(intent())
-    assert reason_of(pack({**wire, "v": 2}), Intent) == "bad-version"
-    assert reason_of(pack({**wire, "v": True}), Intent) == "bad-version"  # True == 1, not an int
-    assert reason_of(pack({k: v for k, v in wire.items() if k != "v"}), Intent) == "bad-version"
+    assert reason_of(pack([1, *wire[1:]]), Intent) == "bad-version"
+    assert reason_of(pack([3, *wire[1:]]), Intent) == "bad-version"
+    assert reason_of(pack([True, *wire[1:]]), Intent) == "bad-version"  # True == 1, not an int
+    assert reason_of(pack([2.0, *wire[1:]]), Intent) == "bad-version"
+    assert reason_of(pack(wire[1:]), Intent) == "bad-version"  # no version: the kind in its place
+    assert reason_of(pack([1, 2]), Intent) == "bad-version"
     assert reason_of(encode(control()), Intent) == "wrong-kind"
-    assert reason_of(pack({**wire, "k": ["intent"]}), Intent) == "wrong-kind"
-    no_action = {k: v for k, v in wire.items() if k != "x"}
-    assert reason_of(pack(no_action), Intent) == "missing-field:action"
-    assert reason_of(pack({**wire, "zz": 1}), Intent) == "extra-field"
-    assert reason_of(pack({**wire, b"zz": 1}), Intent) == "extra-field"
+    assert reason_of(pack([2, ["intent"], *wire[2:]]), Intent) == "wrong-kind"
+    assert reason_of(pack(wire[:-1]), Intent) == "wrong-length"  # no action
+    assert reason_of(pack([*wire, 1]), Intent) == "wrong-length"  # an item too many
     assert reason_of(good, Intent, run="run-2") == "wrong-run"
-    assert reason_of(pack({**wire, "r": 1}), Intent) == "wrong-run"
+    assert reason_of(pack([*wire[:2], 1, *wire[3:]]), Intent) == "wrong-run"
     assert reason_of(mutated(intent(), "action", 5), Intent) == "bad-field:action"
     assert reason_of(mutated(intent(), "sender", "agent/3"), Intent) == "forged-sender"
     assert reason_of(mutated(intent(), "sender", "world"), Intent) == "forged-sender"
@@ -298,6 +321,72 @@ def test_rejection_reasons():
     assert reason_of(mutated(obs(), "sender", "agent/2"), Observation) == "forged-sender"
     assert reason_of(mutated(control(), "sender", "agent/0"), Control) == "forged-sender"
     assert reason_of(mutated(control(), "command", "reboot"), Control) == "bad-field:command"
+
+
+def detail_of(payload, kind, run=RUN, key_agent=None) -> str:
+    with pytest.raises(Rejected) as info:
+        parse(payload, kind, run, key_agent)
+    return str(info.value)
+
+
+def test_wrong_length_says_how_many_items():
+    wire = to_wire(intent())
+    assert detail_of(pack(wire[:-1]), Intent) == "wrong-length: expected 8 items, got 7"
+    assert detail_of(pack([*wire, 0, 0]), Intent) == "wrong-length: expected 8 items, got 10"
+    assert detail_of(pack([]), Intent) == "wrong-length: expected 8 items, got 0"
+    assert detail_of(pack([2]), Intent) == "wrong-length: expected 8 items, got 1"
+    assert detail_of(pack([2, "intent"]), Intent) == "wrong-length: expected 8 items, got 2"
+    full = to_wire(obs())
+    assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 17 items, got 5"
+    short = pack(to_wire(answer())[:-1])
+    assert detail_of(short, Answer) == "wrong-length: expected 9 items, got 8"
+
+
+def test_checks_come_in_order_version_kind_length_run_fields_rules():
+    """Each check wins over the ones after it: a message of another version or kind says so,
+    whatever its length; a wrong length, whatever its items; a wrong run, whatever its fields."""
+    wire = to_wire(intent())
+    assert reason_of(pack([1]), Intent) == "bad-version"
+    assert reason_of(pack([1, "obs"]), Intent) == "bad-version"
+    assert reason_of(pack([1, "obs", *wire[2:], 0, 0]), Intent) == "bad-version"
+    assert reason_of(pack(["intent"]), Intent) == "bad-version"
+    assert reason_of(pack([2, "obs"]), Intent) == "wrong-kind"
+    assert reason_of(pack([2, None, *wire[2:], 0]), Intent) == "wrong-kind"
+    assert reason_of(encode(obs()), Intent) == "wrong-kind"  # longer
+    assert reason_of(encode(control()), Answer) == "wrong-kind"  # shorter
+    assert reason_of(pack([2, "intent", "other-run"]), Intent) == "wrong-length"
+    assert reason_of(pack([2, "intent", None, None, None, None, None]), Intent) == "wrong-length"
+    changed = [*wire[:2], "other-run", -1, None, MAX_AGENTS, -1, 99]
+    assert reason_of(pack(changed), Intent) == "wrong-run"
+    changed = [*wire[:3], -1, "agent/3", MAX_AGENTS, -1, 99]
+    assert reason_of(pack(changed), Intent) == "bad-field:tick"  # the first bad field
+    assert reason_of(pack([*wire[:4], "agent/3", 2, 1, 99]), Intent) == "bad-field:action"
+    itself = mutated(obs(), "neighbours", ((2, 0, 0),))
+    assert reason_of(itself, Observation) == "bad-field:neighbours"
+    forged = to_wire(obs())
+    forged[wire_index(Observation, "sender")] = "agent/2"
+    forged[wire_index(Observation, "neighbours")] = [[2, 0, 0]]
+    assert reason_of(pack(forged), Observation) == "forged-sender"  # the sender before the lists
+
+
+def test_maps_are_not_part_of_the_wire():
+    """At the top level a map is ``not-array`` (a version-1 message among them), whatever its
+    size or content, told by its first byte; anywhere inside, even empty, it is ``not-msgpack``."""
+    version_1 = {"v": 1, "k": "intent", "r": RUN, "t": 7, "s": "agent/2", "a": 2, "e": 1, "x": 3}
+    for top in ({}, {"v": 2}, version_1, {**version_1, "v": 2}, {1: 2}, {"x": [{"y": 1}]},
+                {str(i): i for i in range(100)}, {"a": "b" * 1000}):
+        assert reason_of(pack(top), Intent) == "not-array", top
+    assert reason_of(pack(version_1)[:3], Intent) == "not-array"  # truncated: still a map
+    assert reason_of(b"\xdf\xff\xff\xff\xff", Intent) == "not-array"  # map 32, 4 billion pairs
+    assert reason_of(b"\xde\x00\x01", Intent) == "not-array"  # map 16
+    wire = to_wire(intent())
+    for inner in ({}, {"a": 1}, {1: 2}):
+        for i in range(len(wire)):
+            assert reason_of(pack([*wire[:i], inner, *wire[i + 1:]]), Intent) == "not-msgpack"
+        assert reason_of(pack([*wire, inner]), Intent) == "not-msgpack"
+    assert reason_of(mutated(obs(), "neighbours", [[1, 0, 0], {}]), Observation) == "not-msgpack"
+    for name in ("goal", "position", "collided", "reward_ds"):
+        assert reason_of(mutated(obs(), name, {"x": 1}), Observation) == "not-msgpack"
 
 
 def test_oversize_rejected_before_unpacking(monkeypatch):
@@ -324,7 +413,7 @@ def test_largest_observation_fits():
     ("tick", -1), ("tick", MAX_TICK), ("tick", 1.0), ("tick", True), ("tick", "7"), ("tick", None),
     ("agent", MAX_AGENTS), ("agent", -1), ("episode", -1), ("step", MAX_TICK), ("rank", MAX_AGENTS),
     ("position", [MAX_GRID, 0]), ("position", [0, -1]), ("position", [1]), ("position", [1, 2, 3]),
-    ("position", [True, 0]), ("position", [1.0, 2]), ("position", "ab"), ("goal", {"x": 1}),
+    ("position", [True, 0]), ("position", [1.0, 2]), ("position", "ab"), ("goal", [[1, 2]]),
     ("neighbours", [[2, 1, 1]]), ("neighbours", [[MAX_AGENTS, 0, 0]]),
     ("neighbours", [[1, 0, MAX_GRID]]), ("neighbours", [[1, 0, 0], [1, 2, 2]]),
     ("neighbours", [[1, 0]]), ("neighbours", [1, 2, 3]), ("neighbours", None),
@@ -352,7 +441,7 @@ def test_inbox_never_raises_counts_and_accepts():
         assert inbox.decode(junk, Intent) is None
     assert inbox.rejections["not-bytes"] == 6
     assert inbox.rejections["not-msgpack"] == 1
-    assert inbox.rejections["not-map"] == 1
+    assert inbox.rejections["not-array"] == 1
     assert inbox.rejections["wrong-kind"] == 1
     assert inbox.reject("stale-tick", "tick 3 < 7") is None
     assert inbox.rejections["stale-tick"] == 1
@@ -464,8 +553,8 @@ def test_fuzz_corrupted_valid_bytes_never_raise(msg, data):
 def test_fuzz_valid_messages_round_trip_exactly(msg):
     back = parse(encode(msg), type(msg), msg.run)
     assert back == msg
-    assert [type(getattr(back, f)) for f in msg.__dataclass_fields__] == [
-        type(getattr(msg, f)) for f in msg.__dataclass_fields__
+    assert [type(getattr(back, f)) for f in msg._fields] == [
+        type(getattr(msg, f)) for f in msg._fields
     ]
     assert encode(back) == encode(msg)
 
@@ -529,13 +618,20 @@ BAD = {
 }
 
 
+def _has_map(value) -> bool:
+    return isinstance(value, dict) or isinstance(value, list) and any(map(_has_map, value))
+
+
 @given(any_message, st.data())
 @FUZZ
 def test_fuzz_single_field_mutations_are_rejected_naming_the_field(msg, data):
+    """A value that is wrong for the field names the field (a map, anywhere, is not-msgpack)."""
     cls = type(msg)
     name = data.draw(st.sampled_from([f.name for f in SCHEMA[cls].fields]))
     value = data.draw(BAD[name])
-    if name == "run":
+    if _has_map(value):
+        expected = {"not-msgpack"}
+    elif name == "run":
         expected = {"wrong-run"}
         if value == msg.run:
             return
@@ -553,7 +649,7 @@ def test_neighbour_equal_to_self_is_rejected():
         assert reason_of(mutated(obs(), name, value), Observation) == "bad-field:neighbours"
 
 
-# Arbitrary msgpack structures, and near-valid maps, against an independent reading of the rules.
+# Arbitrary msgpack structures, and near-valid arrays, against an independent reading of the rules.
 
 scalars = st.none() | st.booleans() | st.integers(-(2**63), 2**64 - 1) | st.floats() \
     | st.text(max_size=20) | st.binary(max_size=20)
@@ -577,14 +673,22 @@ def _is_reward(v):
     return type(v) in (int, float) and math.isfinite(v) and abs(v) <= 1e6
 
 
+REFERENCE_FIELDS = {  # the kind tag, then the fields in wire order
+    Observation: ("obs run tick sender agent episode step position goal neighbours rank reward_ds "
+                  "reward_ca collided arrived episode_end"),
+    Intent: "intent run tick sender agent episode action",
+    Answer: "answer run tick sender agent episode action relayed",
+    Control: "control run tick sender command",
+}
+
+
 def reference_valid(d, cls, run) -> bool:
     """The protocol's rules written out again, independently of messages.py."""
-    tags = {Observation: "obs", Intent: "intent", Answer: "answer", Control: "control"}
-    wires = {f.wire: f.name for f in SCHEMA[cls].fields}
-    if type(d) is not dict or set(d) != set(wires) | {"v", "k"}:
+    tag, *names = REFERENCE_FIELDS[cls].split()
+    if type(d) is not list or len(d) != 2 + len(names):
         return False
-    m = {wires[k]: v for k, v in d.items() if k in wires}
-    if not (type(d["v"]) is int and d["v"] == 1 and d["k"] == tags[cls] and m["run"] == run):
+    m = dict(zip(names, d[2:]))
+    if not (type(d[0]) is int and d[0] == 2 and d[1] == tag and m["run"] == run):
         return False
     if not (_is_int(m["tick"], 0, MAX_TICK) and type(m["sender"]) is str):
         return False
@@ -623,28 +727,31 @@ def test_fuzz_arbitrary_structures_never_raise(obj, kind):
     assert (inbox.decode(pack(obj), kind) is not None) == reference_valid(obj, kind, RUN)
 
 
+def _as_lists(value):
+    """``value`` with its tuples made lists, as msgpack unpacks them."""
+    return list(map(_as_lists, value)) if isinstance(value, (tuple, list)) else value
+
+
 @st.composite
-def near_valid_maps(draw):
-    """A valid message's wire map with each value, at random, kept, replaced by junk, or dropped."""
+def near_valid_arrays(draw):
+    """A valid message's wire array with each item, at random, kept, replaced by junk, or dropped,
+    and maybe one more inserted."""
     msg = draw(any_message)
-    wire = to_wire(msg)
-    wire = {k: (list(map(list, v)) if k in ("nb", "rl") else list(v) if isinstance(v, tuple) else v)
-            for k, v in wire.items()}
-    out = {}
-    for k, v in wire.items():
-        choice = draw(st.sampled_from(["keep"] * 6 + ["junk", "drop"]))
+    out = []
+    for v in _as_lists(to_wire(msg)):
+        choice = draw(st.sampled_from(["keep"] * 12 + ["junk", "drop"]))
         if choice == "keep":
-            out[k] = v
+            out.append(v)
         elif choice == "junk":
-            out[k] = draw(structures | st.integers(-3, 1100))
+            out.append(draw(structures | st.integers(-3, 1100)))
     if draw(st.booleans()) and draw(st.booleans()):
-        out[draw(st.text(max_size=3))] = draw(scalars)
+        out.insert(draw(st.integers(0, len(out))), draw(scalars))
     return type(msg), msg.run, out
 
 
-@given(near_valid_maps())
+@given(near_valid_arrays())
 @FUZZ
-def test_fuzz_near_valid_maps_accepted_exactly_when_valid(case):
+def test_fuzz_near_valid_arrays_accepted_exactly_when_valid(case):
     cls, run, obj = case
     inbox = Inbox(run)
     got = inbox.decode(pack(obj), cls)
@@ -665,9 +772,9 @@ def test_answer_rejects_relaying_itself_duplicates_and_forged_senders():
     ]:
         wire = messages.to_wire(good)
         if "relayed" in bad:
-            wire["rl"] = [list(pair) for pair in bad["relayed"]]
+            wire[wire_index(Answer, "relayed")] = [list(pair) for pair in bad["relayed"]]
         else:
-            wire["s"] = bad["sender"]
+            wire[wire_index(Answer, "sender")] = bad["sender"]
         with pytest.raises(Rejected) as caught:
             parse(msgpack.packb(wire), Answer, RUN)
         assert caught.value.reason == reason, bad
@@ -724,27 +831,24 @@ def assert_parse_agrees(payload, cls, run=RUN, key_agent=None):
 
 
 def test_wire_bytes_are_pinned():
-    """The exact bytes, so that neither path can drift (key order, int / float / bool types)."""
+    """The exact bytes, so that neither path can drift (item order, int / float / bool types)."""
     pinned = {
-        obs():
-            "de0011a17601a16ba36f6273a172a572756e2d31a17407a173a5776f726c64a16102a16501a16e06a170"
-            "920304a167920909a26e62929300030593050101a2726b01a27264cb3fd0000000000000a27263cb40"
-            "24000000000000a163c2a26172c2a26565c2",
+        obs():  # 17 items: an array 16 header
+            "dc001102a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "d0000000000000cb4024000000000000c2c2c2",
         answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
-            "89a17601a16ba6616e73776572a172a572756e2d31a17403a173a76167656e742f32a16102a16500a178"
-            "01a2726c92920004920100",
+            "9902a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
         intent():
-            "88a17601a16ba6696e74656e74a172a572756e2d31a17407a173a76167656e742f32a16102a16501a1"
-            "7803",
+            "9802a6696e74656e74a572756e2d3107a76167656e742f32020103",
         control():
-            "86a17601a16ba7636f6e74726f6ca172a572756e2d31a17407a173a5776f726c64a163a873687574646f"
-            "776e",
+            "9602a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
         control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
-            "86a17601a16ba7636f6e74726f6ca172d940" + "72" * 64
-            + "a174cf0000010000000000a173a5776f726c64a163a873687574646f776e",
+            "9602a7636f6e74726f6cd940" + "72" * 64
+            + "cf0000010000000000a5776f726c64a873687574646f776e",
     }
     for msg, hexed in pinned.items():
         assert encode(msg).hex() == hexed == generic_encode(msg).hex()
+        assert parse(bytes.fromhex(hexed), type(msg), msg.run) == msg
 
 
 @given(any_message, st.sampled_from(["bytes", "bytearray", "memoryview", "zbytes"]))
@@ -776,16 +880,20 @@ def test_fast_path_steps_aside_for_numpy_lists_and_ints_for_floats():
 
 def test_fast_path_is_compiled_from_schema(monkeypatch):
     kind = SCHEMA[Intent]
-    fields = tuple(f._replace(wire="xx", check=messages._int(0, 3)) if f.name == "action" else f
+    fields = tuple(f._replace(check=messages._int(0, 3)) if f.name == "action" else f
                    for f in kind.fields)
-    monkeypatch.setitem(SCHEMA, Intent, kind._replace(fields=fields))
+    monkeypatch.setitem(SCHEMA, Intent, kind._replace(tag="act", fields=fields))
     fast_parse, fast_to_wire = messages._compile_fast_codec(Intent)
-    assert fast_to_wire(intent(action=2))["xx"] == 2
-    assert fast_to_wire(intent(action=3)) is None
     wire = fast_to_wire(intent(action=2))
+    assert wire == [PROTOCOL_VERSION, "act", RUN, 7, "agent/2", 2, 1, 2]
+    assert fast_to_wire(intent(action=3)) is None
     assert fast_parse(pack(wire), RUN, None) == intent(action=2)
-    assert fast_parse(pack({**wire, "xx": 3}), RUN, None) is None
-    assert fast_parse(pack({**wire, "x": 2}), RUN, None) is None  # an extra key now
+    assert fast_parse(pack([*wire[:-1], 3]), RUN, None) is None
+    assert fast_parse(pack([*wire, 2]), RUN, None) is None  # an extra item
+    assert fast_parse(encode(intent(action=2)), RUN, None) is None  # the kind "intent" now
+    monkeypatch.setitem(SCHEMA, Intent, kind._replace(fields=fields[::-1]))
+    with pytest.raises(TypeError, match="fields"):  # the wire order must be the class's
+        messages._compile_fast_codec(Intent)
 
 
 # Values a field may be given, valid or not, each tried in every field of every kind, both ways.
@@ -822,16 +930,18 @@ def _numpy_twin(value):
                                  control(), control(run="r" * 64)])
 def test_fast_and_generic_agree_on_every_edge_value_in_every_field(msg):
     cls, key_agent = type(msg), getattr(msg, "agent", None)
-    for name in msg.__dataclass_fields__:
+    for name in msg._fields:
         for value in _EDGES:
             for form in (value, _numpy_twin(value)):
-                assert_encode_agrees(dataclasses.replace(msg, **{name: form}))
+                assert_encode_agrees(msg._replace(**{name: form}))
     wire = to_wire(msg)
-    maps = [{**wire, "zz": 1}] + [{k: v for k, v in wire.items() if k != key} for key in wire]
-    for key in wire:  # "v" and "k" too; and the run field parsed for that run
-        maps += [{**wire, key: value} for value in _EDGES]
-    for changed in maps:
-        for run in {RUN, changed.get("r")} if type(changed.get("r")) is str else {RUN}:
+    arrays = [[*wire, 1], [], wire[:1], wire[:2], wire[:3], dict(zip("vkrtsaexyz", wire))]
+    arrays += [wire[:i] + wire[i + 1:] for i in range(len(wire))]
+    for i in range(len(wire)):  # the version and the kind too; and the run parsed for that run
+        arrays += [[*wire[:i], value, *wire[i + 1:]] for value in _EDGES]
+    for changed in arrays:
+        run_item = changed[2] if type(changed) is list and len(changed) > 2 else None
+        for run in {RUN, run_item} if type(run_item) is str else {RUN}:
             for key in (None, key_agent, 9):
                 assert_parse_agrees(pack(changed), cls, run, key)
 
@@ -883,13 +993,13 @@ def odd_messages(draw):
     """A valid message with up to three fields (or items of them) in another form, maybe invalid,
     and maybe the agent listed among its neighbours or relayed intents."""
     msg = draw(any_message)
-    names = list(msg.__dataclass_fields__)
+    names = list(msg._fields)
     changes = {name: draw(_reshaped(getattr(msg, name)))
                for name in draw(st.lists(st.sampled_from(names), max_size=3))}
     listed = getattr(msg, "neighbours", ()) or getattr(msg, "relayed", ())
     if listed and draw(st.booleans()):
         changes["agent"] = listed[0][0]
-    return dataclasses.replace(msg, **changes)
+    return msg._replace(**changes)
 
 
 @given(odd_messages())
@@ -908,19 +1018,24 @@ def _packable(value) -> bool:
 
 @st.composite
 def odd_payloads(draw):
-    """A valid message's wire map with up to three values (or items of them) in another form or
-    dropped, maybe an extra key, maybe the bytes cut or flipped; and a run and key to parse with."""
+    """A valid message's wire array with up to three items (or items of them) in another form or
+    dropped, maybe an extra item, maybe made a map, maybe the bytes cut or flipped; and a run and
+    key to parse with."""
     msg = draw(any_message)
     wire = to_wire(msg)
-    for key in draw(st.lists(st.sampled_from(list(wire)), max_size=3)):
+    for i in draw(st.lists(st.integers(0, len(wire) - 1), max_size=3)):
+        if i >= len(wire):
+            continue
         if draw(st.integers(0, 4)) == 0:
-            wire.pop(key, None)
-        elif key in wire:
-            value = draw(_reshaped(wire[key]))
+            del wire[i]
+        else:
+            value = draw(_reshaped(wire[i]))
             if _packable(value):
-                wire[key] = value
+                wire[i] = value
     if draw(st.integers(0, 5)) == 0:
-        wire[draw(st.text(max_size=3))] = draw(scalars)
+        wire.insert(draw(st.integers(0, len(wire))), draw(scalars))
+    if draw(st.integers(0, 19)) == 0:
+        wire = {str(i): item for i, item in enumerate(wire)}
     payload = pack(wire)
     if draw(st.integers(0, 5)) == 0:
         payload = bytearray(payload)

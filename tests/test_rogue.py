@@ -37,34 +37,41 @@ def forged_payloads(agent: int) -> dict[str, list[bytes]]:
                       reward_ca=0.0, collided=False, arrived=False, episode_end=False)
     intent = Intent(run=RUN_ID, tick=1, sender=agent_sender(agent), agent=agent, episode=0, action=1)
     garbage = [b"", b"\x00\xff\xfe garbage", b"\xc1", os.urandom(64), b"\x92\x01", b"x" * 100_000]
+    shutdown = Control(run=RUN_ID, tick=1, sender=WORLD_SENDER, command="shutdown")
     wrong_types = [msgpack.packb(v) for v in ([1, 2, 3], "obs", 3.5, None, {"v": "1"}, {1: 2})]
+    wrong_types.append(msgpack.packb({"v": 1, "k": "intent", "r": RUN_ID, "t": 1}))  # version 1
 
     def mutated(msg, **changes) -> bytes:
+        """The wire array of ``msg`` with some items changed: ``version``, ``kind`` or fields."""
         wire = to_wire(msg)
-        wire.update(changes)
+        names = ("version", "kind", *type(msg)._fields)
+        for name, value in changes.items():
+            wire[names.index(name)] = value
         return msgpack.packb(wire)
 
     bad_obs = [
-        mutated(obs, s="agent/3"),  # forged sender
-        mutated(obs, r="another-run"),
-        mutated(obs, t=0),  # stale tick
-        mutated(obs, t=10**12),  # future tick
-        mutated(obs, a=(agent + 1) % AGENTS),  # someone else's observation
-        mutated(obs, p=[True, 2]), mutated(obs, rd=float("nan")), mutated(obs, v=99),
-        mutated(obs, nb=[[agent, 1, 1]]),
+        mutated(obs, sender="agent/3"),  # forged sender
+        mutated(obs, run="another-run"),
+        mutated(obs, tick=0),  # stale tick
+        mutated(obs, tick=10**12),  # future tick
+        mutated(obs, agent=(agent + 1) % AGENTS),  # someone else's observation
+        mutated(obs, position=[True, 2]), mutated(obs, reward_ds=float("nan")),
+        mutated(obs, version=99), mutated(obs, neighbours=[[agent, 1, 1]]),
+        msgpack.packb(to_wire(obs)[:-1]), msgpack.packb([*to_wire(obs), 0]),  # wrong lengths
     ]
     bad_intents = [
-        mutated(intent, s=agent_sender((agent + 1) % AGENTS)),  # forged sender
-        mutated(intent, a=(agent + 1) % AGENTS, s=agent_sender((agent + 1) % AGENTS)),  # wrong key
-        mutated(intent, r="another-run"),
-        mutated(intent, t=0), mutated(intent, t=10**12),  # stale and future ticks
-        mutated(intent, x=7), mutated(intent, x=True), mutated(intent, k="obs"),
-        encode(Control(run=RUN_ID, tick=1, sender=WORLD_SENDER, command="shutdown")),
+        mutated(intent, sender=agent_sender((agent + 1) % AGENTS)),  # forged sender
+        mutated(intent, agent=(agent + 1) % AGENTS,
+                sender=agent_sender((agent + 1) % AGENTS)),  # on the wrong key
+        mutated(intent, run="another-run"),
+        mutated(intent, tick=0), mutated(intent, tick=10**12),  # stale and future ticks
+        mutated(intent, action=7), mutated(intent, action=True), mutated(intent, kind="obs"),
+        msgpack.packb(to_wire(intent)[:-1]),  # wrong length
+        encode(shutdown),
     ]
-    bad_control = [mutated(Control(run=RUN_ID, tick=1, sender=WORLD_SENDER, command="shutdown"),
-                           s=agent_sender(agent)),
-                   mutated(Control(run=RUN_ID, tick=1, sender=WORLD_SENDER, command="shutdown"),
-                           r="another-run"),
+    bad_control = [mutated(shutdown, sender=agent_sender(agent)),
+                   mutated(shutdown, run="another-run"),
+                   mutated(shutdown, command="reboot"),
                    msgpack.packb({"v": 1, "k": "control", "c": "reboot"})]
     return {
         "obs": garbage + wrong_types + bad_obs,
@@ -138,11 +145,12 @@ def test_a_rogue_session_changes_nothing_and_every_rejection_is_counted(tmp_path
     assert sent > 1000
     assert rejected_by_world >= 5 * AGENTS * 20, world["rejected"]
     assert rejected_by_agents >= 5 * AGENTS * 30, [a["rejected"] for a in agents]
-    for reason in ("not-msgpack", "oversize", "forged-sender", "wrong-run", "stale-tick",
-                   "future-tick", "unknown-agent"):
+    for reason in ("not-msgpack", "not-array", "wrong-length", "oversize", "forged-sender",
+                   "wrong-run", "stale-tick", "future-tick", "unknown-agent"):
         assert world["rejected"].get(reason, 0) > 0, (reason, world["rejected"])
     seen_by_agents = set().union(*(a["rejected"] for a in agents))
-    for reason in ("not-msgpack", "oversize", "forged-sender", "wrong-run", "stale-tick",
-                   "future-tick", "wrong-agent", "bad-query", "future-query"):
+    for reason in ("not-msgpack", "not-array", "wrong-length", "oversize", "forged-sender",
+                   "wrong-run", "stale-tick", "future-tick", "wrong-agent", "bad-query",
+                   "future-query"):
         assert reason in seen_by_agents, (reason, seen_by_agents)
     assert all(a["shutdown_by_world"] for a in agents), "no forged shutdown was obeyed"
