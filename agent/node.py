@@ -113,6 +113,7 @@ class AgentNode:
         self.options = options
         self.config = options.config
         self.agent = options.agent
+        self.sender = agent_sender(self.agent)
         self.session = session
         self.brain = brain or AgentBrain(self.agent, self.config)
         self.on_episode_end = on_episode_end
@@ -340,9 +341,9 @@ class AgentNode:
         self.trace.mark(trace.DECIDE, obs.tick)
         action = self.brain.act(obs, answers)
         self.trace.mark(trace.ACTED, obs.tick)
-        answer = Answer(run=self.config.run_id, tick=obs.tick, sender=agent_sender(self.agent),
-                        agent=self.agent, episode=obs.episode, action=action,
-                        relayed=tuple(sorted(self.intents.get(obs.tick, _NOTHING).actions.items())))
+        known = self.intents.get(obs.tick, _NOTHING).actions
+        answer = Answer(self.config.run_id, obs.tick, self.sender, self.agent, obs.episode, action,
+                        tuple(sorted(known.items())))
         self.decided_tick, self.decided_obs, self.decided_payload = obs.tick, obs, encode(answer)
         self.trace.mark(trace.ENCODED, obs.tick)
         self.intents = {t: got for t, got in self.intents.items() if t > obs.tick}
@@ -353,8 +354,8 @@ class AgentNode:
             checkpoint.save(self.checkpoint_file, self.brain, obs.episode)
             if self.on_episode_end is not None:
                 self.on_episode_end(self.brain, obs.episode)
-        intent = encode(Intent(run=answer.run, tick=answer.tick, sender=answer.sender,
-                               agent=self.agent, episode=obs.episode, action=action))
+        intent = encode(Intent(answer.run, answer.tick, answer.sender, self.agent, obs.episode,
+                               action))
         self.trace.mark(trace.INTENT_SENT, obs.tick)
         self.publisher.put(intent)
         if not self.stream_open:
@@ -410,10 +411,11 @@ class AgentNode:
         """Keep an answer for the coming ticks, and move the negotiation on if it waits for it;
         answers for decided ticks are of no more use (a standing query also brings those this
         agent did not need)."""
-        if not reply.ok:
+        sample = reply.ok
+        if sample is None:
             return  # the query's end: a timeout, or a neighbour that is gone
         arrived = self.trace.now()
-        answer = self.inbox.decode(reply.ok.payload, Answer, key_agent=sender)
+        answer = self.inbox.decode(sample.payload, Answer, key_agent=sender)
         if answer is None or answer.tick <= self.decided_tick:
             return
         self.trace.mark(trace.ANSWER_IN, answer.tick, at=arrived)
@@ -472,9 +474,11 @@ class AgentNode:
 
     def _answer_standing_queries(self) -> None:
         """Answer the standing queries owed at the decided tick, the next in rank first."""
-        n = self.config.n_agents
-        for asker in sorted(self.standing, key=lambda a: priority_rank(a, self.decided_tick, n)):
-            self._answer_standing(asker, self.standing[asker])
+        n, standing = self.config.n_agents, self.standing
+        askers = list(standing) if len(standing) < 2 else sorted(
+            standing, key=lambda a: priority_rank(a, self.decided_tick, n))
+        for asker in askers:  # usually one: the agent ranked next
+            self._answer_standing(asker, standing[asker])
 
     def _answer_standing(self, asker: int, query: zenoh.Query) -> None:
         if not negotiation.answers_standing(self.decided_obs, asker, self.config.n_agents,
