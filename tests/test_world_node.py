@@ -36,6 +36,7 @@ def node(tmp_path):
 
 
 def test_the_last_intent_closes_the_tick_where_it_arrives_once_the_last_one_is_logged(node):
+    node.on_tick = lambda world, report: None  # as when recording: every tick is logged
     node._on_intent_sample(intent_sample(0, 0))
     assert node.world.tick == 0 and node.actions == [4, None]
     node._on_intent_sample(intent_sample(1, 0))
@@ -50,6 +51,19 @@ def test_the_last_intent_closes_the_tick_where_it_arrives_once_the_last_one_is_l
     assert node.world.tick == 2
     node._on_intent_sample(intent_sample(0, 0))
     assert node.inbox.rejections["stale-tick"] == 1
+
+
+def test_only_ticks_with_something_to_write_or_log_wake_the_main_thread(node):
+    for tick in range(CONFIG.max_steps):  # nothing to record, nobody arrives in 5 steps
+        for agent in (0, 1):
+            node._on_intent_sample(intent_sample(agent, tick))
+        assert node.world.tick == tick + 1 and node.unlogged == 0 and node.events.empty()
+    for agent in (0, 1):  # the episode's end tick: its row is for the main thread to write
+        node._on_intent_sample(intent_sample(agent, CONFIG.max_steps))
+    kind, (report, slowest, _) = node.events.get_nowait()
+    assert kind == "closed" and report.episode_row is not None and node.unlogged == 1
+    assert report.episode_row["steps"] == CONFIG.max_steps and slowest > 0
+    assert node.slowest == 0.0, "the next episode's slowest tick starts afresh"
 
 
 def test_a_bug_while_closing_a_tick_on_zenohs_thread_stops_the_world(node):

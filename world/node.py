@@ -11,8 +11,9 @@ deadline.
 Intents are handled where Zenoh delivers them, on its network thread, under the node's lock: the
 last one of a tick closes it there and sends the next observations at once, without waking
 another thread (README, "where the time goes"). The main thread does the rest: liveliness, the
-deadline, and the bookkeeping of each closed tick. A tick is closed only once the one before it
-is written and logged, so ``on_tick`` always sees the world as that tick left it.
+deadline, and each closed tick that needs it (an episode's row to write, a broken invariant to
+log, ``on_tick``). A tick is closed only once the one before it is written and logged, so
+``on_tick`` always sees the world as that tick left it.
 """
 
 import logging
@@ -86,7 +87,8 @@ class WorldNode:
         self.actions: list[int | None] | None = None  # the open tick's intents, by agent
         self.tick_start = 0.0
         self.tick_deadline = 0.0
-        self.unlogged = 0  # closed ticks not yet written and logged
+        self.unlogged = 0  # closed ticks handed to the main thread, not yet written and logged
+        self.slowest = 0.0  # the episode's slowest tick so far, in seconds
 
     def stop(self) -> None:
         self.stopping = True
@@ -133,7 +135,7 @@ class WorldNode:
         """Open the first tick, then handle closed ticks, liveliness and deadlines until the
         last tick is written and logged."""
         world = self.world
-        episode_start, episode_tick, slowest = time.perf_counter(), world.tick, 0.0
+        episode_start, episode_tick = time.perf_counter(), world.tick
         with EpisodeWriter(self.options.out_dir / EPISODES_FILE) as writer:
             with self.lock:
                 self._open_tick()
@@ -146,16 +148,15 @@ class WorldNode:
                 closed = self._handle(timeout)
                 if closed is None:
                     continue
-                report, took, now = closed
+                report, slowest, now = closed
                 # Unlocked: no tick closes until this one is logged, so the world stays put.
-                slowest = max(slowest, took)
                 if report.violations:
                     log.error("tick %d broke the world's invariants: %s", report.tick,
                               report.violations)
                 if report.episode_row is not None:
                     writer.write(report.episode_row, now - episode_start, world.tick - episode_tick,
                                  slowest, self.inbox.total_rejected)
-                    episode_start, episode_tick, slowest = now, world.tick, 0.0
+                    episode_start, episode_tick = now, world.tick
                 if self.on_tick is not None:
                     self.on_tick(world, report)
                 with self.lock:
@@ -183,16 +184,20 @@ class WorldNode:
 
     def _close_tick(self) -> None:
         """Apply the open tick, open the next (the agents think while this one is logged), and
-        hand the report to the main thread."""
+        hand the report to the main thread if it has anything to do with it: an episode's row,
+        a broken invariant, or ``on_tick``. Other ticks do not wake it (a thread switch a tick)."""
         self.trace.mark(trace.CLOSE, self.world.tick)
         report = self.world.apply(self.actions)
         now = time.perf_counter()
-        took = now - self.tick_start
+        self.slowest = max(self.slowest, now - self.tick_start)
         self.actions = None
         if not self.world.finished:
             self._open_tick()
-        self.unlogged += 1
-        self.events.put(("closed", (report, took, now)))
+        if report.episode_row is not None or report.violations or self.on_tick is not None:
+            self.unlogged += 1  # the main thread writes, logs or records it: wake it
+            self.events.put(("closed", (report, self.slowest, now)))
+            if report.episode_row is not None:
+                self.slowest = 0.0
 
     def _on_intent_sample(self, sample: zenoh.Sample) -> None:
         """Zenoh callback: keep an intent; the last one of the tick closes it."""
