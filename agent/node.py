@@ -297,7 +297,7 @@ class AgentNode:
             self._decide(obs, {})
             return
         tick, timeout = obs.tick, self.options.negotiation_timeout_s
-        got = self.intents.setdefault(tick, negotiation.TickIntents())
+        got = self._intents_of(tick)
         for j in asks:
             if j not in got.answered and not (j == self.predecessor and self.stream_open):
                 self._ask(j, tick, timeout)
@@ -308,12 +308,19 @@ class AgentNode:
             self.brain.prepare(obs)  # while the answers are on their way
             self._advance()
 
+    def _intents_of(self, tick: int) -> negotiation.TickIntents:
+        """What this agent has learned of ``tick``'s intents (kept from now on)."""
+        got = self.intents.get(tick)
+        if got is None:
+            got = self.intents[tick] = negotiation.TickIntents()
+        return got
+
     def _advance(self) -> None:
         """Move the pending negotiation on: once every asked neighbour answered (or time ran
         out), ask directly for any awaited intent that no answer brought; once those are in
         too (or time ran out), decide. Unanswered neighbours are left out."""
         p = self.pending
-        got = self.intents.setdefault(p.obs.tick, negotiation.TickIntents())
+        got = self._intents_of(p.obs.tick)
         remaining = p.deadline - time.monotonic()
         if p.missing is None:
             if remaining > 0 and not all(j in got.answered for j in p.asks):
@@ -423,7 +430,7 @@ class AgentNode:
             self.inbox.reject("future-tick", f"answer for tick {answer.tick}, "
                                              f"decided {self.decided_tick}")
             return
-        got = self.intents.setdefault(answer.tick, negotiation.TickIntents())
+        got = self._intents_of(answer.tick)
         if not got.add(sender, answer.action, answer.relayed, self.agent):
             self.inbox.reject("conflicting-relay", f"agent {sender} at tick {answer.tick}")
         while len(self.intents) > AHEAD_TICKS + 1:  # a flood of forged ticks stays bounded

@@ -89,6 +89,7 @@ class WorldNode:
         self.tick_deadline = 0.0
         self.unlogged = 0  # closed ticks handed to the main thread, not yet written and logged
         self.slowest = 0.0  # the episode's slowest tick so far, in seconds
+        self.agent_of_key: dict[str, int] = {}  # intent key -> its agent, parsed once
 
     def stop(self) -> None:
         self.stopping = True
@@ -237,7 +238,12 @@ class WorldNode:
             log.warning("agent %d left", agent)
 
     def _on_intent(self, sample: zenoh.Sample) -> None:
-        key_agent = keys.agent_from_key(str(sample.key_expr), self.config.run_id)
+        key = str(sample.key_expr)
+        key_agent = self.agent_of_key.get(key)
+        if key_agent is None:
+            key_agent = keys.agent_from_key(key, self.config.run_id)
+            if key_agent is not None and key_agent < self.config.n_agents:
+                self.agent_of_key[key] = key_agent  # at most one entry per agent
         intent = self.inbox.decode(sample.payload, Intent, key_agent=key_agent)
         if intent is None:
             return
