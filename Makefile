@@ -33,6 +33,7 @@ bench: $(STAMP)
 	$(PY) bench/swarm_collisions.py
 	$(PY) bench/codec.py
 	$(PY) bench/world_tick.py
+	$(PY) bench/node_cpu.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

@@ -5,11 +5,14 @@ The real ``AgentNode`` and ``WorldNode`` handlers run in one thread, over a stan
 delivers every message (observation, standing query, answer, intent) in the order it was sent, by
 calling the receiver's handler directly. What is timed is exactly our code on each message:
 decoding, checks, negotiation, learning, encoding, the world's rules; not Zenoh, the kernel or
-the scheduler. Each handler is timed apart, so the tick's critical path (world -> rank 0 -> ... ->
-rank N-1 -> world) can be added up from them.
+the scheduler. Each handler is timed apart (the last intent's includes closing the tick: the
+rules and the next observations), so the tick's critical path (world -> rank 0 -> ... -> rank
+N-1 -> world) can be added up from them.
 
-On this 2-core machine the swarm's speed drifts by a third within minutes; this figure does not,
-so it is the one to compare two versions of the code by (``--repeats``, median).
+On this 2-core machine the swarm's speed drifts by a third within minutes; this figure drifts
+much less (a few percent), but it is still best compared between runs made one after the other.
+It counts what runs hot in one process: in the swarm, each process wakes from cold caches and
+the same code takes three to six times as long (README, "where the time goes").
 
     python bench/node_cpu.py --agents 8 --episodes 20 --repeats 5
 """
@@ -149,11 +152,12 @@ def run(config: SwarmConfig, out: Path, bare: bool) -> tuple[int, Wire]:
     with world.lock:
         world._open_tick()
     while not world.world.finished:
-        wire.drain()
-        kind, _ = world.events.get_nowait()
-        assert kind == "closed", kind
+        wire.drain()  # up to a tick the main thread must see first: an episode's end
         with world.lock:
-            world.unlogged -= 1
+            while not world.events.empty():
+                kind, _ = world.events.get_nowait()
+                assert kind == "closed", kind
+                world.unlogged -= 1  # what the world's main thread does once it wrote the row
             world._close_if_due()
     for node in agents:
         if node.failure is not None:
