@@ -39,7 +39,7 @@ from protocol.messages import (
 )
 from protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
 from protocol.transport import (
-    EXIT_TRANSPORT, TransportError, TransportSettings, enqueue, open_session,
+    EXIT_TRANSPORT, TransportError, TransportSettings, callback, enqueue, open_session,
 )
 
 log = logging.getLogger("nnql.agent")
@@ -153,7 +153,7 @@ class AgentNode:
     def _guarded(self, handler: Callable, *args) -> Callable:
         """``handler(*args, item)`` as a Zenoh callback: under the lock, and a bug in it stops
         the agent (``run`` raises it) instead of vanishing into Zenoh's thread."""
-        def callback(*item) -> None:
+        def guarded(*item) -> None:
             with self.lock:
                 if self.stopping:
                     return
@@ -162,19 +162,17 @@ class AgentNode:
                 except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
                     self.failure = error
                     self.stop()
-        return callback
+        return guarded
 
     def run(self) -> None:
         run_id, s = self.config.run_id, self.session
-        callback = zenoh.handlers.Callback
         with (
             s.declare_subscriber(keys.obs_key(run_id, self.agent),
-                                 callback(self._guarded(self._on_observation_sample),
-                                          indirect=False)),
+                                 callback(self._guarded(self._on_observation_sample))),
             s.declare_subscriber(keys.control_key(run_id),
                                  enqueue(self.events, "control")),
             s.declare_queryable(keys.intent_key(run_id, self.agent),
-                                callback(self._guarded(self._on_query), indirect=False)),
+                                callback(self._guarded(self._on_query))),
             s.declare_publisher(keys.intent_key(run_id, self.agent), express=True,
                                 congestion_control=zenoh.CongestionControl.BLOCK) as publisher,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
@@ -388,8 +386,7 @@ class AgentNode:
         """The handler of a query to ``sender``: its replies are handled as answers and, for a
         standing query, its end closes the stream."""
         end = None if generation is None else self._guarded(self._on_stream_end, generation)
-        return zenoh.handlers.Callback(self._guarded(self._on_answer, sender), end,
-                                       indirect=False)
+        return callback(self._guarded(self._on_answer, sender), end)
 
     def _on_stream_end(self, generation: int) -> None:
         if generation == self.stream_generation:

@@ -32,7 +32,7 @@ from protocol.config import SwarmConfig
 from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
 from protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
 from protocol.transport import (
-    EXIT_TRANSPORT, TransportError, TransportSettings, enqueue, open_session,
+    EXIT_TRANSPORT, TransportError, TransportSettings, callback, enqueue, open_session,
 )
 from world.engine import SwarmWorld, TickReport
 from world.metrics import EpisodeWriter
@@ -100,7 +100,7 @@ class WorldNode:
         run_id, s, n = self.config.run_id, self.session, self.config.n_agents
         with (
             s.declare_subscriber(keys.intent_key_all(run_id),
-                                 zenoh.handlers.Callback(self._on_intent_sample, indirect=False)),
+                                 callback(self._on_intent_sample)),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               enqueue(self.events, "alive"), history=True),
             s.declare_publisher(keys.control_key(run_id), congestion_control=BLOCK) as control,
