@@ -357,12 +357,14 @@ class AgentNode:
         self._answer_held_queries()
         if obs.episode_end:  # saved before the world hears of the decision: nothing to lose
             checkpoint.save(self.checkpoint_file, self.brain, obs.episode)
-            if self.on_episode_end is not None:
-                self.on_episode_end(self.brain, obs.episode)
         intent = encode(Intent(answer.run, answer.tick, answer.sender, self.agent, obs.episode,
                                action))
         self.trace.mark(trace.INTENT_SENT, obs.tick)
         self.publisher.put(intent)
+        if obs.episode_end and self.on_episode_end is not None:
+            # After the intent, so that the world need not wait for it; the tables stay put
+            # meanwhile (the next decision needs the lock this holds).
+            self.on_episode_end(self.brain, obs.episode)
         if not self.stream_open:
             self._open_stream(obs.tick + 1)
 
@@ -540,7 +542,8 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
               on_episode_end: Callable[[AgentBrain, int], None] | None = None) -> int:
     """Entry point of an agent process; returns its exit code.
 
-    ``on_episode_end(brain, episode)`` runs after each episode's checkpoint (e.g. Rerun heat maps).
+    ``on_episode_end(brain, episode)`` runs after each episode's checkpoint and intent (e.g. Rerun
+    heat maps).
     """
     try:
         session = open_session(options.transport)

@@ -107,6 +107,16 @@ class SwarmWorld:
         return np.array(self._cells, dtype=np.int64)
 
     @property
+    def cells(self) -> tuple[Cell, ...]:
+        """Every agent's cell as ``(x, y)``, by agent id."""
+        return tuple(self._cells)
+
+    @property
+    def arrived_flags(self) -> tuple[bool, ...]:
+        """Whether each agent has arrived, by agent id."""
+        return tuple(self._arrived)
+
+    @property
     def arrived(self) -> np.ndarray:
         """Whether each agent has arrived, ``(N,)``: a new array each time."""
         return np.array(self._arrived, dtype=bool)

@@ -61,8 +61,10 @@ METRICS = {
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
 
-FLUSH_EVERY = 50
-"""Ticks buffered before the per-tick entities are sent (a live viewer lags by at most this)."""
+FLUSH_EVERY = 200
+"""Ticks buffered before the per-tick entities are sent (a live viewer lags by at most this):
+more than an episode's 101 at the default 100 steps, so that one flush sends a whole episode.
+A flush costs about a millisecond, however few ticks it sends."""
 
 COLLISION_RED = (230, 40, 40)
 
@@ -101,8 +103,10 @@ def negotiation_mask(positions: np.ndarray, arrived: np.ndarray, ticks: np.ndarr
 class WorldViz:
     """Logs a swarm run, tick by tick, into one Rerun recording stream.
 
-    :meth:`log_tick` only copies the tick's state into preallocated buffers; :meth:`flush`
-    computes the geometry of every buffered tick at once and sends one chunk per entity.
+    :meth:`log_tick` only keeps references to the tick's state (plain tuples, a few
+    microseconds: it runs on the world's main thread at every tick, beside the negotiation);
+    :meth:`flush` turns every buffered tick into arrays at once, computes their geometry and
+    sends one chunk per entity.
     """
 
     def __init__(self, config: SwarmConfig, stream: rr.RecordingStream,
@@ -115,22 +119,16 @@ class WorldViz:
         self.colors = agent_colors(n)
         self.cumulative_collisions = collisions_before
         self.next_tick = 0
-        self._before: np.ndarray | None = None  # cells at the start of the next tick
-        self._arrived = np.zeros(n, dtype=bool)
-        self._trail = np.zeros((n, TRAIL_LENGTH, 2), dtype=np.float32)
+        self._before: tuple | None = None  # cells at the start of the next tick
+        self._arrived: tuple = (False,) * n
+        self._trail = np.zeros((n, TRAIL_LENGTH, 2), dtype=np.float32)  # before the buffer
         self._goals_episode = -1
         self._episode_clock: float | None = None
         self._episode_first_tick = 0
         self._awaited = 0
-        self._count = 0
-        self._ticks = np.zeros(flush_every, dtype=np.int64)
-        self._episodes = np.zeros(flush_every, dtype=np.int64)
-        self._moved = np.zeros(flush_every, dtype=bool)
-        self._positions = np.zeros((flush_every, n, 2), dtype=np.int64)
-        self._actions = np.zeros((flush_every, n), dtype=np.int64)
-        self._arrived_then = np.zeros((flush_every, n), dtype=bool)  # at the tick's start
-        self._collided = np.zeros((flush_every, n), dtype=bool)
-        self._trails = np.zeros((flush_every, n, TRAIL_LENGTH, 2), dtype=np.float32)
+        # The buffered ticks, one entry each: tick, episode, whether anyone could move, every
+        # agent's cell and whether it had arrived at the tick's start, the actions, who collided.
+        self._buffer: list[tuple] = []
         self._warnings: list[tuple[int, int, str]] = []
         self._log_static()
 
@@ -176,39 +174,27 @@ class WorldViz:
                 f"from episode {report.episode}", level=rr.TextLogLevel.INFO))
         before = self._before
         if before is None:  # the first tick seen: it starts an episode (fresh run or resume)
-            before = swarm_episode(c.seed, report.episode, c.width, c.height, c.n_agents).starts
+            before = tuple(map(tuple, swarm_episode(c.seed, report.episode, c.width, c.height,
+                                                    c.n_agents).starts.tolist()))
         if report.episode != self._goals_episode:
             self._start_episode(report)
-        i = self._count
-        self._ticks[i] = report.tick
-        self._episodes[i] = report.episode
-        self._moved[i] = report.moved
-        self._positions[i] = before
-        self._actions[i] = report.actions
-        self._arrived_then[i] = self._arrived
-        self._collided[i] = False
-        trail = self._trail
-        trail[:, :-1] = trail[:, 1:]
-        trail[:, -1] = before
-        self._trails[i] = trail
+        self._buffer.append((report.tick, report.episode, report.moved, before, self._arrived,
+                             report.actions, report.collided))
         if report.collided:
-            hit = list(report.collided)
-            self._collided[i, hit] = True
             step = f"step {world.step}" if report.moved else "end"
             self._warnings.append((report.tick, report.episode,
                                    f"episode {report.episode}, {step}: collision of agents "
-                                   f"{', '.join(map(str, hit))}"))
-        self._count = i + 1
-        self._before = world.positions.copy()
-        self._arrived = world.arrived.copy()
+                                   f"{', '.join(map(str, report.collided))}"))
+        self._before, self._arrived = world.cells, world.arrived_flags
         self.next_tick = report.tick + 1
         if report.episode_row is not None:
             self.flush()
             self._end_episode(report)
-        elif self._count >= self.flush_every:
+        elif len(self._buffer) >= self.flush_every:
             self.flush()
 
     def _start_episode(self, report: TickReport) -> None:
+        self.flush()  # the buffered ticks' trails are the last episode's
         self._goals_episode = report.episode
         starts = swarm_episode(self.config.seed, report.episode, self.config.width,
                                self.config.height, self.config.n_agents)
@@ -252,27 +238,34 @@ class WorldViz:
 
     def flush(self) -> None:
         """Send the buffered ticks: their geometry computed at once, one chunk per entity."""
-        k, n = self._count, self.config.n_agents
+        k, n = len(self._buffer), self.config.n_agents
         if k == 0:
             return
         rec = self.rec
-        # Rerun may keep (not copy) what it is given until it is written: send copies, never views
-        # of the buffers that the next ticks overwrite.
-        ticks, episodes = self._ticks[:k].copy(), self._episodes[:k].copy()
+        tick_list, episode_list, moved, before, arrived_then, actions, collided = \
+            zip(*self._buffer)
+        self._buffer = []
+        ticks, episodes = np.array(tick_list, dtype=np.int64), np.array(episode_list, np.int64)
+        positions = np.array(before, dtype=np.int64)  # (k, n, 2): the cells each tick started from
         index = [rr.TimeColumn("tick", sequence=ticks), rr.TimeColumn("episode", sequence=episodes)]
         each = [n] * k
-        cells = self._positions[:k].astype(np.float32)
+        cells = positions.astype(np.float32)
         flat = cells.reshape(-1, 2)
         rec.send_columns(AGENTS, index, rr.Points2D.columns(positions=flat).partition(each))
-        moves = (MOVES[self._actions[:k]] * 0.7).astype(np.float32).reshape(-1, 2)
+        moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32).reshape(-1, 2)
         rec.send_columns(INTENTS, index,
                          rr.Arrows2D.columns(origins=flat, vectors=moves).partition(each))
+        # Tick i's trail: the last TRAIL_LENGTH cells each agent started a tick from, up to i.
+        history = np.concatenate([self._trail, cells.transpose(1, 0, 2)], axis=1)
+        windows = np.lib.stride_tricks.sliding_window_view(history, TRAIL_LENGTH, axis=1)
+        trails = windows[:, 1:].transpose(1, 0, 3, 2)  # (k, n, TRAIL_LENGTH, 2)
+        self._trail = history[:, -TRAIL_LENGTH:].copy()
         rec.send_columns(TRAILS, index, rr.LineStrips2D.columns(
-            strips=self._trails[:k].reshape(-1, TRAIL_LENGTH, 2).copy()).partition(each))
+            strips=np.ascontiguousarray(trails).reshape(-1, TRAIL_LENGTH, 2)).partition(each))
 
-        asks = negotiation_mask(self._positions[:k], self._arrived_then[:k], ticks,
+        asks = negotiation_mask(positions, np.array(arrived_then, dtype=bool), ticks,
                                 self.config.algo)
-        asks &= self._moved[:k, None, None]
+        asks &= np.array(moved, dtype=bool)[:, None, None]
         t, asker, asked = np.nonzero(asks)
         self._awaited += len(t)
         start, end = cells[t, asker], cells[t, asked]
@@ -282,16 +275,18 @@ class WorldViz:
             origins=start + unit * 0.36, vectors=gap - unit * 0.72,
             colors=with_alpha(self.colors[asker], 150)).partition(asks.sum(axis=(1, 2))))
 
-        hit_t, hit_agent = np.nonzero(self._collided[:k])
+        hit = np.zeros((k, n), dtype=bool)
+        for t, agents in enumerate(collided):
+            hit[t, list(agents)] = True
+        hit_t, hit_agent = np.nonzero(hit)
         rec.send_columns(COLLISIONS, index, rr.Points2D.columns(
-            positions=cells[hit_t, hit_agent]).partition(self._collided[:k].sum(axis=1)))
+            positions=cells[hit_t, hit_agent]).partition(hit.sum(axis=1)))
         if self._warnings:
             w_ticks, w_episodes, texts = zip(*self._warnings)
             rec.send_columns(EVENTS, [rr.TimeColumn("tick", sequence=w_ticks),
                                       rr.TimeColumn("episode", sequence=w_episodes)],
                              rr.TextLog.columns(text=texts, level=["WARN"] * len(texts)))
             self._warnings = []
-        self._count = 0
 
     def close(self) -> None:
         self.flush()
