@@ -5,6 +5,10 @@ agents are peers that listen on a free loopback port of their own and connect to
 gossip scouting joins them into a full mesh, so a negotiation query goes straight from agent to
 agent. Multicast scouting is always off unless a config file turns it on. Across machines, pass
 a Zenoh config file and/or listen and connect endpoints (README, "Several machines").
+
+Every process also runs Zenoh with one receiving thread (:data:`RUNTIME_DEFAULT`, unless
+``ZENOH_RUNTIME`` is set), and every handler of the nodes is a :func:`callback`: it runs on that
+thread, which keeps its Python thread state from one call to the next (:func:`keep_thread_state`).
 """
 
 import ctypes
