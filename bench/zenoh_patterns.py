@@ -32,7 +32,7 @@ import zenoh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from protocol.transport import TransportSettings, free_port  # noqa: E402
+from protocol.transport import TransportSettings, enqueue, free_port, open_session  # noqa: E402
 
 PATTERNS = ("pubsub", "query", "standing", "token")
 NONE = zenoh.ConsolidationMode.NONE
@@ -42,11 +42,11 @@ STAY = 4
 def session(endpoint: str, world: bool) -> zenoh.Session:
     settings = (TransportSettings(listen=(endpoint,)) if world else
                 TransportSettings(listen=("tcp/127.0.0.1:0",), connect=(endpoint,)))
-    return zenoh.open(settings.zenoh_config())
+    return open_session(settings)  # as the swarm's processes: one receiving thread
 
 
 def to_queue(events: queue.SimpleQueue, kind: str):
-    return zenoh.handlers.Callback(lambda item: events.put((kind, item)), indirect=False)
+    return enqueue(events, kind)  # as the swarm's handlers: Zenoh's thread keeps its state
 
 
 def agent(me: int, n: int, endpoint: str, pattern: str) -> None:
