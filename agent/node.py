@@ -480,11 +480,9 @@ class AgentNode:
 
     def _answer_standing_queries(self) -> None:
         """Answer the standing queries owed at the decided tick, the next in rank first."""
-        n, standing = self.config.n_agents, self.standing
-        askers = list(standing) if len(standing) < 2 else sorted(
-            standing, key=lambda a: priority_rank(a, self.decided_tick, n))
-        for asker in askers:  # usually one: the agent ranked next
-            self._answer_standing(asker, standing[asker])
+        n = self.config.n_agents
+        for asker in sorted(self.standing, key=lambda a: priority_rank(a, self.decided_tick, n)):
+            self._answer_standing(asker, self.standing[asker])
 
     def _answer_standing(self, asker: int, query: zenoh.Query) -> None:
         if not negotiation.answers_standing(self.decided_obs, asker, self.config.n_agents,

@@ -30,11 +30,14 @@ Cell = tuple[int, int]
 
 _MOVE_OF_STEP = {(int(dx), int(dy)): a for a, (dx, dy) in enumerate(MOVES)}
 
+def _weight(dx: int, dy: int) -> float:
+    """Eq. 6's ``1 / d`` of a neighbour's offset: ``agent.learning.neighbour_weights``'s expression."""
+    return 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
+
+
 _R = VIEW_RADIUS
-_WEIGHT_OF_STATE = tuple(1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
-                          for dx in range(-_R, _R + 1) for dy in range(-_R, _R + 1))
-"""Eq. 6's ``1 / d`` of an offset in view, by its state (``offset_state_of``), computed by the
-very expression of ``agent.learning.neighbour_weights``."""
+_WEIGHT_OF_STATE = tuple(_weight(dx, dy) for dx in range(-_R, _R + 1) for dy in range(-_R, _R + 1))
+""":func:`_weight` of every offset in view, by its state (``offset_state_of``)."""
 
 
 def sum_like_einsum(weights: list[tuple[int, float]], rows: list[list[float]],
@@ -156,7 +159,7 @@ class SingleLearner:
                 weights.append((slot, _WEIGHT_OF_STATE[state]))
             else:
                 state = offset_state_of(dx, dy)
-                weights.append((slot, 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)))
+                weights.append((slot, _weight(dx, dy)))
             states[slot] = state + unknown_move
         return Situation(own, offset_state_of(goal[0] - ox, goal[1] - oy), cells, states, weights)
 

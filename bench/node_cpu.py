@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""The Python cost of a tick in the nodes themselves, with Zenoh taken out: one process, no noise.
+"""The Python cost of a tick in the nodes themselves, with Zenoh taken out, in one process.
 
 The real ``AgentNode`` and ``WorldNode`` handlers run in one thread, over a stand-in for Zenoh that
 delivers every message (observation, standing query, answer, intent) in the order it was sent, by
@@ -136,7 +136,6 @@ def run(config: SwarmConfig, out: Path, bare: bool) -> tuple[int, Wire]:
     world.alive = set(range(config.n_agents))
     world.publishers = [_Publisher(wire, keys.obs_key(config.run_id, i), "observation")
                         for i in range(config.n_agents)]
-    wire.subscribers[keys.intent_key_all(config.run_id)]  # noqa: B018 - documents the route
     agents = []
     for i in range(config.n_agents):
         brain = (_LearnNothing if bare else AgentBrain)(i, config)

@@ -5,6 +5,7 @@ for the rest of its process, so each check runs in a fresh spawned process.
 """
 
 import multiprocessing as mp
+import os
 import threading
 import time
 
@@ -80,6 +81,4 @@ def test_the_runtime_default_leaves_a_users_setting_alone(monkeypatch):
         transport.open_session(TransportSettings(mode="peer")).close()
     except transport.TransportError:
         pass
-    import os
-
     assert os.environ[transport.RUNTIME_ENV] == "(rx: (worker_threads: 2))"
