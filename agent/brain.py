@@ -1,82 +1,152 @@
 """One swarm agent's decisions, pure: observation and neighbours' answers in, action out.
 
-The same object runs inside an agent process (``agent.node``) and in the in-process swarm
-(``launch.inprocess``), which is what makes the two runs identical for the same seed.
+The agent process (``agent.node``) runs it; it calls the learner's kernel functions
+(``agent.learner``) on Python lists, the very functions the swarm simulator (``sim.swarm``) runs
+compiled, so that for the same seed the distributed swarm and the simulator play the same run.
 
-Negotiation (DESIGN §2, the paper's hierarchical way): at every tick each agent has a rank
-(``protocol.config.priority_rank``, rotating so nobody always yields). An nnQL agent waits for its
-visible higher-ranked neighbours' intents (:meth:`AgentBrain.neighbours_to_ask`; how it learns them
-is ``agent.negotiation``'s plan), decides with whatever came back (:meth:`AgentBrain.act`), and
-then answers for itself. A neighbour whose intent did not come is read the QL way, from its
-current cell. A QL agent asks nobody.
+Negotiation: at every tick an agent that reads intents waits for the intents of its higher-ranked
+neighbours within reach (:meth:`AgentBrain.neighbours_to_ask`, by ``protocol.ranks.waits_for``; how
+it learns them is ``agent.negotiation``'s plan), decides with whatever came back
+(:meth:`AgentBrain.act`), and then answers for itself. A neighbour whose intent did not come is
+read as one whose intent is unknown, from its current cell. A QL agent asks nobody.
 """
 
-from agent.learning import EpisodeNoise, Hyper
-from agent.negotiation import awaited
-from agent.single import SingleLearner, Situation
-from protocol.actions import STAY, intended_cell_of
+import numpy as np
+
+from agent.learner import (
+    FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
+    LP_RANDOM_STEP, LP_READING, LP_SHIELD, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
+    RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome, record_size, state_size,
+)
+from protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
 from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
+from protocol.jit import floats, ints, rows, table
 from protocol.messages import Observation
+from protocol.ranks import priority_rank, waits_for
 from protocol.seeding import AGENT_STREAM, stream_rng
 
 
+class Learner:
+    """One agent's tables and learner state as the kernel's plain-Python buffers."""
+
+    def __init__(self, config: SwarmConfig) -> None:
+        reading = READINGS[config.algo]
+        self.params = [0] * LP_FIELDS
+        self.params[LP_READING] = reading
+        self.params[LP_KNOWN_STATE] = int(config.known_state)
+        self.params[LP_RADIUS] = config.interaction_radius
+        self.params[LP_SHIELD] = int(config.shield)
+        self.params[LP_RANDOM_STEP] = config.random_step
+        self.params_f = [0.0] * FP_FIELDS
+        self.params_f[FP_ALPHA] = config.alpha
+        self.params_f[FP_GAMMA] = config.gamma
+        self.params_f[FP_BETA] = config.beta
+        self.params, self.params_f = ints(self.params), floats(self.params_f)
+        init = float(config.optimistic)
+        self.q_ds = table(np.full((N_STATES, N_ACTIONS), init))
+        self.q_ca = table(np.full((ca_rows(reading, config.known_state), N_ACTIONS), init))
+        self.state = ints([0] * state_size(config.n_agents))
+        self.state_f = floats([0.0] * LF_FIELDS)
+        self.rec = ints([0] * record_size(config.n_agents))
+        self.rec_f = floats([0.0] * RF_FIELDS)
+        self.values = floats([0.0] * N_ACTIONS)
+
+    @property
+    def actions_taken(self) -> int:
+        return int(self.state[LS_TAKEN])
+
+    def tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """``Q_DS`` and ``Q_CA`` as arrays (copies), for checkpoints and pictures."""
+        return np.array(self.q_ds), np.array(self.q_ca)
+
+    def restore(self, q_ds: np.ndarray, q_ca: np.ndarray, actions_taken: int) -> None:
+        """Take the tables and count of a checkpoint (shapes checked by the caller)."""
+        self.q_ds, self.q_ca = table(q_ds), table(q_ca)
+        self.state[LS_TAKEN] = int(actions_taken)
+
+    def forget_pending(self) -> None:
+        """Drop the pending transition (its episode was abandoned, e.g. the world restarted)."""
+        self.state[LS_PENDING] = 0
+
+
 class AgentBrain:
-    """A learner of batch one (``agent.single``), its noise, and the episode bookkeeping."""
+    """An agent's learner, its noise, and what it remembers of its last observation."""
 
     def __init__(self, agent: int, config: SwarmConfig) -> None:
+        if config.algo not in READINGS:
+            raise ValueError(f"--algo {config.algo} plans centrally; run it with --in-process")
         self.agent = agent
         self.config = config
-        self.learner = SingleLearner(
-            random_step=config.random_step,
-            use_intents=config.algo in NEGOTIATING_ALGOS,
-            n_neighbours=config.n_agents,
-            hyper=Hyper(config.alpha, config.gamma, config.beta),
-            with_direction=config.algo == "nnql-dir",
-        )
+        self.learner = Learner(config)
+        self.reads_intents = config.algo in NEGOTIATING_ALGOS
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
-        self._noise: EpisodeNoise | None = None
+        self._random_actions = np.zeros(config.max_steps, dtype=np.int64)
+        self._ties = np.zeros((config.max_steps, N_ACTIONS))
+        self._noise: tuple[list[int], list[list[float]]] | None = None
         self._noise_episode = -1
-        self._prepared: tuple[Observation, Situation, tuple | None] | None = None
+        self._seen: tuple[int, dict[int, tuple[int, int]]] = (-1, {})  # DAQL: last tick's cells
 
     def neighbours_to_ask(self, obs: Observation) -> list[int]:
-        """The visible higher-ranked neighbours whose intents this agent decides with (none once
-        it has arrived: it stays); ``agent.negotiation`` plans how to learn them."""
-        if obs.arrived:
+        """The neighbours whose intents this agent decides with (none once it has arrived or at
+        an episode's end, where it stays); ``agent.negotiation`` plans how to learn them."""
+        if obs.arrived or obs.episode_end or not self.reads_intents:
             return []
-        return awaited(obs, self.config.n_agents, self.config.algo)
+        (x, y), n, radius = obs.position, self.config.n_agents, self.config.interaction_radius
+        return [j for j, jx, jy in obs.neighbours
+                if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius)]
 
     def prepare(self, obs: Observation) -> None:
-        """Work out what the decision on ``obs`` needs that no intent changes; :meth:`act` on
-        the same observation then only adds the intents (an agent prepares while it waits)."""
-        cells = {j: (x, y) for j, x, y in obs.neighbours}
-        situation = self.learner.situation(obs.position, obs.goal, cells)
-        if obs.arrived or obs.episode_end:
-            self._prepared = (obs, situation, None)
+        """Draw the episode's noise when a new episode starts (an agent prepares while it waits
+        for its neighbours' intents)."""
+        if obs.arrived or obs.episode_end or self._noise_episode == obs.episode:
             return
-        if self._noise_episode != obs.episode:
-            self._noise = EpisodeNoise.draw(self.rng, self.config.max_steps)
-            self._noise_episode = obs.episode
-        noise = (int(self._noise.random_actions[obs.step]),
-                 self._noise.tie_breakers[obs.step].tolist())
-        self._prepared = (obs, situation, noise)
+        draw_noise(self.rng, self._random_actions, self._ties)
+        self._noise = (self._random_actions.tolist(), self._ties.tolist())
+        self._noise_episode = obs.episode
 
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
         """Learn from the last action's rewards and choose this tick's action (STAY if done)."""
-        if self._prepared is None or self._prepared[0] is not obs:
-            self.prepare(obs)
-        _, situation, noise = self._prepared
-        self._prepared = None
         learner = self.learner
-        learner.record_one(obs.reward_ds, obs.reward_ca, obs.arrived)
-        if noise is None:  # arrived, or the episode's end
-            learner.finish_one(situation)
+        record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
+        (x, y), (gx, gy) = obs.position, obs.goal
+        stops = obs.arrived or obs.episode_end
+        nb = rows(self._neighbour_rows(obs, {} if stops else answers), NB_FIELDS)
+        if stops:
+            finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
+                   learner.state_f, x, y, gx, gy, nb, len(obs.neighbours), learner.rec,
+                   learner.rec_f, True)
             return STAY
-        random_action, ties = noise
-        return learner.decide_one(situation, self._next_cells(situation.cells, answers),
-                                  random_action, ties)
+        self.prepare(obs)
+        random_actions, ties = self._noise
+        c = self.config
+        action, _ = decide(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
+                           learner.state, learner.state_f, x, y, gx, gy, nb, len(obs.neighbours),
+                           c.width, c.height, random_actions[obs.step], floats(ties[obs.step]),
+                           learner.values, learner.rec, learner.rec_f, True)
+        return int(action)
 
-    def _next_cells(self, cells: dict[int, tuple[int, int]],
-                    answers: dict[int, int]) -> dict[int, tuple[int, int]]:
-        """The cells the answering neighbours announced they are heading for."""
+    def _neighbour_rows(self, obs: Observation, answers: dict[int, int]) -> list[list[int]]:
+        """The learner's neighbour rows (``agent.learner.NB_*``) for this observation: the
+        visible neighbours in id order, each with its announced move where it answered."""
         w, h = self.config.width, self.config.height
-        return {j: intended_cell_of(*cells[j], action, w, h) for j, action in answers.items()}
+        previous = self._previous_cells(obs)
+        rows = []
+        for j, jx, jy in obs.neighbours:
+            action = answers.get(j)
+            if action is None:
+                nx, ny, known = jx, jy, 0
+            else:
+                nx, ny, known = target_x(jx, action, w), target_y(jy, action, h), 1
+            px, py = previous.get(j, (-1, -1))
+            rows.append([j, jx, jy, known, nx, ny, nx, ny, 0, px, py])
+        return rows
+
+    def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:
+        """DAQL's memory: the neighbours' cells at the previous tick of this episode, where they
+        were in view; and this tick's, for the next."""
+        if self.learner.params[LP_READING] != READ_DAQL:
+            return {}
+        tick, cells = self._seen
+        previous = cells if tick == obs.tick - 1 and obs.step > 0 else {}
+        self._seen = (obs.tick, {j: (jx, jy) for j, jx, jy in obs.neighbours})
+        return previous

@@ -21,8 +21,9 @@ class CheckpointError(ValueError):
 
 def fingerprint(brain: AgentBrain) -> str:
     """A short digest of the brain's Q-tables: equal digests, equal learned values."""
-    digest = hashlib.sha256(brain.learner.q_ds[0].tobytes())
-    digest.update(brain.learner.q_ca[0].tobytes())
+    q_ds, q_ca = brain.learner.tables()
+    digest = hashlib.sha256(q_ds.tobytes())
+    digest.update(q_ca.tobytes())
     return digest.hexdigest()[:16]
 
 
@@ -35,12 +36,13 @@ def save(path: Path, brain: AgentBrain, episode: int) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
+    q_ds, q_ca = brain.learner.tables()
     with open(tmp, "wb") as f:
         np.savez(
             f,
-            q_ds=brain.learner.q_ds[0],
-            q_ca=brain.learner.q_ca[0],
-            actions_taken=brain.learner.actions_taken[0],
+            q_ds=q_ds,
+            q_ca=q_ca,
+            actions_taken=brain.learner.actions_taken,
             episode=episode,
             agent=brain.agent,
             n_agents=brain.config.n_agents,
@@ -64,8 +66,8 @@ def load(path: Path, brain: AgentBrain) -> int:
     missing = [key for key in expected if key not in fields]
     if missing:
         raise CheckpointError(f"{path}: corrupt checkpoint, missing {', '.join(missing)}")
-    for table in ("q_ds", "q_ca"):
-        shape = getattr(brain.learner, table)[0].shape
+    for table, current in zip(("q_ds", "q_ca"), brain.learner.tables()):
+        shape = current.shape
         if fields[table].shape != shape:
             raise CheckpointError(f"{path}: {table} of shape {fields[table].shape}, expected {shape}")
     if not (np.isfinite(fields["q_ds"]).all() and np.isfinite(fields["q_ca"]).all()):

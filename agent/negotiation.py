@@ -1,7 +1,7 @@
 """Whom an nnQL agent asks for intents, so that it learns every intent it must wait for. Pure.
 
-At each tick an nnQL agent waits for the intents of its visible higher-ranked neighbours
-(:func:`awaited`; the paper's hierarchical negotiation, DESIGN §2). It need not ask each of them:
+At each tick an nnQL agent waits for the intents of its higher-ranked neighbours within reach
+(:func:`awaited`, by the one rule of ``protocol.ranks.waits_for``). It need not ask each of them:
 an answer relays every intent its sender learned while negotiating (``protocol.messages.Answer``),
 and that sender waited for *its* visible higher-ranked neighbours in turn. Positions are in the
 observation, so an agent can tell exactly whom a neighbour sees, and so what its answer will bring.
@@ -26,21 +26,23 @@ then costs one message per hop instead of a query, an answer and the query's end
 from dataclasses import dataclass, field
 from typing import Callable
 
-from protocol.actions import sees
-from protocol.config import NEGOTIATING_ALGOS, priority_rank
+from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from protocol.messages import Observation
+from protocol.ranks import priority_rank, waits_for
 
 
-def awaited(obs: Observation, n_agents: int, algo: str) -> list[int]:
-    """The visible neighbours that outrank the observing agent at this tick: whose intents it
-    waits for (none for QL, and none at an episode's end, where everybody stays)."""
-    if algo not in NEGOTIATING_ALGOS or obs.episode_end:
+def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
+    """The neighbours whose intents the observing agent waits for at this tick (none for QL, and
+    none at an episode's end, where everybody stays)."""
+    if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
-    return [j for j, _, _ in obs.neighbours if priority_rank(j, obs.tick, n_agents) < obs.rank]
+    (x, y), n, radius = obs.position, config.n_agents, config.interaction_radius
+    return [j for j, jx, jy in obs.neighbours
+            if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius)]
 
 
 def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
-              rank: Callable[[int], int]) -> list[int]:
+              rank: Callable[[int], int], radius: int) -> list[int]:
     """The fewest neighbours to ask, lowest-ranked first, whose answers (with what they relay)
     bring every intent of ``waiting_for``; ``cells`` holds each one's cell, ``rank`` its rank."""
     ranked = sorted(((rank(j), j) for j in waiting_for), reverse=True)
@@ -51,19 +53,21 @@ def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
             continue
         asks.append(q)
         covered.add(q)
-        cell = cells[q]
-        covered.update(x for rx, x in ranked if rx < r and sees(cell, cells[x]))
+        qx, qy = cells[q]
+        covered.update(x for rx, x in ranked
+                       if waits_for(True, r, rx, qx, qy, cells[x][0], cells[x][1], radius))
     return asks
 
 
-def plan_for(obs: Observation, n_agents: int, algo: str) -> tuple[list[int], list[int]]:
+def plan_for(obs: Observation, config: SwarmConfig) -> tuple[list[int], list[int]]:
     """``(awaited, asks)`` for one observation: whose intents to learn, and whom to ask."""
-    waiting_for = awaited(obs, n_agents, algo)
+    waiting_for = awaited(obs, config)
     if not waiting_for:
         return waiting_for, []
     cells = {j: (x, y) for j, x, y in obs.neighbours}
-    tick = obs.tick
-    return waiting_for, plan_asks(waiting_for, cells, lambda j: priority_rank(j, tick, n_agents))
+    tick, n = obs.tick, config.n_agents
+    return waiting_for, plan_asks(waiting_for, cells, lambda j: priority_rank(j, tick, n),
+                                  config.interaction_radius)
 
 
 def predecessor(agent: int, tick: int, n_agents: int) -> int | None:
@@ -72,15 +76,16 @@ def predecessor(agent: int, tick: int, n_agents: int) -> int | None:
     return None if rank == 0 else (agent - 1) % n_agents
 
 
-def answers_standing(obs: Observation, asker: int, n_agents: int, algo: str) -> bool:
+def answers_standing(obs: Observation, asker: int, config: SwarmConfig) -> bool:
     """Whether the agent that observed ``obs`` answers ``asker``'s standing query at this tick:
-    exactly when the asker waits for its intent (visibility is symmetric, so the asker is in view
-    of whoever it sees; see :func:`awaited`)."""
-    if algo not in NEGOTIATING_ALGOS or obs.episode_end:
+    exactly when the asker waits for its intent (distance is symmetric, so the asker waits for
+    whoever it is in reach of; see :func:`awaited`)."""
+    if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return False
-    n = n_agents
-    return (priority_rank(obs.agent, obs.tick, n) < priority_rank(asker, obs.tick, n)
-            and any(j == asker for j, _, _ in obs.neighbours))
+    n, (x, y) = config.n_agents, obs.position
+    return any(j == asker and waits_for(True, priority_rank(asker, obs.tick, n), obs.rank,
+                                        jx, jy, x, y, config.interaction_radius)
+               for j, jx, jy in obs.neighbours)
 
 
 @dataclass

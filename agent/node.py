@@ -288,7 +288,7 @@ class AgentNode:
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
         needed = self.brain.neighbours_to_ask(obs)
-        awaited, asks = negotiation.plan_for(obs, self.config.n_agents, self.config.algo)
+        awaited, asks = negotiation.plan_for(obs, self.config)
         # An episode's end is decided on the main thread: its checkpoint writes a file.
         decide_here = not obs.episode_end or threading.current_thread() is threading.main_thread()
         if not awaited and decide_here:
@@ -485,8 +485,7 @@ class AgentNode:
             self._answer_standing(asker, self.standing[asker])
 
     def _answer_standing(self, asker: int, query: zenoh.Query) -> None:
-        if not negotiation.answers_standing(self.decided_obs, asker, self.config.n_agents,
-                                            self.config.algo):
+        if not negotiation.answers_standing(self.decided_obs, asker, self.config):
             return
         try:
             query.reply(query.key_expr, self.decided_payload)

@@ -31,7 +31,7 @@ import numpy as np
 import rerun as rr
 
 from agent.brain import AgentBrain
-from protocol.actions import MOVES, N_ACTIONS, STAY, VIEW_RADIUS, WINDOW
+from protocol.actions import MOVES, N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, WINDOW
 from protocol.config import SwarmConfig
 from protocol.messages import Observation
 
@@ -65,17 +65,22 @@ def viridis(t: np.ndarray) -> np.ndarray:
     return (_VIRIDIS[low] * (1 - frac) + _VIRIDIS[high] * frac).astype(np.uint8)
 
 
-def table_picture(q: np.ndarray) -> dict:
-    """One Q-table ``(441, 5)`` as a heat map and a policy over the 21 x 21 offset window.
+def table_picture(q: np.ndarray, initial: float = 0.0) -> dict:
+    """One Q-table as a heat map and a policy over the 21 x 21 offset window.
 
-    Returns ``value`` (max over actions, ``[row, column] = [dy + 10, dx + 10]``), ``best``
-    (argmax), ``visited`` (some action's value moved off 0), ``decided`` (not every action tied)
-    and ``image`` (RGB bytes).
+    A table of several blocks of 441 states (a neighbour's state with its known move, or its
+    intent known or not) shows, per offset, the block with the best value. Returns ``value``
+    (max over actions, ``[row, column] = [dy + 10, dx + 10]``), ``best`` (argmax), ``visited``
+    (some action's value moved off ``initial``), ``decided`` (not every action tied) and
+    ``image`` (RGB bytes).
     """
-    grid = np.asarray(q).reshape(WINDOW, WINDOW, N_ACTIONS).transpose(1, 0, 2)
+    blocks = np.asarray(q).reshape(-1, N_STATES, N_ACTIONS)
+    best_block = blocks.max(axis=-1).argmax(axis=0)
+    table = blocks[best_block, np.arange(N_STATES)]
+    grid = table.reshape(WINDOW, WINDOW, N_ACTIONS).transpose(1, 0, 2)
     value = grid.max(axis=-1)
     best = grid.argmax(axis=-1)
-    visited = np.any(grid != 0, axis=-1)
+    visited = np.any(grid != initial, axis=-1)
     decided = value > grid.min(axis=-1)
     image = np.empty((WINDOW, WINDOW, 3), dtype=np.uint8)
     image[:] = UNVISITED
@@ -173,8 +178,8 @@ class AgentViz:
         rec.set_time("tick", sequence=tick)
         rec.set_time("episode", sequence=episode)
         root = agent_path(self.agent)
-        for table in TABLES:
-            picture = table_picture(getattr(brain.learner, table)[0])
+        for table, values in zip(TABLES, brain.learner.tables()):
+            picture = table_picture(values, self.config.optimistic)
             origins, vectors, colors, stays = policy_marks(picture)
             rec.log(f"{root}/{table}/value", rr.Image(picture["image"]))
             rec.log(f"{root}/{table}/policy",

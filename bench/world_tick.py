@@ -1,38 +1,30 @@
 #!/usr/bin/env python3
-"""Microseconds per tick of the swarm's world: one-world rules against the batch rules.
+"""Microseconds per tick of the swarm's world, as the world process runs it (kernel uncompiled).
 
 A tick here is the world's own work, ``observations()`` then ``apply(actions)``, with no agents
 and no Zenoh: the part of the swarm's lockstep tick between the last agent's intent and the next
-observations. For each agent count, in the same run, on the same seeded random actions:
-
-- ``one-world``: :class:`world.engine.SwarmWorld`, on the plain-Python one-world rules;
-- ``batch``: ``tests/batch_world.py``'s ``BatchRulesWorld``, the same world on the numpy batch
-  rules of ``world.rules`` (a batch of one, as ``SwarmWorld`` was before);
-- ``ratio``: batch / one-world, per column.
-
-Each figure is the median over ``--repeats`` of the mean over ``--ticks`` ticks (episode ends
-included, as in a run); the two worlds run back to back in every repeat.
+observations, on seeded random actions. Each figure is the median over ``--repeats`` of the mean
+over ``--ticks`` ticks (episode ends included, as in a run).
 
     python bench/world_tick.py
     python bench/world_tick.py --agents 8,16,32 --repeats 9 --grid 40x40
 """
 
 import argparse
+import os
 import statistics
 import sys
 import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+os.environ["NNQL_KERNEL"] = "python"  # as in the world process
 
 import numpy as np  # noqa: E402
 
 from protocol.actions import N_ACTIONS  # noqa: E402
 from protocol.config import SwarmConfig  # noqa: E402
-from tests.batch_world import BatchRulesWorld  # noqa: E402
 from world.engine import SwarmWorld  # noqa: E402
-
-WORLDS = {"one-world": SwarmWorld, "batch": BatchRulesWorld}
 
 
 def time_ticks(world: SwarmWorld, actions: list[list[int]]) -> tuple[float, float]:
@@ -57,23 +49,17 @@ def main() -> int:
     p.add_argument("--grid", default="11x11")
     args = p.parse_args()
     width, height = (int(v) for v in args.grid.split("x"))
-    print(f"{'agents':>6} {'world':>9} {'obs us':>7} {'apply us':>8} {'tick us':>8}")
+    print(f"{'agents':>6} {'obs us':>7} {'apply us':>8} {'tick us':>8}")
     for n in (int(v) for v in args.agents.split(",")):
         config = SwarmConfig(run_id="bench-run", n_agents=n, width=width, height=height,
                              episodes=10**6)
         actions = np.random.default_rng(0).integers(0, N_ACTIONS, (args.ticks, n)).tolist()
-        figures: dict[str, list[tuple[float, float, float]]] = {name: [] for name in WORLDS}
+        runs = []
         for _ in range(args.repeats):
-            for name, world in WORLDS.items():
-                observing, applying = time_ticks(world(config), actions)
-                figures[name].append((observing, applying, observing + applying))
-        medians = {name: [statistics.median(run[k] for run in runs) for k in range(3)]
-                   for name, runs in figures.items()}
-        for name, (observing, applying, tick) in medians.items():
-            print(f"{n:>6} {name:>9} {observing:>7.1f} {applying:>8.1f} {tick:>8.1f}")
-        ratios = [b / o for b, o in zip(medians["batch"], medians["one-world"])]
-        print(f"{n:>6} {'ratio':>9}"
-              + "".join(f"{r:>{w}.2f}x" for r, w in zip(ratios, (7, 8, 8))))
+            observing, applying = time_ticks(SwarmWorld(config), actions)
+            runs.append((observing, applying, observing + applying))
+        observing, applying, tick = (statistics.median(run[k] for run in runs) for k in range(3))
+        print(f"{n:>6} {observing:>7.1f} {applying:>8.1f} {tick:>8.1f}")
     return 0
 
 

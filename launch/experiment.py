@@ -20,7 +20,6 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: make the repository's packages importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agent.learning import Hyper  # noqa: E402
 from launch.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
 from launch.progress import Progress  # noqa: E402
 from launch.report import (  # noqa: E402
@@ -28,15 +27,11 @@ from launch.report import (  # noqa: E402
 )
 
 RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
-RUNS_PER_WORKER = 1000
-"""With ``--workers auto``, one worker process per this many runs, up to the cores. Every worker
-pays the fixed cost of a step of the array code, which dominates below about a thousand runs."""
 
 EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
 DEFAULTS = PaperSettings()
-DEFAULT_HYPER = Hyper()
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -126,12 +121,12 @@ def build_parser() -> OneLineParser:
     add("--ks", type=parse_ks, default=list(range(1, 11)), metavar="KS",
         help="random steps k: every k-th action is random; a range or list (default 1-10)")
     add("--algos", type=parse_algos, default=list(ALGOS), help="algorithms to compare (default ql,nnql)")
-    add("--alpha", type=bounded(float, 0.0, 1.0), default=DEFAULT_HYPER.alpha,
-        help=f"learning rate (default {DEFAULT_HYPER.alpha})")
-    add("--gamma", type=bounded(float, 0.0, 1.0), default=DEFAULT_HYPER.gamma,
-        help=f"discount factor (default {DEFAULT_HYPER.gamma})")
-    add("--beta", type=bounded(float, 0.0, 1.0), default=DEFAULT_HYPER.beta,
-        help=f"weight of destination seeking in Eq. 7 (default {DEFAULT_HYPER.beta})")
+    add("--alpha", type=bounded(float, 0.0, 1.0), default=DEFAULTS.alpha,
+        help=f"learning rate (default {DEFAULTS.alpha})")
+    add("--gamma", type=bounded(float, 0.0, 1.0), default=DEFAULTS.gamma,
+        help=f"discount factor (default {DEFAULTS.gamma})")
+    add("--beta", type=bounded(float, 0.0, 1.0), default=DEFAULTS.beta,
+        help=f"weight of destination seeking in Eq. 7 (default {DEFAULTS.beta})")
     add("--goal-reward", type=bounded(float, 0.0), default=DEFAULTS.goal_reward,
         help=f"destination-seeking reward on arriving (default {DEFAULTS.goal_reward:g})")
     add("--obstacles", type=bounded(int, 0), default=DEFAULTS.n_obstacles, metavar="N",
@@ -147,7 +142,7 @@ def build_parser() -> OneLineParser:
         help="random step k of the per-episode figures (default: the largest k run)")
     add("--no-plots", action="store_true", help="skip the figures (no matplotlib needed)")
     add("--workers", type=parse_workers, default=None, metavar="N|auto",
-        help="worker processes (default auto: by run size, at most the number of cores)")
+        help="threads the runs are spread over (default auto: one per core)")
     return parser
 
 
@@ -177,9 +172,8 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
             require_matplotlib()
         except RuntimeError as error:
             parser.error(str(error))
-    runs = len(args.algos) * len(args.ks) * args.seeds
     if args.workers is None:
-        args.workers = max(1, min(os.cpu_count() or 1, runs // RUNS_PER_WORKER))
+        args.workers = os.cpu_count() or 1
     return args
 
 
@@ -192,7 +186,7 @@ def settings_from(args: argparse.Namespace) -> PaperSettings:
         n_obstacles=args.obstacles,
         count_swaps=args.count_swaps,
         goal_reward=args.goal_reward,
-        hyper=Hyper(alpha=args.alpha, gamma=args.gamma, beta=args.beta),
+        alpha=args.alpha, gamma=args.gamma, beta=args.beta,
     )
 
 

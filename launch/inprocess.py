@@ -1,57 +1,125 @@
-"""The swarm in one process: the very same world and agent logic, with function calls for Zenoh.
+"""The swarm in one process: the swarm simulator (``sim.swarm``) playing one run, with its files.
 
-Agents decide in rank order, so every higher-ranked neighbour's intent is known when an agent
-asks for it: exactly what the distributed negotiation gives when nobody misses a deadline. That
-makes this runner the reference for the parity check (same config, same ``episodes.csv``).
+The simulator plays every agent and the world inside the compiled kernel, in rank order, exactly
+as the distributed negotiation orders them when nobody misses a deadline; this runner adds what a
+run leaves: ``episodes.csv`` (a row per episode, flushed as it ends), the agents' checkpoints at
+the end, and, if asked, every tick replayed to the recording (``on_tick``) and every agent's
+tables at each episode's end (``on_episode_end``).
 """
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, NamedTuple
+
+import numpy as np
 
 from agent import checkpoint
-from agent.brain import AgentBrain
+from protocol.actions import STAY
 from protocol.config import SwarmConfig
 from protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
-from world.engine import SwarmWorld, TickReport
+from sim.runs import Batch, Episodes, Run, swarm_world
+from sim.swarm import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y
+from world.engine import TickReport
 from world.metrics import EpisodeWriter
+from world.scenario import swarm_episode
+
+
+class TickView(NamedTuple):
+    """The world as a tick left it, as the recording reads it (``world.viz.WorldViz``)."""
+
+    cells: tuple[tuple[int, int], ...]
+    arrived_flags: tuple[bool, ...]
+    step: int
+
+
+class SimulatedLearner:
+    """One simulated agent's tables, as an agent process's learner shows them."""
+
+    def __init__(self, batch: Batch, agent: int) -> None:
+        self._batch, self._agent = batch, agent
+
+    def tables(self) -> tuple[np.ndarray, np.ndarray]:
+        q_ds, q_ca = self._batch.tables(0, self._agent)
+        return q_ds.copy(), q_ca.copy()
+
+    @property
+    def actions_taken(self) -> int:
+        return self._batch.actions_taken(0, self._agent)
+
+
+@dataclass
+class SimulatedAgent:
+    """What checkpoints and the recording read of an agent: as an ``agent.brain.AgentBrain``."""
+
+    agent: int
+    config: SwarmConfig
+    learner: SimulatedLearner
+    rng: np.random.Generator
+
+
+@dataclass
+class InProcessRun:
+    """What a finished in-process run reports."""
+
+    episodes: Episodes
+    violations: int
 
 
 def run_in_process(
     config: SwarmConfig,
     out_dir: Path,
-    on_tick: Callable[[SwarmWorld, TickReport], None] | None = None,
+    on_tick: Callable[[TickView, TickReport], None] | None = None,
     checkpoints: bool = True,
-    on_episode_end: Callable[[AgentBrain, int], None] | None = None,
-) -> SwarmWorld:
-    """Run every episode of ``config``; writes ``episodes.csv`` (and checkpoints) to ``out_dir``."""
+    on_episode_end: Callable[[SimulatedAgent, int], None] | None = None,
+    on_row: Callable[[dict], None] | None = None,
+) -> InProcessRun:
+    """Run every episode of ``config``; writes ``episodes.csv`` (and checkpoints) to ``out_dir``.
+    ``on_row(row)`` follows each episode's row (its deterministic columns)."""
     out_dir = Path(out_dir)
-    world = SwarmWorld(config)
-    brains = [AgentBrain(i, config) for i in range(config.n_agents)]
-    episode_start, episode_tick, slowest = time.perf_counter(), world.tick, 0.0
-    with EpisodeWriter(out_dir / EPISODES_FILE) as writer:
-        while not world.finished:
-            tick_start = time.perf_counter()
-            observations = world.observations()
-            actions: dict[int, int] = {}
-            for obs in sorted(observations, key=lambda o: o.rank):
-                brain = brains[obs.agent]
-                answers = {j: actions[j] for j in brain.neighbours_to_ask(obs)}
-                actions[obs.agent] = brain.act(obs, answers)
-                if obs.episode_end and checkpoints:
-                    checkpoint.save(
-                        checkpoint.checkpoint_path(out_dir / CHECKPOINT_DIR, obs.agent),
-                        brain, obs.episode,
-                    )
-                if obs.episode_end and on_episode_end is not None:
-                    on_episode_end(brain, obs.episode)
-            report = world.apply([actions[i] for i in range(config.n_agents)])
-            now = time.perf_counter()
-            slowest = max(slowest, now - tick_start)
-            if report.episode_row is not None:
-                writer.write(report.episode_row, now - episode_start, world.tick - episode_tick,
-                             slowest)
-                episode_start, episode_tick, slowest = now, world.tick, 0.0
-            if on_tick is not None:
-                on_tick(world, report)
-    return world
+    batch = Batch(swarm_world(config), [Run.of(config)], record=on_tick is not None)
+    agents = [SimulatedAgent(i, config, SimulatedLearner(batch, i), batch.rngs[0][i])
+              for i in range(config.n_agents)]
+    results = Episodes(1, config.episodes)
+    try:
+        with EpisodeWriter(out_dir / EPISODES_FILE, sync=False) as writer:
+            for episode in range(config.episodes):
+                started, first_tick = time.perf_counter(), int(batch.tick[0])
+                batch.play(1, results)
+                row = results.swarm_row(0, episode)
+                writer.write(row, time.perf_counter() - started, int(batch.tick[0]) - first_tick)
+                if on_tick is not None:
+                    _replay(config, batch, row, on_tick)
+                if on_episode_end is not None:
+                    for agent in agents:
+                        on_episode_end(agent, episode)
+                if on_row is not None:
+                    on_row(row)
+    finally:
+        if checkpoints and batch.episode:
+            for agent in agents:
+                checkpoint.save(checkpoint.checkpoint_path(out_dir / CHECKPOINT_DIR, agent.agent),
+                                agent, batch.episode - 1)
+    return InProcessRun(results, int(results.violations.sum()))
+
+
+def _replay(config: SwarmConfig, batch: Batch, row: dict,
+            on_tick: Callable[[TickView, TickReport], None]) -> None:
+    """Hand the episode just played to ``on_tick``, tick by tick, from the simulator's trace."""
+    trace, steps = batch.trace[0], row["steps"]
+    first = row["end_tick"] - steps
+    for step in range(steps + 1):
+        ending = step == steps
+        if ending and row["episode"] + 1 < config.episodes:
+            starts = swarm_episode(config.seed, row["episode"] + 1, config.width, config.height,
+                                   config.n_agents).starts
+            after = TickView(tuple(map(tuple, starts.tolist())), (False,) * config.n_agents, 0)
+        else:
+            later = trace[min(step + 1, steps)]
+            after = TickView(tuple(zip(later[:, TR_X].tolist(), later[:, TR_Y].tolist())),
+                             tuple(bool(a) for a in later[:, TR_ARRIVED]), step + 1)
+        now = trace[step]
+        actions = (STAY,) * config.n_agents if ending else tuple(now[:, TR_ACTION].tolist())
+        collided = () if ending else tuple(np.flatnonzero(now[:, TR_COLLIDED]).tolist())
+        on_tick(after, TickReport(first + step, row["episode"], not ending, actions, collided,
+                                  (), (), row if ending else None))

@@ -28,6 +28,7 @@ from launch.recording import RecordingSession, check_viewer_url  # noqa: E402
 from launch.resume import ResumeError, ResumePoint, check_checkpoints, resume_point  # noqa: E402
 from launch.supervisor import Supervisor, describe_exit  # noqa: E402
 from protocol.config import ALGOS, SwarmConfig  # noqa: E402
+from protocol.jit import plain_python_environment  # noqa: E402
 from protocol.runfiles import CONFIG_FILE, EPISODES_FILE  # noqa: E402
 from protocol.transport import MODES, EmbeddedLayout, TransportSettings  # noqa: E402
 
@@ -132,6 +133,8 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
         )
     except ValueError as error:
         raise UsageError(str(error)) from None
+    if not args.in_process:
+        check_distributable(config)
     if args.zenoh_config and not Path(args.zenoh_config).is_file():
         raise UsageError(f"no Zenoh config file at {args.zenoh_config}")
     if args.agent_ids is not None:
@@ -153,6 +156,17 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
         raise UsageError(f"--role {args.role} needs --run-id, the same on every host")
     out = args.out or Path("runs") / run_id
     return config, out
+
+
+def check_distributable(config: SwarmConfig) -> None:
+    """Refuse options that only the in-process simulator plays; raises UsageError."""
+    if config.algo == "oracle":
+        raise UsageError("--algo oracle plans every agent's move centrally; run it with --in-process")
+    unsupported = [flag for flag, on in (("--shared", config.shared),
+                                         ("--known-state", config.known_state),
+                                         ("--lookahead > 1", config.lookahead > 1)) if on]
+    if unsupported:
+        raise UsageError(f"{', '.join(unsupported)}: in-process only for now (add --in-process)")
 
 
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
@@ -318,21 +332,22 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> in
     bar = Progress(config.episodes, "episodes") if progress else None
     collisions = 0
 
-    def on_tick(world, report) -> None:
+    def on_row(row: dict) -> None:
         nonlocal collisions
-        collisions += len(report.collided)
-        viz.on_tick(world, report)
-        if bar is not None and report.episode_row is not None:
-            bar.update(1, collisions=collisions)
+        collisions += row["collisions"]
+        if bar is not None:
+            bar.update(1, collisions=collisions, arrived=f"{row['arrived']}/{config.n_agents}")
 
+    recording = viz.world is not None
     try:
-        world = run(config, out, on_tick, on_episode_end=viz.on_episode_end)
+        result = run(config, out, viz.on_tick if recording else None,
+                     on_episode_end=viz.on_episode_end if recording else None, on_row=on_row)
     finally:
         if bar is not None:
             bar.close()
         viz.close()
         session.finish()
-    return 1 if world.violations else 0
+    return 1 if result.violations else 0
 
 
 def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
@@ -341,6 +356,7 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
     world_transport, agent_transport = transports(args)
     recording = RecordingSession.start(args, config, out)
     record, progress = recording.plan or False, not args.no_progress
+    os.environ.update(plain_python_environment())  # the world and agents run the kernel uncompiled
     supervisor = Supervisor(mp.get_context("spawn"))
     world = None
     if args.role in ("all", "world"):

@@ -2,9 +2,13 @@
 
 Positions are integer cells ``(x, y)`` on a ``width x height`` grid, ``x`` growing to the right and
 ``y`` growing downwards (row-major, as images and the Rerun viewer draw them), so UP is ``y - 1``.
+The scalar functions are kernel functions (``protocol.jit``): the learner, the world and the
+simulator all call these very ones.
 """
 
 import numpy as np
+
+from protocol.jit import kernel
 
 UP, DOWN, LEFT, RIGHT, STAY = 0, 1, 2, 3, 4
 """Action indices, in the paper's order (UP, DOWN, LEFT, RIGHT, DON'T MOVE)."""
@@ -12,8 +16,12 @@ UP, DOWN, LEFT, RIGHT, STAY = 0, 1, 2, 3, 4
 ACTION_NAMES = ("UP", "DOWN", "LEFT", "RIGHT", "STAY")
 N_ACTIONS = len(ACTION_NAMES)
 
-MOVES = np.array([(0, -1), (0, 1), (-1, 0), (1, 0), (0, 0)], dtype=np.int64)
-"""MOVES[a] is the (dx, dy) displacement of action a."""
+STEP_X = (0, 0, -1, 1, 0)
+STEP_Y = (-1, 1, 0, 0, 0)
+"""The (dx, dy) displacement of action a is (STEP_X[a], STEP_Y[a])."""
+
+MOVES = np.array(list(zip(STEP_X, STEP_Y)), dtype=np.int64)
+"""The same displacements as an ``(N_ACTIONS, 2)`` array, for drawing."""
 
 VIEW_RADIUS = 10
 """An agent sees cells at most this many cells away along each axis (Chebyshev distance)."""
@@ -23,17 +31,10 @@ N_STATES = WINDOW * WINDOW
 """441 egocentric states: one per relative offset (dx, dy) in [-10, 10]^2."""
 
 
-def offset_state(offset: np.ndarray) -> np.ndarray:
-    """Map relative offsets ``(..., 2)`` to egocentric state indices ``(...)``.
-
-    Offsets beyond the window are clipped to its edge, which keeps their direction.
-    """
-    clipped = np.minimum(np.maximum(offset, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
-    return clipped[..., 0] * WINDOW + clipped[..., 1]
-
-
-def offset_state_of(dx: int, dy: int) -> int:
-    """:func:`offset_state` for one offset, in plain Python (an agent's decision path)."""
+@kernel
+def offset_state(dx, dy):
+    """The egocentric state of a relative offset; offsets beyond the window are clipped to its
+    edge, which keeps their direction."""
     dx = min(max(dx, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
     dy = min(max(dy, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
     return dx * WINDOW + dy
@@ -45,34 +46,49 @@ def state_offset(state: np.ndarray) -> np.ndarray:
     return np.stack([state // WINDOW - VIEW_RADIUS, state % WINDOW - VIEW_RADIUS], axis=-1)
 
 
-def in_view(offset: np.ndarray) -> np.ndarray:
-    """True where a relative offset ``(..., 2)`` lies inside the egocentric window."""
-    return np.all(np.abs(offset) <= VIEW_RADIUS, axis=-1)
+@kernel
+def chebyshev(ax, ay, bx, by):
+    """The number of king's moves between two cells."""
+    return max(abs(bx - ax), abs(by - ay))
 
 
-def sees(a: tuple[int, int], b: tuple[int, int]) -> bool:
-    """Whether an agent at cell ``a`` sees cell ``b``: :func:`in_view` for one pair, in plain
-    Python (it runs on the negotiation's critical path, where numpy's call overhead shows)."""
-    return abs(b[0] - a[0]) <= VIEW_RADIUS and abs(b[1] - a[1]) <= VIEW_RADIUS
+@kernel
+def sees(ax, ay, bx, by):
+    """Whether an agent at cell ``a`` sees cell ``b`` (within the egocentric window)."""
+    return abs(bx - ax) <= VIEW_RADIUS and abs(by - ay) <= VIEW_RADIUS
 
 
-def intended_cell(position: np.ndarray, action: np.ndarray, width: int, height: int) -> np.ndarray:
-    """The cell an action aims at; a move off the grid aims at the current cell."""
-    target = position + MOVES[action]
-    on_grid = (
-        (target[..., 0] >= 0)
-        & (target[..., 0] < width)
-        & (target[..., 1] >= 0)
-        & (target[..., 1] < height)
-    )
-    return np.where(on_grid[..., None], target, position)
+@kernel
+def target_x(x, action, width):
+    """The column an action aims at; a move off the grid aims at the current cell. (Kernels
+    spell the move table out as branches: numba indexes a tuple by a variable slowly.)"""
+    if action == LEFT:
+        return x - 1 if x > 0 else x
+    if action == RIGHT:
+        return x + 1 if x + 1 < width else x
+    return x
 
 
-_STEPS = tuple((int(dx), int(dy)) for dx, dy in MOVES)
+@kernel
+def target_y(y, action, height):
+    """The row an action aims at; a move off the grid aims at the current cell."""
+    if action == UP:
+        return y - 1 if y > 0 else y
+    if action == DOWN:
+        return y + 1 if y + 1 < height else y
+    return y
 
 
-def intended_cell_of(x: int, y: int, action: int, width: int, height: int) -> tuple[int, int]:
-    """:func:`intended_cell` for one cell, in plain Python (on the negotiation's critical path)."""
-    dx, dy = _STEPS[action]
-    tx, ty = x + dx, y + dy
-    return (tx, ty) if 0 <= tx < width and 0 <= ty < height else (x, y)
+@kernel
+def move_of(dx, dy):
+    """The action whose displacement is ``(dx, dy)``; STAY for anything that is not one step."""
+    if dx == 0:
+        return UP if dy == -1 else DOWN if dy == 1 else STAY
+    if dy == 0:
+        return LEFT if dx == -1 else RIGHT if dx == 1 else STAY
+    return STAY
+
+
+def intended_cell(x: int, y: int, action: int, width: int, height: int) -> tuple[int, int]:
+    """The cell an action aims at, as a pair (off the grid: the current cell)."""
+    return target_x(x, action, width), target_y(y, action, height)

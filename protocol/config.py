@@ -7,17 +7,16 @@ every process, so that a distributed run and an in-process run of one config are
 import json
 from dataclasses import asdict, dataclass, fields
 
+from protocol.actions import VIEW_RADIUS
 from protocol.keys import validate_run_id
 from protocol.messages import MAX_AGENTS, MAX_GRID
+from protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
 
-ALGOS = ("nnql", "ql", "nnql-dir")
-"""nnQL (the paper), plain QL, and nnQL whose neighbour state also holds the announced move."""
+ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
+"""nnQL (the paper), plain QL, nnQL whose neighbour state also holds the announced move, Double
+Action Q-learning (a baseline), and the oracle planner (the lower bound; in-process only)."""
 NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
-
-
-def priority_rank(agent: int, tick: int, n_agents: int) -> int:
-    """The agent's negotiation rank at a tick, 0 the highest; the order rotates every tick."""
-    return (agent - tick) % n_agents
+MAX_LOOKAHEAD = 3
 
 
 @dataclass(frozen=True)
@@ -37,7 +36,14 @@ class SwarmConfig:
     gamma: float = 0.6
     beta: float = 0.5
     goal_reward: float = 10.0
+    stay_reward: float = 0.5
     count_swaps: bool = True
+    interaction_radius: int = VIEW_RADIUS
+    optimistic: float = 0.0
+    known_state: bool = False
+    shared: bool = False
+    shield: bool = False
+    lookahead: int = 1
     tick_deadline_s: float = 2.0
 
     def __post_init__(self) -> None:
@@ -56,6 +62,12 @@ class SwarmConfig:
             (self.random_step >= 1, "the random step k must be at least 1"),
             (0 < self.alpha <= 1 and 0 <= self.gamma < 1 and 0 <= self.beta <= 1,
              "alpha must be in (0, 1], gamma in [0, 1), beta in [0, 1]"),
+            (0 <= self.interaction_radius <= VIEW_RADIUS,
+             f"the interaction radius must be 0..{VIEW_RADIUS}"),
+            (self.optimistic >= 0, "the optimistic initial value must be non-negative"),
+            (self.stay_reward >= 0, "the stay reward must be non-negative"),
+            (1 <= self.lookahead <= MAX_LOOKAHEAD, f"the lookahead n must be 1..{MAX_LOOKAHEAD}"),
+            (self.lookahead == 1 or self.algo in ("nnql",), "a lookahead n > 1 needs --algo nnql"),
             (self.tick_deadline_s > 0, "the tick deadline must be positive"),
         ]
         for ok, message in checks:

@@ -1,12 +1,23 @@
-"""The negotiation plan (agent.negotiation): whom to ask so as to learn every awaited intent."""
+"""Whom an agent waits for, one rule for everyone (``protocol.ranks.waits_for``), and the
+negotiation plan (``agent.negotiation``): whom to ask so as to learn every awaited intent."""
 
 import itertools
+import random
 
+import numpy as np
 import pytest
 
 from agent import negotiation
-from protocol.config import priority_rank
+from agent.brain import AgentBrain
+from protocol.actions import sees
+from protocol.config import ALGOS, SwarmConfig
 from protocol.messages import WORLD_SENDER, Observation
+from protocol.ranks import priority_rank
+from world.viz import negotiation_mask
+
+
+def config(n: int, algo: str = "nnql", radius: int = 10) -> SwarmConfig:
+    return SwarmConfig(n_agents=n, algo=algo, interaction_radius=radius, width=40, height=40)
 
 
 def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
@@ -14,7 +25,7 @@ def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
     """Agent ``agent``'s observation when the agents stand on ``cells`` (view radius 10)."""
     me = cells[agent]
     seen = tuple((j, x, y) for j, (x, y) in sorted(cells.items())
-                 if j != agent and negotiation.sees(me, (x, y)))
+                 if j != agent and sees(*me, x, y))
     return Observation(run="neg", tick=tick, sender=WORLD_SENDER, agent=agent, episode=0, step=0,
                        position=me, goal=(0, 0), neighbours=seen,
                        rank=priority_rank(agent, tick, n), reward_ds=0.0, reward_ca=0.0,
@@ -33,40 +44,67 @@ def test_everyone_in_view_makes_a_chain_of_one_query_each():
     n, tick = 8, 5
     cells = {i: (i, i % 3) for i in range(n)}
     for agent in range(n):
-        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), n, "nnql")
+        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), config(n))
         rank = priority_rank(agent, tick, n)
         assert len(waiting_for) == rank
         assert asks == ([] if rank == 0 else [negotiation.predecessor(agent, tick, n)])
 
 
-@pytest.mark.parametrize("seed", range(30))
-def test_the_plan_covers_every_awaited_intent_on_sparse_grids(seed):
-    import random
-
+@pytest.mark.parametrize("radius", [2, 10])
+@pytest.mark.parametrize("seed", range(20))
+def test_the_plan_covers_every_awaited_intent_on_sparse_grids(seed, radius):
     rng = random.Random(seed)
     n, tick = 12, rng.randrange(100)
     spots = rng.sample(list(itertools.product(range(40), range(12))), n)
     cells = dict(enumerate(spots))
-    asked_by = {a: negotiation.plan_for(observe(a, tick, n, cells), n, "nnql")[1] for a in cells}
+    c = config(n, radius=radius)
+    asked_by = {a: negotiation.plan_for(observe(a, tick, n, cells), c)[1] for a in cells}
     for agent in cells:
-        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), n, "nnql")
+        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), c)
         assert set(asks) <= set(waiting_for)
         assert set(waiting_for) <= learned(agent, tick, n, cells, asked_by)
 
 
 def test_nobody_negotiates_for_ql_or_at_an_episode_end():
     cells = {0: (0, 0), 1: (1, 0)}
-    assert negotiation.plan_for(observe(1, 0, 2, cells), 2, "nnql") == ([0], [0])
-    assert negotiation.plan_for(observe(1, 0, 2, cells), 2, "ql") == ([], [])
-    assert negotiation.plan_for(observe(1, 0, 2, cells, episode_end=True), 2, "nnql") == ([], [])
+    assert negotiation.plan_for(observe(1, 0, 2, cells), config(2)) == ([0], [0])
+    assert negotiation.plan_for(observe(1, 0, 2, cells), config(2, "ql")) == ([], [])
+    assert negotiation.plan_for(observe(1, 0, 2, cells, episode_end=True), config(2)) == ([], [])
 
 
-def test_standing_answers_go_exactly_to_those_who_wait_for_them():
+@pytest.mark.parametrize("radius", [2, 10])
+def test_standing_answers_go_exactly_to_those_who_wait_for_them(radius):
     n, tick = 6, 3
-    cells = {0: (0, 0), 1: (5, 5), 2: (30, 0), 3: (12, 3), 4: (2, 9), 5: (25, 11)}
+    cells = {0: (0, 0), 1: (5, 5), 2: (30, 0), 3: (12, 3), 4: (2, 9), 5: (1, 1)}
+    c = config(n, radius=radius)
     for p, asker in itertools.permutations(cells, 2):
-        waits = p in negotiation.awaited(observe(asker, tick, n, cells), n, "nnql")
-        assert negotiation.answers_standing(observe(p, tick, n, cells), asker, n, "nnql") == waits
+        waits = p in negotiation.awaited(observe(asker, tick, n, cells), c)
+        assert negotiation.answers_standing(observe(p, tick, n, cells), asker, c) == waits
+
+
+@pytest.mark.parametrize("algo", [a for a in ALGOS if a != "oracle"])
+@pytest.mark.parametrize("radius", [2, 10])
+def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(algo, radius):
+    """One rule: the brain's neighbours to ask, the plan's awaited intents and the arrows the
+    world records are the same pairs, for every algorithm (the recording once drew none for
+    nnql-dir while its agents waited)."""
+    rng = random.Random(radius)
+    n, c = 7, config(7, algo, radius)
+    brains = [AgentBrain(i, c) for i in range(n)]
+    waited = 0
+    for tick in range(12):
+        cells = dict(enumerate(rng.sample(list(itertools.product(range(14), range(14))), n)))
+        arrived = [rng.random() < 0.2 for _ in range(n)]
+        mask = negotiation_mask(c, np.array([[cells[i] for i in range(n)]]),
+                                np.array([arrived]), np.array([tick]))[0]
+        for i in range(n):
+            obs = observe(i, tick, n, cells)._replace(arrived=arrived[i])
+            asked = brains[i].neighbours_to_ask(obs)
+            assert set(asked) == set(np.flatnonzero(mask[i]).tolist())
+            if not arrived[i]:
+                assert set(asked) == set(negotiation.awaited(obs, c))
+        waited += int(mask.sum())
+    assert (waited > 0) == (algo in ("nnql", "nnql-dir")), "only intent readers wait"
 
 
 def test_tick_intents_prefer_the_senders_word_and_flag_contradictions():

@@ -67,7 +67,7 @@ def test_observation_holds_goal_offset_and_neighbour_offsets():
     env.reset(seed=0)
     place(env, [(0, 0), (2, 1), (14, 0)], [(3, 4), (9, 9), (10, 10)])
     observation = env._observe(0)
-    assert observation.tolist() == [offset_state(np.array([3, 4])), offset_state(np.array([2, 1])), NOT_IN_VIEW]
+    assert observation.tolist() == [offset_state(3, 4), offset_state(2, 1), NOT_IN_VIEW]
     assert env.observation_space("agent_0").contains(observation)
     assert env.observation_space("agent_0").nvec.tolist() == [N_STATES, N_STATES + 1, N_STATES + 1]
 

@@ -11,17 +11,15 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from agent.brain import AgentBrain
 from agent.viz import TABLES, table_picture
 from launch.recording import PARTS_DIR, log_experiment, rerun_binary
 from protocol.actions import RIGHT, STAY, UP, offset_state
 from protocol.config import SwarmConfig
 from protocol.transport import free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm
-from world.engine import SwarmWorld
 from world.metrics import read_episodes
 from world.scenario import swarm_episode
-from world.viz import METRICS, negotiation_pairs
+from world.viz import METRICS, negotiation_mask
 
 AGENTS, EPISODES = 8, 3
 RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5")
@@ -205,8 +203,8 @@ def test_the_negotiation_is_logged_as_the_agents_ask(run):
         goals = swarm_episode(config.seed, episode_of[tick], config.width, config.height,
                               config.n_agents).goals
         arrived = np.all(positions == goals, axis=1)
-        expected = [] if tick in end_ticks else \
-            negotiation_pairs(positions, arrived, tick, config.algo).tolist()
+        expected = [] if tick in end_ticks else np.argwhere(
+            negotiation_mask(config, positions[None], arrived[None], np.array([tick]))[0]).tolist()
         assert len(logged or []) == len(expected), tick
         total += len(expected)
     assert total > 0
@@ -252,24 +250,11 @@ def test_a_bad_viewer_url_is_a_one_line_usage_error(tmp_path):
     assert len(lines) == 1 and "viewer URL" in lines[0], result.stderr
 
 
-def test_world_negotiation_is_what_the_agents_ask():
-    config = SwarmConfig(run_id="nego", n_agents=6, width=5, height=5, episodes=1)
-    world = SwarmWorld(config)
-    brains = [AgentBrain(i, config) for i in range(config.n_agents)]
-    for _ in range(12):
-        observations = world.observations()
-        asked = {(o.agent, j) for o in observations for j in brains[o.agent].neighbours_to_ask(o)}
-        derived = negotiation_pairs(world.positions, world.arrived, world.tick, config.algo)
-        assert {tuple(p) for p in derived.tolist()} == asked
-        actions = [brains[o.agent].act(o, {}) for o in observations]
-        world.apply(actions)
-
-
 def test_heat_map_pixels_are_egocentric_offsets():
     q = np.zeros((441, 5))
-    q[offset_state(np.array([3, -2])), RIGHT] = 2.0  # goal 3 right, 2 up: move right
-    q[offset_state(np.array([-1, 0])), UP] = 1.0
-    q[offset_state(np.array([0, 4])), STAY] = 0.5
+    q[offset_state(3, -2), RIGHT] = 2.0  # goal 3 right, 2 up: move right
+    q[offset_state(-1, 0), UP] = 1.0
+    q[offset_state(0, 4), STAY] = 0.5
     picture = table_picture(q)
     assert picture["visited"].sum() == 3
     row, col = 10 - 2, 10 + 3  # row = dy + 10, column = dx + 10

@@ -1,4 +1,5 @@
-"""World rules: every collision case of arbitrate, its invariants over random ticks, the rewards."""
+"""World rules: every collision case of arbitrate, its invariants over random ticks, the rewards,
+the world's step (arrivals, scripted bodies, the running score) and the invariant checks."""
 
 import numpy as np
 import pytest
@@ -7,22 +8,36 @@ from hypothesis import strategies as st
 
 from protocol.actions import DOWN, LEFT, MOVES, N_ACTIONS, RIGHT, STAY, UP, intended_cell
 from world.rules import (
-    CA_REWARD, GOAL_REWARD, arbitrate, arbitrate_one, collision_reward, destination_reward,
-    invariant_violations, shortest_steps,
+    CA_REWARD, GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
+    ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS, arbitrate, collision_reward,
+    destination_reward, shared_cells, shortest_steps, swaps_through, world_step,
 )
 
 WIDTH, HEIGHT = 5, 4
 
 
 def tick(cells, actions, count_swaps=False, width=WIDTH, height=HEIGHT):
-    """One world of the batch: returns (new cells as tuples, collided as bools), after checking
-    that the one-world twin agrees."""
-    moved, collided = arbitrate(
-        np.array([cells]), np.array([actions]), width, height, count_swaps
-    )
-    result = [tuple(c) for c in moved[0].tolist()], collided[0].tolist()
-    assert arbitrate_one(cells, actions, width, height, count_swaps) == result
-    return result
+    """One tick of :func:`arbitrate`: returns (new cells as tuples, collided as bools)."""
+    n = len(cells)
+    x = np.array([c[0] for c in cells], dtype=np.int64)
+    y = np.array([c[1] for c in cells], dtype=np.int64)
+    final_x, final_y = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    collided = np.zeros(n, bool)
+    occupancy = np.zeros(width * height, np.int64)
+    arbitrate(x, y, np.array(actions, dtype=np.int64), n, width, height, count_swaps, final_x,
+              final_y, collided, occupancy, np.zeros(n, bool))
+    assert not occupancy.any(), "the scratch grid is left clean"
+    return list(zip(final_x.tolist(), final_y.tolist())), collided.tolist()
+
+
+def plain_tick(cells, actions, count_swaps=False, width=WIDTH, height=HEIGHT):
+    """The same tick with the kernel run as plain Python on lists."""
+    n = len(cells)
+    final_x, final_y, collided = [0] * n, [0] * n, [False] * n
+    arbitrate.py_func([c[0] for c in cells], [c[1] for c in cells], list(actions), n, width,
+                      height, count_swaps, final_x, final_y, collided, [0] * (width * height),
+                      [False] * n)
+    return list(zip(final_x, final_y)), collided
 
 
 def test_free_moves_go_through():
@@ -121,143 +136,155 @@ def test_off_grid_mover_counts_as_staying_for_others():
     assert collided == [True, True]
 
 
-def test_worlds_of_a_batch_are_independent():
-    positions = np.array([[(0, 0), (2, 0)], [(0, 0), (3, 0)]])
-    actions = np.array([[RIGHT, LEFT], [RIGHT, LEFT]])
-    moved, collided = arbitrate(positions, actions, WIDTH, HEIGHT, count_swaps=False)
-    assert moved.tolist() == [[[0, 0], [2, 0]], [[1, 0], [2, 0]]]
-    assert collided.tolist() == [[True, True], [False, False]]
-
-
 @st.composite
 def ticks(draw):
     width = draw(st.integers(1, 6))
     height = draw(st.integers(1, 6))
     n = draw(st.integers(1, min(8, width * height)))
     cells = draw(st.lists(st.integers(0, width * height - 1), min_size=n, max_size=n, unique=True))
-    positions = np.array([(c % width, c // width) for c in cells], dtype=np.int64)
-    actions = np.array(draw(st.lists(st.integers(0, N_ACTIONS - 1), min_size=n, max_size=n)))
+    positions = [(c % width, c // width) for c in cells]
+    actions = draw(st.lists(st.integers(0, N_ACTIONS - 1), min_size=n, max_size=n))
     return positions, actions, width, height, draw(st.booleans())
 
 
 @settings(max_examples=400, deadline=None)
 @given(ticks())
 def test_invariants_of_a_tick(case):
-    positions, actions, width, height, count_swaps = case
-    moved, collided = arbitrate(positions[None], actions[None], width, height, count_swaps)
-    moved, collided = moved[0], collided[0]
-    target = intended_cell(positions, actions, width, height)
-    n = len(positions)
+    cells, actions, width, height, count_swaps = case
+    moved, collided = tick(cells, actions, count_swaps, width, height)
+    assert plain_tick(cells, actions, count_swaps, width, height) == (moved, collided)
+    target = [intended_cell(x, y, a, width, height) for (x, y), a in zip(cells, actions)]
+    n = len(cells)
 
-    assert len({tuple(c) for c in moved.tolist()}) == n, "two agents share a cell"
-    assert np.all((moved >= 0) & (moved < [width, height])), "an agent left the grid"
+    assert len(set(moved)) == n, "two agents share a cell"
+    assert all(0 <= x < width and 0 <= y < height for x, y in moved), "an agent left the grid"
     # Collided agents stay; the others reach the cell they aimed at.
-    assert np.array_equal(moved[collided], positions[collided])
-    assert np.array_equal(moved[~collided], target[~collided])
+    for i in range(n):
+        assert moved[i] == (cells[i] if collided[i] else target[i])
     # Every collision has a cause: the agent was blocked, or someone aimed at its cell.
-    for i in np.flatnonzero(collided):
-        blocked = not np.array_equal(target[i], positions[i])
-        hit = any(np.array_equal(target[j], positions[i]) for j in range(n) if j != i)
-        assert blocked or hit
+    for i in range(n):
+        if collided[i]:
+            assert target[i] != cells[i] or any(target[j] == cells[i] for j in range(n) if j != i)
     if count_swaps:
         for i in range(n):
             for j in range(n):
-                swapped = (
-                    i != j
-                    and np.array_equal(moved[i], positions[j])
-                    and np.array_equal(moved[j], positions[i])
-                )
-                assert not swapped, "swap-through while swaps count as collisions"
+                assert not (i != j and moved[i] == cells[j] and moved[j] == cells[i]), \
+                    "swap-through while swaps count as collisions"
 
 
 @settings(max_examples=200, deadline=None)
 @given(ticks())
 def test_without_swaps_a_tick_equals_the_one_with_swaps_unless_a_swap_is_tried(case):
-    positions, actions, width, height, _ = case
-    target = intended_cell(positions, actions, width, height)
-    n = len(positions)
-    tries_swap = any(
-        i != j
-        and np.array_equal(target[i], positions[j])
-        and np.array_equal(target[j], positions[i])
-        and not np.array_equal(target[i], positions[i])
-        for i in range(n)
-        for j in range(n)
-    )
-    plain = arbitrate(positions[None], actions[None], width, height, False)
-    strict = arbitrate(positions[None], actions[None], width, height, True)
+    cells, actions, width, height, _ = case
+    target = [intended_cell(x, y, a, width, height) for (x, y), a in zip(cells, actions)]
+    n = len(cells)
+    tries_swap = any(i != j and target[i] == cells[j] and target[j] == cells[i]
+                     and target[i] != cells[i] for i in range(n) for j in range(n))
     if not tries_swap:
-        assert np.array_equal(plain[0], strict[0]) and np.array_equal(plain[1], strict[1])
+        assert tick(cells, actions, False, width, height) == tick(cells, actions, True, width, height)
 
 
 def test_destination_reward_closer_same_further_arrived():
-    goal = np.array([5, 5])
-    closer = destination_reward(np.array([5, 0]), np.array([5, 1]), goal)
-    assert closer == pytest.approx(1 / 4)
-    same = destination_reward(np.array([2, 1]), np.array([2, 1]), goal)
-    assert same == pytest.approx(0.5 / 5)
-    further = destination_reward(np.array([5, 1]), np.array([5, 0]), goal)
-    assert further == 0.0
-    assert destination_reward(np.array([5, 4]), goal, goal) == GOAL_REWARD
-    assert destination_reward(np.array([5, 4]), goal, goal, goal_reward=3.5) == 3.5
+    goal = (5, 5)
+    assert destination_reward(5, 0, 5, 1, *goal, GOAL_REWARD, STAY_REWARD) == pytest.approx(1 / 4)
+    assert destination_reward(2, 1, 2, 1, *goal, GOAL_REWARD, STAY_REWARD) == pytest.approx(0.5 / 5)
+    assert destination_reward(5, 1, 5, 0, *goal, GOAL_REWARD, STAY_REWARD) == 0.0
+    assert destination_reward(5, 4, 5, 5, *goal, GOAL_REWARD, STAY_REWARD) == GOAL_REWARD
+    assert destination_reward(5, 4, 5, 5, *goal, 3.5, STAY_REWARD) == 3.5
 
 
 def test_destination_reward_equal_distance_by_exact_integers():
     # (3, 4) and (4, 3) lie at the same distance 5 from the origin: "stayed the same".
-    reward = destination_reward(np.array([3, 4]), np.array([4, 3]), np.array([0, 0]))
-    assert reward == pytest.approx(0.5 / 5)
-
-
-def test_destination_reward_is_batched():
-    before = np.array([[0, 0], [2, 2], [1, 0]])
-    after = np.array([[1, 0], [2, 2], [0, 0]])
-    goal = np.array([[2, 0], [0, 2], [2, 0]])
-    assert destination_reward(before, after, goal) == pytest.approx([1.0, 0.25, 0.0])
+    assert destination_reward(3, 4, 4, 3, 0, 0, GOAL_REWARD, STAY_REWARD) == pytest.approx(0.5 / 5)
 
 
 def test_collision_reward():
-    assert collision_reward(np.array([False, True])).tolist() == [CA_REWARD, 0.0]
+    assert [collision_reward(False), collision_reward(True)] == [CA_REWARD, 0.0]
 
 
 def test_shortest_steps_is_manhattan():
-    assert shortest_steps(np.array([[0, 0], [4, 1]]), np.array([[3, 2], [4, 1]])).tolist() == [5, 0]
+    assert shortest_steps(0, 0, 3, 2) == 5 and shortest_steps(4, 1, 4, 1) == 0
 
 
 def test_move_table_matches_action_names():
     assert MOVES[UP].tolist() == [0, -1] and MOVES[DOWN].tolist() == [0, 1]
     assert MOVES[LEFT].tolist() == [-1, 0] and MOVES[RIGHT].tolist() == [1, 0]
     assert MOVES[STAY].tolist() == [0, 0]
+    for a in range(N_ACTIONS):
+        assert intended_cell(2, 2, a, 5, 5) == (2 + MOVES[a][0], 2 + MOVES[a][1])
 
 
-def _violations_by_numpy(before, after, count_swaps):
-    """The invariants written over arrays, as a reference for the plain-Python check."""
-    problems = []
-    if len({tuple(c) for c in after.tolist()}) != len(after):
-        problems.append("two agents share a cell")
-    if count_swaps:
-        for i in np.flatnonzero(np.any(before != after, axis=-1)):
-            if (np.all(after == before[i], axis=-1) & np.all(before == after[i], axis=-1)).any():
-                problems.append(f"agent {i} swapped through another agent")
-    return problems
+class Step:
+    """One world of :func:`world_step` over its buffers."""
+
+    def __init__(self, cells, goals, learns=None, width=WIDTH, height=HEIGHT, count_swaps=True):
+        n = len(cells)
+        self.n, self.width, self.height, self.count_swaps = n, width, height, count_swaps
+        self.x, self.y = ints([c[0] for c in cells]), ints([c[1] for c in cells])
+        self.gx, self.gy = ints([g[0] for g in goals]), ints([g[1] for g in goals])
+        self.learns = np.array(learns or [True] * n)
+        self.arrived = np.zeros(n, bool)
+        self.row, self.row_f = np.zeros(ROW_INTS, np.int64), np.zeros(ROW_FLOATS)
+
+    def __call__(self, actions):
+        n = self.n
+        self.collided, self.r_ds, self.r_ca = np.zeros(n, bool), np.zeros(n), np.zeros(n)
+        self.actions = ints(actions)
+        self.before_x, self.before_y = np.zeros(n, np.int64), np.zeros(n, np.int64)
+        return world_step(self.x, self.y, self.gx, self.gy, self.learns, self.arrived,
+                          self.actions, n, self.width, self.height, self.count_swaps,
+                          GOAL_REWARD, STAY_REWARD, self.before_x, self.before_y, self.collided, self.r_ds,
+                          self.r_ca, np.zeros(self.width * self.height, np.int64),
+                          np.zeros(n, bool), self.row, self.row_f)
 
 
-def test_invariant_violations_name_shared_cells_and_swaps():
-    before = np.array([[0, 0], [1, 0], [5, 5]])
-    assert invariant_violations(before, np.array([[1, 0], [0, 0], [5, 5]]), True) == [
-        "agent 0 swapped through another agent", "agent 1 swapped through another agent"]
-    assert invariant_violations(before, np.array([[1, 0], [0, 0], [5, 5]]), False) == []
-    assert invariant_violations(before, np.array([[0, 1], [0, 1], [5, 5]]), True) == [
-        "two agents share a cell"]
-    assert invariant_violations(before, np.array([[1, 0], [2, 0], [5, 6]]), True) == []
+def ints(values):
+    return np.array(values, dtype=np.int64)
 
 
-def test_invariant_violations_agree_with_the_array_definition():
-    rng = np.random.default_rng(5)
-    for _ in range(2000):
-        n = int(rng.integers(2, 7))
-        cells = rng.choice(16, size=n, replace=False)
-        before = np.stack([cells % 4, cells // 4], axis=-1)
-        after = before + rng.integers(-1, 2, size=(n, 2)) * (rng.random((n, 1)) < 0.7)
-        for swaps in (True, False):
-            assert invariant_violations(before, after, swaps) == _violations_by_numpy(
-                before, after, swaps)
+def test_world_step_moves_rewards_arrivals_and_the_running_score():
+    step = Step([(0, 0), (3, 0)], goals=[(1, 0), (2, 3)])
+    everyone = step([RIGHT, LEFT])
+    assert not everyone
+    assert (step.x.tolist(), step.y.tolist()) == ([1, 2], [0, 0])
+    assert (step.before_x.tolist(), step.before_y.tolist()) == ([0, 3], [0, 0])
+    assert step.arrived.tolist() == [True, False]
+    assert step.r_ds.tolist() == [GOAL_REWARD, 1 / 3] and step.r_ca.tolist() == [CA_REWARD] * 2
+    assert step.row[ROW_STEPS] == 1 and step.row[ROW_ARRIVED] == 1
+    assert step.row[ROW_AGENT_STEPS] == 2 and step.row[ROW_COLLISIONS] == 0
+    assert step.row_f[ROW_REWARD_DS] == GOAL_REWARD + 1 / 3
+    assert step.row_f[ROW_REWARD_CA] == 2 * CA_REWARD
+    assert step.row_f[ROW_REWARD] == GOAL_REWARD + 1 / 3 + 2 * CA_REWARD
+    # The arrived agent stays whatever it says, earns nothing and is still in the way.
+    step([LEFT, UP])  # agent 1 tries to leave the grid: it stays, "same distance"
+    assert step.actions[0] == STAY and (step.x[0], step.y[0]) == (1, 0)
+    assert step.r_ds.tolist() == [0.0, 0.5 / 3] and step.r_ca[0] == 0.0
+    assert step.row[ROW_AGENT_STEPS] == 3
+    assert [step([STAY, DOWN]) for _ in range(3)] == [False, False, True]
+    assert step.row[ROW_ARRIVED] == 2
+
+
+def test_a_collision_counts_once_per_learner_involved_and_pays_no_ca_reward():
+    step = Step([(0, 0), (2, 0)], goals=[(4, 3), (0, 3)])
+    step([RIGHT, LEFT])
+    assert step.collided.tolist() == [True, True] and step.r_ca.tolist() == [0.0, 0.0]
+    assert step.row[ROW_COLLISIONS] == 2
+
+
+def test_scripted_bodies_move_by_the_rules_but_earn_and_count_nothing():
+    step = Step([(0, 0), (2, 0)], goals=[(4, 3), (-1, -1)], learns=[True, False])
+    step([RIGHT, LEFT])
+    assert step.collided.tolist() == [True, True]
+    assert step.row[ROW_COLLISIONS] == 1 and step.row[ROW_AGENT_STEPS] == 1
+    assert step.r_ds[1] == 0.0 and step.r_ca[1] == 0.0 and not step.arrived.any()
+
+
+def test_invariant_checks_count_shared_cells_and_swaps():
+    occupancy = np.zeros(36, np.int64)
+    assert shared_cells(ints([0, 1, 5]), ints([0, 0, 5]), 3, 6, occupancy) == 0
+    assert shared_cells(ints([0, 0, 5]), ints([1, 1, 5]), 3, 6, occupancy) == 2
+    assert swaps_through(ints([0, 1, 5]), ints([0, 0, 5]), ints([1, 0, 5]), ints([0, 0, 5]), 3, 6,
+                         occupancy) == 2
+    assert swaps_through(ints([0, 1, 5]), ints([0, 0, 5]), ints([1, 2, 5]), ints([0, 0, 4]), 3, 6,
+                         occupancy) == 0
+    assert not occupancy.any()

@@ -18,14 +18,16 @@ COLUMNS = EPISODE_FIELDS + WALL_CLOCK_FIELDS
 
 
 class EpisodeWriter:
-    """Appends episode rows to a CSV file, each one flushed and synced before the next tick.
+    """Appends episode rows to a CSV file, each one flushed (and synced to disk, unless ``sync``
+    is off) before the next tick.
 
     Opening an existing file (``--resume``) first cuts off a last line that a crash left half
     written, so the file holds whole rows only.
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(self, path: Path, sync: bool = True) -> None:
         self.path = Path(path)
+        self.sync = sync
         drop_partial_line(self.path)
         fresh = not self.path.exists() or self.path.stat().st_size == 0
         self._file = open(self.path, "a", newline="")
@@ -45,7 +47,8 @@ class EpisodeWriter:
 
     def _sync(self) -> None:
         self._file.flush()
-        os.fsync(self._file.fileno())
+        if self.sync:
+            os.fsync(self._file.fileno())
 
     def close(self) -> None:
         self._file.close()

@@ -3,8 +3,8 @@
 ## Description
 A swarm episode (:func:`world.scenario.swarm_episode`): ``n_agents`` agents start on distinct cells
 of a ``width x height`` grid, each with its own goal cell, all starts and goals distinct. Every
-step all agents move at once and :func:`world.rules.arbitrate` resolves the moves: two agents
-trying to occupy one cell collide and stay where they were (DESIGN §3), and so do two agents
+step all agents move at once and :func:`world.rules.world_step` resolves the moves: two agents
+trying to occupy one cell collide and stay where they were (``world.rules``), and so do two agents
 swapping cells when ``count_swaps`` is set (the default here, as in swarm mode).
 
 ## Action space
@@ -36,6 +36,12 @@ Euclidean distance ``d`` to the goal decreased, ``0.5/d`` if it stayed, 0 if it 
 ``GOAL_REWARD`` on arriving; plus collision avoidance ``CA_REWARD`` (10) without a collision, 0 with
 one. ``infos[agent]`` holds the two parts (``reward_ds``, ``reward_ca``) and ``collided``.
 
+## Negotiation
+``infos[agent]["waits_for"]`` names the agents whose intents this agent would wait for before
+its next step in the swarm's negotiation (``protocol.ranks.waits_for``: higher-ranked agents within
+``negotiation_radius``, ranks rotating every step), so that a policy that reads intents can be
+stepped in that order.
+
 ## Episode end
 An agent is terminated when it reaches its goal, and then leaves ``agents``. Every agent still on its
 way is truncated after ``max_steps`` steps.
@@ -52,8 +58,9 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from protocol.actions import N_ACTIONS, N_STATES, STAY, in_view, offset_state
-from world.rules import GOAL_REWARD, arbitrate, collision_reward, destination_reward
+from protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
+from protocol.ranks import priority_rank, waits_for
+from world.rules import GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, world_step
 from world.scenario import swarm_episode
 
 NOT_IN_VIEW = N_STATES
@@ -73,6 +80,7 @@ class SwarmGridEnv(ParallelEnv):
         max_steps: int = 100,
         count_swaps: bool = True,
         goal_reward: float = GOAL_REWARD,
+        negotiation_radius: int = VIEW_RADIUS,
         render_mode: str | None = None,
     ) -> None:
         if n_agents < 1:
@@ -86,14 +94,16 @@ class SwarmGridEnv(ParallelEnv):
         self.max_steps = max_steps
         self.count_swaps = count_swaps
         self.goal_reward = goal_reward
+        self.negotiation_radius = negotiation_radius
         self.render_mode = render_mode
         self.possible_agents = [f"agent_{i}" for i in range(n_agents)]
         self.agents: list[str] = []
         self._index = {name: i for i, name in enumerate(self.possible_agents)}
         self._seed: int | None = None
         self._episode = -1
-        self._positions = np.zeros((n_agents, 2), dtype=np.int64)
-        self._goals = np.zeros((n_agents, 2), dtype=np.int64)
+        self._x, self._y = [0] * n_agents, [0] * n_agents
+        self._goal_x, self._goal_y = [0] * n_agents, [0] * n_agents
+        self._arrived = [False] * n_agents
         self._steps = 0
 
     @functools.lru_cache(maxsize=None)
@@ -112,8 +122,9 @@ class SwarmGridEnv(ParallelEnv):
                 self._seed = int(np.random.SeedSequence().entropy % 2**63)
             self._episode += 1
         scenario = swarm_episode(self._seed, self._episode, self.width, self.height, self.n_agents)
-        self._positions = scenario.starts.copy()
-        self._goals = scenario.goals.copy()
+        self._x, self._y = scenario.starts[:, 0].tolist(), scenario.starts[:, 1].tolist()
+        self._goal_x, self._goal_y = scenario.goals[:, 0].tolist(), scenario.goals[:, 1].tolist()
+        self._arrived = [False] * self.n_agents
         self._steps = 0
         self.agents = list(self.possible_agents)
         observations = {agent: self._observe(self._index[agent]) for agent in self.agents}
@@ -121,41 +132,46 @@ class SwarmGridEnv(ParallelEnv):
 
     def step(self, actions: dict):
         live = list(self.agents)
-        chosen = np.full(self.n_agents, STAY, dtype=np.int64)  # parked agents stay
+        n = self.n_agents
+        chosen = [STAY] * n  # parked agents stay
         for agent in live:
             chosen[self._index[agent]] = int(actions.get(agent, STAY))
-        before = self._positions
-        after, collided = arbitrate(
-            before[None], chosen[None], self.width, self.height, self.count_swaps
-        )
-        self._positions = after[0]
+        collided, reward_ds, reward_ca = [False] * n, [0.0] * n, [0.0] * n
+        world_step(self._x, self._y, self._goal_x, self._goal_y, [True] * n, self._arrived,
+                   chosen, n, self.width, self.height, self.count_swaps, self.goal_reward,
+                   STAY_REWARD,
+                   [0] * n, [0] * n, collided, reward_ds, reward_ca,
+                   [0] * (self.width * self.height), [False] * n, [0] * ROW_INTS,
+                   [0.0] * ROW_FLOATS)
         self._steps += 1
-        reward_ds = destination_reward(before, self._positions, self._goals, self.goal_reward)
-        reward_ca = collision_reward(collided[0])
-        arrived = np.all(self._positions == self._goals, axis=1)
 
         observations, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
         for agent in live:
             i = self._index[agent]
             observations[agent] = self._observe(i)
-            rewards[agent] = float(reward_ds[i] + reward_ca[i])
-            terminations[agent] = bool(arrived[i])
-            truncations[agent] = bool(self._steps >= self.max_steps and not arrived[i])
-            infos[agent] = {
-                "reward_ds": float(reward_ds[i]),
-                "reward_ca": float(reward_ca[i]),
-                "collided": bool(collided[0, i]),
-            }
+            rewards[agent] = reward_ds[i] + reward_ca[i]
+            terminations[agent] = self._arrived[i]
+            truncations[agent] = self._steps >= self.max_steps and not self._arrived[i]
+            infos[agent] = {"reward_ds": reward_ds[i], "reward_ca": reward_ca[i],
+                            "collided": collided[i], "waits_for": self._waits_for(i)}
         self.agents = [a for a in live if not (terminations[a] or truncations[a])]
         return observations, rewards, terminations, truncations, infos
+
+    def _waits_for(self, i: int) -> list[str]:
+        """The agents whose intents agent ``i`` waits for before the next step."""
+        n, step, x, y = self.n_agents, self._steps, self._x, self._y
+        rank = priority_rank(i, step, n)
+        return [self.possible_agents[j] for j in range(n)
+                if j != i and waits_for(True, rank, priority_rank(j, step, n), x[i], y[i], x[j],
+                                        y[j], self.negotiation_radius)]
 
     def render(self) -> str | None:
         if self.render_mode != "ansi":
             return None
         rows = [["." for _ in range(self.width)] for _ in range(self.height)]
-        for i, (x, y) in enumerate(self._goals.tolist()):
+        for i, (x, y) in enumerate(zip(self._goal_x, self._goal_y)):
             rows[y][x] = chr(ord("a") + i % 26)
-        for i, (x, y) in enumerate(self._positions.tolist()):
+        for i, (x, y) in enumerate(zip(self._x, self._y)):
             rows[y][x] = chr(ord("A") + i % 26)
         return "\n".join("".join(row) for row in rows)
 
@@ -163,9 +179,8 @@ class SwarmGridEnv(ParallelEnv):
         pass
 
     def _observe(self, i: int) -> np.ndarray:
-        own = self._positions[i]
-        others = np.delete(self._positions, i, axis=0)
-        offsets = others - own
-        neighbours = np.where(in_view(offsets), offset_state(offsets), NOT_IN_VIEW)
-        goal = offset_state(self._goals[i] - own)
-        return np.concatenate([[goal], neighbours]).astype(np.int64)
+        x, y = self._x, self._y
+        goal = offset_state(self._goal_x[i] - x[i], self._goal_y[i] - y[i])
+        others = [offset_state(x[j] - x[i], y[j] - y[i]) if sees(x[i], y[i], x[j], y[j])
+                  else NOT_IN_VIEW for j in range(self.n_agents) if j != i]
+        return np.array([goal, *others], dtype=np.int64)

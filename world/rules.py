@@ -1,193 +1,209 @@
-"""Pure grid-world rules: simultaneous moves, collisions and rewards, over a batch of worlds or one.
+"""The world's rules, once: simultaneous moves, collisions, rewards and the end of an episode.
 
-The batch functions (:func:`arbitrate`, :func:`destination_reward`, :func:`collision_reward`) take
-arrays with a leading batch axis ``B`` (independent worlds) and an agent axis ``N``: the paper's
-experiment runs hundreds of worlds at once through them. The single world of a swarm run is a
-batch of one, where numpy's per-call cost on a handful of cells outweighs the arithmetic, and
-the world's tick is on the swarm's critical path (between the last agent's intent and the next
-observations). So each batch function has a one-world twin in plain Python next to it
-(:func:`arbitrate_one`, :func:`destination_reward_of`, :func:`collision_reward_of`) over cells as
-``(x, y)`` tuples, giving bit for bit the same results (``tests/test_one_world.py``);
-:func:`invariant_violations` only ever serves one world and is plain Python alone.
+Kernel functions (``protocol.jit``) over one world's buffers, indexed by body (agent) id: the
+world process calls them on Python lists, the swarm simulator compiled on rows of its arrays.
 
-Collision rules (DESIGN §3):
+Collision rules:
 
 - All intents of a tick are applied at once. A move off the grid aims at the current cell: the
-  agent stays, and that is no collision.
-- A collision is two agents trying to occupy the same cell in the same step: two moving into one
+  body stays, and that is no collision.
+- A collision is two bodies trying to occupy the same cell in the same step: two moving into one
   cell, or one moving into a cell whose occupant stays or is blocked. Blocking propagates along
   chains until nothing changes (a fixed point): A -> B's cell, B -> C's cell, C stays blocks B,
   which then blocks A.
-- Rotations (cycles of four or more agents; a grid has no cycle of three) all move. Two agents swapping cells pass through each other
-  unless ``count_swaps`` is set; then both are blocked and both collide.
-- Colliding agents stay where they were. Every agent in a conflicting pair is marked collided,
-  the one that stays included (it was hit); each counts one collision per step, however many
-  agents it met.
+- Rotations (cycles of four or more bodies; a grid has no cycle of three) all move. Two bodies
+  swapping cells pass through each other unless ``count_swaps`` is set; then both are blocked and
+  both collide.
+- Colliding bodies stay where they were. Every body of a conflicting pair is marked collided, the
+  one that stays included (it was hit); each counts one collision per step, however many it met.
+
+Rewards (the paper's, Section 4.1): destination seeking ``1/d`` if the Euclidean distance ``d``
+to the goal decreased, ``0.5/d`` if it stayed the same, 0 if it grew, and ``goal_reward`` on
+arriving (the paper leaves it open); collision avoidance 10 without a collision, 0 with one. On a
+grid every move changes the distance, so "the same distance" means the body did not move (it
+stayed, was blocked or bumped the edge): ``stay_reward`` (the paper's 0.5) is what waiting earns.
+
+Bodies are learners, each with its own goal, or scripted obstacles (the paper's experiment), which
+have no goal, earn nothing and are not counted. A learner that reaches its goal has *arrived*:
+parked on its goal for the rest of the episode, it stays and is still an obstacle. The episode is
+over when every learner has arrived (or, the caller's business, after its last step).
 """
 
 import math
-from collections.abc import Sequence
 
-import numpy as np
-
-from protocol.actions import intended_cell, intended_cell_of
+from protocol.actions import STAY, target_x, target_y
+from protocol.jit import kernel
 
 Cell = tuple[int, int]
 
 GOAL_REWARD = 10.0
-"""The destination-seeking reward on arriving (the paper leaves it open, README §Readings)."""
+"""The destination-seeking reward on arriving (the paper leaves it open; docs/paper.md)."""
+
+STAY_REWARD = 0.5
+"""The paper's destination-seeking reward, times ``d``, for a step that kept the distance."""
 
 CA_REWARD = 10.0
 """The collision-avoidance reward for a step without collision (0 with one), as in the paper."""
 
+ROW_STEPS, ROW_COLLISIONS, ROW_ARRIVED, ROW_AGENT_STEPS = 0, 1, 2, 3
+"""Integer fields of an episode's running score (``row``): ticks moved, learners in a collision
+(summed over steps), learners arrived, and learner-steps spent before arriving."""
+ROW_INTS = 4
 
-def arbitrate(
-    positions: np.ndarray,
-    actions: np.ndarray,
-    width: int,
-    height: int,
-    count_swaps: bool,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Apply one tick of simultaneous moves.
+ROW_REWARD, ROW_REWARD_DS, ROW_REWARD_CA = 0, 1, 2
+"""Float fields of an episode's running score (``row_f``): the sum of both rewards, and each."""
+ROW_FLOATS = 3
 
-    ``positions`` is ``(B, N, 2)`` with pairwise distinct cells per world, ``actions`` is
-    ``(B, N)``. Returns the new positions ``(B, N, 2)`` and ``collided`` ``(B, N)``.
+
+@kernel
+def arbitrate(x, y, actions, n, width, height, count_swaps, final_x, final_y, collided,
+              occupancy, blocked):
+    """Apply one tick of simultaneous moves: the final cells go to ``final_x``, ``final_y`` and
+    who collided to ``collided``. ``x``, ``y`` hold ``n`` pairwise distinct cells.
+
+    Scratch: ``occupancy`` has one zero per grid cell (``y * width + x``) and is left all zeros;
+    ``blocked`` has ``n`` entries. A swapping pair (when swaps count) is blocked before the rounds:
+    whoever aims at one of its cells meets one of the two either way, so the fixed point is the
+    one that blocking it within a round gives.
     """
-    positions = np.asarray(positions, dtype=np.int64)
-    target = intended_cell(positions, np.asarray(actions), width, height)
-    moving = np.any(target != positions, axis=-1)
-    n = positions.shape[1]
-    others = ~np.eye(n, dtype=bool)[None]
-    blocked = np.zeros(moving.shape, dtype=bool)
-    collided = np.zeros(moving.shape, dtype=bool)
+    for i in range(n):
+        final_x[i] = target_x(x[i], actions[i], width)
+        final_y[i] = target_y(y[i], actions[i], height)
+        collided[i] = False
+        blocked[i] = False
     if count_swaps:
-        aims_at = np.all(target[:, :, None, :] == positions[:, None, :, :], axis=-1)
-        swap_pair = aims_at & np.swapaxes(aims_at, 1, 2) & others
+        for i in range(n):
+            occupancy[y[i] * width + x[i]] = i + 1
+        for i in range(n):
+            j = occupancy[final_y[i] * width + final_x[i]] - 1
+            if j >= 0 and j != i and final_x[j] == x[i] and final_y[j] == y[i]:
+                blocked[i] = True
+        for i in range(n):
+            occupancy[y[i] * width + x[i]] = 0
     while True:
-        going = moving & ~blocked
-        final = np.where(going[..., None], target, positions)
-        conflict = np.all(final[:, :, None, :] == final[:, None, :, :], axis=-1) & others
-        if count_swaps:
-            conflict |= swap_pair & going[:, :, None] & going[:, None, :]
-        in_conflict = np.any(conflict, axis=2)
-        collided |= in_conflict
-        newly_blocked = in_conflict & going
-        if not newly_blocked.any():
-            return final, collided
-        blocked |= newly_blocked
+        for i in range(n):
+            if blocked[i]:
+                final_x[i] = x[i]
+                final_y[i] = y[i]
+                collided[i] = True
+                blocked[i] = False
+        for i in range(n):
+            occupancy[final_y[i] * width + final_x[i]] += 1
+        any_blocked = False
+        for i in range(n):
+            if occupancy[final_y[i] * width + final_x[i]] > 1:
+                collided[i] = True
+                if final_x[i] != x[i] or final_y[i] != y[i]:
+                    blocked[i] = True
+                    any_blocked = True
+        for i in range(n):
+            occupancy[final_y[i] * width + final_x[i]] = 0
+        if not any_blocked:
+            return
 
 
-def arbitrate_one(
-    cells: Sequence[Cell],
-    actions: Sequence[int],
-    width: int,
-    height: int,
-    count_swaps: bool,
-) -> tuple[list[Cell], list[bool]]:
-    """:func:`arbitrate` for one world, in plain Python: new cells and ``collided``, by agent.
-
-    ``cells`` are pairwise distinct. The batch's rounds: each round finds the agents sharing a
-    cell, marks them collided and blocks at once those of them still moving, until a round
-    blocks nobody. A swapping pair (when swaps count) is blocked before the first round rather
-    than in it: whoever aims at one of its cells meets one of the two either way, so the
-    collided agents and the fixed point are the same.
-    """
-    final = [intended_cell_of(x, y, a, width, height) for (x, y), a in zip(cells, actions)]
-    collided = [False] * len(cells)
-    blocked = _swapping(cells, final) if count_swaps else []
-    while True:
-        for i in blocked:
-            final[i] = cells[i]
-            collided[i] = True
-        sharing = _sharing_a_cell(final)
-        for i in sharing:
-            collided[i] = True
-        blocked = [i for i in sharing if final[i] != cells[i]]
-        if not blocked:
-            return final, collided
-
-
-def _swapping(cells: Sequence[Cell], targets: Sequence[Cell]) -> list[int]:
-    """The agents whose target is the cell of an agent whose target is theirs."""
-    who_is_at = {cell: j for j, cell in enumerate(cells)}
-    swapping = []
-    for i, target in enumerate(targets):
-        j = who_is_at.get(target)
-        if j is not None and j != i and targets[j] == cells[i]:
-            swapping.append(i)
-    return swapping
-
-
-def _sharing_a_cell(final: list[Cell]) -> set[int]:
-    """The agents whose cell is another agent's too."""
-    first_at: dict[Cell, int] = {}
-    sharing = set()
-    for i, cell in enumerate(final):
-        j = first_at.setdefault(cell, i)
-        if j != i:
-            sharing.update((i, j))
-    return sharing
-
-
-def destination_reward(
-    before: np.ndarray, after: np.ndarray, goal: np.ndarray, goal_reward: float = GOAL_REWARD
-) -> np.ndarray:
-    """The paper's destination-seeking reward for cells ``(..., 2)``.
-
-    ``1/d`` if the Euclidean distance ``d`` to the goal decreased, ``0.5/d`` if it stayed the
-    same, 0 if it grew, and ``goal_reward`` on arriving. Distances are compared as exact integer
-    squares, so "stayed the same" never depends on rounding.
-    """
-    d2_before = np.sum((goal - before) ** 2, axis=-1)
-    d2_after = np.sum((goal - after) ** 2, axis=-1)
-    d_after = np.sqrt(np.maximum(d2_after, 1))
-    reward = np.where(
-        d2_after < d2_before, 1.0 / d_after, np.where(d2_after == d2_before, 0.5 / d_after, 0.0)
-    )
-    return np.where(d2_after == 0, goal_reward, reward)
-
-
-def destination_reward_of(
-    before: Cell, after: Cell, goal: Cell, goal_reward: float = GOAL_REWARD
-) -> float:
-    """:func:`destination_reward` for one agent's cells, in plain Python, bit for bit: the same
-    exact integer squares, and ``math.sqrt`` and ``/`` round correctly, as numpy's do."""
-    d2_before = (goal[0] - before[0]) ** 2 + (goal[1] - before[1]) ** 2
-    d2_after = (goal[0] - after[0]) ** 2 + (goal[1] - after[1]) ** 2
+@kernel
+def destination_reward(before_x, before_y, after_x, after_y, goal_x, goal_y, goal_reward,
+                       stay_reward):
+    """The destination-seeking reward of a move; distances are compared as exact integer
+    squares, so "stayed the same" never depends on rounding."""
+    d2_before = (goal_x - before_x) ** 2 + (goal_y - before_y) ** 2
+    d2_after = (goal_x - after_x) ** 2 + (goal_y - after_y) ** 2
     if d2_after == 0:
-        return float(goal_reward)
+        return goal_reward
     if d2_after > d2_before:
         return 0.0
-    return (1.0 if d2_after < d2_before else 0.5) / math.sqrt(d2_after)
+    if d2_after < d2_before:
+        return 1.0 / math.sqrt(d2_after)
+    return stay_reward / math.sqrt(d2_after)
 
 
-def collision_reward(collided: np.ndarray) -> np.ndarray:
-    """The paper's collision-avoidance reward: 10 without a collision, 0 with one."""
-    return np.where(collided, 0.0, CA_REWARD)
-
-
-def collision_reward_of(collided: bool) -> float:
-    """:func:`collision_reward` for one agent."""
+@kernel
+def collision_reward(collided):
+    """The collision-avoidance reward: 10 without a collision, 0 with one."""
     return 0.0 if collided else CA_REWARD
 
 
-def shortest_steps(start: np.ndarray, goal: np.ndarray) -> np.ndarray:
+@kernel
+def shortest_steps(start_x, start_y, goal_x, goal_y):
     """The fewest moves from start to goal on an empty grid (Manhattan distance)."""
-    return np.sum(np.abs(np.asarray(goal) - np.asarray(start)), axis=-1)
+    return abs(goal_x - start_x) + abs(goal_y - start_y)
 
 
-def invariant_violations(
-    before: Sequence[Cell] | np.ndarray, after: Sequence[Cell] | np.ndarray, count_swaps: bool
-) -> list[str]:
-    """What a tick broke, for one world's cells (``(x, y)`` pairs): shared cells, swap-throughs.
+@kernel
+def world_step(x, y, goal_x, goal_y, learns, arrived, actions, n, width, height, count_swaps,
+               goal_reward, stay_reward, before_x, before_y, collided, r_ds, r_ca, occupancy,
+               blocked, row, row_f):
+    """One step of an episode: everyone moves at once; rewards, arrivals and the running score.
 
-    Plain Python over the cells: the world checks every tick, between an agent's last intent
-    and the next observations, where numpy's per-call cost on a handful of cells shows."""
-    problems = []
-    was = list(map(tuple, before))
-    now = list(map(tuple, after))
-    if len(set(now)) != len(now):
-        problems.append("two agents share a cell")
-    if count_swaps:
-        problems.extend(f"agent {i} swapped through another agent" for i in _swapping(was, now))
-    return problems
+    ``actions`` are the bodies' intents, overwritten with the actions applied (a learner that
+    has arrived stays whatever it says). ``x``, ``y`` and ``arrived`` are updated in place; ``before_x``, ``before_y`` receive the
+    cells the step started from, ``collided``, ``r_ds``, ``r_ca`` its outcome per body. Returns
+    whether every learner has now arrived.
+    """
+    for i in range(n):
+        before_x[i] = x[i]
+        before_y[i] = y[i]
+        if learns[i] and arrived[i]:
+            actions[i] = STAY
+    arbitrate(before_x, before_y, actions, n, width, height, count_swaps, x, y, collided,
+              occupancy, blocked)
+    ds_sum = 0.0
+    ca_sum = 0.0
+    everyone_arrived = True
+    for i in range(n):
+        if not learns[i]:
+            r_ds[i] = 0.0
+            r_ca[i] = 0.0
+            continue
+        if collided[i]:
+            row[ROW_COLLISIONS] += 1
+        if arrived[i]:
+            r_ds[i] = 0.0
+            r_ca[i] = 0.0
+        else:
+            r_ds[i] = destination_reward(before_x[i], before_y[i], x[i], y[i],
+                                         goal_x[i], goal_y[i], goal_reward, stay_reward)
+            r_ca[i] = collision_reward(collided[i])
+            row[ROW_AGENT_STEPS] += 1
+            if x[i] == goal_x[i] and y[i] == goal_y[i]:
+                arrived[i] = True
+                row[ROW_ARRIVED] += 1
+        ds_sum += r_ds[i]
+        ca_sum += r_ca[i]
+        everyone_arrived = everyone_arrived and arrived[i]
+    row[ROW_STEPS] += 1
+    row_f[ROW_REWARD] += ds_sum + ca_sum
+    row_f[ROW_REWARD_DS] += ds_sum
+    row_f[ROW_REWARD_CA] += ca_sum
+    return everyone_arrived
+
+
+@kernel
+def shared_cells(x, y, n, width, occupancy):
+    """How many bodies stand on a cell that another body stands on too (``occupancy``: zeros
+    per grid cell, left all zeros)."""
+    for i in range(n):
+        occupancy[y[i] * width + x[i]] += 1
+    shared = 0
+    for i in range(n):
+        if occupancy[y[i] * width + x[i]] > 1:
+            shared += 1
+    for i in range(n):
+        occupancy[y[i] * width + x[i]] = 0
+    return shared
+
+
+@kernel
+def swaps_through(before_x, before_y, x, y, n, width, occupancy):
+    """How many bodies passed through another this step: each took the other's cell."""
+    for i in range(n):
+        occupancy[before_y[i] * width + before_x[i]] = i + 1
+    swapped = 0
+    for i in range(n):
+        j = occupancy[y[i] * width + x[i]] - 1
+        if j >= 0 and j != i and x[j] == before_x[i] and y[j] == before_y[i]:
+            swapped += 1
+    for i in range(n):
+        occupancy[before_y[i] * width + before_x[i]] = 0
+    return swapped

@@ -6,12 +6,12 @@ At time ``tick = t`` the viewer shows the state in which the agents decided tick
 for (``world/negotiation``) and who collided as a result (``world/collisions``, plus a warning in
 ``events``). The next tick shows where everybody ended up.
 
-The negotiation is derived by the world, not reported by the agents: at tick ``t`` an nnQL agent
-that has not arrived decides with the intent of every visible neighbour of higher rank
-(``protocol.config.priority_rank``), which is exactly what
-``agent.brain.AgentBrain.neighbours_to_ask`` says. How each intent reached it (its own query, or
-relayed down the chain, ``agent.negotiation``) and whether it came in time is known only to the
-agent; the agents log that themselves (``agent.viz``).
+The negotiation is derived by the world, not reported by the agents: at tick ``t`` an agent that
+reads intents and has not arrived decides with the intent of every neighbour it waits for, by the
+one rule of ``protocol.ranks.waits_for`` that ``agent.brain.AgentBrain.neighbours_to_ask`` and the
+simulator apply too. How each intent reached it (its own query, or relayed down the chain,
+``agent.negotiation``) and whether it came in time is known only to the agent; the agents log
+that themselves (``agent.viz``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, colours, labels) are logged once.
@@ -28,8 +28,9 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from protocol.actions import MOVES, in_view
-from protocol.config import SwarmConfig
+from protocol.actions import MOVES
+from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
+from protocol.ranks import priority_rank, waits_for
 from world.engine import SwarmWorld, TickReport
 from world.scenario import swarm_episode
 
@@ -81,23 +82,23 @@ def with_alpha(colors: np.ndarray, alpha: int) -> np.ndarray:
     return np.concatenate([colors, np.full((len(colors), 1), alpha, dtype=np.uint8)], axis=1)
 
 
-def negotiation_pairs(positions: np.ndarray, arrived: np.ndarray, tick: int,
-                      algo: str) -> np.ndarray:
-    """``(asker, asked)`` pairs of a tick: nnQL agents ask visible higher-ranked neighbours."""
-    asks = negotiation_mask(positions[None], arrived[None], np.array([tick]), algo)[0]
-    return np.argwhere(asks)
-
-
-def negotiation_mask(positions: np.ndarray, arrived: np.ndarray, ticks: np.ndarray,
-                     algo: str) -> np.ndarray:
-    """``asks[t, i, j]``: at tick ``ticks[t]`` agent i asks j (positions ``(T, n, 2)``)."""
-    n = positions.shape[1]
-    if algo != "nnql":
-        return np.zeros((len(ticks), n, n), dtype=bool)
-    rank = (np.arange(n)[None, :] - np.asarray(ticks)[:, None]) % n
-    offsets = positions[:, None, :, :] - positions[:, :, None, :]
-    return (in_view(offsets) & (rank[:, None, :] < rank[:, :, None])
-            & ~np.asarray(arrived)[:, :, None])
+def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.ndarray,
+                     ticks: np.ndarray) -> np.ndarray:
+    """``asks[t, i, j]``: at tick ``ticks[t]`` agent i waits for j's intent (``positions``
+    ``(T, n, 2)``, ``arrived`` ``(T, n)``: as each tick started)."""
+    n, radius = config.n_agents, config.interaction_radius
+    asks = np.zeros((len(ticks), n, n), dtype=bool)
+    if config.algo not in NEGOTIATING_ALGOS:
+        return asks
+    cells = np.asarray(positions).tolist()
+    for t, tick in enumerate(np.asarray(ticks).tolist()):
+        ranks = [priority_rank(i, tick, n) for i in range(n)]
+        for i, (x, y) in enumerate(cells[t]):
+            if arrived[t][i]:
+                continue
+            for j, (jx, jy) in enumerate(cells[t]):
+                asks[t, i, j] = j != i and waits_for(True, ranks[i], ranks[j], x, y, jx, jy, radius)
+    return asks
 
 
 class WorldViz:
@@ -263,8 +264,7 @@ class WorldViz:
         rec.send_columns(TRAILS, index, rr.LineStrips2D.columns(
             strips=np.ascontiguousarray(trails).reshape(-1, TRAIL_LENGTH, 2)).partition(each))
 
-        asks = negotiation_mask(positions, np.array(arrived_then, dtype=bool), ticks,
-                                self.config.algo)
+        asks = negotiation_mask(self.config, positions, np.array(arrived_then, dtype=bool), ticks)
         asks &= np.array(moved, dtype=bool)[:, None, None]
         t, asker, asked = np.nonzero(asks)
         self._awaited += len(t)

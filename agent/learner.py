@@ -1,0 +1,344 @@
+"""The learner, once: QL, nnQL and their variants, as kernel functions over one learner's buffers.
+
+An agent holds two tables over the 441 egocentric states (``protocol.actions``): ``Q_DS[s_goal]``
+seeks the destination, ``Q_CA[s_i]`` avoids neighbours (one table for all neighbours), five
+actions each. At every tick it completes the transition it left pending (Eq. 9 and 10, with the
+new observation as ``s'``), then chooses (Eq. 6, 7, 8)::
+
+    Q_CA(a)    = sum_i (1 / d_i) Q_CA[s_i, a]     over the neighbours within the interaction radius
+    Q_final(a) = beta Q_DS[s_goal, a] + (1 - beta) Q_CA(a)
+    a_t        = argmax_a Q_final(a), ties broken by the agent's seeded tie-breakers,
+
+and every ``k``-th action of its life (the paper's "random step") is its seeded random action.
+
+The readings of a neighbour's state ``s_i`` (``READ_*``; docs/paper.md has the evidence):
+
+- ``READ_QL``: the neighbour's current offset (QL cannot know its move).
+- ``READ_NNQL``: the offset of the cell it announced it is heading for, where its intent is known
+  (it outranks this agent and is within reach), else its current offset (the paper's nnQL, n = 1).
+- ``READ_DIR``: nnQL's offset and the announced move (6 codes: 5 moves, unknown), so that a
+  neighbour stepping in from the left differs from one coming from the right: a swap can be seen.
+- ``READ_DAQL``: Double Action Q-learning (Ngai and Yung; the paper's Eq. 2): the current offset
+  and the neighbour's action, predicted at the decision as its last move (STAY when unknown),
+  learned with the move it was then seen to make; ``s'`` bootstraps from the best pair of actions.
+
+Options beyond the paper, each one field of the parameters (``LP_*``): the interaction radius
+(only neighbours within it, Chebyshev, enter Eq. 6 and get Eq. 10; the paper's reading is the
+whole view, 10), a distinct state block for a neighbour known to stay or whose intent is known
+(``LP_KNOWN_STATE``: a parked agent then differs from one whose intent is unknown), and the
+announcement shield (``LP_SHIELD``: never move into a cell a known neighbour announced, into a known
+neighbour's cell when it announced moving into this one, or into a parked agent; QL's fair
+counterpart masks the neighbours' current cells; the random step is filtered too).
+
+Completing a transition writes a *learning record* (``rec``, ``rec_f``), applied by
+:func:`apply_record`: at once for an independent learner, or, where a swarm shares one table, by
+every agent in agent-id order before the next tick (``sim.swarm``, ``agent.brain``).
+
+Buffers (numpy arrays when compiled, Python lists in an agent process): ``params`` (``LP_*``),
+``params_f`` (``FP_*``), the learner's state ``state`` (``LS_*``) and ``state_f`` (``LF_*``), and
+the neighbour rows ``nb`` (``NB_*``), one per visible neighbour in agent-id order.
+"""
+
+import math
+
+import numpy as np
+
+from protocol.actions import N_ACTIONS, N_STATES, STAY, move_of, offset_state, target_x, target_y
+from protocol.jit import kernel
+
+READ_QL, READ_NNQL, READ_DIR, READ_DAQL = 0, 1, 2, 3
+READINGS = {"ql": READ_QL, "nnql": READ_NNQL, "nnql-dir": READ_DIR, "daql": READ_DAQL}
+"""The learning algorithms by name, and the neighbour-state reading each uses."""
+
+UNKNOWN_MOVE = N_ACTIONS
+"""The move code of a neighbour whose intent is unknown (``READ_DIR``)."""
+
+LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP, LP_STILL_TERMINAL = 0, 1, 2, 3, 4, 5
+LP_FIELDS = 6
+FP_ALPHA, FP_GAMMA, FP_BETA = 0, 1, 2
+FP_FIELDS = 3
+
+NB_ID, NB_X, NB_Y, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_STATE_X, NB_STATE_Y = 0, 1, 2, 3, 4, 5, 6, 7
+NB_PARKED, NB_PREV_X, NB_PREV_Y = 8, 9, 10
+NB_FIELDS = 11
+"""A neighbour row: id, cell, whether its intent is known, the cell it announced it is heading
+for (its cell where unknown), the cell its state is read at (the announced cell n steps ahead;
+the next cell for n = 1), whether it is parked on its goal, its cell a tick ago (-1 if unseen)."""
+
+LS_TAKEN, LS_PENDING, LS_GOAL, LS_ACTION, LS_TERMINAL, LS_COUNT, LS_NEIGHBOURS = 0, 1, 2, 3, 4, 5, 6
+LS_PER_NEIGHBOUR = 4
+"""A learner's state: actions taken in its life, whether a transition is pending, its goal state,
+action and whether it ended on the goal, and per neighbour of Eq. 6: id, table row, cell."""
+LF_R_DS, LF_R_CA = 0, 1
+LF_FIELDS = 2
+
+REC_GOAL, REC_ACTION, REC_TERMINAL, REC_NEXT_GOAL, REC_BLOCKS, REC_COUNT, REC_PAIRS = 0, 1, 2, 3, 4, 5, 6
+RF_R_DS, RF_R_CA = 0, 1
+RF_FIELDS = 2
+"""A learning record: Eq. 9's ``s, a, terminal, s'``, the blocks ``s'`` bootstraps over, and per
+neighbour a pair of Q_CA rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no bootstrap); its
+floats are the two rewards."""
+
+
+def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.ndarray) -> None:
+    """Draw an agent's noise for one episode into its buffers: an exploring action per step
+    (``random_actions``, one per step) and five tie-breakers in [0, 1) per step (``ties``,
+    ``(steps, 5)``). The order of the draws is part of the determinism contract."""
+    random_actions[:] = rng.integers(0, N_ACTIONS, size=random_actions.shape[0], dtype=np.int64)
+    rng.random(out=ties)
+
+
+def state_size(max_neighbours: int) -> int:
+    return LS_NEIGHBOURS + LS_PER_NEIGHBOUR * max_neighbours
+
+
+def record_size(max_neighbours: int) -> int:
+    return REC_PAIRS + 2 * max_neighbours
+
+
+def ca_rows(reading: int, known_state: bool) -> int:
+    """The number of rows of Q_CA for a reading."""
+    if reading == READ_DIR:
+        return N_STATES * (N_ACTIONS + 1)
+    if reading == READ_DAQL:
+        return N_STATES * N_ACTIONS
+    return N_STATES * (2 if known_state else 1)
+
+
+@kernel
+def ca_row(reading, known_state, ox, oy, nb, j):
+    """The Q_CA row of neighbour row ``j`` for an agent at ``(ox, oy)``."""
+    cx = nb[j][NB_X]
+    cy = nb[j][NB_Y]
+    parked = known_state and nb[j][NB_PARKED] != 0
+    if reading == READ_QL:
+        return offset_state(cx - ox, cy - oy) + (N_STATES if parked else 0)
+    if reading == READ_DAQL:
+        return offset_state(cx - ox, cy - oy) + N_STATES * predicted_move(nb, j, parked)
+    announced = nb[j][NB_KNOWN] != 0
+    if announced or parked:
+        if announced:
+            state = offset_state(nb[j][NB_STATE_X] - ox, nb[j][NB_STATE_Y] - oy)
+            move = move_of(nb[j][NB_NEXT_X] - cx, nb[j][NB_NEXT_Y] - cy)
+        else:
+            state = offset_state(cx - ox, cy - oy)
+            move = STAY
+        if reading == READ_DIR:
+            return state + N_STATES * move
+        return state + (N_STATES if known_state else 0)
+    state = offset_state(cx - ox, cy - oy)
+    if reading == READ_DIR:
+        return state + N_STATES * UNKNOWN_MOVE
+    return state
+
+
+@kernel
+def predicted_move(nb, j, parked):
+    """DAQL's prediction of a neighbour's action: its last move (STAY if parked or unseen)."""
+    if parked or nb[j][NB_PREV_X] < 0:
+        return STAY
+    return move_of(nb[j][NB_X] - nb[j][NB_PREV_X], nb[j][NB_Y] - nb[j][NB_PREV_Y])
+
+
+@kernel
+def row_max(table, row):
+    """``max_a table[row, a]``."""
+    values = table[row]
+    best = values[0]
+    for a in range(1, N_ACTIONS):
+        if values[a] > best:
+            best = values[a]
+    return best
+
+
+@kernel
+def complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f):
+    """Write the pending transition's learning record, ``s'`` read from this observation
+    (own cell, goal, neighbour rows); False if nothing was pending."""
+    if state[LS_PENDING] == 0:
+        return False
+    reading = params[LP_READING]
+    known_state = params[LP_KNOWN_STATE] != 0
+    rec[REC_GOAL] = state[LS_GOAL]
+    rec[REC_ACTION] = state[LS_ACTION]
+    rec[REC_TERMINAL] = state[LS_TERMINAL]
+    rec[REC_NEXT_GOAL] = offset_state(gx - ox, gy - oy)
+    if params[LP_STILL_TERMINAL] != 0 and rec[REC_NEXT_GOAL] == rec[REC_GOAL]:
+        rec[REC_TERMINAL] = 1
+    rec[REC_BLOCKS] = N_ACTIONS if reading == READ_DAQL else 1
+    rec_f[RF_R_DS] = state_f[LF_R_DS]
+    rec_f[RF_R_CA] = state_f[LF_R_CA]
+    count = state[LS_COUNT]
+    for k in range(count):
+        at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * k
+        neighbour, row = state[at], state[at + 1]
+        following = -1
+        for j in range(m):
+            if nb[j][NB_ID] == neighbour:
+                following = ca_row(reading, known_state, ox, oy, nb, j)
+                if reading == READ_DAQL:  # learn the move it made, bootstrap over all moves
+                    seen = move_of(nb[j][NB_X] - state[at + 2], nb[j][NB_Y] - state[at + 3])
+                    row = row % N_STATES + N_STATES * seen
+                    following = following % N_STATES
+                break
+        rec[REC_PAIRS + 2 * k] = row
+        rec[REC_PAIRS + 2 * k + 1] = following
+    rec[REC_COUNT] = count
+    state[LS_PENDING] = 0
+    return True
+
+
+@kernel
+def apply_record(q_ds, q_ca, rec, rec_f, alpha, gamma):
+    """Eq. 9, then Eq. 10 once per neighbour in order: ``Q += alpha (r + gamma max Q' - Q)``."""
+    action = rec[REC_ACTION]
+    values = q_ds[rec[REC_GOAL]]
+    current = values[action]
+    target = rec_f[RF_R_DS]
+    if rec[REC_TERMINAL] == 0:
+        target = target + gamma * row_max(q_ds, rec[REC_NEXT_GOAL])
+    values[action] = current + alpha * (target - current)
+    reward = rec_f[RF_R_CA]
+    blocks = rec[REC_BLOCKS]
+    for k in range(rec[REC_COUNT]):
+        values = q_ca[rec[REC_PAIRS + 2 * k]]
+        following = rec[REC_PAIRS + 2 * k + 1]
+        current = values[action]
+        target = reward
+        if following >= 0:
+            best = row_max(q_ca, following)
+            for block in range(1, blocks):
+                best = max(best, row_max(q_ca, following + N_STATES * block))
+            target = reward + gamma * best
+        values[action] = current + alpha * (target - current)
+
+
+@kernel
+def shield_mask(reading, ox, oy, nb, m, width, height):
+    """The actions the announcement shield forbids, as bits (bit ``a`` set: ``a`` forbidden)."""
+    mask = 0
+    for a in range(N_ACTIONS):
+        tx = target_x(ox, a, width)
+        ty = target_y(oy, a, height)
+        for j in range(m):
+            cx = nb[j][NB_X]
+            cy = nb[j][NB_Y]
+            if reading == READ_QL or reading == READ_DAQL:
+                hit = tx == cx and ty == cy
+            elif nb[j][NB_KNOWN] != 0:
+                nx = nb[j][NB_NEXT_X]
+                ny = nb[j][NB_NEXT_Y]
+                hit = (tx == nx and ty == ny) or (nx == ox and ny == oy and tx == cx and ty == cy)
+            else:
+                hit = nb[j][NB_PARKED] != 0 and tx == cx and ty == cy
+            if hit:
+                mask |= 1 << a
+                break
+    return 0 if mask == (1 << N_ACTIONS) - 1 else mask
+
+
+@kernel
+def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, height,
+           random_action, ties, values):
+    """Eq. 6-8 (and the random step): the action, with the transition it starts left pending."""
+    reading = params[LP_READING]
+    known_state = params[LP_KNOWN_STATE] != 0
+    radius = params[LP_RADIUS]
+    for a in range(N_ACTIONS):
+        values[a] = 0.0
+    count = 0
+    for j in range(m):
+        dx = nb[j][NB_X] - ox
+        dy = nb[j][NB_Y] - oy
+        if max(abs(dx), abs(dy)) > radius:
+            continue
+        weight = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
+        row = ca_row(reading, known_state, ox, oy, nb, j)
+        table_row = q_ca[row]
+        for a in range(N_ACTIONS):
+            values[a] += weight * table_row[a]
+        at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * count
+        state[at] = nb[j][NB_ID]
+        state[at + 1] = row
+        state[at + 2] = nb[j][NB_X]
+        state[at + 3] = nb[j][NB_Y]
+        count += 1
+    goal = offset_state(gx - ox, gy - oy)
+    beta = params_f[FP_BETA]
+    rest = 1.0 - beta
+    ds = q_ds[goal]
+    for a in range(N_ACTIONS):
+        values[a] = beta * ds[a] + rest * values[a]
+    mask = shield_mask(reading, ox, oy, nb, m, width, height) if params[LP_SHIELD] != 0 else 0
+    best = 0.0
+    found = False
+    for a in range(N_ACTIONS):
+        if (mask >> a) & 1 == 0 and (not found or values[a] > best):
+            best = values[a]
+            found = True
+    greedy = 0
+    top = -1.0
+    for a in range(N_ACTIONS):
+        if (mask >> a) & 1 == 0 and values[a] >= best and ties[a] > top:
+            greedy = a
+            top = ties[a]
+    state[LS_TAKEN] += 1
+    action = greedy
+    if state[LS_TAKEN] % params[LP_RANDOM_STEP] == 0 and (mask >> random_action) & 1 == 0:
+        action = random_action
+    state[LS_PENDING] = 1
+    state[LS_GOAL] = goal
+    state[LS_ACTION] = action
+    state[LS_COUNT] = count
+    return action
+
+
+@kernel
+def decide(q_ds, q_ca, params, params_f, state, state_f, ox, oy, gx, gy, nb, m, width, height,
+           random_action, ties, values, rec, rec_f, apply_now):
+    """Complete the pending transition (its record applied at once if ``apply_now``), then
+    choose. Returns the action and whether a record was written."""
+    written = complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f)
+    if written and apply_now:
+        apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
+    action = choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, height,
+                    random_action, ties, values)
+    return action, written
+
+
+@kernel
+def finish(q_ds, q_ca, params, params_f, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f,
+           apply_now):
+    """Complete the pending transition of a learner that stops (arrived, or the episode ended);
+    its neighbours' rows carry no intent then. Returns whether a record was written."""
+    written = complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f)
+    if written and apply_now:
+        apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
+    return written
+
+
+@kernel
+def record_outcome(state, state_f, r_ds, r_ca, arrived):
+    """Store the rewards of the last action, and whether it reached the goal (terminal)."""
+    state_f[LF_R_DS] = r_ds
+    state_f[LF_R_CA] = r_ca
+    state[LS_TERMINAL] = 1 if arrived else 0
+
+
+@kernel
+def planned_cell(q_ds, x, y, gx, gy, steps, width, height):
+    """Where this agent expects to be ``steps`` moves after ``(x, y)``, following its
+    destination-seeking policy greedily (first best action; it stops on its goal): the cells an
+    n-step announcement carries beyond the binding first move."""
+    for _ in range(steps):
+        if x == gx and y == gy:
+            break
+        action = 0
+        values = q_ds[offset_state(gx - x, gy - y)]
+        for a in range(1, N_ACTIONS):
+            if values[a] > values[action]:
+                action = a
+        nx = target_x(x, action, width)
+        y = target_y(y, action, height)
+        x = nx
+    return x, y

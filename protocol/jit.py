@@ -1,0 +1,103 @@
+"""How the kernel runs: compiled by numba, or as the very same functions in plain Python.
+
+Every model of the project (the learning step, the world's rules, whom an agent waits for) is
+written once, as scalar numba-compatible Python over caller-provided buffers, and decorated with
+:func:`kernel`. By default that compiles it: ``numba.njit(cache=True)``, without ``fastmath``, so
+floating point follows IEEE 754 step by step and a compiled run equals a plain-Python run bit for
+bit (the parity tests compare the distributed swarm, which runs plain Python, with the in-process
+simulator, which runs compiled).
+
+A process that sets ``NNQL_KERNEL=python`` before its first import runs the functions as written
+and never imports numba: the swarm's agent and world processes do (the launcher sets it for its
+children), since numba's LLVM alone would make each agent weigh over 100 MB and start in seconds.
+Kernel functions therefore only index and assign into their buffers, which may be numpy arrays
+(compiled) or Python lists (plain), and never allocate on the hot path.
+
+numba's cache knows only the file of each compiled function, not those of the functions it calls:
+an edited learner would leave a stale compiled simulator behind. So the cache lives in a directory
+named by a digest of every kernel source (:func:`cache_directory`), unless ``NUMBA_CACHE_DIR``
+says otherwise.
+"""
+
+import hashlib
+import os
+from pathlib import Path
+
+import numpy as np
+
+MODE_VARIABLE = "NNQL_KERNEL"
+PLAIN = "python"
+
+COMPILED = os.environ.get(MODE_VARIABLE, "compiled") != PLAIN
+"""Whether kernel functions are compiled in this process (fixed at import)."""
+
+KERNEL_ROOMS = ("agent", "protocol", "sim", "world")
+"""The packages whose modules may define kernel functions."""
+
+
+def cache_directory() -> Path:
+    """Where compiled kernels are cached: one directory per version of the kernel sources."""
+    root = Path(__file__).resolve().parent.parent
+    digest = hashlib.sha256()
+    for room in KERNEL_ROOMS:
+        for path in sorted((root / room).glob("*.py")):
+            source = path.read_bytes()
+            if b"protocol.jit import" in source or path.name == "jit.py":
+                digest.update(path.name.encode() + source)
+    cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
+    return cache / "nnql-swarm" / "kernels" / digest.hexdigest()[:16]
+
+
+if COMPILED:
+    os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_directory()))
+    from numba import njit, prange
+
+    def kernel(function):
+        """Compile a kernel function (cached on disk beside its source)."""
+        return njit(cache=True)(function)
+
+    def batch_kernel(function):
+        """Compile a kernel function whose ``prange`` loops spread over the cores."""
+        return njit(cache=True, parallel=True)(function)
+
+else:
+    prange = range
+
+    def kernel(function):
+        """Plain Python: the function as written."""
+        return function
+
+    batch_kernel = kernel
+
+
+def ints(values) -> "np.ndarray | list[int]":
+    """An integer buffer for kernel functions: an array when compiled, a list when not."""
+    return np.array(values, dtype=np.int64) if COMPILED else list(values)
+
+
+def floats(values) -> "np.ndarray | list[float]":
+    return np.array(values, dtype=np.float64) if COMPILED else list(values)
+
+
+def flags(values) -> "np.ndarray | list[bool]":
+    return np.array(values, dtype=np.bool_) if COMPILED else list(values)
+
+
+def rows(values: list[list[int]], width: int) -> "np.ndarray | list[list[int]]":
+    """Rows of integers (such as the learner's neighbour rows) as a kernel buffer."""
+    return np.array(values, dtype=np.int64).reshape(-1, width) if COMPILED else values
+
+
+def table(values: np.ndarray) -> "np.ndarray | list[list[float]]":
+    """A table of floats as a kernel buffer (a copy)."""
+    return np.array(values, dtype=np.float64) if COMPILED else np.asarray(values, float).tolist()
+
+
+def python_values(buffer) -> list:
+    """A buffer's values as Python numbers (for messages and files)."""
+    return buffer.tolist() if isinstance(buffer, np.ndarray) else list(buffer)
+
+
+def plain_python_environment() -> dict[str, str]:
+    """``os.environ`` for a child process that must run the kernel uncompiled."""
+    return {**os.environ, MODE_VARIABLE: PLAIN}

@@ -1,0 +1,1 @@
+"""Simulators: the whole swarm inside one process."""

@@ -1,0 +1,271 @@
+"""Driving the swarm simulator: runs described, their buffers made, their episodes played.
+
+A :class:`Run` is one independent run (seed, learning options); a :class:`Batch` holds many runs
+of one world shape (bodies, grid, episode length) and plays them episode by episode through
+``sim.swarm.run_episode``. Every random draw comes from the run's seed: each episode's scenario
+(starts, goals, scripts) from ``world.scenario``, each learner's exploring actions and tie-breakers
+from its own stream (``protocol.seeding``), drawn per episode in the same order as an agent process
+draws them. A run therefore gives exactly what it gives alone, in any batch, and what the
+distributed swarm gives for the same options.
+"""
+
+import contextlib
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from agent.learner import (
+    FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
+    LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise,
+    record_size, state_size,
+)
+from protocol.actions import N_ACTIONS, N_STATES
+from protocol.config import SwarmConfig
+from protocol.seeding import AGENT_STREAM, stream_rng
+from sim.swarm import (
+    OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
+    OUT_SHORTEST, OUT_VIOLATIONS, TR_FIELDS, run_episode,
+)
+from world.rules import (
+    GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
+    ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS,
+)
+from world.scenario import paper_episode, swarm_episode
+
+
+@dataclass(frozen=True)
+class World:
+    """What every run of a batch shares: bodies (the first ``learners`` learn), grid, steps."""
+
+    bodies: int
+    learners: int
+    width: int = 11
+    height: int = 11
+    max_steps: int = 100
+    count_swaps: bool = True
+    goal_reward: float = GOAL_REWARD
+    stay_reward: float = STAY_REWARD
+
+    @property
+    def scripted(self) -> int:
+        return self.bodies - self.learners
+
+
+@dataclass(frozen=True)
+class Run:
+    """One run: its seed and how its agents learn (the paper's settings are the defaults)."""
+
+    seed: int
+    algo: str = "nnql"
+    random_step: int = 20
+    alpha: float = 0.9
+    gamma: float = 0.6
+    beta: float = 0.5
+    radius: int = 10
+    known_state: bool = False
+    shield: bool = False
+    shared: bool = False
+    lookahead: int = 1
+    optimistic: float = 0.0
+    still_terminal: bool = False
+
+    @staticmethod
+    def of(config: SwarmConfig) -> "Run":
+        """The run a swarm config describes."""
+        return Run(seed=config.seed, algo=config.algo, random_step=config.random_step,
+                   alpha=config.alpha, gamma=config.gamma, beta=config.beta,
+                   radius=config.interaction_radius, known_state=config.known_state,
+                   shield=config.shield, shared=config.shared, lookahead=config.lookahead,
+                   optimistic=config.optimistic)
+
+    def with_seed(self, seed: int) -> "Run":
+        return replace(self, seed=seed)
+
+
+def swarm_world(config: SwarmConfig) -> World:
+    return World(bodies=config.n_agents, learners=config.n_agents, width=config.width,
+                 height=config.height, max_steps=config.max_steps,
+                 count_swaps=config.count_swaps, goal_reward=config.goal_reward,
+                 stay_reward=config.stay_reward)
+
+
+class Episodes:
+    """Per (run, episode) results: the score's fields, the end tick and the shortest paths."""
+
+    def __init__(self, runs: int, episodes: int) -> None:
+        self.row = np.zeros((runs, episodes, ROW_INTS), dtype=np.int64)
+        self.row_f = np.zeros((runs, episodes, ROW_FLOATS))
+        self.out = np.zeros((runs, episodes, OUT_FIELDS), dtype=np.int64)
+
+    steps = property(lambda self: self.row[..., ROW_STEPS])
+    collisions = property(lambda self: self.row[..., ROW_COLLISIONS])
+    arrived = property(lambda self: self.row[..., ROW_ARRIVED])
+    agent_steps = property(lambda self: self.row[..., ROW_AGENT_STEPS])
+    reward_sum = property(lambda self: self.row_f[..., ROW_REWARD])
+    reward_ds = property(lambda self: self.row_f[..., ROW_REWARD_DS])
+    reward_ca = property(lambda self: self.row_f[..., ROW_REWARD_CA])
+    end_tick = property(lambda self: self.out[..., OUT_END_TICK])
+    shortest = property(lambda self: self.out[..., OUT_SHORTEST])
+    violations = property(lambda self: self.out[..., OUT_VIOLATIONS])
+
+    def swarm_row(self, run: int, episode: int) -> dict:
+        """One episode as a row of the swarm's ``episodes.csv`` (its deterministic columns)."""
+        return {
+            "episode": episode,
+            "steps": int(self.steps[run, episode]),
+            "collisions": int(self.collisions[run, episode]),
+            "missed_intents": 0,
+            "reward_sum": float(self.reward_sum[run, episode]),
+            "arrived": int(self.arrived[run, episode]),
+            "shortest_sum": int(self.shortest[run, episode]),
+            "agent_steps": int(self.agent_steps[run, episode]),
+            "end_tick": int(self.end_tick[run, episode]),
+        }
+
+
+class Batch:
+    """Many runs of one world, their tables, learner states and buffers, played episode by
+    episode (:meth:`play`)."""
+
+    def __init__(self, world: World, runs: list[Run], record: bool = False) -> None:
+        if not runs:
+            raise ValueError("a batch needs at least one run")
+        for run in runs:
+            check_run(world, run)
+        self.world, self.runs, self.record = world, list(runs), record
+        self.episode = 0
+        w = world
+        r, n, learners = len(runs), w.bodies, w.learners
+        cells = w.width * w.height
+        rows = max(ca_rows(READINGS.get(run.algo, 0), run.known_state) for run in runs)
+        self.params = np.array([_params(run) for run in runs], dtype=np.int64)
+        self.params_f = np.array([_params_f(run) for run in runs])
+        self.options = np.zeros((r, OPT_FIELDS), dtype=np.int64)
+        self.options[:, OPT_SHARED] = [run.shared for run in runs]
+        self.options[:, OPT_LOOKAHEAD] = [run.lookahead for run in runs]
+        self.options[:, OPT_ORACLE] = [run.algo == "oracle" for run in runs]
+        init = np.array([run.optimistic for run in runs])[:, None, None, None]
+        self.q_ds = np.broadcast_to(init, (r, learners, N_STATES, N_ACTIONS)).copy()
+        self.q_ca = np.broadcast_to(init, (r, learners, rows, N_ACTIONS)).copy()
+        self.state = np.zeros((r, learners, state_size(n)), dtype=np.int64)
+        self.state_f = np.zeros((r, learners, LF_FIELDS))
+        self.tick = np.zeros(r, dtype=np.int64)
+        self.rngs = [[stream_rng(run.seed, AGENT_STREAM, i) for i in range(learners)]
+                     for run in runs]
+        self.trace = np.zeros((r, w.max_steps + 1 if record else 1, n, TR_FIELDS), dtype=np.int64)
+        self.learns = np.arange(n) < learners
+        self._seeds = sorted({run.seed for run in runs})
+        self._seed_of_run = np.array([self._seeds.index(run.seed) for run in runs])
+        self._scratch = dict(
+            x=_ints(r, n), y=_ints(r, n), prev_x=_ints(r, n), prev_y=_ints(r, n),
+            goal_x=_ints(r, n), goal_y=_ints(r, n), arrived=np.zeros((r, n), dtype=bool),
+            actions=_ints(r, n), decided=np.zeros((r, n), dtype=bool),
+            collided=np.zeros((r, n), dtype=bool), r_ds=np.zeros((r, n)), r_ca=np.zeros((r, n)),
+            before_x=_ints(r, n), before_y=_ints(r, n), occupancy=_ints(r, cells),
+            blocked=np.zeros((r, n), dtype=bool), nb=_ints(r, n, NB_FIELDS),
+            values=np.zeros((r, N_ACTIONS)), rec=_ints(r, learners, record_size(n)),
+            rec_f=np.zeros((r, learners, RF_FIELDS)),
+            pending_rec=np.zeros((r, learners), dtype=bool),
+            oracle_scratch=_ints(r, ORACLE_SCRATCH, cells),
+            oracle_cells=_ints(r, n * cells),
+        )
+
+    def play(self, episodes: int, results: Episodes | None = None, on_episode=None) -> Episodes:
+        """Play the next ``episodes`` episodes of every run; ``on_episode(e, batch)`` after each
+        (``batch.trace`` then holds episode ``e``'s ticks, if recording)."""
+        results = results or Episodes(len(self.runs), self.episode + episodes)
+        w, runs = self.world, self.runs
+        r = len(runs)
+        row = np.zeros((r, ROW_INTS), dtype=np.int64)
+        row_f = np.zeros((r, ROW_FLOATS))
+        out = np.zeros((r, OUT_FIELDS), dtype=np.int64)
+        random_actions = np.zeros((r, w.learners, w.max_steps), dtype=np.int64)
+        ties = np.zeros((r, w.learners, w.max_steps, N_ACTIONS))
+        for _ in range(episodes):
+            e = self.episode
+            starts, goals, scripts = self._scenarios(e)
+            for run, rngs in enumerate(self.rngs):
+                for i, rng in enumerate(rngs):
+                    draw_noise(rng, random_actions[run, i], ties[run, i])
+            run_episode(w.bodies, w.learners, w.width, w.height, w.max_steps, w.count_swaps,
+                        w.goal_reward, w.stay_reward, self.params, self.params_f, self.options, self.q_ds,
+                        self.q_ca, self.state, self.state_f, starts, goals, scripts,
+                        random_actions, ties, self.tick, self.record, self.trace,
+                        row=row, row_f=row_f, out=out, learns=self.learns, **self._scratch)
+            results.row[:, e], results.row_f[:, e], results.out[:, e] = row, row_f, out
+            self.episode += 1
+            if on_episode is not None:
+                on_episode(e, self)
+        return results
+
+    def tables(self, run: int, agent: int) -> tuple[np.ndarray, np.ndarray]:
+        """The Q_DS and Q_CA tables an agent of a run holds (the swarm's one table if shared)."""
+        t = 0 if self.runs[run].shared else agent
+        rows = ca_rows(READINGS.get(self.runs[run].algo, 0), self.runs[run].known_state)
+        return self.q_ds[run, t], self.q_ca[run, t, :rows]
+
+    def actions_taken(self, run: int, agent: int) -> int:
+        return int(self.state[run, agent, LS_TAKEN])
+
+    def _scenarios(self, episode: int):
+        """Every run's starts, goals and scripts of an episode (drawn once per seed)."""
+        w = self.world
+        starts, goals, scripts = [], [], []
+        for seed in self._seeds:
+            if w.scripted:
+                sc = paper_episode(seed, episode, w.width, w.height, w.scripted, w.max_steps)
+                starts.append(sc.starts)
+                goals.append(sc.goal[None, :])
+                scripts.append(sc.obstacle_actions)
+            else:
+                sc = swarm_episode(seed, episode, w.width, w.height, w.bodies)
+                starts.append(sc.starts)
+                goals.append(sc.goals)
+                scripts.append(np.zeros((w.max_steps, 0), dtype=np.int64))
+        at = self._seed_of_run
+        return np.stack(starts)[at], np.stack(goals)[at], np.stack(scripts)[at]
+
+
+@contextlib.contextmanager
+def threads(count: int | None):
+    """Play with ``count`` threads inside the block (None: one per core)."""
+    import numba
+
+    before = numba.get_num_threads()
+    numba.set_num_threads(max(1, min(count or numba.config.NUMBA_NUM_THREADS,
+                                     numba.config.NUMBA_NUM_THREADS)))
+    try:
+        yield
+    finally:
+        numba.set_num_threads(before)
+
+
+def check_run(world: World, run: Run) -> None:
+    """Refuse a run the simulator cannot play, with the reason."""
+    if run.algo not in READINGS and run.algo != "oracle":
+        raise ValueError(f"unknown algorithm {run.algo!r}")
+    if run.algo == "oracle" and world.scripted:
+        raise ValueError("the oracle plans swarms of learners, not scripted obstacles")
+    if run.random_step < 1:
+        raise ValueError("the random step k must be at least 1")
+
+
+def _params(run: Run) -> list[int]:
+    params = [0] * LP_FIELDS
+    params[LP_READING] = READINGS.get(run.algo, 0)
+    params[LP_KNOWN_STATE] = int(run.known_state)
+    params[LP_RADIUS] = run.radius
+    params[LP_SHIELD] = int(run.shield)
+    params[LP_RANDOM_STEP] = run.random_step
+    params[LP_STILL_TERMINAL] = int(run.still_terminal)
+    return params
+
+
+def _params_f(run: Run) -> list[float]:
+    params = [0.0] * FP_FIELDS
+    params[FP_ALPHA], params[FP_GAMMA], params[FP_BETA] = run.alpha, run.gamma, run.beta
+    return params
+
+
+def _ints(*shape: int) -> np.ndarray:
+    return np.zeros(shape, dtype=np.int64)

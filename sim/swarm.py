@@ -1,0 +1,247 @@
+"""The whole swarm inside the kernel: world and every agent, many runs at once, episode by episode.
+
+One call of :func:`run_episode` plays one episode of every run of a batch, each run on its own
+(``prange`` spreads the runs over the cores; no run reads another's buffers, so the results do not
+depend on how they are spread). A run is exactly what the distributed swarm plays for the same
+options: at every tick the agents decide in rank order (``protocol.ranks``), each with the intents
+of the higher-ranked neighbours it waits for, by the same learner (``agent.learner``); then the
+world applies every move at once by the same rules (``world.rules``). Each episode ends with one
+extra *end tick* in which nothing moves and every agent completes its last transition, as the
+world's end tick does. Where a run shares one table among its agents, every agent's learning
+record of a tick is applied in agent-id order before the next tick.
+
+Bodies ``0 .. learners - 1`` learn; the rest are scripted obstacles whose every action is given
+(the paper's experiment: one learner, three obstacles), outrank every learner and announce their
+scripted next action. An oracle run plans every learner's move with PIBT (``sim.oracle``) and
+learns nothing.
+
+Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agent.learner``) and
+``options`` (``OPT_*``); the world's options are the same for the whole batch.
+"""
+
+from agent.learner import (
+    FP_ALPHA, FP_GAMMA, LP_RADIUS, LP_READING, NB_FIELDS, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
+    NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
+    apply_record, decide, finish, planned_cell, record_outcome,
+)
+from protocol.actions import STAY, sees, target_x, target_y
+from protocol.jit import batch_kernel, kernel, prange
+from protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
+from sim.oracle import plan
+from world.rules import shared_cells, shortest_steps, swaps_through, world_step
+
+ORACLE_SCRATCH = 8
+"""Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
+queue, stack, tried, the agents' priorities), a slot per grid cell each."""
+
+OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE = 0, 1, 2
+OPT_FIELDS = 3
+"""Per-run options of the swarm: one table for all agents; the steps an announcement covers
+(n of nnQL); the oracle instead of learners."""
+
+OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS = 0, 1, 2
+OUT_FIELDS = 3
+"""Per-run results of an episode beside its score: the end tick, the sum of the learners' shortest
+paths, broken invariants (shared cells, swap-throughs where swaps count)."""
+
+TR_X, TR_Y, TR_ACTION, TR_COLLIDED, TR_ARRIVED = 0, 1, 2, 3, 4
+TR_FIELDS = 5
+"""A recorded tick, per body: the cell it started from, the action applied, whether it collided,
+whether it had arrived when the tick started."""
+
+
+@kernel
+def reads_intents(params):
+    return params[LP_READING] == READ_NNQL or params[LP_READING] == READ_DIR
+
+
+@kernel
+def rank_of(i, tick, learners):
+    """A body's negotiation rank: scripted obstacles outrank every learner."""
+    return SCRIPTED_RANK if i >= learners else priority_rank(i, tick, learners)
+
+
+@kernel
+def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, actions,
+                   decided, lookahead, announcing, params, q_ds, tables, goal_x, goal_y,
+                   width, height, nb):
+    """Fill ``nb`` with what agent ``i`` observes and has been told: its visible neighbours in
+    id order. ``decided``: bodies whose action of this tick is fixed; ``announcing``: whether
+    anyone announces (not at an end tick). Returns the number of rows."""
+    m = 0
+    negotiates = announcing and reads_intents(params)
+    rank = rank_of(i, tick, learners)
+    for j in range(n):
+        if j == i or not sees(x[i], y[i], x[j], y[j]):
+            continue
+        row = nb[m]
+        row[NB_ID] = j
+        row[NB_X] = x[j]
+        row[NB_Y] = y[j]
+        known = (negotiates and decided[j]
+                 and waits_for(True, rank, rank_of(j, tick, learners), x[i], y[i], x[j], y[j],
+                               params[LP_RADIUS]))
+        row[NB_KNOWN] = 1 if known else 0
+        if known:
+            nx = target_x(x[j], actions[j], width)
+            ny = target_y(y[j], actions[j], height)
+            row[NB_NEXT_X] = nx
+            row[NB_NEXT_Y] = ny
+            if lookahead > 1 and learns[j]:
+                t = 0 if tables == 1 else j
+                sx, sy = planned_cell(q_ds[t], nx, ny, goal_x[j], goal_y[j], lookahead - 1,
+                                      width, height)
+                row[NB_STATE_X] = sx
+                row[NB_STATE_Y] = sy
+            else:
+                row[NB_STATE_X] = nx
+                row[NB_STATE_Y] = ny
+        else:
+            row[NB_NEXT_X] = x[j]
+            row[NB_NEXT_Y] = y[j]
+            row[NB_STATE_X] = x[j]
+            row[NB_STATE_Y] = y[j]
+        row[NB_PARKED] = 1 if learns[j] and arrived[j] else 0
+        if prev_x[i] >= 0 and sees(prev_x[i], prev_y[i], prev_x[j], prev_y[j]):
+            row[NB_PREV_X] = prev_x[j]
+            row[NB_PREV_Y] = prev_y[j]
+        else:
+            row[NB_PREV_X] = -1
+            row[NB_PREV_Y] = -1
+        m += 1
+    return m
+
+
+@batch_kernel
+def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
+                params, params_f, options, q_ds, q_ca, state, state_f,
+                starts, goals, scripts, random_actions, ties, tick,
+                record, trace,
+                x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
+                collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
+                rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
+    """Play one episode of every run (see the module docstring); ``tick`` (one per run) is each
+    run's global tick, advanced in place, as are the tables and learner states."""
+    runs = params.shape[0]
+    for r in prange(runs):
+        _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
+                 params[r], params_f[r], options[r], q_ds[r], q_ca[r], state[r], state_f[r],
+                 starts[r], goals[r], scripts[r], random_actions[r], ties[r], tick,
+                 record, trace[r],
+                 x[r], y[r], prev_x[r], prev_y[r], goal_x[r], goal_y[r], learns, arrived[r],
+                 actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
+                 before_y[r], occupancy[r], blocked[r], nb[r], values[r], rec[r], rec_f[r],
+                 pending_rec[r], oracle_scratch[r], oracle_cells[r], row[r], row_f[r], out[r])
+
+
+@kernel
+def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
+             params, params_f, options, q_ds, q_ca, state, state_f,
+             starts, goals, scripts, random_actions, ties, ticks,
+             record, trace,
+             x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
+             collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
+             rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
+    shared = options[OPT_SHARED] != 0
+    tables = 1 if shared else learners
+    lookahead = options[OPT_LOOKAHEAD]
+    oracle = options[OPT_ORACLE] != 0
+    alpha, gamma = params_f[FP_ALPHA], params_f[FP_GAMMA]
+    shortest = 0
+    for i in range(n):
+        x[i] = starts[i, 0]
+        y[i] = starts[i, 1]
+        prev_x[i] = -1
+        prev_y[i] = -1
+        arrived[i] = False
+        collided[i] = False
+        r_ds[i] = 0.0
+        r_ca[i] = 0.0
+        if i < learners:
+            goal_x[i] = goals[i, 0]
+            goal_y[i] = goals[i, 1]
+            shortest += shortest_steps(x[i], y[i], goal_x[i], goal_y[i])
+            if oracle:  # PIBT's order for the episode: the farthest from its goal first
+                oracle_scratch[7, i] = shortest_steps(x[i], y[i], goal_x[i], goal_y[i])
+        else:
+            goal_x[i] = -1
+            goal_y[i] = -1
+    for f in range(row.shape[0]):
+        row[f] = 0
+    for f in range(row_f.shape[0]):
+        row_f[f] = 0.0
+    out[OUT_SHORTEST] = shortest
+    out[OUT_VIOLATIONS] = 0
+    step = 0
+    ending = False
+    while True:
+        tick = ticks[r]
+        if shared:
+            for i in range(learners):
+                if pending_rec[i]:
+                    apply_record(q_ds[0], q_ca[0], rec[i], rec_f[i], alpha, gamma)
+                    pending_rec[i] = False
+        for i in range(n):
+            decided[i] = False
+        for i in range(learners, n):  # scripted obstacles: their given actions, announced
+            actions[i] = STAY if ending else scripts[step, i - learners]
+            decided[i] = True
+        if oracle and not ending:
+            plan(x, y, goal_x, goal_y, arrived, learners, width, height, oracle_scratch[7],
+                 actions, oracle_cells, oracle_scratch[0], oracle_scratch[1], decided,
+                 oracle_scratch[2], oracle_scratch[3], oracle_scratch[4], oracle_scratch[5],
+                 oracle_scratch[6])
+        for rank in range(learners):
+            i = (rank + tick) % learners  # the agent of this rank (inverse of priority_rank)
+            if oracle:
+                if ending or arrived[i]:
+                    actions[i] = STAY
+                decided[i] = True
+                continue
+            t = 0 if shared else i
+            record_outcome(state[i], state_f[i], r_ds[i], r_ca[i], arrived[i])
+            stops = ending or arrived[i]
+            m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived,
+                               actions, decided, lookahead, not stops, params, q_ds, tables,
+                               goal_x, goal_y, width, height, nb)
+            if stops:
+                written = finish(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
+                                 x[i], y[i], goal_x[i], goal_y[i], nb, m, rec[i], rec_f[i],
+                                 not shared)
+                actions[i] = STAY
+            else:
+                actions[i], written = decide(
+                    q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], x[i], y[i],
+                    goal_x[i], goal_y[i], nb, m, width, height, random_actions[i, step],
+                    ties[i, step], values, rec[i], rec_f[i], not shared)
+            pending_rec[i] = shared and written
+            decided[i] = True
+        if record:
+            for i in range(n):
+                trace[step, i, TR_X] = x[i]
+                trace[step, i, TR_Y] = y[i]
+                trace[step, i, TR_ARRIVED] = 1 if arrived[i] else 0
+        if ending:
+            if record:
+                for i in range(n):
+                    trace[step, i, TR_ACTION] = STAY
+                    trace[step, i, TR_COLLIDED] = 0
+            out[OUT_END_TICK] = tick
+            ticks[r] = tick + 1
+            return
+        for i in range(n):
+            prev_x[i] = x[i]
+            prev_y[i] = y[i]
+        everyone = world_step(x, y, goal_x, goal_y, learns, arrived, actions, n, width, height,
+                              count_swaps, goal_reward, stay_reward, before_x, before_y, collided, r_ds,
+                              r_ca, occupancy, blocked, row, row_f)
+        out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, occupancy)
+        if count_swaps:
+            out[OUT_VIOLATIONS] += swaps_through(before_x, before_y, x, y, n, width, occupancy)
+        if record:
+            for i in range(n):
+                trace[step, i, TR_ACTION] = actions[i]
+                trace[step, i, TR_COLLIDED] = 1 if collided[i] else 0
+        step += 1
+        ending = everyone or step >= max_steps
+        ticks[r] = tick + 1
