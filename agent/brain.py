@@ -15,7 +15,7 @@ import numpy as np
 
 from agent.learner import (
     FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
-    LP_RANDOM_STEP, LP_READING, LP_SHIELD, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
+    LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
     RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome, record_size, state_size,
 )
 from protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
@@ -37,6 +37,7 @@ class Learner:
         self.params[LP_RADIUS] = config.interaction_radius
         self.params[LP_SHIELD] = int(config.shield)
         self.params[LP_RANDOM_STEP] = config.random_step
+        self.params[LP_STILL_TERMINAL] = int(config.still_terminal)
         self.params_f = [0.0] * FP_FIELDS
         self.params_f[FP_ALPHA] = config.alpha
         self.params_f[FP_GAMMA] = config.gamma

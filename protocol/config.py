@@ -44,6 +44,7 @@ class SwarmConfig:
     shared: bool = False
     shield: bool = False
     lookahead: int = 1
+    still_terminal: bool = False
     tick_deadline_s: float = 2.0
 
     def __post_init__(self) -> None:
@@ -74,6 +75,10 @@ class SwarmConfig:
             if not ok:
                 raise ValueError(message)
 
+    def learning(self) -> dict:
+        """The options of :data:`LEARNING_FIELDS`, as a preset would give them."""
+        return {name: getattr(self, name) for name in LEARNING_FIELDS}
+
     def to_json(self) -> str:
         return json.dumps(asdict(self), indent=2, sort_keys=True)
 
@@ -85,3 +90,35 @@ class SwarmConfig:
         if unknown:
             raise ValueError(f"unknown config keys: {', '.join(sorted(unknown))}")
         return SwarmConfig(**data)
+
+
+LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "optimistic", "known_state",
+                   "shared", "shield", "lookahead", "still_terminal", "stay_reward")
+"""The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
+run's."""
+
+PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
+         "optimistic": 0.0, "known_state": False, "shared": False, "shield": False,
+         "lookahead": 1, "still_terminal": False, "stay_reward": 0.5}
+"""The paper's reading: every neighbour in view enters Eq. 6, zero-initialised tables, each
+agent its own tables, no shield."""
+
+BEST = {"interaction_radius": 2, "optimistic": 25.0, "shared": True, "still_terminal": True,
+        "alpha": 0.5}
+"""The learning options beyond the paper that the swarm experiment found best (docs/swarm.md):
+neighbours within collision reach only, optimistic tables, one table for the swarm, no future
+learned from a step that went nowhere, a gentler learning rate."""
+
+PRESETS = {
+    "ql": {**PAPER, "algo": "ql"},
+    "nnql": PAPER,
+    "best-ql": {**PAPER, **BEST, "algo": "ql"},
+    "best-nnql": {**PAPER, **BEST, "algo": "nnql-dir"},
+    "shield-ql": {**PAPER, **BEST, "algo": "ql", "shield": True, "known_state": True},
+    "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True},
+    "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
+    "daql": {**PAPER, **BEST, "algo": "daql"},
+    "oracle": {**PAPER, "algo": "oracle"},
+}
+"""Named learning presets: the rows of the swarm experiment, and ``launch/swarm.py --preset``."""
+assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())

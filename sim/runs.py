@@ -76,7 +76,7 @@ class Run:
                    alpha=config.alpha, gamma=config.gamma, beta=config.beta,
                    radius=config.interaction_radius, known_state=config.known_state,
                    shield=config.shield, shared=config.shared, lookahead=config.lookahead,
-                   optimistic=config.optimistic)
+                   optimistic=config.optimistic, still_terminal=config.still_terminal)
 
     def with_seed(self, seed: int) -> "Run":
         return replace(self, seed=seed)

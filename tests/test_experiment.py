@@ -66,7 +66,8 @@ def test_short_run_writes_every_file(tmp_path):
 
     config = json.loads((out / "config.json").read_text())
     assert config["settings"]["episodes"] == 20 and config["settings"]["max_steps"] == 100
-    assert config["settings"]["hyper"] == {"alpha": 0.9, "gamma": 0.6, "beta": 0.5}
+    assert {k: config["settings"][k] for k in ("alpha", "gamma", "beta")} == {
+        "alpha": 0.9, "gamma": 0.6, "beta": 0.5}
     assert config["seeds"] == [0, 1] and config["random_steps"] == [1, 2]
 
     markdown = (out / "table1.md").read_text()

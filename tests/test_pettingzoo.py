@@ -58,8 +58,8 @@ def test_reset_without_seed_moves_on_to_the_next_episode_of_the_seed():
 
 def place(env: SwarmGridEnv, positions, goals) -> None:
     """Put a reset env into a hand-made state."""
-    env._positions = np.array(positions, dtype=np.int64)
-    env._goals = np.array(goals, dtype=np.int64)
+    env._x, env._y = [x for x, _ in positions], [y for _, y in positions]
+    env._goal_x, env._goal_y = [x for x, _ in goals], [y for _, y in goals]
 
 
 def test_observation_holds_goal_offset_and_neighbour_offsets():
@@ -90,7 +90,17 @@ def test_rewards_collisions_arrival_and_removal():
     place(env, [(1, 0), (1, 1), (4, 3)], [(1, 0), (0, 4), (4, 0)])
     _, _, _, _, infos = env.step({"agent_1": UP, "agent_2": STAY})
     assert infos["agent_1"]["collided"] and "agent_0" not in infos
-    assert env._positions[0].tolist() == [1, 0]
+    assert (env._x[0], env._y[0]) == (1, 0)
+
+
+def test_infos_name_whom_each_agent_waits_for():
+    env = SwarmGridEnv(n_agents=3, width=8, height=8, negotiation_radius=2)
+    env.reset(seed=0)
+    place(env, [(0, 0), (1, 1), (6, 6)], [(7, 7), (7, 0), (0, 7)])
+    _, _, _, _, infos = env.step({a: STAY for a in env.agents})
+    # After one step the ranks are (i - 1) mod 3: agent 1 leads, agent 0 is in its reach.
+    assert infos["agent_0"]["waits_for"] == ["agent_1"]
+    assert infos["agent_1"]["waits_for"] == [] and infos["agent_2"]["waits_for"] == []
 
 
 def test_truncation_after_max_steps():
