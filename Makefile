@@ -41,6 +41,8 @@ chromium:
 	    tail -n 20 $$log >&2; rm -f $$log; exit 1; \
 	  fi; \
 	  rm -f $$log; \
+	  test -x $(CHROMIUM) || { echo "chromium: installed, but $(CHROMIUM) is still missing" >&2; \
+	                           exit 1; }; \
 	}
 
 playwright: $(BROWSER_STAMP)
