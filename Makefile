@@ -1,15 +1,19 @@
 # Two commands for a fresh machine: `make run` (the swarm) and `make test` (the test suite).
 # Both create a local virtualenv in .venv and install the project into it first.
+# `make browser-test` installs Debian's chromium (as root, with apt-get) and Playwright, and runs
+# the tests of the web viewer in headless Chromium (`make test` runs them too when both are there).
 
 PYTHON ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
+BROWSER_STAMP := $(VENV)/.browser
+CHROMIUM := /usr/bin/chromium
 
 AGENTS ?= 8
 ARGS ?=
 
-.PHONY: run test experiment bench clean
+.PHONY: run test chromium playwright browser-test experiment bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,6 +26,33 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q
+
+# Debian's chromium, installed only if missing; fails (saying why) where that needs root or apt-get.
+chromium:
+	@test -x $(CHROMIUM) || { \
+	  if [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null; then \
+	    echo "chromium: $(CHROMIUM) is missing, and installing it needs root and apt-get" >&2; \
+	    exit 1; \
+	  fi; \
+	  echo "chromium: installing Debian's chromium with apt-get"; \
+	  log=$$(mktemp); \
+	  if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	         apt-get install -y -qq chromium; } >$$log 2>&1; then \
+	    tail -n 20 $$log >&2; rm -f $$log; exit 1; \
+	  fi; \
+	  rm -f $$log; \
+	  test -x $(CHROMIUM) || { echo "chromium: installed, but $(CHROMIUM) is still missing" >&2; \
+	                           exit 1; }; \
+	}
+
+playwright: $(BROWSER_STAMP)
+
+$(BROWSER_STAMP): $(STAMP)
+	$(PY) -m pip install --quiet -e '.[test,plot,browser]'
+	touch $(BROWSER_STAMP)
+
+browser-test: chromium $(BROWSER_STAMP)
+	$(PY) -m pytest -q -m browser
 
 experiment: $(STAMP)
 	$(PY) launch/experiment.py $(ARGS)

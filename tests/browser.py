@@ -1,0 +1,242 @@
+"""The web viewer in a real browser: a recording served by ``rerun --serve-web``, opened in
+headless Chromium (Debian's ``chromium``, driven by Playwright), and what its screenshots show.
+
+Used by ``tests/test_browser.py`` and ``docs/screenshot.py``. The viewer draws with WebGL, which
+headless Chromium gets from SwiftShader (software); on a busy 2-core machine a short run shows
+30 to 45 s after the page opens, most of it the viewer's own loading.
+
+The pixel checks (:func:`find_grid`, :func:`colour_pixels`, :func:`check_run`) raise
+``AssertionError`` saying what they did not find, so that a poll can retry them and a test can
+report the last failure.
+"""
+
+import io
+import os
+import subprocess
+import tempfile
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterator
+from urllib.parse import quote
+
+import numpy as np
+
+from launch.recording import grpc_url, rerun_binary, stop_process, wait_until_reachable
+from protocol.transport import free_port
+
+CHROMIUM = Path(os.environ.get("NNQL_CHROMIUM", "/usr/bin/chromium"))
+"""Debian's ``chromium`` (``apt-get install chromium``); ``NNQL_CHROMIUM`` names another."""
+
+CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+"""WebGL from SwiftShader, even where there is a GPU (the viewer needs WebGL). Playwright adds
+the rest: no sandbox (which root needs), no background networking, no component updates."""
+
+GRID_GREY = (90, 90, 90)
+"""The colour ``world/viz.py`` draws the grid's lines in."""
+
+BACKGROUND = (255, 255, 255)
+"""The 2D view's background in the viewer's light theme (the page asks for it)."""
+
+
+def unavailable() -> str | None:
+    """Why the browser tests cannot run here, or None when they can."""
+    missing = []
+    if not (CHROMIUM.is_file() and os.access(CHROMIUM, os.X_OK)):
+        missing.append(f"{CHROMIUM} (Debian's chromium)")
+    try:
+        import playwright.sync_api  # noqa: F401
+    except ImportError:
+        missing.append("playwright (the 'browser' extra)")
+    return f"{' and '.join(missing)} missing" if missing else None
+
+
+@dataclass(frozen=True)
+class Viewer:
+    """A running ``rerun --serve-web``: where the browser goes."""
+
+    web_port: int
+    grpc_port: int
+
+    def url(self, grpc_port: int | None = None) -> str:
+        """The viewer's page, reading the recording from ``grpc_port`` (default: the server's)."""
+        source = quote(grpc_url(self.grpc_port if grpc_port is None else grpc_port), safe="")
+        return f"http://127.0.0.1:{self.web_port}/?url={source}&persist=0&theme=light"
+
+
+@contextmanager
+def web_viewer(recording: Path | None, log: Path | None = None) -> Iterator[Viewer]:
+    """``rerun --serve-web`` on free ports, serving ``recording`` (or nothing), until the end."""
+    viewer = Viewer(web_port=free_port(), grpc_port=free_port())
+    command = [*rerun_binary(), "--serve-web", "--port", str(viewer.grpc_port),
+               "--web-viewer-port", str(viewer.web_port)]
+    out = open(log, "w") if log else subprocess.DEVNULL
+    server = subprocess.Popen(command + ([str(recording)] if recording else []),
+                              stdout=out, stderr=subprocess.STDOUT)
+    try:
+        if not wait_until_reachable(grpc_url(viewer.grpc_port)):
+            raise RuntimeError(f"rerun --serve-web did not start: {' '.join(command)}")
+        yield viewer
+    finally:
+        stop_process(server)
+        if log:
+            out.close()
+
+
+@contextmanager
+def chromium(chromium_path: Path = CHROMIUM, args: list[str] = CHROMIUM_ARGS,
+             size: tuple[int, int] = (1280, 720)) -> Iterator:
+    """Headless Chromium with a fresh profile (a Playwright ``BrowserContext``)."""
+    from playwright.sync_api import sync_playwright
+
+    with tempfile.TemporaryDirectory(prefix="nnql-chromium-") as profile, \
+            sync_playwright() as pw:
+        context = pw.chromium.launch_persistent_context(
+            profile, executable_path=str(chromium_path), headless=True,
+            args=args, viewport={"width": size[0], "height": size[1]})
+        try:
+            yield context
+        finally:
+            context.close()
+
+
+def screenshot(page, path: Path | None = None) -> np.ndarray:
+    """The page as RGB bytes ``(height, width, 3)``; also saved to ``path`` if given."""
+    from PIL import Image
+
+    png = page.screenshot()
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(png)
+    return np.asarray(Image.open(io.BytesIO(png)).convert("RGB"))
+
+
+def wait_for(page, check: Callable[[np.ndarray], object], timeout: float,
+             every: float = 1.0) -> tuple[np.ndarray, object, float]:
+    """Screenshot the page until ``check(image)`` stops raising ``AssertionError``.
+
+    Returns the image, what ``check`` returned and the seconds it took; after ``timeout``
+    seconds, raises the last failure.
+    """
+    start = time.monotonic()
+    while True:
+        image = screenshot(page)
+        try:
+            return image, check(image), time.monotonic() - start
+        except AssertionError as failure:
+            if time.monotonic() - start > timeout:
+                raise AssertionError(f"after {time.monotonic() - start:.0f} s: {failure}") \
+                    from None
+        time.sleep(every)
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Where the grid's lines are in a screenshot (pixel centres, left to right, top to bottom)."""
+
+    xs: tuple[int, ...]
+    ys: tuple[int, ...]
+
+    @property
+    def box(self) -> tuple[int, int, int, int]:
+        return self.xs[0], self.ys[0], self.xs[-1], self.ys[-1]
+
+    @property
+    def cell(self) -> float:
+        return (self.xs[-1] - self.xs[0]) / (len(self.xs) - 1)
+
+
+def near(image: np.ndarray, colour, tolerance: int) -> np.ndarray:
+    """Which pixels are within ``tolerance`` of ``colour`` in every channel."""
+    return np.abs(image.astype(np.int16) - np.asarray(colour, np.int16)).max(axis=2) <= tolerance
+
+
+def ink(image: np.ndarray, colour=GRID_GREY, background=BACKGROUND,
+        tolerance: int = 12) -> np.ndarray:
+    """How much of ``colour`` each pixel holds, blended over ``background``: 1 on the colour,
+    0 on the background or on anything not between the two (a line that falls between two rows
+    of pixels is drawn as two rows of half the ink)."""
+    pixels = image.astype(np.float32)
+    bg, fg = np.asarray(background, np.float32), np.asarray(colour, np.float32)
+    share = (pixels - bg) @ (fg - bg) / float((fg - bg) @ (fg - bg))
+    off = np.abs(pixels - (bg + share[..., None] * (fg - bg))).max(axis=2)
+    return np.where((off <= tolerance) & (share >= 0.15) & (share <= 1.1),
+                    np.clip(share, 0.0, 1.0), 0.0)
+
+
+def _evenly_spaced(profile: np.ndarray, count: int) -> list[float] | None:
+    """Exactly ``count`` evenly spaced lines in a profile (the ink of each column or row),
+    neither more nor fewer in a row. A line is a run of columns with at least a quarter of the
+    most ink, whose ink adds up to at least half the most inked run's. None if there are none."""
+    if profile.max(initial=0) < 20:
+        return None
+    hits = np.flatnonzero(profile >= profile.max() / 4)
+    runs = np.split(hits, np.flatnonzero(np.diff(hits) > 1) + 1)
+    totals = np.array([profile[run].sum() for run in runs])
+    centres = [float(np.average(run, weights=profile[run]))
+               for run, total in zip(runs, totals) if total >= totals.max() / 2]
+    first = 0
+    while first < len(centres) - 1:
+        run = centres[first:first + 2]
+        for centre in centres[first + 2:]:
+            if abs(centre - run[-1] - (run[1] - run[0])) > 2:
+                break
+            run.append(centre)
+        if len(run) == count and run[1] - run[0] >= 8:
+            return run
+        first += len(run) - 1
+    return None
+
+
+def find_grid(image: np.ndarray, columns: int, rows: int, colour=GRID_GREY) -> Grid:
+    """The ``columns`` x ``rows`` grid of square cells drawn in ``colour``: ``columns + 1``
+    evenly spaced vertical lines, and between them ``rows + 1`` horizontal ones at the same
+    spacing, each line drawn over at least 80 % of the grid's extent."""
+    lines = ink(image, colour)
+    xs = _evenly_spaced(lines.sum(axis=0), columns + 1)
+    if xs is None:
+        raise AssertionError(f"no {columns}x{rows} grid: no {columns + 1} evenly spaced "
+                             f"vertical lines of {colour} (ink on {np.count_nonzero(lines)} "
+                             f"pixels)")
+    x0, x1 = round(xs[0]), round(xs[-1])
+    ys = _evenly_spaced(lines[:, x0:x1 + 1].sum(axis=1), rows + 1)
+    if ys is None:
+        raise AssertionError(f"no {columns}x{rows} grid: {columns + 1} vertical lines at x "
+                             f"{x0}..{x1}, but no {rows + 1} evenly spaced horizontal ones")
+    grid = Grid(tuple(round(x) for x in xs), tuple(round(y) for y in ys))
+    y0, y1 = grid.ys[0], grid.ys[-1]
+    if abs((y1 - y0) / rows - grid.cell) > 2:
+        raise AssertionError(f"grid lines at x {grid.xs} and y {grid.ys} make no square cells")
+    for x in grid.xs:
+        drawn = np.mean(lines[y0:y1 + 1, max(x - 1, 0):x + 2].max(axis=1) > 0)
+        if drawn < 0.8:
+            raise AssertionError(f"vertical grid line at x={x} drawn over {drawn:.0%} only")
+    for y in grid.ys:
+        drawn = np.mean(lines[max(y - 1, 0):y + 2, x0:x1 + 1].max(axis=0) > 0)
+        if drawn < 0.8:
+            raise AssertionError(f"horizontal grid line at y={y} drawn over {drawn:.0%} only")
+    return grid
+
+
+def colour_pixels(image: np.ndarray, grid: Grid, colours: np.ndarray,
+                  tolerance: int = 12) -> list[int]:
+    """How many pixels inside the grid are each of ``colours`` (``(n, 3)`` RGB bytes)."""
+    x0, y0, x1, y1 = grid.box
+    inside = image[y0:y1 + 1, x0:x1 + 1]
+    return [int(np.count_nonzero(near(inside, c, tolerance))) for c in colours]
+
+
+def check_run(image: np.ndarray, columns: int, rows: int, colours: np.ndarray) -> dict:
+    """The world view of a run: the grid, and inside it each agent's colour on at least a tenth
+    of a cell's area (its goal box alone is about a third). Returns what it found."""
+    grid = find_grid(image, columns, rows)
+    counts = colour_pixels(image, grid, colours)
+    least = 0.1 * grid.cell ** 2
+    missing = [i for i, count in enumerate(counts) if count < least]
+    if missing:
+        raise AssertionError(
+            f"grid at {grid.box}, but agents {missing} have too few pixels of their colours "
+            f"{[tuple(int(v) for v in colours[i]) for i in missing]} inside it "
+            f"(pixels per agent {counts}, at least {least:.0f} wanted)")
+    return {"grid": grid.box, "cell": grid.cell, "pixels": counts}
