@@ -18,7 +18,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from launch.inprocess import run_in_process  # noqa: E402
-from launch.stats import mean_interval  # noqa: E402
+from experiment.stats import mean_interval  # noqa: E402
 from protocol.config import SwarmConfig  # noqa: E402
 from world.metrics import read_episodes  # noqa: E402
 

@@ -1,10 +1,15 @@
-"""The paper's comparison of QL and nnQL (Section 4: Table 1, Figs. 5-13) as a command line.
+"""The experiments as a command line: the paper's comparison of QL and nnQL (Section 4: Table 1,
+Figs. 5-13; the default), and the swarm experiment over the learning presets.
 
     python launch/experiment.py                      # the paper's settings, 10 seeds, k = 1..10
     python launch/experiment.py --episodes 50 --seeds 3 --ks 1,5 --out runs/quick
+    python launch/experiment.py paper ...            # the same, by name
+    python launch/experiment.py swarm --agents 8 --seeds 10 --episodes 500 --out runs/swarm
 
-Writes ``table1.csv``, ``table1.md``, ``episodes.csv``, ``config.json`` and the figures into
-``--out`` (README "The paper's experiment" describes every file and column).
+The paper's writes ``table1.csv``, ``table1.md``, ``episodes.csv``, ``config.json`` and the
+figures into ``--out``; the swarm's ``swarm_table.csv``, ``swarm_table.md``, ``config.json``,
+``runs/<variant>-s<seed>/`` (each run's ``config.json`` and ``episodes.csv``), the learning curves
+(``swarm_*.png``) and their Rerun recording ``swarm_curves.rrd``.
 """
 
 import argparse
@@ -20,11 +25,18 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: make the repository's packages importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from launch.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
-from launch.progress import Progress  # noqa: E402
-from launch.report import (  # noqa: E402
+from tqdm import tqdm  # noqa: E402
+
+from experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
+from experiment.report import (  # noqa: E402
     ResultGrid, summarize, table1_markdown, table1_rows, write_episodes_csv, write_table1_csv,
 )
+from experiment.swarm import (  # noqa: E402
+    TABLE_FILES, VARIANTS, SwarmExperiment, curves, run_experiment, table_rows, write_runs,
+    write_tables,
+)
+from launch.progress import Progress  # noqa: E402
+from launch.recording import log_swarm_curves  # noqa: E402
 
 RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
 
@@ -107,7 +119,8 @@ def build_parser() -> OneLineParser:
     parser = OneLineParser(
         prog="experiment.py",
         description="QL vs nnQL, the paper's experiment: one learner among scripted obstacles "
-        "that announce their next action. The paper's settings are the defaults.",
+        "that announce their next action. The paper's settings are the defaults. (The swarm "
+        "experiment: experiment.py swarm --help.)",
     )
     add = parser.add_argument
     add("--seeds", type=bounded(int, 1), default=10, metavar="N",
@@ -167,7 +180,7 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
         parser.error(f"{args.out} already holds results ({', '.join(held)}); pass --force to overwrite")
     if not args.no_plots:
         try:
-            from launch.figures import require_matplotlib
+            from experiment.figures import require_matplotlib
 
             require_matplotlib()
         except RuntimeError as error:
@@ -223,7 +236,7 @@ def run(args: argparse.Namespace) -> Path:
     }
     (args.out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
     if not args.no_plots:
-        from launch.figures import write_figures
+        from experiment.figures import write_figures
 
         write_figures(args.out, grid, args.figure_k)
     print(markdown)
@@ -239,11 +252,100 @@ def _raise_terminated(signum, frame):
     raise Terminated
 
 
+def parse_variants(text: str) -> tuple[str, ...]:
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    unknown = [v for v in names if v not in VARIANTS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"choose variants from {','.join(VARIANTS)}, got {text!r}")
+    return tuple(v for v in VARIANTS if v in names)
+
+
+def build_swarm_parser() -> OneLineParser:
+    d = SwarmExperiment()
+    parser = OneLineParser(
+        prog="experiment.py swarm",
+        description="The swarm experiment: every learning preset (the paper's QL and nnQL, the "
+        "best options, the shield, n = 2, DAQL, the oracle) over seeds, on the swarm simulator.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+    )
+    add = parser.add_argument
+    add("--agents", type=bounded(int, 1), default=d.agents, metavar="N", help="agents per swarm")
+    add("--seeds", type=bounded(int, 1), default=d.seeds, metavar="N", help="runs per variant")
+    add("--seed-base", type=bounded(int, 0), default=d.seed_base, metavar="S",
+        help="first seed; seeds are S, S+1, ...")
+    add("--episodes", type=bounded(int, 5), default=d.episodes, metavar="N")
+    add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
+    add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH")
+    add("--variants", type=parse_variants, default=d.variants, metavar="LIST",
+        help=f"comma-separated, from {','.join(VARIANTS)}")
+    add("--out", type=Path, default=None, metavar="DIR",
+        help="output directory (default runs/swarm-<time>)")
+    add("--force", action="store_true", help="overwrite results already in --out")
+    add("--no-plots", action="store_true", help="skip the PNG figures (no matplotlib needed)")
+    add("--workers", type=parse_workers, default=None, metavar="N|auto",
+        help="threads the runs are spread over (auto: one per core)")
+    return parser
+
+
+def run_swarm(argv: list[str]) -> Path:
+    """The swarm experiment's command line: run, then write every result file."""
+    parser = build_swarm_parser()
+    args = parser.parse_args(argv)
+    experiment = SwarmExperiment(agents=args.agents, seeds=args.seeds, seed_base=args.seed_base,
+                                 episodes=args.episodes, max_steps=args.max_steps,
+                                 width=args.grid[0], height=args.grid[1], variants=args.variants)
+    try:
+        experiment.config(experiment.variants[0], experiment.seed_base)
+    except ValueError as error:
+        parser.error(str(error))
+    out = args.out or Path("runs") / time.strftime("swarm-%Y%m%d-%H%M%S")
+    if out.exists() and not out.is_dir():
+        parser.error(f"--out {out} exists and is not a directory")
+    held = [name for name in (*TABLE_FILES, "config.json") if (out / name).exists()]
+    if held and not args.force:
+        parser.error(f"{out} already holds results ({', '.join(held)}); pass --force to overwrite")
+    if not args.no_plots:
+        try:
+            from experiment.figures import require_matplotlib
+
+            require_matplotlib()
+        except RuntimeError as error:
+            parser.error(str(error))
+    runs = len(experiment.variants) * experiment.seeds
+    started = time.monotonic()
+    with tqdm(total=experiment.episodes, unit="episode", desc=f"{runs} runs", file=sys.stderr,
+              disable=None) as bar:
+        results = run_experiment(experiment, args.workers, on_episode=lambda _e: bar.update())
+    elapsed = time.monotonic() - started
+    out.mkdir(parents=True, exist_ok=True)
+    write_runs(out, results)
+    rows = table_rows(results)
+    write_tables(out, results, rows)
+    smoothing = max(1, experiment.episodes // 50)
+    learning = curves(results, smoothing)
+    log_swarm_curves(learning, out / "swarm_curves.rrd")
+    if not args.no_plots:
+        from experiment.figures import write_swarm_figures
+
+        write_swarm_figures(out, learning, experiment.seeds, smoothing)
+    config = {"experiment": asdict(experiment), "workers": args.workers,
+              "elapsed_seconds": round(elapsed, 3),
+              "command": [Path(sys.argv[0]).name, *sys.argv[1:]]}
+    (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
+    print((out / "swarm_table.md").read_text())
+    print(f"wrote {out}/ in {elapsed:.1f} s of simulation")
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
     signal.signal(signal.SIGTERM, _raise_terminated)
     try:
-        args = resolve(parser.parse_args(argv), parser)
+        if argv[:1] == ["swarm"]:
+            run_swarm(argv[1:])
+            return 0
+        parser = build_parser()
+        args = resolve(parser.parse_args(argv[1:] if argv[:1] == ["paper"] else argv), parser)
         run(args)
     except KeyboardInterrupt:
         print("\ninterrupted: stopped before writing results", file=sys.stderr)

@@ -431,8 +431,8 @@ def stop_process(process: subprocess.Popen) -> None:
 def log_experiment(specs, metrics, target, *, recording_id: str = "experiment"):
     """Log the paper experiment's learning curves, averaged over seeds, on the ``episode`` timeline.
 
-    ``specs`` are ``launch.paper.RunSpec`` (``algo``, ``random_step``, ``seed``); ``metrics`` is the
-    matching ``launch.paper.EpisodeMetrics`` (arrays ``(runs, episodes)``: ``steps``,
+    ``specs`` are ``experiment.paper.RunSpec`` (``algo``, ``random_step``, ``seed``); ``metrics`` is the
+    matching ``experiment.paper.EpisodeMetrics`` (arrays ``(runs, episodes)``: ``steps``,
     ``collisions``, ``reward_ds``, ``reward_ca``, ``shortest``, ``arrived``). ``target`` is a path
     (a new ``.rrd`` file with its own blueprint is written there), or an open
     ``rr.RecordingStream``. Entities: ``experiment/<metric>/<algo>/k<k>`` for metric in
@@ -471,6 +471,28 @@ def log_experiment(specs, metrics, target, *, recording_id: str = "experiment"):
         close_stream(stream)
         return None
     return stream
+
+
+def log_swarm_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
+                     recording_id: str = "swarm-experiment") -> None:
+    """The swarm experiment's learning curves (``experiment.swarm.curves``) into a new ``.rrd``:
+    ``swarm/<metric>/<variant>`` on the ``episode`` timeline, one plot per metric."""
+    import rerun as rr
+    import rerun.blueprint as rrb
+
+    from world.viz import close_stream
+
+    stream = rr.RecordingStream(APP_ID, recording_id=recording_id)
+    blueprint = rrb.Blueprint(rrb.Grid(*(rrb.TimeSeriesView(origin=f"swarm/{metric}", name=metric)
+                                         for metric in curves), grid_columns=len(curves)))
+    stream.set_sinks(rr.FileSink(str(path)), default_blueprint=blueprint)
+    for metric, by_variant in curves.items():
+        for variant, values in by_variant.items():
+            entity = f"swarm/{metric}/{variant}"
+            stream.log(entity, rr.SeriesLines(names=variant), static=True)
+            stream.send_columns(entity, [rr.TimeColumn("episode", sequence=np.arange(values.size))],
+                                rr.Scalars.columns(scalars=values))
+    close_stream(stream)
 
 
 _ALGO_COLORS = {"ql": (230, 120, 40), "nnql": (40, 140, 230), "nnql-dir": (60, 180, 90)}

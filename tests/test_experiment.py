@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from launch.paper import EpisodeMetrics, RunSpec
+from experiment.paper import EpisodeMetrics, RunSpec
 from launch.progress import Progress, format_duration
-from launch.report import (
+from experiment.report import (
     EPISODE_COLUMNS, PAPER_TABLE1, TABLE1_COLUMNS, ResultGrid, summarize, table1_markdown, table1_rows,
 )
-from launch.stats import mean_interval, t_quantile
+from experiment.stats import mean_interval, t_quantile
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPT = "launch/experiment.py"

@@ -12,7 +12,7 @@ from agent.learner import (
     REC_COUNT, REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, apply_record, ca_row, ca_rows, choose,
     decide, finish, planned_cell, record_outcome, record_size, shield_mask, state_size,
 )
-from launch.paper import PaperSettings, RunSpec, run_batch
+from experiment.paper import PaperSettings, RunSpec, run_batch
 from protocol.actions import DOWN, LEFT, N_ACTIONS, N_STATES, RIGHT, STAY, UP, offset_state
 from sim.runs import Batch, Run, World
 

@@ -4,7 +4,7 @@ numbers as the code before the kernel gave them."""
 import numpy as np
 import pytest
 
-from launch.paper import EpisodeMetrics, PaperSettings, RunSpec, run_batch
+from experiment.paper import EpisodeMetrics, PaperSettings, RunSpec, run_batch
 from world.rules import CA_REWARD
 
 SHORT = PaperSettings(episodes=8, max_steps=40)

@@ -265,7 +265,7 @@ def test_heat_map_pixels_are_egocentric_offsets():
 
 
 def test_experiment_curves_go_into_a_recording(tmp_path):
-    from launch.paper import PaperSettings, RunSpec, run_batch
+    from experiment.paper import PaperSettings, RunSpec, run_batch
 
     specs = [RunSpec(algo, k, seed) for algo in ("ql", "nnql") for k in (2, 5) for seed in (0, 1)]
     metrics = run_batch(specs, PaperSettings(episodes=6, max_steps=30))

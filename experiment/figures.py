@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from launch.report import ALGO_NAMES as ALGO_LABELS
-from launch.report import PAPER_TABLE1, ResultGrid, table1_rows
+from experiment.report import ALGO_NAMES as ALGO_LABELS
+from experiment.report import PAPER_TABLE1, ResultGrid, table1_rows
 
 ALGO_COLOURS = {"ql": "tab:red", "nnql": "tab:blue"}
 FIGURE_FILES = (
@@ -150,3 +150,32 @@ def _collisions_vs_k(plt, grid: ResultGrid, k: int):
     ax.set_xticks(ks)
     ax.legend()
     return figure
+
+
+SWARM_FIGURES = {"arrival": ("swarm_arrival.png", "Share of agents on their goal at the episode's end"),
+                 "steps_ratio": ("swarm_steps_ratio.png",
+                                 "Steps before arriving over the shortest path"),
+                 "collisions": ("swarm_collisions.png", "Collisions per episode")}
+"""The swarm experiment's learning curves: one figure per metric, one line per variant."""
+
+
+def write_swarm_figures(out_dir: Path, curves: dict[str, dict[str, np.ndarray]],
+                        seeds: int, smoothing: int) -> list[Path]:
+    """Draw the swarm experiment's learning curves (``experiment.swarm.curves``)."""
+    plt = require_matplotlib()
+    paths = []
+    for metric, (name, title) in SWARM_FIGURES.items():
+        figure, axis = plt.subplots(figsize=(9, 4.5))
+        for variant, values in curves[metric].items():
+            axis.plot(np.arange(values.size), values, label=variant, linewidth=1.4)
+        axis.set_title(f"{title} (mean over {seeds} seeds, running mean of {smoothing})")
+        axis.set_xlabel("episode")
+        if metric == "steps_ratio":
+            axis.set_yscale("log")
+        axis.grid(alpha=0.3)
+        axis.legend(ncol=3, fontsize=8)
+        path = out_dir / name
+        figure.savefig(path, dpi=110, bbox_inches="tight")
+        plt.close(figure)
+        paths.append(path)
+    return paths

@@ -1,6 +1,6 @@
 """Tables of the paper's experiment: Table 1 with confidence intervals, per-episode CSV, summary.
 
-Everything here reads the per (run, episode) metrics of :func:`launch.paper.run_batch` and the specs
+Everything here reads the per (run, episode) metrics of :func:`experiment.paper.run_batch` and the specs
 that produced them; nothing runs an experiment. A run's score in Table 1 is its total number of
 collisions over all episodes; the table shows the mean over seeds per random step ``k``.
 """
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from launch.paper import ALGOS, EpisodeMetrics, RunSpec
-from launch.stats import CONFIDENCE, Interval, mean_interval
+from experiment.paper import ALGOS, EpisodeMetrics, RunSpec
+from experiment.stats import CONFIDENCE, Interval, mean_interval
 
 PAPER_TABLE1 = {
     # k: (QL collisions, nnQL collisions, decrease in %), Table 1 of the paper
