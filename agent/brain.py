@@ -16,11 +16,12 @@ import numpy as np
 from agent.learner import (
     FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
-    RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome, record_size, state_size,
+    REC_COUNT, REC_PAIRS, RF_FIELDS, apply_record, ca_rows, decide, draw_noise, finish,
+    record_is_valid, record_outcome, record_size, state_size,
 )
 from protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
 from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from protocol.jit import floats, ints, rows, table
+from protocol.jit import floats, ints, python_values, rows, table
 from protocol.messages import Observation
 from protocol.ranks import priority_rank, waits_for
 from protocol.seeding import AGENT_STREAM, stream_rng
@@ -69,16 +70,32 @@ class Learner:
         """Drop the pending transition (its episode was abandoned, e.g. the world restarted)."""
         self.state[LS_PENDING] = 0
 
+    def record(self) -> tuple[tuple[int, ...], tuple[float, float]]:
+        """The learning record just written, as it travels: its integers and its two rewards."""
+        ints = python_values(self.rec)
+        return tuple(ints[:REC_PAIRS + 2 * ints[REC_COUNT]]), tuple(python_values(self.rec_f))
+
 
 class AgentBrain:
-    """An agent's learner, its noise, and what it remembers of its last observation."""
+    """An agent's learner, its noise, and what it remembers of its last observation.
+
+    Where the swarm shares one table (``config.shared``), every agent holds a copy: its own
+    learning record of a tick is not applied at once but goes out with its intent
+    (:attr:`learned`); the world hands every agent's records of that tick to everyone in the next
+    observations, and each agent applies them in agent-id order before it decides, so all copies
+    stay equal (and equal to the simulator's one table).
+    """
 
     def __init__(self, agent: int, config: SwarmConfig) -> None:
         if config.algo not in READINGS:
             raise ValueError(f"--algo {config.algo} plans centrally; run it with --in-process")
+        if config.lookahead > 1:
+            raise ValueError("a lookahead n > 1 is played by the simulator only (--in-process)")
         self.agent = agent
         self.config = config
         self.learner = Learner(config)
+        self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
+        self.rejected_records = 0
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
         self._random_actions = np.zeros(config.max_steps, dtype=np.int64)
@@ -107,30 +124,47 @@ class AgentBrain:
 
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
         """Learn from the last action's rewards and choose this tick's action (STAY if done)."""
-        learner = self.learner
+        learner, shared = self.learner, self.config.shared
+        if shared:
+            self._apply_shared(obs.learned)
         record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
         (x, y), (gx, gy) = obs.position, obs.goal
         stops = obs.arrived or obs.episode_end
         nb = rows(self._neighbour_rows(obs, {} if stops else answers), NB_FIELDS)
         if stops:
-            finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
-                   learner.state_f, x, y, gx, gy, nb, len(obs.neighbours), learner.rec,
-                   learner.rec_f, True)
-            return STAY
-        self.prepare(obs)
-        random_actions, ties = self._noise
-        c = self.config
-        action, _ = decide(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
-                           learner.state, learner.state_f, x, y, gx, gy, nb, len(obs.neighbours),
-                           c.width, c.height, random_actions[obs.step], floats(ties[obs.step]),
-                           learner.values, learner.rec, learner.rec_f, True)
+            written = finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
+                             learner.state, learner.state_f, x, y, gx, gy, nb,
+                             len(obs.neighbours), learner.rec, learner.rec_f, not shared)
+            action = STAY
+        else:
+            self.prepare(obs)
+            random_actions, ties = self._noise
+            c = self.config
+            action, written = decide(
+                learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
+                learner.state_f, x, y, gx, gy, nb, len(obs.neighbours), c.width, c.height,
+                random_actions[obs.step], floats(ties[obs.step]), learner.values, learner.rec,
+                learner.rec_f, not shared)
+        self.learned = (learner.record(),) if shared and written else ()
         return int(action)
+
+    def _apply_shared(self, records) -> None:
+        """Apply every agent's learning records of the last tick, in agent-id order (the world
+        sends them so); a record that does not fit the tables is refused and counted."""
+        learner = self.learner
+        alpha, gamma = learner.params_f[FP_ALPHA], learner.params_f[FP_GAMMA]
+        for _agent, integers, values in records:
+            if not record_is_valid(integers, values, len(learner.q_ca)):
+                self.rejected_records += 1
+                continue
+            apply_record(learner.q_ds, learner.q_ca, ints(integers), floats(values), alpha, gamma)
 
     def _neighbour_rows(self, obs: Observation, answers: dict[int, int]) -> list[list[int]]:
         """The learner's neighbour rows (``agent.learner.NB_*``) for this observation: the
         visible neighbours in id order, each with its announced move where it answered."""
         w, h = self.config.width, self.config.height
         previous = self._previous_cells(obs)
+        parked = set(obs.parked)
         rows = []
         for j, jx, jy in obs.neighbours:
             action = answers.get(j)
@@ -139,7 +173,7 @@ class AgentBrain:
             else:
                 nx, ny, known = target_x(jx, action, w), target_y(jy, action, h), 1
             px, py = previous.get(j, (-1, -1))
-            rows.append([j, jx, jy, known, nx, ny, nx, ny, 0, px, py])
+            rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py])
         return rows
 
     def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:

@@ -36,7 +36,8 @@ every agent in agent-id order before the next tick (``sim.swarm``, ``agent.brain
 
 Buffers (numpy arrays when compiled, Python lists in an agent process): ``params`` (``LP_*``),
 ``params_f`` (``FP_*``), the learner's state ``state`` (``LS_*``) and ``state_f`` (``LF_*``), and
-the neighbour rows ``nb`` (``NB_*``), one per visible neighbour in agent-id order.
+the neighbour rows ``nb`` (``NB_*``), one per visible neighbour, in agent-id order (as the world
+lists them).
 """
 
 import math
@@ -86,6 +87,24 @@ def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.nd
     ``(steps, 5)``). The order of the draws is part of the determinism contract."""
     random_actions[:] = rng.integers(0, N_ACTIONS, size=random_actions.shape[0], dtype=np.int64)
     rng.random(out=ties)
+
+
+def record_is_valid(ints, floats, ca_table_rows: int) -> bool:
+    """Whether a learning record received from another agent fits this learner's tables (a
+    forged or mistaken record must never write outside them)."""
+    if len(ints) < REC_PAIRS or len(floats) != RF_FIELDS:
+        return False
+    count, blocks = ints[REC_COUNT], ints[REC_BLOCKS]
+    if len(ints) != REC_PAIRS + 2 * count or blocks not in (1, N_ACTIONS):
+        return False
+    if not (0 <= ints[REC_GOAL] < N_STATES and 0 <= ints[REC_NEXT_GOAL] < N_STATES
+            and 0 <= ints[REC_ACTION] < N_ACTIONS and ints[REC_TERMINAL] in (0, 1)):
+        return False
+    rows = ints[REC_PAIRS::2]
+    following = ints[REC_PAIRS + 1::2]
+    return (all(0 <= row < ca_table_rows for row in rows)
+            and all(-1 <= f and f + N_STATES * (blocks - 1) < ca_table_rows for f in following)
+            and all(math.isfinite(value) for value in floats))
 
 
 def state_size(max_neighbours: int) -> int:
@@ -169,18 +188,19 @@ def complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f):
     rec_f[RF_R_DS] = state_f[LF_R_DS]
     rec_f[RF_R_CA] = state_f[LF_R_CA]
     count = state[LS_COUNT]
+    j = 0  # the pending neighbours and the rows are both in id order: walk them together
     for k in range(count):
         at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * k
         neighbour, row = state[at], state[at + 1]
+        while j < m and nb[j][NB_ID] < neighbour:
+            j += 1
         following = -1
-        for j in range(m):
-            if nb[j][NB_ID] == neighbour:
-                following = ca_row(reading, known_state, ox, oy, nb, j)
-                if reading == READ_DAQL:  # learn the move it made, bootstrap over all moves
-                    seen = move_of(nb[j][NB_X] - state[at + 2], nb[j][NB_Y] - state[at + 3])
-                    row = row % N_STATES + N_STATES * seen
-                    following = following % N_STATES
-                break
+        if j < m and nb[j][NB_ID] == neighbour:
+            following = ca_row(reading, known_state, ox, oy, nb, j)
+            if reading == READ_DAQL:  # learn the move it made, bootstrap over all moves
+                seen = move_of(nb[j][NB_X] - state[at + 2], nb[j][NB_Y] - state[at + 3])
+                row = row % N_STATES + N_STATES * seen
+                following = following % N_STATES
         rec[REC_PAIRS + 2 * k] = row
         rec[REC_PAIRS + 2 * k + 1] = following
     rec[REC_COUNT] = count

@@ -1,11 +1,13 @@
 """What the swarm benchmarks share: run a swarm (distributed or in-process) and time its ticks."""
 
 import multiprocessing as mp
+import os
 from pathlib import Path
 from typing import Callable
 
 from launch.recording import RecordingPlan
 from protocol.config import SwarmConfig
+from protocol.jit import plain_python_environment
 from protocol.transport import EmbeddedLayout
 from world.metrics import read_episodes
 
@@ -24,6 +26,7 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
     agents' entry point (same arguments as ``launch.swarm.agent_main``)."""
     from launch.swarm import agent_main, world_main
 
+    os.environ.update(plain_python_environment())  # as the launcher's world and agents run
     ctx = mp.get_context("spawn")
     layout = EmbeddedLayout()
     out.mkdir(parents=True)

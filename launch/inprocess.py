@@ -78,7 +78,7 @@ def run_in_process(
     ``on_row(row)`` follows each episode's row (its deterministic columns)."""
     out_dir = Path(out_dir)
     batch = Batch(swarm_world(config), [Run.of(config)], record=on_tick is not None)
-    agents = [SimulatedAgent(i, config, SimulatedLearner(batch, i), batch.rngs[0][i])
+    agents = [SimulatedAgent(i, config, SimulatedLearner(batch, i), batch.generator(0, i))
               for i in range(config.n_agents)]
     results = Episodes(1, config.episodes)
     try:

@@ -12,6 +12,7 @@ without Zenoh. The run directory (``--out``, default ``runs/<run-id>``) receives
 
 import argparse
 import logging
+from dataclasses import fields, replace
 import multiprocessing as mp
 import os
 import sys
@@ -27,7 +28,9 @@ from launch.progress import Progress  # noqa: E402
 from launch.recording import RecordingSession, check_viewer_url  # noqa: E402
 from launch.resume import ResumeError, ResumePoint, check_checkpoints, resume_point  # noqa: E402
 from launch.supervisor import Supervisor, describe_exit  # noqa: E402
-from protocol.config import ALGOS, SwarmConfig  # noqa: E402
+from protocol.config import (  # noqa: E402
+    DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
+)
 from protocol.jit import plain_python_environment  # noqa: E402
 from protocol.runfiles import CONFIG_FILE, EPISODES_FILE  # noqa: E402
 from protocol.transport import MODES, EmbeddedLayout, TransportSettings  # noqa: E402
@@ -60,26 +63,19 @@ def parse_ids(text: str) -> list[int]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(
-        prog="swarm.py", description=__doc__.split("\n\n")[0],
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
+    p = OneLineParser(prog="swarm.py", description=__doc__.split("\n\n")[0])
     d = SwarmConfig()
     run = p.add_argument_group("the run")
-    run.add_argument("--agents", type=int, default=d.n_agents, help="number of agents")
-    run.add_argument("--episodes", type=int, default=d.episodes)
-    run.add_argument("--max-steps", type=int, default=d.max_steps, help="steps per episode at most")
-    run.add_argument("--algo", choices=ALGOS, default=d.algo)
-    run.add_argument("--seed", type=int, default=d.seed)
-    run.add_argument("--grid", type=parse_grid, default=(d.width, d.height), help="WIDTHxHEIGHT")
-    run.add_argument("--random-step", type=int, default=d.random_step,
-                     help="every k-th action is random (the paper's random step)")
-    run.add_argument("--beta", type=float, default=d.beta, help="DS weight in Q_final (Eq. 7)")
-    run.add_argument("--count-swaps", action=argparse.BooleanOptionalAction, default=d.count_swaps,
-                     help="count two agents swapping cells as a collision")
-    run.add_argument("--deadline", type=float, default=d.tick_deadline_s,
-                     help="seconds the world waits for intents each tick")
-    run.add_argument("--run-id", default=None, help="default: <algo>-<agents>a-s<seed>-<time>")
+    run.add_argument("--preset", choices=tuple(PRESETS), default=None,
+                     help=f"learning options by name (default: {DEFAULT_PRESET}, the swarm "
+                          f"experiment's best; nnql or ql: the paper's reading); the options "
+                          f"below override it")
+    add_config_options(run, exclude=LEARNING_FIELDS)
+    run.add_argument("--grid", type=parse_grid, default=argparse.SUPPRESS, metavar="WxH",
+                     help=f"grid size (default: {d.width}x{d.height})")
+    learning = p.add_argument_group("learning (each defaults to the preset's)")
+    add_config_options(learning, only=LEARNING_FIELDS)
+    run.add_argument("--run-id", default=None, help="default: <preset>-<agents>a-s<seed>-<time>")
     run.add_argument("--out", type=Path, default=None, help="run directory (default runs/<run-id>)")
     run.add_argument("--resume", action="store_true",
                      help="continue the run in --out after its last complete episode "
@@ -121,16 +117,46 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def add_config_options(group, only=None, exclude=()) -> None:
+    """One option per :class:`SwarmConfig` field that has one (its metadata): its flag, type,
+    help and default, all from the field."""
+    for f in fields(SwarmConfig):
+        if "help" not in f.metadata or f.name in exclude or (only and f.name not in only):
+            continue
+        meta = dict(f.metadata)
+        flag = meta.pop("flag") or "--" + f.name.replace("_", "-")
+        text = meta.pop("help")
+        shown = "on" if f.default is True else "off" if f.default is False else f.default
+        kwargs = dict(dest=f.name, default=argparse.SUPPRESS, help=f"{text} (default: {shown})")
+        if f.type is bool:
+            kwargs["action"] = argparse.BooleanOptionalAction
+        else:
+            kwargs["type"] = f.type
+        group.add_argument(flag, **kwargs, **meta)
+
+
+def config_values(args: argparse.Namespace) -> dict:
+    """The config fields the options give: the preset's learning options, then every option
+    given explicitly."""
+    values = dict(PRESETS[args.preset]) if args.preset else {}
+    values.update({f.name: getattr(args, f.name) for f in fields(SwarmConfig)
+                   if hasattr(args, f.name)})
+    if hasattr(args, "grid"):
+        values["width"], values["height"] = args.grid
+    return values
+
+
 def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
     """The run's config and directory from the options; raises UsageError on bad values."""
-    run_id = args.run_id or f"{args.algo}-{args.agents}a-s{args.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    values = config_values(args)
     try:
-        config = SwarmConfig(
-            run_id=run_id, n_agents=args.agents, episodes=args.episodes, max_steps=args.max_steps,
-            width=args.grid[0], height=args.grid[1], seed=args.seed, algo=args.algo,
-            random_step=args.random_step, beta=args.beta, count_swaps=args.count_swaps,
-            tick_deadline_s=args.deadline,
-        )
+        config = SwarmConfig(run_id="pending", **values)
+    except (ValueError, TypeError) as error:
+        raise UsageError(str(error)) from None
+    name = args.preset or ("custom" if set(values) & set(LEARNING_FIELDS) else DEFAULT_PRESET)
+    run_id = args.run_id or f"{name}-{config.n_agents}a-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
+    try:
+        config = replace(config, run_id=run_id)
     except ValueError as error:
         raise UsageError(str(error)) from None
     if not args.in_process:

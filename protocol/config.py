@@ -5,7 +5,7 @@ every process, so that a distributed run and an in-process run of one config are
 """
 
 import json
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, field, fields
 
 from protocol.actions import VIEW_RADIUS
 from protocol.keys import validate_run_id
@@ -19,33 +19,89 @@ NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
 MAX_LOOKAHEAD = 3
 
 
+def option(default, help: str, flag: str | None = None, **argparse_options):
+    """A config field with its command-line option: ``flag`` (default ``--<name>``), ``help``,
+    and any other ``argparse`` keyword (``choices``, ``metavar``)."""
+    return field(default=default, metadata={"help": help, "flag": flag, **argparse_options})
+
+
+LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "optimistic", "known_state",
+                   "shared", "shield", "lookahead", "still_terminal", "stay_reward")
+"""The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
+run's."""
+
+PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
+         "optimistic": 0.0, "known_state": False, "shared": False, "shield": False,
+         "lookahead": 1, "still_terminal": False, "stay_reward": 0.5}
+"""The paper's reading: every neighbour in view enters Eq. 6, zero-initialised tables, each
+agent its own tables, no shield."""
+
+BEST = {"interaction_radius": 2, "optimistic": 25.0, "shared": True, "still_terminal": True,
+        "alpha": 0.5}
+"""The learning options beyond the paper that the swarm experiment found best (docs/swarm.md):
+neighbours within collision reach only, optimistic tables, one table for the swarm, no future
+learned from a step that went nowhere, a gentler learning rate."""
+
+PRESETS: dict[str, dict] = {
+    "ql": {**PAPER, "algo": "ql"},
+    "nnql": PAPER,
+    "best-ql": {**PAPER, **BEST, "algo": "ql"},
+    "best-nnql": {**PAPER, **BEST, "algo": "nnql-dir"},
+    "shield-ql": {**PAPER, **BEST, "algo": "ql", "shield": True, "known_state": True},
+    "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True},
+    "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
+    "daql": {**PAPER, **BEST, "algo": "daql"},
+    "oracle": {**PAPER, "algo": "oracle"},
+}
+"""Named learning presets: the rows of the swarm experiment, and ``launch/swarm.py --preset``."""
+assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())
+
+DEFAULT_PRESET = "shield-nnql"
+"""The learning options of a swarm run unless told otherwise: the best of the swarm experiment
+(docs/swarm.md: every agent arrives, none collide, after about 100 episodes)."""
+_DEFAULT = PRESETS[DEFAULT_PRESET]
+
+
 @dataclass(frozen=True)
 class SwarmConfig:
-    """Every knob of a swarm run; the defaults are the swarm's (DESIGN §2, §3)."""
+    """Every knob of a swarm run. The learning options default to :data:`DEFAULT_PRESET`; the
+    rest are the swarm's world (8 agents on the paper's 11 x 11 grid, swaps counted)."""
 
     run_id: str = "run"
-    n_agents: int = 8
-    episodes: int = 50
-    max_steps: int = 100
+    n_agents: int = option(8, "number of agents", "--agents")
+    episodes: int = option(100, "episodes of the run")
+    max_steps: int = option(100, "steps per episode at most")
     width: int = 11
     height: int = 11
-    seed: int = 0
-    algo: str = "nnql"
-    random_step: int = 20
-    alpha: float = 0.9
-    gamma: float = 0.6
-    beta: float = 0.5
-    goal_reward: float = 10.0
-    stay_reward: float = 0.5
-    count_swaps: bool = True
-    interaction_radius: int = VIEW_RADIUS
-    optimistic: float = 0.0
-    known_state: bool = False
-    shared: bool = False
-    shield: bool = False
-    lookahead: int = 1
-    still_terminal: bool = False
-    tick_deadline_s: float = 2.0
+    seed: int = option(0, "the run's seed: every random draw comes from it")
+    algo: str = option(_DEFAULT["algo"], "how agents learn: the paper's nnQL and QL, nnQL with the "
+                       "announced move in the state, Double Action Q-learning, or the oracle "
+                       "planner (in-process only)", choices=ALGOS)
+    random_step: int = option(20, "every k-th action is random (the paper's random step)",
+                              metavar="K")
+    alpha: float = option(_DEFAULT["alpha"], "learning rate")
+    gamma: float = option(0.6, "discount factor")
+    beta: float = option(_DEFAULT["beta"], "weight of destination seeking in Q_final (Eq. 7)")
+    goal_reward: float = option(10.0, "destination-seeking reward on arriving")
+    stay_reward: float = option(_DEFAULT["stay_reward"], "destination-seeking reward times d for a step that kept "
+                                "the distance, i.e. did not move (the paper's 0.5)")
+    count_swaps: bool = option(True, "count two agents swapping cells as a collision")
+    interaction_radius: int = option(_DEFAULT["interaction_radius"], "neighbours within this many cells (Chebyshev) "
+                                     "enter Eq. 6, learn (Eq. 10) and are waited for; the "
+                                     "paper's reading is the whole view, 10", "--radius")
+    optimistic: float = option(_DEFAULT["optimistic"], "initial value of every Q-table entry (the paper: 0)")
+    known_state: bool = option(_DEFAULT["known_state"], "a state block of its own for a neighbour whose next cell "
+                               "is known (announced, or parked on its goal)")
+    shared: bool = option(_DEFAULT["shared"], "the agents learn into one table, each agent's updates of a "
+                          "tick applied by all in agent-id order before the next")
+    shield: bool = option(_DEFAULT["shield"], "never move into a cell a known neighbour announced, into a "
+                          "swap, or into a parked agent")
+    lookahead: int = option(_DEFAULT["lookahead"], "n of nnQL: the neighbour's state is its announced cell n "
+                            "steps ahead (in-process only for n > 1)", metavar="N")
+    still_terminal: bool = option(_DEFAULT["still_terminal"], "a step that went nowhere ends its destination-seeking "
+                                  "return (no bootstrap from the state it stayed in)")
+    tick_deadline_s: float = option(2.0, "seconds the world waits for intents each tick",
+                                    "--deadline")
 
     def __post_init__(self) -> None:
         validate_run_id(self.run_id)
@@ -91,34 +147,3 @@ class SwarmConfig:
             raise ValueError(f"unknown config keys: {', '.join(sorted(unknown))}")
         return SwarmConfig(**data)
 
-
-LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "optimistic", "known_state",
-                   "shared", "shield", "lookahead", "still_terminal", "stay_reward")
-"""The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
-run's."""
-
-PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
-         "optimistic": 0.0, "known_state": False, "shared": False, "shield": False,
-         "lookahead": 1, "still_terminal": False, "stay_reward": 0.5}
-"""The paper's reading: every neighbour in view enters Eq. 6, zero-initialised tables, each
-agent its own tables, no shield."""
-
-BEST = {"interaction_radius": 2, "optimistic": 25.0, "shared": True, "still_terminal": True,
-        "alpha": 0.5}
-"""The learning options beyond the paper that the swarm experiment found best (docs/swarm.md):
-neighbours within collision reach only, optimistic tables, one table for the swarm, no future
-learned from a step that went nowhere, a gentler learning rate."""
-
-PRESETS = {
-    "ql": {**PAPER, "algo": "ql"},
-    "nnql": PAPER,
-    "best-ql": {**PAPER, **BEST, "algo": "ql"},
-    "best-nnql": {**PAPER, **BEST, "algo": "nnql-dir"},
-    "shield-ql": {**PAPER, **BEST, "algo": "ql", "shield": True, "known_state": True},
-    "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True},
-    "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
-    "daql": {**PAPER, **BEST, "algo": "daql"},
-    "oracle": {**PAPER, "algo": "oracle"},
-}
-"""Named learning presets: the rows of the swarm experiment, and ``launch/swarm.py --preset``."""
-assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())

@@ -150,11 +150,12 @@ class Batch:
         self.state = np.zeros((r, learners, state_size(n)), dtype=np.int64)
         self.state_f = np.zeros((r, learners, LF_FIELDS))
         self.tick = np.zeros(r, dtype=np.int64)
-        self.rngs = [[stream_rng(run.seed, AGENT_STREAM, i) for i in range(learners)]
-                     for run in runs]
+        # Runs of one seed draw the same noise (the same streams, the same draws each episode).
+        self.generators = {seed: [stream_rng(seed, AGENT_STREAM, i) for i in range(learners)]
+                           for seed in sorted({run.seed for run in runs})}
         self.trace = np.zeros((r, w.max_steps + 1 if record else 1, n, TR_FIELDS), dtype=np.int64)
         self.learns = np.arange(n) < learners
-        self._seeds = sorted({run.seed for run in runs})
+        self._seeds = list(self.generators)
         self._seed_of_run = np.array([self._seeds.index(run.seed) for run in runs])
         self._scratch = dict(
             x=_ints(r, n), y=_ints(r, n), prev_x=_ints(r, n), prev_y=_ints(r, n),
@@ -179,14 +180,16 @@ class Batch:
         row = np.zeros((r, ROW_INTS), dtype=np.int64)
         row_f = np.zeros((r, ROW_FLOATS))
         out = np.zeros((r, OUT_FIELDS), dtype=np.int64)
-        random_actions = np.zeros((r, w.learners, w.max_steps), dtype=np.int64)
-        ties = np.zeros((r, w.learners, w.max_steps, N_ACTIONS))
+        seeds = len(self.generators)
+        seed_actions = np.zeros((seeds, w.learners, w.max_steps), dtype=np.int64)
+        seed_ties = np.zeros((seeds, w.learners, w.max_steps, N_ACTIONS))
         for _ in range(episodes):
             e = self.episode
             starts, goals, scripts = self._scenarios(e)
-            for run, rngs in enumerate(self.rngs):
-                for i, rng in enumerate(rngs):
-                    draw_noise(rng, random_actions[run, i], ties[run, i])
+            for s, generators in enumerate(self.generators.values()):
+                for i, rng in enumerate(generators):
+                    draw_noise(rng, seed_actions[s, i], seed_ties[s, i])
+            random_actions, ties = seed_actions[self._seed_of_run], seed_ties[self._seed_of_run]
             run_episode(w.bodies, w.learners, w.width, w.height, w.max_steps, w.count_swaps,
                         w.goal_reward, w.stay_reward, self.params, self.params_f, self.options, self.q_ds,
                         self.q_ca, self.state, self.state_f, starts, goals, scripts,
@@ -197,6 +200,10 @@ class Batch:
             if on_episode is not None:
                 on_episode(e, self)
         return results
+
+    def generator(self, run: int, agent: int) -> np.random.Generator:
+        """The noise generator of an agent of a run (shared by the runs of its seed)."""
+        return self.generators[self.runs[run].seed][agent]
 
     def tables(self, run: int, agent: int) -> tuple[np.ndarray, np.ndarray]:
         """The Q_DS and Q_CA tables an agent of a run holds (the swarm's one table if shared)."""

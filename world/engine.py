@@ -3,7 +3,8 @@
 One tick: :meth:`SwarmWorld.observations` gives every agent its observation; the agents answer
 with an action each (``None`` for an agent that missed the deadline: it stays, and the miss is
 counted); :meth:`SwarmWorld.apply` moves everyone at once by the rules of ``world.rules`` and
-scores the tick.
+scores the tick. Where the agents share one table, their intents also carry their learning
+records of the tick, which the next observations hand to everyone, in agent-id order.
 
 Each episode ends with one extra *end tick*: every agent is told ``episode_end`` (with the rewards
 of its last action), finishes its learning, checkpoints and answers STAY; nothing moves. An agent
@@ -68,6 +69,7 @@ class SwarmWorld:
         self._before_x, self._before_y = ints([0] * n), ints([0] * n)
         self._occupancy = ints([0] * (config.width * config.height))
         self._blocked = flags([False] * n)
+        self._learned: tuple = ()
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
         self._start_episode(first_episode)
@@ -137,11 +139,12 @@ class SwarmWorld:
     def _observation(self, i: int, neighbours: tuple[tuple[int, int, int], ...]) -> Observation:
         c = self.config
         r_ds, r_ca, collided, arrived = self._outcome
+        parked = tuple(j for j, _, _ in neighbours if arrived[j])
         # Positional, in Observation's field order: keywords cost a fifth of this call.
         return Observation(c.run_id, self.tick, WORLD_SENDER, i, self.episode, self.step,
                            self._cells[i], self._goal_cells[i], neighbours,
                            priority_rank(i, self.tick, c.n_agents), r_ds[i], r_ca[i],
-                           collided[i], arrived[i], self.ending)
+                           collided[i], arrived[i], self.ending, parked, self._learned)
 
     def _neighbours(self) -> list[tuple[tuple[int, int, int], ...]]:
         """Each agent's visible others as ``(id, x, y)`` in id order, by agent id."""
@@ -157,8 +160,10 @@ class SwarmWorld:
                     seen[j].append(everyone[i])
         return [tuple(others) for others in seen]
 
-    def apply(self, actions: list[int | None]) -> TickReport:
-        """Apply every agent's action for this tick (``None``: missed, counted, stays)."""
+    def apply(self, actions: list[int | None], learned: dict | None = None) -> TickReport:
+        """Apply every agent's action for this tick (``None``: missed, counted, stays);
+        ``learned``: the learning records that came with the intents, by agent."""
+        self._learned = tuple((agent, *learned[agent]) for agent in sorted(learned or ()))
         missed = tuple(i for i, a in enumerate(actions) if a is None)
         self._missed += len(missed)
         if self.ending:
