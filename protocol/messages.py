@@ -166,7 +166,8 @@ class Kind(NamedTuple):
 
     tag: str
     fields: tuple[str, ...]  # the class's, in wire order
-    decoder: msgspec.msgpack.Decoder  # of its whole wire array: version, tag, then the fields
+    head: tuple[int, str]  # the items before the fields: the version and the tag
+    decoder: msgspec.msgpack.Decoder  # of its whole wire array
     rules: object  # the rules between its fields (see _rules)
 
 
@@ -189,7 +190,8 @@ def _message(tag: str, *, from_agent: bool):
             raise TypeError(f"{cls.__name__} must start with {_HEADER}, then agent if it names "
                             "one")
         decoder = msgspec.msgpack.Decoder(tuple[(Literal[PROTOCOL_VERSION], Literal[tag], *types)])
-        SCHEMA[cls] = Kind(tag, cls._fields, decoder, _rules(tag, cls._fields, from_agent, lists))
+        rules = _rules(tag, cls._fields, from_agent, lists)
+        SCHEMA[cls] = Kind(tag, cls._fields, (PROTOCOL_VERSION, tag), decoder, rules)
         return cls
     return register
 
@@ -427,7 +429,7 @@ def encode(msg) -> bytes:
     if type(run) is not str or run not in _VALID_RUNS:
         _check_run(run)
     try:
-        data = _ENCODER.encode((PROTOCOL_VERSION, kind.tag, *msg))
+        data = _ENCODER.encode(kind.head + msg)
         items = kind.decoder.decode(data)
     except msgspec.DecodeError as error:  # ValidationError is one too
         raise _rejection(data, kind, run, error) from None

@@ -917,13 +917,16 @@ def test_every_valid_message_packs_as_msgpack_would_and_comes_back_the_same(msg,
     assert repr(back) == repr(msg) and hash(back) == hash(msg)
 
 
-def test_numpy_lists_and_ints_for_floats_go_on_the_wire_as_plain_values():
+def test_numpy_values_lists_str_subclasses_and_ints_for_floats_go_on_the_wire_plain():
     plain = encode(obs())
     for msg in (obs(agent=np.int64(2)), obs(position=[3, 4]), obs(neighbours=[[0, 3, 5], (5, 1, 1)]),
                 obs(neighbours=np.array([[0, 3, 5], [5, 1, 1]])), obs(collided=np.bool_(False)),
                 obs(reward_ds=np.float32(0.25)), obs(step=np.uint8(6))):
         assert encode(msg) == plain
     assert encode(answer(relayed=[(0, 4), [5, 0]])) == encode(answer())
+    name = type("Name", (str,), {})
+    assert encode(intent(run=name(RUN), sender=name("agent/2"))) == encode(intent())
+    assert encode(intent(sender=np.str_("agent/2"))) == encode(intent())
     as_int = encode(obs(reward_ca=10))  # an int is packed as an int, and parsed as a float
     assert msgpack.unpackb(as_int)[wire_index(Observation, "reward_ca")] == 10 and as_int != plain
     assert type(parse(as_int, Observation, RUN).reward_ca) is float
