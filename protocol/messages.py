@@ -10,11 +10,16 @@ says so whatever its length.
 Each message is a :class:`typing.NamedTuple` whose annotations are its schema: msgspec types with
 :class:`msgspec.Meta` bounds (``Count``, ``AgentId``, ``Reward``, ...). :func:`_message` registers a
 class under its kind tag and builds one ``msgspec.msgpack.Decoder`` for its whole wire array, which
-checks every type and range in C; a few rules between fields follow in Python. To add a field,
-write one annotated line in the class, at the place its item takes in the array (after the header
-``run, tick, sender``), with an existing type or a new one declared beside the others; a list with
-one entry per agent (``agent_list``) also gets the agent-list rules. Bump :data:`PROTOCOL_VERSION`
-when the array changes, and give the field to every constructor call.
+checks every type and range in C; a few rules between fields (:func:`_rules`) follow in Python.
+No source text is generated: the types are the checks.
+
+To add a field, write one annotated line in the class where its item goes in the array (after the
+header ``run, tick, sender``, and ``agent`` if the kind names one); with a default, as the last
+line, existing constructor calls need no change. For example, a per-neighbour "parked" flag is
+``Neighbours = agent_list(Coord, Coord, bool)``, and planned later moves are
+``plan: Annotated[tuple[Action, ...], Meta(max_length=8)] = ()`` at the end of ``Intent``. A list
+with one entry per agent (:func:`agent_list`) also gets the agent-list rules. Bump
+:data:`PROTOCOL_VERSION` whenever the array changes, so that other versions say so.
 
 :func:`parse` checks, in order, and raises :class:`Rejected` with the reason in brackets: bytes
 (``not-bytes``); size, before unpacking (``oversize``); msgpack, with no maps and no ext types
@@ -27,8 +32,8 @@ and range, the first bad one named (``bad-field:<name>``); then the rules betwee
 agent-list naming an agent twice (``bad-field:<name>``), the sender (``forged-sender``: the world,
 or the agent the message is of, on its own key), the message's own agent in one of its
 agent-lists (``bad-field:<name>``). Types are strict: a bool is not an int, an int is not a bool;
-float fields take ints but must be finite. The decoder decides; only when it refuses does
-:func:`_rejection` read the payload again, untyped, to name the first rule broken in that order.
+float fields take ints but must be finite. The decoder and the rules decide; when the decoder
+refuses, :func:`_rejection` reads the payload again, untyped, only to name the first rule broken.
 :class:`Inbox` turns a rejection into a counted, rate-limited log line and None, and never raises.
 
 :func:`encode` packs a message (numpy scalars and arrays become plain values) and parses the bytes
@@ -40,6 +45,7 @@ to the same float.
 import logging
 import re
 from collections import Counter
+from collections.abc import Callable
 from typing import Annotated, Literal, NamedTuple, get_type_hints
 
 import msgspec
@@ -168,7 +174,7 @@ class Kind(NamedTuple):
     fields: tuple[str, ...]  # the class's, in wire order
     head: tuple[int, str]  # the items before the fields: the version and the tag
     decoder: msgspec.msgpack.Decoder  # of its whole wire array
-    rules: object  # the rules between its fields (see _rules)
+    rules: Callable[[tuple, int | None], None]  # the rules between its fields, see _rules
 
 
 SCHEMA: dict[type, Kind] = {}

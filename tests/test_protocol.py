@@ -259,16 +259,19 @@ def test_encode_normalises_numpy_and_ints():
     assert back.neighbours == ((0, 3, 5), (5, 1, 1)) and type(back.position) is tuple
 
 
-@pytest.mark.parametrize("msg", [
-    obs(agent=True), obs(position=(1, 2, 3)), obs(reward_ds=math.nan), obs(neighbours=((2, 0, 0),)),
-    obs(sender="agent/2"), intent(action=N_ACTIONS), intent(sender="agent/3"), intent(action=1.0),
-    control(command="reboot"), control(run="a/b"), control(tick=-1),
+@pytest.mark.parametrize("msg,reason", [
+    (obs(agent=True), "bad-field:agent"), (obs(position=(1, 2, 3)), "bad-field:position"),
+    (obs(reward_ds=math.nan), "bad-field:reward_ds"),
+    (obs(neighbours=((2, 0, 0),)), "bad-field:neighbours"), (obs(sender="agent/2"), "forged-sender"),
+    (intent(action=N_ACTIONS), "bad-field:action"), (intent(sender="agent/3"), "forged-sender"),
+    (intent(action=1.0), "bad-field:action"), (control(command="reboot"), "bad-field:command"),
+    (control(run="a/b"), "bad-field:run"), (control(tick=-1), "bad-field:tick"),
 ])
-def test_encode_rejects_invalid_messages(msg):
-    with pytest.raises(Rejected):
+def test_encode_rejects_invalid_messages(msg, reason):
+    with pytest.raises(Rejected) as rejected:
         encode(msg)
-    with pytest.raises(ValueError):  # Rejected is a ValueError: a bug on the sending side
-        encode(msg)
+    assert rejected.value.reason == reason
+    assert isinstance(rejected.value, ValueError)  # a bug on the sending side
 
 
 def test_encode_rejects_non_messages():
@@ -1114,8 +1117,8 @@ def test_the_schema_is_the_annotations_of_the_classes():
 
 def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
     """Declaring a message is its class: each field one annotated line (here a per-neighbour flag
-    and a tuple of planned moves), checked on the wire by type and range, agent-lists by the rules;
-    the first fields must be the header."""
+    and a tuple of planned moves, with a default), checked on the wire by type and range,
+    agent-lists by the rules; the first fields must be the header."""
     from typing import Annotated, NamedTuple
 
     from msgspec import Meta
@@ -1129,8 +1132,10 @@ def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
         sender: messages.Name
         agent: messages.AgentId
         seen: messages.agent_list(messages.Coord, messages.Coord, bool)
-        moves: Annotated[tuple[messages.Action, ...], Meta(max_length=3)]
+        moves: Annotated[tuple[messages.Action, ...], Meta(max_length=3)] = ()
 
+    assert Plan(RUN, 7, "agent/2", 2, ()).moves == ()  # a default: calls without it still work
+    assert msgpack.unpackb(encode(Plan(RUN, 7, "agent/2", 2, ())))[-1] == []
     good = Plan(RUN, 7, "agent/2", 2, ((0, 1, 1, True), (5, 2, 2, False)), (1, 4))
     payload = encode(good)
     assert msgpack.unpackb(payload) == [2, "plan", RUN, 7, "agent/2", 2, [[0, 1, 1, True],
