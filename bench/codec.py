@@ -96,7 +96,8 @@ def main() -> int:
         ops = [operations(codec, msg) for codec, msg in zip(codecs, msgs)]
         for op in ops[0]:
             rows = timed([o[op] for o in ops], args.repeats)
-            line = f"{type(msgs[0]).__name__:>12} {op:>7} {statistics.median(r[0] for r in rows):>6.2f}"
+            current = statistics.median(r[0] for r in rows)
+            line = f"{type(msgs[0]).__name__:>12} {op:>7} {current:>6.2f}"
             if args.baseline:
                 line += (f" {statistics.median(r[1] for r in rows):>11.2f}"
                          f" {statistics.median(r[1] / r[0] for r in rows):>5.2f}x")

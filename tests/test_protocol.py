@@ -1,4 +1,5 @@
-"""Keys and wire messages: round trips, every rejection reason, and fuzzing of the decode path."""
+"""Keys and wire messages: round trips, every rejection reason, the one codec path against an
+independent reading of the rules, and fuzzing."""
 
 import logging
 import math
@@ -262,7 +263,8 @@ def test_encode_normalises_numpy_and_ints():
 @pytest.mark.parametrize("msg,reason", [
     (obs(agent=True), "bad-field:agent"), (obs(position=(1, 2, 3)), "bad-field:position"),
     (obs(reward_ds=math.nan), "bad-field:reward_ds"),
-    (obs(neighbours=((2, 0, 0),)), "bad-field:neighbours"), (obs(sender="agent/2"), "forged-sender"),
+    (obs(neighbours=((2, 0, 0),)), "bad-field:neighbours"),
+    (obs(sender="agent/2"), "forged-sender"),
     (intent(action=N_ACTIONS), "bad-field:action"), (intent(sender="agent/3"), "forged-sender"),
     (intent(action=1.0), "bad-field:action"), (control(command="reboot"), "bad-field:command"),
     (control(run="a/b"), "bad-field:run"), (control(tick=-1), "bad-field:tick"),
@@ -922,7 +924,8 @@ def test_every_valid_message_packs_as_msgpack_would_and_comes_back_the_same(msg,
 
 def test_numpy_values_lists_str_subclasses_and_ints_for_floats_go_on_the_wire_plain():
     plain = encode(obs())
-    for msg in (obs(agent=np.int64(2)), obs(position=[3, 4]), obs(neighbours=[[0, 3, 5], (5, 1, 1)]),
+    for msg in (obs(agent=np.int64(2)), obs(position=[3, 4]),
+                obs(neighbours=[[0, 3, 5], (5, 1, 1)]),
                 obs(neighbours=np.array([[0, 3, 5], [5, 1, 1]])), obs(collided=np.bool_(False)),
                 obs(reward_ds=np.float32(0.25)), obs(step=np.uint8(6))):
         assert encode(msg) == plain
@@ -1143,7 +1146,8 @@ def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
     assert parse(payload, Plan, RUN, key_agent=2) == good
     for change, reason in [
         ({"moves": (1, 2, 3, 4)}, "bad-field:moves"), ({"moves": (5,)}, "bad-field:moves"),
-        ({"seen": ((0, 1, 1, 1),)}, "bad-field:seen"), ({"seen": ((2, 1, 1, True),)}, "bad-field:seen"),
+        ({"seen": ((0, 1, 1, 1),)}, "bad-field:seen"),
+        ({"seen": ((2, 1, 1, True),)}, "bad-field:seen"),
         ({"seen": ((0, 1, 1, True), (0, 2, 2, True))}, "bad-field:seen"),
         ({"sender": "agent/3"}, "forged-sender"),
     ]:
