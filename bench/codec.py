@@ -1,66 +1,66 @@
 #!/usr/bin/env python3
-"""Cost of the wire codec per message: the compiled fast path against the generic reference path.
+"""Cost of the wire codec per message: ``encode`` (validate, then pack) and ``parse``, per kind.
 
 For each message kind, on one valid message as the world and the agents make them (plain ints,
-floats and tuples), in the same run: ``encode`` (which validates, then packs) against the generic
-``to_wire`` packed alike, and ``parse`` of bytes against the generic parse (which ``parse`` falls
-back on when in doubt). Both sides are checked to give the same bytes and the same message first.
-Each figure is the median over ``--repeats`` of the mean time of one call, in microseconds,
-timed with ``timeit`` over enough calls to take about 0.2 s; the ratio is the median of each
-repeat's own reference / fast ratio (the two are timed back to back, in alternating order).
+floats and tuples): ``encode`` and ``parse`` of its bytes. Each figure is the median over
+``--repeats`` of the mean time of one call, in microseconds, timed with ``timeit`` over enough
+calls to take about 0.2 s. With ``--baseline FILE``, another version of ``protocol/messages.py``
+(say ``git show main:protocol/messages.py > /tmp/messages_main.py``) is timed alongside on equal
+messages, in alternating order, after both are checked to give the same bytes and messages; the
+ratio is the median of each repeat's own baseline / current ratio (above 1: the current is faster).
 
     python bench/codec.py --repeats 5 --neighbours 4
+    python bench/codec.py --repeats 9 --baseline /tmp/messages_main.py
 """
 
 import argparse
+import importlib.util
 import statistics
 import sys
 import timeit
 from pathlib import Path
-
-import msgpack
+from types import ModuleType
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from protocol import messages  # noqa: E402
-from protocol.messages import (  # noqa: E402
-    CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Intent, Observation, agent_sender, encode,
-    parse,
-)
 
 RUN = "bench"
 
 
-def samples(neighbours: int) -> list:
+def samples(codec: ModuleType, neighbours: int) -> list:
     """One typical message of each kind, for agent 0 (relaying as many intents as it sees)."""
     others = range(1, neighbours + 1)
     return [
-        Observation(run=RUN, tick=1234, sender=WORLD_SENDER, agent=0, episode=12, step=34,
-                    position=(3, 4), goal=(9, 1), neighbours=tuple((j, j, 5) for j in others),
-                    rank=2, reward_ds=-0.25, reward_ca=0.0, collided=False, arrived=False,
-                    episode_end=False),
-        Answer(run=RUN, tick=1234, sender=agent_sender(0), agent=0, episode=12, action=3,
-               relayed=tuple((j, j % 5) for j in others)),
-        Intent(run=RUN, tick=1234, sender=agent_sender(0), agent=0, episode=12, action=3),
-        Control(run=RUN, tick=1234, sender=WORLD_SENDER, command=CONTROL_SHUTDOWN),
+        codec.Observation(run=RUN, tick=1234, sender=codec.WORLD_SENDER, agent=0, episode=12,
+                          step=34, position=(3, 4), goal=(9, 1),
+                          neighbours=tuple((j, j, 5) for j in others), rank=2, reward_ds=-0.25,
+                          reward_ca=0.0, collided=False, arrived=False, episode_end=False),
+        codec.Answer(run=RUN, tick=1234, sender=codec.agent_sender(0), agent=0, episode=12,
+                     action=3, relayed=tuple((j, j % 5) for j in others)),
+        codec.Intent(run=RUN, tick=1234, sender=codec.agent_sender(0), agent=0, episode=12,
+                     action=3),
+        codec.Control(run=RUN, tick=1234, sender=codec.WORLD_SENDER,
+                      command=codec.CONTROL_SHUTDOWN),
     ]
 
 
-def generic_encode(msg) -> bytes:
-    return msgpack.packb(messages._generic_to_wire(msg), use_bin_type=True)
-
-
-def operations(msg) -> dict:
-    """Each operation on ``msg`` as (generic, fast), checked to give the same result."""
-    kind, payload, key_agent = type(msg), encode(msg), getattr(msg, "agent", None)
-    assert payload == generic_encode(msg)
-    assert parse(payload, kind, RUN, key_agent) == messages._generic_parse(
-        payload, kind, RUN, key_agent) == msg
+def operations(codec: ModuleType, msg) -> dict:
+    """Each operation on ``msg`` by ``codec``, checked to round-trip first."""
+    kind, payload, key_agent = type(msg), codec.encode(msg), getattr(msg, "agent", None)
+    assert codec.parse(payload, kind, RUN, key_agent) == msg
     return {
-        "encode": (lambda: generic_encode(msg), lambda: encode(msg)),
-        "parse": (lambda: messages._generic_parse(payload, kind, RUN, key_agent),
-                  lambda: parse(payload, kind, RUN, key_agent)),
+        "encode": lambda: codec.encode(msg),
+        "parse": lambda: codec.parse(payload, kind, RUN, key_agent),
     }
+
+
+def load(path: Path) -> ModuleType:
+    """A messages.py from a file, as a module of its own."""
+    spec = importlib.util.spec_from_file_location("baseline_messages", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def per_call_us(fn) -> float:
@@ -69,25 +69,39 @@ def per_call_us(fn) -> float:
     return timer.timeit(number) / number * 1e6
 
 
+def timed(fns: list, repeats: int) -> list[list[float]]:
+    """Per repeat, the time of one call of each function, timed in turn (rotating who goes
+    first)."""
+    rows = []
+    for r in range(repeats):
+        order = fns[r % len(fns):] + fns[:r % len(fns)]
+        times = {fn: per_call_us(fn) for fn in order}
+        rows.append([times[fn] for fn in fns])
+    return rows
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--neighbours", type=int, default=4,
                    help="agents in the observation's neighbours and the answer's relayed intents")
+    p.add_argument("--baseline", type=Path, help="another protocol/messages.py to time alongside")
     args = p.parse_args()
-    print(f"{'kind':>12} {'op':>7} {'generic µs':>10} {'fast µs':>8} {'ratio':>6}  bytes")
-    for msg in samples(args.neighbours):
-        for op, (generic, fast) in operations(msg).items():
-            times = []
-            for r in range(args.repeats):
-                order = (generic, fast) if r % 2 == 0 else (fast, generic)
-                timed = {fn: per_call_us(fn) for fn in order}
-                times.append((timed[generic], timed[fast]))
-            slow = statistics.median(g for g, _ in times)
-            quick = statistics.median(f for _, f in times)
-            ratio = statistics.median(g / f for g, f in times)
-            print(f"{type(msg).__name__:>12} {op:>7} {slow:>10.2f} {quick:>8.2f} {ratio:>5.1f}x  "
-                  f"{len(encode(msg))}", flush=True)
+    codecs = [messages] + ([load(args.baseline)] if args.baseline else [])
+    print(f"{'kind':>12} {'op':>7} {'µs':>6}" + (f" {'baseline µs':>11} {'ratio':>6}"
+                                                  if args.baseline else "") + "  bytes")
+    for msgs in zip(*(samples(codec, args.neighbours) for codec in codecs)):
+        payloads = [codec.encode(msg) for codec, msg in zip(codecs, msgs)]
+        assert len(set(payloads)) == 1, "the baseline gives other bytes"
+        ops = [operations(codec, msg) for codec, msg in zip(codecs, msgs)]
+        for op in ops[0]:
+            rows = timed([o[op] for o in ops], args.repeats)
+            current = statistics.median(r[0] for r in rows)
+            line = f"{type(msgs[0]).__name__:>12} {op:>7} {current:>6.2f}"
+            if args.baseline:
+                line += (f" {statistics.median(r[1] for r in rows):>11.2f}"
+                         f" {statistics.median(r[1] / r[0] for r in rows):>5.2f}x")
+            print(f"{line}  {len(payloads[0])}", flush=True)
     return 0
 
 

@@ -1,42 +1,56 @@
 """Every wire message of the swarm, and the one msgpack codec that encodes and validates them.
 
 On the wire a message is a msgpack array: ``[version, kind tag, run id, tick, sender, ...]``, then
-the other fields of its kind, in the order of :data:`SCHEMA` (its class's field order). An array,
-not a map with a short key per field (protocol version 1), because the codec is on the critical
-path of the lockstep loop: no keys to pack, unpack, hash and match, a smaller payload, and one
-shape to check (exactly as many items as the kind has fields). The version and the kind lead, so
-that a message of another version or kind says so whatever its length.
+the other fields of its kind in its class's field order. An array, not a map with a short key per
+field (protocol version 1), because the codec is on the critical path of the lockstep loop: no keys
+to pack, unpack, hash and match, a smaller payload, and one shape to check (exactly as many items as
+the kind has fields). The version and the kind lead, so that a message of another version or kind
+says so whatever its length.
+
+Each message is a :class:`typing.NamedTuple` whose annotations are its schema: msgspec types with
+:class:`msgspec.Meta` bounds (``Count``, ``AgentId``, ``Reward``, ...). :func:`_message` registers a
+class under its kind tag and builds one ``msgspec.msgpack.Decoder`` for its whole wire array, which
+checks every type and range in C; a few rules between fields (:func:`_rules`) follow in Python.
+No source text is generated: the types are the checks.
+
+To add a field, write one annotated line in the class where its item goes in the array (after the
+header ``run, tick, sender``, and ``agent`` if the kind names one); with a default, as the last
+line, existing constructor calls need no change. For example, a per-neighbour "parked" flag is
+``Neighbours = agent_list(Coord, Coord, bool)``, and planned later moves are
+``plan: Annotated[tuple[Action, ...], Meta(max_length=8)] = ()`` at the end of ``Intent``. A list
+with one entry per agent (:func:`agent_list`) also gets the agent-list rules. Bump
+:data:`PROTOCOL_VERSION` whenever the array changes, so that other versions say so.
 
 :func:`parse` checks, in order, and raises :class:`Rejected` with the reason in brackets: bytes
-(``not-bytes``); size, before unpacking (``oversize``; it stands in for ``max_buffer_size``, which
-``msgpack.unpackb`` lacks); msgpack with strict limits, no ext types and no maps anywhere
-(``not-msgpack``); an array at the top level (``not-array``; a map there is told by its first byte,
-whatever follows, so a version-1 message is ``not-array``, never ``not-msgpack``); the version, if
-the array has an item (``bad-version``); the kind, if it has two (``wrong-kind``); exactly the
-kind's number of items (``wrong-length``); run id (``wrong-run``); each field's type and range
-(``bad-field:<name>``); then the rules between fields: the sender (``forged-sender``), an agent
-neither among its own neighbours nor relaying its own intent (``bad-field:<name>``). Types are
-strict: a bool is not an int, an int is not a bool; float fields take ints but must be finite.
+(``not-bytes``); size, before unpacking (``oversize``); msgpack, with no maps and no ext types
+anywhere, no string or binary longer than MAX_STR_LEN characters or bytes and no array longer than
+MAX_AGENTS items (``not-msgpack``); an array at the top level (``not-array``; a map there is told by
+its first byte, whatever follows, so a version-1 message is ``not-array``, never ``not-msgpack``);
+the version, if the array has an item (``bad-version``); the kind, if it has two (``wrong-kind``);
+exactly the kind's number of items (``wrong-length``); run id (``wrong-run``); each field's type
+and range, the first bad one named (``bad-field:<name>``); then the rules between fields: an
+agent-list naming an agent twice (``bad-field:<name>``), the sender (``forged-sender``: the world,
+or the agent the message is of, on its own key), the message's own agent in one of its
+agent-lists (``bad-field:<name>``). Types are strict: a bool is not an int, an int is not a bool;
+float fields take ints but must be finite. The decoder and the rules decide; when the decoder
+refuses, :func:`_rejection` reads the payload again, untyped, only to name the first rule broken.
 :class:`Inbox` turns a rejection into a counted, rate-limited log line and None, and never raises.
-:func:`encode` runs the same checks (accepting numpy scalars and arrays), so a malformed message
-fails where it is made.
 
-Messages are :class:`typing.NamedTuple` classes: immutable, built by one ``tuple.__new__``, read
-by unpacking. Both :func:`parse` and :func:`encode` first try a fast path, compiled at import from
-:data:`SCHEMA` (each check has a fast form): it tests every field inline and answers only for a
-valid message of plain built-in types; at any doubt (numpy, lists, an int for a float, anything
-invalid) it steps aside and the generic checks decide, so every rejection, its reason and its
-order are theirs.
+:func:`encode` packs a message (numpy scalars and arrays become plain values) and parses the bytes
+it made with the same decoder and rules, so a malformed message fails where it is made and every
+payload it returns parses. An int given for a float field goes on the wire as an int, which parses
+to the same float.
 """
 
 import logging
-import threading
+import re
 from collections import Counter
-from functools import lru_cache
-from typing import NamedTuple
+from collections.abc import Callable
+from typing import Annotated, Literal, NamedTuple, get_type_hints
 
-import msgpack
+import msgspec
 import numpy as np
+from msgspec import Meta
 
 from protocol.actions import N_ACTIONS
 from protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
@@ -56,8 +70,7 @@ CONTROL_COMMANDS = frozenset({CONTROL_SHUTDOWN})
 __all__ = [
     "PROTOCOL_VERSION", "MAX_AGENTS", "MAX_GRID", "MAX_PAYLOAD_BYTES", "WORLD_SENDER",
     "CONTROL_SHUTDOWN", "CONTROL_COMMANDS", "agent_sender", "Observation", "Intent", "Answer",
-    "Control",
-    "SCHEMA", "Rejected", "encode", "to_wire", "parse", "Inbox",
+    "Control", "SCHEMA", "Kind", "Rejected", "encode", "to_wire", "parse", "Inbox",
 ]
 
 
@@ -66,61 +79,40 @@ def agent_sender(agent: int) -> str:
     return f"agent/{agent}"
 
 
-class Observation(NamedTuple):
-    """World -> one agent, each tick: where it is, what it sees, how its previous action went."""
+# ---------------------------------------------------------------- field types
 
-    run: str
-    tick: int
-    sender: str
-    agent: int
-    episode: int
-    step: int
-    position: tuple[int, int]
-    goal: tuple[int, int]
-    neighbours: tuple[tuple[int, int, int], ...]  # (id, x, y) of visible others
-    rank: int  # priority this tick, 0 = highest
-    reward_ds: float  # rewards of the agent's previous action
-    reward_ca: float
-    collided: bool
-    arrived: bool
-    episode_end: bool
+Name = Annotated[str, Meta(max_length=MAX_STR_LEN)]
+Count = Annotated[int, Meta(ge=0, lt=MAX_TICK)]
+"""Ticks, episodes, steps."""
+AgentId = Annotated[int, Meta(ge=0, lt=MAX_AGENTS)]
+Action = Annotated[int, Meta(ge=0, lt=N_ACTIONS)]
+"""0 .. N_ACTIONS - 1, see protocol.actions."""
+Coord = Annotated[int, Meta(ge=0, lt=MAX_GRID)]
+Cell = tuple[Coord, Coord]
+Reward = Annotated[float, Meta(ge=-MAX_REWARD, le=MAX_REWARD)]
+"""Finite: NaN fails both bounds, an infinity one."""
+Command = Literal[tuple(sorted(CONTROL_COMMANDS))]
 
 
-class Intent(NamedTuple):
-    """Agent -> world and neighbours: its action at this tick (never changed once sent)."""
+class _AgentList:
+    """The mark of an agent-list field: each agent at most once, never the message's own agent."""
 
-    run: str
-    tick: int
-    sender: str
-    agent: int
-    episode: int
-    action: int  # 0 .. N_ACTIONS - 1, see protocol.actions
+    def __repr__(self) -> str:
+        return "agent list"
 
 
-class Answer(NamedTuple):
-    """Agent -> a neighbour that asked for its intent: its action at this tick, and the actions
-    of the higher-ranked agents it learned while negotiating (relayed: ``(agent, action)``).
-
-    The relayed intents spare the asker from asking each of those agents itself
-    (``agent.negotiation``); they are what those agents announced, which never changes.
-    """
-
-    run: str
-    tick: int
-    sender: str
-    agent: int
-    episode: int
-    action: int
-    relayed: tuple[tuple[int, int], ...]
+AGENT_LIST = _AgentList()
 
 
-class Control(NamedTuple):
-    """World -> everyone: a command from CONTROL_COMMANDS."""
+def agent_list(*rest) -> object:
+    """The type of a tuple of ``(agent id, *rest)`` entries, at most one per agent."""
+    return Annotated[tuple[tuple[(AgentId, *rest)], ...], Meta(max_length=MAX_AGENTS), AGENT_LIST]
 
-    run: str
-    tick: int
-    sender: str
-    command: str
+
+Neighbours = agent_list(Coord, Coord)
+"""``(id, x, y)`` of each visible other agent."""
+Relayed = agent_list(Action)
+"""``(id, action)`` of each relayed intent."""
 
 
 class Rejected(ValueError):
@@ -132,271 +124,212 @@ class Rejected(ValueError):
         self.detail = detail
 
 
-# Field checks: a decoded (or to-be-encoded) value in, the normalised value out, or ValueError.
-# Each has a fast form for the fast path: ``check.fast(v)``, the source of a test (an ``and`` chain)
-# of the expression ``v``, true only where the check would return ``v`` itself or its equal (so:
-# exact built-in types, tuples and not lists).
-
-def _int(lo: int, hi: int):
-    def check(x):
-        if type(x) is not int:
-            if not isinstance(x, np.integer):  # bool is not an int here
-                raise ValueError(f"expected int, got {type(x).__name__}")
-            x = int(x)
-        if not lo <= x < hi:
-            raise ValueError(f"{x} not in [{lo}, {hi})")
-        return x
-    check.fast = lambda v: f"type({v}) is int and {lo} <= {v} < {hi}"
-    return check
-
-
-def _bool(x):
-    if not isinstance(x, (bool, np.bool_)):
-        raise ValueError(f"expected bool, got {type(x).__name__}")
-    return bool(x)
-
-
-_bool.fast = lambda v: f"type({v}) is bool"
-
-
-def _reward(x):
-    if type(x) not in (float, int) and not isinstance(x, (np.integer, np.floating)):
-        raise ValueError(f"expected float, got {type(x).__name__}")
-    value = float(x)  # before abs(): abs(np.int64(-2**63)) overflows to a negative number
-    if not abs(value) <= MAX_REWARD:  # also false for NaN
-        raise ValueError(f"{x!r} not finite or beyond {MAX_REWARD:g}")
-    return value
-
-
-_reward.fast = lambda v: f"type({v}) is float and {-MAX_REWARD!r} <= {v} <= {MAX_REWARD!r}"
-
-
-def _str(x):
-    if not isinstance(x, str) or len(x) > MAX_STR_LEN:
-        raise ValueError(f"expected str, got {type(x).__name__}")
-    return x
-
-
-_str.fast = lambda v: f"type({v}) is str and len({v}) <= {MAX_STR_LEN}"
-
-
-def _command(x):
-    if _str(x) not in CONTROL_COMMANDS:
-        raise ValueError(f"unknown command {x!r}")
-    return x
-
-
-_command.fast = lambda v: f"{_str.fast(v)} and {v} in CONTROL_COMMANDS"
-
-
-_agent = _int(0, MAX_AGENTS)
-_action = _int(0, N_ACTIONS)
-_coord = _int(0, MAX_GRID)
-_count = _int(0, MAX_TICK)
-_SEQ = (list, tuple, np.ndarray)
-
-
-def _fast_tuple(v: str, checks: tuple) -> str:
-    """The fast form of a check that ``v`` is a tuple of ``len(checks)`` values, one a check."""
-    each = " and ".join(check.fast(f"{v}[{i}]") for i, check in enumerate(checks))
-    return f"type({v}) is tuple and len({v}) == {len(checks)} and {each}"
-
-
-def _cell(x):
-    if not isinstance(x, _SEQ) or len(x) != 2:
-        raise ValueError("expected [x, y]")
-    return (_coord(x[0]), _coord(x[1]))
-
-
-_cell.fast = lambda v: _fast_tuple(v, (_coord, _coord))
-
-
-def _per_agent(what: str, *rest):
-    """A check of a list with one ``[agent id, *rest]`` entry per agent (at most MAX_AGENTS)."""
-    width = 1 + len(rest)
-
-    def check(x):
-        if not isinstance(x, _SEQ) or len(x) > MAX_AGENTS:
-            raise ValueError(f"expected a list of at most {MAX_AGENTS} {what}")
-        out = []
-        for item in x:
-            if not isinstance(item, _SEQ) or len(item) != width:
-                raise ValueError(f"expected {what}")
-            out.append((_agent(item[0]), *(c(v) for c, v in zip(rest, item[1:]))))
-        if len({entry[0] for entry in out}) != len(out):
-            raise ValueError(f"the same agent twice in {what}")
-        return tuple(out)
-
-    def fast(v: str) -> str:  # as many distinct ids as entries, counting only valid entries
-        assert v.isidentifier(), v  # the ids are kept in ``<v>_ids``, for the fast form of _related
-        return (
-            f"type({v}) is tuple and len({v}) <= {MAX_AGENTS} and len({v}) == "
-            f"len({v}_ids := {{item[0] for item in {v} if {_fast_tuple('item', (_agent, *rest))}}})"
-        )
-
-    check.fast = fast
-    return check
-
-
-_neighbours = _per_agent("[id, x, y]", _coord, _coord)
-_relayed = _per_agent("[id, action]", _action)
-
-
-class Field(NamedTuple):
-    name: str
-    check: object
-
-
-class Kind(NamedTuple):
-    tag: str
-    fields: tuple[Field, ...]
-
-
-_HEADER = (Field("run", _str), Field("tick", _count), Field("sender", _str))
-
-SCHEMA: dict[type, Kind] = {
-    Observation: Kind("obs", _HEADER + (
-        Field("agent", _agent),
-        Field("episode", _count),
-        Field("step", _count),
-        Field("position", _cell),
-        Field("goal", _cell),
-        Field("neighbours", _neighbours),
-        Field("rank", _agent),
-        Field("reward_ds", _reward),
-        Field("reward_ca", _reward),
-        Field("collided", _bool),
-        Field("arrived", _bool),
-        Field("episode_end", _bool),
-    )),
-    Intent: Kind("intent", _HEADER + (
-        Field("agent", _agent),
-        Field("episode", _count),
-        Field("action", _action),
-    )),
-    Answer: Kind("answer", _HEADER + (
-        Field("agent", _agent),
-        Field("episode", _count),
-        Field("action", _action),
-        Field("relayed", _relayed),
-    )),
-    Control: Kind("control", _HEADER + (
-        Field("command", _command),
-    )),
-}
-"""Message class -> its kind tag and its fields (name, check), in wire order: the class's order."""
-
-_MAX_ARRAY_LEN = max(MAX_AGENTS, 2 + max(len(kind.fields) for kind in SCHEMA.values()))
-"""The longest array: a list of one entry per agent, or the top level (version, kind, fields)."""
-
-
-def _schema(kind: type) -> Kind:
-    try:
-        return SCHEMA[kind]
-    except (KeyError, TypeError):
-        raise TypeError(f"not a message class: {kind!r}") from None
-
+# ---------------------------------------------------------------- the rules between fields
 
 _AGENT_SENDERS = tuple(map(agent_sender, range(MAX_AGENTS)))
 """The sender of every agent, looked up rather than formatted for each message."""
 
 
-def _related(msg, key_agent: int | None):
-    """``msg`` if the rules between its (valid) fields hold: its sender, whom its lists name."""
-    cls = type(msg)
-    if cls is Intent or cls is Answer:
-        if msg.sender != _AGENT_SENDERS[msg.agent]:
-            raise Rejected("forged-sender", f"intent of agent {msg.agent} sent by {msg.sender!r}")
-        if key_agent is not None and msg.agent != key_agent:
-            raise Rejected("forged-sender", f"agent {msg.agent}'s intent on {key_agent}'s key")
-    elif msg.sender != WORLD_SENDER:
-        raise Rejected("forged-sender", f"{cls.__name__} sent by {msg.sender!r}")
-    if cls is Observation and any(n[0] == msg.agent for n in msg.neighbours):
-        raise Rejected("bad-field:neighbours", "the observing agent is among its neighbours")
-    if cls is Answer and any(r[0] == msg.agent for r in msg.relayed):
-        raise Rejected("bad-field:relayed", "an agent relays its own intent")
-    return msg
+def _rules(tag: str, fields: tuple[str, ...], from_agent: bool, lists: tuple[int, ...]):
+    """The rules between the fields of a kind, as one function ``(items, key_agent)`` that raises
+    Rejected: ``items`` its wire array, each field valid, ``key_agent`` the agent of the key it
+    came on (or None). ``lists`` are where its agent-lists are in the array."""
+
+    def sent_by_agent(items: tuple, key_agent: int | None) -> None:
+        agent = items[5]
+        if items[4] != _AGENT_SENDERS[agent]:
+            raise Rejected("forged-sender", f"agent {agent}'s {tag} sent by {items[4]!r}")
+        if key_agent is not None and agent != key_agent:
+            raise Rejected("forged-sender", f"agent {agent}'s {tag} on {key_agent}'s key")
+
+    def sent_by_world(items: tuple, key_agent: int | None) -> None:
+        if items[4] != WORLD_SENDER:
+            raise Rejected("forged-sender", f"{tag} sent by {items[4]!r}")
+
+    sender_rule = sent_by_agent if from_agent else sent_by_world
+    if not lists:
+        return sender_rule
+
+    def with_agent_lists(items: tuple, key_agent: int | None) -> None:
+        ids_of = []
+        for i in lists:
+            ids = {entry[0] for entry in items[i]}
+            if len(ids) != len(items[i]):
+                raise Rejected(f"bad-field:{fields[i - 2]}", "the same agent twice")
+            ids_of.append((i, ids))
+        sender_rule(items, key_agent)
+        for i, ids in ids_of:
+            if items[5] in ids:
+                raise Rejected(f"bad-field:{fields[i - 2]}", f"agent {items[5]} lists itself")
+
+    return with_agent_lists
 
 
-_related.fast = {  # true exactly where _related returns the message, given its fields valid (as
-    # locals, with ``<list>_ids`` the set of the ids in a list, which the list's fast check binds)
-    Observation: "sender == WORLD_SENDER and agent not in neighbours_ids",
-    Intent: "sender == _AGENT_SENDERS[agent] and (key_agent is None or key_agent == agent)",
-    Answer: "sender == _AGENT_SENDERS[agent] and (key_agent is None or key_agent == agent)"
-            " and agent not in relayed_ids",
-    Control: "sender == WORLD_SENDER",
-}
+# ---------------------------------------------------------------- the registry of kinds
+
+class Kind(NamedTuple):
+    """How one message class goes on the wire."""
+
+    tag: str
+    fields: tuple[str, ...]  # the class's, in wire order
+    head: tuple[int, str]  # the items before the fields: the version and the tag
+    decoder: msgspec.msgpack.Decoder  # of its whole wire array
+    rules: Callable[[tuple, int | None], None]  # the rules between its fields, see _rules
 
 
-def _checked(cls: type, values, key_agent: int | None) -> object:
-    """Build a message from field values (in SCHEMA order), checking each, then their rules."""
-    out = {}
-    for f, value in zip(SCHEMA[cls].fields, values, strict=True):
-        try:
-            out[f.name] = f.check(value)
-        except (ValueError, TypeError) as e:
-            raise Rejected(f"bad-field:{f.name}", str(e)) from None
-    return _related(cls(**out), key_agent)
+SCHEMA: dict[type, Kind] = {}
+"""Message class -> its :class:`Kind`."""
+
+_HEADER = ("run", "tick", "sender")
 
 
-def _generic_to_wire(msg) -> list:
-    """:func:`to_wire` by the generic checks (where the fast path steps aside)."""
-    cls = type(msg)
-    kind = _schema(cls)
-    if len(msg) != len(kind.fields):  # only tuple.__new__ can make one so
-        raise TypeError(f"a {cls.__name__} of {len(msg)} fields, not {len(kind.fields)}")
+def _message(tag: str, *, from_agent: bool):
+    """Register a NamedTuple as the message of kind ``tag``, sent by the agent it names (in its
+    ``agent`` field, right after the header) or else by the world; its annotations are its
+    schema."""
+    def register(cls: type) -> type:
+        hints = get_type_hints(cls, include_extras=True)
+        types = tuple(hints[name] for name in cls._fields)
+        lists = tuple(2 + i for i, t in enumerate(types)
+                      if AGENT_LIST in getattr(t, "__metadata__", ()))
+        if cls._fields[:3] != _HEADER or (from_agent or lists) and cls._fields[3] != "agent":
+            raise TypeError(f"{cls.__name__} must start with {_HEADER}, then agent if it names "
+                            "one")
+        decoder = msgspec.msgpack.Decoder(tuple[(Literal[PROTOCOL_VERSION], Literal[tag], *types)])
+        rules = _rules(tag, cls._fields, from_agent, lists)
+        SCHEMA[cls] = Kind(tag, cls._fields, (PROTOCOL_VERSION, tag), decoder, rules)
+        return cls
+    return register
+
+
+# ---------------------------------------------------------------- the messages
+
+@_message("obs", from_agent=False)
+class Observation(NamedTuple):
+    """World -> one agent, each tick: where it is, what it sees, how its previous action went."""
+
+    run: Name
+    tick: Count
+    sender: Name
+    agent: AgentId
+    episode: Count
+    step: Count
+    position: Cell
+    goal: Cell
+    neighbours: Neighbours
+    rank: AgentId  # priority this tick, 0 = highest
+    reward_ds: Reward  # rewards of the agent's previous action
+    reward_ca: Reward
+    collided: bool
+    arrived: bool
+    episode_end: bool
+
+
+@_message("intent", from_agent=True)
+class Intent(NamedTuple):
+    """Agent -> world and neighbours: its action at this tick (never changed once sent)."""
+
+    run: Name
+    tick: Count
+    sender: Name
+    agent: AgentId
+    episode: Count
+    action: Action
+
+
+@_message("answer", from_agent=True)
+class Answer(NamedTuple):
+    """Agent -> a neighbour that asked for its intent: its action at this tick, and the actions
+    of the higher-ranked agents it learned while negotiating (relayed: ``(agent, action)``).
+
+    The relayed intents spare the asker from asking each of those agents itself
+    (``agent.negotiation``); they are what those agents announced, which never changes.
+    """
+
+    run: Name
+    tick: Count
+    sender: Name
+    agent: AgentId
+    episode: Count
+    action: Action
+    relayed: Relayed
+
+
+@_message("control", from_agent=False)
+class Control(NamedTuple):
+    """World -> everyone: a command from CONTROL_COMMANDS."""
+
+    run: Name
+    tick: Count
+    sender: Name
+    command: Command
+
+
+def _kind(cls) -> Kind:
     try:
-        validate_run_id(msg.run)
-    except ValueError as e:
-        raise Rejected("bad-field:run", str(e)) from None
-    msg = _checked(cls, [getattr(msg, f.name) for f in kind.fields], None)
-    return [PROTOCOL_VERSION, kind.tag, *(getattr(msg, f.name) for f in kind.fields)]
+        return SCHEMA[cls]
+    except (KeyError, TypeError):
+        raise TypeError(f"not a message class: {cls!r}") from None
 
 
-def to_wire(msg) -> list:
-    """The validated wire array of a message (what :func:`encode` packs); Rejected if invalid."""
-    fast = _FAST_TO_WIRE.get(type(msg))
-    return (fast and fast(msg)) or _generic_to_wire(msg)
-
-
-class _PerThread(threading.local):
-    def __init__(self):
-        self.packer = msgpack.Packer(use_bin_type=True)  # what msgpack.packb makes at each call
-
-
-_PER_THREAD = _PerThread()
-
-
-def encode(msg) -> bytes:
-    """msgpack bytes of a message; raises Rejected (a ValueError) if the message is invalid."""
-    fast = _FAST_TO_WIRE.get(type(msg))  # to_wire(msg), a call less
-    return _PER_THREAD.packer.pack((fast and fast(msg)) or _generic_to_wire(msg))
-
-
-def _no_ext(code, data):
-    raise ValueError(f"ext type {code} not allowed")
-
-
-def _no_map(obj):
-    raise ValueError("map not allowed")  # only an empty one gets here, past max_map_len=0
-
-
-_UNPACK_KEYWORDS = (
-    "raw=False, ext_hook=_no_ext, max_ext_len=0, object_hook=_no_map, max_map_len=0, "
-    "max_str_len=MAX_STR_LEN, max_bin_len=MAX_STR_LEN, max_array_len=_MAX_ARRAY_LEN"
-)
-"""The keywords of every ``msgpack.unpackb`` call, as source: strict limits, no ext types, no maps.
-The fast path compiles them into its call: passed as ``**options``, they cost a third of it."""
-
-_UNPACK_OPTIONS = eval(f"dict({_UNPACK_KEYWORDS})")
+# ---------------------------------------------------------------- parsing
 
 _MAP_HEADS = frozenset({*range(0x80, 0x90), 0xDE, 0xDF})
 """The first bytes of a msgpack map (fixmap, map 16, map 32)."""
 
+_UNTYPED = msgspec.msgpack.Decoder()
+_PLAIN = (int, float, bool, type(None))
+_ITEM = re.compile(r" - at `\$\[(\d+)\]")
+"""The top-level item a msgspec ValidationError names: `` - at `$[7]` `` or `` `$[7][0][2]` ``."""
 
-def _unpackb(payload: bytes, use_list: bool = True):
-    """``msgpack.unpackb`` with strict limits (and arrays as tuples if not ``use_list``)."""
-    return msgpack.unpackb(payload, use_list=use_list, **_UNPACK_OPTIONS)
+
+def _foreign(value) -> str | None:
+    """What in an untyped decoded payload the wire never carries, or None: a map, an ext type,
+    a string or binary over MAX_STR_LEN, an array over MAX_AGENTS items."""
+    stack = [value]
+    while stack:
+        v = stack.pop()
+        t = type(v)
+        if t is list:
+            if len(v) > MAX_AGENTS:
+                return f"an array of {len(v)} items"
+            stack.extend(v)
+        elif t is str or t is bytes:
+            if len(v) > MAX_STR_LEN:
+                return f"a {t.__name__} of length {len(v)}"
+        elif t is dict:
+            return "a map"
+        elif t not in _PLAIN:
+            return f"an ext type ({t.__name__})"
+    return None
+
+
+def _rejection(data: bytes, kind: Kind, run_id: str, error: Exception) -> Rejected:
+    """Why the decoder of ``kind`` refused ``data``: the first rule broken, in the order of the
+    module docstring (the decoder stops at the first error it meets, which may come later)."""
+    if data and data[0] in _MAP_HEADS:
+        return Rejected("not-array", "top level is a map")
+    try:
+        items = _UNTYPED.decode(data)
+    except Exception as e:  # malformed, truncated, trailing bytes, bad UTF-8, nested too deep
+        return Rejected("not-msgpack", f"{type(e).__name__}: {e}")
+    foreign = _foreign(items)
+    if foreign:
+        return Rejected("not-msgpack", f"{foreign} is not allowed")
+    if type(items) is not list:
+        return Rejected("not-array", f"top level is {type(items).__name__}")
+    if items and (type(items[0]) is not int or items[0] != PROTOCOL_VERSION):
+        return Rejected("bad-version", f"expected {PROTOCOL_VERSION}, got {items[0]!r}")
+    if len(items) > 1 and items[1] != kind.tag:
+        return Rejected("wrong-kind", f"expected {kind.tag!r}, got {items[1]!r}")
+    if len(items) != 2 + len(kind.fields):
+        return Rejected("wrong-length", f"expected {2 + len(kind.fields)} items, got {len(items)}")
+    if items[2] != run_id:
+        return Rejected("wrong-run", f"expected {run_id!r}, got {items[2]!r}")
+    item = _ITEM.search(str(error))
+    if item is None or not 3 <= int(item[1]) < len(items):  # not an error msgspec words so
+        return Rejected("decode-error", str(error))
+    return Rejected(f"bad-field:{kind.fields[int(item[1]) - 2]}", str(error))
 
 
 _VIA_TO_BYTES: set[type] = set()
@@ -429,32 +362,7 @@ def _as_bytes(payload) -> bytes:
     return data
 
 
-def _generic_parse(payload, kind: type, run_id: str, key_agent: int | None = None):
-    """:func:`parse` by the generic checks (where the fast path steps aside)."""
-    schema = _schema(kind)
-    payload = _as_bytes(payload)
-    if len(payload) > MAX_PAYLOAD_BYTES:
-        raise Rejected("oversize", f"{len(payload)} bytes")
-    try:
-        data = _unpackb(payload)
-    except Exception as e:
-        if payload and payload[0] in _MAP_HEADS:  # the top level is a map, whatever follows
-            raise Rejected("not-array", "top level is a map") from None
-        raise Rejected("not-msgpack", f"{type(e).__name__}: {e}") from None
-    if type(data) is not list:
-        raise Rejected("not-array", f"top level is {type(data).__name__}")
-    if data:
-        version = data[0]
-        if type(version) is not int or version != PROTOCOL_VERSION:
-            raise Rejected("bad-version", f"expected {PROTOCOL_VERSION}, got {version!r}")
-    if len(data) > 1 and data[1] != schema.tag:
-        raise Rejected("wrong-kind", f"expected {schema.tag!r}, got {data[1]!r}")
-    if len(data) != 2 + len(schema.fields):
-        raise Rejected("wrong-length", f"expected {2 + len(schema.fields)} items, got {len(data)}")
-    run = data[2]
-    if type(run) is not str or run != run_id:
-        raise Rejected("wrong-run", f"expected {run_id!r}, got {run!r}")
-    return _checked(kind, data[2:], key_agent)
+_new = tuple.__new__
 
 
 def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None):
@@ -464,82 +372,85 @@ def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None)
     parsed from the key an Intent arrived on: the intent must be that agent's own.
     """
     try:
-        msg = _FAST_PARSE[kind](payload, run_id, key_agent)
-    except (KeyError, TypeError):  # not a message class: the generic path raises the TypeError
-        msg = None
-    return msg or _generic_parse(payload, kind, run_id, key_agent)
+        info = SCHEMA[kind]
+    except (KeyError, TypeError):
+        raise TypeError(f"not a message class: {kind!r}") from None
+    data = payload if type(payload) is bytes else _as_bytes(payload)
+    if len(data) > MAX_PAYLOAD_BYTES:
+        raise Rejected("oversize", f"{len(data)} bytes")
+    try:
+        items = info.decoder.decode(data)
+    except msgspec.DecodeError as error:  # ValidationError is one too
+        raise _rejection(data, info, run_id, error) from None
+    if items[2] != run_id:
+        raise Rejected("wrong-run", f"expected {run_id!r}, got {items[2]!r}")
+    info.rules(items, key_agent)
+    return _new(kind, items[2:])  # kind(*items[2:]), without the call
 
 
-# The fast path: for each message class, a parser and an encoder compiled from its SCHEMA entry,
-# which test each field inline with the fast form of its check, then the rules between fields
-# with the fast form of _related. They answer only for a valid message of plain built-in types
-# (numpy and lists go the generic way), and None at any doubt or broken rule; the generic
-# functions above then decide, and word the rejection. A message is a tuple of its fields in
-# wire order, so the encoder unpacks it, and the parser builds it from a slice of the array.
+# ---------------------------------------------------------------- encoding
 
-@lru_cache(maxsize=64)
-def _valid_run_id(run: str) -> bool:
+def _plain(value):
+    """msgspec's hook for what it cannot pack: numpy scalars and arrays, str subclasses."""
+    if isinstance(value, (np.generic, np.ndarray)):
+        return value.tolist()
+    if isinstance(value, str):
+        return str(value)
+    raise TypeError(f"{type(value).__name__} is not a message value")
+
+
+_ENCODER = msgspec.msgpack.Encoder(enc_hook=_plain)
+
+
+_VALID_RUNS: set[str] = set()
+"""The run ids of the messages encoded so far (a few), checked once each."""
+
+
+def _check_run(run) -> None:
     try:
         validate_run_id(run)
-    except ValueError:
-        return False
-    return True
+    except ValueError as e:
+        raise Rejected("bad-field:run", str(e)) from None
+    if len(_VALID_RUNS) >= 64:
+        _VALID_RUNS.clear()
+    _VALID_RUNS.add(run)
 
 
-_FAST_CODEC = """
-def fast_codec(cls):
-    new = tuple.__new__
-
-    def parse(payload, run_id, key_agent):
+def _unpackable(kind: Kind, msg: tuple) -> str:
+    """The first field of ``msg`` msgpack cannot carry (some field could not be packed)."""
+    for name, value in zip(kind.fields, msg):
         try:
-            if type(payload) is not bytes:
-                payload = _as_bytes(payload)
-            if len(payload) > MAX_PAYLOAD_BYTES:
-                return None
-            data = msgpack.unpackb(payload, use_list=False, {unpack_keywords})  # arrays as tuples
-            if type(data) is tuple and len(data) == {n_items}:
-                version, tag, {names} = data
-                if (type(version) is int and version == PROTOCOL_VERSION and tag == {tag!r}
-                        and run == run_id and {test} and {related}):
-                    return new(cls, data[2:])  # what cls(...) does, without its arguments
-        except Exception:  # any doubt
-            pass
-        return None
-
-    def to_wire(msg):
-        key_agent = None
-        try:
-            {names} = msg
-        except ValueError:  # a message of the wrong length: only tuple.__new__ makes one
-            return None
-        if {test} and _valid_run_id(run) and {related}:
-            return [PROTOCOL_VERSION, {tag!r}, {names}]
-        return None
-
-    return parse, to_wire
-"""
+            _ENCODER.encode(value)
+        except (TypeError, ValueError, OverflowError, msgspec.EncodeError):
+            return name
+    return "?"
 
 
-def _compile_fast_codec(cls: type) -> tuple:
-    """``parse(payload, run_id, key_agent)`` and ``to_wire(msg)`` of the fast path of ``cls``."""
-    kind = SCHEMA[cls]
-    names = tuple(f.name for f in kind.fields)
-    if names != cls._fields:  # the fast path reads and builds a message as the tuple on the wire
-        raise TypeError(f"{cls.__name__}'s fields are not those of its SCHEMA, in order")
-    source = _FAST_CODEC.format(
-        tag=kind.tag, n_items=2 + len(names), names=", ".join(names),
-        test=" and ".join(f.check.fast(f.name) for f in kind.fields), related=_related.fast[cls],
-        unpack_keywords=_UNPACK_KEYWORDS,
-    )
-    namespace = {}
-    exec(compile(source, f"<fast codec of {cls.__name__}>", "exec"), globals(), namespace)
-    return namespace["fast_codec"](cls)
+def encode(msg) -> bytes:
+    """msgpack bytes of a message; raises Rejected (a ValueError) if the message is invalid."""
+    kind = SCHEMA.get(type(msg))
+    if kind is None or len(msg) != len(kind.fields):  # the latter only tuple.__new__ can make
+        raise TypeError(f"not a message: {msg!r:.100}")
+    run = msg[0]
+    if type(run) is not str or run not in _VALID_RUNS:
+        _check_run(run)
+    try:
+        data = _ENCODER.encode(kind.head + msg)
+        items = kind.decoder.decode(data)
+    except msgspec.DecodeError as error:  # ValidationError is one too
+        raise _rejection(data, kind, run, error) from None
+    except (TypeError, ValueError, OverflowError, msgspec.EncodeError) as error:  # not packable
+        raise Rejected(f"bad-field:{_unpackable(kind, msg)}", str(error)) from None
+    kind.rules(items, None)
+    return data
 
 
-_FAST_PARSE, _FAST_TO_WIRE = {}, {}
-for _cls in SCHEMA:
-    _FAST_PARSE[_cls], _FAST_TO_WIRE[_cls] = _compile_fast_codec(_cls)
+def to_wire(msg) -> list:
+    """The validated wire array of a message (what :func:`encode` packs, as plain values)."""
+    return list(SCHEMA[type(msg)].decoder.decode(encode(msg)))
 
+
+# ---------------------------------------------------------------- receiving
 
 class Inbox:
     """The receiving end of one node: decodes payloads, counts and logs rejections, never raises.
@@ -565,19 +476,13 @@ class Inbox:
 
     def decode(self, payload, kind: type, key_agent: int | None = None):
         """The message of class ``kind`` in ``payload``, or None (counted, logged) if rejected."""
-        try:  # what parse() does, with two calls fewer: the fast path (it never raises), then
-            # the generic checks
-            fast = _FAST_PARSE[kind]
-        except (KeyError, TypeError):  # a wrong class is a bug in the caller, not bad input
-            raise TypeError(f"not a message class: {kind!r}") from None
-        msg = fast(payload, self.run_id, key_agent)
-        if msg is None:
-            try:
-                msg = _generic_parse(payload, kind, self.run_id, key_agent)
-            except Rejected as e:
-                return self.reject(e.reason, f"{kind.__name__}: {e.detail}")
-            except Exception as e:  # it raises only Rejected; this guards the event loop anyway
-                return self.reject("decode-error", f"{kind.__name__}: {type(e).__name__}: {e}")
+        try:
+            msg = parse(payload, kind, self.run_id, key_agent)
+        except Rejected as e:
+            return self.reject(e.reason, f"{kind.__name__}: {e.detail}")
+        except Exception as e:  # parse raises only Rejected for any payload; this guards the loop
+            _kind(kind)  # but a wrong class is a bug in the caller, not bad input: raised
+            return self.reject("decode-error", f"{kind.__name__}: {type(e).__name__}: {e}")
         self.accepted += 1
         return msg
 
