@@ -126,7 +126,7 @@ class AgentBrain:
         """Learn from the last action's rewards and choose this tick's action (STAY if done)."""
         learner, shared = self.learner, self.config.shared
         if shared:
-            self._apply_shared(obs.learned)
+            self._apply_shared(obs.records)
         record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
         (x, y), (gx, gy) = obs.position, obs.goal
         stops = obs.arrived or obs.episode_end

@@ -358,7 +358,7 @@ class AgentNode:
         if obs.episode_end:  # saved before the world hears of the decision: nothing to lose
             checkpoint.save(self.checkpoint_file, self.brain, obs.episode)
         intent = encode(Intent(answer.run, answer.tick, answer.sender, self.agent, obs.episode,
-                               action))
+                               action, self.brain.learned))
         self.trace.mark(trace.INTENT_SENT, obs.tick)
         self.publisher.put(intent)
         if obs.episode_end and self.on_episode_end is not None:

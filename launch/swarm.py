@@ -140,7 +140,7 @@ def config_values(args: argparse.Namespace) -> dict:
     given explicitly."""
     values = dict(PRESETS[args.preset]) if args.preset else {}
     values.update({f.name: getattr(args, f.name) for f in fields(SwarmConfig)
-                   if hasattr(args, f.name)})
+                   if "help" in f.metadata and hasattr(args, f.name)})
     if hasattr(args, "grid"):
         values["width"], values["height"] = args.grid
     return values
@@ -188,11 +188,8 @@ def check_distributable(config: SwarmConfig) -> None:
     """Refuse options that only the in-process simulator plays; raises UsageError."""
     if config.algo == "oracle":
         raise UsageError("--algo oracle plans every agent's move centrally; run it with --in-process")
-    unsupported = [flag for flag, on in (("--shared", config.shared),
-                                         ("--known-state", config.known_state),
-                                         ("--lookahead > 1", config.lookahead > 1)) if on]
-    if unsupported:
-        raise UsageError(f"{', '.join(unsupported)}: in-process only for now (add --in-process)")
+    if config.lookahead > 1:
+        raise UsageError("--lookahead > 1 is played by the simulator only (add --in-process)")
 
 
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:

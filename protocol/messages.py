@@ -52,10 +52,10 @@ import msgspec
 import numpy as np
 from msgspec import Meta
 
-from protocol.actions import N_ACTIONS
+from protocol.actions import N_ACTIONS, N_STATES
 from protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -113,6 +113,22 @@ Neighbours = agent_list(Coord, Coord)
 """``(id, x, y)`` of each visible other agent."""
 Relayed = agent_list(Action)
 """``(id, action)`` of each relayed intent."""
+Parked = Annotated[tuple[AgentId, ...], Meta(max_length=MAX_AGENTS)]
+"""The ids of the visible others that are parked on their goals."""
+
+MAX_TABLE_ROW = N_STATES * (N_ACTIONS + 1)
+"""Above every Q-table row index of a learner (the largest table: offsets x 6 move codes)."""
+RecordInts = Annotated[tuple[Annotated[int, Meta(ge=-1, lt=MAX_TABLE_ROW)], ...],
+                       Meta(max_length=8 + 2 * MAX_AGENTS)]
+"""A learning record's integers (``agent.learner.REC_*``: states, action, and a pair of table
+rows per neighbour; the learner checks the layout against its own tables)."""
+Record = tuple[RecordInts, tuple[Reward, Reward]]
+"""A learning record: its integers and its two rewards."""
+Learned = Annotated[tuple[Record, ...], Meta(max_length=1)]
+"""The learning record an intent carries (none, or its sender's of this tick)."""
+LearnedByAgent = Annotated[tuple[tuple[AgentId, RecordInts, tuple[Reward, Reward]], ...],
+                           Meta(max_length=MAX_AGENTS)]
+"""Every agent's learning record of the last tick, in agent-id order (the agent's own too)."""
 
 
 class Rejected(ValueError):
@@ -223,6 +239,8 @@ class Observation(NamedTuple):
     collided: bool
     arrived: bool
     episode_end: bool
+    parked: Parked = ()
+    records: LearnedByAgent = ()  # where the swarm shares one table
 
 
 @_message("intent", from_agent=True)
@@ -235,6 +253,7 @@ class Intent(NamedTuple):
     agent: AgentId
     episode: Count
     action: Action
+    record: Learned = ()  # where the swarm shares one table: this tick's learning record
 
 
 @_message("answer", from_agent=True)

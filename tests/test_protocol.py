@@ -224,11 +224,11 @@ def test_round_trip(msg):
 
 
 def test_wire_format_is_an_array_of_version_kind_and_fields_in_order():
-    assert PROTOCOL_VERSION == 2
+    assert PROTOCOL_VERSION == 3
     wire = msgpack.unpackb(encode(intent()))
-    assert wire == [PROTOCOL_VERSION, "intent", RUN, 7, "agent/2", 2, 1, 3]
-    assert msgpack.unpackb(encode(control())) == [2, "control", RUN, 7, WORLD_SENDER, "shutdown"]
-    assert msgpack.unpackb(encode(obs()))[:2] == [2, "obs"]
+    assert wire == [PROTOCOL_VERSION, "intent", RUN, 7, "agent/2", 2, 1, 3, []]
+    assert msgpack.unpackb(encode(control())) == [3, "control", RUN, 7, WORLD_SENDER, "shutdown"]
+    assert msgpack.unpackb(encode(obs()))[:2] == [3, "obs"]
     assert msgpack.unpackb(encode(answer()))[-1] == [[0, 4], [5, 0]]
     for cls, kind in SCHEMA.items():
         names = list(kind.fields)
@@ -241,8 +241,9 @@ def test_wire_format_is_an_array_of_version_kind_and_fields_in_order():
 def test_messages_are_immutable_named_tuples():
     msg = intent()
     assert isinstance(msg, tuple) and msg == Intent(RUN, 7, "agent/2", 2, 1, 3)
-    assert tuple.__new__(Intent, (RUN, 7, "agent/2", 2, 1, 3)) == msg
-    assert (msg.run, msg.tick, msg.sender, msg.agent, msg.episode, msg.action) == tuple(msg)
+    assert tuple.__new__(Intent, (RUN, 7, "agent/2", 2, 1, 3, ())) == msg
+    assert (msg.run, msg.tick, msg.sender, msg.agent, msg.episode, msg.action,
+            msg.record) == tuple(msg)
     with pytest.raises(AttributeError):
         msg.action = 4
     assert msg._replace(action=4).action == 4 and msg.action == 3
@@ -312,15 +313,15 @@ def test_rejection_reasons():
     assert reason_of(pack("intent"), Intent) == "not-array"
     assert reason_of(pack({1: 2}), Intent) == "not-array"  # a map, whatever its keys
     wire = to_wire(intent())
-    assert reason_of(pack([1, *wire[1:]]), Intent) == "bad-version"
-    assert reason_of(pack([3, *wire[1:]]), Intent) == "bad-version"
+    assert reason_of(pack([2, *wire[1:]]), Intent) == "bad-version"
+    assert reason_of(pack([4, *wire[1:]]), Intent) == "bad-version"
     assert reason_of(pack([True, *wire[1:]]), Intent) == "bad-version"  # True == 1, not an int
     assert reason_of(pack([2.0, *wire[1:]]), Intent) == "bad-version"
     assert reason_of(pack(wire[1:]), Intent) == "bad-version"  # no version: the kind in its place
     assert reason_of(pack([1, 2]), Intent) == "bad-version"
     assert reason_of(encode(control()), Intent) == "wrong-kind"
-    assert reason_of(pack([2, ["intent"], *wire[2:]]), Intent) == "wrong-kind"
-    assert reason_of(pack(wire[:-1]), Intent) == "wrong-length"  # no action
+    assert reason_of(pack([3, ["intent"], *wire[2:]]), Intent) == "wrong-kind"
+    assert reason_of(pack(wire[:-1]), Intent) == "wrong-length"  # no record
     assert reason_of(pack([*wire, 1]), Intent) == "wrong-length"  # an item too many
     assert reason_of(good, Intent, run="run-2") == "wrong-run"
     assert reason_of(pack([*wire[:2], 1, *wire[3:]]), Intent) == "wrong-run"
@@ -343,13 +344,13 @@ def detail_of(payload, kind, run=RUN, key_agent=None) -> str:
 
 def test_wrong_length_says_how_many_items():
     wire = to_wire(intent())
-    assert detail_of(pack(wire[:-1]), Intent) == "wrong-length: expected 8 items, got 7"
-    assert detail_of(pack([*wire, 0, 0]), Intent) == "wrong-length: expected 8 items, got 10"
-    assert detail_of(pack([]), Intent) == "wrong-length: expected 8 items, got 0"
-    assert detail_of(pack([2]), Intent) == "wrong-length: expected 8 items, got 1"
-    assert detail_of(pack([2, "intent"]), Intent) == "wrong-length: expected 8 items, got 2"
+    assert detail_of(pack(wire[:-1]), Intent) == "wrong-length: expected 9 items, got 8"
+    assert detail_of(pack([*wire, 0, 0]), Intent) == "wrong-length: expected 9 items, got 11"
+    assert detail_of(pack([]), Intent) == "wrong-length: expected 9 items, got 0"
+    assert detail_of(pack([3]), Intent) == "wrong-length: expected 9 items, got 1"
+    assert detail_of(pack([3, "intent"]), Intent) == "wrong-length: expected 9 items, got 2"
     full = to_wire(obs())
-    assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 17 items, got 5"
+    assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 19 items, got 5"
     short = pack(to_wire(answer())[:-1])
     assert detail_of(short, Answer) == "wrong-length: expected 9 items, got 8"
 
@@ -362,17 +363,17 @@ def test_checks_come_in_order_version_kind_length_run_fields_rules():
     assert reason_of(pack([1, "obs"]), Intent) == "bad-version"
     assert reason_of(pack([1, "obs", *wire[2:], 0, 0]), Intent) == "bad-version"
     assert reason_of(pack(["intent"]), Intent) == "bad-version"
-    assert reason_of(pack([2, "obs"]), Intent) == "wrong-kind"
-    assert reason_of(pack([2, None, *wire[2:], 0]), Intent) == "wrong-kind"
+    assert reason_of(pack([3, "obs"]), Intent) == "wrong-kind"
+    assert reason_of(pack([3, None, *wire[2:], 0]), Intent) == "wrong-kind"
     assert reason_of(encode(obs()), Intent) == "wrong-kind"  # longer
     assert reason_of(encode(control()), Answer) == "wrong-kind"  # shorter
-    assert reason_of(pack([2, "intent", "other-run"]), Intent) == "wrong-length"
-    assert reason_of(pack([2, "intent", None, None, None, None, None]), Intent) == "wrong-length"
-    changed = [*wire[:2], "other-run", -1, None, MAX_AGENTS, -1, 99]
+    assert reason_of(pack([3, "intent", "other-run"]), Intent) == "wrong-length"
+    assert reason_of(pack([3, "intent", None, None, None, None, None]), Intent) == "wrong-length"
+    changed = [*wire[:2], "other-run", -1, None, MAX_AGENTS, -1, 99, None]
     assert reason_of(pack(changed), Intent) == "wrong-run"
-    changed = [*wire[:3], -1, "agent/3", MAX_AGENTS, -1, 99]
+    changed = [*wire[:3], -1, "agent/3", MAX_AGENTS, -1, 99, None]
     assert reason_of(pack(changed), Intent) == "bad-field:tick"  # the first bad field
-    assert reason_of(pack([*wire[:4], "agent/3", 2, 1, 99]), Intent) == "bad-field:action"
+    assert reason_of(pack([*wire[:4], "agent/3", 2, 1, 99, []]), Intent) == "bad-field:action"
     itself = mutated(obs(), "neighbours", ((2, 0, 0),))
     assert reason_of(itself, Observation) == "bad-field:neighbours"
     forged = to_wire(obs())
@@ -605,6 +606,26 @@ _bad_reward = (
     | st.integers(10**6 + 1, 2**63) | st.integers(-(2**63), -(10**6) - 1)
 )
 _bad_bool = _wrong_types | _small_ints | st.floats()
+_bad_parked = (_wrong_types.filter(lambda v: not isinstance(v, list) or v)
+               | st.lists(_bad_int | _out_of(0, MAX_AGENTS), min_size=1, max_size=3))
+_record_ints = st.lists(st.integers(-1, 441 * 6 - 1), max_size=6)
+_rewards = st.tuples(st.floats(-1e6, 1e6), st.floats(-1e6, 1e6)).map(list)
+_bad_record_ints = (_wrong_types.filter(lambda v: not isinstance(v, list) or v)
+                    | st.lists(_bad_int | _out_of(-1, 441 * 6), min_size=1, max_size=3))
+_bad_rewards = _wrong_types | st.lists(_bad_reward, min_size=2, max_size=2) \
+    | st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=4)
+_bad_records = (
+    _wrong_types.filter(lambda v: not isinstance(v, list) or v)
+    | st.tuples(_bad_int | _out_of(0, MAX_AGENTS), _record_ints, _rewards).map(lambda t: [list(t)])
+    | st.tuples(agents, _bad_record_ints, _rewards).map(lambda t: [list(t)])
+    | st.tuples(agents, _record_ints, _bad_rewards).map(lambda t: [list(t)])
+)
+_bad_record = (
+    _wrong_types.filter(lambda v: not isinstance(v, list) or v)
+    | st.tuples(_bad_record_ints, _rewards).map(lambda t: [list(t)])
+    | st.tuples(_record_ints, _bad_rewards).map(lambda t: [list(t)])
+    | st.tuples(_record_ints, _rewards).map(lambda t: [list(t), list(t)])  # two: at most one
+)
 _bad_command = st.text(max_size=10).filter(lambda c: c not in messages.CONTROL_COMMANDS)
 
 BAD = {
@@ -616,6 +637,7 @@ BAD = {
     "reward_ds": _bad_reward, "reward_ca": _bad_reward,
     "collided": _bad_bool, "arrived": _bad_bool, "episode_end": _bad_bool,
     "command": _wrong_types | _bad_command, "relayed": _bad_relayed,
+    "parked": _bad_parked, "records": _bad_records, "record": _bad_record,
 }
 
 
@@ -674,6 +696,15 @@ def _is_reward(v):
     return type(v) in (int, float) and math.isfinite(v) and abs(v) <= 1e6
 
 
+def _is_record_ints(v):
+    return type(v) is list and len(v) <= 8 + 2 * MAX_AGENTS and all(
+        _is_int(i, -1, 441 * 6) for i in v)
+
+
+def _is_reward_pair(v):
+    return type(v) is list and len(v) == 2 and all(_is_reward(r) for r in v)
+
+
 def _is_agent_list(v, *rest):
     """A list of at most MAX_AGENTS ``[agent id, *rest]`` entries, each item valid (ids unchecked
     for repeats: that is a rule between entries)."""
@@ -684,8 +715,8 @@ def _is_agent_list(v, *rest):
 
 REFERENCE_KINDS = {  # the kind tag, then the fields in wire order
     Observation: ("obs run tick sender agent episode step position goal neighbours rank reward_ds "
-                  "reward_ca collided arrived episode_end"),
-    Intent: "intent run tick sender agent episode action",
+                  "reward_ca collided arrived episode_end parked records"),
+    Intent: "intent run tick sender agent episode action record",
     Answer: "answer run tick sender agent episode action relayed",
     Control: "control run tick sender command",
 }
@@ -702,6 +733,14 @@ REFERENCE_FIELDS = {
     "neighbours": lambda v: _is_agent_list(v, lambda c: _is_int(c, 0, MAX_GRID),
                                            lambda c: _is_int(c, 0, MAX_GRID)),
     "relayed": lambda v: _is_agent_list(v, lambda a: _is_int(a, 0, 5)),
+    "parked": lambda v: type(v) is list and len(v) <= MAX_AGENTS
+    and all(_is_int(a, 0, MAX_AGENTS) for a in v),
+    "records": lambda v: type(v) is list and len(v) <= MAX_AGENTS and all(
+        type(e) is list and len(e) == 3 and _is_int(e[0], 0, MAX_AGENTS)
+        and _is_record_ints(e[1]) and _is_reward_pair(e[2]) for e in v),
+    "record": lambda v: type(v) is list and len(v) <= 1 and all(
+        type(e) is list and len(e) == 2 and _is_record_ints(e[0]) and _is_reward_pair(e[1])
+        for e in v),
 }
 MAP_HEADS = {*range(0x80, 0x90), 0xDE, 0xDF}
 
@@ -739,7 +778,7 @@ def reference_reason(payload: bytes, cls, run, key_agent=None) -> str | None:
     tag, *names = REFERENCE_KINDS[cls].split()
     if type(d) is not list:
         return "not-array"
-    if d and not (type(d[0]) is int and d[0] == 2):
+    if d and not (type(d[0]) is int and d[0] == 3):
         return "bad-version"
     if len(d) > 1 and d[1] != tag:
         return "wrong-kind"
@@ -891,19 +930,22 @@ def encoding_of(msg):
 
 
 def test_wire_bytes_are_pinned():
-    """The exact bytes of protocol version 2 (item order, int / float / bool types)."""
+    """The exact bytes of protocol version 3 (item order, int / float / bool types)."""
     pinned = {
-        obs():  # 17 items: an array 16 header
-            "dc001102a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
-            "d0000000000000cb4024000000000000c2c2c2",
+        obs():  # 19 items: an array 16 header
+            "dc001303a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "d0000000000000cb4024000000000000c2c2c29090",
+        obs(parked=(5,), records=((5, (1, 2, 0, 3, 1, 0), (0.5, 10)),)):
+            "dc001303a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "d0000000000000cb4024000000000000c2c2c291059193059601020003010092cb3fe00000000000000a",
         answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
-            "9902a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
+            "9903a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
         intent():
-            "9802a6696e74656e74a572756e2d3107a76167656e742f32020103",
+            "9903a6696e74656e74a572756e2d3107a76167656e742f3202010390",
         control():
-            "9602a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
+            "9603a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
         control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
-            "9602a7636f6e74726f6cd940" + "72" * 64
+            "9603a7636f6e74726f6cd940" + "72" * 64
             + "cf0000010000000000a5776f726c64a873687574646f776e",
     }
     for msg, hexed in pinned.items():
@@ -1141,7 +1183,7 @@ def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
     assert msgpack.unpackb(encode(Plan(RUN, 7, "agent/2", 2, ())))[-1] == []
     good = Plan(RUN, 7, "agent/2", 2, ((0, 1, 1, True), (5, 2, 2, False)), (1, 4))
     payload = encode(good)
-    assert msgpack.unpackb(payload) == [2, "plan", RUN, 7, "agent/2", 2, [[0, 1, 1, True],
+    assert msgpack.unpackb(payload) == [3, "plan", RUN, 7, "agent/2", 2, [[0, 1, 1, True],
                                                                          [5, 2, 2, False]], [1, 4]]
     assert parse(payload, Plan, RUN, key_agent=2) == good
     for change, reason in [

@@ -167,6 +167,7 @@ class WorldNode:
     def _open_tick(self) -> None:
         """Send every agent its observation of the current tick; start waiting for intents."""
         self.actions = [None] * self.config.n_agents
+        self.learned = {}  # the learning records that came with this tick's intents, by agent
         self.tick_start = time.perf_counter()
         self.tick_deadline = time.monotonic() + self.config.tick_deadline_s
         for obs in self.world.observations_by_rank():  # the first to decide is the first to know
@@ -188,7 +189,7 @@ class WorldNode:
         hand the report to the main thread if it has anything to do with it: an episode's row,
         a broken invariant, or ``on_tick``. Other ticks do not wake it (a thread switch a tick)."""
         self.trace.mark(trace.CLOSE, self.world.tick)
-        report = self.world.apply(self.actions)
+        report = self.world.apply(self.actions, self.learned)
         now = time.perf_counter()
         self.slowest = max(self.slowest, now - self.tick_start)
         self.actions = None
@@ -260,6 +261,8 @@ class WorldNode:
             self.inbox.reject("duplicate-intent", f"agent {intent.agent} tick {tick}")
         else:
             actions[intent.agent] = intent.action
+            if intent.record:
+                self.learned[intent.agent] = intent.record[0]
 
 
 def run_world(options: WorldOptions,
