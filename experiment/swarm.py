@@ -41,6 +41,22 @@ COMPARED_WITH = {"nnql": "ql", "best-nnql": "best-ql", "shield-nnql": "shield-ql
 
 TABLE_FILES = ("swarm_table.csv", "swarm_table.md")
 
+ABLATED = ("interaction_radius", "optimistic", "shared", "still_terminal", "alpha")
+"""The options of ``best-nnql`` beyond the paper, each of which the ablation takes back."""
+
+
+def ablation_presets() -> dict[str, dict]:
+    """``best-nnql`` with each of its options beyond the paper taken back in turn (to the
+    paper's value), and with the paper's nnQL reading instead of the direction-aware one; the
+    QL and nnQL rows it is read against."""
+    best, paper = PRESETS["best-nnql"], PRESETS["nnql"]
+    presets = {name: PRESETS[name] for name in ("ql", "nnql", "best-ql", "best-nnql")}
+    for option in ABLATED:
+        presets[f"best-nnql-paper-{option.replace('_', '-')}"] = {**best, option: paper[option]}
+    presets["best-nnql-plain-nnql"] = {**best, "algo": "nnql"}
+    presets["best-nnql-known-state"] = {**best, "known_state": True}
+    return presets
+
 
 @dataclass(frozen=True)
 class SwarmExperiment:
@@ -54,12 +70,13 @@ class SwarmExperiment:
     width: int = 11
     height: int = 11
     variants: tuple[str, ...] = VARIANTS
+    presets: dict[str, dict] = field(default_factory=lambda: dict(PRESETS))
 
     def config(self, variant: str, seed: int) -> SwarmConfig:
         """The swarm config of one run (the one ``launch/swarm.py --preset`` would resolve)."""
         return SwarmConfig(run_id=run_name(variant, seed), n_agents=self.agents,
                            episodes=self.episodes, max_steps=self.max_steps, width=self.width,
-                           height=self.height, seed=seed, **PRESETS[variant])
+                           height=self.height, seed=seed, **self.presets[variant])
 
     @property
     def seed_list(self) -> list[int]:
@@ -69,6 +86,9 @@ class SwarmExperiment:
         """The early and late windows: the 2nd and the 5th fifth of the run."""
         fifth = self.episodes / 5
         return (round(fifth), round(2 * fifth)), (round(4 * fifth), self.episodes)
+
+    def __hash__(self) -> int:
+        return hash((self.agents, self.seeds, self.seed_base, self.episodes, self.variants))
 
 
 def run_name(variant: str, seed: int) -> str:
@@ -158,12 +178,13 @@ def markdown(results: SwarmResults, rows: list[dict]) -> str:
             f"{_interval(row['collisions_ci_low'], row['collisions_ci_high'])} | {row['vs']} "
             f"| {_number(row['decrease_vs_ql_pct'], 1)} | {_number(row['difference'], 1)} "
             f"{_interval(row['difference_ci_low'], row['difference_ci_high'])} |")
-    lines += ["", "Each variant is a preset of `protocol/config.py` (`PRESETS`); one run of it is "
-              f"`python launch/swarm.py --preset <variant> --agents {e.agents} --episodes "
-              f"{e.episodes} --seed <seed> --grid {e.width}x{e.height} --in-process`, whose "
-              "`episodes.csv` equals `runs/<variant>-s<seed>/episodes.csv` here.", ""]
+    lines += ["", "Each variant is a set of learning options (a preset of `protocol/config.py` where "
+              "it has the name of one); one run of a preset is `python launch/swarm.py --preset "
+              f"<variant> --agents {e.agents} --episodes {e.episodes} --seed <seed> --grid "
+              f"{e.width}x{e.height} --in-process`, whose `episodes.csv` equals "
+              "`runs/<variant>-s<seed>/episodes.csv` here.", ""]
     for variant in e.variants:
-        options = ", ".join(f"{k}={v}" for k, v in PRESETS[variant].items())
+        options = ", ".join(f"{k}={v}" for k, v in e.presets[variant].items())
         lines.append(f"- `{variant}`: {options}")
     return "\n".join(lines) + "\n"
 

@@ -32,9 +32,10 @@ from experiment.report import (  # noqa: E402
     ResultGrid, summarize, table1_markdown, table1_rows, write_episodes_csv, write_table1_csv,
 )
 from experiment.swarm import (  # noqa: E402
-    TABLE_FILES, VARIANTS, SwarmExperiment, curves, run_experiment, table_rows, write_runs,
-    write_tables,
+    TABLE_FILES, VARIANTS, SwarmExperiment, ablation_presets, curves, run_experiment, table_rows,
+    write_runs, write_tables,
 )
+from protocol.config import PRESETS  # noqa: E402
 from launch.progress import Progress  # noqa: E402
 from launch.recording import log_swarm_curves  # noqa: E402
 
@@ -278,6 +279,9 @@ def build_swarm_parser() -> OneLineParser:
     add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH")
     add("--variants", type=parse_variants, default=d.variants, metavar="LIST",
         help=f"comma-separated, from {','.join(VARIANTS)}")
+    add("--ablation", action="store_true",
+        help="instead of the variants: best-nnql with each of its options beyond the paper "
+             "taken back in turn, beside ql, nnql and best-ql")
     add("--out", type=Path, default=None, metavar="DIR",
         help="output directory (default runs/swarm-<time>)")
     add("--force", action="store_true", help="overwrite results already in --out")
@@ -291,9 +295,12 @@ def run_swarm(argv: list[str]) -> Path:
     """The swarm experiment's command line: run, then write every result file."""
     parser = build_swarm_parser()
     args = parser.parse_args(argv)
+    presets = ablation_presets() if args.ablation else dict(PRESETS)
     experiment = SwarmExperiment(agents=args.agents, seeds=args.seeds, seed_base=args.seed_base,
                                  episodes=args.episodes, max_steps=args.max_steps,
-                                 width=args.grid[0], height=args.grid[1], variants=args.variants)
+                                 width=args.grid[0], height=args.grid[1],
+                                 variants=tuple(presets) if args.ablation else args.variants,
+                                 presets=presets)
     try:
         experiment.config(experiment.variants[0], experiment.seed_base)
     except ValueError as error:
