@@ -102,6 +102,7 @@ class AgentBrain:
         self._ties = np.zeros((config.max_steps, N_ACTIONS))
         self._noise: tuple[list[int], list[list[float]]] | None = None
         self._noise_episode = -1
+        self._prepared = (-1, -1)  # the observation prepared last (episode, tick)
         self._seen: tuple[int, dict[int, tuple[int, int]]] = (-1, {})  # DAQL: last tick's cells
 
     def neighbours_to_ask(self, obs: Observation) -> list[int]:
@@ -114,8 +115,13 @@ class AgentBrain:
                 if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius)]
 
     def prepare(self, obs: Observation) -> None:
-        """Draw the episode's noise when a new episode starts (an agent prepares while it waits
-        for its neighbours' intents)."""
+        """What a decision on ``obs`` needs before the intents: the shared records applied, the
+        episode's noise drawn (an agent prepares while it waits for its neighbours' intents)."""
+        if self._prepared == (obs.episode, obs.tick):
+            return
+        self._prepared = (obs.episode, obs.tick)
+        if self.config.shared:
+            self._apply_shared(obs.records)
         if obs.arrived or obs.episode_end or self._noise_episode == obs.episode:
             return
         draw_noise(self.rng, self._random_actions, self._ties)
@@ -125,8 +131,7 @@ class AgentBrain:
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
         """Learn from the last action's rewards and choose this tick's action (STAY if done)."""
         learner, shared = self.learner, self.config.shared
-        if shared:
-            self._apply_shared(obs.records)
+        self.prepare(obs)
         record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
         (x, y), (gx, gy) = obs.position, obs.goal
         stops = obs.arrived or obs.episode_end
@@ -137,7 +142,6 @@ class AgentBrain:
                              len(obs.neighbours), learner.rec, learner.rec_f, not shared)
             action = STAY
         else:
-            self.prepare(obs)
             random_actions, ties = self._noise
             c = self.config
             action, written = decide(

@@ -222,3 +222,65 @@ def test_table1_rows_and_summary_by_hand():
     assert summary.diff.mean == 21 and summary.diff.above_zero
     markdown = table1_markdown(rows, summary)
     assert "| 2 | 42.0 |" in markdown and f"{PAPER_TABLE1[2][0]:.1f}" in markdown
+
+
+SWARM_SHORT = ["swarm", "--agents", "6", "--seeds", "2", "--seed-base", "4", "--episodes", "20",
+               "--max-steps", "40"]
+
+
+def test_swarm_experiment_writes_its_table_runs_curves_and_recording(tmp_path):
+    out = tmp_path / "swarm"
+    result = experiment(*SWARM_SHORT, "--out", str(out), timeout=300)
+    assert result.returncode == 0, result.stderr
+    rows = read_csv(out / "swarm_table.csv")
+    assert [r["variant"] for r in rows] == ["ql", "nnql", "best-ql", "best-nnql", "shield-ql",
+                                            "shield-nnql", "nnql-n2", "daql", "oracle"]
+    for column in ("variant", "seeds", "arrival_4_8", "arrival_16_20", "steps_ratio_16_20",
+                   "collisions", "collisions_ci_low", "collisions_ci_high", "decrease_vs_ql_pct"):
+        assert column in rows[0]
+    by = {r["variant"]: r for r in rows}
+    assert by["oracle"]["collisions"] == "0.0000" and by["oracle"]["arrival_16_20"] == "1.0000"
+    assert by["nnql"]["vs"] == "ql" and by["shield-nnql"]["vs"] == "shield-ql"
+    for name in ("swarm_table.md", "swarm_arrival.png", "swarm_steps_ratio.png",
+                 "swarm_collisions.png", "swarm_curves.rrd", "config.json"):
+        assert (out / name).stat().st_size > 0, name
+    run = out / "runs" / "best-nnql-s5"
+    assert len(read_csv(run / "episodes.csv")) == 20
+    assert json.loads((run / "config.json").read_text())["shared"] is True
+    rerun = os.path.join(os.path.dirname(sys.executable), "rerun")
+    verify = subprocess.run([rerun, "rrd", "verify", str(out / "swarm_curves.rrd")],
+                            capture_output=True, text=True, timeout=120)
+    assert verify.returncode == 0, verify.stderr
+
+
+def test_the_distributed_swarm_plays_the_experiments_run_of_best_nnql(tmp_path):
+    """One seed of best-nnql (one table shared over Zenoh): the distributed swarm writes the very
+    episodes.csv the experiment's runner wrote, wall-clock columns aside."""
+    from world.engine import EPISODE_FIELDS
+
+    out = tmp_path / "swarm"
+    result = experiment("swarm", "--variants", "best-nnql", "--agents", "8", "--seeds", "1",
+                        "--seed-base", "3", "--episodes", "25", "--no-plots", "--out", str(out),
+                        timeout=300)
+    assert result.returncode == 0, result.stderr
+    swarm = subprocess.run(
+        [sys.executable, "launch/swarm.py", "--preset", "best-nnql", "--agents", "8", "--seed",
+         "3", "--episodes", "25", "--no-record", "--no-progress", "--out", str(tmp_path / "dist")],
+        cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert swarm.returncode == 0, swarm.stderr
+    ours = read_csv(out / "runs" / "best-nnql-s3" / "episodes.csv")
+    theirs = read_csv(tmp_path / "dist" / "episodes.csv")
+    assert [[r[f] for f in EPISODE_FIELDS] for r in theirs] == [
+        [r[f] for f in EPISODE_FIELDS] for r in ours]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["swarm", "--variants", "sarsa"], "choose variants"),
+    (["swarm", "--agents", "80"], "distinct start and goal cells"),
+    (["swarm", "--episodes", "2"], "must be at least 5"),
+])
+def test_swarm_experiment_bad_options_exit_2_with_one_line(args, message, tmp_path):
+    result = experiment(*args, "--out", str(tmp_path / "x"))
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0], result.stderr

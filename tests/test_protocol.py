@@ -606,7 +606,7 @@ _bad_reward = (
     | st.integers(10**6 + 1, 2**63) | st.integers(-(2**63), -(10**6) - 1)
 )
 _bad_bool = _wrong_types | _small_ints | st.floats()
-_bad_parked = (_wrong_types.filter(lambda v: not isinstance(v, list) or v)
+_bad_parked = (_wrong_types.filter(lambda v: not isinstance(v, list))
                | st.lists(_bad_int | _out_of(0, MAX_AGENTS), min_size=1, max_size=3))
 _record_ints = st.lists(st.integers(-1, 441 * 6 - 1), max_size=6)
 _rewards = st.tuples(st.floats(-1e6, 1e6), st.floats(-1e6, 1e6)).map(list)

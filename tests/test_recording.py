@@ -22,7 +22,8 @@ from world.scenario import swarm_episode
 from world.viz import METRICS, negotiation_mask
 
 AGENTS, EPISODES = 8, 3
-RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5")
+RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5",
+       "--preset", "nnql")  # the paper's nnQL collides, so collisions show
 WORLD_ENTITIES = ("world/grid", "world/agents", "world/goals", "world/trails", "world/intents",
                   "world/negotiation", "world/collisions", "events")
 PER_TICK = ("world/agents", "world/trails", "world/intents", "world/negotiation",

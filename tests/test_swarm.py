@@ -139,3 +139,18 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
     config = SwarmConfig.from_json((out / "config.json").read_text())
     for agent in range(8):
         checkpoint.load(checkpoint.checkpoint_path(out / "checkpoints", agent), AgentBrain(agent, config))
+
+
+@pytest.mark.parametrize("preset", ["nnql", "best-nnql"])
+def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, tmp_path):
+    """The paper's reading (each agent its own tables) and the best options (one table shared
+    over Zenoh, the direction-aware reading): the same episodes and tables either way."""
+    options = ("--agents", "6", "--episodes", "4", "--max-steps", "30", "--seed", "2",
+               "--preset", preset, "--no-record", "--run-id", preset)
+    distributed = run_swarm(tmp_path / "dist", *options)
+    local = run_swarm(tmp_path / "local", *options, "--in-process")
+    assert distributed.returncode == 0 and local.returncode == 0, distributed.stderr
+    assert deterministic(read_episodes(tmp_path / "dist" / "episodes.csv")) == deterministic(
+        read_episodes(tmp_path / "local" / "episodes.csv"))
+    tables = [np.load(tmp_path / side / "checkpoints" / "agent-0.npz") for side in ("dist", "local")]
+    assert np.array_equal(tables[0]["q_ca"], tables[1]["q_ca"])

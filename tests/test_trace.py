@@ -7,7 +7,7 @@ from bench.tick_trace import (
     FIRST_OBS, HOP, LAST_INTENT, LEARNING, NEXT_OBS, TICK, read_trace, tick_steps,
 )
 from protocol import trace
-from protocol.config import SwarmConfig
+from protocol.config import PRESETS, SwarmConfig
 
 
 def test_a_trace_is_off_unless_it_has_a_directory(tmp_path):
@@ -40,7 +40,8 @@ def test_the_steps_of_a_tick_are_lined_up_down_the_ranks():
 
 def test_a_traced_swarm_marks_every_step_of_every_tick(tmp_path, monkeypatch):
     monkeypatch.setenv(trace.TRACE_ENV, str(tmp_path / "marks"))
-    config = SwarmConfig(run_id="traced", n_agents=3, episodes=2, max_steps=15)
+    config = SwarmConfig(run_id="traced", n_agents=3, episodes=2, max_steps=15,
+                         **PRESETS["nnql"])  # everyone in reach: a chain of answers
     run_distributed(config, tmp_path / "run", record=False)
     world, agents = read_trace(tmp_path / "marks", 3)
     steps = tick_steps(world, agents, sorted(world))

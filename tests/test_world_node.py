@@ -67,7 +67,7 @@ def test_only_ticks_with_something_to_write_or_log_wake_the_main_thread(node):
 
 
 def test_a_bug_while_closing_a_tick_on_zenohs_thread_stops_the_world(node):
-    def broken(actions):
+    def broken(actions, learned=None):
         raise RuntimeError("a bug in the rules")
 
     node.world.apply = broken

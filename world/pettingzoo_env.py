@@ -59,6 +59,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
+from protocol.jit import flags, floats, ints, python_values
 from protocol.ranks import priority_rank, waits_for
 from world.rules import GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, world_step
 from world.scenario import swarm_episode
@@ -136,13 +137,15 @@ class SwarmGridEnv(ParallelEnv):
         chosen = [STAY] * n  # parked agents stay
         for agent in live:
             chosen[self._index[agent]] = int(actions.get(agent, STAY))
-        collided, reward_ds, reward_ca = [False] * n, [0.0] * n, [0.0] * n
-        world_step(self._x, self._y, self._goal_x, self._goal_y, [True] * n, self._arrived,
-                   chosen, n, self.width, self.height, self.count_swaps, self.goal_reward,
-                   STAY_REWARD,
-                   [0] * n, [0] * n, collided, reward_ds, reward_ca,
-                   [0] * (self.width * self.height), [False] * n, [0] * ROW_INTS,
-                   [0.0] * ROW_FLOATS)
+        x, y, arrived = ints(self._x), ints(self._y), flags(self._arrived)
+        collided, r_ds, r_ca = flags([False] * n), floats([0.0] * n), floats([0.0] * n)
+        world_step(x, y, ints(self._goal_x), ints(self._goal_y), flags([True] * n), arrived,
+                   ints(chosen), n, self.width, self.height, self.count_swaps, self.goal_reward,
+                   STAY_REWARD, ints([0] * n), ints([0] * n), collided, r_ds, r_ca,
+                   ints([0] * (self.width * self.height)), flags([False] * n),
+                   ints([0] * ROW_INTS), floats([0.0] * ROW_FLOATS))
+        self._x, self._y, self._arrived = python_values(x), python_values(y), python_values(arrived)
+        collided, reward_ds, reward_ca = map(python_values, (collided, r_ds, r_ca))
         self._steps += 1
 
         observations, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
