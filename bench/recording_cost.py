@@ -28,7 +28,7 @@ from launch.recording import merge_parts  # noqa: E402
 from protocol.config import SwarmConfig  # noqa: E402
 
 TARGET = 0.10
-"""DESIGN §6: logging may cost at most 10 % of the tick rate."""
+"""Recording may cost at most 10 % of the tick rate."""
 
 
 def main() -> int:
