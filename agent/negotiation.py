@@ -12,7 +12,7 @@ sees everyone, as on the default 11 x 11 grid, that is one query, to the agent r
 the negotiation becomes a chain of N - 1 answers a tick instead of N (N - 1) / 2, and every agent
 knows exactly the intents it would have known by asking each neighbour. Should an answer lack an
 intent it was expected to bring (its sender missed it, or died), the agent asks for the missing
-ones directly (``agent.node``). Why a chain: ``README.md``, "Why the negotiation is a chain".
+ones directly (``agent.node``). Why a chain: ``docs/design.md``.
 
 An agent that has arrived still waits for the awaited intents, although it needs none of them,
 so that it can relay them down the chain; only at an episode's end does nobody negotiate.

@@ -12,7 +12,7 @@ N-1 -> world) can be added up from them.
 On this 2-core machine the swarm's speed drifts by a third within minutes; this figure drifts
 much less (a few percent), but it is still best compared between runs made one after the other.
 It counts what runs hot in one process: in the swarm, each process wakes from cold caches and
-the same code takes three to six times as long (README, "where the time goes").
+the same code takes three to six times as long (docs/performance.md).
 
     python bench/node_cpu.py --agents 8 --episodes 20 --repeats 5
 """

@@ -5,7 +5,7 @@ Runs the launcher's world and agent processes (embedded Zenoh, recording off) wi
 set (``protocol.trace``), then lines up the marks of every tick after the first episode: the
 chain from the world's first observation through each agent's answer to the next, to the world
 closing the tick. Medians and 90th percentiles in microseconds. Meant for the default grid, where
-everyone sees everyone and the negotiation is one chain (README, "where the time goes").
+everyone sees everyone and the negotiation is one chain (docs/performance.md).
 
     python bench/tick_trace.py --agents 8 --episodes 15
 """

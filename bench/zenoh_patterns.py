@@ -13,7 +13,7 @@ world waits for the tick's intents. Patterns for how an intent reaches the agent
 - ``token``:    each agent hands the intents so far to the next; the last one to the world.
 
 Except in ``token``, the world gets every intent by subscription. Messages are bare msgpack
-tuples. This is what ``README.md`` ("Why the negotiation is a chain") quotes; the swarm itself
+tuples. This is what ``docs/performance.md`` quotes; the swarm itself
 uses ``standing`` (``agent.negotiation``), with its codec, rules and learning on top.
 
     python bench/zenoh_patterns.py --agents 8 --repeats 3

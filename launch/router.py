@@ -5,8 +5,8 @@
     python launch/router.py --zenoh-config secure/router.json5   # made by launch/secure.py
 
 The world and the agents then join it as clients (``--mode client --connect tcp/ROUTER:7447``),
-and every message, agent-to-agent negotiation queries included, goes through the router (README,
-"Several machines"). zenoh-python's own router mode: no separate binary. Without ``--listen`` and
+and every message, agent-to-agent negotiation queries included, goes through the router
+(docs/operations.md). zenoh-python's own router mode: no separate binary. Without ``--listen`` and
 without a config file that lists endpoints, the router listens on ``tcp/0.0.0.0:7447``. Multicast
 scouting is off unless the config file turns it on. When the router is up it prints one line
 ``router <zid> listening on <endpoints>`` on stdout; bad options or a failure to start (port in

@@ -1,7 +1,7 @@
 """The swarm across hosts: network namespaces on one private bridge stand in for three machines.
 
 Host ``world`` runs the world (and the router), hosts ``a`` and ``b`` run agents 0-3 and 4-7, each
-started by its own ``launch/swarm.py --role ...``: the very commands of the README's "Several
+started by its own ``launch/swarm.py --role ...``: the very commands of docs/operations.md's "Several
 machines" and "Running secured" (only the addresses and the run's size are put in). Every run is
 checked like the one-machine integration test (exit 0, every episode once, no missed intent,
 recordings that verify) and against the same config run ``--in-process``. The topology tests pin
@@ -32,9 +32,9 @@ PY = sys.executable
 ROUTER = str(ROOT / "launch" / "router.py")
 PROBE = str(ROOT / "tests" / "zenoh_probe.py")
 RERUN = os.path.join(os.path.dirname(sys.executable), "rerun")
-README = ROOT / "README.md"
+README = ROOT / "docs" / "operations.md"
 README_RUN = "--run-id demo --agents 8 --episodes 3 --max-steps 30 --seed 1 --no-progress"
-"""What ``$RUN`` stands for in the README's commands here: the README's run, made short."""
+"""What ``$RUN`` stands for in docs/operations.md's commands here: its run, made short."""
 README_HOSTS = {"192.0.2.10": "world", "192.0.2.11": "a", "192.0.2.12": "b"}
 RUN = ("--episodes", "3", "--max-steps", "30")
 PORT = 7447
@@ -51,7 +51,7 @@ def lan():
 
 @pytest.fixture
 def own_lan():
-    """A LAN of its own, for a test that uses the README's fixed port on every host."""
+    """A LAN of its own, for a test that uses the documented fixed port on every host."""
     if REASON is not None:
         pytest.skip(f"no network namespaces: {REASON}")
     with netns.Lan(["world", "a", "b"]) as lan:
@@ -136,13 +136,13 @@ def check_run(world_out: Path, world: Launch, agents: list[Launch], episodes: in
     assert deterministic(world_out / "episodes.csv") == reference
 
 
-# --- the README's commands, as written ---
+# --- docs/operations.md's commands, as written ---
 
 def readme_commands(block: str) -> list[tuple[str, str]]:
-    """(host, command line) of the README's code block marked ``<!-- test: block -->``."""
+    """(host, command line) of docs/operations.md's code block marked ``<!-- test: block -->``."""
     text = README.read_text()
     marker = f"<!-- test: {block} -->\n```sh\n"
-    assert marker in text, f"the README lost its {block!r} commands"
+    assert marker in text, f"docs/operations.md lost its {block!r} commands"
     start = text.index(marker) + len(marker)
     host, commands = None, []
     for line in text[start:text.index("```", start)].splitlines():

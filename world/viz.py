@@ -57,7 +57,7 @@ METRICS = {
     "metrics/ticks_per_s": "wall-clock ticks per second of the world's clock in the episode",
     "metrics/negotiation/awaited_per_tick": "intents waited for per tick, all agents (world-derived)",
 }
-"""Every per-episode series the world logs, with what it means (the README repeats this)."""
+"""Every per-episode series the world logs, with what it means (docs/recording.md repeats this)."""
 
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
