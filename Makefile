@@ -59,9 +59,9 @@ experiment: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/table1.py
+	$(PY) bench/sweep.py
 	$(PY) bench/swarm_ticks.py
 	$(PY) bench/recording_cost.py
-	$(PY) bench/swarm_collisions.py
 	$(PY) bench/codec.py
 	$(PY) bench/world_tick.py
 	$(PY) bench/node_cpu.py

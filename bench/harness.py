@@ -6,7 +6,7 @@ from pathlib import Path
 from typing import Callable
 
 from launch.recording import RecordingPlan
-from protocol.config import SwarmConfig
+from protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from protocol.jit import plain_python_environment
 from protocol.transport import EmbeddedLayout
 from world.metrics import read_episodes
@@ -55,3 +55,15 @@ def run_local(config: SwarmConfig, out: Path, record: bool) -> float:
     out.mkdir(parents=True)
     run_in_process(config, out, record, progress=False)
     return measured_rate(out)
+
+
+def add_preset_option(parser) -> None:
+    """``--preset``: the learning options a benchmark's swarm runs with."""
+    parser.add_argument("--preset", choices=tuple(PRESETS), default=DEFAULT_PRESET,
+                        help=f"learning options (default {DEFAULT_PRESET}; nnql: the paper's, "
+                             "everyone waiting for everyone in view)")
+
+
+def swarm_config(preset: str, **fields) -> SwarmConfig:
+    """A benchmark's swarm config: the preset's learning options and the given fields."""
+    return SwarmConfig(**{**PRESETS[preset], **fields})

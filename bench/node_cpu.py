@@ -33,6 +33,7 @@ from agent.brain import AgentBrain  # noqa: E402
 from agent.node import AgentNode, AgentOptions  # noqa: E402
 from protocol import keys  # noqa: E402
 from protocol.actions import STAY  # noqa: E402
+from bench.harness import add_preset_option, swarm_config  # noqa: E402
 from protocol.config import SwarmConfig  # noqa: E402
 from protocol.transport import TransportSettings  # noqa: E402
 from world.node import WorldNode, WorldOptions  # noqa: E402
@@ -172,13 +173,12 @@ def main() -> int:
     p.add_argument("--episodes", type=int, default=20)
     p.add_argument("--max-steps", type=int, default=100)
     p.add_argument("--repeats", type=int, default=5)
-    p.add_argument("--algo", default="nnql", choices=("nnql", "ql"))
+    add_preset_option(p)
     p.add_argument("--bare", action="store_true", help="agents learn nothing and stay")
     args = p.parse_args()
     n = args.agents
-    config = SwarmConfig(run_id="cpu", n_agents=n, episodes=args.episodes,
-                         max_steps=args.max_steps, width=max(11, 2 * n // 11 + 1), height=11,
-                         algo=args.algo)
+    config = swarm_config(args.preset, run_id="cpu", n_agents=n, episodes=args.episodes,
+                          max_steps=args.max_steps, width=max(11, 2 * n // 11 + 1), height=11)
     per_tick: dict[str, list[float]] = collections.defaultdict(list)
     for r in range(args.repeats):
         with tempfile.TemporaryDirectory() as tmp:

@@ -23,9 +23,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench.harness import run_distributed, run_local  # noqa: E402
+from bench.harness import add_preset_option, run_distributed, run_local, swarm_config  # noqa: E402
 from launch.recording import merge_parts  # noqa: E402
-from protocol.config import SwarmConfig  # noqa: E402
 
 TARGET = 0.10
 """Recording may cost at most 10 % of the tick rate."""
@@ -38,9 +37,10 @@ def main() -> int:
     p.add_argument("--max-steps", type=int, default=100)
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--in-process", action="store_true", help="the one-process runner instead")
+    add_preset_option(p)
     args = p.parse_args()
-    config = SwarmConfig(run_id="recording-cost", n_agents=args.agents, episodes=args.episodes,
-                         max_steps=args.max_steps)
+    config = swarm_config(args.preset, run_id="recording-cost", n_agents=args.agents,
+                          episodes=args.episodes, max_steps=args.max_steps)
     run = run_local if args.in_process else run_distributed
     rates: dict[bool, list[float]] = {False: [], True: []}
     merges, sizes = [], []

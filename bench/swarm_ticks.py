@@ -25,7 +25,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from agent.brain import AgentBrain  # noqa: E402
-from bench.harness import run_distributed, run_local  # noqa: E402
+from bench.harness import add_preset_option, run_distributed, run_local, swarm_config  # noqa: E402
 from protocol.actions import STAY  # noqa: E402
 from protocol.config import SwarmConfig  # noqa: E402
 from protocol.transport import TransportSettings  # noqa: E402
@@ -51,16 +51,16 @@ def main() -> int:
     p.add_argument("--episodes", type=int, default=6)
     p.add_argument("--max-steps", type=int, default=100)
     p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--algo", default="nnql", choices=("nnql", "ql"))
+    add_preset_option(p)
     p.add_argument("--grid", default="11x11")
     p.add_argument("--record", action="store_true", help="also write run.rrd (Rerun cost included)")
     args = p.parse_args()
     width, height = (int(v) for v in args.grid.split("x"))
     print(f"{'agents':>6} {'mode':>12} {'ticks/s':>9} {'ms/tick':>8}  runs")
     for n in (int(v) for v in args.agents.split(",")):
-        config = SwarmConfig(run_id=f"bench{n}", n_agents=n, episodes=args.episodes,
-                             max_steps=args.max_steps, width=max(width, 2 * n // height + 1),
-                             height=height, algo=args.algo)
+        config = swarm_config(args.preset, run_id=f"bench{n}", n_agents=n, episodes=args.episodes,
+                              max_steps=args.max_steps, width=max(width, 2 * n // height + 1),
+                              height=height)
         results = {}
         with tempfile.TemporaryDirectory() as tmp:
             for r in range(args.repeats):

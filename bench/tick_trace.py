@@ -21,9 +21,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from bench.harness import measured_rate, run_distributed  # noqa: E402
+from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config  # noqa: E402
 from protocol import trace  # noqa: E402
-from protocol.config import SwarmConfig  # noqa: E402
 from world.metrics import read_episodes  # noqa: E402
 
 FIRST_OBS = "world: first observation handed to Zenoh -> its agent has it"
@@ -95,11 +94,12 @@ def main() -> int:
     p.add_argument("--agents", type=int, default=8)
     p.add_argument("--episodes", type=int, default=15)
     p.add_argument("--max-steps", type=int, default=100)
+    add_preset_option(p)
     args = p.parse_args()
     if args.agents < 2 or args.episodes < 2:
         p.error("need at least 2 agents and 2 episodes (the first one is warm-up)")
-    config = SwarmConfig(run_id="trace", n_agents=args.agents, episodes=args.episodes,
-                         max_steps=args.max_steps)
+    config = swarm_config(args.preset, run_id="trace", n_agents=args.agents,
+                          episodes=args.episodes, max_steps=args.max_steps)
     with tempfile.TemporaryDirectory() as tmp:
         marks, out = Path(tmp) / "marks", Path(tmp) / "run"
         os.environ[trace.TRACE_ENV] = str(marks)  # the spawned processes inherit it
