@@ -177,7 +177,7 @@ class AgentBrain:
             else:
                 nx, ny, known = target_x(jx, action, w), target_y(jy, action, h), 1
             px, py = previous.get(j, (-1, -1))
-            rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py])
+            rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py, 0])
         return rows
 
     def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:

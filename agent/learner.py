@@ -60,11 +60,12 @@ FP_ALPHA, FP_GAMMA, FP_BETA = 0, 1, 2
 FP_FIELDS = 3
 
 NB_ID, NB_X, NB_Y, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_STATE_X, NB_STATE_Y = 0, 1, 2, 3, 4, 5, 6, 7
-NB_PARKED, NB_PREV_X, NB_PREV_Y = 8, 9, 10
-NB_FIELDS = 11
+NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_ROW = 8, 9, 10, 11
+NB_FIELDS = 12
 """A neighbour row: id, cell, whether its intent is known, the cell it announced it is heading
 for (its cell where unknown), the cell its state is read at (the announced cell n steps ahead;
-the next cell for n = 1), whether it is parked on its goal, its cell a tick ago (-1 if unseen)."""
+the next cell for n = 1), whether it is parked on its goal, its cell a tick ago (-1 if unseen);
+and its Q_CA row, which :func:`read_rows` writes for the steps that read it."""
 
 LS_TAKEN, LS_PENDING, LS_GOAL, LS_ACTION, LS_TERMINAL, LS_COUNT, LS_NEIGHBOURS = 0, 1, 2, 3, 4, 5, 6
 LS_PER_NEIGHBOUR = 4
@@ -98,13 +99,14 @@ def record_is_valid(ints, floats, ca_table_rows: int) -> bool:
     if len(ints) != REC_PAIRS + 2 * count or blocks not in (1, N_ACTIONS):
         return False
     if not (0 <= ints[REC_GOAL] < N_STATES and 0 <= ints[REC_NEXT_GOAL] < N_STATES
-            and 0 <= ints[REC_ACTION] < N_ACTIONS and ints[REC_TERMINAL] in (0, 1)):
+            and 0 <= ints[REC_ACTION] < N_ACTIONS and ints[REC_TERMINAL] in (0, 1)
+            and math.isfinite(floats[0]) and math.isfinite(floats[1])):
         return False
-    rows = ints[REC_PAIRS::2]
-    following = ints[REC_PAIRS + 1::2]
-    return (all(0 <= row < ca_table_rows for row in rows)
-            and all(-1 <= f and f + N_STATES * (blocks - 1) < ca_table_rows for f in following)
-            and all(math.isfinite(value) for value in floats))
+    if count == 0:
+        return True
+    rows, following = ints[REC_PAIRS::2], ints[REC_PAIRS + 1::2]
+    return (min(rows) >= 0 and max(rows) < ca_table_rows and min(following) >= -1
+            and max(following) + N_STATES * (blocks - 1) < ca_table_rows)
 
 
 def state_size(max_neighbours: int) -> int:
@@ -152,6 +154,16 @@ def ca_row(reading, known_state, ox, oy, nb, j):
 
 
 @kernel
+def read_rows(params, ox, oy, nb, m):
+    """Write each neighbour's Q_CA row (:func:`ca_row`) into its ``NB_ROW``: read once, by the
+    completion of the last transition (as ``s'``) and by the choice (as ``s``)."""
+    reading = params[LP_READING]
+    known_state = params[LP_KNOWN_STATE] != 0
+    for j in range(m):
+        nb[j][NB_ROW] = ca_row(reading, known_state, ox, oy, nb, j)
+
+
+@kernel
 def predicted_move(nb, j, parked):
     """DAQL's prediction of a neighbour's action: its last move (STAY if parked or unseen)."""
     if parked or nb[j][NB_PREV_X] < 0:
@@ -173,7 +185,7 @@ def row_max(table, row):
 @kernel
 def complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f):
     """Write the pending transition's learning record, ``s'`` read from this observation
-    (own cell, goal, neighbour rows); False if nothing was pending."""
+    (own cell, goal, neighbour rows with their ``NB_ROW`` read); False if nothing was pending."""
     if state[LS_PENDING] == 0:
         return False
     reading = params[LP_READING]
@@ -196,7 +208,7 @@ def complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f):
             j += 1
         following = -1
         if j < m and nb[j][NB_ID] == neighbour:
-            following = ca_row(reading, known_state, ox, oy, nb, j)
+            following = nb[j][NB_ROW]
             if reading == READ_DAQL:  # learn the move it made, bootstrap over all moves
                 seen = move_of(nb[j][NB_X] - state[at + 2], nb[j][NB_Y] - state[at + 3])
                 row = row % N_STATES + N_STATES * seen
@@ -273,7 +285,7 @@ def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, he
         if max(abs(dx), abs(dy)) > radius:
             continue
         weight = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
-        row = ca_row(reading, known_state, ox, oy, nb, j)
+        row = nb[j][NB_ROW]
         table_row = q_ca[row]
         for a in range(N_ACTIONS):
             values[a] += weight * table_row[a]
@@ -318,6 +330,7 @@ def decide(q_ds, q_ca, params, params_f, state, state_f, ox, oy, gx, gy, nb, m, 
            random_action, ties, values, rec, rec_f, apply_now):
     """Complete the pending transition (its record applied at once if ``apply_now``), then
     choose. Returns the action and whether a record was written."""
+    read_rows(params, ox, oy, nb, m)
     written = complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f)
     if written and apply_now:
         apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
@@ -331,6 +344,7 @@ def finish(q_ds, q_ca, params, params_f, state, state_f, ox, oy, gx, gy, nb, m, 
            apply_now):
     """Complete the pending transition of a learner that stops (arrived, or the episode ended);
     its neighbours' rows carry no intent then. Returns whether a record was written."""
+    read_rows(params, ox, oy, nb, m)
     written = complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f)
     if written and apply_now:
         apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])

@@ -19,6 +19,7 @@ the same code takes three to six times as long (docs/performance.md).
 
 import argparse
 import collections
+import os
 import statistics
 import sys
 import tempfile
@@ -26,6 +27,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+os.environ["NNQL_KERNEL"] = "python"  # as in the swarm's processes
 
 import zenoh  # noqa: E402
 

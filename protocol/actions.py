@@ -35,9 +35,15 @@ N_STATES = WINDOW * WINDOW
 def offset_state(dx, dy):
     """The egocentric state of a relative offset; offsets beyond the window are clipped to its
     edge, which keeps their direction."""
-    dx = min(max(dx, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
-    dy = min(max(dy, -VIEW_RADIUS), VIEW_RADIUS) + VIEW_RADIUS
-    return dx * WINDOW + dy
+    if dx < -VIEW_RADIUS:
+        dx = -VIEW_RADIUS
+    elif dx > VIEW_RADIUS:
+        dx = VIEW_RADIUS
+    if dy < -VIEW_RADIUS:
+        dy = -VIEW_RADIUS
+    elif dy > VIEW_RADIUS:
+        dy = VIEW_RADIUS
+    return (dx + VIEW_RADIUS) * WINDOW + dy + VIEW_RADIUS
 
 
 def state_offset(state: np.ndarray) -> np.ndarray:

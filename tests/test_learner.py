@@ -28,7 +28,7 @@ def neighbour(j, x, y, next_cell=None, state_cell=None, parked=False, previous=(
     known = next_cell is not None
     nx, ny = next_cell if known else (x, y)
     sx, sy = state_cell if state_cell is not None else (nx, ny)
-    return [j, x, y, int(known), nx, ny, sx, sy, int(parked), *previous]
+    return [j, x, y, int(known), nx, ny, sx, sy, int(parked), *previous, 0]
 
 
 class Agent:
@@ -273,3 +273,22 @@ def test_choose_leaves_the_transition_pending_for_the_next_observation():
            SIZE, SIZE, UP, PREFER_STAY, agent.values)
     assert agent.state[LS_PENDING] == 1
     assert not agent.q_ds.any() and not agent.q_ca.any(), "nothing is learned before s' is seen"
+
+
+def test_a_learning_record_from_elsewhere_is_checked_against_the_tables():
+    from agent.learner import record_is_valid
+
+    good = (7, RIGHT, 0, 9, 1, 2, 3, 4, 11, -1)
+    assert record_is_valid(good, (1.0, 10.0), N_STATES)
+    assert record_is_valid(good[:6] and (7, RIGHT, 0, 9, 1, 0), (0.0, 0.0), N_STATES)
+    for bad_ints, bad_floats in [
+        (good[:-1], (1.0, 10.0)),  # a pair cut short
+        ((7, RIGHT, 0, 9, 1, 2, 3, 4, 11, N_STATES), (1.0, 10.0)),  # s' beyond the table
+        ((7, RIGHT, 0, 9, 1, 2, N_STATES, 4, 11, -1), (1.0, 10.0)),  # s beyond the table
+        ((7, RIGHT, 0, 9, 1, 2, -1, 4, 11, -1), (1.0, 10.0)),  # a negative row would wrap
+        ((N_STATES, RIGHT, 0, 9, 1, 0), (1.0, 10.0)), ((7, 5, 0, 9, 1, 0), (1.0, 10.0)),
+        ((7, RIGHT, 2, 9, 1, 0), (1.0, 10.0)), ((7, RIGHT, 0, 9, 3, 0), (1.0, 10.0)),
+        (good, (math.nan, 10.0)), (good, (1.0,)),
+        ((7, RIGHT, 0, 9, N_ACTIONS, 1, 3, N_STATES), (1.0, 10.0)),  # DAQL's blocks overrun
+    ]:
+        assert not record_is_valid(bad_ints, bad_floats, N_STATES), bad_ints
