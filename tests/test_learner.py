@@ -280,7 +280,7 @@ def test_a_learning_record_from_elsewhere_is_checked_against_the_tables():
 
     good = (7, RIGHT, 0, 9, 1, 2, 3, 4, 11, -1)
     assert record_is_valid(good, (1.0, 10.0), N_STATES)
-    assert record_is_valid(good[:6] and (7, RIGHT, 0, 9, 1, 0), (0.0, 0.0), N_STATES)
+    assert record_is_valid((7, RIGHT, 0, 9, 1, 0), (0.0, 0.0), N_STATES)  # no neighbour
     for bad_ints, bad_floats in [
         (good[:-1], (1.0, 10.0)),  # a pair cut short
         ((7, RIGHT, 0, 9, 1, 2, 3, 4, 11, N_STATES), (1.0, 10.0)),  # s' beyond the table
