@@ -189,11 +189,11 @@ class Batch:
             for s, generators in enumerate(self.generators.values()):
                 for i, rng in enumerate(generators):
                     draw_noise(rng, seed_actions[s, i], seed_ties[s, i])
-            random_actions, ties = seed_actions[self._seed_of_run], seed_ties[self._seed_of_run]
             run_episode(w.bodies, w.learners, w.width, w.height, w.max_steps, w.count_swaps,
-                        w.goal_reward, w.stay_reward, self.params, self.params_f, self.options, self.q_ds,
-                        self.q_ca, self.state, self.state_f, starts, goals, scripts,
-                        random_actions, ties, self.tick, self.record, self.trace,
+                        w.goal_reward, w.stay_reward, self.params, self.params_f, self.options,
+                        self.q_ds, self.q_ca, self.state, self.state_f, self._seed_of_run,
+                        starts, goals, scripts, seed_actions, seed_ties, self.tick, self.record,
+                        self.trace,
                         row=row, row_f=row_f, out=out, learns=self.learns, **self._scratch)
             results.row[:, e], results.row_f[:, e], results.out[:, e] = row, row_f, out
             self.episode += 1
@@ -215,7 +215,7 @@ class Batch:
         return int(self.state[run, agent, LS_TAKEN])
 
     def _scenarios(self, episode: int):
-        """Every run's starts, goals and scripts of an episode (drawn once per seed)."""
+        """Every seed's starts, goals and scripts of an episode."""
         w = self.world
         starts, goals, scripts = [], [], []
         for seed in self._seeds:
@@ -229,8 +229,7 @@ class Batch:
                 starts.append(sc.starts)
                 goals.append(sc.goals)
                 scripts.append(np.zeros((w.max_steps, 0), dtype=np.int64))
-        at = self._seed_of_run
-        return np.stack(starts)[at], np.stack(goals)[at], np.stack(scripts)[at]
+        return np.stack(starts), np.stack(goals), np.stack(scripts)
 
 
 @contextlib.contextmanager

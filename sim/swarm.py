@@ -114,19 +114,22 @@ def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, 
 
 @batch_kernel
 def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
-                params, params_f, options, q_ds, q_ca, state, state_f,
+                params, params_f, options, q_ds, q_ca, state, state_f, seed_of_run,
                 starts, goals, scripts, random_actions, ties, tick,
                 record, trace,
                 x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
                 collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
                 rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
     """Play one episode of every run (see the module docstring); ``tick`` (one per run) is each
-    run's global tick, advanced in place, as are the tables and learner states."""
+    run's global tick, advanced in place, as are the tables and learner states. The scenario
+    (``starts``, ``goals``, ``scripts``) and the noise (``random_actions``, ``ties``) are given per
+    seed, and ``seed_of_run`` says which seed's each run plays."""
     runs = params.shape[0]
     for r in prange(runs):
+        s = seed_of_run[r]
         _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
                  params[r], params_f[r], options[r], q_ds[r], q_ca[r], state[r], state_f[r],
-                 starts[r], goals[r], scripts[r], random_actions[r], ties[r], tick,
+                 starts[s], goals[s], scripts[s], random_actions[s], ties[s], tick,
                  record, trace[r],
                  x[r], y[r], prev_x[r], prev_y[r], goal_x[r], goal_y[r], learns, arrived[r],
                  actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
