@@ -12,7 +12,8 @@ from typing import Callable
 
 import numpy as np
 
-from sim.runs import Batch, Run, World, threads
+from protocol.config import PAPER, SwarmConfig
+from sim.runs import Batch, World, threads
 from world.rules import GOAL_REWARD
 
 ALGOS = ("ql", "nnql")
@@ -85,8 +86,9 @@ def run_batch(
     s = settings
     world = World(bodies=1 + s.n_obstacles, learners=1, width=s.width, height=s.height,
                   max_steps=s.max_steps, count_swaps=s.count_swaps, goal_reward=s.goal_reward)
-    runs = [Run(seed=spec.seed, algo=spec.algo, random_step=spec.random_step, alpha=s.alpha,
-                gamma=s.gamma, beta=s.beta) for spec in specs]
+    runs = [SwarmConfig(n_agents=1, seed=spec.seed, random_step=spec.random_step,
+                        **{**PAPER, "algo": spec.algo, "alpha": s.alpha, "beta": s.beta},
+                        gamma=s.gamma) for spec in specs]
     callback = None if on_episode is None else (lambda episode, _batch: on_episode(episode))
     with threads(workers):
         played = Batch(world, runs).play(s.episodes, on_episode=callback)

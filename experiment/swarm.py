@@ -27,7 +27,7 @@ import numpy as np
 
 from experiment.stats import mean_interval
 from protocol.config import PRESETS, SwarmConfig
-from sim.runs import Batch, Episodes, Run, swarm_world, threads
+from sim.runs import Batch, Episodes, swarm_world, threads
 from world.metrics import EpisodeWriter
 
 VARIANTS = ("ql", "nnql", "best-ql", "best-nnql", "shield-ql", "shield-nnql", "nnql-n2", "daql",
@@ -114,7 +114,7 @@ def run_experiment(experiment: SwarmExperiment, workers: int | None = None,
     configs = [experiment.config(variant, seed) for variant, seed in runs]
     callback = None if on_episode is None else (lambda episode, _batch: on_episode(episode))
     with threads(workers):
-        episodes = Batch(swarm_world(configs[0]), [Run.of(c) for c in configs]).play(
+        episodes = Batch(swarm_world(configs[0]), configs).play(
             experiment.episodes, on_episode=callback)
     return SwarmResults(experiment, episodes, runs)
 

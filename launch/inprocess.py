@@ -18,7 +18,7 @@ from agent import checkpoint
 from protocol.actions import STAY
 from protocol.config import SwarmConfig
 from protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
-from sim.runs import Batch, Episodes, Run, swarm_world
+from sim.runs import Batch, Episodes, swarm_world
 from sim.swarm import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y
 from world.engine import TickReport
 from world.metrics import EpisodeWriter
@@ -77,7 +77,7 @@ def run_in_process(
     """Run every episode of ``config``; writes ``episodes.csv`` (and checkpoints) to ``out_dir``.
     ``on_row(row)`` follows each episode's row (its deterministic columns)."""
     out_dir = Path(out_dir)
-    batch = Batch(swarm_world(config), [Run.of(config)], record=on_tick is not None)
+    batch = Batch(swarm_world(config), [config], record=on_tick is not None)
     agents = [SimulatedAgent(i, config, SimulatedLearner(batch, i), batch.generator(0, i))
               for i in range(config.n_agents)]
     results = Episodes(1, config.episodes)

@@ -1,7 +1,8 @@
 """Driving the swarm simulator: runs described, their buffers made, their episodes played.
 
-A :class:`Run` is one independent run (seed, learning options); a :class:`Batch` holds many runs
-of one world shape (bodies, grid, episode length) and plays them episode by episode through
+A run is one ``protocol.config.SwarmConfig``: its seed and learning options (the batch reads those;
+the world's shape is the batch's :class:`World`); a :class:`Batch` holds many runs of one world
+shape (bodies, grid, episode length) and plays them episode by episode through
 ``sim.swarm.run_episode``. Every random draw comes from the run's seed: each episode's scenario
 (starts, goals, scripts) from ``world.scenario``, each learner's exploring actions and tie-breakers
 from its own stream (``protocol.seeding``), drawn per episode in the same order as an agent process
@@ -10,7 +11,7 @@ distributed swarm gives for the same options.
 """
 
 import contextlib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -49,37 +50,6 @@ class World:
     @property
     def scripted(self) -> int:
         return self.bodies - self.learners
-
-
-@dataclass(frozen=True)
-class Run:
-    """One run: its seed and how its agents learn (the paper's settings are the defaults)."""
-
-    seed: int
-    algo: str = "nnql"
-    random_step: int = 20
-    alpha: float = 0.9
-    gamma: float = 0.6
-    beta: float = 0.5
-    radius: int = 10
-    known_state: bool = False
-    shield: bool = False
-    shared: bool = False
-    lookahead: int = 1
-    optimistic: float = 0.0
-    still_terminal: bool = False
-
-    @staticmethod
-    def of(config: SwarmConfig) -> "Run":
-        """The run a swarm config describes."""
-        return Run(seed=config.seed, algo=config.algo, random_step=config.random_step,
-                   alpha=config.alpha, gamma=config.gamma, beta=config.beta,
-                   radius=config.interaction_radius, known_state=config.known_state,
-                   shield=config.shield, shared=config.shared, lookahead=config.lookahead,
-                   optimistic=config.optimistic, still_terminal=config.still_terminal)
-
-    def with_seed(self, seed: int) -> "Run":
-        return replace(self, seed=seed)
 
 
 def swarm_world(config: SwarmConfig) -> World:
@@ -127,7 +97,7 @@ class Batch:
     """Many runs of one world, their tables, learner states and buffers, played episode by
     episode (:meth:`play`)."""
 
-    def __init__(self, world: World, runs: list[Run], record: bool = False) -> None:
+    def __init__(self, world: World, runs: list[SwarmConfig], record: bool = False) -> None:
         if not runs:
             raise ValueError("a batch needs at least one run")
         for run in runs:
@@ -246,28 +216,26 @@ def threads(count: int | None):
         numba.set_num_threads(before)
 
 
-def check_run(world: World, run: Run) -> None:
+def check_run(world: World, run: SwarmConfig) -> None:
     """Refuse a run the simulator cannot play, with the reason."""
     if run.algo not in READINGS and run.algo != "oracle":
         raise ValueError(f"unknown algorithm {run.algo!r}")
     if run.algo == "oracle" and world.scripted:
         raise ValueError("the oracle plans swarms of learners, not scripted obstacles")
-    if run.random_step < 1:
-        raise ValueError("the random step k must be at least 1")
 
 
-def _params(run: Run) -> list[int]:
+def _params(run: SwarmConfig) -> list[int]:
     params = [0] * LP_FIELDS
     params[LP_READING] = READINGS.get(run.algo, 0)
     params[LP_KNOWN_STATE] = int(run.known_state)
-    params[LP_RADIUS] = run.radius
+    params[LP_RADIUS] = run.interaction_radius
     params[LP_SHIELD] = int(run.shield)
     params[LP_RANDOM_STEP] = run.random_step
     params[LP_STILL_TERMINAL] = int(run.still_terminal)
     return params
 
 
-def _params_f(run: Run) -> list[float]:
+def _params_f(run: SwarmConfig) -> list[float]:
     params = [0.0] * FP_FIELDS
     params[FP_ALPHA], params[FP_GAMMA], params[FP_BETA] = run.alpha, run.gamma, run.beta
     return params

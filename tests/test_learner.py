@@ -14,7 +14,7 @@ from agent.learner import (
 )
 from experiment.paper import PaperSettings, RunSpec, run_batch
 from protocol.actions import DOWN, LEFT, N_ACTIONS, N_STATES, RIGHT, STAY, UP, offset_state
-from sim.runs import Batch, Run, World
+from protocol.config import SwarmConfig
 
 NEVER = 10**9
 """A random step so large that no action is random."""
@@ -263,7 +263,7 @@ def test_a_batch_gives_exactly_what_each_run_gives_alone():
 
 def test_a_random_step_below_one_is_refused():
     with pytest.raises(ValueError, match="random step"):
-        Batch(World(bodies=2, learners=2), [Run(seed=0, random_step=0)])
+        SwarmConfig(random_step=0)
 
 
 def test_choose_leaves_the_transition_pending_for_the_next_observation():
