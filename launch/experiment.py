@@ -25,8 +25,6 @@ from pathlib import Path
 if __package__ in (None, ""):  # run as a script: make the repository's packages importable
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from tqdm import tqdm  # noqa: E402
-
 from experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
 from experiment.report import (  # noqa: E402
     ResultGrid, summarize, table1_markdown, table1_rows, write_episodes_csv, write_table1_csv,
@@ -36,22 +34,13 @@ from experiment.swarm import (  # noqa: E402
     write_runs, write_tables,
 )
 from protocol.config import PRESETS  # noqa: E402
-from launch.progress import Progress  # noqa: E402
+from launch.cli import EXIT_INTERRUPTED, OneLineParser, progress  # noqa: E402
 from launch.recording import log_swarm_curves  # noqa: E402
 
 RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
 
-EXIT_USAGE = 2
-EXIT_INTERRUPTED = 130
 EXIT_TERMINATED = 143
 DEFAULTS = PaperSettings()
-
-
-class OneLineParser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line on stderr (exit code 2), usage left to --help."""
-
-    def error(self, message: str) -> None:  # type: ignore[override]
-        self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
 
 
 def parse_ks(text: str) -> list[int]:
@@ -212,7 +201,7 @@ def run(args: argparse.Namespace) -> Path:
     args.out.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     label = f"{len(specs)} runs x {settings.episodes} episodes"
-    with Progress(total=len(specs) * settings.episodes, label=label) as bar:
+    with progress(len(specs) * settings.episodes, "run-episode", label) as bar:
         metrics = run_batch(
             specs, settings, on_episode=lambda e: bar.update(len(specs)), workers=args.workers
         )
@@ -320,8 +309,7 @@ def run_swarm(argv: list[str]) -> Path:
             parser.error(str(error))
     runs = len(experiment.variants) * experiment.seeds
     started = time.monotonic()
-    with tqdm(total=experiment.episodes, unit="episode", desc=f"{runs} runs", file=sys.stderr,
-              disable=None) as bar:
+    with progress(experiment.episodes, "episode", f"{runs} runs") as bar:
         results = run_experiment(experiment, args.workers, on_episode=lambda _e: bar.update())
     elapsed = time.monotonic() - started
     out.mkdir(parents=True, exist_ok=True)

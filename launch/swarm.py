@@ -23,8 +23,7 @@ if __package__ in (None, ""):
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from launch import zenoh_files  # noqa: E402
-from launch.cli import EXIT_INTERRUPTED, OneLineParser  # noqa: E402
-from launch.progress import Progress  # noqa: E402
+from launch.cli import EXIT_INTERRUPTED, OneLineParser, progress as progress_bar  # noqa: E402
 from launch.recording import RecordingSession, check_viewer_url  # noqa: E402
 from launch.resume import ResumeError, ResumePoint, check_checkpoints, resume_point  # noqa: E402
 from launch.supervisor import Supervisor, describe_exit  # noqa: E402
@@ -260,7 +259,7 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
 
     name_process("nnql-world", config)
     setup_logging("world")
-    bar = Progress(config.episodes - start.episode, "episodes") if progress else None
+    bar = progress_bar(config.episodes - start.episode, "episode") if progress else None
     collisions = 0
 
     def on_tick(world, report) -> None:
@@ -269,8 +268,12 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
         if viz is not None:
             viz.log_tick(world, report)
         if bar is not None and report.episode_row is not None:
-            bar.update(1, collisions=collisions, missed=report.episode_row["missed_intents"],
-                       ticks_per_s=f"{world.tick / max(time.monotonic() - started, 1e-9):.0f}")
+            row = report.episode_row
+            bar.set_postfix(arrived=f"{row['arrived']}/{config.n_agents}", collisions=collisions,
+                            missed=row["missed_intents"],
+                            ticks_per_s=f"{world.tick / max(time.monotonic() - started, 1e-9):.0f}",
+                            refresh=False)
+            bar.update(1)
 
     viz = open_world_viz(record, config, out)
     started = time.monotonic()
@@ -352,14 +355,16 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> in
     session = record if isinstance(record, RecordingSession) else \
         RecordingSession.files_only(record, config, out)
     viz = InProcessRecorder(session.plan, config, out)
-    bar = Progress(config.episodes, "episodes") if progress else None
+    bar = progress_bar(config.episodes, "episode") if progress else None
     collisions = 0
 
     def on_row(row: dict) -> None:
         nonlocal collisions
         collisions += row["collisions"]
         if bar is not None:
-            bar.update(1, collisions=collisions, arrived=f"{row['arrived']}/{config.n_agents}")
+            bar.set_postfix(arrived=f"{row['arrived']}/{config.n_agents}", collisions=collisions,
+                            refresh=False)
+            bar.update(1)
 
     recording = viz.world is not None
     try:

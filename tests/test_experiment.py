@@ -16,11 +16,11 @@ import numpy as np
 import pytest
 
 from experiment.paper import EpisodeMetrics, RunSpec
-from launch.progress import Progress, format_duration
 from experiment.report import (
     EPISODE_COLUMNS, PAPER_TABLE1, TABLE1_COLUMNS, ResultGrid, summarize, table1_markdown, table1_rows,
 )
 from experiment.stats import mean_interval, t_quantile
+from launch.cli import progress
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPT = "launch/experiment.py"
@@ -143,43 +143,6 @@ def test_ctrl_c_stops_cleanly_with_exit_130(tmp_path, workers):
     assert not (tmp_path / "big" / "table1.csv").exists()
 
 
-class FakeStream(io.StringIO):
-    def __init__(self, tty: bool) -> None:
-        super().__init__()
-        self.tty = tty
-
-    def isatty(self) -> bool:
-        return self.tty
-
-
-def test_progress_on_a_terminal_redraws_in_place():
-    stream = FakeStream(tty=True)
-    with Progress(total=10, label="work", stream=stream) as bar:
-        for _ in range(10):
-            bar.update(collisions=3)
-    text = stream.getvalue()
-    assert text.startswith("\rwork [") and text.endswith("\n")
-    assert text.count("\n") == 1
-    assert "10/10 100%" in text and "collisions=3" in text
-
-
-def test_progress_elsewhere_prints_few_plain_lines():
-    stream = FakeStream(tty=False)
-    bar = Progress(total=1000, label="plain", stream=stream)
-    for _ in range(1000):
-        bar.update()
-    bar.close()
-    bar.close()  # idempotent
-    lines = stream.getvalue().splitlines()
-    assert "\r" not in stream.getvalue()
-    assert len(lines) == 2  # the first update, then the final state
-    assert lines[-1].startswith("plain [########################] 1000/1000")
-
-
-def test_format_duration():
-    assert format_duration(75) == "1:15" and format_duration(3725) == "1:02:05"
-
-
 @pytest.mark.parametrize(
     "df, quantile",
     [(1, 12.706204736), (2, 4.302652730), (4, 2.776445105), (9, 2.262157163), (29, 2.045229642),
@@ -284,3 +247,12 @@ def test_swarm_experiment_bad_options_exit_2_with_one_line(args, message, tmp_pa
     assert result.returncode == 2
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and message in lines[0], result.stderr
+
+
+def test_a_progress_bar_where_stderr_is_no_terminal_writes_whole_lines(capsys):
+    with progress(10, "step", "work") as bar:
+        for _ in range(10):
+            bar.update()
+    lines = capsys.readouterr().err.splitlines()
+    assert lines and all("\r" not in line for line in lines)
+    assert lines[-1].startswith("work: 100%") and "10/10" in lines[-1]
