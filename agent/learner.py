@@ -272,12 +272,10 @@ def shield_mask(reading, ox, oy, nb, m, width, height):
 @kernel
 def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, height,
            random_action, ties, values):
-    """Eq. 6-8 (and the random step): the action, with the transition it starts left pending."""
-    reading = params[LP_READING]
-    known_state = params[LP_KNOWN_STATE] != 0
+    """Eq. 6-8 (and the random step): the action, with the transition it starts left pending.
+    The five actions' sums are spelled out: it is the agent's hot path in plain Python."""
     radius = params[LP_RADIUS]
-    for a in range(N_ACTIONS):
-        values[a] = 0.0
+    ca0 = ca1 = ca2 = ca3 = ca4 = 0.0
     count = 0
     for j in range(m):
         dx = nb[j][NB_X] - ox
@@ -286,9 +284,12 @@ def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, he
             continue
         weight = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
         row = nb[j][NB_ROW]
-        table_row = q_ca[row]
-        for a in range(N_ACTIONS):
-            values[a] += weight * table_row[a]
+        q = q_ca[row]
+        ca0 += weight * q[0]
+        ca1 += weight * q[1]
+        ca2 += weight * q[2]
+        ca3 += weight * q[3]
+        ca4 += weight * q[4]
         at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * count
         state[at] = nb[j][NB_ID]
         state[at + 1] = row
@@ -299,21 +300,18 @@ def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, he
     beta = params_f[FP_BETA]
     rest = 1.0 - beta
     ds = q_ds[goal]
+    values[0] = beta * ds[0] + rest * ca0
+    values[1] = beta * ds[1] + rest * ca1
+    values[2] = beta * ds[2] + rest * ca2
+    values[3] = beta * ds[3] + rest * ca3
+    values[4] = beta * ds[4] + rest * ca4
+    mask = shield_mask(params[LP_READING], ox, oy, nb, m, width, height) \
+        if params[LP_SHIELD] != 0 else 0
+    greedy = -1  # the best allowed value; among equals, the largest tie-breaker
     for a in range(N_ACTIONS):
-        values[a] = beta * ds[a] + rest * values[a]
-    mask = shield_mask(reading, ox, oy, nb, m, width, height) if params[LP_SHIELD] != 0 else 0
-    best = 0.0
-    found = False
-    for a in range(N_ACTIONS):
-        if (mask >> a) & 1 == 0 and (not found or values[a] > best):
-            best = values[a]
-            found = True
-    greedy = 0
-    top = -1.0
-    for a in range(N_ACTIONS):
-        if (mask >> a) & 1 == 0 and values[a] >= best and ties[a] > top:
+        if (mask >> a) & 1 == 0 and (greedy < 0 or values[a] > values[greedy]
+                                     or values[a] == values[greedy] and ties[a] > ties[greedy]):
             greedy = a
-            top = ties[a]
     state[LS_TAKEN] += 1
     action = greedy
     if state[LS_TAKEN] % params[LP_RANDOM_STEP] == 0 and (mask >> random_action) & 1 == 0:
@@ -323,6 +321,9 @@ def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, he
     state[LS_ACTION] = action
     state[LS_COUNT] = count
     return action
+
+
+assert N_ACTIONS == 5, "choose spells out five actions"
 
 
 @kernel
