@@ -1,6 +1,6 @@
 """What one agent learned, in Rerun: its Q-tables as 21 x 21 heat maps, and its negotiation timing.
 
-Once per episode (from the ``on_episode_end`` hook of ``agent.node.run_agent`` and
+Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.node.run_agent`` and
 ``launch.inprocess.run_in_process``) each agent logs, under ``agents/<id>/``:
 
 - ``q_ds/value``: an image, one pixel per egocentric offset ``(dx, dy)`` of the *goal* from the
@@ -36,6 +36,10 @@ from protocol.config import SwarmConfig
 from protocol.messages import Observation
 
 TABLES = ("q_ds", "q_ca")
+
+HEATMAP_EVERY = 10
+"""Heat maps are logged every this many episodes (and at the run's last): late in a run there are
+tens of episodes a second, and every picture is data the recording keeps."""
 
 _VIRIDIS = np.array([
     (68, 1, 84), (72, 40, 120), (62, 74, 137), (49, 104, 142), (38, 130, 142),
@@ -177,6 +181,16 @@ class AgentViz:
             tick = 0
         rec.set_time("tick", sequence=tick)
         rec.set_time("episode", sequence=episode)
+        if episode % HEATMAP_EVERY == 0 or episode == self.config.episodes - 1:
+            self._log_tables(brain)
+        if isinstance(brain, TimedBrain):
+            latencies, unanswered = brain.take_timings()
+            if latencies:
+                rec.log(latency_path(self.agent), rr.Scalars(1000.0 * float(np.mean(latencies))))
+            rec.log(unanswered_path(self.agent), rr.Scalars(float(unanswered)))
+
+    def _log_tables(self, brain: AgentBrain) -> None:
+        rec = self.rec
         root = agent_path(self.agent)
         for table, values in zip(TABLES, brain.learner.tables()):
             picture = table_picture(values, self.config.optimistic)
@@ -185,11 +199,6 @@ class AgentViz:
             rec.log(f"{root}/{table}/policy",
                     rr.Arrows2D.from_fields(origins=origins, vectors=vectors, colors=colors))
             rec.log(f"{root}/{table}/stay", rr.Points2D.from_fields(positions=stays))
-        if isinstance(brain, TimedBrain):
-            latencies, unanswered = brain.take_timings()
-            if latencies:
-                rec.log(latency_path(self.agent), rr.Scalars(1000.0 * float(np.mean(latencies))))
-            rec.log(unanswered_path(self.agent), rr.Scalars(float(unanswered)))
 
     def close(self) -> None:
         try:
