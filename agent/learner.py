@@ -28,7 +28,10 @@ whole view, 10), a distinct state block for a neighbour known to stay or whose i
 (``LP_KNOWN_STATE``: a parked agent then differs from one whose intent is unknown), and the
 announcement shield (``LP_SHIELD``: never move into a cell a known neighbour announced, into a known
 neighbour's cell when it announced moving into this one, or into a parked agent; QL's fair
-counterpart masks the neighbours' current cells; the random step is filtered too).
+counterpart masks the neighbours' current cells; the random step is filtered too), and
+``LP_STILL_TERMINAL``: a step that left the agent where it was (it stayed, was blocked, bumped the
+edge) does not bootstrap destination seeking from the state it stayed in, so waiting is not
+valued like the move it waits for (docs/swarm.md has the evidence of each).
 
 Completing a transition writes a *learning record* (``rec``, ``rec_f``), applied by
 :func:`apply_record`: at once for an independent learner, or, where a swarm shares one table, by
@@ -54,7 +57,8 @@ READINGS = {"ql": READ_QL, "nnql": READ_NNQL, "nnql-dir": READ_DIR, "daql": READ
 UNKNOWN_MOVE = N_ACTIONS
 """The move code of a neighbour whose intent is unknown (``READ_DIR``)."""
 
-LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP, LP_STILL_TERMINAL = 0, 1, 2, 3, 4, 5
+LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP = 0, 1, 2, 3, 4
+LP_STILL_TERMINAL = 5
 LP_FIELDS = 6
 FP_ALPHA, FP_GAMMA, FP_BETA = 0, 1, 2
 FP_FIELDS = 3
@@ -74,7 +78,8 @@ action and whether it ended on the goal, and per neighbour of Eq. 6: id, table r
 LF_R_DS, LF_R_CA = 0, 1
 LF_FIELDS = 2
 
-REC_GOAL, REC_ACTION, REC_TERMINAL, REC_NEXT_GOAL, REC_BLOCKS, REC_COUNT, REC_PAIRS = 0, 1, 2, 3, 4, 5, 6
+REC_GOAL, REC_ACTION, REC_TERMINAL, REC_NEXT_GOAL, REC_BLOCKS, REC_COUNT = 0, 1, 2, 3, 4, 5
+REC_PAIRS = 6
 RF_R_DS, RF_R_CA = 0, 1
 RF_FIELDS = 2
 """A learning record: Eq. 9's ``s, a, terminal, s'``, the blocks ``s'`` bootstraps over, and per
