@@ -57,11 +57,13 @@ def main() -> int:
     p.add_argument("--warm-up", type=float, default=60.0, help="seconds before the first sample")
     p.add_argument("--agents", type=int, default=8)
     p.add_argument("--preset", default=None, help="learning preset (default: the swarm's)")
+    p.add_argument("--no-record", action="store_true", help="recording off (our own memory)")
     args = p.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         command = [sys.executable, str(ROOT / "launch" / "swarm.py"), "--agents",
                    str(args.agents), "--episodes", "1000000", "--out", str(Path(tmp) / "run"),
-                   "--no-progress", *(["--preset", args.preset] if args.preset else [])]
+                   "--no-progress", *(["--preset", args.preset] if args.preset else []),
+                   *(["--no-record"] if args.no_record else [])]
         swarm = subprocess.Popen(command, cwd=ROOT, start_new_session=True,
                                  stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         samples: dict[str, list[tuple[float, float]]] = {}
@@ -79,21 +81,26 @@ def main() -> int:
                     return 1
                 time.sleep(args.every)
         finally:
+            rows = read_rows(Path(tmp) / "run" / "episodes.csv")
             if swarm.poll() is None:
                 os.killpg(swarm.pid, signal.SIGINT)
-                swarm.wait(timeout=60)
-        rows = read_rows(Path(tmp) / "run" / "episodes.csv")
+                try:
+                    swarm.wait(timeout=600)  # merging a long recording takes a while
+                except subprocess.TimeoutExpired:
+                    os.killpg(swarm.pid, signal.SIGKILL)
     print(f"{args.minutes:g} minutes after a {args.warm_up:g} s warm-up, {len(rows)} episodes, "
-          f"{sum(int(r['steps']) + 1 for r in rows)} ticks, recording on")
-    print(f"{'process':<16} {'start MiB':>9} {'end MiB':>8} {'growth':>7} {'MiB/min':>8}")
+          f"{sum(int(r['steps']) + 1 for r in rows)} ticks, recording "
+          f"{'off' if args.no_record else 'on'}")
+    print(f"{'process':<16} {'start MiB':>9} {'half MiB':>9} {'end MiB':>8} {'MiB/min':>8} "
+          f"{'2nd half':>8}")
     growths = []
     for title in sorted(samples):
         series = samples[title]
-        (t0, first), (t1, last) = series[0], series[-1]
-        rate = (last - first) / max(t1 - t0, 1e-9)
-        growths.append(rate)
-        print(f"{title:<16} {first:>9.1f} {last:>8.1f} {last - first:>7.1f} {rate:>8.2f}")
-    print(f"median growth {statistics.median(growths):.2f} MiB/min")
+        (t0, first), (th, half), (t1, last) = series[0], series[len(series) // 2], series[-1]
+        rate, late = (last - first) / max(t1 - t0, 1e-9), (last - half) / max(t1 - th, 1e-9)
+        growths.append(late)
+        print(f"{title:<16} {first:>9.1f} {half:>9.1f} {last:>8.1f} {rate:>8.2f} {late:>8.2f}")
+    print(f"median growth over the second half {statistics.median(growths):.2f} MiB/min")
     return 0
 
 
