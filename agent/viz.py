@@ -38,6 +38,11 @@ from protocol.messages import Observation
 TABLES = ("q_ds", "q_ca")
 
 HEATMAP_EVERY = 10
+
+
+def logs_heat_maps(episode: int, episodes: int) -> bool:
+    """Whether an agent logs its heat maps at the end of ``episode``: every tenth and the last."""
+    return episode % HEATMAP_EVERY == 0 or episode == episodes - 1
 """Heat maps are logged every this many episodes (and at the run's last): late in a run there are
 tens of episodes a second, and every picture is data the recording keeps."""
 
@@ -181,7 +186,7 @@ class AgentViz:
             tick = 0
         rec.set_time("tick", sequence=tick)
         rec.set_time("episode", sequence=episode)
-        if episode % HEATMAP_EVERY == 0 or episode == self.config.episodes - 1:
+        if logs_heat_maps(episode, self.config.episodes):
             self._log_tables(brain)
         if isinstance(brain, TimedBrain):
             latencies, unanswered = brain.take_timings()
