@@ -47,6 +47,7 @@ class Result(NamedTuple):
     ticks: int
     events: int
     virtual_s: float
+    fired: tuple[str, ...] = ()  # the kinds of the faults that hit it
 
 
 def check_schedule(seed: int, agents: int, scratch: Path | None = None,
@@ -66,7 +67,7 @@ def check_schedule(seed: int, agents: int, scratch: Path | None = None,
             failures += parity_failures(schedule.config, outcome.rows, outcome.fingerprints,
                                         scratch)
         return Result(seed, tuple(failures), outcome.digest, outcome.ticks, outcome.events,
-                      outcome.virtual_s)
+                      outcome.virtual_s, outcome.fired)
     except Exception as error:  # noqa: BLE001 - a bug the schedule found: report it with its seed
         where = traceback.extract_tb(error.__traceback__)[-1]
         return Result(seed, (f"raised {type(error).__name__}: {error} "

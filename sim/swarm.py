@@ -75,6 +75,7 @@ class Outcome:
     digest: str
     rows: list[dict]
     fingerprints: list[str] | None = None
+    fired: tuple[str, ...] = ()  # the kinds of the faults that hit, in order
 
 
 class SimSwarm:
@@ -113,6 +114,7 @@ class SimSwarm:
         for fault in schedule.faults:
             self.triggers.setdefault(fault.tick, []).append(fault)
         self.opened: set[int] = set()
+        self.fired: list[str] = []
 
     # The run.
 
@@ -141,7 +143,7 @@ class SimSwarm:
         if fingerprints:
             prints = [None if b is None else checkpoint.fingerprint(b) for b in self.final_brains]
         return Outcome(self.schedule.seed, check.failures, ticks, net.events, net.now, digest,
-                       self.rows, prints)
+                       self.rows, prints, tuple(self.fired))
 
     def _all_gone(self) -> None:
         if self.world_done and not any(a.alive for a in self.agents):
@@ -179,13 +181,7 @@ class SimSwarm:
         if self.world_done:
             return
         rows = self.rows
-        first_episode = len(rows)
-        first_tick = rows[-1]["end_tick"] + 1 if rows else 0
-        if first_episode >= self.config.episodes:  # the launcher: "already complete", no world
-            self.world_done = self.completed = True
-            self._all_gone()
-            return
-        self._start_world(first_episode, first_tick)
+        self._start_world(len(rows), rows[-1]["end_tick"] + 1 if rows else 0)
 
     def _check_world(self) -> None:
         violations = self.world_protocol.world.violations
@@ -430,17 +426,22 @@ class SimSwarm:
             net.at(net.now + fault.duration_s, self._heal, fault.group)
         elif kind == "stall":
             process = self.processes[fault.target]
+            if not process.alive:
+                return
             resumed = self._world_timer if process is self.world else self._agent_resumed
             net.stall(process, fault.duration_s, resumed)
         elif fault.target == "world":
-            if self.world.alive and not self.world_done:
-                self._crash_world()
-                net.at(net.now + fault.duration_s, self._restart_world)
+            if not self.world.alive or self.world_done:
+                return
+            self._crash_world()
+            net.at(net.now + fault.duration_s, self._restart_world)
         else:
             i = int(fault.target.split("-")[1])
-            if self.agents[i].alive:
-                self._crash_agent(i)
-                net.at(net.now + fault.duration_s, self._start_agent, i, True)
+            if not self.agents[i].alive:
+                return
+            self._crash_agent(i)
+            net.at(net.now + fault.duration_s, self._start_agent, i, True)
+        self.fired.append(kind)
 
     def _heal(self, group: frozenset) -> None:
         if self.net.cut is group:

@@ -12,7 +12,8 @@ STAY and as a missed intent); applies the tick with ``world.engine``; sends the 
 observations at once; then reports the tick (:class:`~protocol.effects.TickClosed`) and, at an
 episode's end, its row (:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a
 stalled one at most the deadline. A world started at ``first_episode`` / ``first_tick`` continues
-a run (``--resume``).
+a run (``--resume``); one started after the last episode only tells the agents still running
+to stop. A completed run tells its agents to stop until every live one has left.
 """
 
 import logging
@@ -65,7 +66,13 @@ class WorldProtocol:
         self.done = False
         self.completed = False
         self.closing_until: float | None = None  # completed: telling the agents to leave
+        self.closing_from = 0.0  # not done before this even if no agent is seen
         self.next_shutdown = 0.0
+        if first_episode >= config.episodes:  # resumed after the last row: only the goodbyes
+            self.started = True
+            self.closing_until = now + SHUTDOWN_WAIT_S
+            self.closing_from = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
+            self.next_shutdown = now
         self.actions: list[int | None] | None = None  # the open tick's intents, by agent
         self.tick_start = 0.0
         self.tick_deadline = 0.0
@@ -86,7 +93,7 @@ class WorldProtocol:
             self.inbox.reject("unknown-agent", str(key))
         elif self.closing_until is not None:
             (self.alive.add if alive else self.alive.discard)(agent)
-            if not self.alive:
+            if not self.alive and now >= self.closing_from:
                 self._finish(True, None)
         elif alive:
             self.alive.add(agent)
@@ -134,7 +141,7 @@ class WorldProtocol:
         if self.done:
             return out
         if self.closing_until is not None:
-            if now >= self.closing_until or not self.alive:
+            if now >= self.closing_until or (not self.alive and now >= self.closing_from):
                 self._finish(True, None)
             elif now >= self.next_shutdown:
                 self._send_shutdown(now)
@@ -220,7 +227,7 @@ class WorldProtocol:
     def _close_run(self, now: float) -> None:
         """The run is complete: tell the agents until every live one has left (or for
         :data:`SHUTDOWN_WAIT_S`)."""
-        self.closing_until = now + SHUTDOWN_WAIT_S
+        self.closing_until, self.closing_from = now + SHUTDOWN_WAIT_S, now
         self._send_shutdown(now)
         if not self.alive:
             self._finish(True, None)
