@@ -24,7 +24,7 @@ malformed input (rejected and counted by reason, never raised).
 """
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from agent import negotiation
 from protocol import keys
@@ -84,7 +84,8 @@ class Pending:
     """An observation whose decision waits for intents: whose (``awaited``), which of them the
     brain decides with (``needed``), whom this agent asked (``asks``), until when, and, once the
     answers are in, the ones it then asked for directly because no answer brought them
-    (``missing``)."""
+    (``missing``); neighbours whose ask ended without an answer (gone, or refusing the tick) are
+    waited for no more (``refused``)."""
 
     obs: Observation
     awaited: list[int]
@@ -92,14 +93,16 @@ class Pending:
     asks: list[int]
     deadline: float
     missing: list[int] | None = None
+    refused: set[int] = field(default_factory=set)  # asked, and the ask ended unanswered
 
 
 @dataclass(slots=True)
 class OpenAsk:
-    """One of this agent's asks, until it ends: whom it asked, and for a standing query its
-    generation (only the newest one's end closes the stream)."""
+    """One of this agent's asks, until it ends: whom it asked, for which tick, and for a
+    standing query its generation (only the newest one's end closes the stream)."""
 
     agent: int
+    tick: int
     generation: int | None = None
 
 
@@ -169,13 +172,19 @@ class AgentProtocol:
         """One of this agent's asks ended: timed out, finished, or its target is gone."""
         out = self._out = []
         open_ask = self.asks.pop(ask, None)
-        if (open_ask is not None and open_ask.generation is not None
-                and open_ask.generation == self.stream_generation and not self.stopped):
-            self.stream_open = False
-            p = self.pending
-            if (p is not None and p.missing is None and self.predecessor in p.asks
-                    and self.predecessor not in self._intents_of(p.obs.tick).answered):
-                self._ask(self.predecessor, p.obs.tick, p.deadline - now)  # not by the stream
+        if open_ask is None or self.stopped:
+            return out
+        p = self.pending
+        if open_ask.generation is not None:
+            if open_ask.generation == self.stream_generation:
+                self.stream_open = False
+                if (p is not None and p.missing is None and self.predecessor in p.asks
+                        and self.predecessor not in self._intents_of(p.obs.tick).answered):
+                    self._ask(self.predecessor, p.obs.tick, p.deadline - now)  # not by the stream
+        elif (p is not None and open_ask.tick == p.obs.tick
+              and open_ask.agent not in self._intents_of(p.obs.tick).answered):
+            p.refused.add(open_ask.agent)  # no answer is coming: do not wait for it
+            self._advance(now)
         return out
 
     def on_query(self, query: int, parameters, now: float) -> list:
@@ -357,17 +366,18 @@ class AgentProtocol:
         p = self.pending
         got = self._intents_of(p.obs.tick)
         remaining = p.deadline - now
+        refused = p.refused
         if p.missing is None:
-            if remaining > 0 and not all(j in got.answered for j in p.asks):
+            if remaining > 0 and not all(j in got.answered or j in refused for j in p.asks):
                 return
             if self.predecessor in p.asks and self.predecessor not in got.answered:
                 self.stream_open = False  # it did not answer in time: open a fresh one
-            p.missing = [j for j in p.awaited if j not in got.actions]
+            p.missing = [j for j in p.awaited if j not in got.actions and j not in refused]
             if p.missing and remaining > 0:
                 for j in p.missing:
                     self._ask(j, p.obs.tick, remaining)
                 return
-        elif remaining > 0 and not all(j in got.actions for j in p.missing):
+        elif remaining > 0 and not all(j in got.actions or j in refused for j in p.missing):
             return
         self._decide_pending()
 
@@ -418,23 +428,23 @@ class AgentProtocol:
         self.gap_run = 0
         return True
 
-    def _new_ask(self, neighbour: int, parameters: str, timeout_s: float,
+    def _new_ask(self, neighbour: int, tick: int, parameters: str, timeout_s: float,
                  generation: int | None = None) -> None:
         ask = self.next_ask
         self.next_ask += 1
-        self.asks[ask] = OpenAsk(neighbour, generation)
+        self.asks[ask] = OpenAsk(neighbour, tick, generation)
         self._out.append(Ask(ask, neighbour, parameters, timeout_s))
 
     def _ask(self, neighbour: int, tick: int, timeout_s: float) -> None:
         """Ask one neighbour for its intent at ``tick``; its answer comes to ``on_answer``."""
-        self._new_ask(neighbour, keys.intent_query_params(tick, self.agent), timeout_s)
+        self._new_ask(neighbour, tick, keys.intent_query_params(tick, self.agent), timeout_s)
 
     def _open_stream(self, since: int) -> None:
         """Open the standing query on the predecessor's intent key (nnQL only)."""
         if not self.negotiates or self.predecessor not in self.peers_seen or since >= keys.MAX_TICK:
             return
         self.stream_generation += 1
-        self._new_ask(self.predecessor, keys.standing_query_params(since, self.agent),
+        self._new_ask(self.predecessor, since, keys.standing_query_params(since, self.agent),
                       STANDING_QUERY_S, self.stream_generation)
         self.stream_open = True
 

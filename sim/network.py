@@ -153,7 +153,8 @@ class Network:
             if not process.alive or process.incarnation != incarnation:
                 return
             function(*args)
-        resumed(process)
+        if process.alive and process.incarnation == incarnation:
+            resumed(process)
 
     def run(self, until: float, max_events: int) -> bool:
         """Handle events in time order until none is left, :attr:`halted` is set, virtual time

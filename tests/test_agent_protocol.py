@@ -169,3 +169,18 @@ def test_bad_input_is_counted_never_raised():
     assert kinds(protocol.on_liveliness("nnql/proto/alive/agent/0042", True, 0.0)) == []
     assert protocol.on_answer(12345, b"garbage", 0.0) == []
     assert protocol.inbox.total_rejected >= 10
+
+
+def test_a_neighbour_whose_ask_ends_unanswered_is_waited_for_no_more():
+    """A neighbour that is gone (no queryable: Zenoh ends the ask at once) or refuses the tick
+    cost the whole negotiation time-out at every tick, as simulated histories showed."""
+    protocol = ready(agent=2)
+    others = [(0, 2, 2), (1, 3, 3)]
+    effects = protocol.on_observation(observation(0, agent=2, others=others), 0.0)
+    [ask] = [e for e in effects if isinstance(e, Ask)]  # agent 1 relays agent 0's intent
+    assert ask.agent == 1
+    effects = protocol.on_ask_end(ask.ask, 0.001)
+    [missing] = [e for e in effects if isinstance(e, Ask)]  # then agent 0 is asked directly
+    assert missing.agent == 0 and protocol.pending is not None
+    effects = protocol.on_ask_end(missing.ask, 0.002)
+    assert "SendIntent" in kinds(effects) and protocol.decided_tick == 0

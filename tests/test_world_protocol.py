@@ -4,7 +4,7 @@ from protocol import keys
 from protocol.config import SwarmConfig
 from protocol.effects import Finished, Log, SendControl, SendObservation, TickClosed, WriteRow
 from protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
-from world.protocol import SHUTDOWN_REPEAT_S, SHUTDOWN_WAIT_S, WorldProtocol
+from world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol
 
 CONFIG = SwarmConfig(run_id="wproto", n_agents=2, episodes=2, max_steps=3, tick_deadline_s=0.5)
 
@@ -94,19 +94,36 @@ def test_a_completed_run_tells_its_agents_until_they_leave():
     assert control.control.command == CONTROL_SHUTDOWN
     assert kinds(protocol.on_timer(now + SHUTDOWN_REPEAT_S)) == ["SendControl"]
     assert kinds(alive(protocol, 0, now + 0.3, up=False)) == []
-    assert alive(protocol, 1, now + 0.4, up=False)[-1] == Finished(True, None)
+    assert kinds(alive(protocol, 1, now + 0.4, up=False)) == []
+    assert "Finished" not in kinds(protocol.on_timer(now + 0.4 + SHUTDOWN_QUIET_S / 2))
+    assert protocol.on_timer(now + 0.4 + SHUTDOWN_QUIET_S)[-1] == Finished(True, None)
     assert protocol.done and protocol.completed and protocol.timer() is None
 
 
-def test_agents_that_never_leave_are_told_for_a_while_only():
+def test_an_agent_that_comes_up_while_the_others_leave_is_told_too():
+    """Seed 9582 of launch/faultsim.py: a stalled world handled, all at once, the last agents
+    leaving and a restarted one coming up, and ended before it saw the newcomer."""
+    protocol, _ = started()
+    protocol.world.finished = True
+    protocol._close_run(1.0)
+    alive(protocol, 0, 3.0 - 0.5, up=False)
+    alive(protocol, 1, 3.0 - 0.5, up=False)
+    alive(protocol, 1, 3.0 - 0.5)  # restarted meanwhile
+    assert kinds(protocol.on_timer(protocol.timer())) == ["SendControl"]
+
+
+def test_agents_that_never_leave_are_told_a_few_times_only_however_long_it_takes():
+    """Seed 9563 of launch/faultsim.py: the world stalled for longer than it meant to tell its
+    agents to stop, and gave up without telling those a partition had cut off."""
     protocol, _ = started()
     protocol.world.finished = True  # as if the last tick had just closed
     protocol._close_run(1.0)
-    resent = 0
+    resent, now = 0, 1.0 + 10 * SHUTDOWN_REPEAT_S * SHUTDOWN_TRIES  # stalled meanwhile
     while not protocol.done:
-        effects = protocol.on_timer(protocol.timer())
+        effects = protocol.on_timer(now)
         resent += kinds(effects).count("SendControl")
-    assert protocol.completed and resent == round(SHUTDOWN_WAIT_S / SHUTDOWN_REPEAT_S) - 1
+        now = protocol.timer() or now
+    assert protocol.completed and resent == SHUTDOWN_TRIES - 1
 
 
 def test_a_stop_tells_everyone_once_and_ends():
@@ -134,7 +151,8 @@ def test_a_world_resumed_after_the_last_episode_only_tells_the_agents_to_stop():
     assert kinds(protocol.on_timer(5.0)) == ["SendControl"]
     assert kinds(alive(protocol, 0, 5.01)) == []  # an agent still running, from the history
     assert kinds(protocol.on_timer(protocol.timer())) == ["SendControl"]
-    assert alive(protocol, 0, 5.3, up=False)[-1] == Finished(True, None)
+    alive(protocol, 0, 5.3, up=False)
+    assert protocol.on_timer(protocol.timer())[-1] == Finished(True, None)
     nobody = WorldProtocol(CONFIG, 0.0, first_episode=CONFIG.episodes)
     effects = nobody.on_timer(0.0) + nobody.on_timer(nobody.timer())
     assert kinds(effects) == ["SendControl", "Finished"], "with nobody left it ends at once"

@@ -28,11 +28,16 @@ from world.engine import SwarmWorld
 STARTUP_TIMEOUT_S = 60.0
 """How long the world waits for every agent to come alive before it gives up."""
 
-SHUTDOWN_WAIT_S = 2.0
-"""How long a world that completed its run waits for every live agent to leave, telling them
-to again every :data:`SHUTDOWN_REPEAT_S`: a shutdown lost on the way would leave an agent
-waiting for a world that never comes back."""
+SHUTDOWN_TRIES = 10
 SHUTDOWN_REPEAT_S = 0.2
+"""A world that completed its run tells its agents to stop up to :data:`SHUTDOWN_TRIES` times,
+this far apart, until every live one has left: a shutdown lost on the way would leave an agent
+waiting for a world that never comes back. Tries, not a time limit: a world stalled meanwhile
+still makes them all (faultsim seed 9563)."""
+SHUTDOWN_QUIET_S = 0.1
+"""With no live agent left, the world still waits this long after the last liveliness change
+before it ends: a world that was stalled handles what queued meanwhile all at once, and an
+agent that came up in the meantime is told too (faultsim seed 9582)."""
 
 _NO_TRACE = TickTrace("world", None)
 
@@ -65,13 +70,13 @@ class WorldProtocol:
         self.startup_by = now + startup_timeout_s
         self.done = False
         self.completed = False
-        self.closing_until: float | None = None  # completed: telling the agents to leave
-        self.closing_from = 0.0  # not done before this even if no agent is seen
+        self.closing = False  # completed: telling the agents to leave
+        self.shutdowns_left = SHUTDOWN_TRIES
+        self.leave_by = 0.0  # with no live agent, done from then on
         self.next_shutdown = 0.0
         if first_episode >= config.episodes:  # resumed after the last row: only the goodbyes
-            self.started = True
-            self.closing_until = now + SHUTDOWN_WAIT_S
-            self.closing_from = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
+            self.started = self.closing = True
+            self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
             self.next_shutdown = now
         self.actions: list[int | None] | None = None  # the open tick's intents, by agent
         self.tick_start = 0.0
@@ -91,10 +96,9 @@ class WorldProtocol:
         agent = keys.agent_from_key(key, self.config.run_id)
         if agent is None or agent >= self.n:
             self.inbox.reject("unknown-agent", str(key))
-        elif self.closing_until is not None:
+        elif self.closing:
             (self.alive.add if alive else self.alive.discard)(agent)
-            if not self.alive and now >= self.closing_from:
-                self._finish(True, None)
+            self.leave_by = max(self.leave_by, now + SHUTDOWN_QUIET_S)
         elif alive:
             self.alive.add(agent)
             out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
@@ -140,11 +144,14 @@ class WorldProtocol:
         out = self._out = []
         if self.done:
             return out
-        if self.closing_until is not None:
-            if now >= self.closing_until or (not self.alive and now >= self.closing_from):
+        if self.closing:
+            if not self.alive and now >= self.leave_by:
                 self._finish(True, None)
             elif now >= self.next_shutdown:
-                self._send_shutdown(now)
+                if self.shutdowns_left:
+                    self._send_shutdown(now)
+                else:
+                    self._finish(True, None)
         elif not self.started:
             if now >= self.startup_by:
                 missing = sorted(set(range(self.n)) - self.alive)
@@ -158,15 +165,15 @@ class WorldProtocol:
         """The process is stopping (a signal): tell everyone and end."""
         out = self._out = []
         if not self.done:
-            self._finish(self.closing_until is not None, None)
+            self._finish(self.closing, None)
         return out
 
     def timer(self) -> float | None:
         """When :meth:`on_timer` is next due (None: no timer)."""
         if self.done:
             return None
-        if self.closing_until is not None:
-            return min(self.next_shutdown, self.closing_until)
+        if self.closing:
+            return self.next_shutdown if self.alive else min(self.next_shutdown, self.leave_by)
         if not self.started:
             return self.startup_by
         return self.tick_deadline if self.actions is not None else None
@@ -225,21 +232,20 @@ class WorldProtocol:
             self._close_run(now)
 
     def _close_run(self, now: float) -> None:
-        """The run is complete: tell the agents until every live one has left (or for
-        :data:`SHUTDOWN_WAIT_S`)."""
-        self.closing_until, self.closing_from = now + SHUTDOWN_WAIT_S, now
+        """The run is complete: tell the agents until every live one has left (and
+        :data:`SHUTDOWN_QUIET_S` passed), :data:`SHUTDOWN_TRIES` times at most."""
+        self.closing, self.leave_by = True, now + SHUTDOWN_QUIET_S
         self._send_shutdown(now)
-        if not self.alive:
-            self._finish(True, None)
 
     def _send_shutdown(self, now: float) -> None:
         self.next_shutdown = now + SHUTDOWN_REPEAT_S
+        self.shutdowns_left -= 1
         control = Control(self.config.run_id, self.world.tick, WORLD_SENDER, CONTROL_SHUTDOWN)
         self._out.append(SendControl(control, encode(control)))
 
     def _finish(self, completed: bool, error: str | None) -> None:
         """The end: a completed run has told its agents already; otherwise tell them now."""
-        if self.closing_until is None:
+        if not self.closing:
             self._send_shutdown(0.0)
         self.done, self.completed = True, completed
         self.actions = None
