@@ -10,7 +10,8 @@ world's rows to a simulated ``episodes.csv`` and the agents' checkpoints to real
 agents a schedule may crash; of all with ``checkpoint_all``), restarts a crashed agent from its
 checkpoint through ``agent.restore`` as an agent process does, and a crashed world as
 ``--resume`` does, after the last complete row. The launcher's rule holds: once the world has
-completed the run, nothing is restarted.
+said the run is over, no agent is restarted (the launcher stops whatever still runs when the
+world exits).
 """
 
 import hashlib
@@ -110,6 +111,7 @@ class SimSwarm:
         self.intent_keys = [keys.intent_key(c.run_id, i) for i in range(n)]
         self.world_done = False
         self.completed = False
+        self.run_over = False  # the world has said so: the launcher restarts nobody any more
         self.triggers: dict[int, list[Fault]] = {}
         for fault in schedule.faults:
             self.triggers.setdefault(fault.tick, []).append(fault)
@@ -210,6 +212,7 @@ class SimSwarm:
                     self.writer.write(effect.row, effect.duration_s, effect.ticks,
                                       effect.slowest_s, effect.rejected)
             elif kind is SendControl:
+                self.run_over = True
                 for i, a in enumerate(agents):
                     net.send(world, a, self._control_in, i, effect.payload)
             elif kind is Finished:
@@ -267,7 +270,7 @@ class SimSwarm:
     # The agents' processes.
 
     def _start_agent(self, i: int, resume: bool) -> None:
-        if self.world_done:
+        if self.world_done or (resume and self.run_over):
             return
         a, net, c = self.agents[i], self.net, self.config
         a.incarnation += 1
