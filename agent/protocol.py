@@ -18,9 +18,12 @@ is lost to a crash.
 
 Faults it survives: an observation lost on the way (it follows the clock again after
 :data:`RESYNC_AFTER` observations in a row), an answer lost or late (the negotiation times out;
-the standing query is replaced), a neighbour that dies (its liveliness token goes) or a world
-that dies and comes back with its own clock (``--resume``: the agent starts afresh), forged or
-malformed input (rejected and counted by reason, never raised).
+the standing query is replaced, at once if it ends mid-negotiation), a neighbour that dies or
+refuses the tick (its ask ends unanswered: it is waited for no more), a world that dies and
+comes back with its own clock (``--resume``: the agent starts afresh, and ignores whatever is
+still on its way from the world before), forged or malformed input (rejected and counted by
+reason, never raised). ``launch/faultsim.py`` runs it through thousands of seeded fault
+schedules (``sim``).
 """
 
 import logging
@@ -178,7 +181,8 @@ class AgentProtocol:
         if open_ask.generation is not None:
             if open_ask.generation == self.stream_generation:
                 self.stream_open = False
-                if (p is not None and p.missing is None and self.predecessor in p.asks
+                if (p is not None and p.missing is None and p.deadline > now
+                        and self.predecessor in p.asks
                         and self.predecessor not in self._intents_of(p.obs.tick).answered):
                     self._ask(self.predecessor, p.obs.tick, p.deadline - now)  # not by the stream
         elif (p is not None and open_ask.tick == p.obs.tick
@@ -401,8 +405,10 @@ class AgentProtocol:
         self.decided_payload = encode(answer)
         trace.mark(ENCODED, tick)
         self.intents = {t: got for t, got in self.intents.items() if t > tick}
-        self._answer_standing_queries()
-        self._answer_held()
+        if self.standing:
+            self._answer_standing_queries()
+        if self.held:
+            self._answer_held()
         if obs.episode_end:  # saved before the world hears of the decision: nothing to lose
             out.append(Checkpoint(obs.episode))
         intent = Intent(answer.run, tick, answer.sender, self.agent, obs.episode, action)

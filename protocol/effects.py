@@ -12,6 +12,7 @@ Queries and asks are named by numbers: an agent numbers its own asks (``Ask.ask`
 numbers the queries it receives (``on_query(query, ...)``), and effects refer to them by those.
 """
 
+from collections.abc import Iterator
 from typing import NamedTuple
 
 
@@ -85,11 +86,13 @@ class Stopped(NamedTuple):
 
 # The world's effects.
 
-class SendObservation(NamedTuple):
-    """Publish one agent's observation on its observation key."""
+class SendObservations(NamedTuple):
+    """Publish every agent's observation of a tick on its observation key, in the order
+    ``observations`` yields them as ``(Observation, payload)``: each is built only when the one
+    before it is taken, so that the first to decide is the first to know. Taken whole before
+    the next input, as every effect is carried out."""
 
-    observation: object  # protocol.messages.Observation
-    payload: bytes
+    observations: Iterator[tuple[object, bytes]]  # (protocol.messages.Observation, payload)
 
 
 class SendControl(NamedTuple):

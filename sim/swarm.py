@@ -25,7 +25,7 @@ from agent.protocol import AgentProtocol
 from agent.restore import start_brain
 from protocol import keys
 from protocol.effects import (
-    Ask, Checkpoint, EndQuery, Finished, Reply, SendControl, SendIntent, SendObservation,
+    Ask, Checkpoint, EndQuery, Finished, Reply, SendControl, SendIntent, SendObservations,
     Stopped, TickClosed, WriteRow,
 )
 from protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
@@ -195,13 +195,12 @@ class SimSwarm:
         net, world, agents = self.net, self.world, self.agents
         for effect in effects:
             kind = type(effect)
-            if kind is SendObservation:
-                obs = effect.observation
-                if sent is None:
-                    sent = []
-                sent.append(obs)
-                net.send(world, agents[obs.agent], self._observation_in, obs.agent, self.era,
-                         obs.tick, effect.payload)
+            if kind is SendObservations:
+                sent = []
+                for obs, payload in effect.observations:
+                    sent.append(obs)
+                    net.send(world, agents[obs.agent], self._observation_in, obs.agent, self.era,
+                             obs.tick, payload)
             elif kind is TickClosed:
                 report = effect.report
                 if report.episode_row is not None:

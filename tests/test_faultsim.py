@@ -38,6 +38,13 @@ REGRESSIONS = {
           "from --in-process",
     5382: "the world crashed while telling its agents the run was over, and a world resumed "
           "after the last episode exited without telling them: an agent waited for ever",
+    9563: "the world stalled for longer than it meant to tell its agents to stop, and gave up "
+          "without telling those a partition had cut off",
+    9582: "a stalled world handled the last agents leaving and a restarted one coming up all at "
+          "once, and ended before it saw the newcomer",
+    176: "the simulator let a query's end overtake its replies (Zenoh keeps them in order)",
+    1834: "the simulator resumed a stalled process that had stopped meanwhile",
+    20794: "the simulator restarted an agent after the world had said the run was over",
 }
 
 

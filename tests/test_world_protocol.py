@@ -2,7 +2,7 @@
 
 from protocol import keys
 from protocol.config import SwarmConfig
-from protocol.effects import Finished, Log, SendControl, SendObservation, TickClosed, WriteRow
+from protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
 from world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol
 
@@ -34,7 +34,8 @@ def test_the_first_tick_opens_once_every_agent_is_alive_in_rank_order():
     protocol = WorldProtocol(CONFIG, 0.0)
     assert kinds(alive(protocol, 1, 0.1)) == [] and protocol.timer() == 60.0
     effects = alive(protocol, 0, 0.2)
-    sent = [e.observation for e in effects if isinstance(e, SendObservation)]
+    [batch] = [e for e in effects if isinstance(e, SendObservations)]
+    sent = [obs for obs, payload in batch.observations]
     assert [o.agent for o in sent] == [0, 1] and [o.rank for o in sent] == [0, 1]
     assert protocol.timer() == 0.2 + CONFIG.tick_deadline_s
 
@@ -51,7 +52,7 @@ def test_the_last_intent_closes_the_tick_and_a_missing_one_waits_for_the_deadlin
     protocol, _ = started()
     assert kinds(intent(protocol, 0, 0.1)) == []
     effects = intent(protocol, 1, 0.2)
-    assert kinds(effects) == ["SendObservation", "SendObservation", "TickClosed"]
+    assert kinds(effects) == ["SendObservations", "TickClosed"]
     assert protocol.world.tick == 1
     intent(protocol, 1, 0.3)
     assert protocol.on_timer(0.69) == [] and protocol.world.tick == 1

@@ -29,7 +29,7 @@ import zenoh
 
 from protocol import keys, trace
 from protocol.config import SwarmConfig
-from protocol.effects import Finished, Log, SendControl, SendObservation, TickClosed, WriteRow
+from protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
 from protocol.transport import (
     EXIT_TRANSPORT, TransportError, TransportSettings, callback, enqueue, open_session,
@@ -86,7 +86,7 @@ class WorldNode:
         self.publishers: list = []
         self.control = None
         self.writer: EpisodeWriter | None = None
-        self._do = {SendObservation: self._send_observation, SendControl: self._send_control,
+        self._do = {SendObservations: self._send_observations, SendControl: self._send_control,
                     TickClosed: self._tick_closed, Log: self._log,
                     WriteRow: self._to_main_thread, Finished: self._to_main_thread}
 
@@ -120,9 +120,11 @@ class WorldNode:
         for effect in effects:
             do[type(effect)](effect)
 
-    def _send_observation(self, effect: SendObservation) -> None:
-        self.trace.mark(trace.OBS_SENT, effect.observation.tick)
-        self.publishers[effect.observation.agent].put(effect.payload)
+    def _send_observations(self, effect: SendObservations) -> None:
+        publishers, mark = self.publishers, self.trace.mark
+        for obs, payload in effect.observations:
+            mark(trace.OBS_SENT, obs.tick)
+            publishers[obs.agent].put(payload)
 
     def _send_control(self, effect: SendControl) -> None:
         self.control.put(effect.payload)

@@ -20,7 +20,7 @@ import logging
 
 from protocol import keys
 from protocol.config import SwarmConfig
-from protocol.effects import Finished, Log, SendControl, SendObservation, TickClosed, WriteRow
+from protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
 from protocol.trace import CLOSE, TickTrace
 from world.engine import SwarmWorld
@@ -199,8 +199,14 @@ class WorldProtocol:
         self.actions = [None] * self.n
         self.tick_start = now
         self.tick_deadline = now + self.config.tick_deadline_s
-        for obs in self.world.observations_by_rank():  # the first to decide is the first to know
-            out.append(SendObservation(obs, encode(obs)))
+        out.append(SendObservations(self._encoded(self.world.observations_by_rank())))
+
+    @staticmethod
+    def _encoded(observations):
+        """Each observation with its payload, built as it is taken (the first to decide is the
+        first to know)."""
+        for obs in observations:
+            yield obs, encode(obs)
 
     def _close_if_due(self, now: float) -> None:
         """Close the open tick if every live agent's intent is in or its deadline passed."""
