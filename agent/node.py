@@ -149,8 +149,10 @@ class AgentNode:
 
         def on_reply(reply: zenoh.Reply) -> None:
             sample = reply.ok
-            if sample is not None:  # an error reply says why there is no answer: nothing to do
+            if sample is not None:
                 self.feed(protocol.on_answer, ask, sample.payload)
+            else:  # an error reply: the neighbour cannot answer that tick
+                self.feed(protocol.on_refusal, ask)
 
         return callback(on_reply, lambda: self.feed(protocol.on_ask_end, ask))
 

@@ -19,7 +19,8 @@ is lost to a crash.
 Faults it survives: an observation lost on the way (it follows the clock again after
 :data:`RESYNC_AFTER` observations in a row), an answer lost or late (the negotiation times out;
 the standing query is replaced, at once if it ends mid-negotiation), a neighbour that dies or
-refuses the tick (its ask ends unanswered: it is waited for no more), a world that dies and
+refuses the tick (its ask ends unanswered, or with an error: it is waited for no more), a world
+that dies and
 comes back with its own clock (``--resume``: the agent starts afresh, and ignores whatever is
 still on its way from the world before), forged or malformed input (rejected and counted by
 reason, never raised). ``launch/faultsim.py`` runs it through thousands of seeded fault
@@ -87,8 +88,8 @@ class Pending:
     """An observation whose decision waits for intents: whose (``awaited``), which of them the
     brain decides with (``needed``), whom this agent asked (``asks``), until when, and, once the
     answers are in, the ones it then asked for directly because no answer brought them
-    (``missing``); neighbours whose ask ended without an answer (gone, or refusing the tick) are
-    waited for no more (``refused``)."""
+    (``missing``); neighbours that cannot answer (gone, or refusing the tick) are waited for no
+    more (``refused``)."""
 
     obs: Observation
     awaited: list[int]
@@ -96,7 +97,7 @@ class Pending:
     asks: list[int]
     deadline: float
     missing: list[int] | None = None
-    refused: set[int] = field(default_factory=set)  # asked, and the ask ended unanswered
+    refused: set[int] = field(default_factory=set)  # asked, and no answer is coming
 
 
 @dataclass(slots=True)
@@ -185,10 +186,17 @@ class AgentProtocol:
                         and self.predecessor in p.asks
                         and self.predecessor not in self._intents_of(p.obs.tick).answered):
                     self._ask(self.predecessor, p.obs.tick, p.deadline - now)  # not by the stream
-        elif (p is not None and open_ask.tick == p.obs.tick
-              and open_ask.agent not in self._intents_of(p.obs.tick).answered):
-            p.refused.add(open_ask.agent)  # no answer is coming: do not wait for it
-            self._advance(now)
+        elif open_ask.agent not in self.peers_seen:  # gone: no answer is coming
+            self._refused(open_ask, now)
+        return out
+
+    def on_refusal(self, ask: int, now: float) -> list:
+        """An error reply to one of this agent's asks: the neighbour cannot answer that tick
+        (it is behind, or past it)."""
+        out = self._out = []
+        open_ask = self.asks.get(ask)
+        if open_ask is not None and open_ask.generation is None and not self.stopped:
+            self._refused(open_ask, now)
         return out
 
     def on_query(self, query: int, parameters, now: float) -> list:
@@ -355,6 +363,14 @@ class AgentProtocol:
         self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s)
         self.brain.prepare(obs)  # while the answers are on their way
         self._advance(now)
+
+    def _refused(self, open_ask: OpenAsk, now: float) -> None:
+        """No answer is coming for this ask: the pending negotiation waits for it no more."""
+        p = self.pending
+        if (p is not None and open_ask.tick == p.obs.tick
+                and open_ask.agent not in self._intents_of(p.obs.tick).answered):
+            p.refused.add(open_ask.agent)
+            self._advance(now)
 
     def _intents_of(self, tick: int) -> negotiation.TickIntents:
         """What this agent has learned of ``tick``'s intents (kept from now on)."""

@@ -25,7 +25,8 @@ from agent.protocol import AgentProtocol
 from agent.restore import start_brain
 from protocol import keys
 from protocol.effects import (
-    Ask, Checkpoint, EndQuery, Finished, Reply, SendControl, SendIntent, SendObservations,
+    Ask, Checkpoint, EndQuery, Finished, Reply, ReplyError, SendControl, SendIntent,
+    SendObservations,
     Stopped, TickClosed, WriteRow,
 )
 from protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
@@ -330,6 +331,12 @@ class SimSwarm:
                 net.send(a, self.world, self._intent_in, self.intent_keys[i], effect.payload)
             elif kind is Ask:
                 self._ask(i, effect)
+            elif kind is ReplyError:
+                q = self.received.get(effect.query)
+                if q is not None:
+                    arrival = net.send(a, self.agents[q.asker], self._refusal_in, q)
+                    if arrival > q.last_reply:
+                        q.last_reply = arrival
             elif kind is EndQuery:
                 q = self.received.pop(effect.query, None)
                 if q is not None and q.open:
@@ -407,6 +414,10 @@ class SimSwarm:
         if q.open and self.agents[q.asker].incarnation == q.asker_incarnation:
             self._agent_effects(q.asker, self.protocols[q.asker].on_answer(q.ask, payload,
                                                                            self.net.now))
+
+    def _refusal_in(self, q: Query) -> None:
+        if q.open and self.agents[q.asker].incarnation == q.asker_incarnation:
+            self._agent_effects(q.asker, self.protocols[q.asker].on_refusal(q.ask, self.net.now))
 
     def _ask_ended(self, q: Query) -> None:
         if q.open:

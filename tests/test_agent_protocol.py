@@ -171,16 +171,21 @@ def test_bad_input_is_counted_never_raised():
     assert protocol.inbox.total_rejected >= 10
 
 
-def test_a_neighbour_whose_ask_ends_unanswered_is_waited_for_no_more():
+def test_a_neighbour_that_is_gone_or_refuses_the_tick_is_waited_for_no_more():
     """A neighbour that is gone (no queryable: Zenoh ends the ask at once) or refuses the tick
     cost the whole negotiation time-out at every tick, as simulated histories showed."""
-    protocol = ready(agent=2)
     others = [(0, 2, 2), (1, 3, 3)]
+    protocol = ready(agent=2)
     effects = protocol.on_observation(observation(0, agent=2, others=others), 0.0)
-    [ask] = [e for e in effects if isinstance(e, Ask)]  # agent 1 relays agent 0's intent
+    [ask] = [e for e in effects if isinstance(e, Ask)]
+    assert kinds(protocol.on_ask_end(ask.ask, 0.001)) == [], "a live neighbour may answer yet"
+    protocol = ready(agent=2)
+    protocol.on_liveliness(keys.alive_key("proto", keys.ROLE_AGENT, 1), False, 0.0)
+    effects = protocol.on_observation(observation(0, agent=2, others=others), 0.0)
+    [ask] = [e for e in effects if isinstance(e, Ask)]  # agent 1 would relay agent 0's intent
     assert ask.agent == 1
-    effects = protocol.on_ask_end(ask.ask, 0.001)
-    [missing] = [e for e in effects if isinstance(e, Ask)]  # then agent 0 is asked directly
+    effects = protocol.on_ask_end(ask.ask, 0.001)  # its body is there, its queryable is not
+    [missing] = [e for e in effects if isinstance(e, Ask)]  # so agent 0 is asked directly
     assert missing.agent == 0 and protocol.pending is not None
-    effects = protocol.on_ask_end(missing.ask, 0.002)
+    effects = protocol.on_refusal(missing.ask, 0.002)  # and cannot answer that tick
     assert "SendIntent" in kinds(effects) and protocol.decided_tick == 0
