@@ -1,8 +1,8 @@
 """Fault schedules: a seed gives a small swarm run and the faults to inject into it, exactly.
 
-A schedule is a run config (grid, algorithm, 2 or 3 episodes of 3 to 5 steps, swaps counted or
+A schedule is a run config (grid, algorithm, 2 or 3 episodes of 3 or 4 steps, swaps counted or
 not; the run's seed is the schedule's) and a list of faults, each triggered when the world first
-opens a given tick, some virtual time into it:
+opens a given tick, some virtual time into it (at most one fault of each kind):
 
 - ``drop``, ``duplicate``, ``reorder``: the network misbehaves for a while (``sim.network``);
 - ``partition``: for a while no message crosses between ``group`` and the other processes;
@@ -96,9 +96,9 @@ def draw_schedule(seed: int, agents: int = 8) -> Schedule:
     width, height = rng.choice(GRIDS)
     while 2 * agents > width * height:
         width, height = width + 5, height + 5
-    algo = rng.choices(("nnql", "nnql-dir", "ql"), weights=(16, 1, 2))[0]
+    algo = rng.choices(("nnql", "nnql-dir", "ql"), weights=(40, 1, 4))[0]
     episodes = rng.choices((2, 3), weights=(4, 1))[0]
-    max_steps = rng.randint(3, 5)
+    max_steps = rng.randint(3, 4)
     config = SwarmConfig(run_id=f"sim{seed}", n_agents=agents, episodes=episodes,
                          max_steps=max_steps, width=width, height=height, seed=seed % 2**31,
                          algo=algo, count_swaps=rng.random() < 0.5, tick_deadline_s=DEADLINE_S)

@@ -100,6 +100,8 @@ class SimSwarm:
         self.era = -1
         self.rows: list[dict] = []
         self.checkpointed = frozenset(range(n)) if checkpoint_all else schedule.crashing_agents
+        self.saving = set(self.checkpointed)  # whose checkpoints someone may still read
+        self.keep_all = checkpoint_all
         if self.checkpointed and disk is None:
             raise ValueError("a schedule that checkpoints needs a disk")
         self.checkpoint_dir = None if disk is None else Path(disk) / CHECKPOINT_DIR
@@ -342,7 +344,7 @@ class SimSwarm:
                 if q is not None and q.open:
                     net.send(a, self.agents[q.asker], self._ask_ended, q, not_before=q.last_reply)
             elif kind is Checkpoint:
-                if i in self.checkpointed:
+                if i in self.saving:
                     brain = self.protocols[i].brain
                     checkpoint.save(checkpoint.checkpoint_path(self.checkpoint_dir, i), brain,
                                     effect.episode)
@@ -453,6 +455,8 @@ class SimSwarm:
             if not self.agents[i].alive:
                 return
             self._crash_agent(i)
+            if not self.keep_all:  # a schedule crashes an agent once: nobody reads later ones
+                self.saving.discard(i)
             net.at(net.now + fault.duration_s, self._start_agent, i, True)
         self.fired.append(kind)
 
