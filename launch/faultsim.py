@@ -37,6 +37,7 @@ CHUNK = 25
 """Schedules a worker runs per task."""
 
 MAX_SIM_AGENTS = 64
+MAX_SEED = 2**63
 
 
 class Result(NamedTuple):
@@ -145,8 +146,10 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.schedules < 1:
         parser.error(f"--schedules must be at least 1, not {args.schedules}")
-    if args.seed_base < 0:
-        parser.error(f"--seed-base must be non-negative, not {args.seed_base}")
+    if not 0 <= args.seed_base < MAX_SEED:
+        parser.error(f"--seed-base must be 0 .. 2**63 - 1, not {args.seed_base}")
+    if args.seed_base + args.schedules > MAX_SEED:
+        parser.error("--seed-base + --schedules must stay below 2**63")
     if not 1 <= args.agents <= MAX_SIM_AGENTS:
         parser.error(f"--agents must be 1..{MAX_SIM_AGENTS}, not {args.agents}")
     if args.workers < 1:

@@ -131,7 +131,8 @@ def test_the_command_line_ends_with_its_count_and_refuses_bad_flags_in_one_line(
     assert done.returncode == 0, done.stdout + done.stderr
     assert done.stdout.splitlines()[-1] == "30 schedules, 0 failures"
     for flags, message in [(["--schedules", "0"], "--schedules must be at least 1"),
-                           (["--seed-base", "-1"], "--seed-base must be non-negative"),
+                           (["--seed-base", "-1"], "--seed-base must be 0 .. 2**63 - 1"),
+                           (["--seed-base", str(2**63)], "--seed-base must be 0 .. 2**63 - 1"),
                            (["--agents", "0"], "--agents must be"),
                            (["--workers", "0"], "--workers must be"),
                            (["--schedules", "many"], "invalid int value")]:
