@@ -2,8 +2,8 @@
 
 Ten thousand seeded schedules of 8 agents, each with its own faults, must pass every check of
 ``sim.checks`` (and equal ``--in-process`` where their faults are benign); each bug they found
-on the way keeps its seed here; a run without faults equals ``--in-process`` file for file; one
-seed reproduces one history exactly.
+on the way keeps its schedule here (its seed, and what that seed drew then); a run without
+faults equals ``--in-process`` file for file; one seed reproduces one history exactly.
 """
 
 import subprocess
@@ -21,7 +21,8 @@ from launch import faultsim
 from launch.inprocess import run_in_process
 from protocol.config import SwarmConfig
 from protocol.messages import encode
-from sim.schedule import KINDS, Schedule, draw_schedule
+from sim.schedule import KINDS, Fault, Schedule, draw_schedule
+from sim.parity import parity_failures
 from sim.swarm import SimSwarm, run_schedule
 from tests.swarm_helpers import ROOT
 from world.engine import EPISODE_FIELDS
@@ -29,29 +30,113 @@ from world.metrics import read_episodes
 
 SCHEDULES = 10_000
 
-REGRESSIONS = {
-    116: "a completed world's one shutdown was lost on the way: an agent waited for ever",
-    508: "a world resumed under running agents replays tick numbers, and answers still on their "
-         "way from the world before counted for the new one: relayed intents changed",
-    2151: "a standing query ended (a duplicated query replaced it) while the agent waited for its "
-          "answer, and the agent waited out the time-out instead of asking: decisions differed "
-          "from --in-process",
-    5382: "the world crashed while telling its agents the run was over, and a world resumed "
-          "after the last episode exited without telling them: an agent waited for ever",
+BUGS = {
+    116: "a completed world sent one shutdown; it was lost on the way and an agent waited for "
+         "ever for a world that had gone",
+    508: "a world resumed under running agents replays tick numbers; answers still on their way "
+         "from the world before counted for the new one, and relayed intents changed",
+    2151: "a duplicated query replaced a standing one at its target, ending it while its asker "
+          "waited for its answer; the asker waited out the time-out: decisions differed from "
+          "--in-process",
+    5382: "the world crashed while telling its agents the run was over; the world resumed after "
+          "the last episode ended without telling them, and an agent waited for ever",
     9563: "the world stalled for longer than it meant to tell its agents to stop, and gave up "
           "without telling those a partition had cut off",
-    9582: "a stalled world handled the last agents leaving and a restarted one coming up all at "
-          "once, and ended before it saw the newcomer",
-    176: "the simulator let a query's end overtake its replies (Zenoh keeps them in order)",
-    1834: "the simulator resumed a stalled process that had stopped meanwhile",
-    20794: "the simulator restarted an agent after the world had said the run was over",
+    176: "(the simulator) a query's end overtook its replies, which Zenoh keeps in order",
+    1834: "(the simulator) a stalled process was resumed after it had stopped meanwhile",
+    20794: "(the simulator) an agent was restarted after the world had said the run was over, "
+           "then counted as never stopping",
+}
+"""What each schedule of :data:`FOUND` broke; each fails again with its fix undone."""
+
+FOUND = {  # the schedules, as drawn when each found its bug (sim/schedule.py changed since)
+    116: Schedule(
+        116, SwarmConfig(run_id='sim116', episodes=2, max_steps=8, width=11,
+                       height=11, seed=116, count_swaps=False, tick_deadline_s=0.5),
+        (0.00015437322974409877, 0.0008459641393827896), (
+            Fault('drop', 17, 0.0035970798479958376, 1.6648105123555081, p=0.20192673621801357),
+            Fault('duplicate', 7, 0.001220328501036098, 0.7235192242324396, p=0.43479034081134355),
+            Fault('partition', 15, 0.001071595450186948, 0.5682154940375999,
+                  group=frozenset(['agent-1', 'agent-2', 'agent-4', 'agent-7', 'world'])),
+        )),
+    508: Schedule(
+        508, SwarmConfig(run_id='sim508', episodes=2, max_steps=8, width=24,
+                       height=24, seed=508, count_swaps=False, tick_deadline_s=0.5),
+        (7.845590186761891e-05, 0.0006427328886513944), (
+            Fault('partition', 8, 0.0030566456960463206, 0.08378666955775729,
+                  group=frozenset(['agent-0', 'agent-2', 'agent-6', 'agent-7'])),
+            Fault('crash', 15, 0.0010395566704450344, 1.7697390735979894, target='world'),
+        )),
+    2151: Schedule(
+        2151, SwarmConfig(run_id='sim2151', episodes=2, max_steps=4, width=11,
+                       height=11, seed=2151, count_swaps=False, tick_deadline_s=0.5),
+        (5.150060742515379e-05, 0.0001828805510616076), (
+            Fault('duplicate', 0, 0.0006005370980102578, 1.0055399056883594, p=0.3688527012841665),
+        )),
+    5382: Schedule(
+        5382, SwarmConfig(run_id='sim5382', episodes=2, max_steps=5, width=30,
+                       height=14, seed=5382, count_swaps=False, tick_deadline_s=0.5),
+        (0.00014557847060894303, 0.000594406027418469), (
+            Fault('stall', 3, 0.0009388533645840443, 1.8514796001970066, target='world'),
+            Fault('drop', 11, 0.0005495144182472682, 1.5254922498387558, p=0.1377082094622803),
+            Fault('duplicate', 3, 0.0021489299397489813, 0.3330695076448985, p=0.28964408388192536),
+            Fault('crash', 11, 0.0020737492267926387, 2.506511067451298, target='world'),
+        )),
+    9563: Schedule(
+        9563, SwarmConfig(run_id='sim9563', episodes=2, max_steps=6, width=30,
+                       height=14, seed=9563, count_swaps=False, tick_deadline_s=0.5),
+        (2.489336807221189e-05, 0.0005116315620147735), (
+            Fault('crash', 7, 0.00042524699951839476, 1.8717332126767234, target='agent-1'),
+            Fault('partition', 12, 0.0026607206908393108, 0.22629872719983912,
+                  group=frozenset(['agent-1', 'agent-2', 'agent-3', 'world'])),
+            Fault('stall', 13, 0.003919791434692538, 2.930226303934185, target='world'),
+        )),
+    176: Schedule(
+        176, SwarmConfig(run_id='sim176', episodes=2, max_steps=6, width=30,
+                       height=14, seed=176, count_swaps=False, tick_deadline_s=0.5),
+        (0.00013679417266388124, 0.0005505395255952156), (
+            Fault('reorder', 9, 0.0012586221509362093, 0.9534241957870209, p=0.29536697554322533),
+        )),
+    1834: Schedule(
+        1834, SwarmConfig(run_id='sim1834', episodes=2, max_steps=3, width=24,
+                       height=24, seed=1834, count_swaps=True, tick_deadline_s=0.5),
+        (0.0001751135654647304, 0.00018266964497069206), (
+            Fault('reorder', 2, 0.002046471161092082, 1.8716246043063487, p=0.26077320046260377),
+            Fault('stall', 6, 0.0014228254878294582, 0.5100850430092169, target='agent-1'),
+        )),
+    20794: Schedule(
+        20794, SwarmConfig(run_id='sim20794', episodes=2, max_steps=4, width=11,
+                       height=11, seed=20794, count_swaps=True, tick_deadline_s=0.5),
+        (2.620259174316997e-05, 0.0005605777902883565), (
+            Fault('stall', 9, 0.001905405678799475, 2.948539624643046, target='world'),
+            Fault('crash', 5, 0.0030330134373254746, 1.922162816026118, target='agent-0'),
+            Fault('duplicate', 4, 0.0024348382365189294, 0.6338957616059013, p=0.4820613909988755),
+            Fault('drop', 9, 0.0020345867270493184, 0.7046542017751871, p=0.2640276263237157),
+        )),
 }
 
 
-@pytest.mark.parametrize("seed", sorted(REGRESSIONS))
-def test_the_schedules_that_found_a_bug_pass(seed):
-    result = faultsim.check_schedule(seed, 8)
-    assert result.failures == (), f"{REGRESSIONS[seed]}: {result.failures}"
+@pytest.mark.parametrize("seed", sorted(FOUND))
+def test_the_schedules_that_found_a_bug_pass(seed, tmp_path):
+    schedule = FOUND[seed]
+    outcome = run_schedule(schedule, tmp_path, fingerprints=schedule.benign)
+    failures = outcome.failures
+    if schedule.benign and not failures:
+        failures = parity_failures(schedule.config, outcome.rows, outcome.fingerprints)
+    assert failures == [], f"{BUGS[seed]}: {failures}"
+    assert set(outcome.fired) == {fault.kind for fault in schedule.faults}, "every fault hit"
+
+
+def test_a_workers_schedules_do_not_see_each_others_files(tmp_path):
+    """(the simulator) a worker kept one directory for the checkpoints of all its schedules,
+    and an agent restarted in one schedule loaded another's (seeds 142 and 147 at the time)."""
+    crashing = [seed for seed in range(200) if draw_schedule(seed).crashing_agents][:4]
+    for name in [f"alone-{seed}" for seed in crashing] + ["shared"]:
+        (tmp_path / name).mkdir()
+    alone = [faultsim.check_schedule(seed, 8, tmp_path / f"alone-{seed}") for seed in crashing]
+    together = [faultsim.check_schedule(seed, 8, tmp_path / "shared") for seed in crashing]
+    assert together == alone and all(r.failures == () for r in together)
+    assert list((tmp_path / "shared").iterdir()) == [], "each schedule cleans up after itself"
 
 
 def test_ten_thousand_schedules_pass(capsys):
