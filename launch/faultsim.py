@@ -57,7 +57,7 @@ def check_schedule(seed: int, agents: int, scratch: Path | None = None,
     """Draw, run and check the schedule of ``seed``; never raises (a raise is a failure)."""
     from sim.parity import parity_failures
     from sim.schedule import draw_schedule
-    from sim.swarm import run_schedule
+    from sim.distributed import run_schedule
 
     try:
         schedule = draw_schedule(seed, agents)
@@ -98,7 +98,7 @@ def _worker_setup() -> None:
     go through them again and again while they live, runs once after each schedule instead,
     and never through what the imports made."""
     import sim.parity  # noqa: F401 - imported before the freeze
-    import sim.swarm  # noqa: F401
+    import sim.distributed  # noqa: F401
 
     gc.freeze()
     gc.disable()

@@ -6,6 +6,6 @@ others with a seeded latency, and the network injects drops, duplicates, reorder
 partitions, stalls (a process that stops answering for a while) and crashes with a restart from
 the last checkpoint. One seed gives one whole history, faults included, and the same seed gives
 it again exactly (after FoundationDB's deterministic simulation). ``sim.schedule`` draws a fault
-schedule from a seed, ``sim.swarm`` runs it, ``sim.checks`` holds what every history must
+schedule from a seed, ``sim.distributed`` runs it, ``sim.checks`` holds what every history must
 satisfy, and ``launch/faultsim.py`` runs thousands of them.
 """

@@ -23,7 +23,7 @@ from protocol.config import SwarmConfig
 from protocol.messages import encode
 from sim.schedule import KINDS, Fault, Schedule, draw_schedule
 from sim.parity import parity_failures
-from sim.swarm import SimSwarm, run_schedule
+from sim.distributed import SimSwarm, run_schedule
 from tests.swarm_helpers import ROOT
 from world.engine import EPISODE_FIELDS
 from world.metrics import read_episodes
