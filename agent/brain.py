@@ -21,7 +21,7 @@ from agent.learner import (
 )
 from protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
 from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from protocol.jit import floats, ints, python_values, rows, table
+from protocol.jit import filled, floats, ints, python_values, rows, table
 from protocol.messages import Observation
 from protocol.ranks import priority_rank, waits_for
 from protocol.seeding import AGENT_STREAM, stream_rng
@@ -45,8 +45,8 @@ class Learner:
         self.params_f[FP_BETA] = config.beta
         self.params, self.params_f = ints(self.params), floats(self.params_f)
         init = float(config.optimistic)
-        self.q_ds = table(np.full((N_STATES, N_ACTIONS), init))
-        self.q_ca = table(np.full((ca_rows(reading, config.known_state), N_ACTIONS), init))
+        self.q_ds = filled(N_STATES, N_ACTIONS, init)
+        self.q_ca = filled(ca_rows(reading, config.known_state), N_ACTIONS, init)
         self.state = ints([0] * state_size(config.n_agents))
         self.state_f = floats([0.0] * LF_FIELDS)
         self.rec = ints([0] * record_size(config.n_agents))

@@ -1,11 +1,12 @@
 #!/usr/bin/env python3
 """The Python cost of a tick in the nodes themselves, with Zenoh taken out, in one process.
 
-The real ``AgentNode`` and ``WorldNode`` handlers run in one thread, over a stand-in for Zenoh that
-delivers every message (observation, standing query, answer, intent) in the order it was sent, by
-calling the receiver's handler directly. What is timed is exactly our code on each message:
-decoding, checks, negotiation, learning, encoding, the world's rules; not Zenoh, the kernel or
-the scheduler. Each handler is timed apart (the last intent's includes closing the tick: the
+The real ``AgentNode`` and ``WorldNode`` handlers (the adapters and the protocol machines under
+them) run in one thread, over a stand-in for Zenoh that delivers every message (observation,
+standing query, answer, intent) in the order it was sent, by calling the receiver's handler
+directly. What is timed is exactly our code on each message: decoding, checks, negotiation,
+learning, encoding, the world's rules, carrying out the effects; not Zenoh, the kernel or the
+scheduler. Each handler is timed apart (the last intent's includes closing the tick: the
 rules and the next observations), so the tick's critical path (world -> rank 0 -> ... -> rank
 N-1 -> world) can be added up from them.
 
@@ -101,16 +102,16 @@ class _Publisher:
 class _Query:
     def __init__(self, wire: Wire, key: str, parameters: str, handler) -> None:
         self.wire, self.key_expr, self.parameters, self.handler = wire, key, parameters, handler
-        self.selector = f"{key}?{parameters}"
 
     def reply(self, key, payload: bytes) -> None:
-        self.wire.send("answer", self.handler, _Reply(payload))
+        self.wire.send("answer", self.handler.callback, _Reply(payload))
 
     def reply_err(self, payload: bytes) -> None:
         pass
 
     def drop(self) -> None:
-        pass
+        if self.handler.drop is not None:
+            self.wire.send("query end", lambda _: self.handler.drop(), None)
 
 
 class _Session:
@@ -122,7 +123,7 @@ class _Session:
     def get(self, selector: str, handler, **_) -> None:
         key, _, parameters = selector.partition("?")
         self.wire.send("query", self.wire.queryables[key],
-                       _Query(self.wire, key, parameters, handler.callback))
+                       _Query(self.wire, key, parameters, handler))
 
 
 class _LearnNothing(AgentBrain):
@@ -135,37 +136,32 @@ def run(config: SwarmConfig, out: Path, bare: bool) -> tuple[int, Wire]:
     zenoh.handlers.Callback = _Callback  # the nodes build their handlers at call time
     wire = Wire()
     transport = TransportSettings()
+    run_id, n = config.run_id, config.n_agents
     world = WorldNode(WorldOptions(config, transport, out), _Session(wire))
-    world.alive = set(range(config.n_agents))
-    world.publishers = [_Publisher(wire, keys.obs_key(config.run_id, i), "observation")
-                        for i in range(config.n_agents)]
+    world.publishers = [_Publisher(wire, keys.obs_key(run_id, i), "observation")
+                        for i in range(n)]
+    world.control = _Publisher(wire, keys.control_key(run_id), "control")
     agents = []
-    for i in range(config.n_agents):
+    for i in range(n):
         brain = (_LearnNothing if bare else AgentBrain)(i, config)
         node = AgentNode(AgentOptions(i, config, transport, out), _Session(wire), brain)
-        node.ready, node.peers_seen = True, set(range(config.n_agents))
-        intent_key = keys.intent_key(config.run_id, i)
+        for j in range(n):
+            node.feed(node.protocol.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, j), True)
+        intent_key = keys.intent_key(run_id, i)
         node.publisher = _Publisher(wire, intent_key, "intent")
-        wire.subscribers[intent_key].append(world._on_intent_sample)
-        wire.subscribers[keys.obs_key(config.run_id, i)].append(
-            node._guarded(node._on_observation_sample))
-        wire.queryables[intent_key] = node._guarded(node._on_query)
+        wire.subscribers[intent_key].append(world._on_intent)
+        wire.subscribers[keys.obs_key(run_id, i)].append(node._on_observation)
+        wire.queryables[intent_key] = node._on_query
         agents.append(node)
-    with world.lock:
-        world._open_tick()
+    for i in range(n):  # the last one opens the first tick
+        world.feed(world.protocol.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, i), True)
     while not world.world.finished:
-        wire.drain()  # up to a tick the main thread must see first: an episode's end
-        with world.lock:
-            while not world.events.empty():
-                kind, _ = world.events.get_nowait()
-                assert kind == "closed", kind
-                world.unlogged -= 1  # what the world's main thread does once it wrote the row
-            world._close_if_due()
-    for node in agents:
+        if not wire.queue:
+            raise RuntimeError(f"nothing to deliver at tick {world.world.tick}")
+        wire.drain()
+    for node in (*agents, world):
         if node.failure is not None:
             raise node.failure
-    if world.failure is not None:
-        raise world.failure
     return world.world.tick, wire
 
 

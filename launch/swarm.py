@@ -420,7 +420,10 @@ def main(argv: list[str] | None = None) -> int:
             if start.episode >= config.episodes:
                 print(f"{out}: the run is already complete ({config.episodes} episodes)",
                       file=sys.stderr)
-                return 0
+                if args.role != "world":
+                    return 0
+                # Agents elsewhere may still wait for the world that completed the run: this one
+                # only tells them to stop.
         else:
             config, out = resolve(args)
             prepare_out_dir(out, config, args.role)

@@ -93,6 +93,14 @@ def table(values: np.ndarray) -> "np.ndarray | list[list[float]]":
     return np.array(values, dtype=np.float64) if COMPILED else np.asarray(values, float).tolist()
 
 
+def filled(rows: int, columns: int, value: float) -> "np.ndarray | list[list[float]]":
+    """A table of ``rows`` x ``columns`` floats, all ``value``, as a kernel buffer."""
+    if COMPILED:
+        return np.full((rows, columns), value, dtype=np.float64)
+    value = float(value)
+    return [[value] * columns for _ in range(rows)]  # one float object: cheap to build and keep
+
+
 def python_values(buffer) -> list:
     """A buffer's values as Python numbers (for messages and files)."""
     return buffer.tolist() if isinstance(buffer, np.ndarray) else list(buffer)

@@ -1,13 +1,15 @@
 """Where every random draw comes from: generators derived from the run's seed, one per stream.
 
 ``SeedSequence(seed, spawn_key=(stream, index))`` gives independent, reproducible streams: the
-scenario of episode ``index``, or the noise of agent ``index``. Nothing else draws randomness.
+scenario of episode ``index``, the noise of agent ``index``, or (the simulator, ``sim``) a fault
+schedule's draws. Nothing else draws randomness.
 """
 
 import numpy as np
 
 SCENARIO_STREAM = 1
 AGENT_STREAM = 2
+SIM_STREAM = 3
 
 
 def stream_rng(seed: int, stream: int, index: int) -> np.random.Generator:

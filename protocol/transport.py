@@ -7,12 +7,14 @@ agent. Multicast scouting is always off unless a config file turns it on. Across
 a Zenoh config file and/or listen and connect endpoints (README, "Several machines").
 
 Every process also runs Zenoh with one receiving thread (:data:`RUNTIME_DEFAULT`, unless
-``ZENOH_RUNTIME`` is set), and every handler of the nodes is a :func:`callback`: it runs on that
-thread, which keeps its Python thread state from one call to the next (:func:`keep_thread_state`).
+``ZENOH_RUNTIME`` is set), and every handler of the nodes is a :func:`callback`: by default it
+runs on that thread, which keeps its Python thread state from one call to the next; one switch,
+:data:`CALLBACKS_ENV`, turns either trick off.
 """
 
 import ctypes
 import json
+import logging
 import os
 import socket
 import threading
@@ -53,34 +55,59 @@ def open_session(settings: "TransportSettings") -> zenoh.Session:
         raise TransportError(f"cannot open a Zenoh {settings.mode or 'session'} ({where}): {reason}") from None
 
 
+CALLBACKS_ENV = "NNQL_ZENOH_CALLBACKS"
+"""The one switch for how Zenoh calls our handlers: ``kept`` (the default), ``direct`` or
+``indirect``; read once, when this module is imported (so a process's children inherit it).
+
+- ``indirect``: Zenoh's default. Each handler runs on a Python thread that zenoh-python starts
+  for it, fed through a channel: a thread hand-over on every message.
+- ``direct``: each handler runs right on Zenoh's receiving thread (``indirect=False``, which
+  zenoh-python's stubs call unstable), without a hand-over.
+- ``kept``: ``direct``, and that thread keeps its Python thread state from one callback to the
+  next. Zenoh calls Python from its own threads through ``PyGILState_Ensure`` and ``_Release``;
+  on a thread Python did not start, each pair creates a thread state and destroys it again, and
+  with it the thread's ``threading.local`` data (the codec's packer). One ``PyGILState_Ensure``
+  left outstanding keeps it for the thread's life, as CPython's documentation advises for
+  threads that call into Python again and again (python/cpython#146219); the GIL is still
+  released after each callback. On a thread that Python started it only raises a counter.
+  Zenoh's threads outlive Python's finalization only once every session is closed, when they no
+  longer call into it.
+
+Measured with paired runs of ``bench/swarm_ticks.py --agents 8 --repeats 5 --episodes 10``
+(``bench/paired.py --pairs 3``, 2026-12-01): ``kept`` 1.18x the ticks a second of ``direct``,
+1.08x those of ``indirect`` (README, "where the time goes").
+"""
+CALLBACK_MODES = ("kept", "direct", "indirect")
+CALLBACK_MODE = os.environ.get(CALLBACKS_ENV) or CALLBACK_MODES[0]
+if CALLBACK_MODE not in CALLBACK_MODES:
+    logging.getLogger("nnql.transport").warning(
+        "%s=%s is none of %s; using %s", CALLBACKS_ENV, CALLBACK_MODE, ", ".join(CALLBACK_MODES),
+        CALLBACK_MODES[0])
+    CALLBACK_MODE = CALLBACK_MODES[0]
+
 _KEPT_STATES: set[int] = set()
-"""The Zenoh threads (by ident) that keep their Python thread state (:func:`keep_thread_state`)."""
+"""The threads (by ident) whose Python thread state is kept (:func:`keep_thread_state`)."""
 
 
 def keep_thread_state() -> None:
-    """Let the calling thread, if Zenoh's (not one Python started), keep its Python thread state
-    from one callback to the next.
-
-    Zenoh calls Python from its own threads through ``PyGILState_Ensure`` and ``_Release``: on a
-    thread that Python did not start, each pair creates a thread state and destroys it again, and
-    with it the thread's ``threading.local`` data (the codec's packer). One ``PyGILState_Ensure``
-    left outstanding keeps the state for the thread's life, as CPython's documentation advises
-    for threads that call into Python again and again (python/cpython#146219). The GIL is still
-    released after each callback. Measured: 1.15x the swarm's ticks a second (README, "where the
-    time goes"). Zenoh's threads outlive Python's finalization only once every session is closed,
-    when they no longer call into it."""
+    """Keep the calling thread's Python thread state from one Zenoh callback to the next
+    (:data:`CALLBACKS_ENV`, ``kept``): one ``PyGILState_Ensure``, never released, on purpose."""
     ident = threading.get_ident()
-    if ident in _KEPT_STATES:
-        return
-    _KEPT_STATES.add(ident)
-    if isinstance(threading.current_thread(), threading._DummyThread):  # not started by Python
-        ctypes.pythonapi.PyGILState_Ensure()  # never released, on purpose
+    if ident not in _KEPT_STATES:
+        _KEPT_STATES.add(ident)
+        ctypes.pythonapi.PyGILState_Ensure()
 
 
-def callback(function: Callable, drop: Callable | None = None) -> zenoh.handlers.Callback:
-    """A Zenoh handler that calls ``function(item)`` right on Zenoh's thread (``indirect=False``),
-    which keeps its Python thread state (:func:`keep_thread_state`); ``drop`` when it ends.
-    Every handler of the nodes is one of these."""
+def callback(function: Callable, drop: Callable | None = None,
+             mode: str | None = None) -> zenoh.handlers.Callback:
+    """A Zenoh handler that calls ``function(item)`` as ``mode`` (default
+    :data:`CALLBACK_MODE`) says, and ``drop()`` when it ends. Every handler of the nodes is one
+    of these."""
+    mode = mode or CALLBACK_MODE
+    if mode == "indirect":
+        return zenoh.handlers.Callback(function, drop)
+    if mode == "direct":
+        return zenoh.handlers.Callback(function, drop, indirect=False)
     kept = _KEPT_STATES
     ident = threading.get_ident
 
@@ -96,8 +123,8 @@ def enqueue(events, kind: str) -> zenoh.handlers.Callback:
     """A Zenoh handler that puts ``(kind, item)`` on the queue ``events`` and does nothing else:
     how the nodes hand their main thread the events off the tick's path (liveliness, control).
 
-    It runs on Zenoh's network thread (:func:`callback`) rather than on a Python thread of its
-    own: a put never blocks, and the event reaches the main thread one thread switch sooner.
+    It is a :func:`callback` like the others (by default on Zenoh's network thread, rather than
+    on a Python thread of its own): a put never blocks.
     """
     put = events.put
     return callback(lambda item: put((kind, item)))

@@ -9,17 +9,16 @@ import os
 import threading
 import time
 
-import zenoh
-
 from protocol import transport
 from protocol.transport import TransportSettings, free_port
 
 MESSAGES = 20
 
 
-def _counts_seen_by_a_subscriber(keep_state: bool) -> dict[int, list[int]]:
-    """Publish MESSAGES samples to a subscriber whose callback counts them in a
-    ``threading.local``, the way the codec keeps its packer: by thread, what it counted at each."""
+def _counts_seen_by_a_subscriber(mode: str | None) -> dict[int, list[int]]:
+    """Publish MESSAGES samples to a subscriber (its handler made by ``transport.callback`` in
+    ``mode``, None: the switch's) whose callback counts them in a ``threading.local``, the way
+    the codec keeps its packer: by thread, what it counted at each."""
     local = threading.local()
     seen: dict[int, list[int]] = {}
     received = threading.Event()
@@ -30,8 +29,7 @@ def _counts_seen_by_a_subscriber(keep_state: bool) -> dict[int, list[int]]:
         if sum(map(len, seen.values())) == MESSAGES:
             received.set()
 
-    handler = (transport.callback(count) if keep_state
-               else zenoh.handlers.Callback(count, indirect=False))
+    handler = transport.callback(count, mode=mode)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with transport.open_session(TransportSettings(listen=(endpoint,))) as publishing, \
             transport.open_session(TransportSettings(connect=(endpoint,))) as subscribing:
@@ -45,15 +43,25 @@ def _counts_seen_by_a_subscriber(keep_state: bool) -> dict[int, list[int]]:
     return seen
 
 
-def _run(keep_state: bool, results) -> None:
-    results.put(_counts_seen_by_a_subscriber(keep_state))
+def _run(mode: str | None, results) -> None:
+    results.put((transport.CALLBACK_MODE, _counts_seen_by_a_subscriber(mode)))
 
 
-def _in_fresh_process(keep_state: bool) -> dict[int, list[int]]:
+def _in_fresh_process(mode: str | None, switch: str | None = None) -> tuple[str, dict]:
+    """``(the switch's mode, what the subscriber saw)`` in a fresh process whose
+    :data:`transport.CALLBACKS_ENV` is ``switch``."""
     ctx = mp.get_context("spawn")
     results = ctx.Queue()
-    process = ctx.Process(target=_run, args=(keep_state, results))
-    process.start()
+    old = os.environ.pop(transport.CALLBACKS_ENV, None)
+    if switch is not None:
+        os.environ[transport.CALLBACKS_ENV] = switch
+    try:
+        process = ctx.Process(target=_run, args=(mode, results))
+        process.start()
+    finally:
+        os.environ.pop(transport.CALLBACKS_ENV, None)
+        if old is not None:
+            os.environ[transport.CALLBACKS_ENV] = old
     try:
         return results.get(timeout=60)
     finally:
@@ -61,18 +69,30 @@ def _in_fresh_process(keep_state: bool) -> dict[int, list[int]]:
 
 
 def test_zenohs_thread_keeps_its_python_state_from_one_callback_to_the_next():
-    seen = _in_fresh_process(keep_state=True)
+    mode, seen = _in_fresh_process(mode=None)
+    assert mode == "kept", "the default"
     assert sum(map(len, seen.values())) == MESSAGES
     for counts in seen.values():  # one receiving thread by default (transport.RUNTIME_DEFAULT)
         assert counts == list(range(1, len(counts) + 1))
 
 
 def test_without_it_each_callback_starts_from_a_new_python_state():
-    """Why keep_thread_state exists: should Zenoh ever keep the state itself, this fails, and
+    """Why the ``kept`` mode exists: should Zenoh ever keep the state itself, this fails, and
     the workaround can go."""
-    seen = _in_fresh_process(keep_state=False)
+    _, seen = _in_fresh_process(mode="direct")
     assert sum(map(len, seen.values())) == MESSAGES
     assert all(set(counts) == {1} for counts in seen.values())
+
+
+def test_the_one_switch_turns_the_tricks_off():
+    mode, seen = _in_fresh_process(mode=None, switch="indirect")
+    assert mode == "indirect"
+    assert sum(map(len, seen.values())) == MESSAGES
+    assert all(ident != threading.main_thread().ident for ident in seen)
+    for counts in seen.values():  # zenoh-python's own Python thread keeps its state anyway
+        assert counts == list(range(1, len(counts) + 1))
+    mode, _ = _in_fresh_process(mode=None, switch="sideways")
+    assert mode == "kept", "an unknown value falls back to the default"
 
 
 def test_the_runtime_default_leaves_a_users_setting_alone(monkeypatch):

@@ -1,0 +1,553 @@
+"""One agent's side of the swarm protocol, pure: inputs in, effects (``protocol.effects``) out.
+
+No sockets, no threads, no clock reads, no files. Every input carries the time ``now`` it
+happens at; every input returns the effects it causes, in order. :meth:`AgentProtocol.timer` is
+when the protocol next wants :meth:`AgentProtocol.on_timer`. ``agent.node`` runs it over Zenoh,
+``sim`` over a simulated network in virtual time.
+
+Per tick: an observation comes in (:meth:`~AgentProtocol.on_observation`), in tick order; the
+agent learns the intents of the visible higher-ranked neighbours as ``agent.negotiation`` plans
+it: from the standing query it keeps open on its predecessor (``?since=T;from=<id>``, answered
+at every tick where the predecessor outranks it) and, where the plan needs more, with one ask
+each (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked
+neighbour answered (or the negotiation timed out), it asks directly for any awaited intent that
+no answer brought; then it decides with what it knows, answers the standing and held queries it
+owes (the next in rank first), and sends its intent for the world. An announced intent never
+changes. At an episode's end it checkpoints before it sends the intent, so that no learned value
+is lost to a crash.
+
+Faults it survives: an observation lost on the way (it follows the clock again after
+:data:`RESYNC_AFTER` observations in a row), an answer lost or late (the negotiation times out;
+the standing query is replaced, at once if it ends mid-negotiation), a neighbour that dies or
+refuses the tick (its ask ends unanswered, or with an error: it is waited for no more), a world
+that dies and
+comes back with its own clock (``--resume``: the agent starts afresh, and ignores whatever is
+still on its way from the world before), forged or malformed input (rejected and counted by
+reason, never raised). ``launch/faultsim.py`` runs it through thousands of seeded fault
+schedules (``sim``).
+"""
+
+import logging
+from dataclasses import dataclass, field
+
+from agent import negotiation
+from protocol import keys
+from protocol.config import NEGOTIATING_ALGOS, SwarmConfig, priority_rank
+from protocol.effects import (
+    Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
+)
+from protocol.messages import (
+    CONTROL_SHUTDOWN, Answer, Control, Inbox, Intent, Observation, agent_sender, encode,
+)
+from protocol.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
+
+RESYNC_AFTER = 3
+"""Consecutive observations past a gap in the ticks after which an agent follows them."""
+
+MAX_HELD_QUERIES = 4 * 1024
+"""Queries for the coming tick held at once; legitimately at most one per other agent."""
+
+AHEAD_TICKS = 2
+"""How far past its last decision an agent holds queries and keeps answers: a neighbour that has
+decided this tick may ask for, or answer, the next one before this agent decides this one."""
+
+STANDING_QUERY_S = 600.0
+"""Lifetime of a standing query; when it ends, the agent opens another after its next decision."""
+
+PEER_WAIT_S = 30.0
+"""How long an agent waits at start-up to see every other agent before it acts anyway."""
+
+_NOTHING = negotiation.TickIntents()
+"""What an agent knows of a tick nobody answered for (never written to)."""
+
+_NO_TRACE = TickTrace("agent", None)
+
+
+class EffectLog:
+    """A logger whose lines become :class:`~protocol.effects.Log` effects of the protocol's
+    current input (what ``Inbox`` is given, so that its rejections are effects too)."""
+
+    def __init__(self, owner) -> None:
+        self.owner = owner
+
+    def log(self, level: int, message: str, *args) -> None:
+        self.owner._out.append(Log(level, message, args))
+
+    def info(self, message: str, *args) -> None:
+        self.log(logging.INFO, message, *args)
+
+    def warning(self, message: str, *args) -> None:
+        self.log(logging.WARNING, message, *args)
+
+    def error(self, message: str, *args) -> None:
+        self.log(logging.ERROR, message, *args)
+
+
+@dataclass
+class Pending:
+    """An observation whose decision waits for intents: whose (``awaited``), which of them the
+    brain decides with (``needed``), whom this agent asked (``asks``), until when, and, once the
+    answers are in, the ones it then asked for directly because no answer brought them
+    (``missing``); neighbours that cannot answer (gone, or refusing the tick) are waited for no
+    more (``refused``)."""
+
+    obs: Observation
+    awaited: list[int]
+    needed: list[int]
+    asks: list[int]
+    deadline: float
+    missing: list[int] | None = None
+    refused: set[int] = field(default_factory=set)  # asked, and no answer is coming
+
+
+@dataclass(slots=True)
+class OpenAsk:
+    """One of this agent's asks, until it ends: whom it asked, for which tick, and for a
+    standing query its generation (only the newest one's end closes the stream)."""
+
+    agent: int
+    tick: int
+    generation: int | None = None
+
+
+class AgentProtocol:
+    """The negotiation of one agent (see the module docstring); ``brain`` decides."""
+
+    def __init__(self, agent: int, config: SwarmConfig, brain, now: float,
+                 negotiation_timeout_s: float | None = None, trace: TickTrace = _NO_TRACE) -> None:
+        """``brain`` is an ``agent.brain.AgentBrain`` (fresh, or restored from a checkpoint);
+        ``trace`` only records the time of each step (``protocol.trace``), never decides."""
+        self.agent = agent
+        self.config = config
+        self.brain = brain
+        self.n = config.n_agents
+        self.sender = agent_sender(agent)
+        self.timeout_s = (config.tick_deadline_s / 2 if negotiation_timeout_s is None
+                          else negotiation_timeout_s)
+        self.negotiates = config.algo in NEGOTIATING_ALGOS and self.n > 1
+        self.trace = trace
+        self._out: list = []
+        self.inbox = Inbox(config.run_id, EffectLog(self))
+        self.ready = self.n == 1  # every peer seen (or given up on): observations are handled
+        self.ready_by = now + PEER_WAIT_S
+        self.early: list = []  # observations that came before ready, in order
+        self.peers_seen: set[int] = set()
+        self.pending: Pending | None = None
+        self.decided_tick = -1
+        self.decided_obs: Observation | None = None
+        self.decided_answer: Answer | None = None
+        self.decided_payload = b""
+        self.held: list[tuple[int, int, int]] = []  # (tick, asker's rank, query)
+        self.standing: dict[int, int] = {}  # asker -> its standing query on this agent
+        self.intents: dict[int, negotiation.TickIntents] = {}  # tick -> what was learned of it
+        self.asks: dict[int, OpenAsk] = {}
+        self.next_ask = 0
+        self.predecessor = (agent - 1) % self.n
+        self.stream_open = False
+        self.stream_generation = 0
+        self.gap_tick, self.gap_run = -1, 0
+        self.shutdown = False
+        self.stopped = False
+
+    # Inputs. Each returns the effects it causes, in the order they must be carried out.
+
+    def on_observation(self, payload, now: float) -> list:
+        """The world's observation for this agent."""
+        out = self._out = []
+        if self.stopped:
+            return out
+        if self.ready:
+            self._observe(payload, now)
+        else:
+            self.early.append(payload)
+        return out
+
+    def on_answer(self, ask: int, payload, now: float) -> list:
+        """A reply to one of this agent's asks (a standing one brings one per tick)."""
+        out = self._out = []
+        if self.stopped:
+            return out
+        open_ask = self.asks.get(ask)
+        if open_ask is not None:
+            self._answer_in(open_ask.agent, payload, now)
+        return out
+
+    def on_ask_end(self, ask: int, now: float) -> list:
+        """One of this agent's asks ended: timed out, finished, or its target is gone."""
+        out = self._out = []
+        open_ask = self.asks.pop(ask, None)
+        if open_ask is None or self.stopped:
+            return out
+        p = self.pending
+        if open_ask.generation is not None:
+            if open_ask.generation == self.stream_generation:
+                self.stream_open = False
+                if (p is not None and p.missing is None and p.deadline > now
+                        and self.predecessor in p.asks
+                        and self.predecessor not in self._intents_of(p.obs.tick).answered):
+                    self._ask(self.predecessor, p.obs.tick, p.deadline - now)  # not by the stream
+        elif open_ask.agent not in self.peers_seen:  # gone: no answer is coming
+            self._refused(open_ask, now)
+        return out
+
+    def on_refusal(self, ask: int, now: float) -> list:
+        """An error reply to one of this agent's asks: the neighbour cannot answer that tick
+        (it is behind, or past it)."""
+        out = self._out = []
+        open_ask = self.asks.get(ask)
+        if open_ask is not None and open_ask.generation is None and not self.stopped:
+            self._refused(open_ask, now)
+        return out
+
+    def on_query(self, query: int, parameters, now: float) -> list:
+        """A neighbour's query on this agent's intent key; ``parameters`` are its selector's
+        (a str such as ``"tick=12;from=3"``, or anything ``protocol.keys`` parses)."""
+        out = self._out = []
+        if self.stopped:
+            out.append(EndQuery(query))
+            return out
+        tick = keys.parse_intent_query(parameters)
+        since = keys.parse_standing_since(parameters) if tick is None else None
+        if since is not None:
+            self._standing_query(query, since, keys.parse_intent_asker(parameters))
+        elif tick is None:
+            self.inbox.reject("bad-query", f"?{parameters}")
+            out.append(ReplyError(query, b"bad query: expected ?tick=T or ?since=T;from=A"))
+            out.append(EndQuery(query))
+        elif tick <= self.decided_tick:
+            self._answer(tick, query)
+        elif self.decided_tick >= 0 and tick > self.decided_tick + AHEAD_TICKS:
+            self.inbox.reject("future-query", f"tick {tick}, decided {self.decided_tick}")
+            out.append(ReplyError(query, b"future tick"))
+            out.append(EndQuery(query))
+        elif len(self.held) >= MAX_HELD_QUERIES:
+            self.inbox.reject("query-flood", f"{len(self.held)} queries held")
+            out.append(ReplyError(query, b"too many queries"))
+            out.append(EndQuery(query))
+        else:
+            asker = keys.parse_intent_asker(parameters)
+            order = self.n if asker is None else priority_rank(asker, tick, self.n)
+            self.held.append((tick, order, query))
+        return out
+
+    def on_reply_failed(self, query: int, now: float) -> list:
+        """A reply to a standing query could not be sent: its asker is gone (it opens a new
+        one if it comes back)."""
+        out = self._out = []
+        for asker, held in list(self.standing.items()):
+            if held == query:
+                del self.standing[asker]
+                out.append(EndQuery(query))
+        return out
+
+    def on_liveliness(self, key: str, alive: bool, now: float) -> list:
+        """An agent's liveliness token (``alive/agent/<id>``) appeared or went."""
+        out = self._out = []
+        agent = keys.agent_from_key(key, self.config.run_id)
+        if agent is None:
+            self.inbox.reject("unknown-agent", str(key))
+        elif alive:
+            self.peers_seen.add(agent)
+            if not self.ready and self._every_peer_seen():
+                self._become_ready(now)
+        else:
+            self.peers_seen.discard(agent)
+            if agent == self.predecessor:
+                self.stream_open = False  # ask its next incarnation afresh
+            query = self.standing.pop(agent, None)
+            if query is not None:
+                out.append(EndQuery(query))
+        return out
+
+    def on_world(self, alive: bool, now: float) -> list:
+        """The world's liveliness token appeared or went. A world that leaves may come back
+        (``--resume``) with its own clock: start afresh."""
+        out = self._out = []
+        if not alive:
+            out.append(Log(logging.INFO, "the world left; waiting for it to come back"))
+            self.decided_tick = -1
+            self.pending = None
+            self.brain.learner.forget_pending()
+            self.intents = {}
+            self._drop_held()
+            # A world that comes back replays tick numbers: what is still on its way from this
+            # one's ticks must not count for the next one's. Replies to the asks made so far
+            # are ignored from now on, and the standing query is opened afresh.
+            self.asks = {}
+            self.stream_open = False
+        return out
+
+    def on_control(self, payload, now: float) -> list:
+        """A control message from the world (shutdown)."""
+        out = self._out = []
+        control = self.inbox.decode(payload, Control)
+        if control is not None and control.command == CONTROL_SHUTDOWN and not self.stopped:
+            out.append(Log(logging.INFO, "shutdown from the world"))
+            self.shutdown = True
+            self._stop(by_world=True)
+        return out
+
+    def on_timer(self, now: float) -> list:
+        """Time has come to ``now``: start without the peers not seen, or end a negotiation."""
+        out = self._out = []
+        if self.stopped:
+            return out
+        if not self.ready and now >= self.ready_by:
+            out.append(Log(logging.WARNING, "only saw agents %s; negotiating with whoever answers",
+                           (sorted(self.peers_seen),)))
+            self._become_ready(now)
+        if self.pending is not None and now >= self.pending.deadline:
+            self._advance(now)
+        return out
+
+    def stop(self, now: float) -> list:
+        """The process is stopping (a signal): finish every query held."""
+        out = self._out = []
+        if not self.stopped:
+            self._stop(by_world=False)
+        return out
+
+    def timer(self) -> float | None:
+        """When :meth:`on_timer` is next due (None: no timer)."""
+        if self.stopped:
+            return None
+        if not self.ready:
+            return self.ready_by
+        return None if self.pending is None else self.pending.deadline
+
+    def stats(self) -> dict:
+        return {"agent": self.agent, "decided_tick": self.decided_tick,
+                "accepted": self.inbox.accepted, "rejected": dict(self.inbox.rejections),
+                "shutdown_by_world": self.shutdown}
+
+    # The negotiation.
+
+    def _every_peer_seen(self) -> bool:
+        return len(self.peers_seen - {self.agent}) >= self.n - 1
+
+    def _become_ready(self, now: float) -> None:
+        """Handle the observations that came while waiting for the peers, in order."""
+        self.ready = True
+        early, self.early = self.early, []
+        for payload in early:
+            self._observe(payload, now)
+
+    def _observe(self, payload, now: float) -> None:
+        """Start a tick: decide at once if no intent is awaited, else ask and wait for them."""
+        arrived = self.trace.now()
+        obs = self.inbox.decode(payload, Observation)
+        if obs is None:
+            return
+        self.trace.mark(OBS_IN, obs.tick, at=arrived)
+        if obs.agent != self.agent:
+            self.inbox.reject("wrong-agent", f"observation for agent {obs.agent}")
+            return
+        if self.pending is not None and obs.tick == self.pending.obs.tick + 1:
+            self._decide_pending()  # the world has moved on (this agent stalled): decide now
+        if obs.tick <= self.decided_tick:
+            self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
+            return
+        if self.decided_tick >= 0 and obs.tick != self.decided_tick + 1 and not self._resync(obs):
+            self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
+            return
+        needed = self.brain.neighbours_to_ask(obs)
+        awaited, asks = negotiation.plan_for(obs, self.config)
+        if not awaited:
+            self._decide(obs, {})
+            return
+        tick = obs.tick
+        got = self._intents_of(tick)
+        for j in asks:
+            if j not in got.answered and not (j == self.predecessor and self.stream_open):
+                self._ask(j, tick, self.timeout_s)
+        self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s)
+        self.brain.prepare(obs)  # while the answers are on their way
+        self._advance(now)
+
+    def _refused(self, open_ask: OpenAsk, now: float) -> None:
+        """No answer is coming for this ask: the pending negotiation waits for it no more."""
+        p = self.pending
+        if (p is not None and open_ask.tick == p.obs.tick
+                and open_ask.agent not in self._intents_of(p.obs.tick).answered):
+            p.refused.add(open_ask.agent)
+            self._advance(now)
+
+    def _intents_of(self, tick: int) -> negotiation.TickIntents:
+        """What this agent has learned of ``tick``'s intents (kept from now on)."""
+        got = self.intents.get(tick)
+        if got is None:
+            got = self.intents[tick] = negotiation.TickIntents()
+        return got
+
+    def _advance(self, now: float) -> None:
+        """Move the pending negotiation on: once every asked neighbour answered (or time ran
+        out), ask directly for any awaited intent that no answer brought; once those are in
+        too (or time ran out), decide. Unanswered neighbours are left out."""
+        p = self.pending
+        got = self._intents_of(p.obs.tick)
+        remaining = p.deadline - now
+        refused = p.refused
+        if p.missing is None:
+            if remaining > 0 and not all(j in got.answered or j in refused for j in p.asks):
+                return
+            if self.predecessor in p.asks and self.predecessor not in got.answered:
+                self.stream_open = False  # it did not answer in time: open a fresh one
+            p.missing = [j for j in p.awaited if j not in got.actions and j not in refused]
+            if p.missing and remaining > 0:
+                for j in p.missing:
+                    self._ask(j, p.obs.tick, remaining)
+                return
+        elif remaining > 0 and not all(j in got.actions or j in refused for j in p.missing):
+            return
+        self._decide_pending()
+
+    def _decide_pending(self) -> None:
+        p, self.pending = self.pending, None
+        known = self.intents.get(p.obs.tick, _NOTHING).actions
+        self._decide(p.obs, {j: known[j] for j in p.needed if j in known})
+
+    def _decide(self, obs: Observation, answers: dict[int, int]) -> None:
+        """Decide ``obs`` with the ``answers`` of the neighbours the brain waits for; answer
+        for it, relaying every intent learned for the tick; checkpoint at an episode's end;
+        tell the world."""
+        out, trace, tick = self._out, self.trace, obs.tick
+        trace.mark(DECIDE, tick)
+        action = self.brain.act(obs, answers)
+        trace.mark(ACTED, tick)
+        known = self.intents.get(tick, _NOTHING).actions
+        answer = Answer(self.config.run_id, tick, self.sender, self.agent, obs.episode, action,
+                        tuple(sorted(known.items())))
+        self.decided_tick, self.decided_obs, self.decided_answer = tick, obs, answer
+        self.decided_payload = encode(answer)
+        trace.mark(ENCODED, tick)
+        self.intents = {t: got for t, got in self.intents.items() if t > tick}
+        if self.standing:
+            self._answer_standing_queries()
+        if self.held:
+            self._answer_held()
+        if obs.episode_end:  # saved before the world hears of the decision: nothing to lose
+            out.append(Checkpoint(obs.episode))
+        intent = Intent(answer.run, tick, answer.sender, self.agent, obs.episode, action,
+                        self.brain.learned)
+        out.append(SendIntent(intent, encode(intent)))
+        if obs.episode_end:
+            out.append(EpisodeEnded(obs.episode))
+        if not self.stream_open:
+            self._open_stream(tick + 1)
+
+    def _resync(self, obs: Observation) -> bool:
+        """After a gap (an observation lost on the way), follow the clock again once
+        ``RESYNC_AFTER`` observations in a row continue one another; a lone message with a far
+        tick (forged, or stale from another run of the world) never moves this agent's clock."""
+        if obs.tick == self.gap_tick + 1:
+            self.gap_run += 1
+        else:
+            self.gap_run = 1
+        self.gap_tick = obs.tick
+        if self.gap_run < RESYNC_AFTER:
+            return False
+        self._out.append(Log(logging.WARNING, "lost observations before tick %d; following the "
+                                              "world's clock again", (obs.tick,)))
+        self.gap_run = 0
+        return True
+
+    def _new_ask(self, neighbour: int, tick: int, parameters: str, timeout_s: float,
+                 generation: int | None = None) -> None:
+        ask = self.next_ask
+        self.next_ask += 1
+        self.asks[ask] = OpenAsk(neighbour, tick, generation)
+        self._out.append(Ask(ask, neighbour, parameters, timeout_s))
+
+    def _ask(self, neighbour: int, tick: int, timeout_s: float) -> None:
+        """Ask one neighbour for its intent at ``tick``; its answer comes to ``on_answer``."""
+        self._new_ask(neighbour, tick, keys.intent_query_params(tick, self.agent), timeout_s)
+
+    def _open_stream(self, since: int) -> None:
+        """Open the standing query on the predecessor's intent key (nnQL only)."""
+        if not self.negotiates or self.predecessor not in self.peers_seen or since >= keys.MAX_TICK:
+            return
+        self.stream_generation += 1
+        self._new_ask(self.predecessor, since, keys.standing_query_params(since, self.agent),
+                      STANDING_QUERY_S, self.stream_generation)
+        self.stream_open = True
+
+    def _answer_in(self, sender: int, payload, now: float) -> None:
+        """Keep an answer for the coming ticks, and move the negotiation on if it waits for it;
+        answers for decided ticks are of no more use (a standing query also brings those this
+        agent did not need)."""
+        arrived = self.trace.now()
+        answer = self.inbox.decode(payload, Answer, key_agent=sender)
+        if answer is None or answer.tick <= self.decided_tick:
+            return
+        self.trace.mark(ANSWER_IN, answer.tick, at=arrived)
+        if self.decided_tick >= 0 and answer.tick > self.decided_tick + AHEAD_TICKS:
+            self.inbox.reject("future-tick", f"answer for tick {answer.tick}, "
+                                             f"decided {self.decided_tick}")
+            return
+        got = self._intents_of(answer.tick)
+        if not got.add(sender, answer.action, answer.relayed, self.agent):
+            self.inbox.reject("conflicting-relay", f"agent {sender} at tick {answer.tick}")
+        while len(self.intents) > AHEAD_TICKS + 1:  # a flood of forged ticks stays bounded
+            del self.intents[min(self.intents)]
+        p = self.pending
+        if p is not None and p.obs.tick == answer.tick:
+            self._advance(now)
+
+    def _standing_query(self, query: int, since: int, asker: int | None) -> None:
+        """Keep a neighbour's standing query (one per asker: a newer one replaces it), and
+        answer it at once if the tick it starts from is already decided."""
+        out = self._out
+        if asker is None or asker == self.agent or asker >= self.n:
+            self.inbox.reject("bad-query", f"?since={since};from={asker}")
+            out.append(ReplyError(query, b"bad standing query: expected ?since=T;from=<another "
+                                         b"agent>"))
+            out.append(EndQuery(query))
+            return
+        old = self.standing.pop(asker, None)
+        if old is not None:
+            out.append(EndQuery(old))
+        self.standing[asker] = query
+        if since <= self.decided_tick and self.decided_obs is not None:
+            self._answer_standing(asker, query)
+
+    def _answer_standing_queries(self) -> None:
+        """Answer the standing queries owed at the decided tick, the next in rank first."""
+        n, tick = self.n, self.decided_tick
+        for asker in sorted(self.standing, key=lambda a: priority_rank(a, tick, n)):
+            self._answer_standing(asker, self.standing[asker])
+
+    def _answer_standing(self, asker: int, query: int) -> None:
+        if negotiation.answers_standing(self.decided_obs, asker, self.config):
+            self._out.append(Reply(query, self.decided_payload, self.decided_answer))
+
+    def _answer_held(self) -> None:
+        """Answer what was asked for the decided tick, the next in rank first: its decision
+        is the one the rest of the chain waits for."""
+        tick = self.decided_tick
+        due = sorted((h for h in self.held if h[0] <= tick), key=lambda h: h[1])
+        self.held = [h for h in self.held if h[0] > tick]
+        for held_tick, _, query in due:
+            self._answer(held_tick, query)
+
+    def _answer(self, tick: int, query: int) -> None:
+        out = self._out
+        if tick == self.decided_tick:
+            out.append(Reply(query, self.decided_payload, self.decided_answer))
+        else:
+            self.inbox.reject("stale-query", f"tick {tick}, decided {self.decided_tick}")
+            out.append(ReplyError(query, b"stale tick"))
+        out.append(EndQuery(query))
+
+    def _drop_held(self) -> None:
+        for _, _, query in self.held:
+            self._out.append(EndQuery(query))
+        self.held = []
+
+    def _stop(self, by_world: bool) -> None:
+        self._drop_held()
+        for query in self.standing.values():
+            self._out.append(EndQuery(query))
+        self.standing = {}
+        self.pending = None
+        self.stopped = True
+        self._out.append(Stopped(by_world))

@@ -1,0 +1,23 @@
+"""What an agent process starts from: a fresh brain, or the one its last checkpoint holds.
+
+The agent node and the simulator's restarted agents both start here, so that a restart in the
+simulator is the restart a real process makes.
+"""
+
+from pathlib import Path
+
+from agent import checkpoint
+from agent.brain import AgentBrain
+from protocol.config import SwarmConfig
+
+
+def start_brain(agent: int, config: SwarmConfig, checkpoint_file: Path, resume: bool,
+                brain: AgentBrain | None = None) -> tuple[AgentBrain, dict | None]:
+    """``(brain, resumed)``: ``brain`` (a fresh one if None), restored from ``checkpoint_file``
+    when ``resume`` and the file exists; ``resumed`` then says from which episode and with
+    which tables (``checkpoint.fingerprint``), else None. Raises ``CheckpointError``."""
+    brain = brain or AgentBrain(agent, config)
+    if not (resume and Path(checkpoint_file).exists()):
+        return brain, None
+    episode = checkpoint.load(checkpoint_file, brain)
+    return brain, {"episode": episode, "fingerprint": checkpoint.fingerprint(brain)}

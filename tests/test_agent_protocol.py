@@ -1,0 +1,191 @@
+"""One agent's protocol machine, pure: inputs in, effects out, no network, no clock."""
+
+import msgpack
+
+from agent.brain import AgentBrain
+from agent.protocol import PEER_WAIT_S, RESYNC_AFTER, AgentProtocol
+from protocol import keys
+from protocol.config import SwarmConfig
+from protocol.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
+from protocol.messages import (
+    CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode, to_wire,
+)
+
+CONFIG = SwarmConfig(run_id="proto", n_agents=3, episodes=10, max_steps=50)
+
+
+def observation(tick: int, agent: int = 0, episode_end: bool = False, others=()) -> bytes:
+    """Agent ``agent``'s observation at ``tick``; ``others``: visible ``(id, x, y)``."""
+    return encode(Observation(
+        run="proto", tick=tick, sender=WORLD_SENDER, agent=agent, episode=0, step=tick % 50,
+        position=(1, 1), goal=(5, 5), neighbours=tuple(others),
+        rank=(agent - tick) % CONFIG.n_agents, reward_ds=0.0, reward_ca=10.0, collided=False,
+        arrived=False, episode_end=episode_end))
+
+
+def answer(tick: int, agent: int, action: int, relayed=()) -> bytes:
+    return encode(Answer("proto", tick, agent_sender(agent), agent, 0, action, tuple(relayed)))
+
+
+def ready(agent: int = 0, config: SwarmConfig = CONFIG) -> AgentProtocol:
+    """A protocol that has seen every peer."""
+    protocol = AgentProtocol(agent, config, AgentBrain(agent, config), now=0.0)
+    for j in range(config.n_agents):
+        protocol.on_liveliness(keys.alive_key(config.run_id, keys.ROLE_AGENT, j), True, 0.0)
+    assert protocol.ready
+    return protocol
+
+
+def kinds(effects) -> list[str]:
+    return [type(e).__name__ for e in effects if not isinstance(e, Log)]
+
+
+def test_ticks_must_follow_on_and_a_gap_is_crossed_only_by_a_run_of_observations():
+    protocol = ready()
+    for tick in (0, 1, 2):
+        assert "SendIntent" in kinds(protocol.on_observation(observation(tick), 0.0))
+    assert protocol.decided_tick == 2
+    assert kinds(protocol.on_observation(observation(1), 0.0)) == []
+    assert protocol.inbox.rejections["stale-tick"] == 1
+    protocol.on_observation(observation(10**6), 0.0)  # a lone far-future tick moves nothing
+    protocol.on_observation(observation(3), 0.0)
+    assert protocol.decided_tick == 3
+    gap = [10 + i for i in range(RESYNC_AFTER)]  # observations 4..9 were lost
+    for tick in gap[:-1]:
+        protocol.on_observation(observation(tick), 0.0)
+        assert protocol.decided_tick == 3
+    protocol.on_observation(observation(gap[-1]), 0.0)
+    assert protocol.decided_tick == gap[-1]
+    assert protocol.inbox.rejections["future-tick"] == RESYNC_AFTER
+
+
+def test_observations_wait_for_the_peers_then_are_handled_in_order():
+    protocol = AgentProtocol(0, CONFIG, AgentBrain(0, CONFIG), now=5.0)
+    assert protocol.timer() == 5.0 + PEER_WAIT_S
+    assert protocol.on_observation(observation(0), 6.0) == []
+    assert protocol.on_observation(observation(1), 6.0) == []
+    for j in (0, 1):
+        protocol.on_liveliness(keys.alive_key("proto", keys.ROLE_AGENT, j), True, 7.0)
+    assert protocol.decided_tick == -1
+    effects = protocol.on_timer(5.0 + PEER_WAIT_S)  # agent 2 never showed up
+    assert kinds(effects).count("SendIntent") == 2 and protocol.decided_tick == 1
+
+
+def test_an_agent_asks_and_decides_once_the_answer_is_in_or_the_time_is_up():
+    protocol = ready(agent=1)
+    # tick 0: agent 0 ranks first, agent 1 second; agent 1 sees agent 0 and waits for it
+    effects = protocol.on_observation(observation(0, agent=1, others=[(0, 2, 2)]), 10.0)
+    [ask] = [e for e in effects if isinstance(e, Ask)]
+    assert ask.agent == 0 and ask.parameters == "tick=0;from=1"
+    assert protocol.timer() == 10.0 + CONFIG.tick_deadline_s / 2
+    effects = protocol.on_answer(ask.ask, answer(0, agent=0, action=3), 10.1)
+    [intent] = [e for e in effects if isinstance(e, SendIntent)]
+    assert intent.intent.tick == 0 and protocol.decided_tick == 0
+    # tick 1: nobody outranks agent 1 that it sees (agent 0 is now last): it decides at once
+    assert "SendIntent" in kinds(protocol.on_observation(observation(1, agent=1, others=[(0, 2, 2)]),
+                                                         10.2))
+    # tick 3: agent 0 first again; no answer comes: the time-out decides
+    protocol.on_observation(observation(2, agent=1, others=[(0, 2, 2)]), 10.3)
+    protocol.on_observation(observation(3, agent=1, others=[(0, 2, 2)]), 10.4)
+    assert protocol.decided_tick == 2 and protocol.pending is not None
+    assert protocol.on_timer(10.5) == []
+    assert "SendIntent" in kinds(protocol.on_timer(protocol.timer()))
+    assert protocol.decided_tick == 3
+
+
+def test_held_and_standing_queries_are_answered_with_the_decision_the_next_in_rank_first():
+    protocol = ready(agent=0)
+    held = protocol.on_query(7, "tick=0;from=2", 0.0)
+    assert held == [] and protocol.held
+    standing = protocol.on_query(8, "since=0;from=1", 0.0)
+    assert standing == []
+    effects = protocol.on_observation(observation(0, others=[(1, 2, 2), (2, 3, 3)]), 0.1)
+    replies = [(type(e).__name__, e.query) for e in effects if isinstance(e, (Reply, EndQuery))]
+    assert replies == [("Reply", 8), ("Reply", 7), ("EndQuery", 7)]  # the standing one stays
+    [intent] = [e for e in effects if isinstance(e, SendIntent)]
+    assert all(e.answer.action == intent.intent.action for e in effects if isinstance(e, Reply))
+    # a newer standing query from the same asker replaces the old one
+    assert protocol.on_query(9, "since=1;from=1", 0.2) == [EndQuery(8)]
+
+
+def test_an_episodes_end_checkpoints_before_the_intent_goes_out():
+    protocol = ready()
+    effects = protocol.on_observation(observation(0, episode_end=True), 0.0)
+    assert kinds(effects) == ["Checkpoint", "SendIntent", "EpisodeEnded", "Ask"]
+    assert effects[0] == Checkpoint(0)
+
+
+def test_answers_from_before_the_world_left_do_not_count_for_the_world_that_comes_back():
+    """Seed 508 of launch/faultsim.py: a world resumed under running agents replays tick
+    numbers, and an answer still on its way from the world before counted for the new one."""
+    protocol = ready(agent=1)
+    effects = protocol.on_observation(observation(0, agent=1, others=[(0, 2, 2)]), 0.0)
+    [ask] = [e for e in effects if isinstance(e, Ask)]
+    protocol.on_world(False, 0.1)
+    assert protocol.on_answer(ask.ask, answer(0, agent=0, action=3), 0.2) == []
+    effects = protocol.on_observation(observation(0, agent=1, others=[(0, 2, 2)]), 1.0)
+    [ask] = [e for e in effects if isinstance(e, Ask)]
+    effects = protocol.on_answer(ask.ask, answer(0, agent=0, action=1), 1.1)
+    assert any(isinstance(e, SendIntent) for e in effects) and protocol.decided_tick == 0
+    assert protocol.decided_answer.relayed == ((0, 1),), "the new world's answer, not the old"
+
+
+def test_a_standing_query_that_ends_mid_negotiation_is_replaced_by_a_direct_ask():
+    """Seed 2151 of launch/faultsim.py: the standing query ended while the agent waited for
+    its answer, and the agent waited out the negotiation's time-out instead of asking."""
+    protocol = ready(agent=1)
+    others = [(0, 2, 2)]
+    protocol.on_observation(observation(1, agent=1, others=others), 0.0)  # decides: it is first
+    [stream] = [a for a, open_ask in protocol.asks.items() if open_ask.generation is not None]
+    protocol.on_observation(observation(2, agent=1, others=others), 0.1)  # agent 0 first: waits
+    assert protocol.pending is not None and not any(
+        isinstance(e, Ask) for e in protocol.on_answer(stream, answer(1, 0, 2), 0.1))
+    effects = protocol.on_ask_end(stream, 0.2)
+    [ask] = [e for e in effects if isinstance(e, Ask)]
+    assert ask.agent == 0 and ask.parameters == "tick=2;from=1"
+
+
+def test_the_worlds_shutdown_stops_the_agent_and_finishes_its_queries():
+    protocol = ready()
+    protocol.on_query(4, "tick=5;from=1", 0.0)
+    protocol.on_query(5, "since=5;from=2", 0.0)
+    wire = to_wire(Control("proto", 1, WORLD_SENDER, CONTROL_SHUTDOWN))
+    wire[4] = agent_sender(1)  # an agent sending the world's shutdown
+    assert kinds(protocol.on_control(msgpack.packb(wire), 0.0)) == [] and not protocol.stopped
+    effects = protocol.on_control(encode(Control("proto", 1, WORLD_SENDER, CONTROL_SHUTDOWN)), 0.0)
+    assert [e for e in effects if not isinstance(e, Log)] == [EndQuery(4), EndQuery(5),
+                                                              Stopped(by_world=True)]
+    assert protocol.shutdown and protocol.timer() is None
+    assert protocol.on_query(6, "tick=5;from=1", 0.0) == [EndQuery(6)]
+
+
+def test_bad_input_is_counted_never_raised():
+    protocol = ready()
+    for payload in (b"", b"\xc1", b"garbage", observation(0, agent=2)):
+        assert kinds(protocol.on_observation(payload, 0.0)) == []
+    for parameters in ("", "tick=abc", "since=1", "since=1;from=0", "since=1;from=99"):
+        effects = protocol.on_query(1, parameters, 0.0)
+        assert kinds(effects) == ["ReplyError", "EndQuery"], parameters
+    assert kinds(protocol.on_liveliness("nnql/proto/alive/agent/0042", True, 0.0)) == []
+    assert protocol.on_answer(12345, b"garbage", 0.0) == []
+    assert protocol.inbox.total_rejected >= 10
+
+
+def test_a_neighbour_that_is_gone_or_refuses_the_tick_is_waited_for_no_more():
+    """A neighbour that is gone (no queryable: Zenoh ends the ask at once) or refuses the tick
+    cost the whole negotiation time-out at every tick, as simulated histories showed."""
+    others = [(0, 2, 2), (1, 3, 3)]
+    protocol = ready(agent=2)
+    effects = protocol.on_observation(observation(0, agent=2, others=others), 0.0)
+    [ask] = [e for e in effects if isinstance(e, Ask)]
+    assert kinds(protocol.on_ask_end(ask.ask, 0.001)) == [], "a live neighbour may answer yet"
+    protocol = ready(agent=2)
+    protocol.on_liveliness(keys.alive_key("proto", keys.ROLE_AGENT, 1), False, 0.0)
+    effects = protocol.on_observation(observation(0, agent=2, others=others), 0.0)
+    [ask] = [e for e in effects if isinstance(e, Ask)]  # agent 1 would relay agent 0's intent
+    assert ask.agent == 1
+    effects = protocol.on_ask_end(ask.ask, 0.001)  # its body is there, its queryable is not
+    [missing] = [e for e in effects if isinstance(e, Ask)]  # so agent 0 is asked directly
+    assert missing.agent == 0 and protocol.pending is not None
+    effects = protocol.on_refusal(missing.ask, 0.002)  # and cannot answer that tick
+    assert "SendIntent" in kinds(effects) and protocol.decided_tick == 0

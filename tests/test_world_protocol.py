@@ -1,0 +1,159 @@
+"""The world's protocol machine, pure: the lockstep clock as inputs in, effects out."""
+
+from protocol import keys
+from protocol.config import SwarmConfig
+from protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
+from world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol
+
+CONFIG = SwarmConfig(run_id="wproto", n_agents=2, episodes=2, max_steps=3, tick_deadline_s=0.5)
+
+
+def alive(protocol: WorldProtocol, agent: int, now: float, up: bool = True) -> list:
+    return protocol.on_liveliness(keys.alive_key("wproto", keys.ROLE_AGENT, agent), up, now)
+
+
+def intent(protocol: WorldProtocol, agent: int, now: float, action: int = 4, tick=None,
+           episode: int = 0) -> list:
+    tick = protocol.world.tick if tick is None else tick
+    payload = encode(Intent("wproto", tick, agent_sender(agent), agent, episode, action))
+    return protocol.on_intent(keys.intent_key("wproto", agent), payload, now)
+
+
+def kinds(effects) -> list[str]:
+    return [type(e).__name__ for e in effects if not isinstance(e, Log)]
+
+
+def started(now: float = 0.0) -> tuple[WorldProtocol, list]:
+    protocol = WorldProtocol(CONFIG, now)
+    alive(protocol, 0, now)
+    return protocol, alive(protocol, 1, now)
+
+
+def test_the_first_tick_opens_once_every_agent_is_alive_in_rank_order():
+    protocol = WorldProtocol(CONFIG, 0.0)
+    assert kinds(alive(protocol, 1, 0.1)) == [] and protocol.timer() == 60.0
+    effects = alive(protocol, 0, 0.2)
+    [batch] = [e for e in effects if isinstance(e, SendObservations)]
+    sent = [obs for obs, payload in batch.observations]
+    assert [o.agent for o in sent] == [0, 1] and [o.rank for o in sent] == [0, 1]
+    assert protocol.timer() == 0.2 + CONFIG.tick_deadline_s
+
+
+def test_an_agent_that_never_comes_alive_ends_the_start_up_with_a_reason():
+    protocol = WorldProtocol(CONFIG, 0.0, startup_timeout_s=5.0)
+    alive(protocol, 0, 1.0)
+    effects = protocol.on_timer(5.0)
+    assert kinds(effects) == ["SendControl", "Finished"]
+    assert effects[-1] == Finished(False, "agents [1] did not come alive within 5 s")
+
+
+def test_the_last_intent_closes_the_tick_and_a_missing_one_waits_for_the_deadline():
+    protocol, _ = started()
+    assert kinds(intent(protocol, 0, 0.1)) == []
+    effects = intent(protocol, 1, 0.2)
+    assert kinds(effects) == ["SendObservations", "TickClosed"]
+    assert protocol.world.tick == 1
+    intent(protocol, 1, 0.3)
+    assert protocol.on_timer(0.69) == [] and protocol.world.tick == 1
+    [closed] = [e for e in protocol.on_timer(0.7) if isinstance(e, TickClosed)]
+    assert closed.report.missed == (0,)
+    intent(protocol, 0, 0.8, tick=0)
+    assert protocol.inbox.rejections["stale-tick"] == 1
+
+
+def test_a_dead_agent_is_not_waited_for():
+    protocol, _ = started()
+    intent(protocol, 0, 0.1)
+    effects = alive(protocol, 1, 0.2, up=False)
+    assert "TickClosed" in kinds(effects) and protocol.world.tick == 1
+
+
+def test_an_episodes_row_follows_its_end_tick_with_the_time_it_took():
+    protocol, _ = started(10.0)
+    now = 10.0
+    for _ in range(CONFIG.max_steps + 1):
+        now += 0.25
+        effects = intent(protocol, 0, now) + intent(protocol, 1, now)
+    [row] = [e for e in effects if isinstance(e, WriteRow)]
+    assert kinds(effects)[-2:] == ["TickClosed", "WriteRow"]
+    assert row.row["episode"] == 0 and row.ticks == CONFIG.max_steps + 1
+    assert row.duration_s == now - 10.0 and row.slowest_s == 0.25
+
+
+def test_a_completed_run_tells_its_agents_until_they_leave():
+    """Seed 116 of launch/faultsim.py: the one shutdown message was lost on the way and an
+    agent waited for ever for a world that had gone."""
+    protocol, _ = started()
+    now, effects = 0.0, []
+    while not any(isinstance(e, SendControl) for e in effects):
+        now += 0.01
+        effects = intent(protocol, 0, now, episode=protocol.world.episode) + intent(
+            protocol, 1, now, episode=protocol.world.episode)
+    assert protocol.world.finished and not protocol.done
+    [control] = [e for e in effects if isinstance(e, SendControl)]
+    assert control.control.command == CONTROL_SHUTDOWN
+    assert kinds(protocol.on_timer(now + SHUTDOWN_REPEAT_S)) == ["SendControl"]
+    assert kinds(alive(protocol, 0, now + 0.3, up=False)) == []
+    assert kinds(alive(protocol, 1, now + 0.4, up=False)) == []
+    assert "Finished" not in kinds(protocol.on_timer(now + 0.4 + SHUTDOWN_QUIET_S / 2))
+    assert protocol.on_timer(now + 0.4 + SHUTDOWN_QUIET_S)[-1] == Finished(True, None)
+    assert protocol.done and protocol.completed and protocol.timer() is None
+
+
+def test_an_agent_that_comes_up_while_the_others_leave_is_told_too():
+    """Seed 9582 of launch/faultsim.py: a stalled world handled, all at once, the last agents
+    leaving and a restarted one coming up, and ended before it saw the newcomer."""
+    protocol, _ = started()
+    protocol.world.finished = True
+    protocol._close_run(1.0)
+    alive(protocol, 0, 3.0 - 0.5, up=False)
+    alive(protocol, 1, 3.0 - 0.5, up=False)
+    alive(protocol, 1, 3.0 - 0.5)  # restarted meanwhile
+    assert kinds(protocol.on_timer(protocol.timer())) == ["SendControl"]
+
+
+def test_agents_that_never_leave_are_told_a_few_times_only_however_long_it_takes():
+    """Seed 9563 of launch/faultsim.py: the world stalled for longer than it meant to tell its
+    agents to stop, and gave up without telling those a partition had cut off."""
+    protocol, _ = started()
+    protocol.world.finished = True  # as if the last tick had just closed
+    protocol._close_run(1.0)
+    resent, now = 0, 1.0 + 10 * SHUTDOWN_REPEAT_S * SHUTDOWN_TRIES  # stalled meanwhile
+    while not protocol.done:
+        effects = protocol.on_timer(now)
+        resent += kinds(effects).count("SendControl")
+        now = protocol.timer() or now
+    assert protocol.completed and resent == SHUTDOWN_TRIES - 1
+
+
+def test_a_stop_tells_everyone_once_and_ends():
+    protocol, _ = started()
+    effects = protocol.stop(0.1)
+    assert kinds(effects) == ["SendControl", "Finished"] and not protocol.completed
+    assert protocol.stop(0.2) == [] and intent(protocol, 0, 0.3) == []
+
+
+def test_bad_intents_are_counted_never_raised():
+    protocol, _ = started()
+    for payload in (b"", b"\xc1", encode(Intent("wproto", 0, agent_sender(1), 1, 0, 2))):
+        effects = protocol.on_intent(keys.intent_key("wproto", 0), payload, 0.1)
+        assert kinds(effects) == []
+    assert kinds(alive(protocol, 7, 0.1)) == [] and protocol.inbox.rejections["unknown-agent"]
+    intent(protocol, 0, 0.2, episode=1)
+    assert set(protocol.inbox.rejections) >= {"not-msgpack", "forged-sender", "wrong-episode"}
+
+
+def test_a_world_resumed_after_the_last_episode_only_tells_the_agents_to_stop():
+    """Seed 5382 of launch/faultsim.py: the world crashed while telling its agents the run was
+    over, and the resumed world, finding every row written, ended without telling them."""
+    protocol = WorldProtocol(CONFIG, 5.0, first_episode=CONFIG.episodes, first_tick=8)
+    assert protocol.timer() == 5.0
+    assert kinds(protocol.on_timer(5.0)) == ["SendControl"]
+    assert kinds(alive(protocol, 0, 5.01)) == []  # an agent still running, from the history
+    assert kinds(protocol.on_timer(protocol.timer())) == ["SendControl"]
+    alive(protocol, 0, 5.3, up=False)
+    assert protocol.on_timer(protocol.timer())[-1] == Finished(True, None)
+    nobody = WorldProtocol(CONFIG, 0.0, first_episode=CONFIG.episodes)
+    effects = nobody.on_timer(0.0) + nobody.on_timer(nobody.timer())
+    assert kinds(effects) == ["SendControl", "Finished"], "with nobody left it ends at once"

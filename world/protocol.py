@@ -1,0 +1,262 @@
+"""The world's side of the swarm protocol, pure: the lockstep clock as inputs in, effects out.
+
+No sockets, no threads, no clock reads, no files: every input carries its time ``now`` and
+returns the effects it causes (``protocol.effects``), in order; :meth:`WorldProtocol.timer` is
+when it next wants :meth:`WorldProtocol.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
+over a simulated network in virtual time.
+
+It waits for every agent's liveliness token (at most ``startup_timeout_s``), then, per tick:
+sends every agent its observation, in rank order (the first to decide first); collects intents
+until every live agent has answered or the tick deadline passes (a missing intent counts as
+STAY and as a missed intent); applies the tick with ``world.engine``; sends the next
+observations at once; then reports the tick (:class:`~protocol.effects.TickClosed`) and, at an
+episode's end, its row (:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a
+stalled one at most the deadline. A world started at ``first_episode`` / ``first_tick`` continues
+a run (``--resume``); one started after the last episode only tells the agents still running
+to stop. A completed run tells its agents to stop until every live one has left.
+"""
+
+import logging
+
+from protocol import keys
+from protocol.config import SwarmConfig
+from protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
+from protocol.trace import CLOSE, TickTrace
+from world.engine import SwarmWorld
+
+STARTUP_TIMEOUT_S = 60.0
+"""How long the world waits for every agent to come alive before it gives up."""
+
+SHUTDOWN_TRIES = 10
+SHUTDOWN_REPEAT_S = 0.2
+"""A world that completed its run tells its agents to stop up to :data:`SHUTDOWN_TRIES` times,
+this far apart, until every live one has left: a shutdown lost on the way would leave an agent
+waiting for a world that never comes back. Tries, not a time limit: a world stalled meanwhile
+still makes them all (faultsim seed 9563)."""
+SHUTDOWN_QUIET_S = 0.1
+"""With no live agent left, the world still waits this long after the last liveliness change
+before it ends: a world that was stalled handles what queued meanwhile all at once, and an
+agent that came up in the meantime is told too (faultsim seed 9582)."""
+
+_NO_TRACE = TickTrace("world", None)
+
+
+class _EffectLog:
+    """A logger whose lines become Log effects of the protocol's current input (for ``Inbox``)."""
+
+    def __init__(self, owner) -> None:
+        self.owner = owner
+
+    def warning(self, message: str, *args) -> None:
+        self.owner._out.append(Log(logging.WARNING, message, args))
+
+
+class WorldProtocol:
+    """The lockstep world of a run (see the module docstring)."""
+
+    def __init__(self, config: SwarmConfig, now: float, first_episode: int = 0,
+                 first_tick: int = 0, startup_timeout_s: float = STARTUP_TIMEOUT_S,
+                 trace: TickTrace = _NO_TRACE) -> None:
+        self.config = config
+        self.n = config.n_agents
+        self.world = SwarmWorld(config, first_episode, first_tick)
+        self.trace = trace
+        self._out: list = []
+        self.inbox = Inbox(config.run_id, _EffectLog(self))
+        self.alive: set[int] = set()
+        self.started = False
+        self.startup_timeout_s = startup_timeout_s
+        self.startup_by = now + startup_timeout_s
+        self.done = False
+        self.completed = False
+        self.closing = False  # completed: telling the agents to leave
+        self.shutdowns_left = SHUTDOWN_TRIES
+        self.leave_by = 0.0  # with no live agent, done from then on
+        self.next_shutdown = 0.0
+        if first_episode >= config.episodes:  # resumed after the last row: only the goodbyes
+            self.started = self.closing = True
+            self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
+            self.next_shutdown = now
+        self.actions: list[int | None] | None = None  # the open tick's intents, by agent
+        self.learned: dict[int, tuple] = {}  # the learning records that came with them
+        self.tick_start = 0.0
+        self.tick_deadline = 0.0
+        self.slowest = 0.0  # the episode's slowest tick so far, in seconds
+        self.episode_start = now
+        self.episode_tick = self.world.tick
+        self.agent_of_key: dict[str, int] = {}  # intent key -> its agent, parsed once
+
+    # Inputs. Each returns the effects it causes, in the order they must be carried out.
+
+    def on_liveliness(self, key: str, alive: bool, now: float) -> list:
+        """An agent's liveliness token (``alive/agent/<id>``) appeared or went."""
+        out = self._out = []
+        if self.done:
+            return out
+        agent = keys.agent_from_key(key, self.config.run_id)
+        if agent is None or agent >= self.n:
+            self.inbox.reject("unknown-agent", str(key))
+        elif self.closing:
+            (self.alive.add if alive else self.alive.discard)(agent)
+            self.leave_by = max(self.leave_by, now + SHUTDOWN_QUIET_S)
+        elif alive:
+            self.alive.add(agent)
+            out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
+            if not self.started and len(self.alive) == self.n:
+                self._start(now)
+        else:
+            self.alive.discard(agent)
+            out.append(Log(logging.WARNING, "agent %d left", (agent,)))
+            self._close_if_due(now)
+        return out
+
+    def on_intent(self, key: str, payload, now: float) -> list:
+        """A sample on ``agent/*/intent``: keep the intent; the last one of the tick closes it."""
+        out = self._out = []
+        if self.done:
+            return out
+        key_agent = self.agent_of_key.get(key)
+        if key_agent is None:
+            key_agent = keys.agent_from_key(key, self.config.run_id)
+            if key_agent is not None and key_agent < self.n:
+                self.agent_of_key[key] = key_agent  # at most one entry per agent
+        intent = self.inbox.decode(payload, Intent, key_agent=key_agent)
+        if intent is None:
+            return out
+        tick, actions = self.world.tick, self.actions
+        if intent.agent >= self.n:
+            self.inbox.reject("unknown-agent", f"agent {intent.agent}")
+        elif actions is None or intent.tick < tick:
+            self.inbox.reject("stale-tick", f"intent for tick {intent.tick} at tick {tick}")
+        elif intent.tick > tick:
+            self.inbox.reject("future-tick", f"intent for tick {intent.tick} at tick {tick}")
+        elif intent.episode != self.world.episode:
+            self.inbox.reject("wrong-episode", f"episode {intent.episode}")
+        elif actions[intent.agent] is not None:
+            self.inbox.reject("duplicate-intent", f"agent {intent.agent} tick {tick}")
+        else:
+            actions[intent.agent] = intent.action
+            if intent.record:
+                self.learned[intent.agent] = intent.record[0]
+            self._close_if_due(now)
+        return out
+
+    def on_timer(self, now: float) -> list:
+        """Time has come to ``now``: a tick's deadline, or the start-up's."""
+        out = self._out = []
+        if self.done:
+            return out
+        if self.closing:
+            if not self.alive and now >= self.leave_by:
+                self._finish(True, None)
+            elif now >= self.next_shutdown:
+                if self.shutdowns_left:
+                    self._send_shutdown(now)
+                else:
+                    self._finish(True, None)
+        elif not self.started:
+            if now >= self.startup_by:
+                missing = sorted(set(range(self.n)) - self.alive)
+                self._finish(False, f"agents {missing} did not come alive within "
+                                    f"{self.startup_timeout_s:.0f} s")
+        else:
+            self._close_if_due(now)
+        return out
+
+    def stop(self, now: float) -> list:
+        """The process is stopping (a signal): tell everyone and end."""
+        out = self._out = []
+        if not self.done:
+            self._finish(self.closing, None)
+        return out
+
+    def timer(self) -> float | None:
+        """When :meth:`on_timer` is next due (None: no timer)."""
+        if self.done:
+            return None
+        if self.closing:
+            return self.next_shutdown if self.alive else min(self.next_shutdown, self.leave_by)
+        if not self.started:
+            return self.startup_by
+        return self.tick_deadline if self.actions is not None else None
+
+    def stats(self) -> dict:
+        return {"completed": self.completed, "ticks": self.world.tick,
+                "episode": self.world.episode, "accepted": self.inbox.accepted,
+                "rejected": dict(self.inbox.rejections), "violations": self.world.violations}
+
+    # The clock.
+
+    def _start(self, now: float) -> None:
+        self.started = True
+        self.episode_start, self.episode_tick = now, self.world.tick
+        if self.world.finished:
+            self._close_run(now)
+        else:
+            self._open_tick(now)
+
+    def _open_tick(self, now: float) -> None:
+        """Send every agent its observation of the current tick; start waiting for intents."""
+        out = self._out
+        self.actions = [None] * self.n
+        self.learned = {}
+        self.tick_start = now
+        self.tick_deadline = now + self.config.tick_deadline_s
+        out.append(SendObservations(self._encoded(self.world.observations_by_rank())))
+
+    @staticmethod
+    def _encoded(observations):
+        """Each observation with its payload, built as it is taken (the first to decide is the
+        first to know)."""
+        for obs in observations:
+            yield obs, encode(obs)
+
+    def _close_if_due(self, now: float) -> None:
+        """Close the open tick if every live agent's intent is in or its deadline passed."""
+        actions = self.actions
+        if actions is None:
+            return
+        if now >= self.tick_deadline or all(actions[i] is not None for i in self.alive):
+            self._close_tick(now)
+
+    def _close_tick(self, now: float) -> None:
+        """Apply the open tick, open the next (the agents think while this one is reported)."""
+        out, world = self._out, self.world
+        self.trace.mark(CLOSE, world.tick)
+        report = world.apply(self.actions, self.learned)
+        self.slowest = max(self.slowest, now - self.tick_start)
+        self.actions = None
+        if not world.finished:
+            self._open_tick(now)
+        if report.violations:
+            out.append(Log(logging.ERROR, "tick %d broke the world's invariants: %s",
+                           (report.tick, report.violations)))
+        out.append(TickClosed(report))
+        if report.episode_row is not None:
+            out.append(WriteRow(report.episode_row, now - self.episode_start,
+                                world.tick - self.episode_tick, self.slowest,
+                                self.inbox.total_rejected))
+            self.episode_start, self.episode_tick, self.slowest = now, world.tick, 0.0
+        if world.finished:
+            self._close_run(now)
+
+    def _close_run(self, now: float) -> None:
+        """The run is complete: tell the agents until every live one has left (and
+        :data:`SHUTDOWN_QUIET_S` passed), :data:`SHUTDOWN_TRIES` times at most."""
+        self.closing, self.leave_by = True, now + SHUTDOWN_QUIET_S
+        self._send_shutdown(now)
+
+    def _send_shutdown(self, now: float) -> None:
+        self.next_shutdown = now + SHUTDOWN_REPEAT_S
+        self.shutdowns_left -= 1
+        control = Control(self.config.run_id, self.world.tick, WORLD_SENDER, CONTROL_SHUTDOWN)
+        self._out.append(SendControl(control, encode(control)))
+
+    def _finish(self, completed: bool, error: str | None) -> None:
+        """The end: a completed run has told its agents already; otherwise tell them now."""
+        if not self.closing:
+            self._send_shutdown(0.0)
+        self.done, self.completed = True, completed
+        self.actions = None
+        self._out.append(Finished(completed, error))
