@@ -13,18 +13,18 @@ read as one whose intent is unknown, from its current cell. A QL agent asks nobo
 
 import numpy as np
 
-from agent.learner import (
+from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
     REC_COUNT, REC_PAIRS, RF_FIELDS, apply_record, ca_rows, decide, draw_noise, finish,
     record_is_valid, record_outcome, record_size, state_size,
 )
-from protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
-from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from protocol.jit import filled, floats, ints, python_values, rows, table
-from protocol.messages import Observation
-from protocol.ranks import priority_rank, waits_for
-from protocol.seeding import AGENT_STREAM, stream_rng
+from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
+from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
+from nnql_swarm.protocol.jit import filled, floats, ints, python_values, rows, table
+from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.ranks import priority_rank, waits_for
+from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 
 
 class Learner:

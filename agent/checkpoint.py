@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from agent.brain import AgentBrain
+from nnql_swarm.agent.brain import AgentBrain
 
 
 class CheckpointError(ValueError):

@@ -26,9 +26,9 @@ then costs one message per hop instead of a query, an answer and the query's end
 from dataclasses import dataclass, field
 from typing import Callable
 
-from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from protocol.messages import Observation
-from protocol.ranks import priority_rank, waits_for
+from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
+from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.ranks import priority_rank, waits_for
 
 
 def awaited(obs: Observation, config: SwarmConfig) -> list[int]:

@@ -26,17 +26,17 @@ from typing import Callable
 
 import zenoh
 
-from agent import checkpoint
-from agent.brain import AgentBrain
-from agent.protocol import AgentProtocol
-from agent.restore import start_brain
-from protocol import keys, trace
-from protocol.config import SwarmConfig
-from protocol.effects import (
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.agent.restore import start_brain
+from nnql_swarm.protocol import keys, trace
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
 )
-from protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
-from protocol.transport import (
+from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
+from nnql_swarm.protocol.transport import (
     EXIT_TRANSPORT, TransportError, TransportSettings, callback, enqueue, open_session,
 )
 

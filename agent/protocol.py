@@ -30,16 +30,16 @@ schedules (``sim``).
 import logging
 from dataclasses import dataclass, field
 
-from agent import negotiation
-from protocol import keys
-from protocol.config import NEGOTIATING_ALGOS, SwarmConfig, priority_rank
-from protocol.effects import (
+from nnql_swarm.agent import negotiation
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig, priority_rank
+from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
 )
-from protocol.messages import (
+from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, Answer, Control, Inbox, Intent, Observation, agent_sender, encode,
 )
-from protocol.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
+from nnql_swarm.protocol.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
 
 RESYNC_AFTER = 3
 """Consecutive observations past a gap in the ticks after which an agent follows them."""

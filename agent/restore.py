@@ -6,9 +6,9 @@ simulator is the restart a real process makes.
 
 from pathlib import Path
 
-from agent import checkpoint
-from agent.brain import AgentBrain
-from protocol.config import SwarmConfig
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.protocol.config import SwarmConfig
 
 
 def start_brain(agent: int, config: SwarmConfig, checkpoint_file: Path, resume: bool,

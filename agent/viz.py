@@ -1,7 +1,7 @@
 """What one agent learned, in Rerun: its Q-tables as 21 x 21 heat maps, and its negotiation timing.
 
 Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.node.run_agent`` and
-``launch.inprocess.run_in_process``) each agent logs, under ``agents/<id>/``:
+``sim.inprocess.run_in_process``) each agent logs, under ``agents/<id>/``:
 
 - ``q_ds/value``: an image, one pixel per egocentric offset ``(dx, dy)`` of the *goal* from the
   agent (the agent sits at the centre pixel, marked by ``q_ds/self``); its colour is
@@ -30,10 +30,10 @@ from typing import Callable
 import numpy as np
 import rerun as rr
 
-from agent.brain import AgentBrain
-from protocol.actions import MOVES, N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, WINDOW
-from protocol.config import SwarmConfig
-from protocol.messages import Observation
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.protocol.actions import MOVES, N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, WINDOW
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.messages import Observation
 
 TABLES = ("q_ds", "q_ca")
 

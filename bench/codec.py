@@ -23,7 +23,7 @@ from types import ModuleType
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from protocol import messages  # noqa: E402
+from nnql_swarm.protocol import messages  # noqa: E402
 
 RUN = "bench"
 

@@ -5,11 +5,11 @@ import os
 from pathlib import Path
 from typing import Callable
 
-from launch.recording import RecordingPlan
-from protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
-from protocol.jit import plain_python_environment
-from protocol.transport import EmbeddedLayout
-from world.metrics import read_episodes
+from nnql_swarm.recording.session import RecordingPlan
+from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
+from nnql_swarm.protocol.jit import plain_python_environment
+from nnql_swarm.protocol.transport import EmbeddedLayout
+from nnql_swarm.world.metrics import read_episodes
 
 
 def measured_rate(out: Path) -> float:
@@ -24,7 +24,7 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
                     agent_target: Callable | None = None) -> float:
     """The launcher's world and agent processes on one machine; ``agent_target`` replaces the
     agents' entry point (same arguments as ``launch.swarm.agent_main``)."""
-    from launch.swarm import agent_main, world_main
+    from nnql_swarm.launch.swarm import agent_main, world_main
 
     os.environ.update(plain_python_environment())  # as the launcher's world and agents run
     ctx = mp.get_context("spawn")
@@ -50,7 +50,7 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
 
 def run_local(config: SwarmConfig, out: Path, record: bool) -> float:
     """The same logic in one process (``--in-process``)."""
-    from launch.swarm import run_in_process
+    from nnql_swarm.launch.swarm import run_in_process
 
     out.mkdir(parents=True)
     run_in_process(config, out, record, progress=False)

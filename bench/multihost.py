@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from tests import netns  # noqa: E402
-from world.metrics import read_episodes  # noqa: E402
+from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
 PY = sys.executable
 SWARM, ROUTER = str(ROOT / "launch" / "swarm.py"), str(ROOT / "launch" / "router.py")

@@ -32,14 +32,14 @@ os.environ["NNQL_KERNEL"] = "python"  # as in the swarm's processes
 
 import zenoh  # noqa: E402
 
-from agent.brain import AgentBrain  # noqa: E402
-from agent.node import AgentNode, AgentOptions  # noqa: E402
-from protocol import keys  # noqa: E402
-from protocol.actions import STAY  # noqa: E402
+from nnql_swarm.agent.brain import AgentBrain  # noqa: E402
+from nnql_swarm.agent.node import AgentNode, AgentOptions  # noqa: E402
+from nnql_swarm.protocol import keys  # noqa: E402
+from nnql_swarm.protocol.actions import STAY  # noqa: E402
 from bench.harness import add_preset_option, swarm_config  # noqa: E402
-from protocol.config import SwarmConfig  # noqa: E402
-from protocol.transport import TransportSettings  # noqa: E402
-from world.node import WorldNode, WorldOptions  # noqa: E402
+from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
+from nnql_swarm.protocol.transport import TransportSettings  # noqa: E402
+from nnql_swarm.world.node import WorldNode, WorldOptions  # noqa: E402
 
 
 class _Callback:

@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 import numpy as np  # noqa: E402
 
 from tests.swarm_helpers import find_process, group_pids, swarm_command  # noqa: E402
-from world.metrics import read_episodes  # noqa: E402
+from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
 
 WARM_UP_S = 20.0

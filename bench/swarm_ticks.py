@@ -24,11 +24,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from agent.brain import AgentBrain  # noqa: E402
+from nnql_swarm.agent.brain import AgentBrain  # noqa: E402
 from bench.harness import add_preset_option, run_distributed, run_local, swarm_config  # noqa: E402
-from protocol.actions import STAY  # noqa: E402
-from protocol.config import SwarmConfig  # noqa: E402
-from protocol.transport import TransportSettings  # noqa: E402
+from nnql_swarm.protocol.actions import STAY  # noqa: E402
+from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
+from nnql_swarm.protocol.transport import TransportSettings  # noqa: E402
 
 
 class BareBrain(AgentBrain):
@@ -40,7 +40,7 @@ class BareBrain(AgentBrain):
 
 def bare_agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
                     resume: bool = False, recording=None) -> None:
-    from agent.node import AgentOptions, run_agent
+    from nnql_swarm.agent.node import AgentOptions, run_agent
 
     sys.exit(run_agent(AgentOptions(agent, config, transport, out), BareBrain(agent, config)))
 

@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
 
-from experiment.swarm import SwarmExperiment, run_experiment  # noqa: E402
+from nnql_swarm.experiment.swarm import SwarmExperiment, run_experiment  # noqa: E402
 
 TARGET_SECONDS = 20.0
 

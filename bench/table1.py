@@ -22,8 +22,8 @@ if __package__ in (None, ""):  # run as a script: make the repository's packages
 
 import numpy as np  # noqa: E402
 
-from experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
-from experiment.report import ResultGrid, summarize, summary_lines, table1_rows  # noqa: E402
+from nnql_swarm.experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
+from nnql_swarm.experiment.report import ResultGrid, summarize, summary_lines, table1_rows  # noqa: E402
 
 TARGET_SECONDS = 5.0
 SEEDS = range(10)

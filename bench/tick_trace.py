@@ -22,8 +22,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config  # noqa: E402
-from protocol import trace  # noqa: E402
-from world.metrics import read_episodes  # noqa: E402
+from nnql_swarm.protocol import trace  # noqa: E402
+from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
 FIRST_OBS = "world: first observation handed to Zenoh -> its agent has it"
 FIRST_DECIDES = "that agent: observation in -> deciding"

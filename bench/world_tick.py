@@ -22,9 +22,9 @@ os.environ["NNQL_KERNEL"] = "python"  # as in the world process
 
 import numpy as np  # noqa: E402
 
-from protocol.actions import N_ACTIONS  # noqa: E402
-from protocol.config import SwarmConfig  # noqa: E402
-from world.engine import SwarmWorld  # noqa: E402
+from nnql_swarm.protocol.actions import N_ACTIONS  # noqa: E402
+from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
+from nnql_swarm.world.engine import SwarmWorld  # noqa: E402
 
 
 def time_ticks(world: SwarmWorld, actions: list[list[int]]) -> tuple[float, float]:

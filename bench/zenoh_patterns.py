@@ -32,7 +32,7 @@ import zenoh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from protocol.transport import TransportSettings, enqueue, free_port, open_session  # noqa: E402
+from nnql_swarm.protocol.transport import TransportSettings, enqueue, free_port, open_session  # noqa: E402
 
 PATTERNS = ("pubsub", "query", "standing", "token")
 NONE = zenoh.ConsolidationMode.NONE

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from experiment.report import ALGO_NAMES as ALGO_LABELS
-from experiment.report import PAPER_TABLE1, ResultGrid, table1_rows
+from nnql_swarm.experiment.report import ALGO_NAMES as ALGO_LABELS
+from nnql_swarm.experiment.report import PAPER_TABLE1, ResultGrid, table1_rows
 
 ALGO_COLOURS = {"ql": "tab:red", "nnql": "tab:blue"}
 FIGURE_FILES = (

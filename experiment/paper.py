@@ -12,9 +12,9 @@ from typing import Callable
 
 import numpy as np
 
-from protocol.config import PAPER, SwarmConfig
-from sim.runs import Batch, World, threads
-from world.rules import GOAL_REWARD
+from nnql_swarm.protocol.config import PAPER, SwarmConfig
+from nnql_swarm.sim.runs import Batch, World, threads
+from nnql_swarm.world.rules import GOAL_REWARD
 
 ALGOS = ("ql", "nnql")
 

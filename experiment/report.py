@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
-from experiment.paper import ALGOS, EpisodeMetrics, RunSpec
-from experiment.stats import CONFIDENCE, Interval, mean_interval
+from nnql_swarm.experiment.paper import ALGOS, EpisodeMetrics, RunSpec
+from nnql_swarm.experiment.stats import CONFIDENCE, Interval, mean_interval
 
 PAPER_TABLE1 = {
     # k: (QL collisions, nnQL collisions, decrease in %), Table 1 of the paper

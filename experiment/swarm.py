@@ -25,10 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from experiment.stats import mean_interval
-from protocol.config import PRESETS, SwarmConfig
-from sim.runs import Batch, Episodes, swarm_world, threads
-from world.metrics import EpisodeWriter
+from nnql_swarm.experiment.stats import mean_interval
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.sim.runs import Batch, Episodes, swarm_world, threads
+from nnql_swarm.world.metrics import EpisodeWriter
 
 VARIANTS = ("ql", "nnql", "best-ql", "best-nnql", "shield-ql", "shield-nnql", "nnql-n2", "daql",
             "oracle")

@@ -1,1 +1,1 @@
-"""Entry points that wire agents and world together: the swarm launcher and the paper's experiment."""
+"""The commands: the swarm, the experiments, the fault schedules, the router and the secured setup."""

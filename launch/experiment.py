@@ -22,20 +22,17 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-if __package__ in (None, ""):  # run as a script: make the repository's packages importable
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
-from experiment.report import (  # noqa: E402
+from nnql_swarm.experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch
+from nnql_swarm.experiment.report import (
     ResultGrid, summarize, table1_markdown, table1_rows, write_episodes_csv, write_table1_csv,
 )
-from experiment.swarm import (  # noqa: E402
+from nnql_swarm.experiment.swarm import (
     TABLE_FILES, VARIANTS, SwarmExperiment, ablation_presets, curves, run_experiment, table_rows,
     write_runs, write_tables,
 )
-from protocol.config import PRESETS  # noqa: E402
-from launch.cli import EXIT_INTERRUPTED, OneLineParser, progress  # noqa: E402
-from launch.recording import log_swarm_curves  # noqa: E402
+from nnql_swarm.protocol.config import PRESETS
+from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress
+from nnql_swarm.recording.session import log_swarm_curves
 
 RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
 
@@ -107,7 +104,6 @@ def parse_workers(text: str) -> int | None:
 
 def build_parser() -> OneLineParser:
     parser = OneLineParser(
-        prog="experiment.py",
         description="QL vs nnQL, the paper's experiment: one learner among scripted obstacles "
         "that announce their next action. The paper's settings are the defaults. (The swarm "
         "experiment: experiment.py swarm --help.)",
@@ -170,7 +166,7 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
         parser.error(f"{args.out} already holds results ({', '.join(held)}); pass --force to overwrite")
     if not args.no_plots:
         try:
-            from experiment.figures import require_matplotlib
+            from nnql_swarm.experiment.figures import require_matplotlib
 
             require_matplotlib()
         except RuntimeError as error:
@@ -226,7 +222,7 @@ def run(args: argparse.Namespace) -> Path:
     }
     (args.out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
     if not args.no_plots:
-        from experiment.figures import write_figures
+        from nnql_swarm.experiment.figures import write_figures
 
         write_figures(args.out, grid, args.figure_k)
     print(markdown)
@@ -253,7 +249,7 @@ def parse_variants(text: str) -> tuple[str, ...]:
 def build_swarm_parser() -> OneLineParser:
     d = SwarmExperiment()
     parser = OneLineParser(
-        prog="experiment.py swarm",
+        prog=f"{Path(sys.argv[0]).name} swarm",
         description="The swarm experiment: every learning preset (the paper's QL and nnQL, the "
         "best options, the shield, n = 2, DAQL, the oracle) over seeds, on the swarm simulator.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
@@ -302,7 +298,7 @@ def run_swarm(argv: list[str]) -> Path:
         parser.error(f"{out} already holds results ({', '.join(held)}); pass --force to overwrite")
     if not args.no_plots:
         try:
-            from experiment.figures import require_matplotlib
+            from nnql_swarm.experiment.figures import require_matplotlib
 
             require_matplotlib()
         except RuntimeError as error:
@@ -320,7 +316,7 @@ def run_swarm(argv: list[str]) -> Path:
     learning = curves(results, smoothing)
     log_swarm_curves(learning, out / "swarm_curves.rrd")
     if not args.no_plots:
-        from experiment.figures import write_swarm_figures
+        from nnql_swarm.experiment.figures import write_swarm_figures
 
         write_swarm_figures(out, learning, experiment.seeds, smoothing)
     config = {"experiment": asdict(experiment), "workers": args.workers,

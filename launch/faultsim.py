@@ -28,11 +28,8 @@ import traceback
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from launch.cli import OneLineParser, progress  # noqa: E402
-from protocol.jit import plain_python_environment  # noqa: E402
+from nnql_swarm.terminal.cli import OneLineParser, progress
+from nnql_swarm.protocol.jit import plain_python_environment
 
 CHUNK = 25
 """Schedules a worker runs per task."""
@@ -56,9 +53,9 @@ class Result(NamedTuple):
 def check_schedule(seed: int, agents: int, scratch: Path | None = None,
                    verbose: bool = False) -> Result:
     """Draw, run and check the schedule of ``seed``; never raises (a raise is a failure)."""
-    from sim.parity import parity_failures
-    from sim.schedule import draw_schedule
-    from sim.distributed import run_schedule
+    from nnql_swarm.sim.parity import parity_failures
+    from nnql_swarm.sim.schedule import draw_schedule
+    from nnql_swarm.sim.distributed import run_schedule
 
     try:
         schedule = draw_schedule(seed, agents)
@@ -98,8 +95,8 @@ def _worker_setup() -> None:
     as long as it does (the brains' tables are lists): the cyclic garbage collector, which would
     go through them again and again while they live, runs once after each schedule instead,
     and never through what the imports made."""
-    import sim.parity  # noqa: F401 - imported before the freeze
-    import sim.distributed  # noqa: F401
+    import nnql_swarm.sim.parity  # noqa: F401 - imported before the freeze
+    import nnql_swarm.sim.distributed  # noqa: F401
 
     gc.freeze()
     gc.disable()
@@ -152,7 +149,7 @@ def run_schedules(count: int, seed_base: int, agents: int = 8, workers: int = 2,
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(prog="faultsim.py", description=__doc__.split("\n\n")[0],
+    p = OneLineParser(description=__doc__.split("\n\n")[0],
                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("--schedules", type=int, default=1000, help="how many schedules to run")
     p.add_argument("--seed-base", type=int, default=0, help="the first schedule's seed")

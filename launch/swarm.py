@@ -19,20 +19,17 @@ import sys
 import time
 from pathlib import Path
 
-if __package__ in (None, ""):
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from launch import zenoh_files  # noqa: E402
-from launch.cli import EXIT_INTERRUPTED, OneLineParser, progress as progress_bar  # noqa: E402
-from launch.recording import RecordingSession, check_viewer_url  # noqa: E402
-from launch.resume import ResumeError, ResumePoint, check_checkpoints, resume_point  # noqa: E402
-from launch.supervisor import Supervisor, describe_exit  # noqa: E402
-from protocol.config import (  # noqa: E402
+from nnql_swarm.operations import zenoh_files
+from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress as progress_bar
+from nnql_swarm.recording.session import RecordingSession, check_viewer_url
+from nnql_swarm.supervision.resume import ResumeError, ResumePoint, check_checkpoints, resume_point
+from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
+from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
 )
-from protocol.jit import plain_python_environment  # noqa: E402
-from protocol.runfiles import CONFIG_FILE, EPISODES_FILE  # noqa: E402
-from protocol.transport import MODES, EmbeddedLayout, TransportSettings  # noqa: E402
+from nnql_swarm.protocol.jit import plain_python_environment
+from nnql_swarm.protocol.runfiles import CONFIG_FILE, EPISODES_FILE
+from nnql_swarm.protocol.transport import MODES, EmbeddedLayout, TransportSettings
 
 log = logging.getLogger("nnql.launch")
 
@@ -62,7 +59,7 @@ def parse_ids(text: str) -> list[int]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(prog="swarm.py", description=__doc__.split("\n\n")[0])
+    p = OneLineParser(description=__doc__.split("\n\n")[0])
     d = SwarmConfig()
     run = p.add_argument_group("the run")
     run.add_argument("--preset", choices=tuple(PRESETS), default=None,
@@ -254,8 +251,8 @@ def transports(args: argparse.Namespace):
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
                progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> None:
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
-    from launch.recording import exit_without_teardown, open_world_viz
-    from world.node import WorldOptions, run_world
+    from nnql_swarm.recording.session import exit_without_teardown, open_world_viz
+    from nnql_swarm.world.node import WorldOptions, run_world
 
     name_process("nnql-world", config)
     setup_logging("world")
@@ -293,8 +290,8 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
 def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
                resume: bool = False, recording=None) -> None:
     """An agent process (spawned); ``resume`` reloads its checkpoint if there is one."""
-    from agent.node import AgentOptions, run_agent
-    from launch.recording import exit_without_teardown, open_agent_viz
+    from nnql_swarm.agent.node import AgentOptions, run_agent
+    from nnql_swarm.recording.session import exit_without_teardown, open_agent_viz
 
     name_process(f"nnql-agent {agent}", config)
     setup_logging(f"agent {agent}")
@@ -349,8 +346,8 @@ def setup_logging(name: str) -> None:
 
 def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> int:
     """``record``: a RecordingSession, or True / False for run.rrd or nothing."""
-    from launch.inprocess import run_in_process as run
-    from launch.recording import InProcessRecorder, RecordingSession
+    from nnql_swarm.sim.inprocess import run_in_process as run
+    from nnql_swarm.recording.session import InProcessRecorder, RecordingSession
 
     session = record if isinstance(record, RecordingSession) else \
         RecordingSession.files_only(record, config, out)

@@ -8,7 +8,7 @@ simulator all call these very ones.
 
 import numpy as np
 
-from protocol.jit import kernel
+from nnql_swarm.protocol.jit import kernel
 
 UP, DOWN, LEFT, RIGHT, STAY = 0, 1, 2, 3, 4
 """Action indices, in the paper's order (UP, DOWN, LEFT, RIGHT, DON'T MOVE)."""

@@ -7,10 +7,10 @@ every process, so that a distributed run and an in-process run of one config are
 import json
 from dataclasses import asdict, dataclass, field, fields
 
-from protocol.actions import VIEW_RADIUS
-from protocol.keys import validate_run_id
-from protocol.messages import MAX_AGENTS, MAX_GRID
-from protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
+from nnql_swarm.protocol.actions import VIEW_RADIUS
+from nnql_swarm.protocol.keys import validate_run_id
+from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_GRID
+from nnql_swarm.protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
 
 ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
 """nnQL (the paper), plain QL, nnQL whose neighbour state also holds the announced move, Double

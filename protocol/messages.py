@@ -52,8 +52,8 @@ import msgspec
 import numpy as np
 from msgspec import Meta
 
-from protocol.actions import N_ACTIONS, N_STATES
-from protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
+from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
+from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
 PROTOCOL_VERSION = 3
 MAX_GRID = 1024

@@ -9,8 +9,8 @@ decision). Agents that wait for nobody decide in parallel. The agent process
 and the swarm simulator (``sim.swarm``) all ask :func:`waits_for`.
 """
 
-from protocol.actions import chebyshev
-from protocol.jit import kernel
+from nnql_swarm.protocol.actions import chebyshev
+from nnql_swarm.protocol.jit import kernel
 
 SCRIPTED_RANK = -1
 """The rank of a scripted obstacle (the paper's experiment): above every learner, always."""

@@ -13,7 +13,7 @@
 - The run ends: the world completes, and every agent still running stops.
 """
 
-from protocol.config import SwarmConfig
+from nnql_swarm.protocol.config import SwarmConfig
 
 
 class Checker:

@@ -19,23 +19,23 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent import checkpoint
-from agent.brain import AgentBrain
-from agent.protocol import AgentProtocol
-from agent.restore import start_brain
-from protocol import keys
-from protocol.effects import (
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.agent.restore import start_brain
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, Finished, Reply, ReplyError, SendControl, SendIntent,
     SendObservations,
     Stopped, TickClosed, WriteRow,
 )
-from protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
-from sim.checks import Checker
-from sim.network import Network, Process
-from sim.schedule import WINDOWS, Fault, Schedule, schedule_rng
-from world.engine import EPISODE_FIELDS
-from world.metrics import EpisodeWriter
-from world.protocol import WorldProtocol
+from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
+from nnql_swarm.sim.checks import Checker
+from nnql_swarm.sim.network import Network, Process
+from nnql_swarm.sim.schedule import WINDOWS, Fault, Schedule, schedule_rng
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import EpisodeWriter
+from nnql_swarm.world.protocol import WorldProtocol
 
 VIRTUAL_LIMIT_S = 3600.0
 """A run still going after this much virtual time did not end."""

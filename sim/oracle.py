@@ -10,8 +10,8 @@ world's arbitration never finds a collision; arrived agents are parked obstacles
 It learns nothing: it is the lower bound the learners are read against.
 """
 
-from protocol.actions import N_ACTIONS, STAY, target_x, target_y
-from protocol.jit import kernel
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
+from nnql_swarm.protocol.jit import kernel
 
 FAR = 1 << 30
 """The distance of a cell its agent cannot reach."""

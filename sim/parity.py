@@ -1,6 +1,6 @@
 """What a simulated run must equal when nothing in it can make anyone miss: ``--in-process``.
 
-The in-process runner (``launch.inprocess``) runs the same world and brains in rank order, every
+The in-process runner (``sim.inprocess``) runs the same world and brains in rank order, every
 intent known when it is asked for. A simulated run whose faults are all benign (latency,
 duplicates, reordering: far shorter than any time-out) must give the very same episodes and the
 very same Q-tables, bit for bit.
@@ -9,11 +9,11 @@ very same Q-tables, bit for bit.
 import tempfile
 from pathlib import Path
 
-from agent import checkpoint
-from launch.inprocess import run_in_process
-from protocol.config import SwarmConfig
-from world.engine import EPISODE_FIELDS
-from world.metrics import read_episodes
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.sim.inprocess import run_in_process
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import read_episodes
 
 
 def in_process_reference(config: SwarmConfig, scratch: Path | None = None) -> tuple[list, list]:

@@ -15,23 +15,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from agent.learner import (
+from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise,
     record_size, state_size,
 )
-from protocol.actions import N_ACTIONS, N_STATES
-from protocol.config import SwarmConfig
-from protocol.seeding import AGENT_STREAM, stream_rng
-from sim.swarm import (
+from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
+from nnql_swarm.sim.swarm import (
     OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
     OUT_SHORTEST, OUT_VIOLATIONS, TR_FIELDS, run_episode,
 )
-from world.rules import (
+from nnql_swarm.world.rules import (
     GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
     ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS,
 )
-from world.scenario import paper_episode, swarm_episode
+from nnql_swarm.world.scenario import paper_episode, swarm_episode
 
 
 @dataclass(frozen=True)

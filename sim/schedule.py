@@ -18,8 +18,8 @@ the in-process run of its config bit for bit.
 import random
 from dataclasses import dataclass
 
-from protocol.config import PRESETS, SwarmConfig
-from protocol.seeding import SIM_STREAM, stream_rng
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.protocol.seeding import SIM_STREAM, stream_rng
 
 KINDS = ("drop", "duplicate", "reorder", "partition", "stall", "crash")
 BENIGN = frozenset({"duplicate", "reorder"})

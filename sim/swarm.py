@@ -19,16 +19,16 @@ Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agen
 ``options`` (``OPT_*``); the world's options are the same for the whole batch.
 """
 
-from agent.learner import (
+from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_GAMMA, LP_RADIUS, LP_READING, NB_FIELDS, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
     NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
     apply_record, decide, finish, planned_cell, record_outcome,
 )
-from protocol.actions import STAY, sees, target_x, target_y
-from protocol.jit import batch_kernel, kernel, prange
-from protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
-from sim.oracle import plan
-from world.rules import shared_cells, shortest_steps, swaps_through, world_step
+from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
+from nnql_swarm.protocol.jit import batch_kernel, kernel, prange
+from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
+from nnql_swarm.sim.oracle import plan
+from nnql_swarm.world.rules import shared_cells, shortest_steps, swaps_through, world_step
 
 ORACLE_SCRATCH = 8
 """Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,

@@ -85,7 +85,7 @@ def wait_for_rows(csv_path: Path, rows: int, timeout: float, process=None) -> No
     """Wait until ``csv_path`` holds at least ``rows`` episode rows."""
     import time
 
-    from world.metrics import read_episodes
+    from nnql_swarm.world.metrics import read_episodes
 
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:

@@ -2,12 +2,12 @@
 
 import msgpack
 
-from agent.brain import AgentBrain
-from agent.protocol import PEER_WAIT_S, RESYNC_AFTER, AgentProtocol
-from protocol import keys
-from protocol.config import SwarmConfig
-from protocol.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
-from protocol.messages import (
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.agent.protocol import PEER_WAIT_S, RESYNC_AFTER, AgentProtocol
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
+from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode, to_wire,
 )
 

@@ -11,13 +11,13 @@ import time
 import pytest
 from PIL import Image
 
-from protocol.config import SwarmConfig
-from protocol.transport import free_port
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.transport import free_port
 from tests.browser import (
     BACKGROUND, check_run, chromium, near, screenshot, wait_for, web_viewer,
 )
 from tests.swarm_helpers import run_swarm
-from world.viz import agent_colors
+from nnql_swarm.world.viz import agent_colors
 
 pytestmark = [pytest.mark.browser, pytest.mark.timeout(420)]
 

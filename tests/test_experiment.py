@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from experiment.paper import EpisodeMetrics, RunSpec
-from experiment.report import (
+from nnql_swarm.experiment.paper import EpisodeMetrics, RunSpec
+from nnql_swarm.experiment.report import (
     EPISODE_COLUMNS, PAPER_TABLE1, TABLE1_COLUMNS, ResultGrid, summarize, table1_markdown, table1_rows,
 )
-from experiment.stats import mean_interval, t_quantile
-from launch.cli import progress
+from nnql_swarm.experiment.stats import mean_interval, t_quantile
+from nnql_swarm.terminal.cli import progress
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPT = "launch/experiment.py"
@@ -219,7 +219,7 @@ def test_swarm_experiment_writes_its_table_runs_curves_and_recording(tmp_path):
 def test_the_distributed_swarm_plays_the_experiments_run_of_best_nnql(tmp_path):
     """One seed of best-nnql (one table shared over Zenoh): the distributed swarm writes the very
     episodes.csv the experiment's runner wrote, wall-clock columns aside."""
-    from world.engine import EPISODE_FIELDS
+    from nnql_swarm.world.engine import EPISODE_FIELDS
 
     out = tmp_path / "swarm"
     result = experiment("swarm", "--variants", "best-nnql", "--agents", "8", "--seeds", "1",

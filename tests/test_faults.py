@@ -14,15 +14,15 @@ from pathlib import Path
 
 import numpy as np
 
-from agent import checkpoint
-from agent.brain import AgentBrain
-from protocol.config import SwarmConfig
-from protocol.transport import free_port
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.transport import free_port
 from tests.swarm_helpers import (
     ROOT, SwarmProcess, find_process, group_pids, run_swarm, start_swarm, stops_within,
     swarm_command, wait_for_rows,
 )
-from world.metrics import read_episodes
+from nnql_swarm.world.metrics import read_episodes
 
 DEADLINE_S = 0.5
 

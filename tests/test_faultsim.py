@@ -15,18 +15,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agent import checkpoint
-from agent.protocol import AgentProtocol
-from launch import faultsim
-from launch.inprocess import run_in_process
-from protocol.config import PRESETS, SwarmConfig
-from protocol.messages import encode
-from sim.schedule import KINDS, Fault, Schedule, draw_schedule
-from sim.parity import parity_failures
-from sim.distributed import SimSwarm, run_schedule
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.launch import faultsim
+from nnql_swarm.sim.inprocess import run_in_process
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.protocol.messages import encode
+from nnql_swarm.sim.schedule import KINDS, Fault, Schedule, draw_schedule
+from nnql_swarm.sim.parity import parity_failures
+from nnql_swarm.sim.distributed import SimSwarm, run_schedule
 from tests.swarm_helpers import ROOT
-from world.engine import EPISODE_FIELDS
-from world.metrics import read_episodes
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import read_episodes
 
 SCHEDULES = 10_000
 

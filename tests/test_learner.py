@@ -6,15 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from agent.learner import (
+from nnql_swarm.agent.learner import (
     FP_FIELDS, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS, LP_RANDOM_STEP, LP_READING,
     LP_SHIELD, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READ_DIR, READ_NNQL, READ_QL,
     REC_COUNT, REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, apply_record, ca_row, ca_rows, choose,
     decide, finish, planned_cell, record_outcome, record_size, shield_mask, state_size,
 )
-from experiment.paper import PaperSettings, RunSpec, run_batch
-from protocol.actions import DOWN, LEFT, N_ACTIONS, N_STATES, RIGHT, STAY, UP, offset_state
-from protocol.config import SwarmConfig
+from nnql_swarm.experiment.paper import PaperSettings, RunSpec, run_batch
+from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, N_STATES, RIGHT, STAY, UP, offset_state
+from nnql_swarm.protocol.config import SwarmConfig
 
 NEVER = 10**9
 """A random step so large that no action is random."""
@@ -276,7 +276,7 @@ def test_choose_leaves_the_transition_pending_for_the_next_observation():
 
 
 def test_a_learning_record_from_elsewhere_is_checked_against_the_tables():
-    from agent.learner import record_is_valid
+    from nnql_swarm.agent.learner import record_is_valid
 
     good = (7, RIGHT, 0, 9, 1, 2, 3, 4, 11, -1)
     assert record_is_valid(good, (1.0, 10.0), N_STATES)

@@ -19,12 +19,12 @@ from pathlib import Path
 
 import pytest
 
-from protocol.runfiles import stats_path
-from protocol.transport import free_port
+from nnql_swarm.protocol.runfiles import stats_path
+from nnql_swarm.protocol.transport import free_port
 from tests import netns
 from tests.swarm_helpers import ROOT, SWARM, run_swarm
-from world.engine import EPISODE_FIELDS
-from world.metrics import read_episodes
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import read_episodes
 
 REASON = netns.unavailable_reason()
 
@@ -357,7 +357,7 @@ def test_bad_several_machine_options_give_one_line(tmp_path, options, message):
 
 
 def test_the_session_mode_is_the_option_else_the_file_else_peer():
-    from launch.zenoh_files import settings
+    from nnql_swarm.operations.zenoh_files import settings
 
     client = ROOT / "config" / "client.json5"
     assert settings(None, [], [], client).mode == "client"

@@ -7,13 +7,13 @@ import random
 import numpy as np
 import pytest
 
-from agent import negotiation
-from agent.brain import AgentBrain
-from protocol.actions import sees
-from protocol.config import ALGOS, SwarmConfig
-from protocol.messages import WORLD_SENDER, Observation
-from protocol.ranks import priority_rank
-from world.viz import negotiation_mask
+from nnql_swarm.agent import negotiation
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.protocol.actions import sees
+from nnql_swarm.protocol.config import ALGOS, SwarmConfig
+from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
+from nnql_swarm.protocol.ranks import priority_rank
+from nnql_swarm.world.viz import negotiation_mask
 
 
 def config(n: int, algo: str = "nnql", radius: int = 10) -> SwarmConfig:

@@ -4,8 +4,8 @@ numbers as the code before the kernel gave them."""
 import numpy as np
 import pytest
 
-from experiment.paper import EpisodeMetrics, PaperSettings, RunSpec, run_batch
-from world.rules import CA_REWARD
+from nnql_swarm.experiment.paper import EpisodeMetrics, PaperSettings, RunSpec, run_batch
+from nnql_swarm.world.rules import CA_REWARD
 
 SHORT = PaperSettings(episodes=8, max_steps=40)
 SPECS = [RunSpec(algo, k, seed) for algo in ("ql", "nnql") for k in (1, 3) for seed in (0, 1)]

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from pettingzoo.test import parallel_api_test, parallel_seed_test
 
-from protocol.actions import LEFT, N_STATES, RIGHT, STAY, UP, offset_state
-from world.pettingzoo_env import NOT_IN_VIEW, SwarmGridEnv
-from world.rules import CA_REWARD, GOAL_REWARD
+from nnql_swarm.protocol.actions import LEFT, N_STATES, RIGHT, STAY, UP, offset_state
+from nnql_swarm.world.pettingzoo_env import NOT_IN_VIEW, SwarmGridEnv
+from nnql_swarm.world.rules import CA_REWARD, GOAL_REWARD
 
 
 @pytest.mark.filterwarnings("error::UserWarning")  # the API test reports problems as warnings

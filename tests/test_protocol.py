@@ -12,10 +12,10 @@ import zenoh
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from protocol import keys, messages
-from protocol.actions import N_ACTIONS
-from protocol.keys import MAX_TICK
-from protocol.messages import (
+from nnql_swarm.protocol import keys, messages
+from nnql_swarm.protocol.actions import N_ACTIONS
+from nnql_swarm.protocol.keys import MAX_TICK
+from nnql_swarm.protocol.messages import (
     Answer,
     CONTROL_SHUTDOWN,
     MAX_AGENTS,

@@ -11,15 +11,15 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from agent.viz import TABLES, logs_heat_maps, table_picture
-from launch.recording import PARTS_DIR, log_experiment, rerun_binary
-from protocol.actions import RIGHT, STAY, UP, offset_state
-from protocol.config import SwarmConfig
-from protocol.transport import free_port
+from nnql_swarm.agent.viz import TABLES, logs_heat_maps, table_picture
+from nnql_swarm.recording.session import PARTS_DIR, log_experiment, rerun_binary
+from nnql_swarm.protocol.actions import RIGHT, STAY, UP, offset_state
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.transport import free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm
-from world.metrics import read_episodes
-from world.scenario import swarm_episode
-from world.viz import METRICS, negotiation_mask
+from nnql_swarm.world.metrics import read_episodes
+from nnql_swarm.world.scenario import swarm_episode
+from nnql_swarm.world.viz import METRICS, negotiation_mask
 
 AGENTS, EPISODES = 8, 3
 RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5",
@@ -268,7 +268,7 @@ def test_heat_map_pixels_are_egocentric_offsets():
 
 
 def test_experiment_curves_go_into_a_recording(tmp_path):
-    from experiment.paper import PaperSettings, RunSpec, run_batch
+    from nnql_swarm.experiment.paper import PaperSettings, RunSpec, run_batch
 
     specs = [RunSpec(algo, k, seed) for algo in ("ql", "nnql") for k in (2, 5) for seed in (0, 1)]
     metrics = run_batch(specs, PaperSettings(episodes=6, max_steps=30))

@@ -15,14 +15,14 @@ import time
 import msgpack
 import zenoh
 
-from protocol import keys
-from protocol.messages import (
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.messages import (
     WORLD_SENDER, Control, Intent, Observation, agent_sender, encode, to_wire,
 )
-from protocol.transport import TransportSettings, free_port
+from nnql_swarm.protocol.transport import TransportSettings, free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm, wait_for_rows
-from world.engine import EPISODE_FIELDS
-from world.metrics import read_episodes
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import read_episodes
 
 RUN_ID = "rogue"
 AGENTS = 6

@@ -6,8 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocol.actions import DOWN, LEFT, MOVES, N_ACTIONS, RIGHT, STAY, UP, intended_cell
-from world.rules import (
+from nnql_swarm.protocol.actions import DOWN, LEFT, MOVES, N_ACTIONS, RIGHT, STAY, UP, intended_cell
+from nnql_swarm.world.rules import (
     CA_REWARD, GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
     ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS, arbitrate, collision_reward,
     destination_reward, shared_cells, shortest_steps, swaps_through, world_step,

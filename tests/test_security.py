@@ -19,16 +19,16 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from launch import secure
-from protocol import keys
-from protocol.messages import (
+from nnql_swarm.operations import secure
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Control, Intent, Observation, agent_sender, encode,
 )
-from protocol.runfiles import stats_path
-from protocol.transport import free_port
+from nnql_swarm.protocol.runfiles import stats_path
+from nnql_swarm.protocol.transport import free_port
 from tests.swarm_helpers import ROOT, run_swarm
-from world.engine import EPISODE_FIELDS
-from world.metrics import read_episodes
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import read_episodes
 
 RUN_ID = "sec"
 AGENTS = 8

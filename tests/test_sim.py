@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from protocol.config import PRESETS, SwarmConfig
-from sim.runs import Batch, swarm_world
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.sim.runs import Batch, swarm_world
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -71,8 +71,8 @@ def test_the_shield_keeps_learning_agents_almost_free_of_collisions():
 
 PLAIN_RUN = """
 import json, sys
-from protocol.config import PRESETS, SwarmConfig
-from sim.runs import Batch, swarm_world
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.sim.runs import Batch, swarm_world
 runs = [SwarmConfig(seed=s, n_agents=6, max_steps=30, **PRESETS[p])
         for p, s in (("shield-nnql", 1), ("best-nnql", 2), ("daql", 3), ("nnql-n2", 4))]
 e = Batch(swarm_world(runs[0]), runs).play(3)

@@ -10,12 +10,12 @@ import time
 import numpy as np
 import pytest
 
-from agent import checkpoint
-from agent.brain import AgentBrain
-from protocol.config import SwarmConfig
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.protocol.config import SwarmConfig
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm, stops_within
-from world.engine import EPISODE_FIELDS
-from world.metrics import COLUMNS, read_episodes
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import COLUMNS, read_episodes
 
 RUN = ("--agents", "8", "--episodes", "4", "--max-steps", "40", "--seed", "3")
 

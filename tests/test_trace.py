@@ -6,8 +6,8 @@ from bench.harness import run_distributed
 from bench.tick_trace import (
     FIRST_OBS, HOP, LAST_INTENT, LEARNING, NEXT_OBS, TICK, read_trace, tick_steps,
 )
-from protocol import trace
-from protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.protocol import trace
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 
 
 def test_a_trace_is_off_unless_it_has_a_directory(tmp_path):

@@ -9,8 +9,8 @@ import os
 import threading
 import time
 
-from protocol import transport
-from protocol.transport import TransportSettings, free_port
+from nnql_swarm.protocol import transport
+from nnql_swarm.protocol.transport import TransportSettings, free_port
 
 MESSAGES = 20
 

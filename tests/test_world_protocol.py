@@ -1,10 +1,10 @@
 """The world's protocol machine, pure: the lockstep clock as inputs in, effects out."""
 
-from protocol import keys
-from protocol.config import SwarmConfig
-from protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
-from protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
-from world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
+from nnql_swarm.world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol
 
 CONFIG = SwarmConfig(run_id="wproto", n_agents=2, episodes=2, max_steps=3, tick_deadline_s=0.5)
 

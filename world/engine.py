@@ -21,16 +21,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.actions import STAY, VIEW_RADIUS, sees
-from protocol.config import SwarmConfig
-from protocol.jit import flags, floats, ints, python_values
-from protocol.messages import WORLD_SENDER, Observation
-from protocol.ranks import priority_rank
-from world.rules import (
+from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sees
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.jit import flags, floats, ints, python_values
+from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
+from nnql_swarm.protocol.ranks import priority_rank
+from nnql_swarm.world.rules import (
     ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD, ROW_STEPS,
     Cell, shared_cells, shortest_steps, swaps_through, world_step,
 )
-from world.scenario import swarm_episode
+from nnql_swarm.world.scenario import swarm_episode
 
 EPISODE_FIELDS = (
     "episode", "steps", "collisions", "missed_intents", "reward_sum", "arrived", "shortest_sum",

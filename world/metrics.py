@@ -9,7 +9,7 @@ import csv
 import os
 from pathlib import Path
 
-from world.engine import EPISODE_FIELDS
+from nnql_swarm.world.engine import EPISODE_FIELDS
 
 WALL_CLOCK_FIELDS = ("duration_s", "ticks_per_s", "max_tick_ms", "rejected")
 """Wall-clock columns: the episode's duration, its tick rate, its slowest tick, and how many

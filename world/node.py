@@ -27,16 +27,16 @@ from typing import Callable
 
 import zenoh
 
-from protocol import keys, trace
-from protocol.config import SwarmConfig
-from protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
-from protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
-from protocol.transport import (
+from nnql_swarm.protocol import keys, trace
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
+from nnql_swarm.protocol.transport import (
     EXIT_TRANSPORT, TransportError, TransportSettings, callback, enqueue, open_session,
 )
-from world.engine import SwarmWorld, TickReport
-from world.metrics import EpisodeWriter
-from world.protocol import STARTUP_TIMEOUT_S, WorldProtocol
+from nnql_swarm.world.engine import SwarmWorld, TickReport
+from nnql_swarm.world.metrics import EpisodeWriter
+from nnql_swarm.world.protocol import STARTUP_TIMEOUT_S, WorldProtocol
 
 log = logging.getLogger("nnql.world")
 

@@ -58,11 +58,11 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
-from protocol.jit import flags, floats, ints, python_values
-from protocol.ranks import priority_rank, waits_for
-from world.rules import GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, world_step
-from world.scenario import swarm_episode
+from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
+from nnql_swarm.protocol.jit import flags, floats, ints, python_values
+from nnql_swarm.protocol.ranks import priority_rank, waits_for
+from nnql_swarm.world.rules import GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, world_step
+from nnql_swarm.world.scenario import swarm_episode
 
 NOT_IN_VIEW = N_STATES
 """The observation slot value of another agent out of view."""

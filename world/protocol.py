@@ -18,12 +18,12 @@ to stop. A completed run tells its agents to stop until every live one has left.
 
 import logging
 
-from protocol import keys
-from protocol.config import SwarmConfig
-from protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
-from protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
-from protocol.trace import CLOSE, TickTrace
-from world.engine import SwarmWorld
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
+from nnql_swarm.protocol.trace import CLOSE, TickTrace
+from nnql_swarm.world.engine import SwarmWorld
 
 STARTUP_TIMEOUT_S = 60.0
 """How long the world waits for every agent to come alive before it gives up."""

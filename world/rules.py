@@ -31,8 +31,8 @@ over when every learner has arrived (or, the caller's business, after its last s
 
 import math
 
-from protocol.actions import STAY, target_x, target_y
-from protocol.jit import kernel
+from nnql_swarm.protocol.actions import STAY, target_x, target_y
+from nnql_swarm.protocol.jit import kernel
 
 Cell = tuple[int, int]
 

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from protocol.actions import N_ACTIONS
-from protocol.seeding import SCENARIO_STREAM, stream_rng
+from nnql_swarm.protocol.actions import N_ACTIONS
+from nnql_swarm.protocol.seeding import SCENARIO_STREAM, stream_rng
 
 
 def episode_rng(seed: int, episode: int) -> np.random.Generator:

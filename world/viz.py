@@ -28,11 +28,11 @@ from pathlib import Path
 import numpy as np
 import rerun as rr
 
-from protocol.actions import MOVES
-from protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from protocol.ranks import priority_rank, waits_for
-from world.engine import SwarmWorld, TickReport
-from world.scenario import swarm_episode
+from nnql_swarm.protocol.actions import MOVES
+from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
+from nnql_swarm.protocol.ranks import priority_rank, waits_for
+from nnql_swarm.world.engine import SwarmWorld, TickReport
+from nnql_swarm.world.scenario import swarm_episode
 
 APP_ID = "nnql-swarm"
 

@@ -8,11 +8,11 @@ will run is loaded once up front, so a corrupt or foreign one is refused before 
 from dataclasses import dataclass
 from pathlib import Path
 
-from agent import checkpoint
-from agent.brain import AgentBrain
-from protocol.config import SwarmConfig
-from protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
-from world.metrics import drop_partial_line, read_episodes
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
+from nnql_swarm.world.metrics import drop_partial_line, read_episodes
 
 
 class ResumeError(ValueError):

@@ -14,15 +14,15 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from agent import checkpoint
-from protocol.actions import STAY
-from protocol.config import SwarmConfig
-from protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
-from sim.runs import Batch, Episodes, swarm_world
-from sim.swarm import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y
-from world.engine import TickReport
-from world.metrics import EpisodeWriter
-from world.scenario import swarm_episode
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.protocol.actions import STAY
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
+from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
+from nnql_swarm.sim.swarm import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y
+from nnql_swarm.world.engine import TickReport
+from nnql_swarm.world.metrics import EpisodeWriter
+from nnql_swarm.world.scenario import swarm_episode
 
 
 class TickView(NamedTuple):

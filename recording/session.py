@@ -31,7 +31,7 @@ from urllib.parse import quote, urlparse
 
 import numpy as np
 
-from protocol.config import SwarmConfig
+from nnql_swarm.protocol.config import SwarmConfig
 
 APP_ID = "nnql-swarm"
 PARTS_DIR = "rerun-parts"
@@ -141,8 +141,8 @@ def plan_of(record, config: SwarmConfig, out: Path) -> RecordingPlan | None:
 
 def open_world_viz(record, config: SwarmConfig, out: Path):
     """The world's logger (``world.viz.WorldViz``) with the blueprint, or None if not recording."""
-    from world.metrics import read_episodes
-    from world.viz import WorldViz
+    from nnql_swarm.world.metrics import read_episodes
+    from nnql_swarm.world.viz import WorldViz
 
     plan = plan_of(record, config, out)
     if plan is None:
@@ -157,7 +157,7 @@ def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):
     """``(brain, on_episode_end, viz)`` for an agent process; all None if not recording."""
     if plan is None or not plan.enabled:
         return None, None, None
-    from agent.viz import AgentViz, TimedBrain
+    from nnql_swarm.agent.viz import AgentViz, TimedBrain
 
     viz = AgentViz(agent, config, plan.open(f"agent-{agent}"))
     return TimedBrain(agent, config), viz.on_episode_end, viz
@@ -167,7 +167,7 @@ class InProcessRecorder:
     """World and agents of the in-process runner logging into one stream."""
 
     def __init__(self, record, config: SwarmConfig, out: Path) -> None:
-        from agent.viz import AgentViz
+        from nnql_swarm.agent.viz import AgentViz
 
         self.world = open_world_viz(record, config, out)
         self.agents = []
@@ -192,7 +192,7 @@ def blueprint(config: SwarmConfig):
     """The first view: grid and events | metrics | each agent's Q_DS and Q_CA heat maps."""
     import rerun.blueprint as rrb
 
-    from world import viz as world_viz
+    from nnql_swarm.world import viz as world_viz
 
     world_view = rrb.Spatial2DView(
         origin="world", name="World: agents, goals, trails, intents, negotiation, collisions",
@@ -441,7 +441,7 @@ def log_experiment(specs, metrics, target, *, recording_id: str = "experiment"):
     """
     import rerun as rr
 
-    from world.viz import close_stream
+    from nnql_swarm.world.viz import close_stream
 
     groups: dict[tuple[str, int], list[int]] = {}
     for row, spec in enumerate(specs):
@@ -480,7 +480,7 @@ def log_swarm_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from world.viz import close_stream
+    from nnql_swarm.world.viz import close_stream
 
     stream = rr.RecordingStream(APP_ID, recording_id=recording_id)
     blueprint = rrb.Blueprint(rrb.Grid(*(rrb.TimeSeriesView(origin=f"swarm/{metric}", name=metric)

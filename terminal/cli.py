@@ -1,8 +1,9 @@
-"""What every command-line entry point shares: one-line usage errors with exit code 2, and the
-progress bar of long work."""
+"""What every command-line entry point shares: one-line usage errors with exit code 2, ``--version``,
+and the progress bar of long work."""
 
 import argparse
 import sys
+from importlib import metadata
 
 from tqdm import tqdm
 
@@ -10,8 +11,22 @@ EXIT_USAGE = 2
 EXIT_INTERRUPTED = 130
 
 
+def package_version() -> str:
+    """The installed version of the project (``pyproject.toml``'s)."""
+    try:
+        return metadata.version("nnql-swarm")
+    except metadata.PackageNotFoundError:
+        return "unknown (not installed)"
+
+
 class OneLineParser(argparse.ArgumentParser):
-    """An ArgumentParser whose errors are one line on stderr (no usage dump) and exit code 2."""
+    """An ArgumentParser whose errors are one line on stderr (no usage dump) and exit code 2, with
+    ``--version``. Its name is the command's as it was called (``swarm.py``, ``nnql-swarm``)."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.add_argument("--version", action="version",
+                          version=f"%(prog)s (nnql-swarm {package_version()})")
 
     def error(self, message: str):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")

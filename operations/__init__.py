@@ -1,0 +1,1 @@
+"""Zenoh operations: config files per process, a router, and a secured deployment's certificates."""
