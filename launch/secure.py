@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Certificates, passwords and Zenoh configs for a secured swarm: the command (the work is ``nnql_swarm.operations.secure``'s).
+"""Certificates, passwords and Zenoh configs for a secured swarm: the command
+(``nnql_swarm.operations.secure`` holds the work).
 
     python launch/secure.py --out secure --agents 8 --router-host 192.0.2.1
 """
