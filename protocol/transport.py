@@ -146,16 +146,20 @@ class TransportSettings:
     connect: tuple[str, ...] = ()
     config_file: str | None = None
     multicast: bool = False
+    gossip: bool | None = None
+    """Gossip scouting on or off; None leaves it to Zenoh (on) or to the config file."""
 
     def to_dict(self) -> dict:
         return {"mode": self.mode, "listen": list(self.listen), "connect": list(self.connect),
-                "config_file": self.config_file, "multicast": self.multicast}
+                "config_file": self.config_file, "multicast": self.multicast,
+                "gossip": self.gossip}
 
     @staticmethod
     def from_dict(data: dict) -> "TransportSettings":
         return TransportSettings(
             mode=data["mode"], listen=tuple(data["listen"]), connect=tuple(data["connect"]),
             config_file=data.get("config_file"), multicast=bool(data.get("multicast", False)),
+            gossip=data.get("gossip"),
         )
 
     def zenoh_config(self) -> zenoh.Config:
@@ -170,22 +174,50 @@ class TransportSettings:
             config.insert_json5("connect/endpoints", json.dumps(list(self.connect)))
         if not self.config_file or self.multicast:
             config.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
+        if self.gossip is not None:
+            config.insert_json5("scouting/gossip/enabled", json.dumps(self.gossip))
         return config
+
+
+TOPOLOGIES = ("mesh", "hub-peer", "hub-router", "router", "star-peers")
 
 
 @dataclass(frozen=True)
 class EmbeddedLayout:
-    """The one-machine layout: the world listens on ``port``; agents join through it."""
+    """The one-machine layout: the hub (the world, or a router process) listens on ``port``;
+    everyone else joins through it, as ``topology`` says."""
 
     port: int = field(default_factory=free_port)
     host: str = "127.0.0.1"
+    topology: str = "mesh"
+
+    def __post_init__(self) -> None:
+        if self.topology not in TOPOLOGIES:
+            raise ValueError(f"topology must be one of {', '.join(TOPOLOGIES)}")
 
     @property
     def endpoint(self) -> str:
         return f"tcp/{self.host}:{self.port}"
 
+    def router(self) -> TransportSettings | None:
+        """The router process's settings, where the topology has one."""
+        if self.topology != "router":
+            return None
+        return TransportSettings(mode="router", listen=(self.endpoint,), gossip=False)
+
     def world(self) -> TransportSettings:
-        return TransportSettings(mode="peer", listen=(self.endpoint,))
+        t = self.topology
+        if t == "router":
+            return TransportSettings(mode="client", connect=(self.endpoint,))
+        mode = "router" if t in ("hub-router", "star-peers") else "peer"
+        return TransportSettings(mode=mode, listen=(self.endpoint,),
+                                 gossip=None if t == "mesh" else False)
 
     def agent(self) -> TransportSettings:
-        return TransportSettings(mode="peer", listen=(f"tcp/{self.host}:0",), connect=(self.endpoint,))
+        t = self.topology
+        if t == "mesh":
+            return TransportSettings(mode="peer", listen=(f"tcp/{self.host}:0",),
+                                     connect=(self.endpoint,))
+        if t == "star-peers":
+            return TransportSettings(mode="peer", connect=(self.endpoint,), gossip=False)
+        return TransportSettings(mode="client", connect=(self.endpoint,))

@@ -1,0 +1,199 @@
+#!/usr/bin/env python3
+"""The bare Zenoh lockstep loop: what a tick costs when every agent answers at once.
+
+A world process and N agent processes (spawn; one machine, the launcher's Zenoh settings and
+layout, multicast off). Each tick the world publishes every agent its observation (a small
+msgpack tuple, first rank first); each agent answers with its intent the moment its observation
+arrives, from Zenoh's callback; the world waits for every intent, then opens the next tick from
+its own callback. No negotiation, no codec, no rules, no learning: the floor under the swarm's
+tick, for the same number of processes and the same topology.
+
+    python bench/lockstep.py --agents 8,32,64 --repeats 3 --topology mesh
+"""
+
+import argparse
+import multiprocessing as mp
+import socket
+import statistics
+import sys
+import threading
+import time
+from pathlib import Path
+
+import msgpack
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from bench.procstat import MemorySampler  # noqa: E402
+from protocol.transport import (  # noqa: E402
+    TOPOLOGIES, EmbeddedLayout, TransportSettings, callback, open_session,
+)
+
+START_TIMEOUT_S = 120.0
+
+
+def agent(me: int, transport: TransportSettings) -> None:
+    """Answer every observation at once with an intent; leave on a negative tick."""
+    import zenoh
+
+    done = threading.Event()
+    with open_session(transport) as s:
+        publisher = s.declare_publisher(f"bare/intent/{me}", express=True,
+                                        congestion_control=zenoh.CongestionControl.BLOCK)
+
+        def on_obs(sample) -> None:
+            tick, _rank = msgpack.unpackb(sample.payload.to_bytes())
+            if tick < 0:
+                done.set()
+            else:
+                publisher.put(msgpack.packb((tick, me, 4)))
+
+        s.declare_subscriber(f"bare/obs/{me}", callback(on_obs))
+        token = s.liveliness().declare_token(f"bare/alive/{me}")  # alive while referenced
+        done.wait()
+        token.undeclare()
+        time.sleep(0.2)
+
+
+def world(n: int, transport: TransportSettings, ticks: int, results) -> None:
+    """The clock; puts ``(ticks a second, the time every agent was alive)`` on ``results``."""
+    import zenoh
+
+    alive: set[str] = set()
+    everyone = threading.Event()
+    finished = threading.Event()
+    state = {"tick": 0, "heard": 0, "start": 0.0}
+    warm_up = ticks // 5
+    with open_session(transport) as s:
+        pubs = [s.declare_publisher(f"bare/obs/{i}", express=True,
+                                    congestion_control=zenoh.CongestionControl.BLOCK)
+                for i in range(n)]
+
+        def open_tick(tick: int) -> None:
+            for rank in range(n):
+                pubs[(tick + rank) % n].put(msgpack.packb((tick, rank)))
+
+        def on_intent(sample) -> None:
+            tick, _agent, _action = msgpack.unpackb(sample.payload.to_bytes())
+            if tick != state["tick"]:
+                return
+            state["heard"] += 1
+            if state["heard"] < n:
+                return
+            state["tick"], state["heard"] = tick + 1, 0
+            if tick + 1 == warm_up:
+                state["start"] = time.perf_counter()
+            if tick + 1 == ticks:
+                finished.set()
+            else:
+                open_tick(tick + 1)
+
+        def on_alive(sample) -> None:
+            alive.add(str(sample.key_expr))
+            if len(alive) == n:
+                everyone.set()
+
+        s.declare_subscriber("bare/intent/*", callback(on_intent))
+        s.liveliness().declare_subscriber("bare/alive/*", callback(on_alive), history=True)
+        if not everyone.wait(START_TIMEOUT_S):
+            print(f"world: only {len(alive)} of {n} agents alive", file=sys.stderr, flush=True)
+            results.put((float("nan"), float("nan")))
+            return
+        startup = time.time()
+        time.sleep(0.5)  # let late declarations settle before the clock starts
+        open_tick(0)
+        if not finished.wait(START_TIMEOUT_S):
+            results.put((float("nan"), startup))
+        else:
+            results.put(((ticks - warm_up) / (time.perf_counter() - state["start"]), startup))
+        for pub in pubs:
+            pub.put(msgpack.packb((-1, 0)))
+        time.sleep(0.3)
+
+
+def router(transport: TransportSettings) -> None:
+    """A bare Zenoh router, until killed."""
+    with open_session(transport):
+        threading.Event().wait()
+
+
+def wait_listening(host: str, port: int, timeout_s: float = 30.0) -> None:
+    """Until something accepts TCP connections on ``host:port`` (the hub's Zenoh listener)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection((host, port), timeout=1.0).close()
+            return
+        except OSError:
+            time.sleep(0.05)
+    raise TimeoutError(f"nothing listens on {host}:{port} after {timeout_s:.0f} s")
+
+
+def run(n: int, topology: str, ticks: int) -> dict:
+    """One bare loop of ``n`` agents: ``rate`` (ticks a second), ``startup_s`` (until every
+    agent was alive), ``rss`` (peak MiB by process name)."""
+    ctx = mp.get_context("spawn")
+    layout = EmbeddedLayout(topology=topology)
+    results = ctx.Queue()
+    extra = []
+    if layout.router() is not None:
+        extra.append(("router", ctx.Process(target=router, args=(layout.router(),))))
+    processes = extra + [("world", ctx.Process(target=world,
+                                               args=(n, layout.world(), ticks, results)))]
+    processes += [(f"agent-{i}", ctx.Process(target=agent, args=(i, layout.agent())))
+                  for i in range(n)]
+    launched = time.time()
+    with MemorySampler() as memory:
+        for name, p in processes:
+            p.start()
+            memory.watch(name, p.pid)
+            if name in ("router", "world"):
+                wait_listening(layout.host, layout.port)
+        try:
+            rate, startup = results.get(timeout=3 * START_TIMEOUT_S)
+        except Exception:  # noqa: BLE001 - a run that hung is reported as nan, not fatal
+            rate, startup = float("nan"), float("nan")
+    stop_all([p for _, p in processes])
+    return {"rate": rate, "startup_s": startup - launched, "rss": memory.peaks()}
+
+
+def stop_all(processes, grace_s: float = 5.0) -> None:
+    """Give the processes ``grace_s`` seconds together to end, then kill the rest."""
+    deadline = time.monotonic() + grace_s
+    for p in processes:
+        p.join(max(deadline - time.monotonic(), 0.01))
+    for p in processes:
+        if p.is_alive():
+            p.kill()
+            p.join()
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--agents", default="8,32", help="comma-separated agent counts")
+    p.add_argument("--ticks", type=int, default=2000)
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--topology", default="mesh", help=f"comma-separated: {', '.join(TOPOLOGIES)}")
+    args = p.parse_args()
+    topologies = args.topology.split(",")
+    if any(t not in TOPOLOGIES for t in topologies):
+        p.error(f"topologies are {', '.join(TOPOLOGIES)}")
+    print(f"{'agents':>6} {'topology':>11} {'ticks/s':>8} {'start s':>8}  runs")
+    for n in (int(v) for v in args.agents.split(",")):
+        results: dict[str, list[dict]] = {t: [] for t in topologies}
+        for _ in range(args.repeats):
+            for t in topologies:  # interleaved, so a drifting machine disturbs them alike
+                results[t].append(run(n, t, args.ticks))
+                print(f"  {n} {t}: {results[t][-1]['rate']:.0f} ticks/s, start-up "
+                      f"{results[t][-1]['startup_s']:.1f} s", file=sys.stderr, flush=True)
+        for t in topologies:
+            rates = [r["rate"] for r in results[t]]
+            starts = [r["startup_s"] for r in results[t]]
+            print(f"{n:>6} {t:>11} {statistics.median(rates):>8.0f} "
+                  f"{statistics.median(starts):>8.2f}  {' '.join(f'{x:.0f}' for x in rates)}",
+                  flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

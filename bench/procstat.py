@@ -1,0 +1,49 @@
+"""Resident memory of running processes, sampled from ``/proc/<pid>/status`` while they run."""
+
+import threading
+from pathlib import Path
+
+
+def resident_mib(pid: int) -> float | None:
+    """``VmRSS`` of a process in MiB, or None once it has gone."""
+    try:
+        text = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return None
+    for line in text.splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    return None
+
+
+class MemorySampler:
+    """Samples the resident memory of named processes every ``every_s`` seconds in a thread;
+    :meth:`peaks` gives each one's largest sample (the run's middle, not its start or end)."""
+
+    def __init__(self, every_s: float = 0.5) -> None:
+        self.every_s = every_s
+        self.pids: dict[str, int] = {}
+        self.samples: dict[str, float] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def watch(self, name: str, pid: int) -> None:
+        self.pids[name] = pid
+
+    def __enter__(self) -> "MemorySampler":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *_) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.every_s):
+            for name, pid in list(self.pids.items()):
+                rss = resident_mib(pid)
+                if rss is not None:
+                    self.samples[name] = max(rss, self.samples.get(name, 0.0))
+
+    def peaks(self) -> dict[str, float]:
+        return dict(self.samples)
