@@ -25,7 +25,7 @@ import msgpack
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.procstat import MemorySampler  # noqa: E402
-from protocol.transport import (  # noqa: E402
+from nnql_swarm.protocol.transport import (  # noqa: E402
     TOPOLOGIES, EmbeddedLayout, TransportSettings, callback, open_session,
 )
 
