@@ -18,7 +18,10 @@ ARGS ?=
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,plot]'
+	@# pip's log (and setuptools' note that an editable install maps folders) goes to a file,
+	@# shown if the install fails.
+	$(PY) -m pip install --quiet -e '.[test,plot]' >$(VENV)/install.log 2>&1 || \
+	  { cat $(VENV)/install.log; exit 1; }
 	touch $(STAMP)
 
 run: $(STAMP)
@@ -48,7 +51,8 @@ chromium:
 playwright: $(BROWSER_STAMP)
 
 $(BROWSER_STAMP): $(STAMP)
-	$(PY) -m pip install --quiet -e '.[test,plot,browser]'
+	$(PY) -m pip install --quiet -e '.[test,plot,browser]' >$(VENV)/install.log 2>&1 || \
+	  { cat $(VENV)/install.log; exit 1; }
 	touch $(BROWSER_STAMP)
 
 browser-test: chromium $(BROWSER_STAMP)
