@@ -3,6 +3,7 @@ and the progress bar of long work."""
 
 import argparse
 import sys
+import threading
 from importlib import metadata
 
 from tqdm import tqdm
@@ -38,7 +39,10 @@ PLAIN_INTERVAL_S = 5.0
 
 def progress(total: int, unit: str, desc: str = "") -> tqdm:
     """A progress bar on stderr: redrawn in place on a terminal; elsewhere a line of its own at
-    most every few seconds, so that logs stay short and readable line by line."""
+    most every few seconds, so that logs stay short and readable line by line. One process draws
+    it, so its lock is a thread lock (tqdm's default adds a multiprocessing semaphore, which a
+    process stopped by a signal leaves behind for the resource tracker to warn about)."""
+    tqdm.set_lock(threading.RLock())
     if sys.stderr.isatty():
         return tqdm(total=total, unit=unit, desc=desc, file=sys.stderr, dynamic_ncols=True)
     return tqdm(total=total, unit=unit, desc=desc, file=_Lines(), mininterval=PLAIN_INTERVAL_S,
@@ -48,9 +52,15 @@ def progress(total: int, unit: str, desc: str = "") -> tqdm:
 class _Lines:
     """stderr as a bar's stream where it is not a terminal: each redraw becomes a line."""
 
+    def __init__(self) -> None:
+        self.last = ""
+
     def write(self, text: str) -> None:
-        if text.startswith("\r"):
-            sys.stderr.write(text[1:].rstrip() + "\n")
+        line = text[1:].rstrip()
+        done = line.split("[")[0]  # the count; closing redraws the last one with a later time
+        if text.startswith("\r") and done != self.last:
+            sys.stderr.write(line + "\n")
+            self.last = done
 
     def flush(self) -> None:
         sys.stderr.flush()

@@ -256,3 +256,4 @@ def test_a_progress_bar_where_stderr_is_no_terminal_writes_whole_lines(capsys):
     lines = capsys.readouterr().err.splitlines()
     assert lines and all("\r" not in line for line in lines)
     assert lines[-1].startswith("work: 100%") and "10/10" in lines[-1]
+    assert sum("10/10" in line for line in lines) == 1  # closing does not repeat the last line
