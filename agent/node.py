@@ -37,7 +37,8 @@ from nnql_swarm.protocol.effects import (
 )
 from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
 from nnql_swarm.protocol.transport import (
-    EXIT_TRANSPORT, TransportError, TransportSettings, callback, enqueue, open_session,
+    EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback, enqueue,
+    open_session,
 )
 
 log = logging.getLogger("nnql.agent")
@@ -70,7 +71,7 @@ class AgentOptions:
         return self.config.tick_deadline_s / 2
 
 
-class AgentNode:
+class AgentNode(ProtocolAdapter):
     """The protocol's adapter to one Zenoh session (see the module docstring)."""
 
     def __init__(self, options: AgentOptions, session: zenoh.Session,
@@ -118,18 +119,6 @@ class AgentNode:
 
     # Inputs, on whichever thread they arrive, one at a time under the lock.
 
-    def feed(self, handler: Callable, *args) -> None:
-        """``handler(*args, now)``, a protocol input, then its effects; a bug in either stops
-        the agent (``run`` raises it) instead of vanishing into Zenoh's thread."""
-        with self.lock:
-            if self.stopping:
-                return
-            try:
-                self.perform(handler(*args, time.monotonic()))
-            except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
-                self.failure = error
-                self.stop()
-
     def _on_observation(self, sample: zenoh.Sample) -> None:
         self.feed(self.protocol.on_observation, sample.payload)
 
@@ -157,11 +146,6 @@ class AgentNode:
         return callback(on_reply, lambda: self.feed(protocol.on_ask_end, ask))
 
     # Effects, in order.
-
-    def perform(self, effects: list) -> None:
-        do = self._do
-        for effect in effects:
-            do[type(effect)](effect)
 
     def _send_intent(self, effect: SendIntent) -> None:
         tick = effect.intent.tick

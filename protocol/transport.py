@@ -18,6 +18,7 @@ import logging
 import os
 import socket
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -128,6 +129,39 @@ def enqueue(events, kind: str) -> zenoh.handlers.Callback:
     """
     put = events.put
     return callback(lambda item: put((kind, item)))
+
+
+class ProtocolAdapter:
+    """What the agent and world nodes share as adapters of their protocol machines: an input is
+    fed under the node's one lock and its effects are carried out there, in order, each by the
+    handler ``_do`` names for its type. A bug in either stops the node (its ``run`` re-raises
+    ``failure`` on the main thread) instead of vanishing into Zenoh's thread.
+
+    A node sets ``lock``, ``stopping``, ``failure`` and ``_do``, and says how it stops."""
+
+    lock: threading.RLock
+    stopping: bool
+    failure: BaseException | None
+    _do: dict[type, Callable]
+
+    def stop(self) -> None:
+        raise NotImplementedError
+
+    def feed(self, handler: Callable, *args) -> None:
+        """``handler(*args, now)``, a protocol input, then its effects."""
+        with self.lock:
+            if self.stopping:
+                return
+            try:
+                self.perform(handler(*args, time.monotonic()))
+            except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
+                self.failure = error
+                self.stop()
+
+    def perform(self, effects: list) -> None:
+        do = self._do
+        for effect in effects:
+            do[type(effect)](effect)
 
 
 def free_port(host: str = "127.0.0.1") -> int:

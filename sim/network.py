@@ -92,18 +92,10 @@ class Network:
         if self.reorder and rng.random() < self.reorder:
             arrival += self.reorder_s * rng.random()  # later messages may overtake it
         else:
-            link = (src, dst)
-            last = self._last.get(link, 0.0)
-            if arrival < last:
-                arrival = last
-            self._last[link] = arrival
-        self._made += 1
-        heapq.heappush(self._heap, (arrival, self._made, self._arrive,
-                                    (dst, dst.incarnation, function, args)))
+            arrival = self._in_order(src, dst, arrival)
+        self._deliver(dst, arrival, function, args)
         if self.duplicate and rng.random() < self.duplicate:
-            self._made += 1
-            heapq.heappush(self._heap, (arrival + self.latency(), self._made, self._arrive,
-                                        (dst, dst.incarnation, function, args)))
+            self._deliver(dst, arrival + self.latency(), function, args)
         return arrival
 
     def send_reliable(self, src: Process | None, dst: Process, function: Callable, *args) -> None:
@@ -111,11 +103,19 @@ class Network:
         itself, e.g. a liveliness change it noticed)."""
         arrival = self.now + self._low + self._span * self.rng.random()
         if src is not None:
-            link = (src, dst)
-            last = self._last.get(link, 0.0)
-            if arrival < last:
-                arrival = last
-            self._last[link] = arrival
+            arrival = self._in_order(src, dst, arrival)
+        self._deliver(dst, arrival, function, args)
+
+    def _in_order(self, src: Process, dst: Process, arrival: float) -> float:
+        """``arrival``, or later: nothing overtakes the message before it on its link."""
+        link = (src, dst)
+        last = self._last.get(link, 0.0)
+        if arrival < last:
+            arrival = last
+        self._last[link] = arrival
+        return arrival
+
+    def _deliver(self, dst: Process, arrival: float, function: Callable, args: tuple) -> None:
         self._made += 1
         heapq.heappush(self._heap, (arrival, self._made, self._arrive,
                                     (dst, dst.incarnation, function, args)))

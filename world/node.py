@@ -32,7 +32,8 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
 from nnql_swarm.protocol.transport import (
-    EXIT_TRANSPORT, TransportError, TransportSettings, callback, enqueue, open_session,
+    EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback, enqueue,
+    open_session,
 )
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
@@ -67,7 +68,7 @@ class WorldOptions:
     first_tick: int = 0
 
 
-class WorldNode:
+class WorldNode(ProtocolAdapter):
     """The protocol's adapter to one Zenoh session (see the module docstring)."""
 
     def __init__(self, options: WorldOptions, session: zenoh.Session,
@@ -98,27 +99,10 @@ class WorldNode:
         self.stopping = True
         self.events.put((None, None))
 
-    def feed(self, handler: Callable, *args) -> None:
-        """``handler(*args, now)``, a protocol input, then its effects; a bug in either stops
-        the world (``run`` raises it) instead of vanishing into Zenoh's thread."""
-        with self.lock:
-            if self.stopping:
-                return
-            try:
-                self.perform(handler(*args, time.monotonic()))
-            except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
-                self.failure = error
-                self.stop()
-
     def _on_intent(self, sample: zenoh.Sample) -> None:
         self.feed(self.protocol.on_intent, str(sample.key_expr), sample.payload)
 
     # Effects, in order.
-
-    def perform(self, effects: list) -> None:
-        do = self._do
-        for effect in effects:
-            do[type(effect)](effect)
 
     def _send_observations(self, effect: SendObservations) -> None:
         publishers, mark = self.publishers, self.trace.mark
