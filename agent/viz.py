@@ -12,6 +12,8 @@ Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.no
 - ``q_ca/value``, ``q_ca/policy``, ``q_ca/stay``, ``q_ca/self``: the same for ``Q_CA``, whose
   state is a *neighbour's* offset (nnQL: its announced next cell, QL: its current cell).
 
+What an agent logs is buffered and sent in columns every few seconds (:class:`AgentViz`).
+
 Pixel ``(column, row) = (dx + 10, dy + 10)``; rows grow downwards, like the world's ``y``, so an
 arrow points the way the agent would move on the grid. The colour scale is per image (from its
 visited minimum to its maximum), so compare shapes across episodes, not colours.
@@ -34,10 +36,14 @@ from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.actions import MOVES, N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, WINDOW
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.recording.columns import FlushClock, SeriesColumns, time_columns
 
 TABLES = ("q_ds", "q_ca")
 
 HEATMAP_EVERY = 10
+
+FLUSH_EPISODES = 200
+"""The most episodes buffered before the agent's logging is sent (or after ``FLUSH_SECONDS``)."""
 
 
 def logs_heat_maps(episode: int, episodes: int) -> bool:
@@ -154,7 +160,11 @@ class TimedBrain(AgentBrain):
 
 
 class AgentViz:
-    """Logs one agent's Q-tables (and negotiation timing) at the end of every episode."""
+    """Logs one agent's Q-tables (and negotiation timing) at the end of every episode.
+
+    Everything is buffered and sent in columns, a few calls per flush (``recording.columns``):
+    after :data:`FLUSH_EPISODES` episodes or ``FLUSH_SECONDS`` of wall time, and at :meth:`close`.
+    """
 
     def __init__(self, agent: int, config: SwarmConfig, stream: rr.RecordingStream,
                  tick_of_episode_end: Callable[[], int] | None = None) -> None:
@@ -162,6 +172,10 @@ class AgentViz:
         self.config = config
         self.rec = stream
         self.tick_of_episode_end = tick_of_episode_end
+        self.clock = FlushClock(FLUSH_EPISODES)
+        self._episodes = 0  # buffered
+        self._series = SeriesColumns()
+        self._pictures: list[tuple[int, int, list[tuple]]] = []  # tick, episode, per table
         root = agent_path(agent)
         centre = np.array([[VIEW_RADIUS + 0.5, VIEW_RADIUS + 0.5]], dtype=np.float32)
         for table in TABLES:
@@ -177,35 +191,53 @@ class AgentViz:
 
     def on_episode_end(self, brain: AgentBrain, episode: int) -> None:
         """The ``on_episode_end(brain, episode)`` hook of the agent process and in-process run."""
-        rec = self.rec
         if isinstance(brain, TimedBrain):
             tick = brain.last_tick
         elif self.tick_of_episode_end is not None:
             tick = self.tick_of_episode_end()
         else:
             tick = 0
-        rec.set_time("tick", sequence=tick)
-        rec.set_time("episode", sequence=episode)
         if logs_heat_maps(episode, self.config.episodes):
-            self._log_tables(brain)
+            self._pictures.append((tick, episode, [
+                (picture["image"], *policy_marks(picture))
+                for picture in (table_picture(values, self.config.optimistic)
+                                for values in brain.learner.tables())]))
         if isinstance(brain, TimedBrain):
             latencies, unanswered = brain.take_timings()
             if latencies:
-                rec.log(latency_path(self.agent), rr.Scalars(1000.0 * float(np.mean(latencies))))
-            rec.log(unanswered_path(self.agent), rr.Scalars(float(unanswered)))
+                self._series.add(latency_path(self.agent), tick, episode,
+                                 1000.0 * float(np.mean(latencies)))
+            self._series.add(unanswered_path(self.agent), tick, episode, float(unanswered))
+        self._episodes += 1
+        if self.clock.due(self._episodes):
+            self.flush()
 
-    def _log_tables(self, brain: AgentBrain) -> None:
-        rec = self.rec
+    def flush(self) -> None:
+        """Send the buffered heat maps and timings, one call per entity."""
+        self.clock.flushed()
+        self._episodes = 0
+        self._series.send(self.rec)
+        if not self._pictures:
+            return
+        ticks, episodes, tables = zip(*self._pictures)
+        self._pictures = []
+        index = time_columns(ticks, episodes)
+        image_format = rr.components.ImageFormat(width=WINDOW, height=WINDOW, color_model="RGB",
+                                                 channel_datatype="U8")
         root = agent_path(self.agent)
-        for table, values in zip(TABLES, brain.learner.tables()):
-            picture = table_picture(values, self.config.optimistic)
-            origins, vectors, colors, stays = policy_marks(picture)
-            rec.log(f"{root}/{table}/value", rr.Image(picture["image"]))
-            rec.log(f"{root}/{table}/policy",
-                    rr.Arrows2D.from_fields(origins=origins, vectors=vectors, colors=colors))
-            rec.log(f"{root}/{table}/stay", rr.Points2D.from_fields(positions=stays))
+        for table, marks in zip(TABLES, zip(*tables)):
+            images, origins, vectors, colors, stays = zip(*marks)
+            self.rec.send_columns(f"{root}/{table}/value", index, rr.Image.columns(
+                buffer=[image.tobytes() for image in images], format=[image_format] * len(images)))
+            self.rec.send_columns(f"{root}/{table}/policy", index, rr.Arrows2D.columns(
+                origins=np.concatenate(origins), vectors=np.concatenate(vectors),
+                colors=np.concatenate(colors)).partition([len(o) for o in origins]))
+            self.rec.send_columns(f"{root}/{table}/stay", index, rr.Points2D.columns(
+                positions=np.concatenate(stays)).partition([len(p) for p in stays]))
 
     def close(self) -> None:
+        """Send what is buffered and close the agent's own stream."""
+        self.flush()
         try:
             self.rec.flush(timeout_sec=3.0)
         except Exception as error:  # noqa: BLE001 - rerun raises RuntimeError for a lost viewer

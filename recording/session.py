@@ -184,6 +184,8 @@ class InProcessRecorder:
             self.agents[brain.agent].on_episode_end(brain, episode)
 
     def close(self) -> None:
+        for agent in self.agents:  # they share the world's stream, which the world closes
+            agent.flush()
         if self.world is not None:
             self.world.close()
 

@@ -16,9 +16,12 @@ that themselves (``agent.viz``).
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, colours, labels) are logged once.
 
-Cost: the per-tick entities are buffered and sent every :data:`FLUSH_EVERY` ticks (and at each
-episode's end) with ``send_columns``, one call per entity, which costs about a tenth of logging
-them tick by tick (``bench/recording_cost.py``).
+Cost: everything is buffered, the per-tick entities, each episode's goals, metrics and event
+lines alike, and sent with ``send_columns`` (one call per entity) every :data:`FLUSH_EVERY` ticks
+or :data:`recording.columns.FLUSH_SECONDS` of wall time, whichever comes first, and at the end.
+That costs about a tenth of logging tick by tick (``bench/recording_cost.py``), and it bounds the
+memory the Rerun SDK keeps per logging call (``recording.columns``): one flush spans many
+episodes late in a run, when they are short.
 """
 
 import sys
@@ -31,6 +34,7 @@ import rerun as rr
 from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.ranks import priority_rank, waits_for
+from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.scenario import swarm_episode
 
@@ -62,10 +66,9 @@ METRICS = {
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
 
-FLUSH_EVERY = 200
-"""Ticks buffered before the per-tick entities are sent (a live viewer lags by at most this):
-more than an episode's 101 at the default 100 steps, so that one flush sends a whole episode.
-A flush costs about a millisecond, however few ticks it sends."""
+FLUSH_EVERY = 2000
+"""The most ticks buffered before a flush (which also comes after ``FLUSH_SECONDS``); a flush
+costs about a millisecond and a dozen logging calls, however few ticks it sends."""
 
 COLLISION_RED = (230, 40, 40)
 
@@ -115,7 +118,7 @@ class WorldViz:
         """``collisions_before``: the collisions of the episodes a resumed run already has."""
         self.config = config
         self.rec = stream
-        self.flush_every = flush_every
+        self.clock = FlushClock(flush_every)
         n = config.n_agents
         self.colors = agent_colors(n)
         self.cumulative_collisions = collisions_before
@@ -123,14 +126,19 @@ class WorldViz:
         self._before: tuple | None = None  # cells at the start of the next tick
         self._arrived: tuple = (False,) * n
         self._trail = np.zeros((n, TRAIL_LENGTH, 2), dtype=np.float32)  # before the buffer
+        self._trail_episode = -1  # the episode whose trails self._trail continues
         self._goals_episode = -1
         self._episode_clock: float | None = None
         self._episode_first_tick = 0
-        self._awaited = 0
+        self._awaited: dict[int, int] = {}  # per episode, until its metrics are sent
+        self._ended: list[tuple[int, int, int]] = []  # tick, episode, steps: awaited not yet sent
         # The buffered ticks, one entry each: tick, episode, whether anyone could move, every
         # agent's cell and whether it had arrived at the tick's start, the actions, who collided.
         self._buffer: list[tuple] = []
-        self._warnings: list[tuple[int, int, str]] = []
+        self._starts: dict[int, np.ndarray] = {}  # the buffered episodes' start cells
+        self._goals: list[tuple[int, int, np.ndarray]] = []
+        self._metrics = SeriesColumns()
+        self._events = TextColumns(EVENTS)
         self._log_static()
 
     @staticmethod
@@ -167,12 +175,10 @@ class WorldViz:
         if self._episode_clock is None:
             self._episode_clock = time.perf_counter()
             self._episode_first_tick = report.tick
-            self.rec.set_time("tick", sequence=report.tick)
-            self.rec.set_time("episode", sequence=report.episode)
-            self.rec.log(EVENTS, rr.TextLog(
-                f"run {c.run_id}: {c.n_agents} {c.algo} agents on a {c.width}x{c.height} grid, "
-                f"{c.episodes} episodes of at most {c.max_steps} steps, seed {c.seed}; "
-                f"from episode {report.episode}", level=rr.TextLogLevel.INFO))
+            self._events.add(report.tick, report.episode,
+                             f"run {c.run_id}: {c.n_agents} {c.algo} agents on a {c.width}x"
+                             f"{c.height} grid, {c.episodes} episodes of at most {c.max_steps} "
+                             f"steps, seed {c.seed}; from episode {report.episode}", "INFO")
         before = self._before
         if before is None:  # the first tick seen: it starts an episode (fresh run or resume)
             before = tuple(map(tuple, swarm_episode(c.seed, report.episode, c.width, c.height,
@@ -183,29 +189,22 @@ class WorldViz:
                              report.actions, report.collided))
         if report.collided:
             step = f"step {world.step}" if report.moved else "end"
-            self._warnings.append((report.tick, report.episode,
-                                   f"episode {report.episode}, {step}: collision of agents "
-                                   f"{', '.join(map(str, report.collided))}"))
+            self._events.add(report.tick, report.episode,
+                             f"episode {report.episode}, {step}: collision of agents "
+                             f"{', '.join(map(str, report.collided))}", "WARN")
         self._before, self._arrived = world.cells, world.arrived_flags
         self.next_tick = report.tick + 1
         if report.episode_row is not None:
-            self.flush()
             self._end_episode(report)
-        elif len(self._buffer) >= self.flush_every:
+        if self.clock.due(len(self._buffer)):
             self.flush()
 
     def _start_episode(self, report: TickReport) -> None:
-        self.flush()  # the buffered ticks' trails are the last episode's
         self._goals_episode = report.episode
-        starts = swarm_episode(self.config.seed, report.episode, self.config.width,
-                               self.config.height, self.config.n_agents)
-        self._trail[:] = starts.starts.astype(np.float32)[:, None, :]
-        rec = self.rec
-        rec.set_time("tick", sequence=report.tick)
-        rec.set_time("episode", sequence=report.episode)
-        goals = starts.goals
-        rec.log(GOALS, rr.Boxes2D.from_fields(centers=goals.astype(np.float32),
-                                              half_sizes=np.full(goals.shape, 0.42, np.float32)))
+        episode = swarm_episode(self.config.seed, report.episode, self.config.width,
+                                self.config.height, self.config.n_agents)
+        self._starts[report.episode] = episode.starts.astype(np.float32)
+        self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32)))
 
     def _end_episode(self, report: TickReport) -> None:
         row, n = report.episode_row, self.config.n_agents
@@ -224,31 +223,44 @@ class WorldViz:
             "metrics/reward_sum": row["reward_sum"],
             "metrics/missed_intents": row["missed_intents"],
             "metrics/ticks_per_s": rate,
-            "metrics/negotiation/awaited_per_tick": self._awaited / max(row["steps"], 1),
         }
-        self._awaited = 0
-        rec = self.rec
-        rec.set_time("tick", sequence=report.tick)
-        rec.set_time("episode", sequence=report.episode)
         for path, value in values.items():
-            rec.log(path, rr.Scalars(float(value)))
-        rec.log(EVENTS, rr.TextLog(
-            f"episode {row['episode']} ended after {row['steps']} steps: {row['arrived']}/{n} "
-            f"arrived, {row['collisions']} collisions, {row['missed_intents']} missed intents, "
-            f"reward {row['reward_sum']:.1f}, {rate:.0f} ticks/s", level=rr.TextLogLevel.INFO))
+            self._metrics.add(path, report.tick, report.episode, value)
+        self._ended.append((report.tick, report.episode, max(row["steps"], 1)))
+        self._events.add(report.tick, report.episode,
+                         f"episode {row['episode']} ended after {row['steps']} steps: "
+                         f"{row['arrived']}/{n} arrived, {row['collisions']} collisions, "
+                         f"{row['missed_intents']} missed intents, reward {row['reward_sum']:.1f}, "
+                         f"{rate:.0f} ticks/s", "INFO")
 
     def flush(self) -> None:
-        """Send the buffered ticks: their geometry computed at once, one chunk per entity."""
+        """Send everything buffered: the ticks' geometry computed at once, one call per entity."""
+        self.clock.flushed()
+        if self._goals:
+            g_ticks, g_episodes, goals = zip(*self._goals)
+            self._goals = []
+            centers = np.concatenate(goals)
+            self.rec.send_columns(GOALS, time_columns(g_ticks, g_episodes), rr.Boxes2D.columns(
+                centers=centers, half_sizes=np.full(centers.shape, 0.42, np.float32)
+            ).partition([len(g) for g in goals]))
+        if self._buffer:
+            self._send_ticks()
+        for tick, episode, steps in self._ended:  # every tick of theirs is counted now
+            self._metrics.add("metrics/negotiation/awaited_per_tick", tick, episode,
+                              self._awaited.pop(episode, 0) / steps)
+        self._ended = []
+        self._metrics.send(self.rec)
+        self._events.send(self.rec)
+
+    def _send_ticks(self) -> None:
         k, n = len(self._buffer), self.config.n_agents
-        if k == 0:
-            return
         rec = self.rec
         tick_list, episode_list, moved, before, arrived_then, actions, collided = \
             zip(*self._buffer)
         self._buffer = []
         ticks, episodes = np.array(tick_list, dtype=np.int64), np.array(episode_list, np.int64)
         positions = np.array(before, dtype=np.int64)  # (k, n, 2): the cells each tick started from
-        index = [rr.TimeColumn("tick", sequence=ticks), rr.TimeColumn("episode", sequence=episodes)]
+        index = time_columns(ticks, episodes)
         each = [n] * k
         cells = positions.astype(np.float32)
         flat = cells.reshape(-1, 2)
@@ -256,18 +268,16 @@ class WorldViz:
         moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32).reshape(-1, 2)
         rec.send_columns(INTENTS, index,
                          rr.Arrows2D.columns(origins=flat, vectors=moves).partition(each))
-        # Tick i's trail: the last TRAIL_LENGTH cells each agent started a tick from, up to i.
-        history = np.concatenate([self._trail, cells.transpose(1, 0, 2)], axis=1)
-        windows = np.lib.stride_tricks.sliding_window_view(history, TRAIL_LENGTH, axis=1)
-        trails = windows[:, 1:].transpose(1, 0, 3, 2)  # (k, n, TRAIL_LENGTH, 2)
-        self._trail = history[:, -TRAIL_LENGTH:].copy()
+        trails = np.concatenate([self._trails(cells[first:last], int(episodes[first]))
+                                 for first, last in episode_spans(episodes)])
         rec.send_columns(TRAILS, index, rr.LineStrips2D.columns(
-            strips=np.ascontiguousarray(trails).reshape(-1, TRAIL_LENGTH, 2)).partition(each))
+            strips=trails.reshape(-1, TRAIL_LENGTH, 2)).partition(each))
 
         asks = negotiation_mask(self.config, positions, np.array(arrived_then, dtype=bool), ticks)
         asks &= np.array(moved, dtype=bool)[:, None, None]
         t, asker, asked = np.nonzero(asks)
-        self._awaited += len(t)
+        for episode, count in zip(*np.unique(episodes[t], return_counts=True)):
+            self._awaited[int(episode)] = self._awaited.get(int(episode), 0) + int(count)
         start, end = cells[t, asker], cells[t, asked]
         gap = end - start
         unit = gap / np.maximum(np.linalg.norm(gap, axis=-1, keepdims=True), 1e-6)
@@ -281,12 +291,17 @@ class WorldViz:
         hit_t, hit_agent = np.nonzero(hit)
         rec.send_columns(COLLISIONS, index, rr.Points2D.columns(
             positions=cells[hit_t, hit_agent]).partition(hit.sum(axis=1)))
-        if self._warnings:
-            w_ticks, w_episodes, texts = zip(*self._warnings)
-            rec.send_columns(EVENTS, [rr.TimeColumn("tick", sequence=w_ticks),
-                                      rr.TimeColumn("episode", sequence=w_episodes)],
-                             rr.TextLog.columns(text=texts, level=["WARN"] * len(texts)))
-            self._warnings = []
+
+    def _trails(self, cells: np.ndarray, episode: int) -> np.ndarray:
+        """``(k, n, TRAIL_LENGTH, 2)``: at each of an episode's ticks ``cells`` ``(k, n, 2)``, the
+        last TRAIL_LENGTH cells each agent started a tick from (its start cell before them)."""
+        if episode != self._trail_episode:
+            self._trail[:] = self._starts.pop(episode)[:, None, :]
+            self._trail_episode = episode
+        history = np.concatenate([self._trail, cells.transpose(1, 0, 2)], axis=1)
+        windows = np.lib.stride_tricks.sliding_window_view(history, TRAIL_LENGTH, axis=1)
+        self._trail = history[:, -TRAIL_LENGTH:].copy()
+        return np.ascontiguousarray(windows[:, 1:].transpose(1, 0, 3, 2))
 
     def close(self) -> None:
         self.flush()
@@ -301,3 +316,9 @@ def close_stream(stream: rr.RecordingStream, timeout_s: float = 3.0) -> None:
         print(f"rerun: could not flush the recording: {error}", file=sys.stderr)
     stream.disconnect()
 
+
+
+def episode_spans(episodes: np.ndarray) -> list[tuple[int, int]]:
+    """``[(first, last), ...]``: the index ranges of the runs of equal values in ``episodes``."""
+    cuts = (np.flatnonzero(np.diff(episodes)) + 1).tolist()
+    return list(zip([0, *cuts], [*cuts, len(episodes)]))
