@@ -21,14 +21,16 @@ def measured_rate(out: Path) -> float:
 
 
 def run_distributed(config: SwarmConfig, out: Path, record: bool,
-                    agent_target: Callable | None = None) -> float:
+                    agent_target: Callable | None = None, memory=None,
+                    layout: EmbeddedLayout | None = None) -> float:
     """The launcher's world and agent processes on one machine; ``agent_target`` replaces the
-    agents' entry point (same arguments as ``launch.swarm.agent_main``)."""
+    agents' entry point (same arguments as ``launch.swarm.agent_main``); ``memory`` (a
+    ``bench.procstat.MemorySampler``) is told every process as ``world`` and ``agent-<i>``."""
     from nnql_swarm.launch.swarm import agent_main, world_main
 
     os.environ.update(plain_python_environment())  # as the launcher's world and agents run
     ctx = mp.get_context("spawn")
-    layout = EmbeddedLayout()
+    layout = layout or EmbeddedLayout()
     out.mkdir(parents=True)
     plan = RecordingPlan.to_files(config, out) if record else False
     world = ctx.Process(target=world_main, args=(config, layout.world(), out, plan, False))
@@ -38,6 +40,10 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
     world.start()
     for agent in agents:
         agent.start()
+    if memory is not None:
+        memory.watch("world", world.pid)
+        for i, agent in enumerate(agents):
+            memory.watch(f"agent-{i}", agent.pid)
     world.join()
     for agent in agents:
         agent.join(10)

@@ -120,7 +120,7 @@ def add_config_options(group, only=None, exclude=()) -> None:
         if "help" not in f.metadata or f.name in exclude or (only and f.name not in only):
             continue
         meta = dict(f.metadata)
-        flag = meta.pop("flag") or "--" + f.name.replace("_", "-")
+        flags = meta.pop("flag") or "--" + f.name.replace("_", "-")
         text = meta.pop("help")
         shown = "on" if f.default is True else "off" if f.default is False else f.default
         kwargs = dict(dest=f.name, default=argparse.SUPPRESS, help=f"{text} (default: {shown})")
@@ -128,7 +128,7 @@ def add_config_options(group, only=None, exclude=()) -> None:
             kwargs["action"] = argparse.BooleanOptionalAction
         else:
             kwargs["type"] = f.type
-        group.add_argument(flag, **kwargs, **meta)
+        group.add_argument(*([flags] if isinstance(flags, str) else flags), **kwargs, **meta)
 
 
 def config_values(args: argparse.Namespace) -> dict:

@@ -19,9 +19,9 @@ NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
 MAX_LOOKAHEAD = 3
 
 
-def option(default, help: str, flag: str | None = None, **argparse_options):
-    """A config field with its command-line option: ``flag`` (default ``--<name>``), ``help``,
-    and any other ``argparse`` keyword (``choices``, ``metavar``)."""
+def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argparse_options):
+    """A config field with its command-line option: ``flag`` (default ``--<name>``; a tuple for
+    several names), ``help``, and any other ``argparse`` keyword (``choices``, ``metavar``)."""
     return field(default=default, metadata={"help": help, "flag": flag, **argparse_options})
 
 
@@ -88,7 +88,9 @@ class SwarmConfig:
     count_swaps: bool = option(True, "count two agents swapping cells as a collision")
     interaction_radius: int = option(_DEFAULT["interaction_radius"], "neighbours within this many cells (Chebyshev) "
                                      "enter Eq. 6, learn (Eq. 10) and are waited for; the "
-                                     "paper's reading is the whole view, 10", "--radius")
+                                     "paper's reading is the whole view, 10 (which makes the "
+                                     "negotiation one chain when everyone sees everyone)",
+                                     ("--radius", "--negotiation-radius"))
     optimistic: float = option(_DEFAULT["optimistic"], "initial value of every Q-table entry (the paper: 0)")
     known_state: bool = option(_DEFAULT["known_state"], "a state block of its own for a neighbour whose next cell "
                                "is known (announced, or parked on its goal)")

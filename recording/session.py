@@ -155,9 +155,10 @@ def open_world_viz(record, config: SwarmConfig, out: Path):
 
 def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):
     """``(brain, on_episode_end, viz)`` for an agent process; all None if not recording."""
-    if plan is None or not plan.enabled:
+    from nnql_swarm.agent.viz import AgentViz, TimedBrain, records_itself
+
+    if plan is None or not plan.enabled or not records_itself(agent):
         return None, None, None
-    from nnql_swarm.agent.viz import AgentViz, TimedBrain
 
     viz = AgentViz(agent, config, plan.open(f"agent-{agent}"))
     return TimedBrain(agent, config), viz.on_episode_end, viz
@@ -167,20 +168,20 @@ class InProcessRecorder:
     """World and agents of the in-process runner logging into one stream."""
 
     def __init__(self, record, config: SwarmConfig, out: Path) -> None:
-        from nnql_swarm.agent.viz import AgentViz
+        from nnql_swarm.agent.viz import RECORDED_AGENTS, AgentViz
 
         self.world = open_world_viz(record, config, out)
         self.agents = []
         if self.world is not None:
             self.agents = [AgentViz(i, config, self.world.rec, lambda: self.world.next_tick)
-                           for i in range(config.n_agents)]
+                           for i in range(min(config.n_agents, RECORDED_AGENTS))]
 
     def on_tick(self, world, report) -> None:
         if self.world is not None:
             self.world.log_tick(world, report)
 
     def on_episode_end(self, brain, episode: int) -> None:
-        if self.agents:
+        if brain.agent < len(self.agents):
             self.agents[brain.agent].on_episode_end(brain, episode)
 
     def close(self) -> None:
@@ -191,8 +192,10 @@ class InProcessRecorder:
 
 
 def blueprint(config: SwarmConfig):
-    """The first view: grid and events | metrics | each agent's Q_DS and Q_CA heat maps."""
+    """The first view: grid and events | metrics | each recorded agent's Q_DS and Q_CA heat maps."""
     import rerun.blueprint as rrb
+
+    from nnql_swarm.agent.viz import RECORDED_AGENTS
 
     from nnql_swarm.world import viz as world_viz
 
@@ -226,7 +229,7 @@ def blueprint(config: SwarmConfig):
                               name=f"Agent {i} Q_CA by neighbour offset (best move)"),
             name=f"agent {i}",
         )
-        for i in range(config.n_agents)
+        for i in range(min(config.n_agents, RECORDED_AGENTS))
     ], active_tab=0, name="What each agent learned")
     return rrb.Blueprint(
         rrb.Horizontal(

@@ -68,6 +68,8 @@ class WorldProtocol:
         self.started = False
         self.startup_timeout_s = startup_timeout_s
         self.startup_by = now + startup_timeout_s
+        self.created = now
+        self.startup_s: float | None = None  # until every agent was alive
         self.done = False
         self.completed = False
         self.closing = False  # completed: telling the agents to leave
@@ -184,12 +186,14 @@ class WorldProtocol:
     def stats(self) -> dict:
         return {"completed": self.completed, "ticks": self.world.tick,
                 "episode": self.world.episode, "accepted": self.inbox.accepted,
-                "rejected": dict(self.inbox.rejections), "violations": self.world.violations}
+                "rejected": dict(self.inbox.rejections), "violations": self.world.violations,
+                "startup_s": self.startup_s}
 
     # The clock.
 
     def _start(self, now: float) -> None:
         self.started = True
+        self.startup_s = now - self.created
         self.episode_start, self.episode_tick = now, self.world.tick
         if self.world.finished:
             self._close_run(now)

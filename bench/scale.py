@@ -1,0 +1,161 @@
+#!/usr/bin/env python3
+"""The swarm against its number of agents, at constant density, beside the bare lockstep loop.
+
+For each size (8, 16, 32, 64, 128 agents on 11 x 11, 16 x 16, 22 x 22, 32 x 32 and 45 x 45: about
+one agent per 16 cells), in the same run and interleaved repeat by repeat:
+
+- the distributed swarm (the launcher's world and agent processes, embedded Zenoh, recording
+  off, the default preset unless ``--preset``): ticks a second over every episode but the first
+  (``bench.harness.measured_rate``), missed intents after the first episode, the world's
+  start-up (until every agent's liveliness token was seen, from its stats file) and the peak
+  resident memory of the world and of the largest agent;
+- the bare loop of ``bench/lockstep.py`` with as many agents: every agent answers at once, no
+  negotiation, no learning, the floor under a tick.
+
+Prints one row per size (medians over the repeats; each repeat's figures on stderr), the cost
+of a tick per agent (ms a tick / N: flat where cost grows linearly) and, with ``--png``, draws
+ticks a second and milliseconds a tick per agent against N for both.
+
+    python bench/scale.py --agents 8,16,32,64 --repeats 3 --png docs/scale.png
+"""
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import tempfile
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+from bench import lockstep  # noqa: E402
+from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config  # noqa: E402
+from bench.procstat import MemorySampler  # noqa: E402
+from nnql_swarm.protocol.runfiles import stats_path  # noqa: E402
+from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+
+GRIDS = {8: 11, 16: 16, 32: 22, 64: 32, 128: 45}
+"""The side of the square grid for each size: about 16 cells per agent, as 8 on 11 x 11."""
+
+
+def grid_side(n: int) -> int:
+    return GRIDS.get(n, round(11 * math.sqrt(n / 8)))
+
+
+def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int) -> dict:
+    side = grid_side(n)
+    config = swarm_config(preset, n_agents=n, width=side, height=side, episodes=episodes,
+                          max_steps=max_steps, seed=seed, run_id=f"scale-{n}")
+    with tempfile.TemporaryDirectory() as tmp, MemorySampler() as memory:
+        out = Path(tmp) / "run"
+        rate = run_distributed(config, out, record=False, memory=memory)
+        rows = read_episodes(out / "episodes.csv")
+        world = json.loads(stats_path(out, "world").read_text())
+        peaks = memory.peaks()
+    agents = [mib for name, mib in peaks.items() if name.startswith("agent")]
+    return {"rate": rate, "missed": sum(int(r["missed_intents"]) for r in rows[1:]),
+            "missed_first": int(rows[0]["missed_intents"]), "startup_s": world["startup_s"],
+            "world_mib": peaks.get("world", math.nan), "agent_mib": max(agents, default=math.nan),
+            "arrived": sum(int(r["arrived"]) for r in rows[1:]) / max(n * (len(rows) - 1), 1)}
+
+
+def bare_once(n: int, ticks: int) -> dict:
+    result = lockstep.run(n, "mesh", ticks)
+    return {"rate": result["rate"], "startup_s": result["startup_s"]}
+
+
+def median(runs: list[dict], key: str) -> float:
+    values = [r[key] for r in runs if r[key] is not None and not math.isnan(r[key])]
+    return statistics.median(values) if values else math.nan
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--agents", default="8,16,32,64,128", help="comma-separated agent counts")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--episodes", type=int, default=6, help="swarm episodes per run (the first "
+                   "is start-up and not timed)")
+    p.add_argument("--max-steps", type=int, default=100)
+    p.add_argument("--bare-ticks", type=int, default=2000, help="ticks of each bare loop")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--png", type=Path, default=None, help="draw the curves into this PNG")
+    add_preset_option(p)
+    args = p.parse_args()
+    try:
+        sizes = [int(v) for v in args.agents.split(",")]
+    except ValueError:
+        p.error(f"--agents takes comma-separated numbers, not {args.agents!r}")
+    if args.repeats < 1 or args.episodes < 2 or any(n < 2 for n in sizes):
+        p.error("need --repeats >= 1, --episodes >= 2 and at least 2 agents per size")
+
+    table = []
+    for n in sizes:
+        swarm, bare = [], []
+        for repeat in range(args.repeats):
+            swarm.append(swarm_once(n, args.preset, args.episodes, args.max_steps, args.seed))
+            bare.append(bare_once(n, args.bare_ticks))
+            s, b = swarm[-1], bare[-1]
+            print(f"  {n} agents, repeat {repeat + 1}: swarm {s['rate']:.0f} ticks/s "
+                  f"(missed {s['missed_first']} then {s['missed']}, start-up "
+                  f"{s['startup_s']:.1f} s, agent {s['agent_mib']:.0f} MiB), bare "
+                  f"{b['rate']:.0f} ticks/s", file=sys.stderr, flush=True)
+        ratios = [s["rate"] / b["rate"] for s, b in zip(swarm, bare)]
+        row = {"agents": n, "grid": grid_side(n), "swarm": median(swarm, "rate"),
+               "bare": median(bare, "rate"), "ratio": statistics.median(ratios),
+               "missed": median(swarm, "missed"), "missed_first": median(swarm, "missed_first"),
+               "startup_s": median(swarm, "startup_s"), "agent_mib": median(swarm, "agent_mib"),
+               "world_mib": median(swarm, "world_mib"), "arrived": median(swarm, "arrived"),
+               "runs": [round(s["rate"]) for s in swarm], "bare_runs": [round(b["rate"]) for b in bare]}
+        row["ms_per_agent"] = 1000.0 / row["swarm"] / n
+        row["bare_ms_per_agent"] = 1000.0 / row["bare"] / n
+        table.append(row)
+    print_table(table, args)
+    if args.png is not None:
+        draw(table, args.png)
+        print(f"curves: {args.png}")
+    return 0
+
+
+def print_table(table: list[dict], args) -> None:
+    print(f"preset {args.preset}, {args.episodes} episodes of at most {args.max_steps} steps, "
+          f"medians of {args.repeats}")
+    print("| agents | grid | swarm ticks/s | bare ticks/s | ratio | ms a tick per agent "
+          "(swarm / bare) | missed intents (1st episode / after) | start-up s | agent MiB | "
+          "world MiB | runs (swarm; bare) |")
+    print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
+    for r in table:
+        print(f"| {r['agents']} | {r['grid']}x{r['grid']} | {r['swarm']:.0f} | {r['bare']:.0f} | "
+              f"{r['ratio']:.2f} | {r['ms_per_agent']:.3f} / {r['bare_ms_per_agent']:.3f} | "
+              f"{r['missed_first']:.0f} / {r['missed']:.0f} | {r['startup_s']:.1f} | "
+              f"{r['agent_mib']:.0f} | {r['world_mib']:.0f} | "
+              f"{' '.join(map(str, r['runs']))}; {' '.join(map(str, r['bare_runs']))} |")
+
+
+def draw(table: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = [r["agents"] for r in table]
+    fig, (rate, cost) = plt.subplots(1, 2, figsize=(11, 4.2))
+    rate.plot(n, [r["swarm"] for r in table], "o-", label="swarm (negotiation, learning)")
+    rate.plot(n, [r["bare"] for r in table], "s--", label="bare loop (all answer at once)")
+    rate.set(xscale="log", yscale="log", xlabel="agents", ylabel="ticks a second",
+             title="Ticks a second, constant density")
+    cost.plot(n, [r["ms_per_agent"] for r in table], "o-", label="swarm")
+    cost.plot(n, [r["bare_ms_per_agent"] for r in table], "s--", label="bare loop")
+    cost.set(xscale="log", xlabel="agents", ylabel="ms a tick / agents",
+             title="Cost of a tick per agent (flat = linear)")
+    for axis in (rate, cost):
+        axis.set_xticks(n, [str(v) for v in n])
+        axis.grid(True, alpha=0.3)
+        axis.legend()
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
