@@ -12,7 +12,8 @@ Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.no
 - ``q_ca/value``, ``q_ca/policy``, ``q_ca/stay``, ``q_ca/self``: the same for ``Q_CA``, whose
   state is a *neighbour's* offset (nnQL: its announced next cell, QL: its current cell).
 
-Only the first :data:`RECORDED_AGENTS` agents log these. What an agent logs is buffered and sent in columns every few seconds (:class:`AgentViz`).
+Only the first ``recording.session.RECORDED_AGENTS`` agents log these. What an agent logs is
+buffered and sent in columns every few seconds (:class:`AgentViz`).
 
 Pixel ``(column, row) = (dx + 10, dy + 10)``; rows grow downwards, like the world's ``y``, so an
 arrow points the way the agent would move on the grid. The colour scale is per image (from its
@@ -41,16 +42,6 @@ from nnql_swarm.recording.columns import FlushClock, SeriesColumns, time_columns
 TABLES = ("q_ds", "q_ca")
 
 HEATMAP_EVERY = 10
-
-RECORDED_AGENTS = 8
-"""Agents ``0 .. RECORDED_AGENTS - 1`` log their heat maps and negotiation timing; the others
-log nothing of their own (the world's entities show every agent, each entity all of them at once):
-a viewer slows down with hundreds of entities, and 128 agents would give it over a thousand."""
-
-
-def records_itself(agent: int) -> bool:
-    """Whether an agent logs its own entities (heat maps, negotiation timing)."""
-    return agent < RECORDED_AGENTS
 
 FLUSH_EPISODES = 200
 """The most episodes buffered before the agent's logging is sent (or after ``FLUSH_SECONDS``)."""

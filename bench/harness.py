@@ -2,6 +2,7 @@
 
 import multiprocessing as mp
 import os
+import time
 from pathlib import Path
 from typing import Callable
 
@@ -37,6 +38,7 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
     agents = [ctx.Process(target=agent_target or agent_main,
                           args=(i, config, layout.agent(), out, False, plan or None))
               for i in range(config.n_agents)]
+    launched = time.time()
     world.start()
     for agent in agents:
         agent.start()
@@ -51,6 +53,7 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
             agent.kill()
     if world.exitcode != 0:
         raise RuntimeError(f"world exited with {world.exitcode}")
+    (out / "launched_at").write_text(f"{launched}\n")  # for start-up: the world's stats' started_at
     return measured_rate(out)
 
 

@@ -6,8 +6,9 @@ one agent per 16 cells), in the same run and interleaved repeat by repeat:
 
 - the distributed swarm (the launcher's world and agent processes, embedded Zenoh, recording
   off, the default preset unless ``--preset``): ticks a second over every episode but the first
-  (``bench.harness.measured_rate``), missed intents after the first episode, the world's
-  start-up (until every agent's liveliness token was seen, from its stats file) and the peak
+  (``bench.harness.measured_rate``), missed intents in the first episode and after it, the
+  start-up (from starting the processes until the world saw every agent's liveliness token and
+  opened the first tick, from its stats file) and the peak
   resident memory of the world and of the largest agent;
 - the bare loop of ``bench/lockstep.py`` with as many agents: every agent answers at once, no
   negotiation, no learning, the floor under a tick.
@@ -55,7 +56,8 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int) ->
         peaks = memory.peaks()
     agents = [mib for name, mib in peaks.items() if name.startswith("agent")]
     return {"rate": rate, "missed": sum(int(r["missed_intents"]) for r in rows[1:]),
-            "missed_first": int(rows[0]["missed_intents"]), "startup_s": world["startup_s"],
+            "missed_first": int(rows[0]["missed_intents"]),
+            "startup_s": world["started_at"] - float((out / "launched_at").read_text()),
             "world_mib": peaks.get("world", math.nan), "agent_mib": max(agents, default=math.nan),
             "arrived": sum(int(r["arrived"]) for r in rows[1:]) / max(n * (len(rows) - 1), 1)}
 

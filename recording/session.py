@@ -153,12 +153,20 @@ def open_world_viz(record, config: SwarmConfig, out: Path):
     return WorldViz(config, plan.open("world", blueprint(config)), collisions_before=before)
 
 
+RECORDED_AGENTS = 8
+"""Agents ``0 .. RECORDED_AGENTS - 1`` log their own entities (heat maps, negotiation timing);
+the others log nothing and never load Rerun. The world's entities show every agent, each entity
+all of them at once: a viewer slows down with hundreds of entities, and 128 agents logging their
+own would give it over a thousand."""
+
+
 def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):
     """``(brain, on_episode_end, viz)`` for an agent process; all None if not recording."""
-    from nnql_swarm.agent.viz import AgentViz, TimedBrain, records_itself
-
-    if plan is None or not plan.enabled or not records_itself(agent):
+    if plan is None or not plan.enabled:
         return None, None, None
+    if agent >= RECORDED_AGENTS:
+        return None, None, None
+    from nnql_swarm.agent.viz import AgentViz, TimedBrain
 
     viz = AgentViz(agent, config, plan.open(f"agent-{agent}"))
     return TimedBrain(agent, config), viz.on_episode_end, viz
@@ -168,7 +176,7 @@ class InProcessRecorder:
     """World and agents of the in-process runner logging into one stream."""
 
     def __init__(self, record, config: SwarmConfig, out: Path) -> None:
-        from nnql_swarm.agent.viz import RECORDED_AGENTS, AgentViz
+        from nnql_swarm.agent.viz import AgentViz
 
         self.world = open_world_viz(record, config, out)
         self.agents = []
@@ -194,8 +202,6 @@ class InProcessRecorder:
 def blueprint(config: SwarmConfig):
     """The first view: grid and events | metrics | each recorded agent's Q_DS and Q_CA heat maps."""
     import rerun.blueprint as rrb
-
-    from nnql_swarm.agent.viz import RECORDED_AGENTS
 
     from nnql_swarm.world import viz as world_viz
 

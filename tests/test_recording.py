@@ -284,3 +284,22 @@ def test_experiment_curves_go_into_a_recording(tmp_path):
     extra = recording.column("experiment/extra_steps/ql/k5", "Scalars:scalars")
     assert [v[0] for v in extra] == pytest.approx(
         (metrics.steps[[2, 3]] - metrics.shortest[[2, 3]]).mean(axis=0))
+
+
+def test_processes_that_do_not_record_never_load_rerun():
+    """An agent with recording off, or past the recorded few, keeps Rerun's 60 MiB out."""
+    probe = (
+        "import sys\n"
+        "from nnql_swarm.protocol.config import SwarmConfig\n"
+        "from nnql_swarm.recording.session import RECORDED_AGENTS, RecordingPlan, open_agent_viz\n"
+        "config = SwarmConfig(n_agents=16)\n"
+        "assert open_agent_viz(None, 0, config) == (None, None, None)\n"
+        "assert 'rerun' not in sys.modules, 'open_agent_viz(None) loaded rerun'\n"
+        "plan = RecordingPlan.to_files(config, sys.argv[1])\n"
+        "assert open_agent_viz(plan, RECORDED_AGENTS, config) == (None, None, None)\n"
+        "assert 'rerun' not in sys.modules, 'an agent past the recorded few loaded rerun'\n"
+        "print('ok')\n"
+    )
+    done = subprocess.run([os.sys.executable, "-c", probe, "/tmp/unused-recording"],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr

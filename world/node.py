@@ -77,6 +77,7 @@ class WorldNode(ProtocolAdapter):
         self.config = options.config
         self.session = session
         self.trace = trace.TickTrace.from_env("world")
+        self.created_at = time.time()  # wall clock, for the stats' start-up: the protocol's is monotonic
         self.protocol = WorldProtocol(self.config, time.monotonic(), options.first_episode,
                                       options.first_tick, options.startup_timeout_s, self.trace)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
@@ -211,7 +212,10 @@ def run_world(options: WorldOptions,
             log.error("%s", error)
             return 1
     node.trace.save()
-    write_json_atomic(stats_path(options.out_dir, "world"), node.protocol.stats())
+    stats = node.protocol.stats()
+    if stats["startup_s"] is not None:
+        stats["started_at"] = node.created_at + stats["startup_s"]  # seconds since the epoch
+    write_json_atomic(stats_path(options.out_dir, "world"), stats)
     inbox = node.protocol.inbox
     if inbox.total_rejected:
         log.warning("world rejected %d messages: %s", inbox.total_rejected,
