@@ -1,5 +1,6 @@
 """What the swarm benchmarks share: run a swarm (distributed or in-process) and time its ticks."""
 
+import math
 import multiprocessing as mp
 import os
 import time
@@ -11,6 +12,15 @@ from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from nnql_swarm.protocol.jit import plain_python_environment
 from nnql_swarm.protocol.transport import EmbeddedLayout
 from nnql_swarm.world.metrics import read_episodes
+
+
+SCALE_GRIDS = {8: 11, 16: 16, 32: 22, 64: 32, 128: 45}
+"""The side of the square grid for a swarm of each size: about 16 cells per agent, as 8 agents on
+the paper's 11 x 11 (the sizes of ``bench/scale.py``; others by the same density)."""
+
+
+def grid_side(n: int) -> int:
+    return SCALE_GRIDS.get(n, max(2, round(11 * math.sqrt(n / 8))))
 
 
 def measured_rate(out: Path) -> float:

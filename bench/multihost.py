@@ -2,12 +2,14 @@
 """Zenoh layouts across hosts: query round trips and swarm ticks per second (needs root: netns).
 
 Three network namespaces on one private bridge stand in for three machines (tests/netns.py):
-``world`` (the world, the router), ``a`` (agents 0-3), ``b`` (agents 4-7). Measured per layout:
+``world`` (the world, the router), ``a`` (the first half of the agents), ``b`` (the rest).
+Measured per layout:
 
 - ``get_ms``: the median round trip of a ``get`` from a process on host b to a queryable on host a
   (tests/zenoh_probe.py, 2000 queries), i.e. one negotiation question across hosts;
-- ``ticks_per_s``: the swarm's tick rate, 8 agents, from the world's ``episodes.csv`` (all ticks
-  over all episode durations; start-up excluded), and whether every intent arrived.
+- ``ticks_per_s``: the swarm's tick rate, ``--agents`` agents (8; on the grid of
+  ``bench/scale.py`` for their number), from the world's ``episodes.csv`` (all ticks over all
+  episode durations; start-up excluded), and whether every intent arrived.
 
 Layouts: ``router`` (everyone a client of launch/router.py), ``secured`` (the same through the
 mTLS + password + access-control router of launch/secure.py), ``mesh`` (peers; every agent listens
@@ -15,6 +17,7 @@ on its host's address, gossip connects them all), ``world-hub`` (the world a pee
 clients: the world relays), and ``one-host`` (the default embedded layout, all in host world).
 
     sudo .venv/bin/python bench/multihost.py --episodes 20 --repeats 3
+    sudo .venv/bin/python bench/multihost.py --agents 64 --layouts router --episodes 5 --repeats 1
 """
 
 import argparse
@@ -29,6 +32,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from bench.harness import grid_side  # noqa: E402
 from tests import netns  # noqa: E402
 from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
@@ -108,9 +112,12 @@ def log(out: Path, name: str):
 
 
 def swarm_rate(layout: str, lan: netns.Lan, port: int, secure_dir: Path, out: Path,
-               episodes: int) -> tuple[float, int]:
-    run = ["--agents", "8", "--episodes", str(episodes), "--max-steps", "100", "--seed", "3",
-           "--run-id", "bench", "--no-record", "--no-progress"]
+               episodes: int, agents: int) -> tuple[float, int, int]:
+    """Ticks a second, missed intents, and episodes run of one swarm in a layout."""
+    side = grid_side(agents)
+    run = ["--agents", str(agents), "--grid", f"{side}x{side}", "--episodes", str(episodes),
+           "--max-steps", "100", "--seed", "3", "--run-id", "bench", "--no-record", "--no-progress"]
+    half = agents // 2
     if layout == "one-host":
         world = lan.popen("world", [PY, SWARM, *run, "--out", str(out / "world")],
                           stderr=log(out, "world"))
@@ -122,7 +129,7 @@ def swarm_rate(layout: str, lan: netns.Lan, port: int, secure_dir: Path, out: Pa
         agents = [lan.popen(host, [PY, SWARM, *run, "--role", "agents", "--agent-ids", ids,
                                    "--out", str(out / host), *agent_options(host)],
                             stderr=log(out, host))
-                  for host, ids in (("a", "0-3"), ("b", "4-7"))]
+                  for host, ids in (("a", f"0-{half - 1}"), ("b", f"{half}-{agents - 1}"))]
     if world.wait(600) != 0:
         raise RuntimeError(f"{layout}: the world failed: {(out / 'world.err').read_text()[-2000:]}")
     for agent in agents:
@@ -130,7 +137,7 @@ def swarm_rate(layout: str, lan: netns.Lan, port: int, secure_dir: Path, out: Pa
     rows = read_episodes(out / "world" / "episodes.csv")
     ticks = sum(int(r["steps"]) + 1 for r in rows)
     seconds = sum(float(r["duration_s"]) for r in rows)
-    return ticks / seconds, sum(int(r["missed_intents"]) for r in rows)
+    return ticks / seconds, sum(int(r["missed_intents"]) for r in rows), len(rows)
 
 
 def main() -> int:
@@ -138,7 +145,10 @@ def main() -> int:
     p.add_argument("--episodes", type=int, default=20)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--layouts", default=",".join(LAYOUTS))
+    p.add_argument("--agents", type=int, default=8, help="agents, split between hosts a and b")
     args = p.parse_args()
+    if args.agents < 2:
+        p.error("--agents must be at least 2 (one per agent host)")
     reason = netns.unavailable_reason()
     if reason:
         print(f"multihost.py: cannot make network namespaces: {reason}", file=sys.stderr)
@@ -151,18 +161,22 @@ def main() -> int:
                 subnet = 100 + index  # both Lans alike: the certificate names the router's address
                 with netns.Lan(["world", "a", "b"], subnet) as lan:
                     secure_dir = Path(tmp) / f"secure-{repeat}-{layout}"
-                    subprocess.run([PY, SECURE, "--out", str(secure_dir), "--agents", "8",
+                    subprocess.run([PY, SECURE, "--out", str(secure_dir), "--agents",
+                                    str(args.agents),
                                     "--router-host", lan.ip("world"), "--port", str(port)],
                                    check=True, capture_output=True)
                     rtt = probe_rtt(layout, lan, port, secure_dir)
                 with netns.Lan(["world", "a", "b"], subnet) as lan:
-                    rate, missed = swarm_rate(layout, lan, port, secure_dir,
-                                              Path(tmp) / f"{repeat}-{layout}", args.episodes)
+                    rate, missed, ran = swarm_rate(layout, lan, port, secure_dir,
+                                                   Path(tmp) / f"{repeat}-{layout}", args.episodes,
+                                                   args.agents)
                 results.setdefault(layout, []).append((rtt, rate, missed))
-                print(f"  {layout:10s} get {rtt:.3f} ms, {rate:.0f} ticks/s, missed {missed} "
+                print(f"  {layout:10s} get {rtt:.3f} ms, {rate:.0f} ticks/s, missed {missed}, "
+                      f"{ran} of {args.episodes} episodes "
                       f"(load {os.getloadavg()[0]:.1f})", file=sys.stderr, flush=True)
     print(f"{'layout':10s} {'get_ms':>8s} {'ticks_per_s':>12s} {'missed':>7s}   "
-          f"(medians of {args.repeats}, 8 agents, {args.episodes} episodes of <= 100 steps)")
+          f"(medians of {args.repeats}, {args.agents} agents, {args.episodes} episodes of <= 100 "
+          f"steps)")
     for layout, rows in results.items():
         print(f"{layout:10s} {statistics.median(r[0] for r in rows):8.3f} "
               f"{statistics.median(r[1] for r in rows):12.0f} {sum(r[2] for r in rows):7d}")

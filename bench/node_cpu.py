@@ -36,7 +36,7 @@ from nnql_swarm.agent.brain import AgentBrain  # noqa: E402
 from nnql_swarm.agent.node import AgentNode, AgentOptions  # noqa: E402
 from nnql_swarm.protocol import keys  # noqa: E402
 from nnql_swarm.protocol.actions import STAY  # noqa: E402
-from bench.harness import add_preset_option, swarm_config  # noqa: E402
+from bench.harness import add_preset_option, grid_side, swarm_config  # noqa: E402
 from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
 from nnql_swarm.protocol.transport import TransportSettings  # noqa: E402
 from nnql_swarm.world.node import WorldNode, WorldOptions  # noqa: E402
@@ -176,7 +176,7 @@ def main() -> int:
     args = p.parse_args()
     n = args.agents
     config = swarm_config(args.preset, run_id="cpu", n_agents=n, episodes=args.episodes,
-                          max_steps=args.max_steps, width=max(11, 2 * n // 11 + 1), height=11)
+                          max_steps=args.max_steps, width=grid_side(n), height=grid_side(n))
     per_tick: dict[str, list[float]] = collections.defaultdict(list)
     for r in range(args.repeats):
         with tempfile.TemporaryDirectory() as tmp:

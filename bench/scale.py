@@ -31,18 +31,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench import lockstep  # noqa: E402
-from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config  # noqa: E402
+from bench.harness import add_preset_option, grid_side, run_distributed, swarm_config  # noqa: E402
 from bench.procstat import MemorySampler  # noqa: E402
 from nnql_swarm.protocol.runfiles import stats_path  # noqa: E402
 from nnql_swarm.world.metrics import read_episodes  # noqa: E402
-
-GRIDS = {8: 11, 16: 16, 32: 22, 64: 32, 128: 45}
-"""The side of the square grid for each size: about 16 cells per agent, as 8 on 11 x 11."""
-
-
-def grid_side(n: int) -> int:
-    return GRIDS.get(n, round(11 * math.sqrt(n / 8)))
-
 
 def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int) -> dict:
     side = grid_side(n)
@@ -53,11 +45,12 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int) ->
         rate = run_distributed(config, out, record=False, memory=memory)
         rows = read_episodes(out / "episodes.csv")
         world = json.loads(stats_path(out, "world").read_text())
+        startup = world["started_at"] - float((out / "launched_at").read_text())
         peaks = memory.peaks()
     agents = [mib for name, mib in peaks.items() if name.startswith("agent")]
     return {"rate": rate, "missed": sum(int(r["missed_intents"]) for r in rows[1:]),
             "missed_first": int(rows[0]["missed_intents"]),
-            "startup_s": world["started_at"] - float((out / "launched_at").read_text()),
+            "startup_s": startup,
             "world_mib": peaks.get("world", math.nan), "agent_mib": max(agents, default=math.nan),
             "arrived": sum(int(r["arrived"]) for r in rows[1:]) / max(n * (len(rows) - 1), 1)}
 
