@@ -10,7 +10,7 @@ from typing import Callable
 from nnql_swarm.recording.session import RecordingPlan
 from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from nnql_swarm.protocol.jit import plain_python_environment
-from nnql_swarm.protocol.transport import EmbeddedLayout
+from nnql_swarm.protocol.transport import EmbeddedLayout, wait_listening
 from nnql_swarm.world.metrics import read_episodes
 
 
@@ -50,6 +50,8 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
               for i in range(config.n_agents)]
     launched = time.time()
     world.start()
+    if layout.agents_wait_for_hub and not wait_listening(layout.host, layout.port, 60.0):
+        raise RuntimeError(f"the world does not listen on {layout.endpoint}")
     for agent in agents:
         agent.start()
     if memory is not None:

@@ -13,7 +13,6 @@ tick, for the same number of processes and the same topology.
 
 import argparse
 import multiprocessing as mp
-import socket
 import statistics
 import sys
 import threading
@@ -26,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.procstat import MemorySampler  # noqa: E402
 from nnql_swarm.protocol.transport import (  # noqa: E402
-    TOPOLOGIES, EmbeddedLayout, TransportSettings, callback, open_session,
+    TOPOLOGIES, EmbeddedLayout, TransportSettings, callback, open_session, wait_listening,
 )
 
 START_TIMEOUT_S = 120.0
@@ -117,18 +116,6 @@ def router(transport: TransportSettings) -> None:
         threading.Event().wait()
 
 
-def wait_listening(host: str, port: int, timeout_s: float = 30.0) -> None:
-    """Until something accepts TCP connections on ``host:port`` (the hub's Zenoh listener)."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        try:
-            socket.create_connection((host, port), timeout=1.0).close()
-            return
-        except OSError:
-            time.sleep(0.05)
-    raise TimeoutError(f"nothing listens on {host}:{port} after {timeout_s:.0f} s")
-
-
 def run(n: int, topology: str, ticks: int) -> dict:
     """One bare loop of ``n`` agents: ``rate`` (ticks a second), ``startup_s`` (until every
     agent was alive), ``rss`` (peak MiB by process name)."""
@@ -147,8 +134,8 @@ def run(n: int, topology: str, ticks: int) -> dict:
         for name, p in processes:
             p.start()
             memory.watch(name, p.pid)
-            if name in ("router", "world"):
-                wait_listening(layout.host, layout.port)
+            if name in ("router", "world") and not wait_listening(layout.host, layout.port):
+                raise TimeoutError(f"nothing listens on {layout.endpoint} after 30 s")
         try:
             rate, startup = results.get(timeout=3 * START_TIMEOUT_S)
         except Exception:  # noqa: BLE001 - a run that hung is reported as nan, not fatal

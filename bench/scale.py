@@ -34,15 +34,18 @@ from bench import lockstep  # noqa: E402
 from bench.harness import add_preset_option, grid_side, run_distributed, swarm_config  # noqa: E402
 from bench.procstat import MemorySampler  # noqa: E402
 from nnql_swarm.protocol.runfiles import stats_path  # noqa: E402
+from nnql_swarm.protocol.transport import TOPOLOGIES, EmbeddedLayout, embedded_topology  # noqa: E402
 from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
-def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int) -> dict:
+def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
+               topology: str) -> dict:
     side = grid_side(n)
     config = swarm_config(preset, n_agents=n, width=side, height=side, episodes=episodes,
                           max_steps=max_steps, seed=seed, run_id=f"scale-{n}")
     with tempfile.TemporaryDirectory() as tmp, MemorySampler() as memory:
         out = Path(tmp) / "run"
-        rate = run_distributed(config, out, record=False, memory=memory)
+        rate = run_distributed(config, out, record=False, memory=memory,
+                               layout=EmbeddedLayout(topology=topology))
         rows = read_episodes(out / "episodes.csv")
         world = json.loads(stats_path(out, "world").read_text())
         startup = world["started_at"] - float((out / "launched_at").read_text())
@@ -55,8 +58,8 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int) ->
             "arrived": sum(int(r["arrived"]) for r in rows[1:]) / max(n * (len(rows) - 1), 1)}
 
 
-def bare_once(n: int, ticks: int) -> dict:
-    result = lockstep.run(n, "mesh", ticks)
+def bare_once(n: int, ticks: int, topology: str) -> dict:
+    result = lockstep.run(n, topology, ticks)
     return {"rate": result["rate"], "startup_s": result["startup_s"]}
 
 
@@ -75,6 +78,9 @@ def main() -> int:
     p.add_argument("--bare-ticks", type=int, default=2000, help="ticks of each bare loop")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--png", type=Path, default=None, help="draw the curves into this PNG")
+    p.add_argument("--topology", choices=("auto", *TOPOLOGIES), default="auto",
+                   help="how the processes connect, swarm and bare loop alike (default: auto, "
+                        "the launcher's choice for each size)")
     add_preset_option(p)
     args = p.parse_args()
     try:
@@ -87,16 +93,18 @@ def main() -> int:
     table = []
     for n in sizes:
         swarm, bare = [], []
+        topology = embedded_topology(n) if args.topology == "auto" else args.topology
         for repeat in range(args.repeats):
-            swarm.append(swarm_once(n, args.preset, args.episodes, args.max_steps, args.seed))
-            bare.append(bare_once(n, args.bare_ticks))
+            swarm.append(swarm_once(n, args.preset, args.episodes, args.max_steps, args.seed,
+                                    topology))
+            bare.append(bare_once(n, args.bare_ticks, topology))
             s, b = swarm[-1], bare[-1]
             print(f"  {n} agents, repeat {repeat + 1}: swarm {s['rate']:.0f} ticks/s "
                   f"(missed {s['missed_first']} then {s['missed']}, start-up "
                   f"{s['startup_s']:.1f} s, agent {s['agent_mib']:.0f} MiB), bare "
                   f"{b['rate']:.0f} ticks/s", file=sys.stderr, flush=True)
         ratios = [s["rate"] / b["rate"] for s, b in zip(swarm, bare)]
-        row = {"agents": n, "grid": grid_side(n), "swarm": median(swarm, "rate"),
+        row = {"agents": n, "grid": grid_side(n), "topology": topology, "swarm": median(swarm, "rate"),
                "bare": median(bare, "rate"), "ratio": statistics.median(ratios),
                "missed": median(swarm, "missed"), "missed_first": median(swarm, "missed_first"),
                "startup_s": median(swarm, "startup_s"), "agent_mib": median(swarm, "agent_mib"),
@@ -108,19 +116,20 @@ def main() -> int:
     print_table(table, args)
     if args.png is not None:
         draw(table, args.png)
-        print(f"curves: {args.png}")
+        args.png.with_suffix(".json").write_text(json.dumps(table, indent=1) + "\n")
+        print(f"curves: {args.png} (their figures: {args.png.with_suffix('.json')})")
     return 0
 
 
 def print_table(table: list[dict], args) -> None:
-    print(f"preset {args.preset}, {args.episodes} episodes of at most {args.max_steps} steps, "
+    print(f"preset {args.preset}, topology {args.topology}, {args.episodes} episodes of at most {args.max_steps} steps, "
           f"medians of {args.repeats}")
-    print("| agents | grid | swarm ticks/s | bare ticks/s | ratio | ms a tick per agent "
+    print("| agents | grid | topology | swarm ticks/s | bare ticks/s | ratio | ms a tick per agent "
           "(swarm / bare) | missed intents (1st episode / after) | start-up s | agent MiB | "
           "world MiB | runs (swarm; bare) |")
-    print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
+    print("| ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
     for r in table:
-        print(f"| {r['agents']} | {r['grid']}x{r['grid']} | {r['swarm']:.0f} | {r['bare']:.0f} | "
+        print(f"| {r['agents']} | {r['grid']}x{r['grid']} | {r['topology']} | {r['swarm']:.0f} | {r['bare']:.0f} | "
               f"{r['ratio']:.2f} | {r['ms_per_agent']:.3f} / {r['bare_ms_per_agent']:.3f} | "
               f"{r['missed_first']:.0f} / {r['missed']:.0f} | {r['startup_s']:.1f} | "
               f"{r['agent_mib']:.0f} | {r['world_mib']:.0f} | "
@@ -144,6 +153,7 @@ def draw(table: list[dict], path: Path) -> None:
     cost.set(xscale="log", xlabel="agents", ylabel="ms a tick / agents",
              title="Cost of a tick per agent (flat = linear)")
     for axis in (rate, cost):
+        axis.minorticks_off()
         axis.set_xticks(n, [str(v) for v in n])
         axis.grid(True, alpha=0.3)
         axis.legend()

@@ -29,7 +29,13 @@ from nnql_swarm.protocol.config import (
 )
 from nnql_swarm.protocol.jit import plain_python_environment
 from nnql_swarm.protocol.runfiles import CONFIG_FILE, EPISODES_FILE
-from nnql_swarm.protocol.transport import MODES, EmbeddedLayout, TransportSettings
+from nnql_swarm.protocol.transport import (
+    HUB_FROM_AGENTS, MODES, EmbeddedLayout, TransportSettings, embedded_topology, wait_listening,
+)
+
+LAUNCHER_TOPOLOGIES = ("mesh", "hub-peer", "hub-router", "star-peers")
+"""The one-machine topologies the launcher starts (``protocol.transport.EmbeddedLayout``; the
+``router`` one needs a router process of its own)."""
 
 log = logging.getLogger("nnql.launch")
 
@@ -86,6 +92,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --role agents: which agents to start, e.g. 0-3")
     z.add_argument("--port", type=int, default=None,
                    help="one machine: the loopback port the world listens on (default: a free one)")
+    z.add_argument("--topology", choices=("auto", *LAUNCHER_TOPOLOGIES), default="auto",
+                   help="one machine: mesh (every process a peer of every other), hub-peer or "
+                        "hub-router (the agents clients of the world), star-peers (peers of the "
+                        f"world only); auto: mesh below {HUB_FROM_AGENTS} agents, hub-peer from "
+                        "then on (default: auto)")
     z.add_argument("--mode", choices=MODES, default=None,
                    help="Zenoh session mode (default: the config file's, else peer)")
     z.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
@@ -157,6 +168,10 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
         raise UsageError(str(error)) from None
     if not args.in_process:
         check_distributable(config)
+    if args.topology != "auto" and (args.role != "all" or args.listen or args.connect
+                                    or args.zenoh_config or args.zenoh_config_dir):
+        raise UsageError("--topology lays out one machine's embedded Zenoh; with --role, "
+                         "--listen, --connect or a Zenoh config the layout is yours")
     if args.zenoh_config and not Path(args.zenoh_config).is_file():
         raise UsageError(f"no Zenoh config file at {args.zenoh_config}")
     if args.agent_ids is not None:
@@ -230,12 +245,21 @@ def check_zenoh_files(args: argparse.Namespace, config: SwarmConfig) -> None:
         raise UsageError(str(error)) from None
 
 
-def transports(args: argparse.Namespace):
-    """The world's Zenoh settings and a function giving agent i's: embedded, or from the options."""
+def embedded_layout(args: argparse.Namespace, n_agents: int):
+    """The one-machine layout's ``(world settings, agent i -> settings, hub to wait for)``."""
+    topology = embedded_topology(n_agents) if args.topology == "auto" else args.topology
+    layout = EmbeddedLayout(topology=topology, **({} if args.port is None else {"port": args.port}))
+    return (layout.world(), lambda _agent: layout.agent(),
+            (layout.host, layout.port) if layout.agents_wait_for_hub else None)
+
+
+def transports(args: argparse.Namespace, config: SwarmConfig):
+    """The world's Zenoh settings, a function giving agent i's, and the ``(host, port)`` agents
+    wait for before they open their sessions (None: they need not): embedded, or from the
+    options."""
     if args.role == "all" and not (args.listen or args.connect or args.zenoh_config
                                    or args.zenoh_config_dir):
-        layout = EmbeddedLayout() if args.port is None else EmbeddedLayout(port=args.port)
-        return layout.world(), lambda _agent: layout.agent()
+        return embedded_layout(args, config.n_agents)
 
     def explicit(config_file) -> TransportSettings:
         return zenoh_files.settings(args.mode, args.listen, args.connect, config_file)
@@ -243,9 +267,9 @@ def transports(args: argparse.Namespace):
     if args.zenoh_config_dir:
         directory = Path(args.zenoh_config_dir)
         world = explicit(directory / zenoh_files.WORLD_FILE) if args.role != "agents" else None
-        return world, lambda agent: explicit(directory / zenoh_files.agent_file_name(agent))
+        return world, lambda agent: explicit(directory / zenoh_files.agent_file_name(agent)), None
     shared = explicit(args.zenoh_config)
-    return shared, lambda _agent: shared
+    return shared, lambda _agent: shared, None
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
@@ -288,13 +312,16 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
 
 
 def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
-               resume: bool = False, recording=None) -> None:
-    """An agent process (spawned); ``resume`` reloads its checkpoint if there is one."""
+               resume: bool = False, recording=None, hub: tuple[str, int] | None = None) -> None:
+    """An agent process (spawned); ``resume`` reloads its checkpoint if there is one; ``hub``:
+    the ``(host, port)`` of the world to wait for, where the agent is its client."""
     from nnql_swarm.agent.node import AgentOptions, run_agent
     from nnql_swarm.recording.session import exit_without_teardown, open_agent_viz
 
     name_process(f"nnql-agent {agent}", config)
     setup_logging(f"agent {agent}")
+    if hub is not None:
+        wait_listening(*hub, timeout_s=HUB_WAIT_S)  # if not, opening the session says so
     brain, on_episode_end, viz = open_agent_viz(recording, agent, config)
     try:
         code = run_agent(AgentOptions(agent, config, transport, out, resume=resume), brain,
@@ -305,6 +332,10 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
     if viz is not None:
         exit_without_teardown(code)
     sys.exit(code)
+
+
+HUB_WAIT_S = 60.0
+"""How long an agent of a hub topology waits for the world to listen before it tries anyway."""
 
 
 def name_process(title: str, config: SwarmConfig) -> None:
@@ -378,7 +409,7 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> in
 def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
                   start: ResumePoint) -> int:
     """Start the world and/or agents as supervised processes and wait for the run to end."""
-    world_transport, agent_transport = transports(args)
+    world_transport, agent_transport, hub = transports(args, config)
     recording = RecordingSession.start(args, config, out)
     record, progress = recording.plan or False, not args.no_progress
     os.environ.update(plain_python_environment())  # the world and agents run the kernel uncompiled
@@ -392,7 +423,7 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True,
                            make_args=lambda restarted, i=i: (
                                i, config, agent_transport(i), out, restarted or args.resume,
-                               recording.plan))
+                               recording.plan, hub))
     code = supervisor.run(leader=world)
     recording.finish()
     if code == EXIT_INTERRUPTED:

@@ -95,6 +95,8 @@ def test_ql_swarm_runs_distributed(tmp_path):
     (("--role", "world"), "needs --listen"),
     (("--zenoh-config", "/nonexistent.json5"), "no Zenoh config file"),
     (("--run-id", "bad id!"), "invalid run id"),
+    (("--topology", "hub-peer", "--connect", "tcp/127.0.0.1:7447"), "--topology lays out"),
+    (("--topology", "ring"), "invalid choice"),
 ])
 def test_bad_options_give_one_line_and_exit_2(tmp_path, options, message):
     result = run_swarm(tmp_path / "bad", *options, timeout=60)
@@ -141,13 +143,15 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
         checkpoint.load(checkpoint.checkpoint_path(out / "checkpoints", agent), AgentBrain(agent, config))
 
 
-@pytest.mark.parametrize("preset", ["nnql", "best-nnql"])
-def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, tmp_path):
+@pytest.mark.parametrize("preset, topology", [("nnql", "auto"), ("best-nnql", "auto"),
+                                             ("shield-nnql", "hub-peer")])
+def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, tmp_path):
     """The paper's reading (each agent its own tables) and the best options (one table shared
-    over Zenoh, the direction-aware reading): the same episodes and tables either way."""
+    over Zenoh, the direction-aware reading), and the default with every agent a client of the
+    world (the layout of 64 agents and more): the same episodes and tables either way."""
     options = ("--agents", "6", "--episodes", "4", "--max-steps", "30", "--seed", "2",
                "--preset", preset, "--no-record", "--run-id", preset)
-    distributed = run_swarm(tmp_path / "dist", *options)
+    distributed = run_swarm(tmp_path / "dist", *options, "--topology", topology)
     local = run_swarm(tmp_path / "local", *options, "--in-process")
     assert distributed.returncode == 0 and local.returncode == 0, distributed.stderr
     assert deterministic(read_episodes(tmp_path / "dist" / "episodes.csv")) == deterministic(
