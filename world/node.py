@@ -37,7 +37,7 @@ from nnql_swarm.protocol.transport import (
 )
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
-from nnql_swarm.world.protocol import STARTUP_TIMEOUT_S, WorldProtocol
+from nnql_swarm.world.protocol import WorldProtocol
 
 log = logging.getLogger("nnql.world")
 
@@ -63,7 +63,7 @@ class WorldOptions:
     config: SwarmConfig
     transport: TransportSettings
     out_dir: Path
-    startup_timeout_s: float = STARTUP_TIMEOUT_S
+    startup_timeout_s: float | None = None  # None: protocol.startup_timeout of the agents
     first_episode: int = 0
     first_tick: int = 0
 

@@ -26,7 +26,15 @@ from nnql_swarm.protocol.trace import CLOSE, TickTrace
 from nnql_swarm.world.engine import SwarmWorld
 
 STARTUP_TIMEOUT_S = 60.0
-"""How long the world waits for every agent to come alive before it gives up."""
+"""How long the world waits for every agent to come alive before it gives up, at least..."""
+STARTUP_S_PER_AGENT = 1.0
+"""...and at most this per agent: 128 spawned agents importing on two cores took 28 s, once over
+60 s (``bench/scale.py --agents 128``)."""
+
+
+def startup_timeout(n_agents: int) -> float:
+    """How long a world of ``n_agents`` waits for them all to come alive."""
+    return max(STARTUP_TIMEOUT_S, STARTUP_S_PER_AGENT * n_agents)
 
 SHUTDOWN_TRIES = 10
 SHUTDOWN_REPEAT_S = 0.2
@@ -56,7 +64,7 @@ class WorldProtocol:
     """The lockstep world of a run (see the module docstring)."""
 
     def __init__(self, config: SwarmConfig, now: float, first_episode: int = 0,
-                 first_tick: int = 0, startup_timeout_s: float = STARTUP_TIMEOUT_S,
+                 first_tick: int = 0, startup_timeout_s: float | None = None,
                  trace: TickTrace = _NO_TRACE) -> None:
         self.config = config
         self.n = config.n_agents
@@ -66,8 +74,8 @@ class WorldProtocol:
         self.inbox = Inbox(config.run_id, _EffectLog(self))
         self.alive: set[int] = set()
         self.started = False
-        self.startup_timeout_s = startup_timeout_s
-        self.startup_by = now + startup_timeout_s
+        self.startup_timeout_s = startup_timeout_s or startup_timeout(config.n_agents)
+        self.startup_by = now + self.startup_timeout_s
         self.created = now
         self.startup_s: float | None = None  # until every agent was alive
         self.done = False
