@@ -127,8 +127,11 @@ def test_refuses_to_overwrite_results_unless_forced(tmp_path):
 
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_ctrl_c_stops_cleanly_with_exit_130(tmp_path, workers):
+    # 100 times the default seeds, minutes of work: the whole default run takes under 3 s, so a
+    # Ctrl-C half a second after its first line could come after its end (it did, in CI)
     process = subprocess.Popen(
-        [sys.executable, SCRIPT, "--no-plots", "--workers", workers, "--out", str(tmp_path / "big")],
+        [sys.executable, SCRIPT, "--no-plots", "--workers", workers, "--seeds", "1000",
+         "--out", str(tmp_path / "big")],
         cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
     )
     deadline = time.monotonic() + 60
