@@ -32,7 +32,9 @@ from dataclasses import dataclass, field
 
 from nnql_swarm.agent import negotiation
 from nnql_swarm.protocol import keys
-from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig, priority_rank
+from nnql_swarm.protocol.config import (
+    NEGOTIATING_ALGOS, START_S_PER_AGENT, SwarmConfig, priority_rank,
+)
 from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
 )
@@ -55,7 +57,8 @@ STANDING_QUERY_S = 600.0
 """Lifetime of a standing query; when it ends, the agent opens another after its next decision."""
 
 PEER_WAIT_S = 30.0
-"""How long an agent waits at start-up to see every other agent before it acts anyway."""
+"""How long an agent waits at least, at start-up, to see every other agent before it acts anyway
+(``protocol.config.START_S_PER_AGENT`` per agent, where that is longer)."""
 
 _NOTHING = negotiation.TickIntents()
 """What an agent knows of a tick nobody answered for (never written to)."""
@@ -129,7 +132,7 @@ class AgentProtocol:
         self._out: list = []
         self.inbox = Inbox(config.run_id, EffectLog(self))
         self.ready = self.n == 1  # every peer seen (or given up on): observations are handled
-        self.ready_by = now + PEER_WAIT_S
+        self.ready_by = now + max(PEER_WAIT_S, START_S_PER_AGENT * self.n)
         self.early: list = []  # observations that came before ready, in order
         self.peers_seen: set[int] = set()
         self.pending: Pending | None = None

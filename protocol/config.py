@@ -18,6 +18,11 @@ Action Q-learning (a baseline), and the oracle planner (the lower bound; in-proc
 NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
 MAX_LOOKAHEAD = 3
 
+START_S_PER_AGENT = 1.0
+"""The start-up a swarm is given per agent, where that is longer than a fixed wait: the world
+waits so long for every agent to come alive, and an agent to see every other (128 spawned agents
+importing on two cores took 28 s, once over 60 s: ``bench/scale.py --agents 128``)."""
+
 
 def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argparse_options):
     """A config field with its command-line option: ``flag`` (default ``--<name>``; a tuple for

@@ -7,6 +7,7 @@ from nnql_swarm.agent.protocol import PEER_WAIT_S, RESYNC_AFTER, AgentProtocol
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
+from nnql_swarm.world.protocol import STARTUP_TIMEOUT_S, WorldProtocol
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode, to_wire,
 )
@@ -69,6 +70,15 @@ def test_observations_wait_for_the_peers_then_are_handled_in_order():
     assert protocol.decided_tick == -1
     effects = protocol.on_timer(5.0 + PEER_WAIT_S)  # agent 2 never showed up
     assert kinds(effects).count("SendIntent") == 2 and protocol.decided_tick == 1
+
+
+def test_the_wait_for_peers_grows_with_a_large_swarm():
+    """Over a second per agent at start-up where that is longer than the fixed wait, as the world's
+    wait for its agents: 128 spawned processes need about half a minute to come up."""
+    large = SwarmConfig(run_id="proto", n_agents=128, width=45, height=45)
+    assert AgentProtocol(0, large, AgentBrain(0, large), now=5.0).timer() == 5.0 + 128 * 1.0
+    assert WorldProtocol(large, 5.0).timer() == 5.0 + 128 * 1.0
+    assert WorldProtocol(CONFIG, 5.0).timer() == 5.0 + STARTUP_TIMEOUT_S
 
 
 def test_an_agent_asks_and_decides_once_the_answer_is_in_or_the_time_is_up():

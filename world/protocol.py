@@ -19,22 +19,19 @@ to stop. A completed run tells its agents to stop until every live one has left.
 import logging
 
 from nnql_swarm.protocol import keys
-from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.config import START_S_PER_AGENT, SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
 from nnql_swarm.protocol.trace import CLOSE, TickTrace
 from nnql_swarm.world.engine import SwarmWorld
 
 STARTUP_TIMEOUT_S = 60.0
-"""How long the world waits for every agent to come alive before it gives up, at least..."""
-STARTUP_S_PER_AGENT = 1.0
-"""...and at most this per agent: 128 spawned agents importing on two cores took 28 s, once over
-60 s (``bench/scale.py --agents 128``)."""
+"""How long the world waits at least for every agent to come alive before it gives up."""
 
 
 def startup_timeout(n_agents: int) -> float:
     """How long a world of ``n_agents`` waits for them all to come alive."""
-    return max(STARTUP_TIMEOUT_S, STARTUP_S_PER_AGENT * n_agents)
+    return max(STARTUP_TIMEOUT_S, START_S_PER_AGENT * n_agents)
 
 SHUTDOWN_TRIES = 10
 SHUTDOWN_REPEAT_S = 0.2
