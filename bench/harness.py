@@ -3,7 +3,6 @@
 import math
 import multiprocessing as mp
 import os
-import time
 from pathlib import Path
 from typing import Callable
 
@@ -48,7 +47,6 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
     agents = [ctx.Process(target=agent_target or agent_main,
                           args=(i, config, layout.agent(), out, False, plan or None))
               for i in range(config.n_agents)]
-    launched = time.time()
     world.start()
     if layout.agents_wait_for_hub and not wait_listening(layout.host, layout.port, 60.0):
         raise RuntimeError(f"the world does not listen on {layout.endpoint}")
@@ -65,7 +63,6 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
             agent.kill()
     if world.exitcode != 0:
         raise RuntimeError(f"world exited with {world.exitcode}")
-    (out / "launched_at").write_text(f"{launched}\n")  # for start-up: the world's stats' started_at
     return measured_rate(out)
 
 

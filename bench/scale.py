@@ -26,6 +26,7 @@ import math
 import statistics
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -44,11 +45,12 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
                           max_steps=max_steps, seed=seed, run_id=f"scale-{n}")
     with tempfile.TemporaryDirectory() as tmp, MemorySampler() as memory:
         out = Path(tmp) / "run"
+        launched = time.time()  # the processes start within milliseconds of it
         rate = run_distributed(config, out, record=False, memory=memory,
                                layout=EmbeddedLayout(topology=topology))
         rows = read_episodes(out / "episodes.csv")
         world = json.loads(stats_path(out, "world").read_text())
-        startup = world["started_at"] - float((out / "launched_at").read_text())
+        startup = world["started_at"] - launched
         peaks = memory.peaks()
     agents = [mib for name, mib in peaks.items() if name.startswith("agent")]
     return {"rate": rate, "missed": sum(int(r["missed_intents"]) for r in rows[1:]),
