@@ -16,8 +16,8 @@ import numpy as np
 from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
-    REC_COUNT, REC_PAIRS, RF_FIELDS, apply_record, ca_rows, decide, draw_noise, finish,
-    record_is_valid, record_outcome, record_size, state_size,
+    REC_COUNT, REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome,
+    record_size, state_size, write_updates,
 )
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
@@ -81,9 +81,10 @@ class AgentBrain:
 
     Where the swarm shares one table (``config.shared``), every agent holds a copy: its own
     learning record of a tick is not applied at once but goes out with its intent
-    (:attr:`learned`); the world hands every agent's records of that tick to everyone in the next
-    observations, and each agent applies them in agent-id order before it decides, so all copies
-    stay equal (and equal to the simulator's one table).
+    (:attr:`learned`); the world applies every agent's records of that tick to its own copy
+    (``world.shared_table``) and hands everyone the entries they changed in the next
+    observations, which each agent writes into its copy before it decides, so all copies stay
+    equal (and equal to the simulator's one table).
     """
 
     def __init__(self, agent: int, config: SwarmConfig) -> None:
@@ -95,7 +96,7 @@ class AgentBrain:
         self.config = config
         self.learner = Learner(config)
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
-        self.rejected_records = 0
+        self.rejected_updates = 0  # shared-table entries that fell outside the tables
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
         self._random_actions = np.zeros(config.max_steps, dtype=np.int64)
@@ -120,8 +121,9 @@ class AgentBrain:
         if self._prepared == (obs.episode, obs.tick):
             return
         self._prepared = (obs.episode, obs.tick)
-        if self.config.shared:
-            self._apply_shared(obs.records)
+        if self.config.shared and obs.updates:
+            learner = self.learner
+            self.rejected_updates += write_updates(learner.q_ds, learner.q_ca, obs.updates)
         if obs.arrived or obs.episode_end or self._noise_episode == obs.episode:
             return
         draw_noise(self.rng, self._random_actions, self._ties)
@@ -151,17 +153,6 @@ class AgentBrain:
                 learner.rec_f, not shared)
         self.learned = (learner.record(),) if shared and written else ()
         return int(action)
-
-    def _apply_shared(self, records) -> None:
-        """Apply every agent's learning records of the last tick, in agent-id order (the world
-        sends them so); a record that does not fit the tables is refused and counted."""
-        learner = self.learner
-        alpha, gamma = learner.params_f[FP_ALPHA], learner.params_f[FP_GAMMA]
-        for _agent, integers, values in records:
-            if not record_is_valid(integers, values, len(learner.q_ca)):
-                self.rejected_records += 1
-                continue
-            apply_record(learner.q_ds, learner.q_ca, ints(integers), floats(values), alpha, gamma)
 
     def _neighbour_rows(self, obs: Observation, answers: dict[int, int]) -> list[list[int]]:
         """The learner's neighbour rows (``agent.learner.NB_*``) for this observation: the

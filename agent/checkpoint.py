@@ -7,12 +7,12 @@ from another run shape is refused with a clear error naming the file.
 
 import hashlib
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
 from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.protocol.runfiles import write_npz_atomic
 
 
 class CheckpointError(ValueError):
@@ -33,45 +33,44 @@ def checkpoint_path(directory: Path, agent: int) -> Path:
 
 def save(path: Path, brain: AgentBrain, episode: int) -> None:
     """Write the brain's learned state after ``episode``; readers see the old file or the new."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
     q_ds, q_ca = brain.learner.tables()
-    with open(tmp, "wb") as f:
-        np.savez(
-            f,
-            q_ds=q_ds,
-            q_ca=q_ca,
-            actions_taken=brain.learner.actions_taken,
-            episode=episode,
-            agent=brain.agent,
-            n_agents=brain.config.n_agents,
-            algo=brain.config.algo,
-            rng_state=json.dumps(brain.rng.bit_generator.state),
-        )
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    write_npz_atomic(path, q_ds=q_ds, q_ca=q_ca, actions_taken=brain.learner.actions_taken,
+                     episode=episode, agent=brain.agent, n_agents=brain.config.n_agents,
+                     algo=brain.config.algo, rng_state=json.dumps(brain.rng.bit_generator.state))
 
 
-def load(path: Path, brain: AgentBrain) -> int:
-    """Restore the brain from a checkpoint; returns the episode it completes."""
+def read_fields(path: Path, expected: tuple[str, ...]) -> dict:
+    """Every array of an ``.npz`` checkpoint, by name; raises CheckpointError naming the file
+    if it cannot be read or lacks one of ``expected``."""
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             fields = {key: data[key] for key in data.files}
     except Exception as error:  # numpy raises many kinds for a damaged file
         raise CheckpointError(f"{path}: not a readable checkpoint ({error})") from None
-    expected = ("q_ds", "q_ca", "actions_taken", "episode", "agent", "n_agents", "algo", "rng_state")
     missing = [key for key in expected if key not in fields]
     if missing:
         raise CheckpointError(f"{path}: corrupt checkpoint, missing {', '.join(missing)}")
-    for table, current in zip(("q_ds", "q_ca"), brain.learner.tables()):
+    return fields
+
+
+def check_tables(path: Path, fields: dict, tables: tuple[np.ndarray, np.ndarray]) -> None:
+    """That a checkpoint's ``q_ds`` and ``q_ca`` have the shapes of ``tables`` and hold only
+    finite values; raises CheckpointError naming the file."""
+    for name, current in zip(("q_ds", "q_ca"), tables):
         shape = current.shape
-        if fields[table].shape != shape:
-            raise CheckpointError(f"{path}: {table} of shape {fields[table].shape}, expected {shape}")
+        if fields[name].shape != shape:
+            raise CheckpointError(f"{path}: {name} of shape {fields[name].shape}, expected {shape}")
     if not (np.isfinite(fields["q_ds"]).all() and np.isfinite(fields["q_ca"]).all()):
         raise CheckpointError(f"{path}: Q-tables hold non-finite values")
+
+
+def load(path: Path, brain: AgentBrain) -> int:
+    """Restore the brain from a checkpoint; returns the episode it completes."""
+    path = Path(path)
+    fields = read_fields(path, ("q_ds", "q_ca", "actions_taken", "episode", "agent", "n_agents",
+                                "algo", "rng_state"))
+    check_tables(path, fields, brain.learner.tables())
     owner = (int(fields["agent"]), int(fields["n_agents"]), str(fields["algo"]))
     mine = (brain.agent, brain.config.n_agents, brain.config.algo)
     if owner != mine:

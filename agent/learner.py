@@ -34,8 +34,10 @@ edge) does not bootstrap destination seeking from the state it stayed in, so wai
 valued like the move it waits for (docs/swarm.md has the evidence of each).
 
 Completing a transition writes a *learning record* (``rec``, ``rec_f``), applied by
-:func:`apply_record`: at once for an independent learner, or, where a swarm shares one table, by
-every agent in agent-id order before the next tick (``sim.swarm``, ``agent.brain``).
+:func:`apply_record`: at once for an independent learner, or, where a swarm shares one table, in
+agent-id order before the next tick: by the simulator to its one table (``sim.swarm``), by the
+world to its copy (``world.shared_table``), which hands the entries written to every agent's copy
+(:func:`write_updates`).
 
 Buffers (numpy arrays when compiled, Python lists in an agent process): ``params`` (``LP_*``),
 ``params_f`` (``FP_*``), the learner's state ``state`` (``LS_*``) and ``state_f`` (``LF_*``), and
@@ -112,6 +114,40 @@ def record_is_valid(ints, floats, ca_table_rows: int) -> bool:
     rows, following = ints[REC_PAIRS::2], ints[REC_PAIRS + 1::2]
     return (min(rows) >= 0 and max(rows) < ca_table_rows and min(following) >= -1
             and max(following) + N_STATES * (blocks - 1) < ca_table_rows)
+
+
+def record_entries(ints) -> list[int]:
+    """The table entries a (valid) learning record writes, in the order :func:`apply_record`
+    writes them. An entry is named by its index among both tables stacked, five actions a row:
+    Q_DS's 441 rows, then Q_CA's (how a shared table's updates travel)."""
+    action = ints[REC_ACTION]
+    entries = [ints[REC_GOAL] * N_ACTIONS + action]
+    for k in range(ints[REC_COUNT]):
+        entries.append((N_STATES + ints[REC_PAIRS + 2 * k]) * N_ACTIONS + action)
+    return entries
+
+
+def entry_value(q_ds, q_ca, index: int) -> float:
+    """The Q-value at a stacked entry index (:func:`record_entries`)."""
+    row, action = divmod(index, N_ACTIONS)
+    return float(q_ds[row][action] if row < N_STATES else q_ca[row - N_STATES][action])
+
+
+def write_updates(q_ds, q_ca, groups) -> int:
+    """Write a shared table's updates (groups of ``(entry index, value)``) into a learner's
+    copy; returns how many entries fell outside its tables (refused, nothing written)."""
+    ca_end = N_STATES + len(q_ca)
+    refused = 0
+    for group in groups:
+        for index, value in group:
+            row, action = divmod(index, N_ACTIONS)
+            if row < N_STATES:
+                q_ds[row][action] = value
+            elif row < ca_end:
+                q_ca[row - N_STATES][action] = value
+            else:
+                refused += 1
+    return refused
 
 
 def state_size(max_neighbours: int) -> int:

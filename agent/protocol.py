@@ -415,8 +415,12 @@ class AgentProtocol:
         tell the world."""
         out, trace, tick = self._out, self.trace, obs.tick
         trace.mark(DECIDE, tick)
+        refused = self.brain.rejected_updates
         action = self.brain.act(obs, answers)
         trace.mark(ACTED, tick)
+        if self.brain.rejected_updates != refused:
+            self.inbox.reject("bad-update", f"{self.brain.rejected_updates - refused} shared-table "
+                                            f"entries outside the tables at tick {tick}")
         known = self.intents.get(tick, _NOTHING).actions
         answer = Answer(self.config.run_id, tick, self.sender, self.agent, obs.episode, action,
                         tuple(sorted(known.items())))

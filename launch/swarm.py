@@ -22,7 +22,9 @@ from pathlib import Path
 from nnql_swarm.operations import zenoh_files
 from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress as progress_bar
 from nnql_swarm.recording.session import RecordingSession, check_viewer_url
-from nnql_swarm.supervision.resume import ResumeError, ResumePoint, check_checkpoints, resume_point
+from nnql_swarm.supervision.resume import (
+    ResumeError, ResumePoint, check_checkpoints, resume_point, shared_table,
+)
 from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
 from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
@@ -223,6 +225,8 @@ def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
     check_zenoh_files(args, config)
     if args.role != "world":
         check_checkpoints(args.out, config, agent_ids(args, config))
+    if args.role != "agents":
+        shared_table(args.out, config, start)
     if start.episode < config.episodes:
         print(f"resuming {config.run_id} at episode {start.episode} (tick {start.tick})",
               file=sys.stderr)

@@ -109,13 +109,16 @@ class TickClosed(NamedTuple):
 
 
 class WriteRow(NamedTuple):
-    """Append one episode's row to ``episodes.csv``, with its wall-clock columns."""
+    """Append one episode's row to ``episodes.csv``, with its wall-clock columns; where the
+    agents share one table, checkpoint it first (``table``: ``Q_DS, Q_CA`` as the agents
+    checkpointed it at that episode's end)."""
 
     row: dict
     duration_s: float
     ticks: int
     slowest_s: float
     rejected: int
+    table: tuple | None = None
 
 
 class Finished(NamedTuple):

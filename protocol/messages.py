@@ -55,7 +55,7 @@ from msgspec import Meta
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 3
+PROTOCOL_VERSION = 4
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -126,9 +126,15 @@ Record = tuple[RecordInts, tuple[Reward, Reward]]
 """A learning record: its integers and its two rewards."""
 Learned = Annotated[tuple[Record, ...], Meta(max_length=1)]
 """The learning record an intent carries (none, or its sender's of this tick)."""
-LearnedByAgent = Annotated[tuple[tuple[AgentId, RecordInts, tuple[Reward, Reward]], ...],
-                           Meta(max_length=MAX_AGENTS)]
-"""Every agent's learning record of the last tick, in agent-id order (the agent's own too)."""
+MAX_TABLE_ENTRY = (N_STATES + MAX_TABLE_ROW) * N_ACTIONS
+"""Above every entry index of a learner's two tables stacked (``agent.learner.record_entries``)."""
+TableEntry = tuple[Annotated[int, Meta(ge=0, lt=MAX_TABLE_ENTRY)], Reward]
+"""One Q-value of the shared table: its entry index and its new value (finite, bounded as a
+reward is: a Q-value is at most a reward over 1 - gamma)."""
+Updates = Annotated[tuple[Annotated[tuple[TableEntry, ...], Meta(max_length=MAX_AGENTS)], ...],
+                    Meta(max_length=MAX_AGENTS)]
+"""The shared table's entries that the last tick's learning records changed, with their new
+values: a group per record applied, in agent-id order (the agent's own too)."""
 
 
 class Rejected(ValueError):
@@ -240,7 +246,7 @@ class Observation(NamedTuple):
     arrived: bool
     episode_end: bool
     parked: Parked = ()
-    records: LearnedByAgent = ()  # where the swarm shares one table
+    updates: Updates = ()  # where the swarm shares one table
 
 
 @_message("intent", from_agent=True)

@@ -3,7 +3,7 @@
 The simulator plays every agent and the world inside the compiled kernel, in rank order, exactly
 as the distributed negotiation orders them when nobody misses a deadline; this runner adds what a
 run leaves: ``episodes.csv`` (a row per episode, flushed as it ends), the agents' checkpoints at
-the end, and, if asked, every tick replayed to the recording (``on_tick``) and every agent's
+the end (and the world's, where they share one table), and, if asked, every tick replayed to the recording (``on_tick``) and every agent's
 tables at each episode's end (``on_episode_end``).
 """
 
@@ -15,6 +15,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 
 from nnql_swarm.agent import checkpoint
+from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
@@ -100,6 +101,9 @@ def run_in_process(
             for agent in agents:
                 checkpoint.save(checkpoint.checkpoint_path(out_dir / CHECKPOINT_DIR, agent.agent),
                                 agent, batch.episode - 1)
+            if config.shared:  # the world's copy, for a distributed --resume
+                world_checkpoint.save(world_checkpoint.table_path(out_dir),
+                                      agents[0].learner.tables(), batch.episode - 1, config)
     return InProcessRun(results, int(results.violations.sum()))
 
 

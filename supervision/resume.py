@@ -2,7 +2,8 @@
 
 The run's own ``config.json`` is the config; ``episodes.csv`` (a half-written last line dropped)
 gives the last complete episode and the tick it ended on. Every checkpoint of the agents that
-will run is loaded once up front, so a corrupt or foreign one is refused before anything starts.
+will run, and the world's shared table where the agents share one, is loaded once up front, so a
+missing, corrupt or foreign one is refused before anything starts.
 """
 
 from dataclasses import dataclass
@@ -12,6 +13,7 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
+from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.metrics import drop_partial_line, read_episodes
 
 
@@ -58,3 +60,15 @@ def check_checkpoints(out: Path, config: SwarmConfig, agents: list[int]) -> None
                 checkpoint.load(path, AgentBrain(agent, config))
             except checkpoint.CheckpointError as error:
                 raise ResumeError(str(error)) from None
+
+
+def shared_table(out: Path, config: SwarmConfig, start: ResumePoint):
+    """The shared ``(Q_DS, Q_CA)`` the world of a resumed run starts from (None where the agents
+    learn apart, or nothing was learned yet, or nothing is left to play); raises ResumeError
+    naming the file."""
+    if not config.shared or not 0 < start.episode < config.episodes:
+        return None
+    try:
+        return world_checkpoint.load(world_checkpoint.table_path(out), config, start.episode - 1)
+    except checkpoint.CheckpointError as error:
+        raise ResumeError(str(error)) from None

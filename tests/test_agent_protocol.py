@@ -199,3 +199,17 @@ def test_a_neighbour_that_is_gone_or_refuses_the_tick_is_waited_for_no_more():
     assert missing.agent == 0 and protocol.pending is not None
     effects = protocol.on_refusal(missing.ask, 0.002)  # and cannot answer that tick
     assert "SendIntent" in kinds(effects) and protocol.decided_tick == 0
+
+
+def test_shared_table_updates_are_written_and_entries_outside_the_tables_refused():
+    assert CONFIG.shared
+    protocol = ready()
+    payload = encode(Observation(
+        run="proto", tick=0, sender=WORLD_SENDER, agent=0, episode=0, step=0, position=(1, 1),
+        goal=(5, 5), neighbours=(), rank=0, reward_ds=0.0, reward_ca=10.0, collided=False,
+        arrived=False, episode_end=False,
+        updates=(((7 * 5 + 1, 20.5), (441 * 5 + 3, -1.5)), ((441 * 6 * 5, 1.0),))))
+    assert "SendIntent" in kinds(protocol.on_observation(payload, 0.0))
+    q_ds, q_ca = protocol.brain.learner.tables()
+    assert q_ds[7, 1] == 20.5 and q_ca[0, 3] == -1.5
+    assert protocol.inbox.rejections["bad-update"] == 1, "Q_CA has 882 rows here, not 2646"

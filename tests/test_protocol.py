@@ -224,11 +224,11 @@ def test_round_trip(msg):
 
 
 def test_wire_format_is_an_array_of_version_kind_and_fields_in_order():
-    assert PROTOCOL_VERSION == 3
+    assert PROTOCOL_VERSION == 4
     wire = msgpack.unpackb(encode(intent()))
     assert wire == [PROTOCOL_VERSION, "intent", RUN, 7, "agent/2", 2, 1, 3, []]
-    assert msgpack.unpackb(encode(control())) == [3, "control", RUN, 7, WORLD_SENDER, "shutdown"]
-    assert msgpack.unpackb(encode(obs()))[:2] == [3, "obs"]
+    assert msgpack.unpackb(encode(control())) == [PROTOCOL_VERSION, "control", RUN, 7, WORLD_SENDER, "shutdown"]
+    assert msgpack.unpackb(encode(obs()))[:2] == [PROTOCOL_VERSION, "obs"]
     assert msgpack.unpackb(encode(answer()))[-1] == [[0, 4], [5, 0]]
     for cls, kind in SCHEMA.items():
         names = list(kind.fields)
@@ -313,14 +313,14 @@ def test_rejection_reasons():
     assert reason_of(pack("intent"), Intent) == "not-array"
     assert reason_of(pack({1: 2}), Intent) == "not-array"  # a map, whatever its keys
     wire = to_wire(intent())
-    assert reason_of(pack([2, *wire[1:]]), Intent) == "bad-version"
-    assert reason_of(pack([4, *wire[1:]]), Intent) == "bad-version"
+    assert reason_of(pack([PROTOCOL_VERSION - 1, *wire[1:]]), Intent) == "bad-version"
+    assert reason_of(pack([PROTOCOL_VERSION + 1, *wire[1:]]), Intent) == "bad-version"
     assert reason_of(pack([True, *wire[1:]]), Intent) == "bad-version"  # True == 1, not an int
     assert reason_of(pack([2.0, *wire[1:]]), Intent) == "bad-version"
     assert reason_of(pack(wire[1:]), Intent) == "bad-version"  # no version: the kind in its place
     assert reason_of(pack([1, 2]), Intent) == "bad-version"
     assert reason_of(encode(control()), Intent) == "wrong-kind"
-    assert reason_of(pack([3, ["intent"], *wire[2:]]), Intent) == "wrong-kind"
+    assert reason_of(pack([PROTOCOL_VERSION, ["intent"], *wire[2:]]), Intent) == "wrong-kind"
     assert reason_of(pack(wire[:-1]), Intent) == "wrong-length"  # no record
     assert reason_of(pack([*wire, 1]), Intent) == "wrong-length"  # an item too many
     assert reason_of(good, Intent, run="run-2") == "wrong-run"
@@ -347,8 +347,8 @@ def test_wrong_length_says_how_many_items():
     assert detail_of(pack(wire[:-1]), Intent) == "wrong-length: expected 9 items, got 8"
     assert detail_of(pack([*wire, 0, 0]), Intent) == "wrong-length: expected 9 items, got 11"
     assert detail_of(pack([]), Intent) == "wrong-length: expected 9 items, got 0"
-    assert detail_of(pack([3]), Intent) == "wrong-length: expected 9 items, got 1"
-    assert detail_of(pack([3, "intent"]), Intent) == "wrong-length: expected 9 items, got 2"
+    assert detail_of(pack([PROTOCOL_VERSION]), Intent) == "wrong-length: expected 9 items, got 1"
+    assert detail_of(pack([PROTOCOL_VERSION, "intent"]), Intent) == "wrong-length: expected 9 items, got 2"
     full = to_wire(obs())
     assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 19 items, got 5"
     short = pack(to_wire(answer())[:-1])
@@ -363,12 +363,12 @@ def test_checks_come_in_order_version_kind_length_run_fields_rules():
     assert reason_of(pack([1, "obs"]), Intent) == "bad-version"
     assert reason_of(pack([1, "obs", *wire[2:], 0, 0]), Intent) == "bad-version"
     assert reason_of(pack(["intent"]), Intent) == "bad-version"
-    assert reason_of(pack([3, "obs"]), Intent) == "wrong-kind"
-    assert reason_of(pack([3, None, *wire[2:], 0]), Intent) == "wrong-kind"
+    assert reason_of(pack([PROTOCOL_VERSION, "obs"]), Intent) == "wrong-kind"
+    assert reason_of(pack([PROTOCOL_VERSION, None, *wire[2:], 0]), Intent) == "wrong-kind"
     assert reason_of(encode(obs()), Intent) == "wrong-kind"  # longer
     assert reason_of(encode(control()), Answer) == "wrong-kind"  # shorter
-    assert reason_of(pack([3, "intent", "other-run"]), Intent) == "wrong-length"
-    assert reason_of(pack([3, "intent", None, None, None, None, None]), Intent) == "wrong-length"
+    assert reason_of(pack([PROTOCOL_VERSION, "intent", "other-run"]), Intent) == "wrong-length"
+    assert reason_of(pack([PROTOCOL_VERSION, "intent", None, None, None, None, None]), Intent) == "wrong-length"
     changed = [*wire[:2], "other-run", -1, None, MAX_AGENTS, -1, 99, None]
     assert reason_of(pack(changed), Intent) == "wrong-run"
     changed = [*wire[:3], -1, "agent/3", MAX_AGENTS, -1, 99, None]
@@ -614,11 +614,14 @@ _bad_record_ints = (_wrong_types.filter(lambda v: not isinstance(v, list) or v)
                     | st.lists(_bad_int | _out_of(-1, 441 * 6), min_size=1, max_size=3))
 _bad_rewards = _wrong_types | st.lists(_bad_reward, min_size=2, max_size=2) \
     | st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=4)
-_bad_records = (
+_entries = st.integers(0, (441 + 441 * 6) * 5 - 1)
+_bad_updates = (
     _wrong_types.filter(lambda v: not isinstance(v, list) or v)
-    | st.tuples(_bad_int | _out_of(0, MAX_AGENTS), _record_ints, _rewards).map(lambda t: [list(t)])
-    | st.tuples(agents, _bad_record_ints, _rewards).map(lambda t: [list(t)])
-    | st.tuples(agents, _record_ints, _bad_rewards).map(lambda t: [list(t)])
+    | st.tuples(_bad_int | _out_of(0, (441 + 441 * 6) * 5), st.floats(-1e6, 1e6))
+    .map(lambda t: [[list(t)]])
+    | st.tuples(_entries, _bad_reward).map(lambda t: [[list(t)]])
+    | _entries.map(lambda e: [[[e]]])  # an entry without its value
+    | _wrong_types.filter(lambda v: not isinstance(v, list) or v).map(lambda v: [v])
 )
 _bad_record = (
     _wrong_types.filter(lambda v: not isinstance(v, list) or v)
@@ -637,7 +640,7 @@ BAD = {
     "reward_ds": _bad_reward, "reward_ca": _bad_reward,
     "collided": _bad_bool, "arrived": _bad_bool, "episode_end": _bad_bool,
     "command": _wrong_types | _bad_command, "relayed": _bad_relayed,
-    "parked": _bad_parked, "records": _bad_records, "record": _bad_record,
+    "parked": _bad_parked, "updates": _bad_updates, "record": _bad_record,
 }
 
 
@@ -715,7 +718,7 @@ def _is_agent_list(v, *rest):
 
 REFERENCE_KINDS = {  # the kind tag, then the fields in wire order
     Observation: ("obs run tick sender agent episode step position goal neighbours rank reward_ds "
-                  "reward_ca collided arrived episode_end parked records"),
+                  "reward_ca collided arrived episode_end parked updates"),
     Intent: "intent run tick sender agent episode action record",
     Answer: "answer run tick sender agent episode action relayed",
     Control: "control run tick sender command",
@@ -735,9 +738,10 @@ REFERENCE_FIELDS = {
     "relayed": lambda v: _is_agent_list(v, lambda a: _is_int(a, 0, 5)),
     "parked": lambda v: type(v) is list and len(v) <= MAX_AGENTS
     and all(_is_int(a, 0, MAX_AGENTS) for a in v),
-    "records": lambda v: type(v) is list and len(v) <= MAX_AGENTS and all(
-        type(e) is list and len(e) == 3 and _is_int(e[0], 0, MAX_AGENTS)
-        and _is_record_ints(e[1]) and _is_reward_pair(e[2]) for e in v),
+    "updates": lambda v: type(v) is list and len(v) <= MAX_AGENTS and all(
+        type(g) is list and len(g) <= MAX_AGENTS and all(
+            type(e) is list and len(e) == 2 and _is_int(e[0], 0, (441 + 441 * 6) * 5)
+            and _is_reward(e[1]) for e in g) for g in v),
     "record": lambda v: type(v) is list and len(v) <= 1 and all(
         type(e) is list and len(e) == 2 and _is_record_ints(e[0]) and _is_reward_pair(e[1])
         for e in v),
@@ -778,7 +782,7 @@ def reference_reason(payload: bytes, cls, run, key_agent=None) -> str | None:
     tag, *names = REFERENCE_KINDS[cls].split()
     if type(d) is not list:
         return "not-array"
-    if d and not (type(d[0]) is int and d[0] == 3):
+    if d and not (type(d[0]) is int and d[0] == PROTOCOL_VERSION):
         return "bad-version"
     if len(d) > 1 and d[1] != tag:
         return "wrong-kind"
@@ -930,22 +934,22 @@ def encoding_of(msg):
 
 
 def test_wire_bytes_are_pinned():
-    """The exact bytes of protocol version 3 (item order, int / float / bool types)."""
+    """The exact bytes of protocol version 4 (item order, int / float / bool types)."""
     pinned = {
         obs():  # 19 items: an array 16 header
-            "dc001303a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "dc001304a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
             "d0000000000000cb4024000000000000c2c2c29090",
-        obs(parked=(5,), records=((5, (1, 2, 0, 3, 1, 0), (0.5, 10)),)):
-            "dc001303a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
-            "d0000000000000cb4024000000000000c2c2c291059193059601020003010092cb3fe00000000000000a",
+        obs(parked=(5,), updates=(((7, 0.5), (2210, 10)), ())):
+            "dc001304a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "d0000000000000cb4024000000000000c2c2c2910592929207cb3fe000000000000092cd08a20a90",
         answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
-            "9903a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
+            "9904a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
         intent():
-            "9903a6696e74656e74a572756e2d3107a76167656e742f3202010390",
+            "9904a6696e74656e74a572756e2d3107a76167656e742f3202010390",
         control():
-            "9603a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
+            "9604a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
         control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
-            "9603a7636f6e74726f6cd940" + "72" * 64
+            "9604a7636f6e74726f6cd940" + "72" * 64
             + "cf0000010000000000a5776f726c64a873687574646f776e",
     }
     for msg, hexed in pinned.items():
@@ -1183,7 +1187,7 @@ def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
     assert msgpack.unpackb(encode(Plan(RUN, 7, "agent/2", 2, ())))[-1] == []
     good = Plan(RUN, 7, "agent/2", 2, ((0, 1, 1, True), (5, 2, 2, False)), (1, 4))
     payload = encode(good)
-    assert msgpack.unpackb(payload) == [3, "plan", RUN, 7, "agent/2", 2, [[0, 1, 1, True],
+    assert msgpack.unpackb(payload) == [PROTOCOL_VERSION, "plan", RUN, 7, "agent/2", 2, [[0, 1, 1, True],
                                                                          [5, 2, 2, False]], [1, 4]]
     assert parse(payload, Plan, RUN, key_agent=2) == good
     for change, reason in [

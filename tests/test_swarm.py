@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from nnql_swarm.agent import checkpoint
+from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm, stops_within
@@ -62,6 +63,10 @@ def test_every_agent_checkpointed_its_last_episode(distributed_run):
         episode = checkpoint.load(checkpoint.checkpoint_path(out / "checkpoints", agent), brain)
         assert episode == config.episodes - 1
         assert np.abs(brain.learner.q_ds).sum() > 0
+    assert config.shared
+    shared = world_checkpoint.load(world_checkpoint.table_path(out), config, config.episodes - 1)
+    assert all(np.array_equal(a, b) for a, b in zip(shared, brain.learner.tables())), \
+        "the world's copy of the shared table equals every agent's"
 
 
 def test_in_process_and_distributed_runs_are_identical(distributed_run, tmp_path):

@@ -157,3 +157,39 @@ def test_a_world_resumed_after_the_last_episode_only_tells_the_agents_to_stop():
     nobody = WorldProtocol(CONFIG, 0.0, first_episode=CONFIG.episodes)
     effects = nobody.on_timer(0.0) + nobody.on_timer(nobody.timer())
     assert kinds(effects) == ["SendControl", "Finished"], "with nobody left it ends at once"
+
+
+def test_shared_records_are_checked_once_applied_in_the_world_and_their_changes_reach_everyone():
+    """A record that fits the table is applied by the world (Eq. 9 by hand: optimistic 25,
+    alpha 0.5, gamma 0.6, reward 1: 25 + 0.5 (1 + 0.6 * 25 - 25) = 20.5) and its entry goes to
+    every agent; a forged one is refused, and its intent still counts."""
+    assert CONFIG.shared and CONFIG.optimistic == 25.0 and CONFIG.alpha == 0.5
+    protocol, _ = started()
+    tick = protocol.world.tick
+    good = ((7, 1, 0, 9, 1, 0), (1.0, 0.0))  # s=7, a=1, not terminal, s'=9, no neighbour
+    forged = ((500, 1, 0, 9, 1, 0), (1.0, 0.0))  # a goal state beyond the table's 441
+    for agent, record in ((0, good), (1, forged)):
+        payload = encode(Intent("wproto", tick, agent_sender(agent), agent, 0, 4, (record,)))
+        effects = protocol.on_intent(keys.intent_key("wproto", agent), payload, 0.1)
+    assert protocol.inbox.rejections["bad-record"] == 1
+    [closed] = [e for e in effects if isinstance(e, TickClosed)]
+    assert closed.report.missed == ()
+    [batch] = [e for e in effects if isinstance(e, SendObservations)]
+    assert [obs.updates for obs, _ in batch.observations] == [(((7 * 5 + 1, 20.5),),)] * 2
+    q_ds, _ = protocol.world.table.tables()
+    assert q_ds[7, 1] == 20.5 and (q_ds == 25.0).sum() == q_ds.size - 1
+
+
+def test_the_end_ticks_row_carries_the_shared_table_as_the_agents_checkpointed_it():
+    """The end tick's own records are applied after the table is taken for the checkpoint."""
+    protocol, _ = started()
+    record = ((7, 1, 0, 9, 1, 0), (1.0, 0.0))
+    for _ in range(CONFIG.max_steps + 1):
+        tick = protocol.world.tick
+        for agent in (0, 1):
+            payload = encode(Intent("wproto", tick, agent_sender(agent), agent, 0, 4,
+                                    (record,) if protocol.world.ending else ()))
+            effects = protocol.on_intent(keys.intent_key("wproto", agent), payload, 0.1)
+    [row] = [e for e in effects if isinstance(e, WriteRow)]
+    assert (row.table[0] == 25.0).all(), "taken before the end tick's records"
+    assert protocol.world.table.tables()[0][7, 1] != 25.0, "which the world then applied"

@@ -4,7 +4,8 @@ One tick: :meth:`SwarmWorld.observations` gives every agent its observation; the
 with an action each (``None`` for an agent that missed the deadline: it stays, and the miss is
 counted); :meth:`SwarmWorld.apply` moves everyone at once by the rules of ``world.rules`` and
 scores the tick. Where the agents share one table, their intents also carry their learning
-records of the tick, which the next observations hand to everyone, in agent-id order.
+records of the tick: the world applies them to its copy (``world.shared_table``), and the next
+observations hand everyone the entries they changed.
 
 Each episode ends with one extra *end tick*: every agent is told ``episode_end`` (with the rewards
 of its last action), finishes its learning, checkpoints and answers STAY; nothing moves. An agent
@@ -31,6 +32,7 @@ from nnql_swarm.world.rules import (
     Cell, shared_cells, shortest_steps, swaps_through, world_step,
 )
 from nnql_swarm.world.scenario import swarm_episode
+from nnql_swarm.world.shared_table import SharedTable, Updates
 
 EPISODE_FIELDS = (
     "episode", "steps", "collisions", "missed_intents", "reward_sum", "arrived", "shortest_sum",
@@ -51,13 +53,16 @@ class TickReport:
     missed: tuple[int, ...]
     violations: tuple[str, ...]
     episode_row: dict | None
+    table: tuple[np.ndarray, np.ndarray] | None = None  # at an episode's end, if shared
 
 
 class SwarmWorld:
     """The lockstep world of a swarm run (every agent learns, each has its own goal)."""
 
-    def __init__(self, config: SwarmConfig, first_episode: int = 0, first_tick: int = 0) -> None:
-        """A world at the start of ``first_episode`` (``--resume`` starts after the last row)."""
+    def __init__(self, config: SwarmConfig, first_episode: int = 0, first_tick: int = 0,
+                 table: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """A world at the start of ``first_episode`` (``--resume`` starts after the last row,
+        with the shared ``table`` of its checkpoint, where the agents share one)."""
         self.config = config
         self.tick = first_tick
         self.finished = False
@@ -69,7 +74,10 @@ class SwarmWorld:
         self._before_x, self._before_y = ints([0] * n), ints([0] * n)
         self._occupancy = ints([0] * (config.width * config.height))
         self._blocked = flags([False] * n)
-        self._learned: tuple = ()
+        self.table = SharedTable(config) if config.shared else None
+        if table is not None and self.table is not None:
+            self.table.restore(*table)
+        self._updates: Updates = ()
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
         self._start_episode(first_episode)
@@ -144,7 +152,7 @@ class SwarmWorld:
         return Observation(c.run_id, self.tick, WORLD_SENDER, i, self.episode, self.step,
                            self._cells[i], self._goal_cells[i], neighbours,
                            priority_rank(i, self.tick, c.n_agents), r_ds[i], r_ca[i],
-                           collided[i], arrived[i], self.ending, parked, self._learned)
+                           collided[i], arrived[i], self.ending, parked, self._updates)
 
     def _neighbours(self) -> list[tuple[tuple[int, int, int], ...]]:
         """Each agent's visible others as ``(id, x, y)`` in id order, by agent id."""
@@ -162,13 +170,15 @@ class SwarmWorld:
 
     def apply(self, actions: list[int | None], learned: dict | None = None) -> TickReport:
         """Apply every agent's action for this tick (``None``: missed, counted, stays);
-        ``learned``: the learning records that came with the intents, by agent."""
-        self._learned = tuple((agent, *learned[agent]) for agent in sorted(learned or ()))
+        ``learned``: the accepted learning records that came with the intents, by agent (the
+        end tick's report holds the shared table from before they are applied: what the agents
+        checkpointed)."""
         missed = tuple(i for i, a in enumerate(actions) if a is None)
         self._missed += len(missed)
-        if self.ending:
-            return self._end_tick(missed)
-        return self._move(actions, missed)
+        report = self._end_tick(missed) if self.ending else self._move(actions, missed)
+        if self.table is not None:
+            self._updates = self.table.apply(learned or {})
+        return report
 
     def episode_row(self) -> dict:
         """The running episode's row of ``episodes.csv`` (its deterministic columns)."""
@@ -184,7 +194,8 @@ class SwarmWorld:
         c = self.config
         stays = (STAY,) * c.n_agents
         report = TickReport(self.tick, self.episode, False, stays, (), missed, (),
-                            self.episode_row())
+                            self.episode_row(),
+                            None if self.table is None else self.table.tables())
         self.tick += 1
         if self.episode + 1 >= c.episodes:
             self.finished = True

@@ -4,7 +4,8 @@ The protocol keeps the clock (when a tick opens and closes, what goes to whom); 
 feeds it the intents and liveliness changes Zenoh delivers, with the time, and carries out its
 effects: publish each observation on ``world/obs/<id>`` and the control messages, hand each
 closed tick to ``on_tick`` (the launcher records it to Rerun there), write each episode's row
-to ``episodes.csv``, log.
+to ``episodes.csv`` (and, where the agents share one table, its checkpoint first), log. A resumed
+world starts from the shared table of its checkpoint (``world.checkpoint``).
 
 Threads, in three sentences. Every input reaches the protocol under the node's one lock, and its
 effects are carried out right there, in order, before the lock is let go, except the episode
@@ -35,6 +36,8 @@ from nnql_swarm.protocol.transport import (
     EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback, enqueue,
     open_session,
 )
+from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
+from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.protocol import WorldProtocol
@@ -78,8 +81,12 @@ class WorldNode(ProtocolAdapter):
         self.session = session
         self.trace = trace.TickTrace.from_env("world")
         self.created_at = time.time()  # wall clock, for the stats' start-up: the protocol's is monotonic
+        table = shared_table(options.out_dir, self.config,
+                             ResumePoint(options.first_episode, options.first_tick))
+        self.table_file = world_checkpoint.table_path(options.out_dir)
         self.protocol = WorldProtocol(self.config, time.monotonic(), options.first_episode,
-                                      options.first_tick, options.startup_timeout_s, self.trace)
+                                      options.first_tick, options.startup_timeout_s, self.trace,
+                                      table)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False
@@ -178,7 +185,9 @@ class WorldNode(ProtocolAdapter):
 
     def _write(self, row: WriteRow) -> None:
         """Append an episode's row (the file is opened at the first: a world that never
-        started leaves no ``episodes.csv``)."""
+        started leaves no ``episodes.csv``), after the shared table's checkpoint, if any."""
+        if row.table is not None:
+            world_checkpoint.save(self.table_file, row.table, row.row["episode"], self.config)
         if self.writer is None:
             self.writer = EpisodeWriter(self.options.out_dir / EPISODES_FILE)
         self.writer.write(row.row, row.duration_s, row.ticks, row.slowest_s, row.rejected)
@@ -203,7 +212,11 @@ def run_world(options: WorldOptions,
         log.error("%s", error)
         return EXIT_TRANSPORT
     with session:
-        node = WorldNode(options, session, on_tick)
+        try:
+            node = WorldNode(options, session, on_tick)
+        except ResumeError as error:
+            log.error("%s", error)
+            return 1
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
         try:

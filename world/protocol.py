@@ -62,10 +62,11 @@ class WorldProtocol:
 
     def __init__(self, config: SwarmConfig, now: float, first_episode: int = 0,
                  first_tick: int = 0, startup_timeout_s: float | None = None,
-                 trace: TickTrace = _NO_TRACE) -> None:
+                 trace: TickTrace = _NO_TRACE, table=None) -> None:
+        """``table``: the shared ``(Q_DS, Q_CA)`` a resumed run continues from (``--resume``)."""
         self.config = config
         self.n = config.n_agents
-        self.world = SwarmWorld(config, first_episode, first_tick)
+        self.world = SwarmWorld(config, first_episode, first_tick, table)
         self.trace = trace
         self._out: list = []
         self.inbox = Inbox(config.run_id, _EffectLog(self))
@@ -86,7 +87,7 @@ class WorldProtocol:
             self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
             self.next_shutdown = now
         self.actions: list[int | None] | None = None  # the open tick's intents, by agent
-        self.learned: dict[int, tuple] = {}  # the learning records that came with them
+        self.learned: dict[int, tuple] = {}  # the accepted learning records that came with them
         self.tick_start = 0.0
         self.tick_deadline = 0.0
         self.slowest = 0.0  # the episode's slowest tick so far, in seconds
@@ -145,9 +146,20 @@ class WorldProtocol:
         else:
             actions[intent.agent] = intent.action
             if intent.record:
-                self.learned[intent.agent] = intent.record[0]
+                self._keep_record(intent.agent, intent.record[0])
             self._close_if_due(now)
         return out
+
+    def _keep_record(self, agent: int, record: tuple) -> None:
+        """Keep a learning record for the shared table, if it fits it (its intent counts
+        either way)."""
+        table = self.world.table
+        if table is None:
+            self.inbox.reject("bad-record", f"agent {agent}: the agents learn apart in this run")
+        elif not table.accepts(record):
+            self.inbox.reject("bad-record", f"agent {agent}: {record!r:.100}")
+        else:
+            self.learned[agent] = record
 
     def on_timer(self, now: float) -> list:
         """Time has come to ``now``: a tick's deadline, or the start-up's."""
@@ -245,7 +257,7 @@ class WorldProtocol:
         if report.episode_row is not None:
             out.append(WriteRow(report.episode_row, now - self.episode_start,
                                 world.tick - self.episode_tick, self.slowest,
-                                self.inbox.total_rejected))
+                                self.inbox.total_rejected, report.table))
             self.episode_start, self.episode_tick, self.slowest = now, world.tick, 0.0
         if world.finished:
             self._close_run(now)

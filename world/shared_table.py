@@ -1,0 +1,58 @@
+"""The swarm's one Q-table, as the world keeps it where the agents share it (``config.shared``).
+
+Each agent's intent carries its learning record of the tick. The world checks every record once
+(:meth:`SharedTable.accepts`, as it takes the intent) and, when the tick closes, applies them all
+in agent-id order with the learner's own ``apply_record``, the very step the simulator applies
+to its one table (``sim.swarm``). The next observations then tell every agent which entries
+changed and their new values (:meth:`SharedTable.apply` returns them, a group per record), and
+each agent writes them into its copy (``agent.learner.write_updates``). All copies stay equal to
+this one and to the simulator's, and a tick costs every agent one write per changed entry,
+where applying every record itself cost it the whole learning step N times over.
+"""
+
+import numpy as np
+
+from nnql_swarm.agent.brain import Learner
+from nnql_swarm.agent.learner import (
+    FP_ALPHA, FP_GAMMA, apply_record, entry_value, record_entries, record_is_valid,
+)
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.jit import floats, ints, table
+
+Updates = tuple[tuple[tuple[int, float], ...], ...]
+"""Groups of ``(entry index, new value)``, one per record applied, in agent-id order."""
+
+
+class SharedTable:
+    """The world's copy of the swarm's one table (see the module docstring)."""
+
+    def __init__(self, config: SwarmConfig) -> None:
+        self._learner = Learner(config)  # the tables an agent starts with, and its alpha, gamma
+        self.alpha = self._learner.params_f[FP_ALPHA]
+        self.gamma = self._learner.params_f[FP_GAMMA]
+
+    def accepts(self, record) -> bool:
+        """Whether a record received from an agent fits the tables (a forged or mistaken one
+        must never write outside them)."""
+        integers, values = record
+        return record_is_valid(integers, values, len(self._learner.q_ca))
+
+    def apply(self, learned: dict[int, tuple]) -> Updates:
+        """Apply the accepted records of a tick (``agent -> (integers, rewards)``) in agent-id
+        order; the entries each one wrote, with their values once all are applied."""
+        q_ds, q_ca = self._learner.q_ds, self._learner.q_ca
+        written = []
+        for agent in sorted(learned):
+            integers, values = learned[agent]
+            apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
+            written.append(record_entries(integers))
+        return tuple(tuple((index, entry_value(q_ds, q_ca, index)) for index in entries)
+                     for entries in written)
+
+    def tables(self) -> tuple[np.ndarray, np.ndarray]:
+        """``Q_DS`` and ``Q_CA`` as arrays (copies), for the world's checkpoint."""
+        return self._learner.tables()
+
+    def restore(self, q_ds: np.ndarray, q_ca: np.ndarray) -> None:
+        """Take the tables of a checkpoint (shapes checked by the caller)."""
+        self._learner.q_ds, self._learner.q_ca = table(q_ds), table(q_ca)
