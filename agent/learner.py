@@ -127,24 +127,23 @@ def record_entries(ints) -> list[int]:
     return entries
 
 
-def entry_value(q_ds, q_ca, index: int) -> float:
-    """The Q-value at a stacked entry index (:func:`record_entries`)."""
-    row, action = divmod(index, N_ACTIONS)
-    return float(q_ds[row][action] if row < N_STATES else q_ca[row - N_STATES][action])
+def entry_cells(q_ds, q_ca) -> list:
+    """Every entry of a learner's two tables stacked, as ``(row, action)`` with ``row`` the
+    table's own row (a list, or a view of an array): what :func:`write_updates` writes through,
+    built once per pair of tables."""
+    return [(row, action) for table in (q_ds, q_ca) for row in table for action in range(N_ACTIONS)]
 
 
-def write_updates(q_ds, q_ca, groups) -> int:
-    """Write a shared table's updates (groups of ``(entry index, value)``) into a learner's
-    copy; returns how many entries fell outside its tables (refused, nothing written)."""
-    ca_end = N_STATES + len(q_ca)
+def write_updates(cells: list, groups) -> int:
+    """Write a shared table's updates (groups of ``(entry index, value)``) through a learner's
+    :func:`entry_cells`; returns how many entries fell outside its tables (refused)."""
+    end = len(cells)
     refused = 0
     for group in groups:
         for index, value in group:
-            row, action = divmod(index, N_ACTIONS)
-            if row < N_STATES:
-                q_ds[row][action] = value
-            elif row < ca_end:
-                q_ca[row - N_STATES][action] = value
+            if index < end:
+                row, action = cells[index]
+                row[action] = value
             else:
                 refused += 1
     return refused

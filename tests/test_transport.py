@@ -102,3 +102,24 @@ def test_the_runtime_default_leaves_a_users_setting_alone(monkeypatch):
     except transport.TransportError:
         pass
     assert os.environ[transport.RUNTIME_ENV] == "(rx: (worker_threads: 2))"
+
+
+def _zenoh_shared_memory_mapped(results) -> None:
+    """After two sessions exchanged samples: the Zenoh shared-memory segments this process maps."""
+    _counts_seen_by_a_subscriber(None)
+    with open("/proc/self/maps") as maps:
+        results.put(sorted({line.split()[-1] for line in maps if line.rstrip().endswith(".zenoh")}))
+
+
+def test_sessions_map_no_shared_memory():
+    """Zenoh's shared-memory transport maps a 16 MiB segment into every process that meets
+    another on the machine (resident in each agent); the swarm sends bytes over TCP and turns it
+    off where it writes the config itself."""
+    ctx = mp.get_context("spawn")
+    results = ctx.Queue()
+    process = ctx.Process(target=_zenoh_shared_memory_mapped, args=(results,))
+    process.start()
+    try:
+        assert results.get(timeout=60) == []
+    finally:
+        process.join(10)

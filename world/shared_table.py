@@ -14,10 +14,10 @@ import numpy as np
 
 from nnql_swarm.agent.brain import Learner
 from nnql_swarm.agent.learner import (
-    FP_ALPHA, FP_GAMMA, apply_record, entry_value, record_entries, record_is_valid,
+    FP_ALPHA, FP_GAMMA, apply_record, record_entries, record_is_valid,
 )
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.jit import floats, ints, table
+from nnql_swarm.protocol.jit import floats, ints
 
 Updates = tuple[tuple[tuple[int, float], ...], ...]
 """Groups of ``(entry index, new value)``, one per record applied, in agent-id order."""
@@ -40,14 +40,22 @@ class SharedTable:
     def apply(self, learned: dict[int, tuple]) -> Updates:
         """Apply the accepted records of a tick (``agent -> (integers, rewards)``) in agent-id
         order; the entries each one wrote, with their values once all are applied."""
-        q_ds, q_ca = self._learner.q_ds, self._learner.q_ca
+        learner = self._learner
+        q_ds, q_ca = learner.q_ds, learner.q_ca
         written = []
         for agent in sorted(learned):
             integers, values = learned[agent]
             apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
             written.append(record_entries(integers))
-        return tuple(tuple((index, entry_value(q_ds, q_ca, index)) for index in entries)
-                     for entries in written)
+        cells = learner.cells()
+        updates = []
+        for entries in written:
+            group = []
+            for index in entries:
+                row, action = cells[index]
+                group.append((index, float(row[action])))
+            updates.append(tuple(group))
+        return tuple(updates)
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
         """``Q_DS`` and ``Q_CA`` as arrays (copies), for the world's checkpoint."""
@@ -55,4 +63,4 @@ class SharedTable:
 
     def restore(self, q_ds: np.ndarray, q_ca: np.ndarray) -> None:
         """Take the tables of a checkpoint (shapes checked by the caller)."""
-        self._learner.q_ds, self._learner.q_ca = table(q_ds), table(q_ca)
+        self._learner.restore(q_ds, q_ca, 0)
