@@ -5,8 +5,9 @@ The agent process (``agent.node``) runs it; it calls the learner's kernel functi
 compiled, so that for the same seed the distributed swarm and the simulator play the same run.
 
 Negotiation: at every tick an agent that reads intents waits for the intents of its higher-ranked
-neighbours within reach (:meth:`AgentBrain.neighbours_to_ask`, by ``protocol.ranks.waits_for``; how
-it learns them is ``agent.negotiation``'s plan), decides with whatever came back
+neighbours within reach (``agent.negotiation.awaited``, by ``protocol.ranks.waits_for``; how it
+learns them is that module's plan), and decides with those of them it needs
+(:meth:`AgentBrain.neighbours_to_ask`), with whatever came back
 (:meth:`AgentBrain.act`), and then answers for itself. A neighbour whose intent did not come is
 read as one whose intent is unknown, from its current cell. A QL agent asks nobody.
 """
@@ -17,13 +18,12 @@ from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
     REC_COUNT, REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome,
-    entry_cells, record_size, state_size, write_updates,
+    entry_cells, reach, record_size, state_size, write_updates,
 )
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import filled, floats, ints, python_values, rows, table
 from nnql_swarm.protocol.messages import Observation
-from nnql_swarm.protocol.ranks import priority_rank, waits_for
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 
 
@@ -106,6 +106,7 @@ class AgentBrain:
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
         self.rejected_updates = 0  # shared-table entries that fell outside the tables
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
+        self._reach = reach(config.interaction_radius)
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
         self._random_actions = np.zeros(config.max_steps, dtype=np.int64)
         self._ties = np.zeros((config.max_steps, N_ACTIONS))
@@ -114,14 +115,13 @@ class AgentBrain:
         self._prepared = (-1, -1)  # the observation prepared last (episode, tick)
         self._seen: tuple[int, dict[int, tuple[int, int]]] = (-1, {})  # DAQL: last tick's cells
 
-    def neighbours_to_ask(self, obs: Observation) -> list[int]:
-        """The neighbours whose intents this agent decides with (none once it has arrived or at
-        an episode's end, where it stays); ``agent.negotiation`` plans how to learn them."""
+    def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
+        """The neighbours whose intents this agent decides with, of those it waits for
+        (``awaited``, ``agent.negotiation.awaited``): none once it has arrived or at an
+        episode's end, where it stays (it still waits, to relay them down the chain)."""
         if obs.arrived or obs.episode_end or not self.reads_intents:
             return []
-        (x, y), n, radius = obs.position, self.config.n_agents, self.config.interaction_radius
-        return [j for j, jx, jy in obs.neighbours
-                if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius)]
+        return awaited
 
     def prepare(self, obs: Observation) -> None:
         """What a decision on ``obs`` needs before the intents: the shared records applied, the
@@ -144,18 +144,19 @@ class AgentBrain:
         record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
         (x, y), (gx, gy) = obs.position, obs.goal
         stops = obs.arrived or obs.episode_end
-        nb = rows(self._neighbour_rows(obs, {} if stops else answers), NB_FIELDS)
+        near = self._neighbour_rows(obs, {} if stops else answers)
+        nb, m = rows(near, NB_FIELDS), len(near)
         if stops:
             written = finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
-                             learner.state, learner.state_f, x, y, gx, gy, nb,
-                             len(obs.neighbours), learner.rec, learner.rec_f, not shared)
+                             learner.state, learner.state_f, x, y, gx, gy, nb, m, learner.rec,
+                             learner.rec_f, not shared)
             action = STAY
         else:
             random_actions, ties = self._noise
             c = self.config
             action, written = decide(
                 learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
-                learner.state_f, x, y, gx, gy, nb, len(obs.neighbours), c.width, c.height,
+                learner.state_f, x, y, gx, gy, nb, m, c.width, c.height,
                 random_actions[obs.step], floats(ties[obs.step]), learner.values, learner.rec,
                 learner.rec_f, not shared)
         self.learned = (learner.record(),) if shared and written else ()
@@ -163,12 +164,17 @@ class AgentBrain:
 
     def _neighbour_rows(self, obs: Observation, answers: dict[int, int]) -> list[list[int]]:
         """The learner's neighbour rows (``agent.learner.NB_*``) for this observation: the
-        visible neighbours in id order, each with its announced move where it answered."""
+        visible neighbours within the learner's reach (``agent.learner.reach``: no other can
+        change its decision or its learning) in id order, each with its announced move where it
+        answered."""
         w, h = self.config.width, self.config.height
         previous = self._previous_cells(obs)
         parked = set(obs.parked)
+        (x, y), far = obs.position, self._reach
         rows = []
         for j, jx, jy in obs.neighbours:
+            if jx - x > far or x - jx > far or jy - y > far or y - jy > far:
+                continue
             action = answers.get(j)
             if action is None:
                 nx, ny, known = jx, jy, 0

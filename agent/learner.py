@@ -89,6 +89,21 @@ neighbour a pair of Q_CA rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no boo
 floats are the two rewards."""
 
 
+SHIELD_REACH = 2
+"""The announcement shield looks this far (Chebyshev): a neighbour farther away can be in none of
+the cells it forbids, each within one move of a cell next to this agent."""
+
+
+def reach(radius: int) -> int:
+    """The farthest (Chebyshev) a neighbour can matter to a learner of interaction radius
+    ``radius``: within the radius it enters Eq. 6; within two more, it can be one that entered a
+    pending transition a tick ago (both moved one cell at most) and so its ``s'``; within
+    :data:`SHIELD_REACH` it enters the shield. A neighbour beyond changes nothing the learner
+    computes, so an agent may leave it out of the rows it builds (after lost ticks, a neighbour
+    of a pending transition that far is read as out of view)."""
+    return max(radius + 2, SHIELD_REACH)
+
+
 def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.ndarray) -> None:
     """Draw an agent's noise for one episode into its buffers: an exploring action per step
     (``random_actions``, one per step) and five tie-breakers in [0, 1) per step (``ties``,

@@ -353,8 +353,8 @@ class AgentProtocol:
         if self.decided_tick >= 0 and obs.tick != self.decided_tick + 1 and not self._resync(obs):
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
-        needed = self.brain.neighbours_to_ask(obs)
         awaited, asks = negotiation.plan_for(obs, self.config)
+        needed = self.brain.neighbours_to_ask(obs, awaited)
         if not awaited:
             self._decide(obs, {})
             return

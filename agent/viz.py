@@ -139,8 +139,8 @@ class TimedBrain(AgentBrain):
         self._asked = 0
         self._asked_at = 0.0
 
-    def neighbours_to_ask(self, obs: Observation) -> list[int]:
-        asked = super().neighbours_to_ask(obs)
+    def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
+        asked = super().neighbours_to_ask(obs, awaited)
         self._asked = len(asked)
         self._asked_at = time.perf_counter()
         return asked

@@ -198,6 +198,11 @@ def test_resume_refuses_corrupt_or_foreign_checkpoints_naming_the_file(tmp_path)
     assert "agent-1.npz: not a readable checkpoint" in corrupt.stderr
     assert len(corrupt.stderr.strip().splitlines()) == 1
     assert len(read_episodes(out / "episodes.csv")) == 2, "the half-written row was dropped"
+    (out / "checkpoints" / "agent-1.npz").unlink()  # an agent without one starts afresh
+    (out / "checkpoints" / "world.npz").unlink()
+    tableless = run_swarm(out, "--resume", timeout=60)
+    assert tableless.returncode == 2
+    assert "world.npz: missing (the shared table of episode 1)" in tableless.stderr
     nothing = run_swarm(tmp_path / "nothing-here", "--resume", timeout=60)
     assert nothing.returncode == 2 and "no run to resume here" in nothing.stderr
 

@@ -8,8 +8,8 @@ for (``world/negotiation``) and who collided as a result (``world/collisions``, 
 
 The negotiation is derived by the world, not reported by the agents: at tick ``t`` an agent that
 reads intents and has not arrived decides with the intent of every neighbour it waits for, by the
-one rule of ``protocol.ranks.waits_for`` that ``agent.brain.AgentBrain.neighbours_to_ask`` and the
-simulator apply too. How each intent reached it (its own query, or relayed down the chain,
+one rule of ``protocol.ranks.waits_for`` that ``agent.negotiation.awaited`` and the simulator
+apply too. How each intent reached it (its own query, or relayed down the chain,
 ``agent.negotiation``) and whether it came in time is known only to the agent; the agents log
 that themselves (``agent.viz``).
 
