@@ -34,9 +34,9 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
                     agent_target: Callable | None = None, memory=None,
                     layout: EmbeddedLayout | None = None) -> float:
     """The launcher's world and agent processes on one machine; ``agent_target`` replaces the
-    agents' entry point (same arguments as ``launch.swarm.agent_main``); ``memory`` (a
+    agents' entry point (same arguments as ``launch.processes.agent_main``); ``memory`` (a
     ``bench.procstat.MemorySampler``) is told every process as ``world`` and ``agent-<i>``."""
-    from nnql_swarm.launch.swarm import agent_main, world_main
+    from nnql_swarm.launch.processes import agent_main, world_main
 
     os.environ.update(plain_python_environment())  # as the launcher's world and agents run
     ctx = mp.get_context("spawn")
@@ -68,7 +68,7 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
 
 def run_local(config: SwarmConfig, out: Path, record: bool) -> float:
     """The same logic in one process (``--in-process``)."""
-    from nnql_swarm.launch.swarm import run_in_process
+    from nnql_swarm.launch.swarm_cli import run_in_process
 
     out.mkdir(parents=True)
     run_in_process(config, out, record, progress=False)

@@ -220,12 +220,13 @@ class TransportSettings:
 
 TOPOLOGIES = ("mesh", "hub-peer", "hub-router", "router", "star-peers")
 
-HUB_FROM_AGENTS = 64
+HUB_FROM_AGENTS = 32
 """From this many agents the launcher's embedded layout is ``hub-peer`` rather than ``mesh``
 (``embedded_topology``): measured with ``bench/scale.py --topology`` at constant density, the
-mesh ticks faster at 8 agents (355 against 285 ticks a second) and about as fast at 32 (49
-against 44); at 64 the hub gives 16 against 13, a start-up of 12.4 s against 16.5 and no missed
-intent in the first episode against 51 (every peer's mesh of 63 links takes long to form)."""
+mesh ticks faster at 8 agents (355 against 285 ticks a second) and about as fast at 32 (46 and
+47 against 45 and 43), but there each agent holds 61 MiB against 55 (a link per peer); at 64 the
+hub gives 16 against 13 ticks a second, a start-up of 12.4 s against 16.5 and no missed intent in
+the first episode against 51 (every peer's mesh of 63 links takes long to form)."""
 
 
 def embedded_topology(n_agents: int) -> str:

@@ -153,7 +153,7 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
 def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, tmp_path):
     """The paper's reading (each agent its own tables) and the best options (one table shared
     over Zenoh, the direction-aware reading), and the default with every agent a client of the
-    world (the layout of 64 agents and more): the same episodes and tables either way."""
+    world (the layout of 32 agents and more): the same episodes and tables either way."""
     options = ("--agents", "6", "--episodes", "4", "--max-steps", "30", "--seed", "2",
                "--preset", preset, "--no-record", "--run-id", preset)
     distributed = run_swarm(tmp_path / "dist", *options, "--topology", topology)

@@ -1,0 +1,122 @@
+"""What each spawned process of a swarm runs: the world's and an agent's entry points.
+
+Apart from the command line (``launch.swarm_cli``) so that a spawned agent imports only what it
+runs: every process imports its entry point's module, and an agent's resident memory is the
+measure (``bench/scale.py``). The heavy parts (the nodes, the recording) are imported inside.
+"""
+
+import logging
+import multiprocessing as mp
+import os
+import sys
+import time
+from pathlib import Path
+
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.transport import TransportSettings, wait_listening
+from nnql_swarm.supervision.resume import ResumePoint
+
+
+def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
+               progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> None:
+    """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
+    from nnql_swarm.recording.session import exit_without_teardown, open_world_viz
+    from nnql_swarm.world.node import WorldOptions, run_world
+
+    from nnql_swarm.terminal.cli import progress as progress_bar
+
+    name_process("nnql-world", config)
+    setup_logging("world")
+    bar = progress_bar(config.episodes - start.episode, "episode") if progress else None
+    collisions = 0
+
+    def on_tick(world, report) -> None:
+        nonlocal collisions
+        collisions += len(report.collided)
+        if viz is not None:
+            viz.log_tick(world, report)
+        if bar is not None and report.episode_row is not None:
+            row = report.episode_row
+            bar.set_postfix(arrived=f"{row['arrived']}/{config.n_agents}", collisions=collisions,
+                            missed=row["missed_intents"],
+                            ticks_per_s=f"{world.tick / max(time.monotonic() - started, 1e-9):.0f}",
+                            refresh=False)
+            bar.update(1)
+
+    viz = open_world_viz(record, config, out)
+    started = time.monotonic()
+    try:
+        code = run_world(WorldOptions(config, transport, out,
+                                      first_episode=start.episode, first_tick=start.tick), on_tick)
+    finally:
+        if bar is not None:
+            bar.close()
+        if viz is not None:
+            viz.close()
+    if viz is not None:
+        exit_without_teardown(code)
+    sys.exit(code)  # a spawned process's exit code is its target's SystemExit, not its return
+
+
+def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
+               resume: bool = False, recording=None, hub: tuple[str, int] | None = None) -> None:
+    """An agent process (spawned); ``resume`` reloads its checkpoint if there is one; ``hub``:
+    the ``(host, port)`` of the world to wait for, where the agent is its client."""
+    from nnql_swarm.agent.node import AgentOptions, run_agent
+    from nnql_swarm.recording.session import exit_without_teardown, open_agent_viz
+
+    name_process(f"nnql-agent {agent}", config)
+    setup_logging(f"agent {agent}")
+    if hub is not None:
+        wait_listening(*hub, timeout_s=HUB_WAIT_S)  # if not, opening the session says so
+    brain, on_episode_end, viz = open_agent_viz(recording, agent, config)
+    try:
+        code = run_agent(AgentOptions(agent, config, transport, out, resume=resume), brain,
+                         on_episode_end)
+    finally:
+        if viz is not None:
+            viz.close()
+    if viz is not None:
+        exit_without_teardown(code)
+    sys.exit(code)
+
+
+HUB_WAIT_S = 60.0
+"""How long an agent of a hub topology waits for the world to listen before it tries anyway."""
+
+
+def name_process(title: str, config: SwarmConfig) -> None:
+    """Make the process recognisable in ps / pgrep: e.g. ``nnql-agent 3 <run-id>``; and make it
+    end with the launcher (:func:`die_with_launcher`)."""
+    import setproctitle
+
+    setproctitle.setproctitle(f"{title} {config.run_id}")
+    die_with_launcher()
+
+
+PR_SET_PDEATHSIG = 1
+"""prctl(2): the signal a process gets when the thread that started it ends."""
+
+
+def die_with_launcher() -> None:
+    """Have Linux send SIGTERM to this process when the launcher dies, even by ``kill -9``.
+
+    Otherwise a launcher killed outright leaves its agents waiting for a world that never comes
+    back, and they would join the next ``--resume`` of the same run as a second copy of each
+    agent. SIGTERM stops a process as Ctrl-C does (checkpoints and stats intact). Elsewhere than
+    Linux this does nothing.
+    """
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+    parent = mp.parent_process()
+    if parent is not None and os.getppid() != parent.pid:  # it died before prctl took effect
+        os.kill(os.getpid(), signal.SIGTERM)
+
+
+def setup_logging(name: str) -> None:
+    logging.basicConfig(level=os.environ.get("NNQL_LOG", "WARNING").upper(),
+                        format=f"%(asctime)s {name}: %(message)s", stream=sys.stderr)
