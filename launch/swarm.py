@@ -3,14 +3,19 @@
 
     python launch/swarm.py --agents 8
 
-``--help`` lists the options; ``launch.swarm_cli`` is the command line. This file only calls it:
-every process it spawns imports this file again (multiprocessing's spawn), and so loads nothing
-it does not run.
+``--help`` lists the options; ``launch.swarm_cli`` is the command line. This module only calls
+it: every process the launcher spawns imports its main module again (multiprocessing's spawn),
+this file or the ``nnql-swarm`` script, and so loads nothing it does not run.
 """
 
 import sys
 
-if __name__ == "__main__":
-    from nnql_swarm.launch.swarm_cli import main
 
+def main(argv: list[str] | None = None) -> int:
+    from nnql_swarm.launch.swarm_cli import main as command_line
+
+    return command_line(argv)
+
+
+if __name__ == "__main__":
     sys.exit(main())
