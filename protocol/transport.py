@@ -182,11 +182,13 @@ class TransportSettings:
     multicast: bool = False
     gossip: bool | None = None
     """Gossip scouting on or off; None leaves it to Zenoh (on) or to the config file."""
+    connect_timeout_s: float = 0.0
+    """How long a client keeps retrying its first connect (Zenoh's client default: not at all)."""
 
     def to_dict(self) -> dict:
         return {"mode": self.mode, "listen": list(self.listen), "connect": list(self.connect),
                 "config_file": self.config_file, "multicast": self.multicast,
-                "gossip": self.gossip}
+                "gossip": self.gossip, "connect_timeout_s": self.connect_timeout_s}
 
     @staticmethod
     def from_dict(data: dict) -> "TransportSettings":
@@ -194,6 +196,7 @@ class TransportSettings:
             mode=data["mode"], listen=tuple(data["listen"]), connect=tuple(data["connect"]),
             config_file=data.get("config_file"), multicast=bool(data.get("multicast", False)),
             gossip=data.get("gossip"),
+            connect_timeout_s=float(data.get("connect_timeout_s", 0.0)),
         )
 
     def zenoh_config(self) -> zenoh.Config:
@@ -215,6 +218,9 @@ class TransportSettings:
             config.insert_json5("transport/shared_memory/enabled", "false")
         if self.gossip is not None:
             config.insert_json5("scouting/gossip/enabled", json.dumps(self.gossip))
+        if self.connect_timeout_s > 0:
+            config.insert_json5("connect/timeout_ms", json.dumps(
+                {"router": -1, "peer": -1, "client": round(self.connect_timeout_s * 1000)}))
         return config
 
 
@@ -227,6 +233,12 @@ mesh ticks faster at 8 agents (355 against 285 ticks a second) and about as fast
 47 against 45 and 43), but there each agent holds 61 MiB against 55 (a link per peer); at 64 the
 hub gives 16 against 13 ticks a second, a start-up of 12.4 s against 16.5 and no missed intent in
 the first episode against 51 (every peer's mesh of 63 links takes long to form)."""
+
+
+HUB_CONNECT_S = 60.0
+"""How long an agent that is a client of the hub keeps retrying its connect: 128 agents that
+connect at once to a world still starting up on two cores were refused, and a Zenoh client by
+default does not retry."""
 
 
 def embedded_topology(n_agents: int) -> str:
@@ -290,4 +302,5 @@ class EmbeddedLayout:
                                      connect=(self.endpoint,))
         if t == "star-peers":
             return TransportSettings(mode="peer", connect=(self.endpoint,), gossip=False)
-        return TransportSettings(mode="client", connect=(self.endpoint,))
+        return TransportSettings(mode="client", connect=(self.endpoint,),
+                                 connect_timeout_s=HUB_CONNECT_S)

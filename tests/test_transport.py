@@ -123,3 +123,33 @@ def test_sessions_map_no_shared_memory():
         assert results.get(timeout=60) == []
     finally:
         process.join(10)
+
+
+def test_a_client_of_the_hub_keeps_connecting_until_the_hub_listens():
+    """The embedded hub's agents retry their connect (128 of them at once were refused)."""
+    from nnql_swarm.protocol.transport import EmbeddedLayout, TransportError
+
+    layout = EmbeddedLayout(topology="hub-peer")
+    agent = layout.agent()
+    assert agent.mode == "client" and agent.connect_timeout_s >= 30
+    hub_up = threading.Event()
+
+    def hub_later() -> None:
+        time.sleep(1.5)
+        with transport.open_session(layout.world()):
+            hub_up.set()
+            time.sleep(5)
+
+    late = threading.Thread(target=hub_later)
+    late.start()
+    try:
+        with transport.open_session(agent):
+            assert hub_up.is_set()
+    finally:
+        late.join()
+    impatient = TransportSettings(mode="client", connect=(f"tcp/127.0.0.1:{free_port()}",))
+    try:
+        transport.open_session(impatient).close()
+        raise AssertionError("a client without the retry connected to nobody")
+    except TransportError:
+        pass
