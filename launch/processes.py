@@ -21,9 +21,8 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
                progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> None:
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
     from nnql_swarm.recording.session import exit_without_teardown, open_world_viz
-    from nnql_swarm.world.node import WorldOptions, run_world
-
     from nnql_swarm.terminal.cli import progress as progress_bar
+    from nnql_swarm.world.node import WorldOptions, run_world
 
     name_process("nnql-world", config)
     setup_logging("world")

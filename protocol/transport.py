@@ -248,7 +248,8 @@ def embedded_topology(n_agents: int) -> str:
 
 def wait_listening(host: str, port: int, timeout_s: float = 30.0) -> bool:
     """Until something accepts TCP connections on ``host:port`` (a hub's Zenoh listener);
-    False if nothing did within ``timeout_s``. Zenoh clients do not retry their first connect."""
+    False if nothing did within ``timeout_s``. A client of the hub connects then at once, rather
+    than at Zenoh's next retry (``connect_timeout_s``), a second or more later."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
         try:

@@ -3,8 +3,8 @@
 The simulator plays every agent and the world inside the compiled kernel, in rank order, exactly
 as the distributed negotiation orders them when nobody misses a deadline; this runner adds what a
 run leaves: ``episodes.csv`` (a row per episode, flushed as it ends), the agents' checkpoints at
-the end (and the world's, where they share one table), and, if asked, every tick replayed to the recording (``on_tick``) and every agent's
-tables at each episode's end (``on_episode_end``).
+the end (and the world's, where they share one table), and, if asked, every tick replayed to the
+recording (``on_tick``) and every agent's tables at each episode's end (``on_episode_end``).
 """
 
 import time
