@@ -20,7 +20,9 @@ from nnql_swarm.agent.learner import (
     REC_COUNT, REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome,
     entry_cells, reach, record_size, state_size, write_updates,
 )
-from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, target_x, target_y
+from nnql_swarm.protocol.actions import (
+    N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y,
+)
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import filled, floats, ints, python_values, rows, table
 from nnql_swarm.protocol.messages import Observation
@@ -47,9 +49,9 @@ class Learner:
         init = float(config.optimistic)
         self.q_ds = filled(N_STATES, N_ACTIONS, init)
         self.q_ca = filled(ca_rows(reading, config.known_state), N_ACTIONS, init)
-        self.state = ints([0] * state_size(config.n_agents))
+        self.state = ints([0] * state_size(config.n_bodies))
         self.state_f = floats([0.0] * LF_FIELDS)
-        self.rec = ints([0] * record_size(config.n_agents))
+        self.rec = ints([0] * record_size(config.n_bodies))
         self.rec_f = floats([0.0] * RF_FIELDS)
         self.values = floats([0.0] * N_ACTIONS)
         self._cells: list | None = None
@@ -113,7 +115,11 @@ class AgentBrain:
         self._noise: tuple[list[int], list[list[float]]] | None = None
         self._noise_episode = -1
         self._prepared = (-1, -1)  # the observation prepared last (episode, tick)
-        self._seen: tuple[int, dict[int, tuple[int, int]]] = (-1, {})  # DAQL: last tick's cells
+        self._seen: tuple = (-1, {}, None)  # DAQL: last tick's cells, and the agent's own
+        self._was_at: tuple[int, int] | None = None  # DAQL: the agent's cell a tick ago
+        self._walls = {y * config.width + x: config.n_agents + k
+                       for k, (x, y) in enumerate(config.walls().tolist())}
+        self._walls_near: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
 
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         """The neighbours whose intents this agent decides with, of those it waits for
@@ -144,7 +150,7 @@ class AgentBrain:
         record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
         (x, y), (gx, gy) = obs.position, obs.goal
         stops = obs.arrived or obs.episode_end
-        near = self._neighbour_rows(obs, {} if stops else answers)
+        near = self._neighbour_rows(obs, {} if stops else answers, not stops)
         nb, m = rows(near, NB_FIELDS), len(near)
         if stops:
             written = finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
@@ -162,11 +168,14 @@ class AgentBrain:
         self.learned = (learner.record(),) if shared and written else ()
         return int(action)
 
-    def _neighbour_rows(self, obs: Observation, answers: dict[int, int]) -> list[list[int]]:
+    def _neighbour_rows(self, obs: Observation, answers: dict[int, int],
+                        announcing: bool) -> list[list[int]]:
         """The learner's neighbour rows (``agent.learner.NB_*``) for this observation: the
         visible neighbours within the learner's reach (``agent.learner.reach``: no other can
         change its decision or its learning) in id order, each with its announced move where it
-        answered."""
+        answered; then the walls within reach, each known to stay where it is within the
+        negotiation radius (as the simulator reads a scripted obstacle), unless nobody
+        announces (``announcing``: not at an episode's end, nor once arrived)."""
         w, h = self.config.width, self.config.height
         previous = self._previous_cells(obs)
         parked = set(obs.parked)
@@ -182,14 +191,36 @@ class AgentBrain:
                 nx, ny, known = target_x(jx, action, w), target_y(jy, action, h), 1
             px, py = previous.get(j, (-1, -1))
             rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py, 0])
+        if self._walls:
+            knows = announcing and self.reads_intents
+            radius = self.config.interaction_radius
+            was_at = self._was_at
+            for j, jx, jy, distance in self._walls_within(x, y):
+                px, py = (jx, jy) if was_at is not None and sees(*was_at, jx, jy) else (-1, -1)
+                known = int(knows and distance <= radius)
+                rows.append([j, jx, jy, known, jx, jy, jx, jy, 0, px, py, 0])
         return rows
+
+    def _walls_within(self, x: int, y: int) -> list[tuple[int, int, int, int]]:
+        """The walls within reach and view of cell ``(x, y)`` as ``(id, x, y, distance)`` in id
+        order (cell order), once per cell."""
+        near = self._walls_near.get((x, y))
+        if near is None:
+            w, h, far = self.config.width, self.config.height, min(self._reach, VIEW_RADIUS)
+            near = [(self._walls[cy * w + cx], cx, cy, max(abs(cx - x), abs(cy - y)))
+                    for cy in range(max(0, y - far), min(h, y + far + 1))
+                    for cx in range(max(0, x - far), min(w, x + far + 1))
+                    if cy * w + cx in self._walls]
+            self._walls_near[(x, y)] = near
+        return near
 
     def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:
         """DAQL's memory: the neighbours' cells at the previous tick of this episode, where they
-        were in view; and this tick's, for the next."""
+        were in view, and the agent's own then (:attr:`_was_at`); and this tick's, for the next."""
         if self.learner.params[LP_READING] != READ_DAQL:
             return {}
-        tick, cells = self._seen
-        previous = cells if tick == obs.tick - 1 and obs.step > 0 else {}
-        self._seen = (obs.tick, {j: (jx, jy) for j, jx, jy in obs.neighbours})
-        return previous
+        tick, cells, was_at = self._seen
+        recent = tick == obs.tick - 1 and obs.step > 0
+        self._was_at = was_at if recent else None
+        self._seen = (obs.tick, {j: (jx, jy) for j, jx, jy in obs.neighbours}, obs.position)
+        return cells if recent else {}

@@ -73,6 +73,7 @@ class SwarmExperiment:
     max_steps: int = 100
     width: int = 11
     height: int = 11
+    obstacle_density: float = 0.0
     variants: tuple[str, ...] = VARIANTS
     presets: dict[str, dict] = field(default_factory=lambda: dict(PRESETS))
 
@@ -80,7 +81,8 @@ class SwarmExperiment:
         """The swarm config of one run (the one ``launch/swarm.py --preset`` would resolve)."""
         return SwarmConfig(run_id=run_name(variant, seed), n_agents=self.agents,
                            episodes=self.episodes, max_steps=self.max_steps, width=self.width,
-                           height=self.height, seed=seed, **self.presets[variant])
+                           height=self.height, seed=seed, obstacle_density=self.obstacle_density,
+                           **self.presets[variant])
 
     @property
     def seed_list(self) -> list[int]:
@@ -92,7 +94,8 @@ class SwarmExperiment:
         return (round(fifth), round(2 * fifth)), (round(4 * fifth), self.episodes)
 
     def __hash__(self) -> int:
-        return hash((self.agents, self.seeds, self.seed_base, self.episodes, self.variants))
+        return hash((self.agents, self.seeds, self.seed_base, self.episodes, self.variants,
+                     self.obstacle_density))
 
 
 def run_name(variant: str, seed: int) -> str:
@@ -172,8 +175,9 @@ def markdown(results: SwarmResults, rows: list[dict]) -> str:
     (a0, a1), (b0, b1) = e.windows()
     head = (f"| variant | arrival {a0}-{a1} | arrival {b0}-{b1} | steps ratio {b0}-{b1} | "
             f"collisions [95 % CI] | vs | decrease % | difference [95 % CI] |")
-    lines = [f"# The swarm experiment: {e.agents} agents, {e.width} x {e.height}, swaps counted, "
-             f"{e.episodes} episodes, seeds {e.seed_base}-{e.seed_base + e.seeds - 1}", "",
+    walls = f", obstacle density {e.obstacle_density}" if e.obstacle_density else ""
+    lines = [f"# The swarm experiment: {e.agents} agents, {e.width} x {e.height}{walls}, swaps "
+             f"counted, {e.episodes} episodes, seeds {e.seed_base}-{e.seed_base + e.seeds - 1}", "",
              head, "|---|---:|---:|---:|---:|---|---:|---:|"]
     for row in rows:
         lines.append(
@@ -185,7 +189,9 @@ def markdown(results: SwarmResults, rows: list[dict]) -> str:
     lines += ["", "Each variant is a set of learning options (a preset of `protocol/config.py` where "
               "it has the name of one); one run of a preset is `python launch/swarm.py --preset "
               f"<variant> --agents {e.agents} --episodes {e.episodes} --seed <seed> --grid "
-              f"{e.width}x{e.height} --in-process`, whose `episodes.csv` equals "
+              f"{e.width}x{e.height}"
+              + (f" --obstacle-density {e.obstacle_density}" if e.obstacle_density else "")
+              + " --in-process`, whose `episodes.csv` equals "
               "`runs/<variant>-s<seed>/episodes.csv` here.", ""]
     for variant in e.variants:
         options = ", ".join(f"{k}={v}" for k, v in e.presets[variant].items())

@@ -262,6 +262,9 @@ def build_swarm_parser() -> OneLineParser:
     add("--episodes", type=bounded(int, 5), default=d.episodes, metavar="N")
     add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
     add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH")
+    add("--obstacle-density", type=float, default=d.obstacle_density, metavar="P",
+        help="fraction of the grid's cells that are walls (each seed its own map); the oracle, "
+             "which plans on an open grid, is then left out")
     add("--variants", type=parse_variants, default=d.variants, metavar="LIST",
         help=f"comma-separated, from {','.join(VARIANTS)}")
     add("--ablation", action="store_true",
@@ -281,11 +284,16 @@ def run_swarm(argv: list[str]) -> Path:
     parser = build_swarm_parser()
     args = parser.parse_args(argv)
     presets = ablation_presets() if args.ablation else dict(PRESETS)
+    variants = tuple(presets) if args.ablation else args.variants
+    if args.obstacle_density:
+        variants = tuple(v for v in variants if presets[v]["algo"] != "oracle")
+        if not variants:
+            parser.error("the oracle plans on an open grid: no variant left with walls")
     experiment = SwarmExperiment(agents=args.agents, seeds=args.seeds, seed_base=args.seed_base,
                                  episodes=args.episodes, max_steps=args.max_steps,
                                  width=args.grid[0], height=args.grid[1],
-                                 variants=tuple(presets) if args.ablation else args.variants,
-                                 presets=presets)
+                                 obstacle_density=args.obstacle_density,
+                                 variants=variants, presets=presets)
     try:
         experiment.config(experiment.variants[0], experiment.seed_base)
     except ValueError as error:

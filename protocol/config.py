@@ -7,10 +7,13 @@ every process, so that a distributed run and an in-process run of one config are
 import json
 from dataclasses import asdict, dataclass, field, fields
 
+import numpy as np
+
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.keys import validate_run_id
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_GRID
 from nnql_swarm.protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
+from nnql_swarm.protocol.walls import MAX_DENSITY, layout, wall_count
 
 ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
 """nnQL (the paper), plain QL, nnQL whose neighbour state also holds the announced move, Double
@@ -107,6 +110,9 @@ class SwarmConfig:
                             "steps ahead (in-process only for n > 1)", metavar="N")
     still_terminal: bool = option(_DEFAULT["still_terminal"], "a step that went nowhere ends its destination-seeking "
                                   "return (no bootstrap from the state it stayed in)")
+    obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
+                                     "obstacles drawn from the seed; starts and goals in the "
+                                     "largest free region)", metavar="P")
     tick_deadline_s: float = option(2.0, "seconds the world waits for intents each tick",
                                     "--deadline")
 
@@ -133,10 +139,38 @@ class SwarmConfig:
             (1 <= self.lookahead <= MAX_LOOKAHEAD, f"the lookahead n must be 1..{MAX_LOOKAHEAD}"),
             (self.lookahead == 1 or self.algo in ("nnql",), "a lookahead n > 1 needs --algo nnql"),
             (self.tick_deadline_s > 0, "the tick deadline must be positive"),
+            (0 <= self.obstacle_density <= MAX_DENSITY,
+             f"the obstacle density must be 0..{MAX_DENSITY}"),
+            (self.obstacle_density == 0 or self.algo != "oracle",
+             "the oracle plans on an open grid: --algo oracle takes no --obstacle-density"),
         ]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+        free = len(self.open_cells())
+        if self.obstacle_density and 2 * self.n_agents > free:
+            raise ValueError(
+                f"{self.n_agents} agents need {2 * self.n_agents} distinct start and goal cells; "
+                f"the largest free region of a {self.width}x{self.height} grid at obstacle density "
+                f"{self.obstacle_density} has {free}")
+
+    @property
+    def n_walls(self) -> int:
+        """How many walls the grid holds (``protocol.walls``)."""
+        return wall_count(self.width, self.height, self.obstacle_density)
+
+    @property
+    def n_bodies(self) -> int:
+        """Agents, then walls: body ``n_agents + k`` is wall ``k``."""
+        return self.n_agents + self.n_walls
+
+    def walls(self) -> np.ndarray:
+        """The run's walls, ``(K, 2)`` cells in cell order (read-only)."""
+        return layout(self.seed, self.width, self.height, self.obstacle_density)[0]
+
+    def open_cells(self) -> np.ndarray:
+        """The cells starts and goals are drawn from (``y * W + x``; read-only)."""
+        return layout(self.seed, self.width, self.height, self.obstacle_density)[1]
 
     def learning(self) -> dict:
         """The options of :data:`LEARNING_FIELDS`, as a preset would give them."""

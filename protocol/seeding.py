@@ -2,7 +2,7 @@
 
 ``SeedSequence(seed, spawn_key=(stream, index))`` gives independent, reproducible streams: the
 scenario of episode ``index``, the noise of agent ``index``, or (the simulator, ``sim``) a fault
-schedule's draws. Nothing else draws randomness.
+schedule's draws; and, once per run, its walls (``protocol.walls``). Nothing else draws randomness.
 """
 
 import numpy as np
@@ -10,6 +10,7 @@ import numpy as np
 SCENARIO_STREAM = 1
 AGENT_STREAM = 2
 SIM_STREAM = 3
+WALL_STREAM = 4
 
 
 def stream_rng(seed: int, stream: int, index: int) -> np.random.Generator:

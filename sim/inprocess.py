@@ -109,14 +109,15 @@ def run_in_process(
 
 def _replay(config: SwarmConfig, batch: Batch, row: dict,
             on_tick: Callable[[TickView, TickReport], None]) -> None:
-    """Hand the episode just played to ``on_tick``, tick by tick, from the simulator's trace."""
-    trace, steps = batch.trace[0], row["steps"]
+    """Hand the episode just played to ``on_tick``, tick by tick, from the simulator's trace
+    (its agents: the walls after them never move)."""
+    trace, steps = batch.trace[0][:, :config.n_agents], row["steps"]
     first = row["end_tick"] - steps
     for step in range(steps + 1):
         ending = step == steps
         if ending and row["episode"] + 1 < config.episodes:
             starts = swarm_episode(config.seed, row["episode"] + 1, config.width, config.height,
-                                   config.n_agents).starts
+                                   config.n_agents, config.obstacle_density).starts
             after = TickView(tuple(map(tuple, starts.tolist())), (False,) * config.n_agents, 0)
         else:
             later = trace[min(step + 1, steps)]

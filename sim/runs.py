@@ -20,9 +20,10 @@ from nnql_swarm.agent.learner import (
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise,
     record_size, state_size,
 )
-from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
+from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
+from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
     OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
     OUT_SHORTEST, OUT_VIOLATIONS, TR_FIELDS, run_episode,
@@ -36,7 +37,10 @@ from nnql_swarm.world.scenario import paper_episode, swarm_episode
 
 @dataclass(frozen=True)
 class World:
-    """What every run of a batch shares: bodies (the first ``learners`` learn), grid, steps."""
+    """What every run of a batch shares: bodies (the first ``learners`` learn), grid, steps.
+
+    The scripted bodies are the paper's obstacles or, at an ``obstacle_density`` above 0, the
+    swarm's walls (each run's own, from its seed)."""
 
     bodies: int
     learners: int
@@ -46,17 +50,23 @@ class World:
     count_swaps: bool = True
     goal_reward: float = GOAL_REWARD
     stay_reward: float = STAY_REWARD
+    obstacle_density: float = 0.0
 
     @property
     def scripted(self) -> int:
         return self.bodies - self.learners
 
+    @property
+    def paper(self) -> bool:
+        """Whether the scripted bodies are the paper's obstacles (rather than walls)."""
+        return self.scripted > 0 and not self.obstacle_density
+
 
 def swarm_world(config: SwarmConfig) -> World:
-    return World(bodies=config.n_agents, learners=config.n_agents, width=config.width,
+    return World(bodies=config.n_bodies, learners=config.n_agents, width=config.width,
                  height=config.height, max_steps=config.max_steps,
                  count_swaps=config.count_swaps, goal_reward=config.goal_reward,
-                 stay_reward=config.stay_reward)
+                 stay_reward=config.stay_reward, obstacle_density=config.obstacle_density)
 
 
 class Episodes:
@@ -155,14 +165,15 @@ class Batch:
         seed_ties = np.zeros((seeds, w.learners, w.max_steps, N_ACTIONS))
         for _ in range(episodes):
             e = self.episode
-            starts, goals, scripts = self._scenarios(e)
+            starts, goals, scripts, paths = self._scenarios(e)
             for s, generators in enumerate(self.generators.values()):
                 for i, rng in enumerate(generators):
                     draw_noise(rng, seed_actions[s, i], seed_ties[s, i])
             run_episode(w.bodies, w.learners, w.width, w.height, w.max_steps, w.count_swaps,
                         w.goal_reward, w.stay_reward, self.params, self.params_f, self.options,
                         self.q_ds, self.q_ca, self.state, self.state_f, self._seed_of_run,
-                        starts, goals, scripts, seed_actions, seed_ties, self.tick, self.record,
+                        starts, goals, scripts, paths, seed_actions, seed_ties, self.tick,
+                        self.record,
                         self.trace,
                         row=row, row_f=row_f, out=out, learns=self.learns, **self._scratch)
             results.row[:, e], results.row_f[:, e], results.out[:, e] = row, row_f, out
@@ -185,21 +196,25 @@ class Batch:
         return int(self.state[run, agent, LS_TAKEN])
 
     def _scenarios(self, episode: int):
-        """Every seed's starts, goals and scripts of an episode."""
+        """Every seed's starts, goals, scripts and the learners' shortest paths of an episode."""
         w = self.world
-        starts, goals, scripts = [], [], []
+        starts, goals, scripts, paths = [], [], [], []
         for seed in self._seeds:
-            if w.scripted:
+            if w.paper:
                 sc = paper_episode(seed, episode, w.width, w.height, w.scripted, w.max_steps)
                 starts.append(sc.starts)
                 goals.append(sc.goal[None, :])
                 scripts.append(sc.obstacle_actions)
+                paths.append(np.abs(sc.starts[:1] - sc.goal).sum(axis=1))
             else:
-                sc = swarm_episode(seed, episode, w.width, w.height, w.bodies)
-                starts.append(sc.starts)
+                sc = swarm_episode(seed, episode, w.width, w.height, w.learners,
+                                   w.obstacle_density)
+                walls = layout(seed, w.width, w.height, w.obstacle_density)[0]
+                starts.append(np.concatenate([sc.starts, walls]))
                 goals.append(sc.goals)
-                scripts.append(np.zeros((w.max_steps, 0), dtype=np.int64))
-        return np.stack(starts), np.stack(goals), np.stack(scripts)
+                scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))
+                paths.append(sc.shortest)
+        return np.stack(starts), np.stack(goals), np.stack(scripts), np.stack(paths)
 
 
 @contextlib.contextmanager
@@ -222,6 +237,8 @@ def check_run(world: World, run: SwarmConfig) -> None:
         raise ValueError(f"unknown algorithm {run.algo!r}")
     if run.algo == "oracle" and world.scripted:
         raise ValueError("the oracle plans swarms of learners, not scripted obstacles")
+    if run.obstacle_density != world.obstacle_density:
+        raise ValueError("every run of a batch needs the world's obstacle density")
 
 
 def _params(run: SwarmConfig) -> list[int]:

@@ -11,8 +11,8 @@ world's end tick does. Where a run shares one table among its agents, every agen
 record of a tick is applied in agent-id order before the next tick.
 
 Bodies ``0 .. learners - 1`` learn; the rest are scripted obstacles whose every action is given
-(the paper's experiment: one learner, three obstacles), outrank every learner and announce their
-scripted next action. An oracle run plans every learner's move with PIBT (``sim.oracle``) and
+(the paper's experiment: one learner, three obstacles; a swarm's walls, ``protocol.walls``, whose
+every action is to stay), outrank every learner and announce their scripted next action. An oracle run plans every learner's move with PIBT (``sim.oracle``) and
 learns nothing.
 
 Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agent.learner``) and
@@ -115,21 +115,21 @@ def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, 
 @batch_kernel
 def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
                 params, params_f, options, q_ds, q_ca, state, state_f, seed_of_run,
-                starts, goals, scripts, random_actions, ties, tick,
+                starts, goals, scripts, paths, random_actions, ties, tick,
                 record, trace,
                 x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
                 collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
                 rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
     """Play one episode of every run (see the module docstring); ``tick`` (one per run) is each
     run's global tick, advanced in place, as are the tables and learner states. The scenario
-    (``starts``, ``goals``, ``scripts``) and the noise (``random_actions``, ``ties``) are given per
+    (``starts``, ``goals``, ``scripts``, the learners' shortest ``paths``) and the noise (``random_actions``, ``ties``) are given per
     seed, and ``seed_of_run`` says which seed's each run plays."""
     runs = params.shape[0]
     for r in prange(runs):
         s = seed_of_run[r]
         _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
                  params[r], params_f[r], options[r], q_ds[r], q_ca[r], state[r], state_f[r],
-                 starts[s], goals[s], scripts[s], random_actions[s], ties[s], tick,
+                 starts[s], goals[s], scripts[s], paths[s], random_actions[s], ties[s], tick,
                  record, trace[r],
                  x[r], y[r], prev_x[r], prev_y[r], goal_x[r], goal_y[r], learns, arrived[r],
                  actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
@@ -140,7 +140,7 @@ def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward,
 @kernel
 def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
              params, params_f, options, q_ds, q_ca, state, state_f,
-             starts, goals, scripts, random_actions, ties, ticks,
+             starts, goals, scripts, paths, random_actions, ties, ticks,
              record, trace,
              x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
              collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
@@ -163,7 +163,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
         if i < learners:
             goal_x[i] = goals[i, 0]
             goal_y[i] = goals[i, 1]
-            shortest += shortest_steps(x[i], y[i], goal_x[i], goal_y[i])
+            shortest += paths[i]
             if oracle:  # PIBT's order for the episode: the farthest from its goal first
                 oracle_scratch[7, i] = shortest_steps(x[i], y[i], goal_x[i], goal_y[i])
         else:

@@ -160,11 +160,15 @@ def test_ten_thousand_schedules_pass(capsys):
     assert sum(1 for r in results if not r.fired) >= SCHEDULES // 20, "some ran without faults"
 
 
-@pytest.mark.parametrize("algo, grid", [("nnql", (11, 11)), ("nnql", (30, 14)), ("ql", (11, 11)),
-                                        ("nnql-dir", (16, 16))])
-def test_without_faults_the_simulator_gives_the_in_process_run_file_for_file(tmp_path, algo, grid):
+@pytest.mark.parametrize("algo, grid, walls", [
+    ("nnql", (11, 11), 0.0), ("nnql", (30, 14), 0.0), ("ql", (11, 11), 0.0),
+    ("nnql-dir", (16, 16), 0.0), ("nnql", (14, 14), 0.25), ("daql", (14, 14), 0.25),
+    ("ql", (24, 24), 0.2)])
+def test_without_faults_the_simulator_gives_the_in_process_run_file_for_file(tmp_path, algo, grid,
+                                                                             walls):
     config = SwarmConfig(run_id="parity", n_agents=8, episodes=4, max_steps=40, seed=3,
-                         algo=algo, width=grid[0], height=grid[1])
+                         algo=algo, width=grid[0], height=grid[1], obstacle_density=walls,
+                         interaction_radius=10 if algo == "daql" else 2)
     schedule = Schedule(3, config, latency=(50e-6, 400e-6), faults=())
     (tmp_path / "sim").mkdir()
     outcome = SimSwarm(schedule, tmp_path / "sim", checkpoint_all=True, write_metrics=True).run()

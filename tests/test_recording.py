@@ -214,6 +214,26 @@ def test_the_negotiation_is_logged_as_the_agents_ask(run):
 
 
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server was stopped, not closed
+def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
+    out = tmp_path / "walls"
+    result = run_swarm(out, "--agents", "6", "--episodes", "3", "--max-steps", "30", "--grid",
+                       "16x16", "--obstacle-density", "0.25", "--in-process")
+    assert result.returncode == 0, result.stderr
+    verify(out / "run.rrd")
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    walls = {tuple(cell) for cell in config.walls().tolist()}
+    assert len(walls) == 64
+    reader = rr.chunk.RrdReader(out / "run.rrd")
+    logged = [chunk.to_record_batch().column("Boxes2D:centers").to_pylist()
+              for chunk in reader.stream() if chunk.entity_path.lstrip("/") == "world/walls"]
+    assert [{tuple(map(round, c)) for c in batch[0]} for batch in logged] == [walls]
+    recording = Recording(out / "run.rrd")
+    cells = {tuple(map(round, cell)) for tick in recording.column("world/agents",
+                                                                 "Points2D:positions")
+             for cell in tick}
+    assert cells and not cells & walls
+
+
 def test_streaming_to_a_viewer_sends_the_same_recording(in_process):
     out, recording, received = in_process
     streamed = Recording(received)

@@ -148,14 +148,17 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
         checkpoint.load(checkpoint.checkpoint_path(out / "checkpoints", agent), AgentBrain(agent, config))
 
 
-@pytest.mark.parametrize("preset, topology", [("nnql", "auto"), ("best-nnql", "auto"),
-                                             ("shield-nnql", "hub-peer")])
-def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, tmp_path):
+@pytest.mark.parametrize("preset, topology, grid", [
+    ("nnql", "auto", ()), ("best-nnql", "auto", ()), ("shield-nnql", "hub-peer", ()),
+    ("shield-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25"))])
+def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, grid,
+                                                                   tmp_path):
     """The paper's reading (each agent its own tables) and the best options (one table shared
-    over Zenoh, the direction-aware reading), and the default with every agent a client of the
-    world (the layout of 32 agents and more): the same episodes and tables either way."""
+    over Zenoh, the direction-aware reading), the default with every agent a client of the
+    world (the layout of 32 agents and more), and a grid with walls: the same episodes and
+    tables either way."""
     options = ("--agents", "6", "--episodes", "4", "--max-steps", "30", "--seed", "2",
-               "--preset", preset, "--no-record", "--run-id", preset)
+               "--preset", preset, "--no-record", "--run-id", preset, *grid)
     distributed = run_swarm(tmp_path / "dist", *options, "--topology", topology)
     local = run_swarm(tmp_path / "local", *options, "--in-process")
     assert distributed.returncode == 0 and local.returncode == 0, distributed.stderr

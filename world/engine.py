@@ -14,7 +14,8 @@ obstacle to the others. The episode ends when every agent has arrived or after `
 
 The world keeps its state in the rules' buffers (plain lists; the world process runs the kernel
 uncompiled) and plays a tick with ``world.rules.world_step``, the very function the swarm
-simulator runs compiled.
+simulator runs compiled. The buffers hold every body: the agents, then the run's walls
+(``protocol.walls``), which always stay and which nobody is told about (every process knows them).
 """
 
 from collections.abc import Iterator
@@ -29,7 +30,7 @@ from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
     ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD, ROW_STEPS,
-    Cell, shared_cells, shortest_steps, swaps_through, world_step,
+    Cell, shared_cells, swaps_through, world_step,
 )
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedTable, Updates
@@ -67,13 +68,15 @@ class SwarmWorld:
         self.tick = first_tick
         self.finished = False
         self.violations = 0
-        n = config.n_agents
-        self._x, self._y = ints([0] * n), ints([0] * n)
-        self._goal_x, self._goal_y = ints([0] * n), ints([0] * n)
-        self._learns = flags([True] * n)
-        self._before_x, self._before_y = ints([0] * n), ints([0] * n)
+        n, bodies = config.n_agents, config.n_bodies
+        self._walls = config.walls().tolist()
+        self._x, self._y = ints([0] * bodies), ints([0] * bodies)
+        self._goal_x, self._goal_y = ints([-1] * bodies), ints([-1] * bodies)
+        self._learns = flags([True] * n + [False] * (bodies - n))
+        self._before_x, self._before_y = ints([0] * bodies), ints([0] * bodies)
         self._occupancy = ints([0] * (config.width * config.height))
-        self._blocked = flags([False] * n)
+        self._blocked = flags([False] * bodies)
+        self._stays = [STAY] * (bodies - n)
         self.table = SharedTable(config) if config.shared else None
         if table is not None and self.table is not None:
             self.table.restore(*table)
@@ -90,38 +93,46 @@ class SwarmWorld:
     @property
     def cells(self) -> tuple[Cell, ...]:
         """Every agent's cell as ``(x, y)``, by agent id."""
-        return tuple(zip(python_values(self._x), python_values(self._y)))
+        n = self.config.n_agents
+        return tuple(zip(python_values(self._x)[:n], python_values(self._y)[:n]))
+
+    @property
+    def walls(self) -> list[list[int]]:
+        """The run's walls as ``[x, y]`` cells, in cell order."""
+        return self._walls
 
     @property
     def arrived_flags(self) -> tuple[bool, ...]:
         """Whether each agent has arrived, by agent id."""
-        return tuple(python_values(self._arrived))
+        return tuple(python_values(self._arrived)[:self.config.n_agents])
 
     @property
     def arrived(self) -> np.ndarray:
         """Whether each agent has arrived, ``(N,)``: a new array each time."""
-        return np.array(self._arrived, dtype=bool)
+        return np.array(self.arrived_flags, dtype=bool)
 
     def _start_episode(self, episode: int) -> None:
         c = self.config
-        scenario = swarm_episode(c.seed, episode, c.width, c.height, c.n_agents)
+        scenario = swarm_episode(c.seed, episode, c.width, c.height, c.n_agents,
+                                 c.obstacle_density)
         self.episode = episode
         self.step = 0
         self.goals = scenario.goals
         self.ending = False
-        n = c.n_agents
-        self._x[:], self._y[:] = scenario.starts[:, 0].tolist(), scenario.starts[:, 1].tolist()
-        self._goal_x[:], self._goal_y[:] = scenario.goals[:, 0].tolist(), scenario.goals[:, 1].tolist()
+        n, bodies = c.n_agents, c.n_bodies
+        wall_x, wall_y = [x for x, _ in self._walls], [y for _, y in self._walls]
+        self._x[:] = scenario.starts[:, 0].tolist() + wall_x
+        self._y[:] = scenario.starts[:, 1].tolist() + wall_y
+        self._goal_x[:n], self._goal_y[:n] = scenario.goals[:, 0].tolist(), scenario.goals[:, 1].tolist()
         self._goal_cells = [tuple(cell) for cell in scenario.goals.tolist()]
-        self._arrived = flags([False] * n)
-        self._r_ds = floats([0.0] * n)
-        self._r_ca = floats([0.0] * n)
-        self._collided = flags([False] * n)
+        self._arrived = flags([False] * bodies)
+        self._r_ds = floats([0.0] * bodies)
+        self._r_ca = floats([0.0] * bodies)
+        self._collided = flags([False] * bodies)
         self._row = ints([0] * ROW_INTS)
         self._row_f = floats([0.0] * ROW_FLOATS)
         self._missed = 0
-        self._shortest = sum(int(shortest_steps(self._x[i], self._y[i], self._goal_x[i],
-                                                self._goal_y[i])) for i in range(n))
+        self._shortest = int(scenario.shortest.sum())
         self._plain()
 
     def _plain(self) -> None:
@@ -156,7 +167,8 @@ class SwarmWorld:
 
     def _neighbours(self) -> list[tuple[tuple[int, int, int], ...]]:
         """Each agent's visible others as ``(id, x, y)`` in id order, by agent id."""
-        xs, ys = python_values(self._x), python_values(self._y)
+        n = self.config.n_agents
+        xs, ys = python_values(self._x)[:n], python_values(self._y)[:n]
         everyone = tuple(zip(range(len(xs)), xs, ys))
         if self._sees_all:
             return [everyone[:i] + everyone[i + 1:] for i in range(len(xs))]
@@ -206,10 +218,9 @@ class SwarmWorld:
     def _move(self, actions: list[int | None], missed: tuple[int, ...]) -> TickReport:
         """A step of the episode: everyone moves at once; rewards, arrivals and the row."""
         c = self.config
-        n = c.n_agents
-        chosen = ints([STAY if a is None else a for a in actions])
+        chosen = ints([STAY if a is None else a for a in actions] + self._stays)
         everyone = world_step(self._x, self._y, self._goal_x, self._goal_y, self._learns,
-                              self._arrived, chosen, n, c.width, c.height, c.count_swaps,
+                              self._arrived, chosen, c.n_bodies, c.width, c.height, c.count_swaps,
                               c.goal_reward, c.stay_reward, self._before_x, self._before_y, self._collided,
                               self._r_ds, self._r_ca, self._occupancy, self._blocked, self._row,
                               self._row_f)
@@ -218,15 +229,16 @@ class SwarmWorld:
         self.step += 1
         self.ending = bool(everyone) or self.step >= c.max_steps
         collided = self._outcome[2]
-        report = TickReport(self.tick, self.episode, True, tuple(python_values(chosen)),
-                            tuple(i for i, hit in enumerate(collided) if hit), missed,
+        n = c.n_agents
+        report = TickReport(self.tick, self.episode, True, tuple(python_values(chosen)[:n]),
+                            tuple(i for i, hit in enumerate(collided[:n]) if hit), missed,
                             violations, None)
         self.tick += 1
         return report
 
     def _check(self) -> tuple[str, ...]:
         """The invariants every tick must hold: no shared cell, no swap-through (if counted)."""
-        c, n = self.config, self.config.n_agents
+        c, n = self.config, self.config.n_bodies
         problems = []
         if shared_cells(self._x, self._y, n, c.width, self._occupancy):
             problems.append("two agents share a cell")

@@ -3,6 +3,8 @@
 Each episode draws from its own generator, derived from the run's seed and the episode number
 (``protocol.seeding``), so an episode's data does not depend on
 which algorithm runs it or on how many episodes came before: QL and nnQL see identical data.
+Where the grid has walls (``protocol.walls``: one map for the whole run), starts and goals come
+from its largest free region, and each agent's shortest path goes around them.
 """
 
 from dataclasses import dataclass
@@ -11,6 +13,7 @@ import numpy as np
 
 from nnql_swarm.protocol.actions import N_ACTIONS
 from nnql_swarm.protocol.seeding import SCENARIO_STREAM, stream_rng
+from nnql_swarm.protocol.walls import layout, path_lengths
 
 
 def episode_rng(seed: int, episode: int) -> np.random.Generator:
@@ -44,20 +47,29 @@ def paper_episode(
 
 @dataclass(frozen=True)
 class SwarmEpisode:
-    """One episode of a swarm run: every agent learns; starts and goals are all distinct cells."""
+    """One episode of a swarm run: every agent learns; starts and goals are all distinct cells,
+    and ``shortest[i]`` is agent ``i``'s shortest path (around the walls, if any)."""
 
     starts: np.ndarray  # (N, 2)
     goals: np.ndarray  # (N, 2)
+    shortest: np.ndarray  # (N,)
 
 
-def swarm_episode(seed: int, episode: int, width: int, height: int, n_agents: int) -> SwarmEpisode:
-    """Draw ``2 * n_agents`` distinct cells: the starts, then the goals."""
-    if 2 * n_agents > width * height:
+def swarm_episode(seed: int, episode: int, width: int, height: int, n_agents: int,
+                  obstacle_density: float = 0.0) -> SwarmEpisode:
+    """Draw ``2 * n_agents`` distinct free cells: the starts, then the goals."""
+    walls, free = layout(seed, width, height, obstacle_density)
+    if 2 * n_agents > len(free):
         raise ValueError(
             f"{n_agents} agents need {2 * n_agents} distinct start and goal cells; "
-            f"a {width}x{height} grid has {width * height}"
+            f"a {width}x{height} grid has {len(free)} free"
         )
     rng = episode_rng(seed, episode)
-    cells = rng.choice(width * height, size=2 * n_agents, replace=False)
+    if len(walls):
+        cells = rng.choice(free, size=2 * n_agents, replace=False)
+    else:  # the draw of runs without walls, as it always was
+        cells = rng.choice(width * height, size=2 * n_agents, replace=False)
     xy = np.stack([cells % width, cells // width], axis=-1).astype(np.int64)
-    return SwarmEpisode(starts=xy[:n_agents], goals=xy[n_agents:])
+    starts, goals = xy[:n_agents], xy[n_agents:]
+    return SwarmEpisode(starts=starts, goals=goals,
+                        shortest=path_lengths(width, height, walls, starts, goals))

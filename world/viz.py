@@ -14,7 +14,8 @@ apply too. How each intent reached it (its own query, or relayed down the chain,
 that themselves (``agent.viz``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
-Timelines are ``tick`` and ``episode``; static things (grid, colours, labels) are logged once.
+Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels) are logged
+once.
 
 Cost: everything is buffered, the per-tick entities, each episode's goals, metrics and event
 lines alike, and sent with ``send_columns`` (one call per entity) every :data:`FLUSH_EVERY` ticks
@@ -41,6 +42,7 @@ from nnql_swarm.world.scenario import swarm_episode
 APP_ID = "nnql-swarm"
 
 GRID = "world/grid"
+WALLS = "world/walls"
 AGENTS = "world/agents"
 GOALS = "world/goals"
 TRAILS = "world/trails"
@@ -71,6 +73,7 @@ FLUSH_EVERY = 2000
 costs about a millisecond and a dozen logging calls, however few ticks it sends."""
 
 COLLISION_RED = (230, 40, 40)
+WALL_GREY = (150, 150, 150)
 
 
 def agent_colors(n: int) -> np.ndarray:
@@ -154,6 +157,11 @@ class WorldViz:
         lines = [[(x, ys[0]), (x, ys[-1])] for x in xs] + [[(xs[0], y), (xs[-1], y)] for y in ys]
         rec.log(GRID, rr.LineStrips2D(lines, colors=[90, 90, 90], radii=0.02, draw_order=0.0),
                 static=True)
+        walls = c.walls()
+        if len(walls):
+            rec.log(WALLS, rr.Boxes2D(centers=walls.astype(np.float32), half_sizes=[0.4, 0.4],
+                                      colors=[WALL_GREY], radii=0.1, draw_order=5.0),
+                    static=True)
         labels = [str(i) for i in range(c.n_agents)]
         rec.log(AGENTS, rr.Points2D.from_fields(colors=self.colors, labels=labels, radii=0.33,
                                                 show_labels=True, draw_order=30.0), static=True)
@@ -182,7 +190,8 @@ class WorldViz:
         before = self._before
         if before is None:  # the first tick seen: it starts an episode (fresh run or resume)
             before = tuple(map(tuple, swarm_episode(c.seed, report.episode, c.width, c.height,
-                                                    c.n_agents).starts.tolist()))
+                                                    c.n_agents, c.obstacle_density
+                                                    ).starts.tolist()))
         if report.episode != self._goals_episode:
             self._start_episode(report)
         self._buffer.append((report.tick, report.episode, report.moved, before, self._arrived,
@@ -201,8 +210,9 @@ class WorldViz:
 
     def _start_episode(self, report: TickReport) -> None:
         self._goals_episode = report.episode
-        episode = swarm_episode(self.config.seed, report.episode, self.config.width,
-                                self.config.height, self.config.n_agents)
+        c = self.config
+        episode = swarm_episode(c.seed, report.episode, c.width, c.height, c.n_agents,
+                                c.obstacle_density)
         self._starts[report.episode] = episode.starts.astype(np.float32)
         self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32)))
 
