@@ -13,6 +13,8 @@ one agent per 16 cells), in the same run and interleaved repeat by repeat:
 - the bare loop of ``bench/lockstep.py`` with as many agents: every agent answers at once, no
   negotiation, no learning, the floor under a tick.
 
+``--obstacle-density P`` puts walls on the swarm's grids (``protocol.walls``), the same grids.
+
 Prints one row per size (medians over the repeats; each repeat's figures on stderr), the cost
 of a tick per agent (ms a tick / N: flat where cost grows linearly) and, with ``--png``, draws
 ticks a second and milliseconds a tick per agent against N for both.
@@ -39,10 +41,11 @@ from nnql_swarm.protocol.transport import TOPOLOGIES, EmbeddedLayout, embedded_t
 from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
 def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
-               topology: str) -> dict:
+               topology: str, obstacle_density: float = 0.0) -> dict:
     side = grid_side(n)
     config = swarm_config(preset, n_agents=n, width=side, height=side, episodes=episodes,
-                          max_steps=max_steps, seed=seed, run_id=f"scale-{n}")
+                          max_steps=max_steps, seed=seed, run_id=f"scale-{n}",
+                          obstacle_density=obstacle_density)
     with tempfile.TemporaryDirectory() as tmp, MemorySampler() as memory:
         out = Path(tmp) / "run"
         launched = time.time()  # the processes start within milliseconds of it
@@ -83,6 +86,8 @@ def main() -> int:
     p.add_argument("--topology", choices=("auto", *TOPOLOGIES), default="auto",
                    help="how the processes connect, swarm and bare loop alike (default: auto, "
                         "the launcher's choice for each size)")
+    p.add_argument("--obstacle-density", type=float, default=0.0, metavar="P",
+                   help="walls on the swarm's grid (the bare loop has none)")
     add_preset_option(p)
     args = p.parse_args()
     try:
@@ -91,6 +96,12 @@ def main() -> int:
         p.error(f"--agents takes comma-separated numbers, not {args.agents!r}")
     if args.repeats < 1 or args.episodes < 2 or any(n < 2 for n in sizes):
         p.error("need --repeats >= 1, --episodes >= 2 and at least 2 agents per size")
+    for n in sizes:
+        try:
+            swarm_config(args.preset, n_agents=n, width=grid_side(n), height=grid_side(n),
+                         obstacle_density=args.obstacle_density)
+        except ValueError as error:
+            p.error(f"{n} agents: {error}")
 
     table = []
     for n in sizes:
@@ -98,7 +109,7 @@ def main() -> int:
         topology = embedded_topology(n) if args.topology == "auto" else args.topology
         for repeat in range(args.repeats):
             swarm.append(swarm_once(n, args.preset, args.episodes, args.max_steps, args.seed,
-                                    topology))
+                                    topology, args.obstacle_density))
             bare.append(bare_once(n, args.bare_ticks, topology))
             s, b = swarm[-1], bare[-1]
             print(f"  {n} agents, repeat {repeat + 1}: swarm {s['rate']:.0f} ticks/s "

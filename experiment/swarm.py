@@ -11,7 +11,7 @@ distributed swarm; the table reads those rows:
   mean over seeds (the windows are the 2nd and the 5th fifth of the run: 100-200 and 400-500 of
   500 episodes);
 - ``steps_ratio_A_B``: the ticks agents spent before arriving (up to the episode's end for those
-  that did not), over the sum of their Manhattan shortest paths, late in the run;
+  that did not), over the sum of their shortest paths (around the walls, if any), late in the run;
 - ``collisions``: a run's total (every agent in a collision counts one per step), mean over
   seeds, with its 95 % t interval;
 - ``decrease_vs_ql_pct``: the decrease against the QL row with the same options (``vs``), with the
