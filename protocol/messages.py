@@ -131,10 +131,14 @@ MAX_TABLE_ENTRY = (N_STATES + MAX_TABLE_ROW) * N_ACTIONS
 TableEntry = tuple[Annotated[int, Meta(ge=0, lt=MAX_TABLE_ENTRY)], Reward]
 """One Q-value of the shared table: its entry index and its new value (finite, bounded as a
 reward is: a Q-value is at most a reward over 1 - gamma)."""
+MAX_SYNC_GROUPS = 2
+"""Groups of the whole table an observation carries at most beside the records' groups, for an
+agent being resynchronised (``world.shared_table``)."""
 Updates = Annotated[tuple[Annotated[tuple[TableEntry, ...], Meta(max_length=MAX_AGENTS)], ...],
-                    Meta(max_length=MAX_AGENTS)]
+                    Meta(max_length=MAX_AGENTS + MAX_SYNC_GROUPS)]
 """The shared table's entries that the last tick's learning records changed, with their new
-values: a group per record applied, in agent-id order (the agent's own too)."""
+values: a group per record applied, in agent-id order (the agent's own too); then, for an agent
+being resynchronised, up to :data:`MAX_SYNC_GROUPS` groups of the whole table's values."""
 
 
 class Rejected(ValueError):

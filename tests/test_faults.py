@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.agent import checkpoint
+from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.transport import free_port
@@ -78,6 +79,17 @@ def test_a_killed_agent_is_restarted_from_its_checkpoint(tmp_path):
     assert resumed["fingerprint"] == checkpoint.fingerprint(at_kill), "and it was the one at the kill"
     assert sum(int(r["missed_intents"]) for r in rows) > 0, "the dead agent's ticks were missed"
     assert stats(out, "world")["violations"] == 0
+    assert_copies_equal_the_worlds(out, config, range(8))
+
+
+def assert_copies_equal_the_worlds(out, config, agents) -> None:
+    """Every agent's last checkpoint holds the world's shared table of the same episode: a
+    restarted agent, or a restarted world, was sent the whole table and caught up."""
+    shared = world_checkpoint.load(world_checkpoint.table_path(out), config, config.episodes - 1)
+    for agent in agents:
+        with np.load(checkpoint.checkpoint_path(out / "checkpoints", agent)) as mine:
+            assert np.array_equal(mine["q_ds"], shared[0]), agent
+            assert np.array_equal(mine["q_ca"], shared[1]), agent
 
 
 def test_a_stalled_agent_costs_at_most_the_deadline_and_its_stale_intents_are_rejected(tmp_path):
@@ -179,6 +191,8 @@ def test_agents_reconnect_to_a_restarted_world(tmp_path):
     episodes_once(out, 80)
     for agent in range(6):
         assert stats(out, f"agent-{agent}")["shutdown_by_world"]
+    assert_copies_equal_the_worlds(out, SwarmConfig.from_json((out / "config.json").read_text()),
+                                   range(6))
 
 
 def test_resume_refuses_corrupt_or_foreign_checkpoints_naming_the_file(tmp_path):

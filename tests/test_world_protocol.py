@@ -1,5 +1,9 @@
 """The world's protocol machine, pure: the lockstep clock as inputs in, effects out."""
 
+import numpy as np
+
+from nnql_swarm.agent.brain import Learner
+from nnql_swarm.agent.learner import write_updates
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
@@ -193,3 +197,62 @@ def test_the_end_ticks_row_carries_the_shared_table_as_the_agents_checkpointed_i
     [row] = [e for e in effects if isinstance(e, WriteRow)]
     assert (row.table[0] == 25.0).all(), "taken before the end tick's records"
     assert protocol.world.table.tables()[0][7, 1] != 25.0, "which the world then applied"
+
+
+def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_worlds():
+    """Agent 1 leaves and comes back with a stale copy (all 25: what it started with); the world
+    sends it the table, a slice an observation, while both agents go on learning; once the last
+    slice is written its copy equals the world's. Agent 0, which never left, gets no slice."""
+    config = SwarmConfig(run_id="wproto", n_agents=2, episodes=4, max_steps=40,
+                         tick_deadline_s=0.5)
+    protocol = WorldProtocol(config, 0.0)
+    alive(protocol, 0, 0.0)
+    effects = alive(protocol, 1, 0.0)
+    stale = Learner(config)
+    entries = protocol.world.table.entries
+    records = [((s, s % 5, 0, (s + 1) % 441, 1, 0), (1.0, 0.0)) for s in range(300)]
+
+    def tick(number: int) -> list:
+        t = protocol.world.tick
+        out = []
+        for agent in (0, 1):
+            record = () if protocol.world.ending else (records[(2 * number + agent) % 300],)
+            payload = encode(Intent("wproto", t, agent_sender(agent), agent,
+                                    protocol.world.episode, 4, record))
+            out += protocol.on_intent(keys.intent_key("wproto", agent), payload, 0.1)
+        return out
+
+    for number in range(5):
+        effects = tick(number)
+    alive(protocol, 1, 0.2, up=False)
+    alive(protocol, 1, 0.3)
+    assert protocol.world.syncing == (), "not before it shows it hears the observations"
+    [batch] = [e for e in effects if isinstance(e, SendObservations)]
+    write_updates(stale.cells(), dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates)
+    effects = tick(5)
+    assert protocol.world.syncing == (1,)
+    slices = 0
+    for number in range(6, 6 + 12):
+        [batch] = [e for e in effects if isinstance(e, SendObservations)]
+        observed = {obs.agent: obs for obs, _ in batch.observations}
+        assert len(observed[0].updates) <= 2, "the agent that stayed gets the tick's groups only"
+        slices += len(observed[1].updates) > 2
+        write_updates(stale.cells(), observed[1].updates)
+        effects = tick(number)
+    assert slices == -(-entries // 2048) and protocol.world.syncing == ()
+    [batch] = [e for e in effects if isinstance(e, SendObservations)]
+    write_updates(stale.cells(), dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates)
+    world_q_ds, world_q_ca = protocol.world.table.tables()
+    q_ds, q_ca = stale.tables()
+    assert (world_q_ds != 25.0).sum() > 10, "the world learned meanwhile"
+    assert np.array_equal(q_ds, world_q_ds) and np.array_equal(q_ca, world_q_ca)
+
+
+def test_a_resumed_world_sends_every_agent_the_whole_table():
+    protocol = WorldProtocol(CONFIG, 0.0, first_episode=1, first_tick=4)
+    alive(protocol, 0, 0.0)
+    alive(protocol, 1, 0.0)
+    intent(protocol, 0, 0.1, episode=1)
+    assert protocol.world.syncing == (0,)
+    intent(protocol, 1, 0.1, episode=1)
+    assert protocol.world.syncing == (0, 1)

@@ -26,7 +26,7 @@ import numpy as np
 from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sees
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import flags, floats, ints, python_values
-from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
+from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
     ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD, ROW_STEPS,
@@ -34,6 +34,10 @@ from nnql_swarm.world.rules import (
 )
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedTable, Updates
+
+SYNC_ENTRIES = MAX_SYNC_GROUPS * MAX_AGENTS
+"""Table entries sent with each observation of an agent being resynchronised (2,048: about
+27 KB; the default preset's 6,615 entries take 4 ticks)."""
 
 EPISODE_FIELDS = (
     "episode", "steps", "collisions", "missed_intents", "reward_sum", "arrived", "shortest_sum",
@@ -81,6 +85,8 @@ class SwarmWorld:
         if table is not None and self.table is not None:
             self.table.restore(*table)
         self._updates: Updates = ()
+        self._syncing: dict[int, int] = {}  # agent -> the first table entry it is sent next
+        self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
         self._start_episode(first_episode)
@@ -159,11 +165,27 @@ class SwarmWorld:
         c = self.config
         r_ds, r_ca, collided, arrived = self._outcome
         parked = tuple(j for j, _, _ in neighbours if arrived[j])
+        updates = self._updates
+        if i in self._syncing:
+            updates += self.table.chunk(self._syncing[i], SYNC_ENTRIES)
         # Positional, in Observation's field order: keywords cost a fifth of this call.
         return Observation(c.run_id, self.tick, WORLD_SENDER, i, self.episode, self.step,
                            self._cells[i], self._goal_cells[i], neighbours,
                            priority_rank(i, self.tick, c.n_agents), r_ds[i], r_ca[i],
-                           collided[i], arrived[i], self.ending, parked, self._updates)
+                           collided[i], arrived[i], self.ending, parked, updates)
+
+    def resync(self, agent: int) -> None:
+        """Send ``agent`` the whole shared table, a slice with each of its next observations
+        (``world.shared_table``): its copy may differ from the world's (it was restarted, or the
+        world was). Nothing to do where every agent learns alone."""
+        if self.table is not None:
+            self._syncing[agent] = 0
+            self._sync_from_next.add(agent)
+
+    @property
+    def syncing(self) -> tuple[int, ...]:
+        """The agents still being sent the whole table."""
+        return tuple(sorted(self._syncing))
 
     def _neighbours(self) -> list[tuple[tuple[int, int, int], ...]]:
         """Each agent's visible others as ``(id, x, y)`` in id order, by agent id."""
@@ -190,6 +212,14 @@ class SwarmWorld:
         report = self._end_tick(missed) if self.ending else self._move(actions, missed)
         if self.table is not None:
             self._updates = self.table.apply(learned or {})
+            for agent, start in list(self._syncing.items()):
+                if agent in self._sync_from_next:  # its first slice goes with the next tick
+                    continue
+                if start + SYNC_ENTRIES >= self.table.entries:
+                    del self._syncing[agent]
+                else:
+                    self._syncing[agent] = start + SYNC_ENTRIES
+            self._sync_from_next.clear()
         return report
 
     def episode_row(self) -> dict:

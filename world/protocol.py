@@ -13,7 +13,10 @@ observations at once; then reports the tick (:class:`~protocol.effects.TickClose
 episode's end, its row (:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a
 stalled one at most the deadline. A world started at ``first_episode`` / ``first_tick`` continues
 a run (``--resume``); one started after the last episode only tells the agents still running
-to stop. A completed run tells its agents to stop until every live one has left.
+to stop. A completed run tells its agents to stop until every live one has left. Where the agents
+share one table, an agent that comes back after it left, and every agent of a resumed world, is
+sent the world's whole table (``SwarmWorld.resync``) from its first intent on (by then it surely
+hears its observations): its copy may be an older checkpoint's.
 """
 
 import logging
@@ -71,6 +74,9 @@ class WorldProtocol:
         self._out: list = []
         self.inbox = Inbox(config.run_id, _EffectLog(self))
         self.alive: set[int] = set()
+        self.joined: set[int] = set()  # every agent seen alive once
+        self.to_resync: set[int] = set()  # to be sent the whole table from their next intent
+        self.resumed = first_episode > 0 or first_tick > 0
         self.started = False
         self.startup_timeout_s = startup_timeout_s or startup_timeout(config.n_agents)
         self.startup_by = now + self.startup_timeout_s
@@ -111,6 +117,9 @@ class WorldProtocol:
         elif alive:
             self.alive.add(agent)
             out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
+            if self.started and agent in self.joined:  # restarted: its copy is a checkpoint's
+                self.to_resync.add(agent)
+            self.joined.add(agent)
             if not self.started and len(self.alive) == self.n:
                 self._start(now)
         else:
@@ -147,6 +156,9 @@ class WorldProtocol:
             actions[intent.agent] = intent.action
             if intent.record:
                 self._keep_record(intent.agent, intent.record[0])
+            if intent.agent in self.to_resync:  # it hears the observations: send it the table
+                self.to_resync.discard(intent.agent)
+                self.world.resync(intent.agent)
             self._close_if_due(now)
         return out
 
@@ -211,6 +223,8 @@ class WorldProtocol:
     def _start(self, now: float) -> None:
         self.started = True
         self.startup_s = now - self.created
+        if self.resumed:  # agents that kept running learned past this world's checkpoint
+            self.to_resync.update(range(self.n))
         self.episode_start, self.episode_tick = now, self.world.tick
         if self.world.finished:
             self._close_run(now)

@@ -8,6 +8,12 @@ changed and their new values (:meth:`SharedTable.apply` returns them, a group pe
 each agent writes them into its copy (``agent.learner.write_updates``). All copies stay equal to
 this one and to the simulator's, and a tick costs every agent one write per changed entry,
 where applying every record itself cost it the whole learning step N times over.
+
+An agent whose copy may differ (it was restarted from an older checkpoint, or the world was
+restarted under it from its own) is sent the whole table instead, a slice of it with each of its
+observations (:meth:`SharedTable.chunk`): each slice holds the values as the tick's updates leave
+them, and every later change reaches the agent as an update, so once the last slice is written
+its copy equals this one.
 """
 
 import numpy as np
@@ -18,6 +24,7 @@ from nnql_swarm.agent.learner import (
 )
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import floats, ints
+from nnql_swarm.protocol.messages import MAX_AGENTS
 
 Updates = tuple[tuple[tuple[int, float], ...], ...]
 """Groups of ``(entry index, new value)``, one per record applied, in agent-id order."""
@@ -56,6 +63,19 @@ class SharedTable:
                 group.append((index, float(row[action])))
             updates.append(tuple(group))
         return tuple(updates)
+
+    @property
+    def entries(self) -> int:
+        """How many Q-values both tables hold (entry indices are 0 to this - 1)."""
+        return len(self._learner.cells())
+
+    def chunk(self, start: int, count: int) -> Updates:
+        """The current values of entries ``start`` to ``start + count - 1`` (fewer at the end),
+        as update groups of at most :data:`MAX_AGENTS` entries (the most a group holds)."""
+        cells = self._learner.cells()
+        indices = range(start, min(start + count, len(cells)))
+        values = [(i, float(cells[i][0][cells[i][1]])) for i in indices]
+        return tuple(tuple(values[k:k + MAX_AGENTS]) for k in range(0, len(values), MAX_AGENTS))
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
         """``Q_DS`` and ``Q_CA`` as arrays (copies), for the world's checkpoint."""
