@@ -73,7 +73,8 @@ class SwarmWorld:
         self.finished = False
         self.violations = 0
         n, bodies = config.n_agents, config.n_bodies
-        self._walls = config.walls().tolist()
+        walls = config.walls()
+        self._wall_x, self._wall_y = walls[:, 0].tolist(), walls[:, 1].tolist()
         self._x, self._y = ints([0] * bodies), ints([0] * bodies)
         self._goal_x, self._goal_y = ints([-1] * bodies), ints([-1] * bodies)
         self._learns = flags([True] * n + [False] * (bodies - n))
@@ -103,11 +104,6 @@ class SwarmWorld:
         return tuple(zip(python_values(self._x)[:n], python_values(self._y)[:n]))
 
     @property
-    def walls(self) -> list[list[int]]:
-        """The run's walls as ``[x, y]`` cells, in cell order."""
-        return self._walls
-
-    @property
     def arrived_flags(self) -> tuple[bool, ...]:
         """Whether each agent has arrived, by agent id."""
         return tuple(python_values(self._arrived)[:self.config.n_agents])
@@ -126,9 +122,8 @@ class SwarmWorld:
         self.goals = scenario.goals
         self.ending = False
         n, bodies = c.n_agents, c.n_bodies
-        wall_x, wall_y = [x for x, _ in self._walls], [y for _, y in self._walls]
-        self._x[:] = scenario.starts[:, 0].tolist() + wall_x
-        self._y[:] = scenario.starts[:, 1].tolist() + wall_y
+        self._x[:] = scenario.starts[:, 0].tolist() + self._wall_x
+        self._y[:] = scenario.starts[:, 1].tolist() + self._wall_y
         self._goal_x[:n], self._goal_y[:n] = scenario.goals[:, 0].tolist(), scenario.goals[:, 1].tolist()
         self._goal_cells = [tuple(cell) for cell in scenario.goals.tolist()]
         self._arrived = flags([False] * bodies)
