@@ -17,15 +17,18 @@ ones directly (``agent.node``). Why a chain: ``docs/design.md``.
 An agent that has arrived still waits for the awaited intents, although it needs none of them,
 so that it can relay them down the chain; only at an episode's end does nobody negotiate.
 
-Since an agent's predecessor in rank is always the same agent (``id - 1``; ranks rotate, the order
-does not), each agent keeps one *standing* query open on its predecessor's intent key, answered at
-every tick where the predecessor outranks it and sees it (:func:`answers_standing`): the chain
-then costs one message per hop instead of a query, an answer and the query's end.
+Each agent keeps a *standing* query open on every other agent's intent key (``?since=T``),
+and a decider answers through it exactly the agents whose plan asks it (:func:`standing_answers`):
+the negotiation then costs one message per planned ask, instead of a query, an answer and the
+query's end. A decider can tell whose plan asks it when it sees every agent its waiters wait for
+(:func:`plans_are_known`: on grids that fit in the view, or with a radius of at most half the
+view); otherwise it answers every agent that waits for it, a superset of the plans.
 """
 
 from dataclasses import dataclass, field
 from typing import Callable
 
+from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.ranks import priority_rank, waits_for
@@ -76,16 +79,37 @@ def predecessor(agent: int, tick: int, n_agents: int) -> int | None:
     return None if rank == 0 else (agent - 1) % n_agents
 
 
-def answers_standing(obs: Observation, asker: int, config: SwarmConfig) -> bool:
-    """Whether the agent that observed ``obs`` answers ``asker``'s standing query at this tick:
-    exactly when the asker waits for its intent (distance is symmetric, so the asker waits for
-    whoever it is in reach of; see :func:`awaited`)."""
+def plans_are_known(config: SwarmConfig) -> bool:
+    """Whether a decider sees every agent that an agent within its reach waits for, and so can
+    tell whose plan (:func:`plan_for`) asks it: the grid fits in the view, or twice the
+    interaction radius does."""
+    return (max(config.width, config.height) <= VIEW_RADIUS + 1
+            or 2 * config.interaction_radius <= VIEW_RADIUS)
+
+
+def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
+    """The agents that the agent which observed ``obs`` answers through their standing queries
+    at this tick, the next in rank first: those whose plan asks it (:func:`plans_are_known`), or
+    else every agent that waits for it (distance is symmetric: whoever is in reach)."""
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
-        return False
-    n, (x, y) = config.n_agents, obs.position
-    return any(j == asker and waits_for(True, priority_rank(asker, obs.tick, n), obs.rank,
-                                        jx, jy, x, y, config.interaction_radius)
-               for j, jx, jy in obs.neighbours)
+        return []
+    n, tick, radius, me = config.n_agents, obs.tick, config.interaction_radius, obs.agent
+    (x, y), rank = obs.position, obs.rank
+    waiters = sorted((priority_rank(j, tick, n), j) for j, jx, jy in obs.neighbours
+                     if waits_for(True, priority_rank(j, tick, n), rank, jx, jy, x, y, radius))
+    if not waiters or not plans_are_known(config):
+        return [j for _, j in waiters]
+    cells = {j: (jx, jy) for j, jx, jy in obs.neighbours}
+    cells[me] = (x, y)
+    ranks = {j: priority_rank(j, tick, n) for j in cells}
+    answered = []
+    for w_rank, w in waiters:
+        wx, wy = cells[w]
+        waiting_for = [j for j, (jx, jy) in cells.items()
+                       if waits_for(True, w_rank, ranks[j], wx, wy, jx, jy, radius)]
+        if me in plan_asks(waiting_for, cells, ranks.__getitem__, radius):
+            answered.append(w)
+    return answered
 
 
 @dataclass

@@ -202,11 +202,12 @@ class AgentNode(ProtocolAdapter):
             s.declare_queryable(self.intent_keys[self.agent], callback(self._on_query)),
             s.declare_publisher(self.intent_keys[self.agent], express=True,
                                 congestion_control=zenoh.CongestionControl.BLOCK) as publisher,
-            s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               enqueue(self.events, "alive"), history=True),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_WORLD),
                                               enqueue(self.events, "world")),
+            # Last: the peers open their standing queries once they see it.
+            s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
         ):
             self.publisher = publisher
             try:

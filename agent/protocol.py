@@ -7,9 +7,9 @@ when the protocol next wants :meth:`AgentProtocol.on_timer`. ``agent.node`` runs
 
 Per tick: an observation comes in (:meth:`~AgentProtocol.on_observation`), in tick order; the
 agent learns the intents of the visible higher-ranked neighbours as ``agent.negotiation`` plans
-it: from the standing query it keeps open on its predecessor (``?since=T;from=<id>``, answered
-at every tick where the predecessor outranks it) and, where the plan needs more, with one ask
-each (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked
+it: from the standing queries it keeps open on every other agent (``?since=T;from=<id>``),
+answered by each neighbour whose plan asks it, and, where no standing query is open yet, with
+one ask each (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked
 neighbour answered (or the negotiation timed out), it asks directly for any awaited intent that
 no answer brought; then it decides with what it knows, answers the standing and held queries it
 owes (the next in rank first), and sends its intent for the world. An announced intent never
@@ -138,6 +138,7 @@ class AgentProtocol:
         self.pending: Pending | None = None
         self.decided_tick = -1
         self.decided_obs: Observation | None = None
+        self.decided_waiters: list[int] = []  # whom the decided tick's answer goes to by stream
         self.decided_answer: Answer | None = None
         self.decided_payload = b""
         self.held: list[tuple[int, int, int]] = []  # (tick, asker's rank, query)
@@ -145,8 +146,7 @@ class AgentProtocol:
         self.intents: dict[int, negotiation.TickIntents] = {}  # tick -> what was learned of it
         self.asks: dict[int, OpenAsk] = {}
         self.next_ask = 0
-        self.predecessor = (agent - 1) % self.n
-        self.stream_open = False
+        self.streams: dict[int, int] = {}  # neighbour -> generation of its open standing query
         self.stream_generation = 0
         self.gap_tick, self.gap_run = -1, 0
         self.shutdown = False
@@ -183,12 +183,12 @@ class AgentProtocol:
             return out
         p = self.pending
         if open_ask.generation is not None:
-            if open_ask.generation == self.stream_generation:
-                self.stream_open = False
-                if (p is not None and p.missing is None and p.deadline > now
-                        and self.predecessor in p.asks
-                        and self.predecessor not in self._intents_of(p.obs.tick).answered):
-                    self._ask(self.predecessor, p.obs.tick, p.deadline - now)  # not by the stream
+            j = open_ask.agent
+            if self.streams.get(j) == open_ask.generation:
+                del self.streams[j]
+                if (p is not None and p.missing is None and p.deadline > now and j in p.asks
+                        and j not in self._intents_of(p.obs.tick).answered):
+                    self._ask(j, p.obs.tick, p.deadline - now)  # not by the stream
         elif open_ask.agent not in self.peers_seen:  # gone: no answer is coming
             self._refused(open_ask, now)
         return out
@@ -255,8 +255,7 @@ class AgentProtocol:
                 self._become_ready(now)
         else:
             self.peers_seen.discard(agent)
-            if agent == self.predecessor:
-                self.stream_open = False  # ask its next incarnation afresh
+            self.streams.pop(agent, None)  # ask its next incarnation afresh
             query = self.standing.pop(agent, None)
             if query is not None:
                 out.append(EndQuery(query))
@@ -277,7 +276,7 @@ class AgentProtocol:
             # one's ticks must not count for the next one's. Replies to the asks made so far
             # are ignored from now on, and the standing query is opened afresh.
             self.asks = {}
-            self.stream_open = False
+            self.streams = {}
         return out
 
     def on_control(self, payload, now: float) -> list:
@@ -361,7 +360,7 @@ class AgentProtocol:
         tick = obs.tick
         got = self._intents_of(tick)
         for j in asks:
-            if j not in got.answered and not (j == self.predecessor and self.stream_open):
+            if j not in got.answered and j not in self.streams:
                 self._ask(j, tick, self.timeout_s)
         self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s)
         self.brain.prepare(obs)  # while the answers are on their way
@@ -393,8 +392,9 @@ class AgentProtocol:
         if p.missing is None:
             if remaining > 0 and not all(j in got.answered or j in refused for j in p.asks):
                 return
-            if self.predecessor in p.asks and self.predecessor not in got.answered:
-                self.stream_open = False  # it did not answer in time: open a fresh one
+            for j in p.asks:
+                if j not in got.answered:
+                    self.streams.pop(j, None)  # it did not answer in time: open a fresh one
             p.missing = [j for j in p.awaited if j not in got.actions and j not in refused]
             if p.missing and remaining > 0:
                 for j in p.missing:
@@ -425,6 +425,7 @@ class AgentProtocol:
         answer = Answer(self.config.run_id, tick, self.sender, self.agent, obs.episode, action,
                         tuple(sorted(known.items())))
         self.decided_tick, self.decided_obs, self.decided_answer = tick, obs, answer
+        self.decided_waiters = negotiation.standing_answers(obs, self.config)
         self.decided_payload = encode(answer)
         trace.mark(ENCODED, tick)
         self.intents = {t: got for t, got in self.intents.items() if t > tick}
@@ -439,8 +440,8 @@ class AgentProtocol:
         out.append(SendIntent(intent, encode(intent)))
         if obs.episode_end:
             out.append(EpisodeEnded(obs.episode))
-        if not self.stream_open:
-            self._open_stream(tick + 1)
+        if self.negotiates and len(self.streams) < len(self.peers_seen - {self.agent}):
+            self._open_streams(tick + 1)
 
     def _resync(self, obs: Observation) -> bool:
         """After a gap (an observation lost on the way), follow the clock again once
@@ -469,14 +470,16 @@ class AgentProtocol:
         """Ask one neighbour for its intent at ``tick``; its answer comes to ``on_answer``."""
         self._new_ask(neighbour, tick, keys.intent_query_params(tick, self.agent), timeout_s)
 
-    def _open_stream(self, since: int) -> None:
-        """Open the standing query on the predecessor's intent key (nnQL only)."""
-        if not self.negotiates or self.predecessor not in self.peers_seen or since >= keys.MAX_TICK:
+    def _open_streams(self, since: int) -> None:
+        """Open a standing query on the intent key of every agent seen that has none (nnQL)."""
+        if since >= keys.MAX_TICK:
             return
-        self.stream_generation += 1
-        self._new_ask(self.predecessor, since, keys.standing_query_params(since, self.agent),
-                      STANDING_QUERY_S, self.stream_generation)
-        self.stream_open = True
+        params = keys.standing_query_params(since, self.agent)
+        for j in sorted(self.peers_seen):
+            if j != self.agent and j not in self.streams:
+                self.stream_generation += 1
+                self._new_ask(j, since, params, STANDING_QUERY_S, self.stream_generation)
+                self.streams[j] = self.stream_generation
 
     def _answer_in(self, sender: int, payload, now: float) -> None:
         """Keep an answer for the coming ticks, and move the negotiation on if it waits for it;
@@ -514,18 +517,16 @@ class AgentProtocol:
         if old is not None:
             out.append(EndQuery(old))
         self.standing[asker] = query
-        if since <= self.decided_tick and self.decided_obs is not None:
-            self._answer_standing(asker, query)
+        if since <= self.decided_tick and asker in self.decided_waiters:
+            self._out.append(Reply(query, self.decided_payload, self.decided_answer))
 
     def _answer_standing_queries(self) -> None:
         """Answer the standing queries owed at the decided tick, the next in rank first."""
-        n, tick = self.n, self.decided_tick
-        for asker in sorted(self.standing, key=lambda a: priority_rank(a, tick, n)):
-            self._answer_standing(asker, self.standing[asker])
-
-    def _answer_standing(self, asker: int, query: int) -> None:
-        if negotiation.answers_standing(self.decided_obs, asker, self.config):
-            self._out.append(Reply(query, self.decided_payload, self.decided_answer))
+        standing, out = self.standing, self._out
+        for asker in self.decided_waiters:
+            query = standing.get(asker)
+            if query is not None:
+                out.append(Reply(query, self.decided_payload, self.decided_answer))
 
     def _answer_held(self) -> None:
         """Answer what was asked for the decided tick, the next in rank first: its decision

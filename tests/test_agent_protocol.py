@@ -121,8 +121,10 @@ def test_held_and_standing_queries_are_answered_with_the_decision_the_next_in_ra
 def test_an_episodes_end_checkpoints_before_the_intent_goes_out():
     protocol = ready()
     effects = protocol.on_observation(observation(0, episode_end=True), 0.0)
-    assert kinds(effects) == ["Checkpoint", "SendIntent", "EpisodeEnded", "Ask"]
+    assert kinds(effects) == ["Checkpoint", "SendIntent", "EpisodeEnded", "Ask", "Ask"]
     assert effects[0] == Checkpoint(0)
+    streams = [e for e in effects if isinstance(e, Ask)]  # a standing query on every other agent
+    assert [(a.agent, a.parameters) for a in streams] == [(1, "since=1;from=0"), (2, "since=1;from=0")]
 
 
 def test_answers_from_before_the_world_left_do_not_count_for_the_world_that_comes_back():
@@ -146,9 +148,11 @@ def test_a_standing_query_that_ends_mid_negotiation_is_replaced_by_a_direct_ask(
     protocol = ready(agent=1)
     others = [(0, 2, 2)]
     protocol.on_observation(observation(1, agent=1, others=others), 0.0)  # decides: it is first
-    [stream] = [a for a, open_ask in protocol.asks.items() if open_ask.generation is not None]
-    protocol.on_observation(observation(2, agent=1, others=others), 0.1)  # agent 0 first: waits
-    assert protocol.pending is not None and not any(
+    [stream] = [a for a, open_ask in protocol.asks.items()
+                if open_ask.generation is not None and open_ask.agent == 0]
+    effects = protocol.on_observation(observation(2, agent=1, others=others), 0.1)  # 0 first: waits
+    assert protocol.pending is not None and not any(isinstance(e, Ask) for e in effects)
+    assert not any(
         isinstance(e, Ask) for e in protocol.on_answer(stream, answer(1, 0, 2), 0.1))
     effects = protocol.on_ask_end(stream, 0.2)
     [ask] = [e for e in effects if isinstance(e, Ask)]

@@ -72,14 +72,24 @@ def test_nobody_negotiates_for_ql_or_at_an_episode_end():
     assert negotiation.plan_for(observe(1, 0, 2, cells, episode_end=True), config(2)) == ([], [])
 
 
-@pytest.mark.parametrize("radius", [2, 10])
-def test_standing_answers_go_exactly_to_those_who_wait_for_them(radius):
-    n, tick = 6, 3
-    cells = {0: (0, 0), 1: (5, 5), 2: (30, 0), 3: (12, 3), 4: (2, 9), 5: (1, 1)}
-    c = config(n, radius=radius)
-    for p, asker in itertools.permutations(cells, 2):
-        waits = p in negotiation.awaited(observe(asker, tick, n, cells), c)
-        assert negotiation.answers_standing(observe(p, tick, n, cells), asker, c) == waits
+@pytest.mark.parametrize("radius,side", [(2, 40), (5, 40), (10, 11), (10, 40), (7, 30)])
+@pytest.mark.parametrize("seed", range(10))
+def test_standing_answers_go_to_exactly_the_plans_that_ask_them(seed, radius, side):
+    """A decider answers by stream exactly the agents whose plan asks it, where it can tell
+    (a grid in view, or a radius of at most half the view); elsewhere every agent that waits
+    for it, a superset of the plans."""
+    rng = random.Random(seed)
+    n, tick = 12, rng.randrange(100)
+    cells = dict(enumerate(rng.sample(list(itertools.product(range(side), range(side))), n)))
+    c = SwarmConfig(n_agents=n, algo="nnql", interaction_radius=radius, width=side, height=side)
+    known = negotiation.plans_are_known(c)
+    assert known == (radius <= 5 or side <= 11)
+    plans = {a: negotiation.plan_for(observe(a, tick, n, cells), c) for a in cells}
+    for p in cells:
+        answered = negotiation.standing_answers(observe(p, tick, n, cells), c)
+        expected = [a for a in cells if p in plans[a][1 if known else 0]]
+        assert sorted(answered) == expected
+        assert answered == sorted(answered, key=lambda a: priority_rank(a, tick, n))
 
 
 @pytest.mark.parametrize("algo", [a for a in ALGOS if a != "oracle"])
