@@ -10,8 +10,10 @@ effects are carried out right there, in order, before the lock is let go (a chec
 written before the intent that follows it is published). Observations, replies and queries are
 handled on the thread Zenoh calls back on (its receiving thread, ``protocol.transport``), so the
 last awaited intent is acted on without waking another thread, while liveliness and control
-messages are only queued there, because Zenoh calls those callbacks holding a lock of its own
-(eclipse-zenoh/zenoh#1092). The main thread handles that queue and the protocol's timers,
+messages and the ends of asks are only queued there, because Zenoh calls those callbacks holding
+a lock of its own (eclipse-zenoh/zenoh#1092: when a peer dies, Zenoh ends the asks on it under
+that lock while the main thread, holding the node's, ends that peer's standing query, and one
+waited for the other forever). The main thread handles that queue and the protocol's timers,
 sleeping on the queue until the next timer is due, at most :data:`POLL_S`.
 """
 
@@ -143,7 +145,7 @@ class AgentNode(ProtocolAdapter):
             else:  # an error reply: the neighbour cannot answer that tick
                 self.feed(protocol.on_refusal, ask)
 
-        return callback(on_reply, lambda: self.feed(protocol.on_ask_end, ask))
+        return callback(on_reply, lambda: self.events.put(("ask-end", ask)))
 
     # Effects, in order.
 
@@ -202,12 +204,11 @@ class AgentNode(ProtocolAdapter):
             s.declare_queryable(self.intent_keys[self.agent], callback(self._on_query)),
             s.declare_publisher(self.intent_keys[self.agent], express=True,
                                 congestion_control=zenoh.CongestionControl.BLOCK) as publisher,
+            s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               enqueue(self.events, "alive"), history=True),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_WORLD),
                                               enqueue(self.events, "world")),
-            # Last: the peers open their standing queries once they see it.
-            s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
         ):
             self.publisher = publisher
             try:
@@ -225,6 +226,8 @@ class AgentNode(ProtocolAdapter):
                         self.feed(protocol.on_liveliness, str(item.key_expr), item.kind == _PUT)
                     elif kind == "world":
                         self.feed(protocol.on_world, item.kind == _PUT)
+                    elif kind == "ask-end":
+                        self.feed(protocol.on_ask_end, item)
                     with self.lock:
                         due = protocol.timer()
                     if due is not None and time.monotonic() >= due:
