@@ -247,7 +247,7 @@ class AgentProtocol:
         """An agent's liveliness token (``alive/agent/<id>``) appeared or went."""
         out = self._out = []
         agent = keys.agent_from_key(key, self.config.run_id)
-        if agent is None:
+        if agent is None or agent >= self.n:  # a token of no agent of this run: nobody to ask
             self.inbox.reject("unknown-agent", str(key))
         elif alive:
             self.peers_seen.add(agent)

@@ -217,3 +217,13 @@ def test_shared_table_updates_are_written_and_entries_outside_the_tables_refused
     q_ds, q_ca = protocol.brain.learner.tables()
     assert q_ds[7, 1] == 20.5 and q_ca[0, 3] == -1.5
     assert protocol.inbox.rejections["bad-update"] == 1, "Q_CA has 882 rows here, not 2646"
+
+
+def test_a_token_of_an_agent_outside_the_run_is_rejected_and_never_asked():
+    """A rogue session's token alive/agent/99 once made every agent open a standing query on
+    an intent key it has no agent for (and crash)."""
+    protocol = ready(agent=0)
+    effects = protocol.on_liveliness(keys.alive_key(CONFIG.run_id, keys.ROLE_AGENT, 99), True, 0.0)
+    assert kinds(effects) == [] and protocol.inbox.rejections["unknown-agent"] == 1
+    effects = protocol.on_observation(observation(0), 0.0)
+    assert sorted(e.agent for e in effects if isinstance(e, Ask)) == [1, 2]
