@@ -73,12 +73,6 @@ def plan_for(obs: Observation, config: SwarmConfig) -> tuple[list[int], list[int
                                   config.interaction_radius)
 
 
-def predecessor(agent: int, tick: int, n_agents: int) -> int | None:
-    """The agent ranked just above ``agent`` at ``tick`` (None for the top rank)."""
-    rank = priority_rank(agent, tick, n_agents)
-    return None if rank == 0 else (agent - 1) % n_agents
-
-
 def plans_are_known(config: SwarmConfig) -> bool:
     """Whether a decider sees every agent that an agent within its reach waits for, and so can
     tell whose plan (:func:`plan_for`) asks it: the grid fits in the view, or twice the
@@ -95,13 +89,13 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
         return []
     n, tick, radius, me = config.n_agents, obs.tick, config.interaction_radius, obs.agent
     (x, y), rank = obs.position, obs.rank
-    waiters = sorted((priority_rank(j, tick, n), j) for j, jx, jy in obs.neighbours
-                     if waits_for(True, priority_rank(j, tick, n), rank, jx, jy, x, y, radius))
+    cells = {j: (jx, jy) for j, jx, jy in obs.neighbours}
+    ranks = {j: priority_rank(j, tick, n) for j in cells}
+    waiters = sorted((ranks[j], j) for j, (jx, jy) in cells.items()
+                     if waits_for(True, ranks[j], rank, jx, jy, x, y, radius))
     if not waiters or not plans_are_known(config):
         return [j for _, j in waiters]
-    cells = {j: (jx, jy) for j, jx, jy in obs.neighbours}
-    cells[me] = (x, y)
-    ranks = {j: priority_rank(j, tick, n) for j in cells}
+    cells[me], ranks[me] = (x, y), rank
     answered = []
     for w_rank, w in waiters:
         wx, wy = cells[w]

@@ -137,7 +137,6 @@ class AgentProtocol:
         self.peers_seen: set[int] = set()
         self.pending: Pending | None = None
         self.decided_tick = -1
-        self.decided_obs: Observation | None = None
         self.decided_waiters: list[int] = []  # whom the decided tick's answer goes to by stream
         self.decided_answer: Answer | None = None
         self.decided_payload = b""
@@ -274,7 +273,7 @@ class AgentProtocol:
             self._drop_held()
             # A world that comes back replays tick numbers: what is still on its way from this
             # one's ticks must not count for the next one's. Replies to the asks made so far
-            # are ignored from now on, and the standing query is opened afresh.
+            # are ignored from now on, and the standing queries are opened afresh.
             self.asks = {}
             self.streams = {}
         return out
@@ -424,7 +423,7 @@ class AgentProtocol:
         known = self.intents.get(tick, _NOTHING).actions
         answer = Answer(self.config.run_id, tick, self.sender, self.agent, obs.episode, action,
                         tuple(sorted(known.items())))
-        self.decided_tick, self.decided_obs, self.decided_answer = tick, obs, answer
+        self.decided_tick, self.decided_answer = tick, answer
         self.decided_waiters = negotiation.standing_answers(obs, self.config)
         self.decided_payload = encode(answer)
         trace.mark(ENCODED, tick)
@@ -440,7 +439,8 @@ class AgentProtocol:
         out.append(SendIntent(intent, encode(intent)))
         if obs.episode_end:
             out.append(EpisodeEnded(obs.episode))
-        if self.negotiates and len(self.streams) < len(self.peers_seen - {self.agent}):
+        peers = len(self.peers_seen) - (self.agent in self.peers_seen)
+        if self.negotiates and len(self.streams) < peers:
             self._open_streams(tick + 1)
 
     def _resync(self, obs: Observation) -> bool:

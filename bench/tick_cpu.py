@@ -11,7 +11,6 @@ cores offer in a tick: near 1, the tick waits for CPU, not for messages.
 """
 
 import argparse
-import csv
 import os
 import subprocess
 import sys
@@ -20,6 +19,10 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+
 HZ = os.sysconf("SC_CLK_TCK")
 
 
@@ -45,10 +48,10 @@ def process_cpu(pid: int) -> tuple[str, float] | None:
 
 
 def episode_ends(path: Path) -> list[int]:
+    """The end tick of every episode written so far (none before the file exists)."""
     try:
-        with open(path, newline="") as f:
-            return [int(row["end_tick"]) for row in csv.DictReader(f)]
-    except (OSError, KeyError, ValueError):
+        return [int(row["end_tick"]) for row in read_episodes(path)]
+    except (OSError, KeyError, ValueError):  # not there yet, or a row half written
         return []
 
 

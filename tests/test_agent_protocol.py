@@ -124,7 +124,8 @@ def test_an_episodes_end_checkpoints_before_the_intent_goes_out():
     assert kinds(effects) == ["Checkpoint", "SendIntent", "EpisodeEnded", "Ask", "Ask"]
     assert effects[0] == Checkpoint(0)
     streams = [e for e in effects if isinstance(e, Ask)]  # a standing query on every other agent
-    assert [(a.agent, a.parameters) for a in streams] == [(1, "since=1;from=0"), (2, "since=1;from=0")]
+    assert [(a.agent, a.parameters) for a in streams] == [(1, "since=1;from=0"),
+                                                          (2, "since=1;from=0")]
 
 
 def test_answers_from_before_the_world_left_do_not_count_for_the_world_that_comes_back():

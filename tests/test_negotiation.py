@@ -47,7 +47,7 @@ def test_everyone_in_view_makes_a_chain_of_one_query_each():
         waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), config(n))
         rank = priority_rank(agent, tick, n)
         assert len(waiting_for) == rank
-        assert asks == ([] if rank == 0 else [negotiation.predecessor(agent, tick, n)])
+        assert asks == ([] if rank == 0 else [(agent - 1) % n])  # the one ranked just above
 
 
 @pytest.mark.parametrize("radius", [2, 10])
