@@ -1,4 +1,5 @@
-"""Atomic Q-table checkpoints of one agent: written to a temporary file, then renamed over.
+"""Q-table checkpoints of one agent, rewritten in place at every episode's end (``protocol.slotfile``:
+a reader sees the old checkpoint or the new, whatever is killed when).
 
 A checkpoint holds both tables, the exploration counter, the agent's generator state and the
 episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
@@ -12,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.protocol.runfiles import write_npz_atomic
+from nnql_swarm.protocol import slotfile
 
 
 class CheckpointError(ValueError):
@@ -28,25 +29,26 @@ def fingerprint(brain: AgentBrain) -> str:
 
 
 def checkpoint_path(directory: Path, agent: int) -> Path:
-    return Path(directory) / f"agent-{agent}.npz"
+    return Path(directory) / f"agent-{agent}.ckpt"
 
 
 def save(path: Path, brain: AgentBrain, episode: int) -> None:
     """Write the brain's learned state after ``episode``; readers see the old file or the new."""
     q_ds, q_ca = brain.learner.tables()
-    write_npz_atomic(path, q_ds=q_ds, q_ca=q_ca, actions_taken=brain.learner.actions_taken,
-                     episode=episode, agent=brain.agent, n_agents=brain.config.n_agents,
-                     algo=brain.config.algo, rng_state=json.dumps(brain.rng.bit_generator.state))
+    slotfile.write(path, {"q_ds": q_ds, "q_ca": q_ca,
+                          "actions_taken": int(brain.learner.actions_taken), "episode": episode,
+                          "agent": brain.agent, "n_agents": brain.config.n_agents,
+                          "algo": brain.config.algo,
+                          "rng_state": json.dumps(brain.rng.bit_generator.state)})
 
 
 def read_fields(path: Path, expected: tuple[str, ...]) -> dict:
-    """Every array of an ``.npz`` checkpoint, by name; raises CheckpointError naming the file
-    if it cannot be read or lacks one of ``expected``."""
+    """Every field of a checkpoint, by name (the tables as arrays); raises CheckpointError naming
+    the file if it cannot be read or lacks one of ``expected``."""
     path = Path(path)
     try:
-        with np.load(path, allow_pickle=False) as data:
-            fields = {key: data[key] for key in data.files}
-    except Exception as error:  # numpy raises many kinds for a damaged file
+        fields = slotfile.read(path)
+    except (OSError, slotfile.SlotFileError) as error:
         raise CheckpointError(f"{path}: not a readable checkpoint ({error})") from None
     missing = [key for key in expected if key not in fields]
     if missing:
@@ -59,6 +61,8 @@ def check_tables(path: Path, fields: dict, tables: tuple[np.ndarray, np.ndarray]
     finite values; raises CheckpointError naming the file."""
     for name, current in zip(("q_ds", "q_ca"), tables):
         shape = current.shape
+        if not isinstance(fields[name], np.ndarray):
+            raise CheckpointError(f"{path}: {name} is not a table")
         if fields[name].shape != shape:
             raise CheckpointError(f"{path}: {name} of shape {fields[name].shape}, expected {shape}")
     if not (np.isfinite(fields["q_ds"]).all() and np.isfinite(fields["q_ca"]).all()):

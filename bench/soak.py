@@ -26,6 +26,7 @@ sys.path.insert(0, str(ROOT))
 
 import numpy as np  # noqa: E402
 
+from nnql_swarm.agent import checkpoint  # noqa: E402
 from tests.swarm_helpers import find_process, group_pids, swarm_command  # noqa: E402
 from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
@@ -104,8 +105,8 @@ def main() -> int:
     lost = len(set(range(max(episodes) + 1)) - set(episodes)) + (len(episodes) - len(set(episodes)))
     zeroed = 0
     for agent in range(args.agents):
-        with np.load(out / "checkpoints" / f"agent-{agent}.npz") as data:
-            zeroed += int(np.abs(data["q_ds"]).sum() == 0 or np.abs(data["q_ca"]).sum() == 0)
+        data = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
+        zeroed += int(np.abs(data["q_ds"]).sum() == 0 or np.abs(data["q_ca"]).sum() == 0)
     ticks = int(rows[-1]["end_tick"]) + 1
     print(f"\nsoak: {args.minutes:g} min, {args.agents} agents, {ticks} ticks, {len(rows)} episodes")
     print(f"faults injected and survived: {faults} (the run went on after each)")

@@ -2,8 +2,8 @@
 
     <out>/config.json          the resolved SwarmConfig
     <out>/episodes.csv         one row per finished episode (world.metrics)
-    <out>/checkpoints/agent-<id>.npz   each agent's Q-tables (agent.checkpoint)
-    <out>/checkpoints/world.npz        the shared Q-table, where the agents share one (world.checkpoint)
+    <out>/checkpoints/agent-<id>.ckpt  each agent's Q-tables (agent.checkpoint; protocol.slotfile)
+    <out>/checkpoints/world.ckpt       the shared Q-table, where the agents share one (world.checkpoint)
     <out>/stats/world.json, <out>/stats/agent-<id>.json   closing statistics of each process
     <out>/run.rrd              the Rerun recording
 """
@@ -11,8 +11,6 @@
 import json
 import os
 from pathlib import Path
-
-import numpy as np
 
 CONFIG_FILE = "config.json"
 EPISODES_FILE = "episodes.csv"
@@ -32,17 +30,4 @@ def write_json_atomic(path: Path, data: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
-    os.replace(tmp, path)
-
-
-def write_npz_atomic(path: Path, **arrays) -> None:
-    """Write arrays to a temporary ``.npz``, sync it, and rename it over ``path``: readers see
-    the old file or the new, and a crash right after loses neither."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-        f.flush()
-        os.fsync(f.fileno())
     os.replace(tmp, path)

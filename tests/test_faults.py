@@ -61,8 +61,8 @@ def test_a_killed_agent_is_restarted_from_its_checkpoint(tmp_path):
         wait_for_rows(out / "episodes.csv", 3, 120, swarm)
         [victim] = find_process("nnql-agent 3 killed")
         os.kill(victim, signal.SIGKILL)
-        saved = out / "agent-3-at-kill.npz"
-        shutil.copy(out / "checkpoints" / "agent-3.npz", saved)
+        saved = out / "agent-3-at-kill.ckpt"
+        shutil.copy(out / "checkpoints" / "agent-3.ckpt", saved)
         stderr = swarm.finish(timeout=240)
     finally:
         if group_pids(swarm.pid):
@@ -87,9 +87,9 @@ def assert_copies_equal_the_worlds(out, config, agents) -> None:
     restarted agent, or a restarted world, was sent the whole table and caught up."""
     shared = world_checkpoint.load(world_checkpoint.table_path(out), config, config.episodes - 1)
     for agent in agents:
-        with np.load(checkpoint.checkpoint_path(out / "checkpoints", agent)) as mine:
-            assert np.array_equal(mine["q_ds"], shared[0]), agent
-            assert np.array_equal(mine["q_ca"], shared[1]), agent
+        mine = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
+        assert np.array_equal(mine["q_ds"], shared[0]), agent
+        assert np.array_equal(mine["q_ca"], shared[1]), agent
 
 
 def test_a_stalled_agent_costs_at_most_the_deadline_and_its_stale_intents_are_rejected(tmp_path):
@@ -158,7 +158,7 @@ def test_sigterm_to_the_launcher_stops_everything_within_3_s(tmp_path):
             os.killpg(swarm.pid, signal.SIGKILL)
     config = SwarmConfig.from_json((out / "config.json").read_text())
     for agent in range(8):
-        checkpoint.load(out / "checkpoints" / f"agent-{agent}.npz", AgentBrain(agent, config))
+        checkpoint.load(out / "checkpoints" / f"agent-{agent}.ckpt", AgentBrain(agent, config))
     episodes_once(out, len(read_episodes(out / "episodes.csv")))
 
 
@@ -202,21 +202,21 @@ def test_resume_refuses_corrupt_or_foreign_checkpoints_naming_the_file(tmp_path)
     assert done.returncode == 0, done.stderr
     lines = (out / "episodes.csv").read_text().splitlines(keepends=True)
     (out / "episodes.csv").write_text("".join(lines[:3]) + lines[3][:7])  # a crash mid-row
-    shutil.copy(out / "checkpoints" / "agent-0.npz", out / "checkpoints" / "agent-1.npz")
+    shutil.copy(out / "checkpoints" / "agent-0.ckpt", out / "checkpoints" / "agent-1.ckpt")
     foreign = run_swarm(out, "--resume", timeout=60)
     assert foreign.returncode == 2
-    assert "agent-1.npz: belongs to agent 0" in foreign.stderr
-    (out / "checkpoints" / "agent-1.npz").write_bytes(b"not a checkpoint")
+    assert "agent-1.ckpt: belongs to agent 0" in foreign.stderr
+    (out / "checkpoints" / "agent-1.ckpt").write_bytes(b"not a checkpoint")
     corrupt = run_swarm(out, "--resume", timeout=60)
     assert corrupt.returncode == 2
-    assert "agent-1.npz: not a readable checkpoint" in corrupt.stderr
+    assert "agent-1.ckpt: not a readable checkpoint" in corrupt.stderr
     assert len(corrupt.stderr.strip().splitlines()) == 1
     assert len(read_episodes(out / "episodes.csv")) == 2, "the half-written row was dropped"
-    (out / "checkpoints" / "agent-1.npz").unlink()  # an agent without one starts afresh
-    (out / "checkpoints" / "world.npz").unlink()
+    (out / "checkpoints" / "agent-1.ckpt").unlink()  # an agent without one starts afresh
+    (out / "checkpoints" / "world.ckpt").unlink()
     tableless = run_swarm(out, "--resume", timeout=60)
     assert tableless.returncode == 2
-    assert "world.npz: missing (the shared table of episode 1)" in tableless.stderr
+    assert "world.ckpt: missing (the shared table of episode 1)" in tableless.stderr
     nothing = run_swarm(tmp_path / "nothing-here", "--resume", timeout=60)
     assert nothing.returncode == 2 and "no run to resume here" in nothing.stderr
 
@@ -259,4 +259,4 @@ def test_a_launcher_killed_outright_takes_its_processes_with_it(tmp_path):
             os.killpg(swarm.pid, signal.SIGKILL)
     config = SwarmConfig.from_json((out / "config.json").read_text())
     for agent in range(4):  # they stopped as on Ctrl-C: checkpoints intact
-        checkpoint.load(out / "checkpoints" / f"agent-{agent}.npz", AgentBrain(agent, config))
+        checkpoint.load(out / "checkpoints" / f"agent-{agent}.ckpt", AgentBrain(agent, config))

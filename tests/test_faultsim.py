@@ -182,8 +182,10 @@ def test_without_faults_the_simulator_gives_the_in_process_run_file_for_file(tmp
     assert deterministic(tmp_path / "sim") == deterministic(tmp_path / "local")
     assert sum(int(r[3]) for r in deterministic(tmp_path / "sim")) == 0, "no intent missed"
     for agent in range(8):
-        a = np.load(checkpoint.checkpoint_path(tmp_path / "sim" / "checkpoints", agent))
-        b = np.load(checkpoint.checkpoint_path(tmp_path / "local" / "checkpoints", agent))
+        a = checkpoint.read_fields(checkpoint.checkpoint_path(tmp_path / "sim" / "checkpoints",
+                                                              agent), ())
+        b = checkpoint.read_fields(checkpoint.checkpoint_path(tmp_path / "local" / "checkpoints",
+                                                              agent), ())
         assert np.array_equal(a["q_ds"], b["q_ds"]) and np.array_equal(a["q_ca"], b["q_ca"])
 
 

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 import rerun as rr
 
+from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.viz import TABLES, logs_heat_maps, table_picture
 from nnql_swarm.recording.session import PARTS_DIR, log_experiment, rerun_binary
 from nnql_swarm.protocol.actions import RIGHT, STAY, UP, offset_state
@@ -179,8 +180,7 @@ def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run
             assert all(0 < v < 2000 for _, v in latency.values())
     # the last heat map is the picture of the agent's checkpointed table
     agent = 3
-    with np.load(out / "checkpoints" / f"agent-{agent}.npz") as data:
-        q_ds = data["q_ds"]
+    q_ds = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())["q_ds"]
     batches = recording.temporal[f"agents/{agent}/q_ds/value"]
     last = max(((b, i) for b in batches for i in range(b.num_rows)),
                key=lambda bi: bi[0].column("episode")[bi[1]].as_py())

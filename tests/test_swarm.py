@@ -78,8 +78,8 @@ def test_in_process_and_distributed_runs_are_identical(distributed_run, tmp_path
     assert deterministic(read_episodes(local / "episodes.csv")) == deterministic(
         read_episodes(out / "episodes.csv"))
     for agent in range(8):
-        a = np.load(local / "checkpoints" / f"agent-{agent}.npz")
-        b = np.load(out / "checkpoints" / f"agent-{agent}.npz")
+        a = checkpoint.read_fields(checkpoint.checkpoint_path(local / "checkpoints", agent), ())
+        b = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
         assert np.array_equal(a["q_ds"], b["q_ds"]) and np.array_equal(a["q_ca"], b["q_ca"])
 
 
@@ -164,5 +164,6 @@ def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topol
     assert distributed.returncode == 0 and local.returncode == 0, distributed.stderr
     assert deterministic(read_episodes(tmp_path / "dist" / "episodes.csv")) == deterministic(
         read_episodes(tmp_path / "local" / "episodes.csv"))
-    tables = [np.load(tmp_path / side / "checkpoints" / "agent-0.npz") for side in ("dist", "local")]
+    tables = [checkpoint.read_fields(checkpoint.checkpoint_path(tmp_path / side / "checkpoints", 0),
+                                     ()) for side in ("dist", "local")]
     assert np.array_equal(tables[0]["q_ca"], tables[1]["q_ca"])

@@ -11,10 +11,11 @@ import numpy as np
 
 from nnql_swarm.agent.checkpoint import CheckpointError, check_tables, read_fields
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, write_npz_atomic
+from nnql_swarm.protocol import slotfile
+from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR
 from nnql_swarm.world.shared_table import SharedTable
 
-FILE = "world.npz"
+FILE = "world.ckpt"
 
 
 def table_path(out_dir: Path) -> Path:
@@ -25,8 +26,8 @@ def save(path: Path, table: tuple[np.ndarray, np.ndarray], episode: int,
          config: SwarmConfig) -> None:
     """Write the shared table after ``episode``; readers see the old file or the new."""
     q_ds, q_ca = table
-    write_npz_atomic(path, q_ds=q_ds, q_ca=q_ca, episode=episode, n_agents=config.n_agents,
-                     algo=config.algo)
+    slotfile.write(path, {"q_ds": q_ds, "q_ca": q_ca, "episode": episode,
+                          "n_agents": config.n_agents, "algo": config.algo})
 
 
 def load(path: Path, config: SwarmConfig, episode: int) -> tuple[np.ndarray, np.ndarray]:

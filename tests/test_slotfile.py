@@ -1,0 +1,75 @@
+"""protocol.slotfile: the record rewritten in place, whole whatever is cut short."""
+
+import numpy as np
+import pytest
+
+from nnql_swarm.protocol import slotfile
+
+
+def record(episode: int) -> dict:
+    rng = np.random.default_rng(episode)
+    return {"q_ds": rng.random((441, 5)), "q_ca": rng.random((882, 5)), "episode": episode,
+            "algo": "nnql", "count": np.int64(7)}
+
+
+def slot_start(path, k: int) -> int:
+    size = int.from_bytes(path.read_bytes()[8:12], "little")
+    return 12 + k * size
+
+
+def test_a_record_reads_back_as_written(tmp_path):
+    path = tmp_path / "a" / "x.ckpt"
+    slotfile.write(path, record(1))
+    got = slotfile.read(path)
+    assert got["episode"] == 1 and got["algo"] == "nnql" and got["count"] == 7
+    assert np.array_equal(got["q_ds"], record(1)["q_ds"]) and got["q_ca"].shape == (882, 5)
+    got["q_ds"][0, 0] = -1.0  # a copy, writable
+    for episode in range(2, 7):
+        slotfile.write(path, record(episode))
+        assert slotfile.read(path)["episode"] == episode
+
+
+def test_a_torn_newest_slot_leaves_the_one_before(tmp_path):
+    path = tmp_path / "x.ckpt"
+    for episode in (1, 2):  # episode 1 in slot 0, episode 2 in slot 1
+        slotfile.write(path, record(episode))
+    data = bytearray(path.read_bytes())
+    data[slot_start(path, 1) + 500] ^= 0xFF  # half of episode 2's payload never reached the disk
+    path.write_bytes(bytes(data))
+    assert slotfile.read(path)["episode"] == 1
+    slotfile.write(path, record(3))  # must go over the torn slot, never over episode 1
+    assert slotfile.read(path)["episode"] == 3
+    data = bytearray(path.read_bytes())
+    data[slot_start(path, 1) + 500] ^= 0xFF
+    path.write_bytes(bytes(data))
+    assert slotfile.read(path)["episode"] == 1
+
+
+def test_a_record_that_outgrows_its_slots_gets_a_new_file(tmp_path):
+    path = tmp_path / "x.ckpt"
+    slotfile.write(path, {"episode": 1, "note": "a"})
+    slotfile.write(path, {"episode": 2, "note": "b" * 20_000})
+    assert slotfile.read(path) == {"episode": 2, "note": "b" * 20_000}
+    assert not (tmp_path / "x.ckpt.tmp").exists()
+
+
+@pytest.mark.parametrize("content", [b"", b"not a checkpoint", b"NNQLSLT1" + bytes(40)])
+def test_a_file_without_a_whole_record_is_refused(tmp_path, content):
+    path = tmp_path / "x.ckpt"
+    path.write_bytes(content)
+    with pytest.raises(slotfile.SlotFileError):
+        slotfile.read(path)
+    slotfile.write(path, record(4))  # and the next write replaces it whole
+    assert slotfile.read(path)["episode"] == 4
+
+
+def test_both_slots_damaged_is_refused(tmp_path):
+    path = tmp_path / "x.ckpt"
+    for episode in (1, 2):
+        slotfile.write(path, record(episode))
+    data = bytearray(path.read_bytes())
+    for k in (0, 1):
+        data[slot_start(path, k) + 100] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with pytest.raises(slotfile.SlotFileError, match="no whole record"):
+        slotfile.read(path)
