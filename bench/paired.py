@@ -11,7 +11,10 @@ ratio of each pair's figures cancels most of the drift.
     python bench/paired.py --pairs 3 --a-env NNQL_ZENOH_CALLBACKS=direct \\
         --b-env NNQL_ZENOH_CALLBACKS=kept -- --agents 8 --repeats 5 --episodes 10
 
-Everything after ``--`` goes to ``swarm_ticks.py``. Both sides run with this Python.
+Everything after ``--`` goes to ``swarm_ticks.py``. Both sides run with this Python. The
+editable install maps ``nnql_swarm`` to the checkout it was made from, whichever tree a side runs
+in; so each side runs with ``PYTHONPATH`` on a directory of its own whose ``nnql_swarm/<part>``
+links to its tree's folders (its ``pyproject.toml``'s package-dir), which Python finds first.
 """
 
 import argparse
@@ -20,19 +23,34 @@ import re
 import statistics
 import subprocess
 import sys
+import tempfile
+import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 LINE = re.compile(r"^\s*(\d+)\s+(distributed|bare|in-process)\s+(\d+)\s")
 
 
-def run_side(directory: Path, env: dict[str, str], args: list[str]) -> dict[str, float]:
-    """One ``swarm_ticks.py`` run; its median ticks/s by mode (a failed run is said and tried
-    once more)."""
+def package_path(directory: Path, under: Path) -> Path:
+    """A directory under ``under`` in which ``nnql_swarm.<part>`` is ``directory``'s own code."""
+    with open(directory / "pyproject.toml", "rb") as f:
+        parts = tomllib.load(f)["tool"]["setuptools"]["package-dir"]
+    root = Path(tempfile.mkdtemp(dir=under)) / "nnql_swarm"
+    root.mkdir()
+    for package, folder in parts.items():
+        (root / package.removeprefix("nnql_swarm.")).symlink_to(directory / folder)
+    return root.parent
+
+
+def run_side(directory: Path, env: dict[str, str], args: list[str],
+             path: Path) -> dict[str, float]:
+    """One ``swarm_ticks.py`` run of ``directory``'s code (importable from ``path``); its median
+    ticks/s by mode (a failed run is said and tried once more)."""
+    python_path = os.pathsep.join(filter(None, [str(path), os.environ.get("PYTHONPATH")]))
     for attempt in (1, 2):
         done = subprocess.run([sys.executable, str(directory / "bench" / "swarm_ticks.py"),
                                *args], capture_output=True, text=True, cwd=directory,
-                              env={**os.environ, **env})
+                              env={**os.environ, **env, "PYTHONPATH": python_path})
         if done.returncode == 0:
             break
         print(f"  swarm_ticks.py failed ({done.returncode}), attempt {attempt}: "
@@ -73,12 +91,14 @@ def main() -> int:
     print(f"A: {sides['A'][0]} {sides['A'][1]}\nB: {sides['B'][0]} {sides['B'][1]}\n"
           f"swarm_ticks.py {' '.join(rest)}", flush=True)
     results: dict[str, list[dict[str, float]]] = {"A": [], "B": []}
-    for pair in range(args.pairs):
-        for side in ("A", "B") if pair % 2 == 0 else ("B", "A"):
-            rates = run_side(*sides[side], rest)
-            results[side].append(rates)
-            print(f"pair {pair + 1} {side}: " + ", ".join(f"{m} {r:.0f}" for m, r in rates.items()),
-                  flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = {side: package_path(directory, Path(tmp)) for side, (directory, _) in sides.items()}
+        for pair in range(args.pairs):
+            for side in ("A", "B") if pair % 2 == 0 else ("B", "A"):
+                rates = run_side(*sides[side], rest, paths[side])
+                results[side].append(rates)
+                print(f"pair {pair + 1} {side}: "
+                      + ", ".join(f"{m} {r:.0f}" for m, r in rates.items()), flush=True)
     for mode in ("distributed", "bare"):
         a = [r[mode] for r in results["A"]]
         b = [r[mode] for r in results["B"]]
