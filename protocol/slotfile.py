@@ -37,7 +37,7 @@ class SlotFileError(ValueError):
 
 def _pack(fields: dict) -> bytes:
     def plain(value):
-        if isinstance(value, np.ndarray):
+        if isinstance(value, np.ndarray) and not value.dtype.hasobject:
             value = np.ascontiguousarray(value)
             return {_ARRAY: [value.dtype.str, list(value.shape), value.tobytes()]}
         if isinstance(value, np.generic):

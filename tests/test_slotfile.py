@@ -73,3 +73,11 @@ def test_both_slots_damaged_is_refused(tmp_path):
     path.write_bytes(bytes(data))
     with pytest.raises(slotfile.SlotFileError, match="no whole record"):
         slotfile.read(path)
+
+
+def test_what_msgpack_cannot_carry_is_refused_before_anything_is_written(tmp_path):
+    path = tmp_path / "x.ckpt"
+    slotfile.write(path, record(1))
+    with pytest.raises(TypeError):
+        slotfile.write(path, {"q_ds": np.array([object()], dtype=object)})
+    assert slotfile.read(path)["episode"] == 1
