@@ -45,15 +45,22 @@ def save(path: Path, brain: AgentBrain, episode: int) -> None:
 def read_fields(path: Path, expected: tuple[str, ...]) -> dict:
     """Every field of a checkpoint, by name (the tables as arrays); raises CheckpointError naming
     the file if it cannot be read or lacks one of ``expected``."""
+    return read_versions(path, expected)[0]
+
+
+def read_versions(path: Path, expected: tuple[str, ...]) -> list[dict]:
+    """The checkpoint file's whole versions, the newest first (``protocol.slotfile.read_all``:
+    the last and the one before), as :func:`read_fields` gives each."""
     path = Path(path)
     try:
-        fields = slotfile.read(path)
+        versions = slotfile.read_all(path)
     except (OSError, slotfile.SlotFileError) as error:
         raise CheckpointError(f"{path}: not a readable checkpoint ({error})") from None
-    missing = [key for key in expected if key not in fields]
-    if missing:
-        raise CheckpointError(f"{path}: corrupt checkpoint, missing {', '.join(missing)}")
-    return fields
+    for fields in versions:
+        missing = [key for key in expected if key not in fields]
+        if missing:
+            raise CheckpointError(f"{path}: corrupt checkpoint, missing {', '.join(missing)}")
+    return versions
 
 
 def check_tables(path: Path, fields: dict, tables: tuple[np.ndarray, np.ndarray]) -> None:

@@ -14,7 +14,9 @@ rewrite in place is one ``pwrite``.
 
 The payload is msgpack: a map of names to plain values, a numpy array as ``[dtype, shape,
 bytes]``. A file is created (or grown, if a record outgrows its slots) whole, under a temporary
-name renamed over it.
+name renamed over it. Until the next write, the slot written before holds the record before
+(:func:`read_all`): a reader that needs the one before the newest, because a process was killed
+between writing this file and recording that it did, finds it there.
 """
 
 import os
@@ -126,14 +128,21 @@ def write(path: Path, fields: dict) -> None:
         os.close(fd)
 
 
-def read(path: Path) -> dict:
-    """The file's newest whole record; raises FileNotFoundError or SlotFileError."""
+def read_all(path: Path) -> list[dict]:
+    """The file's whole records, the newest first: the last one written, and the one before it
+    unless that slot is empty or damaged. Raises FileNotFoundError or SlotFileError (no whole
+    record)."""
     with open(path, "rb") as f:
         _, records = _records(f.read())
-    whole = [r for r in records if r is not None]
+    whole = sorted((r for r in records if r is not None), reverse=True)
     if not whole:
         raise SlotFileError("no whole record in either slot")
     try:
-        return _unpack(max(whole)[1])
+        return [_unpack(payload) for _, payload in whole]
     except (ValueError, TypeError, msgpack.UnpackException) as error:
         raise SlotFileError(f"a damaged record ({error})") from None
+
+
+def read(path: Path) -> dict:
+    """The file's newest whole record; raises FileNotFoundError or SlotFileError."""
+    return read_all(path)[0]

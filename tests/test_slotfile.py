@@ -1,9 +1,14 @@
-"""protocol.slotfile: the record rewritten in place, whole whatever is cut short."""
+"""protocol.slotfile: the record rewritten in place, whole whatever is cut short; and the world's
+checkpoint, which keeps the table of the episode before for a world killed before its row."""
 
 import numpy as np
 import pytest
 
+from nnql_swarm.agent.checkpoint import CheckpointError
 from nnql_swarm.protocol import slotfile
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world.shared_table import SharedTable
 
 
 def record(episode: int) -> dict:
@@ -81,3 +86,28 @@ def test_what_msgpack_cannot_carry_is_refused_before_anything_is_written(tmp_pat
     with pytest.raises(TypeError):
         slotfile.write(path, {"q_ds": np.array([object()], dtype=object)})
     assert slotfile.read(path)["episode"] == 1
+
+
+def test_the_record_before_the_newest_is_kept_until_the_next_write(tmp_path):
+    path = tmp_path / "x.ckpt"
+    slotfile.write(path, record(1))
+    assert [r["episode"] for r in slotfile.read_all(path)] == [1]
+    for episode in (2, 3):
+        slotfile.write(path, record(episode))
+    assert [r["episode"] for r in slotfile.read_all(path)] == [3, 2]
+
+
+def test_a_world_killed_before_its_row_resumes_from_the_table_that_row_recorded(tmp_path):
+    """The world writes its table, then the episode's row: killed in between, episodes.csv ends
+    one episode before the file's newest table, and the resumed world takes the one before."""
+    config = SwarmConfig(n_agents=4, run_id="slots")
+    path = world_checkpoint.table_path(tmp_path)
+    tables = {e: SharedTable(config).tables() for e in (3, 4)}
+    for e, (q_ds, q_ca) in tables.items():
+        q_ds[0, 0] = q_ca[0, 0] = float(e)
+        world_checkpoint.save(path, (q_ds, q_ca), e, config)
+    assert world_checkpoint.load(path, config, 3)[0][0, 0] == 3.0
+    assert world_checkpoint.load(path, config, 4)[0][0, 0] == 4.0
+    with pytest.raises(CheckpointError, match="holds the table after episode 4, episodes.csv "
+                                              "ends with episode 2"):
+        world_checkpoint.load(path, config, 2)

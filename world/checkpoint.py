@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nnql_swarm.agent.checkpoint import CheckpointError, check_tables, read_fields
+from nnql_swarm.agent.checkpoint import CheckpointError, check_tables, read_versions
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol import slotfile
 from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR
@@ -36,7 +36,10 @@ def load(path: Path, config: SwarmConfig, episode: int) -> tuple[np.ndarray, np.
     path = Path(path)
     if not path.exists():
         raise CheckpointError(f"{path}: missing (the shared table of episode {episode})")
-    fields = read_fields(path, ("q_ds", "q_ca", "episode", "n_agents", "algo"))
+    versions = read_versions(path, ("q_ds", "q_ca", "episode", "n_agents", "algo"))
+    # a world killed after writing this file and before the episode's row holds the table of an
+    # episode past episodes.csv; the version before it is the one the row before recorded
+    fields = next((v for v in versions if int(v["episode"]) == episode), versions[0])
     check_tables(path, fields, SharedTable(config).tables())
     owner = (int(fields["n_agents"]), str(fields["algo"]))
     if owner != (config.n_agents, config.algo):
