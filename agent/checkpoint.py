@@ -45,15 +45,19 @@ def save(path: Path, brain: AgentBrain, episode: int) -> None:
 def read_fields(path: Path, expected: tuple[str, ...]) -> dict:
     """Every field of a checkpoint, by name (the tables as arrays); raises CheckpointError naming
     the file if it cannot be read or lacks one of ``expected``."""
-    return read_versions(path, expected)[0]
+    return _read(path, expected, all_versions=False)[0]
 
 
 def read_versions(path: Path, expected: tuple[str, ...]) -> list[dict]:
     """The checkpoint file's whole versions, the newest first (``protocol.slotfile.read_all``:
     the last and the one before), as :func:`read_fields` gives each."""
+    return _read(path, expected, all_versions=True)
+
+
+def _read(path: Path, expected: tuple[str, ...], all_versions: bool) -> list[dict]:
     path = Path(path)
     try:
-        versions = slotfile.read_all(path)
+        versions = slotfile.read_all(path) if all_versions else [slotfile.read(path)]
     except (OSError, slotfile.SlotFileError) as error:
         raise CheckpointError(f"{path}: not a readable checkpoint ({error})") from None
     for fields in versions:

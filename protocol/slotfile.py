@@ -128,21 +128,30 @@ def write(path: Path, fields: dict) -> None:
         os.close(fd)
 
 
-def read_all(path: Path) -> list[dict]:
-    """The file's whole records, the newest first: the last one written, and the one before it
-    unless that slot is empty or damaged. Raises FileNotFoundError or SlotFileError (no whole
-    record)."""
+def _payloads(path: Path) -> list[bytes]:
+    """The payloads of the file's whole records, the newest first; raises FileNotFoundError or
+    SlotFileError (no whole record)."""
     with open(path, "rb") as f:
         _, records = _records(f.read())
     whole = sorted((r for r in records if r is not None), reverse=True)
     if not whole:
         raise SlotFileError("no whole record in either slot")
+    return [payload for _, payload in whole]
+
+
+def _record(payload: bytes) -> dict:
     try:
-        return [_unpack(payload) for _, payload in whole]
+        return _unpack(payload)
     except (ValueError, TypeError, msgpack.UnpackException) as error:
         raise SlotFileError(f"a damaged record ({error})") from None
 
 
 def read(path: Path) -> dict:
     """The file's newest whole record; raises FileNotFoundError or SlotFileError."""
-    return read_all(path)[0]
+    return _record(_payloads(path)[0])
+
+
+def read_all(path: Path) -> list[dict]:
+    """The file's whole records, the newest first: the last one written, and the one before it
+    unless that slot is empty or damaged. Raises FileNotFoundError or SlotFileError."""
+    return [_record(payload) for payload in _payloads(path)]
