@@ -6,10 +6,10 @@ gossip scouting joins them into a full mesh, so a negotiation query goes straigh
 agent. Multicast scouting is always off unless a config file turns it on. Across machines, pass
 a Zenoh config file and/or listen and connect endpoints (README, "Several machines").
 
-Every process also runs Zenoh with one receiving thread (:data:`RUNTIME_DEFAULT`, unless
-``ZENOH_RUNTIME`` is set), and every handler of the nodes is a :func:`callback`: by default it
-runs on that thread, which keeps its Python thread state from one call to the next; one switch,
-:data:`CALLBACKS_ENV`, turns either trick off.
+Every process also runs Zenoh with one thread that waits on every socket and receives
+(:data:`RUNTIME_DEFAULT`, unless ``ZENOH_RUNTIME`` is set), and every handler of the nodes is a
+:func:`callback`: by default it runs on that thread, which keeps its Python thread state from
+one call to the next; one switch, :data:`CALLBACKS_ENV`, turns either trick off.
 """
 
 import ctypes
@@ -36,11 +36,25 @@ class TransportError(RuntimeError):
 
 
 RUNTIME_ENV = "ZENOH_RUNTIME"
-RUNTIME_DEFAULT = "(rx: (worker_threads: 1))"
+RUNTIME_DEFAULT = ("(rx: (worker_threads: 1), acc: (handover: rx), app: (handover: rx),"
+                   " net: (handover: rx))")
 """Zenoh's runtime threads, unless ``ZENOH_RUNTIME`` says otherwise: one network receiving
-thread instead of two. Our handlers run on that thread (``indirect=False``); with two, each
-message woke the idle one too (tokio's work stealing), and the handlers hopped between threads:
-24 % more ticks a second with one, on 2 cores and 9 processes (README, "where the time goes")."""
+thread instead of two, which also runs the acceptor's, the application's and the network
+runtime's tasks (``handover``). Our handlers run on that thread (``indirect=False``).
+
+- One receiving thread: with two, each message woke the idle one too (tokio's work stealing),
+  and the handlers hopped between threads; 24 % more ticks a second with one, on 2 cores and 9
+  processes (docs/performance.md, "Where the time goes").
+- The hand-overs: a socket is registered with the reactor of the runtime that opened it, the
+  acceptor's for a link accepted, the application's for one connected. So every message that
+  came in woke that runtime's thread first (an ``epoll_wait``), which then woke the receiving
+  thread (an ``eventfd`` write): two thread wake-ups a message. Handed over, one thread waits on
+  every socket and handles what arrives. ``bench/paired.py --pairs 3 --a-env
+  ZENOH_RUNTIME='(rx: (worker_threads: 1))' --b-env ZENOH_RUNTIME='<this>' -- --agents 8
+  --repeats 3 --episodes 10``: 1.10x the ticks a second (1.01, 1.20, 1.10).
+- The sending runtime (``tx``) keeps its own thread: handed over too, a put that waits for the
+  sender (``CongestionControl.BLOCK``) from a handler on that thread waited for itself, and at
+  start-up agents stalled until their leases ran out."""
 
 
 def open_session(settings: "TransportSettings") -> zenoh.Session:

@@ -8,6 +8,7 @@ import multiprocessing as mp
 import os
 import threading
 import time
+from pathlib import Path
 
 from nnql_swarm.protocol import transport
 from nnql_swarm.protocol.transport import TransportSettings, free_port
@@ -40,7 +41,13 @@ def _counts_seen_by_a_subscriber(mode: str | None) -> dict[int, list[int]]:
                     publisher.put(b"x")
                     time.sleep(0.01)
                 received.wait(5)
+                seen["threads"] = _thread_names()
     return seen
+
+
+def _thread_names() -> list[str]:
+    """The names of this process's threads (Zenoh names its runtimes' ``<runtime>-<n>``)."""
+    return sorted(path.read_text().strip() for path in Path("/proc/self/task").glob("*/comm"))
 
 
 def _run(mode: str | None, results) -> None:
@@ -70,6 +77,7 @@ def _in_fresh_process(mode: str | None, switch: str | None = None) -> tuple[str,
 
 def test_zenohs_thread_keeps_its_python_state_from_one_callback_to_the_next():
     mode, seen = _in_fresh_process(mode=None)
+    seen.pop("threads")
     assert mode == "kept", "the default"
     assert sum(map(len, seen.values())) == MESSAGES
     for counts in seen.values():  # one receiving thread by default (transport.RUNTIME_DEFAULT)
@@ -80,12 +88,14 @@ def test_without_it_each_callback_starts_from_a_new_python_state():
     """Why the ``kept`` mode exists: should Zenoh ever keep the state itself, this fails, and
     the workaround can go."""
     _, seen = _in_fresh_process(mode="direct")
+    seen.pop("threads")
     assert sum(map(len, seen.values())) == MESSAGES
     assert all(set(counts) == {1} for counts in seen.values())
 
 
 def test_the_one_switch_turns_the_tricks_off():
     mode, seen = _in_fresh_process(mode=None, switch="indirect")
+    seen.pop("threads")
     assert mode == "indirect"
     assert sum(map(len, seen.values())) == MESSAGES
     assert all(ident != threading.main_thread().ident for ident in seen)
@@ -93,6 +103,17 @@ def test_the_one_switch_turns_the_tricks_off():
         assert counts == list(range(1, len(counts) + 1))
     mode, _ = _in_fresh_process(mode=None, switch="sideways")
     assert mode == "kept", "an unknown value falls back to the default"
+
+
+def test_one_thread_waits_on_every_socket_and_receives_another_sends():
+    """transport.RUNTIME_DEFAULT: the acceptor's, the application's and the network runtimes
+    are handed over to the one receiving thread, which both a listening session (its accepted
+    link) and a connecting one used; the sending runtime keeps its own. (Tokio names the
+    threads of a runtime's blocking pool as its workers, so two sessions opened in one process
+    may show more than ``rx-0``.)"""
+    _, seen = _in_fresh_process(mode=None)
+    runtimes = {name.split("-")[0] for name in seen["threads"]}
+    assert {"rx", "tx"} <= runtimes and not runtimes & {"acc", "app", "net"}, seen["threads"]
 
 
 def test_the_runtime_default_leaves_a_users_setting_alone(monkeypatch):
