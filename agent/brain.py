@@ -18,7 +18,7 @@ from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
     REC_COUNT, REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome,
-    entry_cells, reach, record_size, state_size, write_updates,
+    entry_rows, reach, record_size, state_size, write_updates,
 )
 from nnql_swarm.protocol.actions import (
     N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y,
@@ -54,7 +54,7 @@ class Learner:
         self.rec = ints([0] * record_size(config.n_bodies))
         self.rec_f = floats([0.0] * RF_FIELDS)
         self.values = floats([0.0] * N_ACTIONS)
-        self._cells: list | None = None
+        self._rows: list | None = None
 
     @property
     def actions_taken(self) -> int:
@@ -67,14 +67,15 @@ class Learner:
     def restore(self, q_ds: np.ndarray, q_ca: np.ndarray, actions_taken: int) -> None:
         """Take the tables and count of a checkpoint (shapes checked by the caller)."""
         self.q_ds, self.q_ca = table(q_ds), table(q_ca)
-        self._cells = None
+        self._rows = None
         self.state[LS_TAKEN] = int(actions_taken)
 
-    def cells(self) -> list:
-        """The tables' entries as shared-table updates name them (``entry_cells``)."""
-        if self._cells is None:
-            self._cells = entry_cells(self.q_ds, self.q_ca)
-        return self._cells
+    def rows(self) -> list:
+        """Both tables' rows, stacked, as shared-table updates name their entries
+        (``entry_rows``)."""
+        if self._rows is None:
+            self._rows = entry_rows(self.q_ds, self.q_ca)
+        return self._rows
 
     def forget_pending(self) -> None:
         """Drop the pending transition (its episode was abandoned, e.g. the world restarted)."""
@@ -136,7 +137,7 @@ class AgentBrain:
             return
         self._prepared = (obs.episode, obs.tick)
         if self.config.shared and obs.updates:
-            self.rejected_updates += write_updates(self.learner.cells(), obs.updates)
+            self.rejected_updates += write_updates(self.learner.rows(), obs.updates)
         if obs.arrived or obs.episode_end or self._noise_episode == obs.episode:
             return
         draw_noise(self.rng, self._random_actions, self._ties)

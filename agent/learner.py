@@ -142,23 +142,22 @@ def record_entries(ints) -> list[int]:
     return entries
 
 
-def entry_cells(q_ds, q_ca) -> list:
-    """Every entry of a learner's two tables stacked, as ``(row, action)`` with ``row`` the
-    table's own row (a list, or a view of an array): what :func:`write_updates` writes through,
-    built once per pair of tables."""
-    return [(row, action) for table in (q_ds, q_ca) for row in table for action in range(N_ACTIONS)]
+def entry_rows(q_ds, q_ca) -> list:
+    """Both of a learner's tables stacked, as one list of their rows (lists, or views of an
+    array): entry ``e`` of a shared table's updates is ``rows[e // N_ACTIONS][e % N_ACTIONS]``.
+    Built once per pair of tables, for :func:`write_updates`."""
+    return [*q_ds, *q_ca]
 
 
-def write_updates(cells: list, groups) -> int:
+def write_updates(rows: list, groups) -> int:
     """Write a shared table's updates (groups of ``(entry index, value)``) through a learner's
-    :func:`entry_cells`; returns how many entries fell outside its tables (refused)."""
-    end = len(cells)
+    :func:`entry_rows`; returns how many entries fell outside its tables (refused)."""
+    end = len(rows) * N_ACTIONS
     refused = 0
     for group in groups:
         for index, value in group:
             if index < end:
-                row, action = cells[index]
-                row[action] = value
+                rows[index // N_ACTIONS][index % N_ACTIONS] = value
             else:
                 refused += 1
     return refused

@@ -37,11 +37,25 @@ from nnql_swarm.protocol.ranks import priority_rank, waits_for
 def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
     """The neighbours whose intents the observing agent waits for at this tick (none for QL, and
     none at an episode's end, where everybody stays)."""
+    return [j for j, _, _ in _awaited(obs, config)]
+
+
+def _awaited(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]]:
+    """:func:`awaited` as ``(id, x, y)``."""
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
     (x, y), n, radius = obs.position, config.n_agents, config.interaction_radius
-    return [j for j, jx, jy in obs.neighbours
+    return [(j, jx, jy) for j, jx, jy in within(obs, radius)
             if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius)]
+
+
+def within(obs: Observation, distance: int) -> list[tuple[int, int, int]]:
+    """The observed neighbours at most ``distance`` cells (Chebyshev) from the observer, as
+    ``(id, x, y)`` in id order: a cheap first cut of those a plan can involve, so that the
+    rule (``waits_for``) is asked about a few neighbours, not about all in view."""
+    x, y = obs.position
+    return [(j, jx, jy) for j, jx, jy in obs.neighbours
+            if -distance <= jx - x <= distance and -distance <= jy - y <= distance]
 
 
 def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
@@ -64,10 +78,11 @@ def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
 
 def plan_for(obs: Observation, config: SwarmConfig) -> tuple[list[int], list[int]]:
     """``(awaited, asks)`` for one observation: whose intents to learn, and whom to ask."""
-    waiting_for = awaited(obs, config)
-    if not waiting_for:
-        return waiting_for, []
-    cells = {j: (x, y) for j, x, y in obs.neighbours}
+    near = _awaited(obs, config)
+    if not near:
+        return [], []
+    waiting_for = [j for j, _, _ in near]
+    cells = {j: (x, y) for j, x, y in near}  # plan_asks reads only the cells of waiting_for
     tick, n = obs.tick, config.n_agents
     return waiting_for, plan_asks(waiting_for, cells, lambda j: priority_rank(j, tick, n),
                                   config.interaction_radius)
@@ -89,7 +104,7 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
         return []
     n, tick, radius, me = config.n_agents, obs.tick, config.interaction_radius, obs.agent
     (x, y), rank = obs.position, obs.rank
-    cells = {j: (jx, jy) for j, jx, jy in obs.neighbours}
+    cells = {j: (jx, jy) for j, jx, jy in within(obs, 2 * radius)}  # waiters and theirs
     ranks = {j: priority_rank(j, tick, n) for j in cells}
     waiters = sorted((ranks[j], j) for j, (jx, jy) in cells.items()
                      if waits_for(True, ranks[j], rank, jx, jy, x, y, radius))

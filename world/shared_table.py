@@ -22,6 +22,7 @@ from nnql_swarm.agent.brain import Learner
 from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_GAMMA, apply_record, record_entries, record_is_valid,
 )
+from nnql_swarm.protocol.actions import N_ACTIONS
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import floats, ints
 from nnql_swarm.protocol.messages import MAX_AGENTS
@@ -54,27 +55,22 @@ class SharedTable:
             integers, values = learned[agent]
             apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
             written.append(record_entries(integers))
-        cells = learner.cells()
-        updates = []
-        for entries in written:
-            group = []
-            for index in entries:
-                row, action = cells[index]
-                group.append((index, float(row[action])))
-            updates.append(tuple(group))
-        return tuple(updates)
+        rows = learner.rows()
+        return tuple(tuple((index, float(rows[index // N_ACTIONS][index % N_ACTIONS]))
+                           for index in entries)
+                     for entries in written)
 
     @property
     def entries(self) -> int:
         """How many Q-values both tables hold (entry indices are 0 to this - 1)."""
-        return len(self._learner.cells())
+        return len(self._learner.rows()) * N_ACTIONS
 
     def chunk(self, start: int, count: int) -> Updates:
         """The current values of entries ``start`` to ``start + count - 1`` (fewer at the end),
         as update groups of at most :data:`MAX_AGENTS` entries (the most a group holds)."""
-        cells = self._learner.cells()
-        indices = range(start, min(start + count, len(cells)))
-        values = [(i, float(cells[i][0][cells[i][1]])) for i in indices]
+        rows = self._learner.rows()
+        indices = range(start, min(start + count, self.entries))
+        values = [(i, float(rows[i // N_ACTIONS][i % N_ACTIONS])) for i in indices]
         return tuple(tuple(values[k:k + MAX_AGENTS]) for k in range(0, len(values), MAX_AGENTS))
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
