@@ -24,6 +24,8 @@ from typing import Callable
 
 import zenoh
 
+from nnql_swarm.protocol.keys import MAX_AGENTS
+
 MODES = ("peer", "client", "router")
 
 
@@ -36,8 +38,8 @@ class TransportError(RuntimeError):
 
 
 RUNTIME_ENV = "ZENOH_RUNTIME"
-RUNTIME_DEFAULT = ("(rx: (worker_threads: 1), acc: (handover: rx), app: (handover: rx),"
-                   " net: (handover: rx))")
+RUNTIME_DEFAULT = (f"(rx: (worker_threads: 1, max_blocking_threads: {MAX_AGENTS}),"
+                   " acc: (handover: rx), app: (handover: rx), net: (handover: rx))")
 """Zenoh's runtime threads, unless ``ZENOH_RUNTIME`` says otherwise: one network receiving
 thread instead of two, which also runs the acceptor's, the application's and the network
 runtime's tasks (``handover``). Our handlers run on that thread (``indirect=False``).
@@ -52,6 +54,11 @@ runtime's tasks (``handover``). Our handlers run on that thread (``indirect=Fals
   every socket and handles what arrives. ``bench/paired.py --pairs 3 --a-env
   ZENOH_RUNTIME='(rx: (worker_threads: 1))' --b-env ZENOH_RUNTIME='<this>' -- --agents 8
   --repeats 3 --episodes 10``: 1.10x the ticks a second (1.01, 1.20, 1.10).
+- The receiving runtime's pool of blocking threads holds up to one per possible agent
+  (``protocol.keys.MAX_AGENTS``), not tokio's 50: a link's accepting takes one of them, which
+  once came from the acceptor's own pool. With 50, the world of 128 agents filled it (51
+  threads), and its session's close then waited forever, in 2 of 6 runs; with 1024, 6 of 6
+  closed (32 to 53 threads at the peak).
 - The sending runtime (``tx``) keeps its own thread: handed over too, a put that waits for the
   sender (``CongestionControl.BLOCK``) from a handler on that thread waited for itself, and at
   start-up agents stalled until their leases ran out."""
