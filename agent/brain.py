@@ -21,7 +21,7 @@ from nnql_swarm.agent.learner import (
     entry_rows, reach, record_size, state_size, write_updates,
 )
 from nnql_swarm.protocol.actions import (
-    N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y,
+    N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y, within,
 )
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import filled, floats, ints, python_values, rows, table
@@ -182,9 +182,7 @@ class AgentBrain:
         parked = set(obs.parked)
         (x, y), far = obs.position, self._reach
         rows = []
-        for j, jx, jy in obs.neighbours:
-            if jx - x > far or x - jx > far or jy - y > far or y - jy > far:
-                continue
+        for j, jx, jy in within(obs.neighbours, x, y, far):
             action = answers.get(j)
             if action is None:
                 nx, ny, known = jx, jy, 0

@@ -149,6 +149,11 @@ def entry_rows(q_ds, q_ca) -> list:
     return [*q_ds, *q_ca]
 
 
+def entry_value(rows: list, index: int) -> float:
+    """Entry ``index`` of a learner's :func:`entry_rows`, as a Python float."""
+    return float(rows[index // N_ACTIONS][index % N_ACTIONS])
+
+
 def write_updates(rows: list, groups) -> int:
     """Write a shared table's updates (groups of ``(entry index, value)``) through a learner's
     :func:`entry_rows`; returns how many entries fell outside its tables (refused)."""
@@ -156,7 +161,7 @@ def write_updates(rows: list, groups) -> int:
     refused = 0
     for group in groups:
         for index, value in group:
-            if index < end:
+            if index < end:  # entry_value's cell, spelled out: once per update, every tick
                 rows[index // N_ACTIONS][index % N_ACTIONS] = value
             else:
                 refused += 1

@@ -28,7 +28,7 @@ view); otherwise it answers every agent that waits for it, a superset of the pla
 from dataclasses import dataclass, field
 from typing import Callable
 
-from nnql_swarm.protocol.actions import VIEW_RADIUS
+from nnql_swarm.protocol.actions import VIEW_RADIUS, within
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.ranks import priority_rank, waits_for
@@ -45,17 +45,8 @@ def _awaited(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
     (x, y), n, radius = obs.position, config.n_agents, config.interaction_radius
-    return [(j, jx, jy) for j, jx, jy in within(obs, radius)
+    return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
             if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius)]
-
-
-def within(obs: Observation, distance: int) -> list[tuple[int, int, int]]:
-    """The observed neighbours at most ``distance`` cells (Chebyshev) from the observer, as
-    ``(id, x, y)`` in id order: a cheap first cut of those a plan can involve, so that the
-    rule (``waits_for``) is asked about a few neighbours, not about all in view."""
-    x, y = obs.position
-    return [(j, jx, jy) for j, jx, jy in obs.neighbours
-            if -distance <= jx - x <= distance and -distance <= jy - y <= distance]
 
 
 def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
@@ -104,7 +95,8 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
         return []
     n, tick, radius, me = config.n_agents, obs.tick, config.interaction_radius, obs.agent
     (x, y), rank = obs.position, obs.rank
-    cells = {j: (jx, jy) for j, jx, jy in within(obs, 2 * radius)}  # waiters and theirs
+    near = within(obs.neighbours, x, y, 2 * radius)  # the waiters and those they wait for
+    cells = {j: (jx, jy) for j, jx, jy in near}
     ranks = {j: priority_rank(j, tick, n) for j in cells}
     waiters = sorted((ranks[j], j) for j, (jx, jy) in cells.items()
                      if waits_for(True, ranks[j], rank, jx, jy, x, y, radius))

@@ -41,7 +41,6 @@ def _counts_seen_by_a_subscriber(mode: str | None) -> dict[int, list[int]]:
                     publisher.put(b"x")
                     time.sleep(0.01)
                 received.wait(5)
-                seen["threads"] = _thread_names()
     return seen
 
 
@@ -51,12 +50,14 @@ def _thread_names() -> list[str]:
 
 
 def _run(mode: str | None, results) -> None:
-    results.put((transport.CALLBACK_MODE, _counts_seen_by_a_subscriber(mode)))
+    seen = _counts_seen_by_a_subscriber(mode)
+    results.put((transport.CALLBACK_MODE, seen, _thread_names()))
 
 
-def _in_fresh_process(mode: str | None, switch: str | None = None) -> tuple[str, dict]:
-    """``(the switch's mode, what the subscriber saw)`` in a fresh process whose
-    :data:`transport.CALLBACKS_ENV` is ``switch``."""
+def _in_fresh_process(mode: str | None,
+                      switch: str | None = None) -> tuple[str, dict, list[str]]:
+    """``(the switch's mode, what the subscriber saw, the process's thread names after it)`` in
+    a fresh process whose :data:`transport.CALLBACKS_ENV` is ``switch``."""
     ctx = mp.get_context("spawn")
     results = ctx.Queue()
     old = os.environ.pop(transport.CALLBACKS_ENV, None)
@@ -76,8 +77,7 @@ def _in_fresh_process(mode: str | None, switch: str | None = None) -> tuple[str,
 
 
 def test_zenohs_thread_keeps_its_python_state_from_one_callback_to_the_next():
-    mode, seen = _in_fresh_process(mode=None)
-    seen.pop("threads")
+    mode, seen, _ = _in_fresh_process(mode=None)
     assert mode == "kept", "the default"
     assert sum(map(len, seen.values())) == MESSAGES
     for counts in seen.values():  # one receiving thread by default (transport.RUNTIME_DEFAULT)
@@ -87,21 +87,19 @@ def test_zenohs_thread_keeps_its_python_state_from_one_callback_to_the_next():
 def test_without_it_each_callback_starts_from_a_new_python_state():
     """Why the ``kept`` mode exists: should Zenoh ever keep the state itself, this fails, and
     the workaround can go."""
-    _, seen = _in_fresh_process(mode="direct")
-    seen.pop("threads")
+    _, seen, _ = _in_fresh_process(mode="direct")
     assert sum(map(len, seen.values())) == MESSAGES
     assert all(set(counts) == {1} for counts in seen.values())
 
 
 def test_the_one_switch_turns_the_tricks_off():
-    mode, seen = _in_fresh_process(mode=None, switch="indirect")
-    seen.pop("threads")
+    mode, seen, _ = _in_fresh_process(mode=None, switch="indirect")
     assert mode == "indirect"
     assert sum(map(len, seen.values())) == MESSAGES
     assert all(ident != threading.main_thread().ident for ident in seen)
     for counts in seen.values():  # zenoh-python's own Python thread keeps its state anyway
         assert counts == list(range(1, len(counts) + 1))
-    mode, _ = _in_fresh_process(mode=None, switch="sideways")
+    mode, _, _ = _in_fresh_process(mode=None, switch="sideways")
     assert mode == "kept", "an unknown value falls back to the default"
 
 
@@ -111,9 +109,9 @@ def test_one_thread_waits_on_every_socket_and_receives_another_sends():
     link) and a connecting one used; the sending runtime keeps its own. (Tokio names the
     threads of a runtime's blocking pool as its workers, so two sessions opened in one process
     may show more than ``rx-0``.)"""
-    _, seen = _in_fresh_process(mode=None)
-    runtimes = {name.split("-")[0] for name in seen["threads"]}
-    assert {"rx", "tx"} <= runtimes and not runtimes & {"acc", "app", "net"}, seen["threads"]
+    _, _, threads = _in_fresh_process(mode=None)
+    runtimes = {name.split("-")[0] for name in threads}
+    assert {"rx", "tx"} <= runtimes and not runtimes & {"acc", "app", "net"}, threads
 
 
 def test_the_runtime_default_leaves_a_users_setting_alone(monkeypatch):

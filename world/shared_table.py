@@ -20,7 +20,7 @@ import numpy as np
 
 from nnql_swarm.agent.brain import Learner
 from nnql_swarm.agent.learner import (
-    FP_ALPHA, FP_GAMMA, apply_record, record_entries, record_is_valid,
+    FP_ALPHA, FP_GAMMA, apply_record, entry_value, record_entries, record_is_valid,
 )
 from nnql_swarm.protocol.actions import N_ACTIONS
 from nnql_swarm.protocol.config import SwarmConfig
@@ -56,8 +56,7 @@ class SharedTable:
             apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
             written.append(record_entries(integers))
         rows = learner.rows()
-        return tuple(tuple((index, float(rows[index // N_ACTIONS][index % N_ACTIONS]))
-                           for index in entries)
+        return tuple(tuple((index, entry_value(rows, index)) for index in entries)
                      for entries in written)
 
     @property
@@ -70,7 +69,7 @@ class SharedTable:
         as update groups of at most :data:`MAX_AGENTS` entries (the most a group holds)."""
         rows = self._learner.rows()
         indices = range(start, min(start + count, self.entries))
-        values = [(i, float(rows[i // N_ACTIONS][i % N_ACTIONS])) for i in indices]
+        values = [(i, entry_value(rows, i)) for i in indices]
         return tuple(tuple(values[k:k + MAX_AGENTS]) for k in range(0, len(values), MAX_AGENTS))
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
