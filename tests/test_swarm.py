@@ -1,6 +1,7 @@
 """The distributed swarm end to end: real processes, real Zenoh sessions on loopback, real Rerun files."""
 
 import csv
+import json
 import os
 import signal
 import subprocess
@@ -14,6 +15,7 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.runfiles import stats_path
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm, stops_within
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import COLUMNS, read_episodes
@@ -45,6 +47,15 @@ def test_distributed_run_completes_and_writes_everything(distributed_run):
     config = SwarmConfig.from_json((out / "config.json").read_text())
     assert config.n_agents == 8 and config.run_id == "dist"
     assert "invariants" not in result.stderr
+
+
+def test_no_process_refuses_a_message_another_made(distributed_run):
+    """Senders do not parse what they encode: every payload is judged where it arrives, and in a
+    run without faults or forgeries nothing a node made may be refused there."""
+    out, _ = distributed_run
+    for name in ("world", *(f"agent-{i}" for i in range(8))):
+        stats = json.loads(stats_path(out, name).read_text())
+        assert stats["rejected"] == {} and stats["accepted"] > 0, (name, stats)
 
 
 def test_recording_verifies(distributed_run):
