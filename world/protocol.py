@@ -74,6 +74,7 @@ class WorldProtocol:
         self._out: list = []
         self.inbox = Inbox(config.run_id, _EffectLog(self))
         self.alive: set[int] = set()
+        self.awaited: set[int] = set()  # the live agents whose intent the open tick still awaits
         self.joined: set[int] = set()  # every agent seen alive once
         self.to_resync: set[int] = set()  # to be sent the whole table from their next intent
         self.resumed = first_episode > 0 or first_tick > 0
@@ -113,9 +114,12 @@ class WorldProtocol:
             self.inbox.reject("unknown-agent", str(key))
         elif self.closing:
             (self.alive.add if alive else self.alive.discard)(agent)
+            self.awaited.discard(agent)
             self.leave_by = max(self.leave_by, now + SHUTDOWN_QUIET_S)
         elif alive:
             self.alive.add(agent)
+            if self.actions is not None and self.actions[agent] is None:
+                self.awaited.add(agent)
             out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
             if self.started and agent in self.joined:  # restarted: its copy is a checkpoint's
                 self.to_resync.add(agent)
@@ -124,6 +128,7 @@ class WorldProtocol:
                 self._start(now)
         else:
             self.alive.discard(agent)
+            self.awaited.discard(agent)
             out.append(Log(logging.WARNING, "agent %d left", (agent,)))
             self._close_if_due(now)
         return out
@@ -154,6 +159,7 @@ class WorldProtocol:
             self.inbox.reject("duplicate-intent", f"agent {intent.agent} tick {tick}")
         else:
             actions[intent.agent] = intent.action
+            self.awaited.discard(intent.agent)
             if intent.record:
                 self._keep_record(intent.agent, intent.record[0])
             if intent.agent in self.to_resync:  # it hears the observations: send it the table
@@ -235,6 +241,7 @@ class WorldProtocol:
         """Send every agent its observation of the current tick; start waiting for intents."""
         out = self._out
         self.actions = [None] * self.n
+        self.awaited = set(self.alive)
         self.learned = {}
         self.tick_start = now
         self.tick_deadline = now + self.config.tick_deadline_s
@@ -249,10 +256,7 @@ class WorldProtocol:
 
     def _close_if_due(self, now: float) -> None:
         """Close the open tick if every live agent's intent is in or its deadline passed."""
-        actions = self.actions
-        if actions is None:
-            return
-        if now >= self.tick_deadline or all(actions[i] is not None for i in self.alive):
+        if self.actions is not None and (now >= self.tick_deadline or not self.awaited):
             self._close_tick(now)
 
     def _close_tick(self, now: float) -> None:
