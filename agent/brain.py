@@ -24,7 +24,9 @@ from nnql_swarm.protocol.actions import (
     N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y, within,
 )
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import filled, floats, ints, python_values, rows, table
+from nnql_swarm.protocol.jit import (
+    filled, floats, ints, python_values, rows, table, table_array,
+)
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 
@@ -62,7 +64,7 @@ class Learner:
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
         """``Q_DS`` and ``Q_CA`` as arrays (copies), for checkpoints and pictures."""
-        return np.array(self.q_ds), np.array(self.q_ca)
+        return table_array(self.q_ds), table_array(self.q_ca)
 
     def restore(self, q_ds: np.ndarray, q_ca: np.ndarray, actions_taken: int) -> None:
         """Take the tables and count of a checkpoint (shapes checked by the caller)."""

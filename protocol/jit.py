@@ -20,6 +20,7 @@ says otherwise.
 """
 
 import hashlib
+import itertools
 import os
 from pathlib import Path
 
@@ -91,6 +92,16 @@ def rows(values: list[list[int]], width: int) -> "np.ndarray | list[list[int]]":
 def table(values: np.ndarray) -> "np.ndarray | list[list[float]]":
     """A table of floats as a kernel buffer (a copy)."""
     return np.array(values, dtype=np.float64) if COMPILED else np.asarray(values, float).tolist()
+
+
+def table_array(buffer) -> np.ndarray:
+    """A table buffer as a new array of floats (for checkpoints and pictures): rows of a list
+    read in one pass, twice as fast as ``np.array`` of the lists."""
+    if isinstance(buffer, np.ndarray):
+        return np.array(buffer, dtype=np.float64)
+    width = len(buffer[0]) if buffer else 0
+    values = np.fromiter(itertools.chain.from_iterable(buffer), np.float64, len(buffer) * width)
+    return values.reshape(len(buffer), width)
 
 
 def filled(rows: int, columns: int, value: float) -> "np.ndarray | list[list[float]]":
