@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Cost of the wire codec per message: ``encode`` (validate, then pack) and ``parse``, per kind.
+"""Cost of the wire codec per message, per kind: ``encode`` (it only packs) and ``parse``.
 
 For each message kind, on one valid message as the world and the agents make them (plain ints,
 floats and tuples): ``encode`` and ``parse`` of its bytes. Each figure is the median over
