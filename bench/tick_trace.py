@@ -4,8 +4,10 @@
 Runs the launcher's world and agent processes (embedded Zenoh, recording off) with ``NNQL_TRACE``
 set (``protocol.trace``), then lines up the marks of every tick after the first episode: the
 chain from the world's first observation through each agent's answer to the next, to the world
-closing the tick. Medians and 90th percentiles in microseconds. Meant for the default grid, where
-everyone sees everyone and the negotiation is one chain (docs/performance.md).
+closing the tick. Medians and 90th percentiles in microseconds. With the paper's preset
+(``--preset nnql``, radius 10) the negotiation is one chain of every agent; with the default
+(radius 2) the chains are only among agents in reach, so a tick has fewer hops, each counted
+once (docs/performance.md).
 
     python bench/tick_trace.py --agents 8 --episodes 15
 """
