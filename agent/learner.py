@@ -248,7 +248,6 @@ def complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f):
     if state[LS_PENDING] == 0:
         return False
     reading = params[LP_READING]
-    known_state = params[LP_KNOWN_STATE] != 0
     rec[REC_GOAL] = state[LS_GOAL]
     rec[REC_ACTION] = state[LS_ACTION]
     rec[REC_TERMINAL] = state[LS_TERMINAL]

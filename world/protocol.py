@@ -114,7 +114,6 @@ class WorldProtocol:
             self.inbox.reject("unknown-agent", str(key))
         elif self.closing:
             (self.alive.add if alive else self.alive.discard)(agent)
-            self.awaited.discard(agent)
             self.leave_by = max(self.leave_by, now + SHUTDOWN_QUIET_S)
         elif alive:
             self.alive.add(agent)
