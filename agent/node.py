@@ -14,7 +14,7 @@ messages and the ends of asks are only queued there, because Zenoh calls those c
 a lock of its own (eclipse-zenoh/zenoh#1092: when a peer dies, Zenoh ends the asks on it under
 that lock while the main thread, holding the node's, ends that peer's standing query, and one
 waited for the other forever). The main thread handles that queue and the protocol's timers,
-sleeping on the queue until the next timer is due, at most :data:`POLL_S`.
+sleeping on the queue until the next timer is due, at most ``protocol.transport.POLL_S``.
 """
 
 import logging
@@ -47,10 +47,6 @@ log = logging.getLogger("nnql.agent")
 
 NO_CONSOLIDATION = zenoh.ConsolidationMode.NONE
 """Answers are delivered as they come; Zenoh's default would hold them until the query ends."""
-
-POLL_S = 0.05
-"""The longest the main thread sleeps: a timer set meanwhile on Zenoh's thread (a negotiation's
-time-out) is noticed at most this late, and so is a request to stop."""
 
 EXIT_STOPPED = 130
 """Exit code of an agent stopped by a signal rather than by the world's shutdown."""
@@ -213,13 +209,7 @@ class AgentNode(ProtocolAdapter):
             self.publisher = publisher
             try:
                 while not self.stopping:
-                    with self.lock:
-                        due = protocol.timer()
-                    wait = POLL_S if due is None else min(max(due - time.monotonic(), 0.0), POLL_S)
-                    try:
-                        kind, item = self.events.get(timeout=wait)
-                    except queue.Empty:
-                        kind, item = None, None
+                    kind, item = self.next_event()
                     if kind == "control":
                         self.feed(protocol.on_control, item.payload)
                     elif kind == "alive":
@@ -228,10 +218,7 @@ class AgentNode(ProtocolAdapter):
                         self.feed(protocol.on_world, item.kind == _PUT)
                     elif kind == "ask-end":
                         self.feed(protocol.on_ask_end, item)
-                    with self.lock:
-                        due = protocol.timer()
-                    if due is not None and time.monotonic() >= due:
-                        self.feed(protocol.on_timer)
+                    self.fire_timer_if_due()
             finally:
                 with self.lock:
                     self.stopping = True

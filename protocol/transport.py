@@ -16,6 +16,7 @@ import ctypes
 import json
 import logging
 import os
+import queue
 import socket
 import threading
 import time
@@ -152,17 +153,28 @@ def enqueue(events, kind: str) -> zenoh.handlers.Callback:
     return callback(lambda item: put((kind, item)))
 
 
+POLL_S = 0.05
+"""The longest a node's main thread sleeps on its queue: a timer set meanwhile on Zenoh's thread
+(a tick's deadline, a negotiation's time-out) is noticed at most this late, and so is a request
+to stop."""
+
+
 class ProtocolAdapter:
     """What the agent and world nodes share as adapters of their protocol machines: an input is
     fed under the node's one lock and its effects are carried out there, in order, each by the
     handler ``_do`` names for its type. A bug in either stops the node (its ``run`` re-raises
-    ``failure`` on the main thread) instead of vanishing into Zenoh's thread.
+    ``failure`` on the main thread) instead of vanishing into Zenoh's thread. The main thread
+    takes the node's queue of ``events`` (:meth:`next_event`) and fires the protocol's timer
+    (:meth:`fire_timer_if_due`).
 
-    A node sets ``lock``, ``stopping``, ``failure`` and ``_do``, and says how it stops."""
+    A node sets ``lock``, ``stopping``, ``failure``, ``protocol``, ``events`` and ``_do``, and
+    says how it stops."""
 
     lock: threading.RLock
     stopping: bool
     failure: BaseException | None
+    protocol: object  # a protocol machine: timer(), on_timer(now)
+    events: queue.SimpleQueue
     _do: dict[type, Callable]
 
     def stop(self) -> None:
@@ -183,6 +195,24 @@ class ProtocolAdapter:
         do = self._do
         for effect in effects:
             do[type(effect)](effect)
+
+    def next_event(self) -> tuple:
+        """The next ``(kind, item)`` of the main thread's queue; ``(None, None)`` if none came
+        before the protocol's timer is due, or within :data:`POLL_S`."""
+        with self.lock:
+            due = self.protocol.timer()
+        wait = POLL_S if due is None else min(max(due - time.monotonic(), 0.0), POLL_S)
+        try:
+            return self.events.get(timeout=wait)
+        except queue.Empty:
+            return None, None
+
+    def fire_timer_if_due(self) -> None:
+        """Feed the protocol its timer if that is due."""
+        with self.lock:
+            due = self.protocol.timer()
+        if due is not None and time.monotonic() >= due:
+            self.feed(self.protocol.on_timer)
 
 
 def free_port(host: str = "127.0.0.1") -> int:

@@ -14,7 +14,7 @@ handled on the thread Zenoh calls back on (its receiving thread, ``protocol.tran
 last intent of a tick closes it and sends the next observations at once, while liveliness
 changes are only queued there, because Zenoh calls those callbacks holding a lock of its own.
 The main thread handles that queue (rows, liveliness) and the protocol's timers, sleeping on the
-queue until the next timer is due, at most :data:`POLL_S`.
+queue until the next timer is due, at most ``protocol.transport.POLL_S``.
 """
 
 import logging
@@ -47,10 +47,6 @@ log = logging.getLogger("nnql.world")
 BLOCK = zenoh.CongestionControl.BLOCK
 """Lockstep messages are never dropped: through a router one link carries every observation, and
 under load Zenoh's default (DROP) lost some, which stalled agents (README, "Several machines")."""
-
-POLL_S = 0.05
-"""The longest the main thread sleeps: a tick deadline set meanwhile on Zenoh's thread is
-noticed at most this late, and so is a request to stop."""
 
 _PUT = zenoh.SampleKind.PUT
 
@@ -150,23 +146,14 @@ class WorldNode(ProtocolAdapter):
                                for i in range(self.config.n_agents)]
             try:
                 while finished is None and not self.stopping:
-                    with self.lock:
-                        due = protocol.timer()
-                    wait = POLL_S if due is None else min(max(due - time.monotonic(), 0.0), POLL_S)
-                    try:
-                        kind, item = self.events.get(timeout=wait)
-                    except queue.Empty:
-                        kind, item = None, None
+                    kind, item = self.next_event()
                     if kind is WriteRow:
                         self._write(item)
                     elif kind is Finished:
                         finished = item
                     elif kind == "alive":
                         self.feed(protocol.on_liveliness, str(item.key_expr), item.kind == _PUT)
-                    with self.lock:
-                        due = protocol.timer()
-                    if due is not None and time.monotonic() >= due:
-                        self.feed(protocol.on_timer)
+                    self.fire_timer_if_due()
             finally:
                 with self.lock:
                     self.stopping = True
