@@ -18,21 +18,23 @@ from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
     REC_COUNT, REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome,
-    entry_rows, reach, record_size, state_size, write_updates,
+    reach, record_size, state_size, write_updates,
 )
 from nnql_swarm.protocol.actions import (
     N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y, within,
 )
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import (
-    filled, floats, ints, python_values, rows, table, table_array,
-)
+from nnql_swarm.protocol.jit import floats, ints, python_values, rows
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 
 
 class Learner:
-    """One agent's tables and learner state as the kernel's plain-Python buffers."""
+    """One agent's tables and learner state as the kernel's buffers.
+
+    The two tables are views of one array, ``Q_DS``'s rows first (:attr:`entries`, flat, is how
+    a shared table's updates name its Q-values), a numpy array whether the kernel is compiled or
+    not (``protocol.jit``); the other buffers are Python lists in plain Python."""
 
     def __init__(self, config: SwarmConfig) -> None:
         reading = READINGS[config.algo]
@@ -48,15 +50,15 @@ class Learner:
         self.params_f[FP_GAMMA] = config.gamma
         self.params_f[FP_BETA] = config.beta
         self.params, self.params_f = ints(self.params), floats(self.params_f)
-        init = float(config.optimistic)
-        self.q_ds = filled(N_STATES, N_ACTIONS, init)
-        self.q_ca = filled(ca_rows(reading, config.known_state), N_ACTIONS, init)
+        both = np.full((N_STATES + ca_rows(reading, config.known_state), N_ACTIONS),
+                       float(config.optimistic))
+        self.q_ds, self.q_ca = both[:N_STATES], both[N_STATES:]
+        self.entries = both.reshape(-1)  # entry e: row e // N_ACTIONS, action e % N_ACTIONS
         self.state = ints([0] * state_size(config.n_bodies))
         self.state_f = floats([0.0] * LF_FIELDS)
         self.rec = ints([0] * record_size(config.n_bodies))
         self.rec_f = floats([0.0] * RF_FIELDS)
         self.values = floats([0.0] * N_ACTIONS)
-        self._rows: list | None = None
 
     @property
     def actions_taken(self) -> int:
@@ -64,20 +66,12 @@ class Learner:
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
         """``Q_DS`` and ``Q_CA`` as arrays (copies), for checkpoints and pictures."""
-        return table_array(self.q_ds), table_array(self.q_ca)
+        return self.q_ds.copy(), self.q_ca.copy()
 
     def restore(self, q_ds: np.ndarray, q_ca: np.ndarray, actions_taken: int) -> None:
         """Take the tables and count of a checkpoint (shapes checked by the caller)."""
-        self.q_ds, self.q_ca = table(q_ds), table(q_ca)
-        self._rows = None
+        self.q_ds[:], self.q_ca[:] = q_ds, q_ca
         self.state[LS_TAKEN] = int(actions_taken)
-
-    def rows(self) -> list:
-        """Both tables' rows, stacked, as shared-table updates name their entries
-        (``entry_rows``)."""
-        if self._rows is None:
-            self._rows = entry_rows(self.q_ds, self.q_ca)
-        return self._rows
 
     def forget_pending(self) -> None:
         """Drop the pending transition (its episode was abandoned, e.g. the world restarted)."""
@@ -139,7 +133,7 @@ class AgentBrain:
             return
         self._prepared = (obs.episode, obs.tick)
         if self.config.shared and obs.updates:
-            self.rejected_updates += write_updates(self.learner.rows(), obs.updates)
+            self.rejected_updates += write_updates(self.learner.entries, obs.updates)
         if obs.arrived or obs.episode_end or self._noise_episode == obs.episode:
             return
         draw_noise(self.rng, self._random_actions, self._ties)

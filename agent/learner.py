@@ -142,27 +142,16 @@ def record_entries(ints) -> list[int]:
     return entries
 
 
-def entry_rows(q_ds, q_ca) -> list:
-    """Both of a learner's tables stacked, as one list of their rows (lists, or views of an
-    array): entry ``e`` of a shared table's updates is ``rows[e // N_ACTIONS][e % N_ACTIONS]``.
-    Built once per pair of tables, for :func:`write_updates`."""
-    return [*q_ds, *q_ca]
-
-
-def entry_value(rows: list, index: int) -> float:
-    """Entry ``index`` of a learner's :func:`entry_rows`, as a Python float."""
-    return float(rows[index // N_ACTIONS][index % N_ACTIONS])
-
-
-def write_updates(rows: list, groups) -> int:
-    """Write a shared table's updates (groups of ``(entry index, value)``) through a learner's
-    :func:`entry_rows`; returns how many entries fell outside its tables (refused)."""
-    end = len(rows) * N_ACTIONS
+def write_updates(entries: np.ndarray, groups) -> int:
+    """Write a shared table's updates (groups of ``(entry index, value)``) into a learner's
+    Q-values, both tables flat (``agent.brain.Learner.entries``); returns how many fell outside
+    its tables (refused)."""
+    end = len(entries)
     refused = 0
     for group in groups:
         for index, value in group:
-            if index < end:  # entry_value's cell, spelled out: once per update, every tick
-                rows[index // N_ACTIONS][index % N_ACTIONS] = value
+            if index < end:
+                entries[index] = value
             else:
                 refused += 1
     return refused

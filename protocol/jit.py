@@ -11,7 +11,10 @@ A process that sets ``NNQL_KERNEL=python`` before its first import runs the func
 and never imports numba: the swarm's agent and world processes do (the launcher sets it for its
 children), since numba's LLVM alone would make each agent weigh over 100 MB and start in seconds.
 Kernel functions therefore only index and assign into their buffers, which may be numpy arrays
-(compiled) or Python lists (plain), and never allocate on the hot path.
+(compiled) or Python lists (plain: :func:`ints`, :func:`floats`, :func:`rows`, where reading a list
+is several times faster), and never allocate on the hot path. The Q-tables are numpy arrays
+either way (``agent.brain.Learner``): a decision reads a few of their rows, and a shared table's
+updates are written into them with one scatter.
 
 numba's cache knows only the file of each compiled function, not those of the functions it calls:
 an edited learner would leave a stale compiled simulator behind. So the cache lives in a directory
@@ -20,7 +23,6 @@ says otherwise.
 """
 
 import hashlib
-import itertools
 import os
 from pathlib import Path
 
@@ -87,29 +89,6 @@ def flags(values) -> "np.ndarray | list[bool]":
 def rows(values: list[list[int]], width: int) -> "np.ndarray | list[list[int]]":
     """Rows of integers (such as the learner's neighbour rows) as a kernel buffer."""
     return np.array(values, dtype=np.int64).reshape(-1, width) if COMPILED else values
-
-
-def table(values: np.ndarray) -> "np.ndarray | list[list[float]]":
-    """A table of floats as a kernel buffer (a copy)."""
-    return np.array(values, dtype=np.float64) if COMPILED else np.asarray(values, float).tolist()
-
-
-def table_array(buffer) -> np.ndarray:
-    """A table buffer as a new array of floats (for checkpoints and pictures): rows of a list
-    read in one pass, twice as fast as ``np.array`` of the lists."""
-    if isinstance(buffer, np.ndarray):
-        return np.array(buffer, dtype=np.float64)
-    width = len(buffer[0]) if buffer else 0
-    values = np.fromiter(itertools.chain.from_iterable(buffer), np.float64, len(buffer) * width)
-    return values.reshape(len(buffer), width)
-
-
-def filled(rows: int, columns: int, value: float) -> "np.ndarray | list[list[float]]":
-    """A table of ``rows`` x ``columns`` floats, all ``value``, as a kernel buffer."""
-    if COMPILED:
-        return np.full((rows, columns), value, dtype=np.float64)
-    value = float(value)
-    return [[value] * columns for _ in range(rows)]  # one float object: cheap to build and keep
 
 
 def python_values(buffer) -> list:

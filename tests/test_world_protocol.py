@@ -228,7 +228,7 @@ def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_
     alive(protocol, 1, 0.3)
     assert protocol.world.syncing == (), "not before it shows it hears the observations"
     [batch] = [e for e in effects if isinstance(e, SendObservations)]
-    write_updates(stale.rows(), dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates)
+    write_updates(stale.entries, dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates)
     effects = tick(5)
     assert protocol.world.syncing == (1,)
     slices = 0
@@ -237,11 +237,11 @@ def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_
         observed = {obs.agent: obs for obs, _ in batch.observations}
         assert len(observed[0].updates) <= 2, "the agent that stayed gets the tick's groups only"
         slices += len(observed[1].updates) > 2
-        write_updates(stale.rows(), observed[1].updates)
+        write_updates(stale.entries, observed[1].updates)
         effects = tick(number)
     assert slices == -(-entries // 2048) and protocol.world.syncing == ()
     [batch] = [e for e in effects if isinstance(e, SendObservations)]
-    write_updates(stale.rows(), dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates)
+    write_updates(stale.entries, dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates)
     world_q_ds, world_q_ca = protocol.world.table.tables()
     q_ds, q_ca = stale.tables()
     assert (world_q_ds != 25.0).sum() > 10, "the world learned meanwhile"

@@ -20,9 +20,8 @@ import numpy as np
 
 from nnql_swarm.agent.brain import Learner
 from nnql_swarm.agent.learner import (
-    FP_ALPHA, FP_GAMMA, apply_record, entry_value, record_entries, record_is_valid,
+    FP_ALPHA, FP_GAMMA, apply_record, record_entries, record_is_valid,
 )
-from nnql_swarm.protocol.actions import N_ACTIONS
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import floats, ints
 from nnql_swarm.protocol.messages import MAX_AGENTS
@@ -55,22 +54,21 @@ class SharedTable:
             integers, values = learned[agent]
             apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
             written.append(record_entries(integers))
-        rows = learner.rows()
-        return tuple(tuple((index, entry_value(rows, index)) for index in entries)
-                     for entries in written)
+        every = [index for entries in written for index in entries]
+        values = iter(learner.entries[every].tolist())
+        return tuple(tuple((index, next(values)) for index in entries) for entries in written)
 
     @property
     def entries(self) -> int:
         """How many Q-values both tables hold (entry indices are 0 to this - 1)."""
-        return len(self._learner.rows()) * N_ACTIONS
+        return len(self._learner.entries)
 
     def chunk(self, start: int, count: int) -> Updates:
         """The current values of entries ``start`` to ``start + count - 1`` (fewer at the end),
         as update groups of at most :data:`MAX_AGENTS` entries (the most a group holds)."""
-        rows = self._learner.rows()
-        indices = range(start, min(start + count, self.entries))
-        values = [(i, entry_value(rows, i)) for i in indices]
-        return tuple(tuple(values[k:k + MAX_AGENTS]) for k in range(0, len(values), MAX_AGENTS))
+        stop = min(start + count, self.entries)
+        pairs = list(zip(range(start, stop), self._learner.entries[start:stop].tolist()))
+        return tuple(tuple(pairs[k:k + MAX_AGENTS]) for k in range(0, len(pairs), MAX_AGENTS))
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
         """``Q_DS`` and ``Q_CA`` as arrays (copies), for the world's checkpoint."""
