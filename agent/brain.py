@@ -1,8 +1,9 @@
 """One swarm agent's decisions, pure: observation and neighbours' answers in, action out.
 
 The agent process (``agent.node``) runs it; it calls the learner's kernel functions
-(``agent.learner``) on Python lists, the very functions the swarm simulator (``sim.swarm``) runs
-compiled, so that for the same seed the distributed swarm and the simulator play the same run.
+(``agent.learner``) on Python lists and its tables' array, the very functions the swarm
+simulator (``sim.swarm``) runs compiled, so that for the same seed the distributed swarm and the
+simulator play the same run.
 
 Negotiation: at every tick an agent that reads intents waits for the intents of its higher-ranked
 neighbours within reach (``agent.negotiation.awaited``, by ``protocol.ranks.waits_for``; how it

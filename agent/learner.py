@@ -42,7 +42,7 @@ world to its copy (``world.shared_table``), which hands the entries written to e
 Buffers (numpy arrays when compiled, Python lists in an agent process): ``params`` (``LP_*``),
 ``params_f`` (``FP_*``), the learner's state ``state`` (``LS_*``) and ``state_f`` (``LF_*``), and
 the neighbour rows ``nb`` (``NB_*``), one per visible neighbour, in agent-id order (as the world
-lists them).
+lists them). The tables ``q_ds`` and ``q_ca`` are numpy arrays either way.
 """
 
 import math
