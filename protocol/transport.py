@@ -13,6 +13,7 @@ one call to the next; one switch, :data:`CALLBACKS_ENV`, turns either trick off.
 """
 
 import ctypes
+import itertools
 import json
 import logging
 import os
@@ -215,8 +216,44 @@ class ProtocolAdapter:
             self.feed(self.protocol.on_timer)
 
 
+LOWEST_CHOSEN_PORT = 10_000
+"""The lowest port :func:`free_port` picks (below it: well-known and registered services)."""
+
+_PORT_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
+_PORT_TRIES = itertools.count()
+
+
+def _ephemeral_ports() -> tuple[int, int]:
+    """The range the kernel hands ports out of for port 0 and outgoing connections."""
+    try:
+        with open(_PORT_RANGE_FILE) as f:
+            low, high = map(int, f.read().split())
+        return low, high
+    except (OSError, ValueError):
+        return 32768, 60999  # Linux's default; elsewhere a guess
+
+
 def free_port(host: str = "127.0.0.1") -> int:
-    """A TCP port that nobody listens on right now."""
+    """A TCP port that nobody listens on right now, below the kernel's ephemeral range.
+
+    A port from that range (a bind to port 0) could be handed, before its owner binds it, to
+    another process of the same run that binds port 0 (a mesh agent's listener) or connects out:
+    the world of a test once failed to listen that way. Below the range only an explicit bind
+    can take it. Each process searches from a place derived from its id, so that processes
+    choosing at once start apart, and each call goes on from where the last stopped, so that
+    one process choosing several ports gets different ones; where the range leaves no room
+    below it, the kernel chooses.
+    """
+    low, _ = _ephemeral_ports()
+    span = low - LOWEST_CHOSEN_PORT
+    for _ in range(max(span, 0)):
+        port = LOWEST_CHOSEN_PORT + (os.getpid() * 7919 + next(_PORT_TRIES)) % span
+        with socket.socket() as s:
+            try:
+                s.bind((host, port))
+            except OSError:
+                continue
+            return port
     with socket.socket() as s:
         s.bind((host, 0))
         return s.getsockname()[1]

@@ -6,6 +6,7 @@ for the rest of its process, so each check runs in a fresh spawned process.
 
 import multiprocessing as mp
 import os
+import socket
 import threading
 import time
 from pathlib import Path
@@ -172,3 +173,21 @@ def test_a_client_of_the_hub_keeps_connecting_until_the_hub_listens():
         raise AssertionError("a client without the retry connected to nobody")
     except TransportError:
         pass
+
+
+def test_free_ports_lie_below_the_kernels_ephemeral_range_and_differ_call_by_call():
+    """A port the kernel could hand to a bind to port 0 or an outgoing connection is never
+    chosen (the world of a test once lost its port that way), and one process choosing several
+    gets several, skipping one that is taken."""
+    low, _ = transport._ephemeral_ports()
+    ports = [free_port() for _ in range(5)]
+    assert len(set(ports)) == 5
+    assert all(transport.LOWEST_CHOSEN_PORT <= p < low for p in ports)
+    span = low - transport.LOWEST_CHOSEN_PORT
+
+    def after(port):  # the next port the search tries
+        return transport.LOWEST_CHOSEN_PORT + (port + 1 - transport.LOWEST_CHOSEN_PORT) % span
+
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", after(ports[-1])))
+        assert free_port() == after(after(ports[-1]))
