@@ -6,6 +6,7 @@ every process, so that a distributed run and an in-process run of one config are
 
 import json
 from dataclasses import asdict, dataclass, field, fields
+from functools import cached_property
 
 import numpy as np
 
@@ -154,12 +155,12 @@ class SwarmConfig:
                 f"the largest free region of a {self.width}x{self.height} grid at obstacle density "
                 f"{self.obstacle_density} has {free}")
 
-    @property
+    @cached_property  # the world reads it every tick: worked out once (the config is frozen)
     def n_walls(self) -> int:
         """How many walls the grid holds (``protocol.walls``)."""
         return wall_count(self.width, self.height, self.obstacle_density)
 
-    @property
+    @cached_property
     def n_bodies(self) -> int:
         """Agents, then walls: body ``n_agents + k`` is wall ``k``."""
         return self.n_agents + self.n_walls
