@@ -143,13 +143,17 @@ def record_entries(ints) -> list[int]:
 
 
 def write_updates(entries: np.ndarray, groups) -> int:
-    """Write a shared table's updates (groups of ``(entry index, value)``) into a learner's
-    Q-values, both tables flat (``agent.brain.Learner.entries``); returns how many fell outside
-    its tables (refused)."""
+    """Write a shared table's updates (groups of entry indices and their values,
+    ``protocol.messages.Updates``) into a learner's Q-values, both tables flat
+    (``agent.brain.Learner.entries``); returns how many it refused: those outside its tables,
+    and every entry of a group whose values are not as many as its entries."""
     end = len(entries)
     refused = 0
-    for group in groups:
-        for index, value in group:
+    for indices, values in groups:
+        if len(indices) != len(values):
+            refused += max(len(indices), len(values))
+            continue
+        for index, value in zip(indices, values):
             if index < end:
                 entries[index] = value
             else:

@@ -419,7 +419,8 @@ class AgentProtocol:
         trace.mark(ACTED, tick)
         if self.brain.rejected_updates != refused:
             self.inbox.reject("bad-update", f"{self.brain.rejected_updates - refused} shared-table "
-                                            f"entries outside the tables at tick {tick}")
+                                            f"entries refused at tick {tick} (outside the "
+                                            "tables, or in a group of uneven lengths)")
         known = self.intents.get(tick, _NOTHING).actions
         answer = Answer(self.config.run_id, tick, self.sender, self.agent, obs.episode, action,
                         tuple(sorted(known.items())))

@@ -57,7 +57,7 @@ from msgspec import Meta
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 4
+PROTOCOL_VERSION = 5
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -130,17 +130,24 @@ Learned = Annotated[tuple[Record, ...], Meta(max_length=1)]
 """The learning record an intent carries (none, or its sender's of this tick)."""
 MAX_TABLE_ENTRY = (N_STATES + MAX_TABLE_ROW) * N_ACTIONS
 """Above every entry index of a learner's two tables stacked (``agent.learner.record_entries``)."""
-TableEntry = tuple[Annotated[int, Meta(ge=0, lt=MAX_TABLE_ENTRY)], Reward]
-"""One Q-value of the shared table: its entry index and its new value (finite, bounded as a
-reward is: a Q-value is at most a reward over 1 - gamma)."""
+TableEntries = Annotated[tuple[Annotated[int, Meta(ge=0, lt=MAX_TABLE_ENTRY)], ...],
+                         Meta(max_length=MAX_AGENTS)]
+"""Q-values of the shared table by entry index (``agent.learner.record_entries``)."""
+TableValues = Annotated[tuple[Reward, ...], Meta(max_length=MAX_AGENTS)]
+"""Their new values, finite, bounded as a reward is (a Q-value is at most a reward over
+1 - gamma)."""
 MAX_SYNC_GROUPS = 2
-"""Groups of the whole table an observation carries at most beside the records' groups, for an
-agent being resynchronised (``world.shared_table``)."""
-Updates = Annotated[tuple[Annotated[tuple[TableEntry, ...], Meta(max_length=MAX_AGENTS)], ...],
+"""Groups of the whole table an observation carries at most beside the tick's, for an agent
+being resynchronised (``world.shared_table``)."""
+Updates = Annotated[tuple[tuple[TableEntries, TableValues], ...],
                     Meta(max_length=MAX_AGENTS + MAX_SYNC_GROUPS)]
 """The shared table's entries that the last tick's learning records changed, with their new
-values: a group per record applied, in agent-id order (the agent's own too); then, for an agent
-being resynchronised, up to :data:`MAX_SYNC_GROUPS` groups of the whole table's values."""
+values: groups of two sequences, the entries and their values, as many of each (the receiver
+refuses a group where they differ); the tick's in the order the records were applied (agent-id
+order), at most MAX_AGENTS entries a group; then, for an agent being resynchronised, up to
+:data:`MAX_SYNC_GROUPS` groups of the whole table's values. Two flat sequences a group, not a
+pair per entry: at 64 agents an observation carries about 160 updates, and a pair each cost the
+decoder a tuple each (``bench/node_cpu.py``, docs/performance.md)."""
 
 
 class Rejected(ValueError):

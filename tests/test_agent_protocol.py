@@ -207,16 +207,20 @@ def test_a_neighbour_that_is_gone_or_refuses_the_tick_is_waited_for_no_more():
 
 
 def test_shared_table_updates_are_written_and_entries_outside_the_tables_refused():
+    """Entries beyond this learner's tables are refused, and so is a whole group whose values
+    are not as many as its entries; the rest is written."""
     assert CONFIG.shared
     protocol = ready()
     payload = encode(Observation(
         run="proto", tick=0, sender=WORLD_SENDER, agent=0, episode=0, step=0, position=(1, 1),
         goal=(5, 5), neighbours=(), rank=0, reward_ds=0.0, reward_ca=10.0, collided=False,
         arrived=False, episode_end=False,
-        updates=(((7 * 5 + 1, 20.5), (441 * 5 + 3, -1.5)), ((441 * 6 * 5, 1.0),))))
+        updates=(((7 * 5 + 1, 441 * 5 + 3), (20.5, -1.5)), ((441 * 6 * 5,), (1.0,)),
+                 ((8 * 5, 8 * 5 + 1), (3.0,)))))
     assert "SendIntent" in kinds(protocol.on_observation(payload, 0.0))
     q_ds, q_ca = protocol.brain.learner.tables()
     assert q_ds[7, 1] == 20.5 and q_ca[0, 3] == -1.5
+    assert q_ds[8, 0] == q_ds[8, 1] == CONFIG.optimistic, "the uneven group is not written"
     assert protocol.inbox.rejections["bad-update"] == 1, "Q_CA has 882 rows here, not 2646"
 
 

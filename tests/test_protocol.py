@@ -224,7 +224,7 @@ def test_round_trip(msg):
 
 
 def test_wire_format_is_an_array_of_version_kind_and_fields_in_order():
-    assert PROTOCOL_VERSION == 4
+    assert PROTOCOL_VERSION == 5
     wire = msgpack.unpackb(encode(intent()))
     assert wire == [PROTOCOL_VERSION, "intent", RUN, 7, "agent/2", 2, 1, 3, []]
     assert msgpack.unpackb(encode(control())) == [PROTOCOL_VERSION, "control", RUN, 7, WORLD_SENDER, "shutdown"]
@@ -623,10 +623,11 @@ _entries = st.integers(0, (441 + 441 * 6) * 5 - 1)
 _bad_updates = (
     _wrong_types.filter(lambda v: not isinstance(v, list) or v)
     | st.tuples(_bad_int | _out_of(0, (441 + 441 * 6) * 5), st.floats(-1e6, 1e6))
-    .map(lambda t: [[list(t)]])
-    | st.tuples(_entries, _bad_reward).map(lambda t: [[list(t)]])
-    | _entries.map(lambda e: [[[e]]])  # an entry without its value
+    .map(lambda t: [[[t[0]], [t[1]]]])
+    | st.tuples(_entries, _bad_reward).map(lambda t: [[[t[0]], [t[1]]]])
+    | _entries.map(lambda e: [[[e]]])  # entries without their values
     | _wrong_types.filter(lambda v: not isinstance(v, list) or v).map(lambda v: [v])
+    | _wrong_types.filter(lambda v: not isinstance(v, list) or v).map(lambda v: [[v, []]])
 )
 _bad_record = (
     _wrong_types.filter(lambda v: not isinstance(v, list) or v)
@@ -743,10 +744,11 @@ REFERENCE_FIELDS = {
     "relayed": lambda v: _is_agent_list(v, lambda a: _is_int(a, 0, 5)),
     "parked": lambda v: type(v) is list and len(v) <= MAX_AGENTS
     and all(_is_int(a, 0, MAX_AGENTS) for a in v),
-    "updates": lambda v: type(v) is list and len(v) <= MAX_AGENTS and all(
-        type(g) is list and len(g) <= MAX_AGENTS and all(
-            type(e) is list and len(e) == 2 and _is_int(e[0], 0, (441 + 441 * 6) * 5)
-            and _is_reward(e[1]) for e in g) for g in v),
+    "updates": lambda v: type(v) is list and len(v) <= MAX_AGENTS + 2 and all(
+        type(g) is list and len(g) == 2 and type(g[0]) is list and type(g[1]) is list
+        and len(g[0]) <= MAX_AGENTS and len(g[1]) <= MAX_AGENTS
+        and all(_is_int(e, 0, (441 + 441 * 6) * 5) for e in g[0])
+        and all(_is_reward(x) for x in g[1]) for g in v),
     "record": lambda v: type(v) is list and len(v) <= 1 and all(
         type(e) is list and len(e) == 2 and _is_record_ints(e[0]) and _is_reward_pair(e[1])
         for e in v),
@@ -942,22 +944,22 @@ def encoding_of(msg):
 
 
 def test_wire_bytes_are_pinned():
-    """The exact bytes of protocol version 4 (item order, int / float / bool types)."""
+    """The exact bytes of protocol version 5 (item order, int / float / bool types)."""
     pinned = {
         obs():  # 19 items: an array 16 header
-            "dc001304a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "dc001305a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
             "d0000000000000cb4024000000000000c2c2c29090",
-        obs(parked=(5,), updates=(((7, 0.5), (2210, 10)), ())):
-            "dc001304a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
-            "d0000000000000cb4024000000000000c2c2c2910592929207cb3fe000000000000092cd08a20a90",
+        obs(parked=(5,), updates=(((7, 2210), (0.5, 10)), ((), ()))):
+            "dc001305a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "d0000000000000cb4024000000000000c2c2c2910592929207cd08a292cb3fe00000000000000a929090",
         answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
-            "9904a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
+            "9905a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
         intent():
-            "9904a6696e74656e74a572756e2d3107a76167656e742f3202010390",
+            "9905a6696e74656e74a572756e2d3107a76167656e742f3202010390",
         control():
-            "9604a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
+            "9605a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
         control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
-            "9604a7636f6e74726f6cd940" + "72" * 64
+            "9605a7636f6e74726f6cd940" + "72" * 64
             + "cf0000010000000000a5776f726c64a873687574646f776e",
     }
     for msg, hexed in pinned.items():

@@ -4,10 +4,10 @@ Each agent's intent carries its learning record of the tick. The world checks ev
 (:meth:`SharedTable.accepts`, as it takes the intent) and, when the tick closes, applies them all
 in agent-id order with the learner's own ``apply_record``, the very step the simulator applies
 to its one table (``sim.swarm``). The next observations then tell every agent which entries
-changed and their new values (:meth:`SharedTable.apply` returns them, a group per record), and
-each agent writes them into its copy (``agent.learner.write_updates``). All copies stay equal to
-this one and to the simulator's, and a tick costs every agent one write per changed entry,
-where applying every record itself cost it the whole learning step N times over.
+changed and their new values (:meth:`SharedTable.apply` returns them, in the order the records
+wrote them), and each agent writes them into its copy (``agent.learner.write_updates``). All
+copies stay equal to this one and to the simulator's, and a tick costs every agent one write per
+changed entry, where applying every record itself cost it the whole learning step N times over.
 
 An agent whose copy may differ (it was restarted from an older checkpoint, or the world was
 restarted under it from its own) is sent the whole table instead, a slice of it with each of its
@@ -26,8 +26,15 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import floats, ints
 from nnql_swarm.protocol.messages import MAX_AGENTS
 
-Updates = tuple[tuple[tuple[int, float], ...], ...]
-"""Groups of ``(entry index, new value)``, one per record applied, in agent-id order."""
+Updates = tuple[tuple[tuple[int, ...], tuple[float, ...]], ...]
+"""Groups of entry indices and their new values (``protocol.messages.Updates``)."""
+
+
+def _groups(indices: list[int], values: list[float]) -> Updates:
+    """Entries and their values as update groups of at most :data:`MAX_AGENTS` entries (the
+    most a group holds)."""
+    return tuple((tuple(indices[k:k + MAX_AGENTS]), tuple(values[k:k + MAX_AGENTS]))
+                 for k in range(0, len(indices), MAX_AGENTS))
 
 
 class SharedTable:
@@ -55,8 +62,7 @@ class SharedTable:
             apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
             written.append(record_entries(integers))
         every = [index for entries in written for index in entries]
-        values = iter(learner.entries[every].tolist())
-        return tuple(tuple((index, next(values)) for index in entries) for entries in written)
+        return _groups(every, learner.entries[every].tolist())
 
     @property
     def entries(self) -> int:
@@ -65,10 +71,9 @@ class SharedTable:
 
     def chunk(self, start: int, count: int) -> Updates:
         """The current values of entries ``start`` to ``start + count - 1`` (fewer at the end),
-        as update groups of at most :data:`MAX_AGENTS` entries (the most a group holds)."""
+        as update groups."""
         stop = min(start + count, self.entries)
-        pairs = list(zip(range(start, stop), self._learner.entries[start:stop].tolist()))
-        return tuple(tuple(pairs[k:k + MAX_AGENTS]) for k in range(0, len(pairs), MAX_AGENTS))
+        return _groups(list(range(start, stop)), self._learner.entries[start:stop].tolist())
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
         """``Q_DS`` and ``Q_CA`` as arrays (copies), for the world's checkpoint."""
