@@ -104,7 +104,7 @@ class AgentBrain:
         self.config = config
         self.learner = Learner(config)
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
-        self.rejected_updates = 0  # shared-table entries refused (outside the tables, uneven groups)
+        self.rejected_updates = 0  # shared-table entries refused (outside, or uneven groups)
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
         self._reach = reach(config.interaction_radius)
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)

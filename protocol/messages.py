@@ -61,7 +61,8 @@ PROTOCOL_VERSION = 5
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
-"""Larger payloads are rejected unread (the largest valid Observation is about 10 KiB)."""
+"""Larger payloads are rejected unread (an Observation with a resynchronising slice of the
+shared table and 64 neighbours is about 27 KB; with 1,000 neighbours, all parked, about 40)."""
 MAX_REWARD = 1e6
 MAX_STR_LEN = 256
 

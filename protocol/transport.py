@@ -223,14 +223,13 @@ _PORT_RANGE_FILE = "/proc/sys/net/ipv4/ip_local_port_range"
 _PORT_TRIES = itertools.count()
 
 
-def _ephemeral_ports() -> tuple[int, int]:
-    """The range the kernel hands ports out of for port 0 and outgoing connections."""
+def _ephemeral_low() -> int:
+    """The lowest port the kernel hands out for port 0 and outgoing connections."""
     try:
         with open(_PORT_RANGE_FILE) as f:
-            low, high = map(int, f.read().split())
-        return low, high
-    except (OSError, ValueError):
-        return 32768, 60999  # Linux's default; elsewhere a guess
+            return int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768  # Linux's default; elsewhere a guess
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -244,8 +243,7 @@ def free_port(host: str = "127.0.0.1") -> int:
     one process choosing several ports gets different ones; where the range leaves no room
     below it, the kernel chooses.
     """
-    low, _ = _ephemeral_ports()
-    span = low - LOWEST_CHOSEN_PORT
+    span = _ephemeral_low() - LOWEST_CHOSEN_PORT
     for _ in range(max(span, 0)):
         port = LOWEST_CHOSEN_PORT + (os.getpid() * 7919 + next(_PORT_TRIES)) % span
         with socket.socket() as s:

@@ -37,7 +37,7 @@ from nnql_swarm.world.shared_table import SharedTable, Updates
 
 SYNC_ENTRIES = MAX_SYNC_GROUPS * MAX_AGENTS
 """Table entries sent with each observation of an agent being resynchronised (2,048: about
-27 KB; the default preset's 6,615 entries take 4 ticks)."""
+25 KB; the default preset's 6,615 entries take 4 ticks)."""
 
 EPISODE_FIELDS = (
     "episode", "steps", "collisions", "missed_intents", "reward_sum", "arrived", "shortest_sum",
