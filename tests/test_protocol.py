@@ -615,9 +615,10 @@ _bad_parked = (_wrong_types.filter(lambda v: not isinstance(v, list))
                | st.lists(_bad_int | _out_of(0, MAX_AGENTS), min_size=1, max_size=3))
 _record_ints = st.lists(st.integers(-1, 441 * 6 - 1), max_size=6)
 _rewards = st.tuples(st.floats(-1e6, 1e6), st.floats(-1e6, 1e6)).map(list)
-_bad_record_ints = (_wrong_types.filter(lambda v: not isinstance(v, list) or v)
+_bad_record_ints = (_wrong_types.filter(lambda v: not isinstance(v, list))  # [0] is valid
                     | st.lists(_bad_int | _out_of(-1, 441 * 6), min_size=1, max_size=3))
-_bad_rewards = _wrong_types | st.lists(_bad_reward, min_size=2, max_size=2) \
+_bad_rewards = _wrong_types.filter(lambda v: not (isinstance(v, list) and len(v) == 2)) \
+    | st.lists(_bad_reward, min_size=2, max_size=2) \
     | st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=4)
 _entries = st.integers(0, (441 + 441 * 6) * 5 - 1)
 _bad_updates = (
@@ -627,7 +628,7 @@ _bad_updates = (
     | st.tuples(_entries, _bad_reward).map(lambda t: [[[t[0]], [t[1]]]])
     | _entries.map(lambda e: [[[e]]])  # entries without their values
     | _wrong_types.filter(lambda v: not isinstance(v, list) or v).map(lambda v: [v])
-    | _wrong_types.filter(lambda v: not isinstance(v, list) or v).map(lambda v: [[v, []]])
+    | _wrong_types.filter(lambda v: not isinstance(v, list)).map(lambda v: [[v, []]])
 )
 _bad_record = (
     _wrong_types.filter(lambda v: not isinstance(v, list) or v)
