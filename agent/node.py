@@ -39,8 +39,8 @@ from nnql_swarm.protocol.effects import (
 )
 from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
 from nnql_swarm.protocol.transport import (
-    EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback, enqueue,
-    open_session,
+    EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback,
+    declare_lockstep_publisher, enqueue, open_session,
 )
 
 log = logging.getLogger("nnql.agent")
@@ -153,8 +153,7 @@ class AgentNode(ProtocolAdapter):
 
     def _ask(self, effect: Ask) -> None:
         self.session.get(f"{self.intent_keys[effect.agent]}?{effect.parameters}",
-                         self._replies(effect.ask), express=True,
-                         consolidation=NO_CONSOLIDATION, timeout=effect.timeout_s)
+                         self._replies(effect.ask), consolidation=NO_CONSOLIDATION, timeout=effect.timeout_s)
 
     def _reply(self, effect: Reply) -> None:
         query = self.queries.get(effect.query)
@@ -198,8 +197,7 @@ class AgentNode(ProtocolAdapter):
             s.declare_subscriber(keys.obs_key(run_id, self.agent), callback(self._on_observation)),
             s.declare_subscriber(keys.control_key(run_id), enqueue(self.events, "control")),
             s.declare_queryable(self.intent_keys[self.agent], callback(self._on_query)),
-            s.declare_publisher(self.intent_keys[self.agent], express=True,
-                                congestion_control=zenoh.CongestionControl.BLOCK) as publisher,
+            declare_lockstep_publisher(s, self.intent_keys[self.agent]) as publisher,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_AGENT, self.agent)),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               enqueue(self.events, "alive"), history=True),

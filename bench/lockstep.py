@@ -25,7 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.procstat import MemorySampler  # noqa: E402
 from nnql_swarm.protocol.transport import (  # noqa: E402
-    TOPOLOGIES, EmbeddedLayout, TransportSettings, callback, open_session, wait_listening,
+    TOPOLOGIES, EmbeddedLayout, TransportSettings, callback, declare_lockstep_publisher,
+    open_session, wait_listening,
 )
 
 START_TIMEOUT_S = 120.0
@@ -33,12 +34,9 @@ START_TIMEOUT_S = 120.0
 
 def agent(me: int, transport: TransportSettings) -> None:
     """Answer every observation at once with an intent; leave on a negative tick."""
-    import zenoh
-
     done = threading.Event()
     with open_session(transport) as s:
-        publisher = s.declare_publisher(f"bare/intent/{me}", express=True,
-                                        congestion_control=zenoh.CongestionControl.BLOCK)
+        publisher = declare_lockstep_publisher(s, f"bare/intent/{me}")
 
         def on_obs(sample) -> None:
             tick, _rank = msgpack.unpackb(sample.payload.to_bytes())
@@ -56,17 +54,13 @@ def agent(me: int, transport: TransportSettings) -> None:
 
 def world(n: int, transport: TransportSettings, ticks: int, results) -> None:
     """The clock; puts ``(ticks a second, the time every agent was alive)`` on ``results``."""
-    import zenoh
-
     alive: set[str] = set()
     everyone = threading.Event()
     finished = threading.Event()
     state = {"tick": 0, "heard": 0, "start": 0.0}
     warm_up = ticks // 5
     with open_session(transport) as s:
-        pubs = [s.declare_publisher(f"bare/obs/{i}", express=True,
-                                    congestion_control=zenoh.CongestionControl.BLOCK)
-                for i in range(n)]
+        pubs = [declare_lockstep_publisher(s, f"bare/obs/{i}") for i in range(n)]
 
         def open_tick(tick: int) -> None:
             for rank in range(n):

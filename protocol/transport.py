@@ -6,8 +6,9 @@ gossip scouting joins them into a full mesh, so a negotiation query goes straigh
 agent. Multicast scouting is always off unless a config file turns it on. Across machines, pass
 a Zenoh config file and/or listen and connect endpoints (README, "Several machines").
 
-Every process also runs Zenoh with one thread that waits on every socket and receives
-(:data:`RUNTIME_DEFAULT`, unless ``ZENOH_RUNTIME`` is set), and every handler of the nodes is a
+Every process also runs Zenoh with one thread that waits on every socket, receives and sends
+(:data:`RUNTIME_DEFAULT`, unless ``ZENOH_RUNTIME`` is set), so the lockstep's sends are batched
+(:func:`declare_lockstep_publisher`), and every handler of the nodes is a
 :func:`callback`: by default it runs on that thread, which keeps its Python thread state from
 one call to the next; one switch, :data:`CALLBACKS_ENV`, turns either trick off.
 """
@@ -41,29 +42,62 @@ class TransportError(RuntimeError):
 
 RUNTIME_ENV = "ZENOH_RUNTIME"
 RUNTIME_DEFAULT = (f"(rx: (worker_threads: 1, max_blocking_threads: {MAX_AGENTS}),"
-                   " acc: (handover: rx), app: (handover: rx), net: (handover: rx))")
-"""Zenoh's runtime threads, unless ``ZENOH_RUNTIME`` says otherwise: one network receiving
-thread instead of two, which also runs the acceptor's, the application's and the network
+                   " acc: (handover: rx), app: (handover: rx), net: (handover: rx),"
+                   " tx: (handover: rx))")
+"""Zenoh's runtime threads, unless ``ZENOH_RUNTIME`` says otherwise: one network thread, which
+receives, and also runs the acceptor's, the application's, the network runtime's and the sending
 runtime's tasks (``handover``). Our handlers run on that thread (``indirect=False``).
 
 - One receiving thread: with two, each message woke the idle one too (tokio's work stealing),
   and the handlers hopped between threads; 24 % more ticks a second with one, on 2 cores and 9
   processes (docs/performance.md, "Where the time goes").
-- The hand-overs: a socket is registered with the reactor of the runtime that opened it, the
-  acceptor's for a link accepted, the application's for one connected. So every message that
-  came in woke that runtime's thread first (an ``epoll_wait``), which then woke the receiving
-  thread (an ``eventfd`` write): two thread wake-ups a message. Handed over, one thread waits on
-  every socket and handles what arrives. ``bench/paired.py --pairs 3 --a-env
-  ZENOH_RUNTIME='(rx: (worker_threads: 1))' --b-env ZENOH_RUNTIME='<this>' -- --agents 8
-  --repeats 3 --episodes 10``: 1.10x the ticks a second (1.01, 1.20, 1.10).
+- The acceptor, the application and the network runtime: a socket is registered with the
+  reactor of the runtime that opened it, the acceptor's for a link accepted, the application's
+  for one connected. So every message that came in woke that runtime's thread first (an
+  ``epoll_wait``), which then woke the receiving thread (an ``eventfd`` write): two thread
+  wake-ups a message. Handed over, one thread waits on every socket and handles what arrives.
+  ``bench/paired.py --pairs 3 --a-env ZENOH_RUNTIME='(rx: (worker_threads: 1))' --b-env
+  ZENOH_RUNTIME='<those three>' -- --agents 8 --repeats 3 --episodes 10``: 1.10x the ticks a
+  second (1.01, 1.20, 1.10).
+- The sending runtime (``tx``): on a thread of its own, every message a handler sent woke it (a
+  futex or ``eventfd`` write, then a switch of threads), and at 64 agents those wake-ups were
+  most of our handlers' time (py-spy). Handed over, what a handler sends waits until the handler
+  returns, and then leaves in one batch a link: ticks a second 1.19 to 1.28x at 64 agents
+  (docs/performance.md, "One network thread"). It needs :func:`declare_lockstep_publisher`'s
+  batched sends and :data:`QUEUE_BATCHES`: a handler's sends that filled a link's queue would
+  wait for the thread they run on.
 - The receiving runtime's pool of blocking threads holds up to one per possible agent
   (``protocol.keys.MAX_AGENTS``), not tokio's 50: a link's accepting takes one of them, which
   once came from the acceptor's own pool. With 50, the world of 128 agents filled it (51
   threads), and its session's close then waited forever, in 2 of 6 runs; with 1024, 6 of 6
-  closed (32 to 53 threads at the peak).
-- The sending runtime (``tx``) keeps its own thread: handed over too, a put that waits for the
-  sender (``CongestionControl.BLOCK``) from a handler on that thread waited for itself, and at
-  start-up agents stalled until their leases ran out."""
+  closed (32 to 53 threads at the peak)."""
+
+QUEUE_BATCHES = 16
+"""Batches in each priority's queue of a link (Zenoh's maximum; its default is 2). With the
+sending tasks on the network thread (:data:`RUNTIME_DEFAULT`), the queue must hold everything one
+handler sends onto one link: 16 batches of 64 KiB, against at most one message of at most
+``protocol.messages.MAX_PAYLOAD_BYTES`` (64 KiB) a link and handler in the swarm. Batches are
+allocated as they are used."""
+
+_PRIORITIES = ("control", "real_time", "interactive_high", "interactive_low", "data_high", "data",
+               "data_low", "background")
+
+
+def declare_lockstep_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
+    """A publisher of the lockstep's messages (observations, intents, control): never dropped,
+    and batched.
+
+    - ``CongestionControl.BLOCK``: through a router one link carries every observation, and
+      under load Zenoh's default (DROP) lost some, which stalled agents (README, "Several
+      machines").
+    - Not ``express``, and nor are the asks and answers: an express message is a batch of its
+      own, and with the sending tasks on the network thread (:data:`RUNTIME_DEFAULT`) what a
+      handler sends waits for it to return. Express, more than :data:`QUEUE_BATCHES` messages
+      from one handler onto one link (an agent's first asks to its 63 peers, over the hub's one
+      link) filled the queue and waited for themselves, 5 s, until the link closed. Batched,
+      they share batches and leave together.
+    """
+    return session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
 
 
 def open_session(settings: "TransportSettings") -> zenoh.Session:
@@ -286,10 +320,10 @@ class TransportSettings:
         )
 
     def zenoh_config(self) -> zenoh.Config:
-        """The ``zenoh.Config``: the file first (if any), then these settings on top. Without
-        a file, the shared-memory transport is off too: the swarm's messages are small bytes
-        over TCP, and its 16 MiB segment was resident in every process (77 MiB an agent at 64
-        agents, 57 without)."""
+        """The ``zenoh.Config``: the file first (if any), then these settings on top, and
+        :data:`QUEUE_BATCHES` always. Without a file, the shared-memory transport is off too: the
+        swarm's messages are small bytes over TCP, and its 16 MiB segment was resident in every
+        process (77 MiB an agent at 64 agents, 57 without)."""
         if self.mode not in MODES:
             raise ValueError(f"zenoh mode must be one of {', '.join(MODES)}, not {self.mode!r}")
         config = zenoh.Config.from_file(self.config_file) if self.config_file else zenoh.Config()
@@ -302,6 +336,8 @@ class TransportSettings:
             config.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
         if not self.config_file:
             config.insert_json5("transport/shared_memory/enabled", "false")
+        config.insert_json5("transport/link/tx/queue/size", json.dumps(
+            dict.fromkeys(_PRIORITIES, QUEUE_BATCHES)))
         if self.gossip is not None:
             config.insert_json5("scouting/gossip/enabled", json.dumps(self.gossip))
         if self.connect_timeout_s > 0:

@@ -33,8 +33,8 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
 from nnql_swarm.protocol.transport import (
-    EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback, enqueue,
-    open_session,
+    EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback,
+    declare_lockstep_publisher, enqueue, open_session,
 )
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
 from nnql_swarm.world import checkpoint as world_checkpoint
@@ -43,10 +43,6 @@ from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.protocol import WorldProtocol
 
 log = logging.getLogger("nnql.world")
-
-BLOCK = zenoh.CongestionControl.BLOCK
-"""Lockstep messages are never dropped: through a router one link carries every observation, and
-under load Zenoh's default (DROP) lost some, which stalled agents (README, "Several machines")."""
 
 _PUT = zenoh.SampleKind.PUT
 
@@ -137,12 +133,11 @@ class WorldNode(ProtocolAdapter):
             s.declare_subscriber(keys.intent_key_all(run_id), callback(self._on_intent)),
             s.liveliness().declare_subscriber(keys.alive_key_all(run_id, keys.ROLE_AGENT),
                                               enqueue(self.events, "alive"), history=True),
-            s.declare_publisher(keys.control_key(run_id), congestion_control=BLOCK) as control,
+            declare_lockstep_publisher(s, keys.control_key(run_id)) as control,
             s.liveliness().declare_token(keys.alive_key(run_id, keys.ROLE_WORLD, 0)),
         ):
             self.control = control
-            self.publishers = [s.declare_publisher(keys.obs_key(run_id, i), express=True,
-                                                   congestion_control=BLOCK)
+            self.publishers = [declare_lockstep_publisher(s, keys.obs_key(run_id, i))
                                for i in range(self.config.n_agents)]
             try:
                 while finished is None and not self.stopping:
