@@ -62,8 +62,8 @@ runtime's tasks (``handover``). Our handlers run on that thread (``indirect=Fals
 - The sending runtime (``tx``): on a thread of its own, every message a handler sent woke it (a
   futex or ``eventfd`` write, then a switch of threads), and at 64 agents those wake-ups were
   most of our handlers' time (py-spy). Handed over, what a handler sends waits until the handler
-  returns, and then leaves in one batch a link: ticks a second 1.19 to 1.28x at 64 agents
-  (docs/performance.md, "One network thread"). It needs :func:`declare_lockstep_publisher`'s
+  returns, and then leaves in one batch a link: ticks a second 1.16x at 64 agents, median of 8
+  pairs (docs/performance.md, "One network thread"). It needs :func:`declare_lockstep_publisher`'s
   batched sends and :data:`QUEUE_BATCHES`: a handler's sends that filled a link's queue would
   wait for the thread they run on.
 - The receiving runtime's pool of blocking threads holds up to one per possible agent
@@ -75,9 +75,10 @@ runtime's tasks (``handover``). Our handlers run on that thread (``indirect=Fals
 QUEUE_BATCHES = 16
 """Batches in each priority's queue of a link (Zenoh's maximum; its default is 2). With the
 sending tasks on the network thread (:data:`RUNTIME_DEFAULT`), the queue must hold everything one
-handler sends onto one link: 16 batches of 64 KiB, against at most one message of at most
-``protocol.messages.MAX_PAYLOAD_BYTES`` (64 KiB) a link and handler in the swarm. Batches are
-allocated as they are used."""
+handler sends onto one link: 16 batches of 64 KiB. A handler of the swarm sends a link a few
+messages at most (the world an agent its observation; an agent its answers and intent, over the
+hub's one link), each of at most ``protocol.messages.MAX_PAYLOAD_BYTES`` (64 KiB), and batched
+(:func:`declare_lockstep_publisher`). Batches are allocated as they are used."""
 
 _PRIORITIES = ("control", "real_time", "interactive_high", "interactive_low", "data_high", "data",
                "data_low", "background")
