@@ -80,9 +80,7 @@ messages at most (the world an agent its observation; an agent its answers and i
 hub's one link), each of at most ``protocol.messages.MAX_PAYLOAD_BYTES`` (64 KiB), and batched
 (:func:`declare_lockstep_publisher`). Batches are allocated as they are used."""
 
-_PRIORITIES = ("control", "real_time", "interactive_high", "interactive_low", "data_high", "data",
-               "data_low", "background")
-
+_QUEUE_SIZES = "transport/link/tx/queue/size"
 
 def declare_lockstep_publisher(session: zenoh.Session, key: str) -> zenoh.Publisher:
     """A publisher of the lockstep's messages (observations, intents, control): never dropped,
@@ -337,8 +335,8 @@ class TransportSettings:
             config.insert_json5("scouting/multicast/enabled", json.dumps(self.multicast))
         if not self.config_file:
             config.insert_json5("transport/shared_memory/enabled", "false")
-        config.insert_json5("transport/link/tx/queue/size", json.dumps(
-            dict.fromkeys(_PRIORITIES, QUEUE_BATCHES)))
+        priorities = json.loads(config.get_json(_QUEUE_SIZES))  # Zenoh's own list of them
+        config.insert_json5(_QUEUE_SIZES, json.dumps(dict.fromkeys(priorities, QUEUE_BATCHES)))
         if self.gossip is not None:
             config.insert_json5("scouting/gossip/enabled", json.dumps(self.gossip))
         if self.connect_timeout_s > 0:

@@ -56,13 +56,12 @@ class SharedTable:
         order; the entries each one wrote, with their values once all are applied."""
         learner = self._learner
         q_ds, q_ca = learner.q_ds, learner.q_ca
-        written = []
+        written: list[int] = []
         for agent in sorted(learned):
             integers, values = learned[agent]
             apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
-            written.append(record_entries(integers))
-        every = [index for entries in written for index in entries]
-        return _groups(every, learner.entries[every].tolist())
+            written.extend(record_entries(integers))
+        return _groups(written, learner.entries[written].tolist())
 
     @property
     def entries(self) -> int:
