@@ -490,7 +490,7 @@ class AgentProtocol:
         answer = self.inbox.decode(payload, Answer, key_agent=sender)
         if answer is None or answer.tick <= self.decided_tick:
             return
-        self.trace.mark(ANSWER_IN, answer.tick, at=arrived)
+        self.trace.mark(ANSWER_IN, answer.tick, at=arrived, peer=sender)
         if self.decided_tick >= 0 and answer.tick > self.decided_tick + AHEAD_TICKS:
             self.inbox.reject("future-tick", f"answer for tick {answer.tick}, "
                                              f"decided {self.decided_tick}")

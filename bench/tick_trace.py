@@ -2,12 +2,12 @@
 """Where a tick's time goes: the distributed swarm, with every process marking each step it takes.
 
 Runs the launcher's world and agent processes (embedded Zenoh, recording off) with ``NNQL_TRACE``
-set (``protocol.trace``), then lines up the marks of every tick after the first episode: the
-chain from the world's first observation through each agent's answer to the next, to the world
-closing the tick. Medians and 90th percentiles in microseconds. With the paper's preset
-(``--preset nnql``, radius 10) the negotiation is one chain of every agent; with the default
-(radius 2) the chains are only among agents in reach, so a tick has fewer hops, each counted
-once (docs/performance.md).
+set (``protocol.trace``), then lines up the marks of every tick after the first episode: from the
+world's first observation through each agent's decision and each answer (from the agent that
+sent it to the one that got it) to the world closing the tick after the last intent. Medians and
+90th percentiles in microseconds. With the paper's preset (``--preset nnql``, radius 10) the
+negotiation is one chain of every agent; with the default (radius 2) the waits are only among
+agents in reach: fewer answers a tick, several short chains side by side (docs/performance.md).
 
     python bench/tick_trace.py --agents 8 --episodes 15
 """
@@ -32,10 +32,10 @@ FIRST_DECIDES = "that agent: observation in -> deciding"
 LEARNING = "each agent: deciding -> action chosen (the learning)"
 ENCODING = "each agent: action chosen -> answer encoded"
 REPLYING = "each agent: answer encoded -> the agents below answered"
-HOP = "each hop: answer encoded -> the next agent has it"
-ANSWER_IN = "each agent: answer in -> deciding"
+HOP = "each answer: encoded by its sender -> its asker has it"
+ANSWER_IN = "each agent that waited: its last answer in -> deciding"
 INTENT = "each agent: answered -> intent handed to Zenoh"
-LAST_INTENT = "last intent handed over -> the world closes the tick"
+LAST_INTENT = "the tick's last intent handed over -> the world closes the tick"
 NEXT_OBS = "the world: closing -> next tick's first observation handed over"
 TICK = "a whole tick"
 STEPS = (FIRST_OBS, FIRST_DECIDES, LEARNING, ENCODING, REPLYING, HOP, ANSWER_IN, INTENT,
@@ -44,12 +44,19 @@ AGENT_MARKS = (trace.OBS_IN, trace.DECIDE, trace.ACTED, trace.ENCODED, trace.ANS
                trace.INTENT_SENT)
 
 
-def by_tick(marks: list) -> dict[int, dict[str, float]]:
-    """One process's marks as tick -> step -> the first time it was marked."""
-    ticks: dict[int, dict[str, float]] = defaultdict(dict)
-    for step, tick, at in marks:
-        ticks[tick].setdefault(step, at)
+def by_tick(marks: list) -> dict[int, dict]:
+    """One process's marks as tick -> step -> the first time it was marked; a mark that names
+    its peer (an answer in) as tick -> ``(step, peer)`` -> time."""
+    ticks: dict[int, dict] = defaultdict(dict)
+    for step, tick, at, *peer in marks:
+        ticks[tick].setdefault((step, *peer) if peer else step, at)
     return ticks
+
+
+def answers_in(marks: dict) -> dict[int, float]:
+    """When each answer of one agent's tick came in, by its sender."""
+    return {key[1]: at for key, at in marks.items()
+            if isinstance(key, tuple) and key[0] == trace.ANSWER_IN}
 
 
 def tick_steps(world: dict[int, dict[str, float]], agents: dict[int, dict[int, dict[str, float]]],
@@ -61,20 +68,24 @@ def tick_steps(world: dict[int, dict[str, float]], agents: dict[int, dict[int, d
         w, after = world.get(tick, {}), world.get(tick + 1, {})
         chain = [agents[(rank + tick) % n].get(tick, {}) for rank in range(n)]  # by rank
         if (trace.OBS_SENT not in w or trace.CLOSE not in w or trace.OBS_SENT not in after
-                or not all(step in a for a in chain for step in AGENT_MARKS)):
+                or not all(step in a for a in chain for step in AGENT_MARKS)
+                or not all(trace.ENCODED in agents.get(s, {}).get(tick, {})
+                           for a in chain for s in answers_in(a))):
             continue
-        first, last = chain[0], chain[-1]
+        first = chain[0]
         out[FIRST_OBS].append(first[trace.OBS_IN] - w[trace.OBS_SENT])
         out[FIRST_DECIDES].append(first[trace.DECIDE] - first[trace.OBS_IN])
-        for rank, a in enumerate(chain):
+        for a in chain:
             out[LEARNING].append(a[trace.ACTED] - a[trace.DECIDE])
             out[ENCODING].append(a[trace.ENCODED] - a[trace.ACTED])
             out[REPLYING].append(a[trace.ANSWERED] - a[trace.ENCODED])
             out[INTENT].append(a[trace.INTENT_SENT] - a[trace.ANSWERED])
-            if rank and trace.ANSWER_IN in a:
-                out[HOP].append(a[trace.ANSWER_IN] - chain[rank - 1][trace.ENCODED])
-                out[ANSWER_IN].append(a[trace.DECIDE] - a[trace.ANSWER_IN])
-        out[LAST_INTENT].append(w[trace.CLOSE] - last[trace.INTENT_SENT])
+            came = answers_in(a)
+            out[HOP].extend(at - agents[sender][tick][trace.ENCODED]
+                            for sender, at in came.items())
+            if came:
+                out[ANSWER_IN].append(a[trace.DECIDE] - max(came.values()))
+        out[LAST_INTENT].append(w[trace.CLOSE] - max(a[trace.INTENT_SENT] for a in chain))
         out[NEXT_OBS].append(after[trace.OBS_SENT] - w[trace.CLOSE])
         out[TICK].append(after[trace.OBS_SENT] - w[trace.OBS_SENT])
     return out

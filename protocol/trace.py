@@ -20,7 +20,7 @@ OBS_SENT = "obs-sent"  # one observation of the tick is handed to Zenoh
 
 # An agent's steps.
 OBS_IN = "obs-in"  # its observation arrived
-ANSWER_IN = "answer-in"  # an answer for the tick arrived
+ANSWER_IN = "answer-in"  # an answer for the tick arrived (marked with its sender)
 DECIDE = "decide"  # it starts deciding
 ACTED = "acted"  # the learner chose the action
 ENCODED = "encoded"  # the answer to the agents below is encoded: replying starts
@@ -44,10 +44,13 @@ class TickTrace:
         """The time to mark a step with later, once its tick is known (0 when off)."""
         return time.perf_counter() if self.on else 0.0
 
-    def mark(self, step: str, tick: int, at: float | None = None) -> None:
-        """Mark ``step`` of ``tick`` as taken now (or ``at`` a time from :meth:`now`)."""
+    def mark(self, step: str, tick: int, at: float | None = None,
+             peer: int | None = None) -> None:
+        """Mark ``step`` of ``tick`` as taken now (or ``at`` a time from :meth:`now`); ``peer``:
+        the agent a message came from, where it matters (an answer)."""
         if self.on:
-            self.marks.append((step, tick, time.perf_counter() if at is None else at))
+            at = time.perf_counter() if at is None else at
+            self.marks.append((step, tick, at) if peer is None else (step, tick, at, peer))
 
     def save(self) -> None:
         if self.on:
