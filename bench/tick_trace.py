@@ -45,21 +45,18 @@ AGENT_MARKS = (trace.OBS_IN, trace.DECIDE, trace.ACTED, trace.ENCODED, trace.ANS
 
 
 def by_tick(marks: list) -> dict[int, dict]:
-    """One process's marks as tick -> step -> the first time it was marked; a mark that names
-    its peer (an answer in) as tick -> ``(step, peer)`` -> time."""
+    """One process's marks as tick -> step -> the first time it was marked; the answers in
+    (marked with their senders) as tick -> ``ANSWER_IN`` -> sender -> the time it came."""
     ticks: dict[int, dict] = defaultdict(dict)
     for step, tick, at, *peer in marks:
-        ticks[tick].setdefault((step, *peer) if peer else step, at)
+        if peer:
+            ticks[tick].setdefault(step, {}).setdefault(peer[0], at)
+        else:
+            ticks[tick].setdefault(step, at)
     return ticks
 
 
-def answers_in(marks: dict) -> dict[int, float]:
-    """When each answer of one agent's tick came in, by its sender."""
-    return {key[1]: at for key, at in marks.items()
-            if isinstance(key, tuple) and key[0] == trace.ANSWER_IN}
-
-
-def tick_steps(world: dict[int, dict[str, float]], agents: dict[int, dict[int, dict[str, float]]],
+def tick_steps(world: dict[int, dict], agents: dict[int, dict[int, dict]],
                ticks: list[int]) -> dict[str, list[float]]:
     """Each step of :data:`STEPS` for every tick in ``ticks`` that has all its marks, in seconds."""
     n = len(agents)
@@ -70,7 +67,7 @@ def tick_steps(world: dict[int, dict[str, float]], agents: dict[int, dict[int, d
         if (trace.OBS_SENT not in w or trace.CLOSE not in w or trace.OBS_SENT not in after
                 or not all(step in a for a in chain for step in AGENT_MARKS)
                 or not all(trace.ENCODED in agents.get(s, {}).get(tick, {})
-                           for a in chain for s in answers_in(a))):
+                           for a in chain for s in a.get(trace.ANSWER_IN, ()))):
             continue
         first = chain[0]
         out[FIRST_OBS].append(first[trace.OBS_IN] - w[trace.OBS_SENT])
@@ -80,7 +77,7 @@ def tick_steps(world: dict[int, dict[str, float]], agents: dict[int, dict[int, d
             out[ENCODING].append(a[trace.ENCODED] - a[trace.ACTED])
             out[REPLYING].append(a[trace.ANSWERED] - a[trace.ENCODED])
             out[INTENT].append(a[trace.INTENT_SENT] - a[trace.ANSWERED])
-            came = answers_in(a)
+            came = a.get(trace.ANSWER_IN, {})
             out[HOP].extend(at - agents[sender][tick][trace.ENCODED]
                             for sender, at in came.items())
             if came:
