@@ -16,10 +16,9 @@ read as one whose intent is unknown, from its current cell. A QL agent asks nobo
 import numpy as np
 
 from nnql_swarm.agent.learner import (
-    FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
-    LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS,
-    REC_COUNT, REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, record_outcome,
-    reach, record_size, state_size, write_updates,
+    LF_FIELDS, LP_READING, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READINGS, REC_COUNT,
+    REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, learner_params, reach,
+    record_outcome, record_size, state_size, write_updates,
 )
 from nnql_swarm.protocol.actions import (
     N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y, within,
@@ -27,6 +26,7 @@ from nnql_swarm.protocol.actions import (
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import floats, ints, python_values, rows
 from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.ranks import in_reach
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 
 
@@ -39,18 +39,8 @@ class Learner:
 
     def __init__(self, config: SwarmConfig) -> None:
         reading = READINGS[config.algo]
-        self.params = [0] * LP_FIELDS
-        self.params[LP_READING] = reading
-        self.params[LP_KNOWN_STATE] = int(config.known_state)
-        self.params[LP_RADIUS] = config.interaction_radius
-        self.params[LP_SHIELD] = int(config.shield)
-        self.params[LP_RANDOM_STEP] = config.random_step
-        self.params[LP_STILL_TERMINAL] = int(config.still_terminal)
-        self.params_f = [0.0] * FP_FIELDS
-        self.params_f[FP_ALPHA] = config.alpha
-        self.params_f[FP_GAMMA] = config.gamma
-        self.params_f[FP_BETA] = config.beta
-        self.params, self.params_f = ints(self.params), floats(self.params_f)
+        params, params_f = learner_params(config)
+        self.params, self.params_f = ints(params), floats(params_f)
         both = np.full((N_STATES + ca_rows(reading, config.known_state), N_ACTIONS),
                        float(config.optimistic))
         self.q_ds, self.q_ca = both[:N_STATES], both[N_STATES:]
@@ -189,21 +179,21 @@ class AgentBrain:
             rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py, 0])
         if self._walls:
             knows = announcing and self.reads_intents
-            radius = self.config.interaction_radius
+            radius, meet = self.config.interaction_radius, self.config.meet_only
             was_at = self._was_at
-            for j, jx, jy, distance in self._walls_within(x, y):
+            for j, jx, jy in self._walls_within(x, y):
                 px, py = (jx, jy) if was_at is not None and sees(*was_at, jx, jy) else (-1, -1)
-                known = int(knows and distance <= radius)
+                known = int(knows and in_reach(x, y, jx, jy, radius, meet))
                 rows.append([j, jx, jy, known, jx, jy, jx, jy, 0, px, py, 0])
         return rows
 
-    def _walls_within(self, x: int, y: int) -> list[tuple[int, int, int, int]]:
-        """The walls within reach and view of cell ``(x, y)`` as ``(id, x, y, distance)`` in id
-        order (cell order), once per cell."""
+    def _walls_within(self, x: int, y: int) -> list[tuple[int, int, int]]:
+        """The walls within reach and view of cell ``(x, y)`` as ``(id, x, y)`` in id order
+        (cell order), once per cell."""
         near = self._walls_near.get((x, y))
         if near is None:
             w, h, far = self.config.width, self.config.height, min(self._reach, VIEW_RADIUS)
-            near = [(self._walls[cy * w + cx], cx, cy, max(abs(cx - x), abs(cy - y)))
+            near = [(self._walls[cy * w + cx], cx, cy)
                     for cy in range(max(0, y - far), min(h, y + far + 1))
                     for cx in range(max(0, x - far), min(w, x + far + 1))
                     if cy * w + cx in self._walls]

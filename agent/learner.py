@@ -15,7 +15,8 @@ The readings of a neighbour's state ``s_i`` (``READ_*``; docs/paper.md has the e
 
 - ``READ_QL``: the neighbour's current offset (QL cannot know its move).
 - ``READ_NNQL``: the offset of the cell it announced it is heading for, where its intent is known
-  (it outranks this agent and is within reach), else its current offset (the paper's nnQL, n = 1).
+  (it outranks this agent and is one it waits for: ``protocol.ranks.waits_for``), else its
+  current offset (the paper's nnQL, n = 1).
 - ``READ_DIR``: nnQL's offset and the announced move (6 codes: 5 moves, unknown), so that a
   neighbour stepping in from the left differs from one coming from the right: a swap can be seen.
 - ``READ_DAQL``: Double Action Q-learning (Ngai and Yung; the paper's Eq. 2): the current offset
@@ -60,8 +61,8 @@ UNKNOWN_MOVE = N_ACTIONS
 """The move code of a neighbour whose intent is unknown (``READ_DIR``)."""
 
 LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP = 0, 1, 2, 3, 4
-LP_STILL_TERMINAL = 5
-LP_FIELDS = 6
+LP_STILL_TERMINAL, LP_MEET_ONLY = 5, 6
+LP_FIELDS = 7
 FP_ALPHA, FP_GAMMA, FP_BETA = 0, 1, 2
 FP_FIELDS = 3
 
@@ -87,6 +88,22 @@ RF_FIELDS = 2
 """A learning record: Eq. 9's ``s, a, terminal, s'``, the blocks ``s'`` bootstraps over, and per
 neighbour a pair of Q_CA rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no bootstrap); its
 floats are the two rewards."""
+
+
+def learner_params(config) -> tuple[list[int], list[float]]:
+    """A learner's ``params`` and ``params_f`` for a run's options (a ``SwarmConfig``; the
+    oracle, which learns nothing, reads as QL)."""
+    params = [0] * LP_FIELDS
+    params[LP_READING] = READINGS.get(config.algo, READ_QL)
+    params[LP_KNOWN_STATE] = int(config.known_state)
+    params[LP_RADIUS] = config.interaction_radius
+    params[LP_SHIELD] = int(config.shield)
+    params[LP_RANDOM_STEP] = config.random_step
+    params[LP_STILL_TERMINAL] = int(config.still_terminal)
+    params[LP_MEET_ONLY] = int(config.meet_only)
+    params_f = [0.0] * FP_FIELDS
+    params_f[FP_ALPHA], params_f[FP_GAMMA], params_f[FP_BETA] = config.alpha, config.gamma, config.beta
+    return params, params_f
 
 
 SHIELD_REACH = 2

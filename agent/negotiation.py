@@ -8,7 +8,8 @@ observation, so an agent can tell exactly whom a neighbour sees, and so what its
 
 :func:`plan_asks` walks the awaited neighbours from the lowest rank up (the nearest in the chain,
 who decides last and knows the most) and asks each one that no earlier ask covers. When everyone
-sees everyone, as on the default 11 x 11 grid, that is one query, to the agent ranked just above:
+waits for everyone above it (the paper's presets on 11 x 11), that is one query, to the agent
+ranked just above:
 the negotiation becomes a chain of N - 1 answers a tick instead of N (N - 1) / 2, and every agent
 knows exactly the intents it would have known by asking each neighbour. Should an answer lack an
 intent it was expected to bring (its sender missed it, or died), the agent asks for the missing
@@ -44,15 +45,16 @@ def _awaited(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]
     """:func:`awaited` as ``(id, x, y)``."""
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
-    (x, y), n, radius = obs.position, config.n_agents, config.interaction_radius
+    (x, y), n, radius, meet = obs.position, config.n_agents, config.interaction_radius, config.meet_only
     return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
-            if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius)]
+            if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet)]
 
 
 def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
-              rank: Callable[[int], int], radius: int) -> list[int]:
+              rank: Callable[[int], int], radius: int, meet_only: bool) -> list[int]:
     """The fewest neighbours to ask, lowest-ranked first, whose answers (with what they relay)
-    bring every intent of ``waiting_for``; ``cells`` holds each one's cell, ``rank`` its rank."""
+    bring every intent of ``waiting_for``; ``cells`` holds each one's cell, ``rank`` its rank;
+    ``radius`` and ``meet_only`` are the negotiation's (``protocol.ranks.waits_for``)."""
     ranked = sorted(((rank(j), j) for j in waiting_for), reverse=True)
     asks: list[int] = []
     covered: set[int] = set()
@@ -63,7 +65,8 @@ def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
         covered.add(q)
         qx, qy = cells[q]
         covered.update(x for rx, x in ranked
-                       if waits_for(True, r, rx, qx, qy, cells[x][0], cells[x][1], radius))
+                       if waits_for(True, r, rx, qx, qy, cells[x][0], cells[x][1], radius,
+                                    meet_only))
     return asks
 
 
@@ -76,7 +79,7 @@ def plan_for(obs: Observation, config: SwarmConfig) -> tuple[list[int], list[int
     cells = {j: (x, y) for j, x, y in near}  # plan_asks reads only the cells of waiting_for
     tick, n = obs.tick, config.n_agents
     return waiting_for, plan_asks(waiting_for, cells, lambda j: priority_rank(j, tick, n),
-                                  config.interaction_radius)
+                                  config.interaction_radius, config.meet_only)
 
 
 def plans_are_known(config: SwarmConfig) -> bool:
@@ -94,12 +97,13 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
     n, tick, radius, me = config.n_agents, obs.tick, config.interaction_radius, obs.agent
+    meet = config.meet_only
     (x, y), rank = obs.position, obs.rank
     near = within(obs.neighbours, x, y, 2 * radius)  # the waiters and those they wait for
     cells = {j: (jx, jy) for j, jx, jy in near}
     ranks = {j: priority_rank(j, tick, n) for j in cells}
     waiters = sorted((ranks[j], j) for j, (jx, jy) in cells.items()
-                     if waits_for(True, ranks[j], rank, jx, jy, x, y, radius))
+                     if waits_for(True, ranks[j], rank, jx, jy, x, y, radius, meet))
     if not waiters or not plans_are_known(config):
         return [j for _, j in waiters]
     cells[me], ranks[me] = (x, y), rank
@@ -107,8 +111,8 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     for w_rank, w in waiters:
         wx, wy = cells[w]
         waiting_for = [j for j, (jx, jy) in cells.items()
-                       if waits_for(True, w_rank, ranks[j], wx, wy, jx, jy, radius)]
-        if me in plan_asks(waiting_for, cells, ranks.__getitem__, radius):
+                       if waits_for(True, w_rank, ranks[j], wx, wy, jx, jy, radius, meet)]
+        if me in plan_asks(waiting_for, cells, ranks.__getitem__, radius, meet):
             answered.append(w)
     return answered
 

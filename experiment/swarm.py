@@ -47,18 +47,22 @@ ABLATED = ("interaction_radius", "optimistic", "shared", "still_terminal", "alph
 
 def ablation_presets() -> dict[str, dict]:
     """``best-nnql`` with each of its options beyond the paper taken back in turn (to the
-    paper's value), and with the paper's nnQL reading instead of the direction-aware one; the
-    swarm's default (``shield-nnql``) with its negotiation radius of 2 and with the full chain
-    (the paper's radius, 10); the QL and nnQL rows they are read against."""
-    best, paper = PRESETS["best-nnql"], PRESETS["nnql"]
+    paper's value), with the paper's nnQL reading instead of the direction-aware one, with a
+    state block for known neighbours, and waiting only for the neighbours it could meet; the
+    swarm's default (``shield-nnql``: radius 2, waiting only for the neighbours it could meet)
+    waiting for every higher-ranked neighbour within the radius, and with the full chain (the
+    paper's radius, 10, and its waits); the QL and nnQL rows they are read against."""
+    best, paper, shield = PRESETS["best-nnql"], PRESETS["nnql"], PRESETS["shield-nnql"]
     presets = {name: PRESETS[name] for name in ("ql", "nnql", "best-ql", "best-nnql")}
     for option in ABLATED:
         presets[f"best-nnql-paper-{option.replace('_', '-')}"] = {**best, option: paper[option]}
     presets["best-nnql-plain-nnql"] = {**best, "algo": "nnql"}
     presets["best-nnql-known-state"] = {**best, "known_state": True}
-    presets["shield-nnql"] = PRESETS["shield-nnql"]
-    presets["shield-nnql-paper-interaction-radius"] = {
-        **PRESETS["shield-nnql"], "interaction_radius": paper["interaction_radius"]}
+    presets["best-nnql-wait-rule-meet"] = {**best, "wait_rule": "meet"}
+    presets["shield-nnql"] = shield
+    presets["shield-nnql-paper-wait-rule"] = {**shield, "wait_rule": paper["wait_rule"]}
+    presets["shield-nnql-full-chain"] = {**shield, "interaction_radius": paper["interaction_radius"],
+                                         "wait_rule": paper["wait_rule"]}
     return presets
 
 

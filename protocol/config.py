@@ -13,7 +13,7 @@ import numpy as np
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.keys import validate_run_id
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_GRID
-from nnql_swarm.protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
+from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank  # noqa: F401 (the nodes import it from here)
 from nnql_swarm.protocol.walls import MAX_DENSITY, layout, wall_count
 
 ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
@@ -34,16 +34,17 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
     return field(default=default, metadata={"help": help, "flag": flag, **argparse_options})
 
 
-LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "optimistic", "known_state",
-                   "shared", "shield", "lookahead", "still_terminal", "stay_reward")
+LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
+                   "known_state", "shared", "shield", "lookahead", "still_terminal",
+                   "stay_reward")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
 PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
-         "optimistic": 0.0, "known_state": False, "shared": False, "shield": False,
+         "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False, "shield": False,
          "lookahead": 1, "still_terminal": False, "stay_reward": 0.5}
-"""The paper's reading: every neighbour in view enters Eq. 6, zero-initialised tables, each
-agent its own tables, no shield."""
+"""The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
+the agent, zero-initialised tables, each agent its own tables, no shield."""
 
 BEST = {"interaction_radius": 2, "optimistic": 25.0, "shared": True, "still_terminal": True,
         "alpha": 0.5}
@@ -57,7 +58,8 @@ PRESETS: dict[str, dict] = {
     "best-ql": {**PAPER, **BEST, "algo": "ql"},
     "best-nnql": {**PAPER, **BEST, "algo": "nnql-dir"},
     "shield-ql": {**PAPER, **BEST, "algo": "ql", "shield": True, "known_state": True},
-    "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True},
+    "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
+                    "wait_rule": "meet"},
     "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
     "daql": {**PAPER, **BEST, "algo": "daql"},
     "oracle": {**PAPER, "algo": "oracle"},
@@ -100,6 +102,10 @@ class SwarmConfig:
                                      "paper's reading is the whole view, 10 (which makes the "
                                      "negotiation one chain when everyone sees everyone)",
                                      ("--radius", "--negotiation-radius"))
+    wait_rule: str = option(_DEFAULT["wait_rule"], "whom an agent waits for before it decides: "
+                            "every higher-ranked neighbour within the radius (reach, the "
+                            "paper's), or only those it could meet on the next step (meet)",
+                            choices=WAIT_RULES)
     optimistic: float = option(_DEFAULT["optimistic"], "initial value of every Q-table entry (the paper: 0)")
     known_state: bool = option(_DEFAULT["known_state"], "a state block of its own for a neighbour whose next cell "
                                "is known (announced, or parked on its goal)")
@@ -135,6 +141,7 @@ class SwarmConfig:
              "alpha must be in (0, 1], gamma in [0, 1), beta in [0, 1]"),
             (0 <= self.interaction_radius <= VIEW_RADIUS,
              f"the interaction radius must be 0..{VIEW_RADIUS}"),
+            (self.wait_rule in WAIT_RULES, f"the wait rule must be one of {', '.join(WAIT_RULES)}"),
             (self.optimistic >= 0, "the optimistic initial value must be non-negative"),
             (self.stay_reward >= 0, "the stay reward must be non-negative"),
             (1 <= self.lookahead <= MAX_LOOKAHEAD, f"the lookahead n must be 1..{MAX_LOOKAHEAD}"),
@@ -160,6 +167,12 @@ class SwarmConfig:
         """How many walls the grid holds (``protocol.walls``)."""
         return wall_count(self.width, self.height, self.obstacle_density)
 
+    @property
+    def meet_only(self) -> bool:
+        """Whether agents wait only for the neighbours they could meet next step (the ``meet``
+        wait rule, ``protocol.ranks``)."""
+        return self.wait_rule == "meet"
+
     @cached_property
     def n_bodies(self) -> int:
         """Agents, then walls: body ``n_agents + k`` is wall ``k``."""
@@ -183,6 +196,7 @@ class SwarmConfig:
     @staticmethod
     def from_json(text: str) -> "SwarmConfig":
         data = json.loads(text)
+        data.setdefault("wait_rule", "reach")  # a config from before the rule: it waited so
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:

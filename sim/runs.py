@@ -16,8 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nnql_swarm.agent.learner import (
-    FP_ALPHA, FP_BETA, FP_FIELDS, FP_GAMMA, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS,
-    LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_TERMINAL, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise,
+    LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise, learner_params,
     record_size, state_size,
 )
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
@@ -118,8 +117,9 @@ class Batch:
         r, n, learners = len(runs), w.bodies, w.learners
         cells = w.width * w.height
         rows = max(ca_rows(READINGS.get(run.algo, 0), run.known_state) for run in runs)
-        self.params = np.array([_params(run) for run in runs], dtype=np.int64)
-        self.params_f = np.array([_params_f(run) for run in runs])
+        params = [learner_params(run) for run in runs]
+        self.params = np.array([ints for ints, _ in params], dtype=np.int64)
+        self.params_f = np.array([floats for _, floats in params])
         self.options = np.zeros((r, OPT_FIELDS), dtype=np.int64)
         self.options[:, OPT_SHARED] = [run.shared for run in runs]
         self.options[:, OPT_LOOKAHEAD] = [run.lookahead for run in runs]
@@ -239,23 +239,6 @@ def check_run(world: World, run: SwarmConfig) -> None:
         raise ValueError("the oracle plans swarms of learners, not scripted obstacles")
     if run.obstacle_density != world.obstacle_density:
         raise ValueError("every run of a batch needs the world's obstacle density")
-
-
-def _params(run: SwarmConfig) -> list[int]:
-    params = [0] * LP_FIELDS
-    params[LP_READING] = READINGS.get(run.algo, 0)
-    params[LP_KNOWN_STATE] = int(run.known_state)
-    params[LP_RADIUS] = run.interaction_radius
-    params[LP_SHIELD] = int(run.shield)
-    params[LP_RANDOM_STEP] = run.random_step
-    params[LP_STILL_TERMINAL] = int(run.still_terminal)
-    return params
-
-
-def _params_f(run: SwarmConfig) -> list[float]:
-    params = [0.0] * FP_FIELDS
-    params[FP_ALPHA], params[FP_GAMMA], params[FP_BETA] = run.alpha, run.gamma, run.beta
-    return params
 
 
 def _ints(*shape: int) -> np.ndarray:

@@ -20,7 +20,7 @@ Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agen
 """
 
 from nnql_swarm.agent.learner import (
-    FP_ALPHA, FP_GAMMA, LP_RADIUS, LP_READING, NB_FIELDS, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
+    FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
     NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
     apply_record, decide, finish, planned_cell, record_outcome,
 )
@@ -80,7 +80,7 @@ def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, 
         row[NB_Y] = y[j]
         known = (negotiates and decided[j]
                  and waits_for(True, rank, rank_of(j, tick, learners), x[i], y[i], x[j], y[j],
-                               params[LP_RADIUS]))
+                               params[LP_RADIUS], params[LP_MEET_ONLY]))
         row[NB_KNOWN] = 1 if known else 0
         if known:
             nx = target_x(x[j], actions[j], width)

@@ -189,7 +189,7 @@ def test_bad_input_is_counted_never_raised():
 def test_a_neighbour_that_is_gone_or_refuses_the_tick_is_waited_for_no_more():
     """A neighbour that is gone (no queryable: Zenoh ends the ask at once) or refuses the tick
     cost the whole negotiation time-out at every tick, as simulated histories showed."""
-    others = [(0, 2, 2), (1, 3, 3)]
+    others = [(0, 2, 2), (1, 1, 3)]  # agent 2, at (1, 1), could meet both; agent 1 could meet 0
     protocol = ready(agent=2)
     effects = protocol.on_observation(observation(0, agent=2, others=others), 0.0)
     [ask] = [e for e in effects if isinstance(e, Ask)]

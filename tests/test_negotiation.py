@@ -9,15 +9,16 @@ import pytest
 
 from nnql_swarm.agent import negotiation
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.protocol.actions import sees
+from nnql_swarm.protocol.actions import N_ACTIONS, sees, target_x, target_y
 from nnql_swarm.protocol.config import ALGOS, SwarmConfig
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
-from nnql_swarm.protocol.ranks import priority_rank
+from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank, waits_for
 from nnql_swarm.world.viz import negotiation_mask
 
 
-def config(n: int, algo: str = "nnql", radius: int = 10) -> SwarmConfig:
-    return SwarmConfig(n_agents=n, algo=algo, interaction_radius=radius, width=40, height=40)
+def config(n: int, algo: str = "nnql", radius: int = 10, wait_rule: str = "reach") -> SwarmConfig:
+    return SwarmConfig(n_agents=n, algo=algo, interaction_radius=radius, wait_rule=wait_rule,
+                       width=40, height=40)
 
 
 def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
@@ -50,14 +51,15 @@ def test_everyone_in_view_makes_a_chain_of_one_query_each():
         assert asks == ([] if rank == 0 else [(agent - 1) % n])  # the one ranked just above
 
 
+@pytest.mark.parametrize("wait_rule", WAIT_RULES)
 @pytest.mark.parametrize("radius", [2, 10])
 @pytest.mark.parametrize("seed", range(20))
-def test_the_plan_covers_every_awaited_intent_on_sparse_grids(seed, radius):
+def test_the_plan_covers_every_awaited_intent_on_sparse_grids(seed, radius, wait_rule):
     rng = random.Random(seed)
     n, tick = 12, rng.randrange(100)
     spots = rng.sample(list(itertools.product(range(40), range(12))), n)
     cells = dict(enumerate(spots))
-    c = config(n, radius=radius)
+    c = config(n, radius=radius, wait_rule=wait_rule)
     asked_by = {a: negotiation.plan_for(observe(a, tick, n, cells), c)[1] for a in cells}
     for agent in cells:
         waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), c)
@@ -72,16 +74,18 @@ def test_nobody_negotiates_for_ql_or_at_an_episode_end():
     assert negotiation.plan_for(observe(1, 0, 2, cells, episode_end=True), config(2)) == ([], [])
 
 
+@pytest.mark.parametrize("wait_rule", WAIT_RULES)
 @pytest.mark.parametrize("radius,side", [(2, 40), (5, 40), (10, 11), (10, 40), (7, 30)])
 @pytest.mark.parametrize("seed", range(10))
-def test_standing_answers_go_to_exactly_the_plans_that_ask_them(seed, radius, side):
+def test_standing_answers_go_to_exactly_the_plans_that_ask_them(seed, radius, side, wait_rule):
     """A decider answers by stream exactly the agents whose plan asks it, where it can tell
     (a grid in view, or a radius of at most half the view); elsewhere every agent that waits
     for it, a superset of the plans."""
     rng = random.Random(seed)
     n, tick = 12, rng.randrange(100)
     cells = dict(enumerate(rng.sample(list(itertools.product(range(side), range(side))), n)))
-    c = SwarmConfig(n_agents=n, algo="nnql", interaction_radius=radius, width=side, height=side)
+    c = SwarmConfig(n_agents=n, algo="nnql", interaction_radius=radius, wait_rule=wait_rule,
+                    width=side, height=side)
     known = negotiation.plans_are_known(c)
     assert known == (radius <= 5 or side <= 11)
     plans = {a: negotiation.plan_for(observe(a, tick, n, cells), c) for a in cells}
@@ -92,14 +96,16 @@ def test_standing_answers_go_to_exactly_the_plans_that_ask_them(seed, radius, si
         assert answered == sorted(answered, key=lambda a: priority_rank(a, tick, n))
 
 
+@pytest.mark.parametrize("wait_rule", WAIT_RULES)
 @pytest.mark.parametrize("algo", [a for a in ALGOS if a != "oracle"])
 @pytest.mark.parametrize("radius", [2, 10])
-def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(algo, radius):
+def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(algo, radius,
+                                                                               wait_rule):
     """One rule: the brain's neighbours to ask, the plan's awaited intents and the arrows the
     world records are the same pairs, for every algorithm (the recording once drew none for
     nnql-dir while its agents waited)."""
     rng = random.Random(radius)
-    n, c = 7, config(7, algo, radius)
+    n, c = 7, config(7, algo, radius, wait_rule)
     brains = [AgentBrain(i, c) for i in range(n)]
     waited = 0
     for tick in range(12):
@@ -125,3 +131,40 @@ def test_tick_intents_prefer_the_senders_word_and_flag_contradictions():
     assert got.actions[1] == 0
     assert got.add(4, 2, ((5, 1),), me=5)  # this agent's own intent is never taken from others
     assert 5 not in got.actions
+
+
+def _can_meet(ax: int, ay: int, bx: int, by: int) -> bool:
+    """Whether some pair of moves takes two agents into one cell or across each other (on a
+    grid large enough that no edge is near)."""
+    for a in range(N_ACTIONS):
+        for b in range(N_ACTIONS):
+            na = (target_x(ax, a, 99), target_y(ay, a, 99))
+            nb = (target_x(bx, b, 99), target_y(by, b, 99))
+            if na == nb or (na == (bx, by) and nb == (ax, ay)):
+                return True
+    return False
+
+
+@pytest.mark.parametrize("radius", [0, 1, 2, 3, 10])
+def test_the_meet_rule_waits_for_exactly_the_outranking_neighbours_that_could_collide(radius):
+    """Under ``meet`` an agent waits for a higher-ranked neighbour within the radius exactly when
+    some pair of next moves makes the two collide or swap; under ``reach``, for every one within
+    the radius. Every offset of the view, from the middle of a large grid."""
+    x = y = 50
+    for dx, dy in itertools.product(range(-10, 11), repeat=2):
+        if (dx, dy) == (0, 0):
+            continue
+        within = max(abs(dx), abs(dy)) <= radius
+        assert waits_for(True, 3, 1, x, y, x + dx, y + dy, radius, False) == within
+        assert (waits_for(True, 3, 1, x, y, x + dx, y + dy, radius, True)
+                == (within and _can_meet(x, y, x + dx, y + dy)))
+        assert not waits_for(True, 1, 3, x, y, x + dx, y + dy, radius, True)  # it outranks
+
+
+def test_the_meet_rule_leaves_out_a_neighbour_two_cells_off_along_both_axes():
+    cells = {0: (5, 5), 1: (7, 7), 2: (6, 6)}  # ranks at tick 0: 0, 1, 2
+    reach = negotiation.plan_for(observe(1, 0, 3, cells), config(3, radius=2))
+    meet = negotiation.plan_for(observe(1, 0, 3, cells), config(3, radius=2, wait_rule="meet"))
+    assert reach[0] == [0] and meet[0] == []
+    assert negotiation.plan_for(observe(2, 0, 3, cells),
+                                config(3, radius=2, wait_rule="meet"))[0] == [0, 1]

@@ -103,6 +103,17 @@ def test_infos_name_whom_each_agent_waits_for():
     assert infos["agent_1"]["waits_for"] == [] and infos["agent_2"]["waits_for"] == []
 
 
+def test_infos_under_the_meet_rule_leave_out_a_neighbour_it_cannot_meet():
+    for rule, expected in (("reach", ["agent_1"]), ("meet", [])):
+        env = SwarmGridEnv(n_agents=2, width=8, height=8, negotiation_radius=2, wait_rule=rule)
+        env.reset(seed=0)
+        place(env, [(0, 0), (2, 2)], [(7, 7), (7, 0)])
+        _, _, _, _, infos = env.step({a: STAY for a in env.agents})
+        assert infos["agent_0"]["waits_for"] == expected  # two cells off along both axes
+    with pytest.raises(ValueError, match="wait_rule"):
+        SwarmGridEnv(wait_rule="near")
+
+
 def test_truncation_after_max_steps():
     env = SwarmGridEnv(n_agents=2, max_steps=3)
     env.reset(seed=1)

@@ -1,6 +1,7 @@
 """Keys and wire messages: round trips, every rejection reason, the one codec path against an
 independent reading of the rules, and fuzzing."""
 
+import json
 import logging
 import math
 
@@ -14,6 +15,7 @@ from hypothesis import strategies as st
 
 from nnql_swarm.protocol import keys, messages
 from nnql_swarm.protocol.actions import N_ACTIONS
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.protocol.keys import MAX_TICK
 from nnql_swarm.protocol.messages import (
     Answer,
@@ -1283,3 +1285,15 @@ def test_encode_and_parse_from_many_threads_at_once():
         results = list(pool.map(round_trip, msgs))
     assert [p for p, _ in results] == expected
     assert [m for _, m in results] == msgs
+
+
+def test_a_config_written_before_the_wait_rule_existed_keeps_waiting_for_all_in_reach():
+    """A run resumed from an older ``config.json`` plays on as it started: the ``meet`` rule
+    came later, and until then every higher-ranked neighbour in reach was waited for."""
+    data = json.loads(SwarmConfig().to_json())
+    assert data["wait_rule"] == "meet" and SwarmConfig.from_json(json.dumps(data)).meet_only
+    del data["wait_rule"]
+    assert SwarmConfig.from_json(json.dumps(data)).wait_rule == "reach"
+    assert PRESETS["nnql"]["wait_rule"] == "reach"  # the paper's hierarchy
+    with pytest.raises(ValueError, match="wait rule"):
+        SwarmConfig(wait_rule="near")

@@ -107,6 +107,7 @@ def test_ql_swarm_runs_distributed(tmp_path):
     (("--agents", "80"), "distinct start and goal cells"),
     (("--grid", "11by11"), "WIDTHxHEIGHT"),
     (("--algo", "dqn"), "invalid choice"),
+    (("--wait-rule", "near"), "invalid choice"),
     (("--episodes", "-1"), "episodes must be"),
     (("--role", "world"), "needs --listen"),
     (("--zenoh-config", "/nonexistent.json5"), "no Zenoh config file"),

@@ -39,7 +39,8 @@ one. ``infos[agent]`` holds the two parts (``reward_ds``, ``reward_ca``) and ``c
 ## Negotiation
 ``infos[agent]["waits_for"]`` names the agents whose intents this agent would wait for before
 its next step in the swarm's negotiation (``protocol.ranks.waits_for``: higher-ranked agents within
-``negotiation_radius``, ranks rotating every step), so that a policy that reads intents can be
+``negotiation_radius``, all of them or, with ``wait_rule="meet"``, those it could meet on the next
+step; ranks rotating every step), so that a policy that reads intents can be
 stepped in that order.
 
 ## Episode end
@@ -60,7 +61,7 @@ from pettingzoo import ParallelEnv
 
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
 from nnql_swarm.protocol.jit import flags, floats, ints, python_values
-from nnql_swarm.protocol.ranks import priority_rank, waits_for
+from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank, waits_for
 from nnql_swarm.world.rules import GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, world_step
 from nnql_swarm.world.scenario import swarm_episode
 
@@ -82,12 +83,15 @@ class SwarmGridEnv(ParallelEnv):
         count_swaps: bool = True,
         goal_reward: float = GOAL_REWARD,
         negotiation_radius: int = VIEW_RADIUS,
+        wait_rule: str = "reach",
         render_mode: str | None = None,
     ) -> None:
         if n_agents < 1:
             raise ValueError(f"need at least one agent, got {n_agents}")
         if 2 * n_agents > width * height:
             raise ValueError(f"{n_agents} agents need {2 * n_agents} cells; {width}x{height} has fewer")
+        if wait_rule not in WAIT_RULES:
+            raise ValueError(f"wait_rule must be one of {', '.join(WAIT_RULES)}, got {wait_rule!r}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unsupported render mode {render_mode!r}")
         self.n_agents = n_agents
@@ -96,6 +100,7 @@ class SwarmGridEnv(ParallelEnv):
         self.count_swaps = count_swaps
         self.goal_reward = goal_reward
         self.negotiation_radius = negotiation_radius
+        self.meet_only = wait_rule == "meet"
         self.render_mode = render_mode
         self.possible_agents = [f"agent_{i}" for i in range(n_agents)]
         self.agents: list[str] = []
@@ -166,7 +171,7 @@ class SwarmGridEnv(ParallelEnv):
         rank = priority_rank(i, step, n)
         return [self.possible_agents[j] for j in range(n)
                 if j != i and waits_for(True, rank, priority_rank(j, step, n), x[i], y[i], x[j],
-                                        y[j], self.negotiation_radius)]
+                                        y[j], self.negotiation_radius, self.meet_only)]
 
     def render(self) -> str | None:
         if self.render_mode != "ansi":

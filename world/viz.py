@@ -92,7 +92,7 @@ def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.nda
                      ticks: np.ndarray) -> np.ndarray:
     """``asks[t, i, j]``: at tick ``ticks[t]`` agent i waits for j's intent (``positions``
     ``(T, n, 2)``, ``arrived`` ``(T, n)``: as each tick started)."""
-    n, radius = config.n_agents, config.interaction_radius
+    n, radius, meet = config.n_agents, config.interaction_radius, config.meet_only
     asks = np.zeros((len(ticks), n, n), dtype=bool)
     if config.algo not in NEGOTIATING_ALGOS:
         return asks
@@ -103,7 +103,8 @@ def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.nda
             if arrived[t][i]:
                 continue
             for j, (jx, jy) in enumerate(cells[t]):
-                asks[t, i, j] = j != i and waits_for(True, ranks[i], ranks[j], x, y, jx, jy, radius)
+                asks[t, i, j] = j != i and waits_for(True, ranks[i], ranks[j], x, y, jx, jy,
+                                                     radius, meet)
     return asks
 
 
