@@ -15,8 +15,11 @@ knows exactly the intents it would have known by asking each neighbour. Should a
 intent it was expected to bring (its sender missed it, or died), the agent asks for the missing
 ones directly (``agent.node``). Why a chain: ``docs/design.md``.
 
-An agent that has arrived still waits for the awaited intents, although it needs none of them,
-so that it can relay them down the chain; only at an episode's end does nobody negotiate.
+Under the paper's ``reach`` rule an agent that has arrived still waits for the awaited intents,
+although it needs none of them, so that it can relay them down the chain. Under ``meet`` nobody
+waits for a parked agent: every observation that shows it says it is parked, so its intent,
+STAY, is known (:func:`staying`), and it waits for nobody in turn. At an episode's end nobody
+negotiates.
 
 Each agent keeps a *standing* query open on every other agent's intent key (``?since=T``),
 and a decider answers through it exactly the agents whose plan asks it (:func:`standing_answers`):
@@ -45,9 +48,27 @@ def _awaited(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]
     """:func:`awaited` as ``(id, x, y)``."""
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
-    (x, y), n, radius, meet = obs.position, config.n_agents, config.interaction_radius, config.meet_only
+    meet = config.meet_only
+    if meet and obs.arrived:
+        return []  # it stays, and nobody waits for it: it has nothing to relay
+    (x, y), n, radius = obs.position, config.n_agents, config.interaction_radius
+    parked = set(obs.parked) if meet else ()
     return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
-            if waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet)]
+            if j not in parked
+            and waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet)]
+
+
+def staying(obs: Observation, config: SwarmConfig) -> list[int]:
+    """Under the ``meet`` rule, the parked neighbours whose intents the observing agent knows
+    without waiting: those ``protocol.ranks.waits_for`` names among the parked ones of the
+    observation, each of which stays on its goal (its intent is STAY)."""
+    if not (config.meet_only and obs.parked) or config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
+        return []
+    (x, y), n, radius = obs.position, config.n_agents, config.interaction_radius
+    parked = set(obs.parked)
+    return [j for j, jx, jy in within(obs.neighbours, x, y, radius)
+            if j in parked
+            and waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, True)]
 
 
 def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
@@ -98,8 +119,13 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
         return []
     n, tick, radius, me = config.n_agents, obs.tick, config.interaction_radius, obs.agent
     meet = config.meet_only
+    if meet and obs.arrived:
+        return []  # nobody waits for a parked agent
     (x, y), rank = obs.position, obs.rank
     near = within(obs.neighbours, x, y, 2 * radius)  # the waiters and those they wait for
+    if meet and obs.parked:  # they wait for nobody, and nobody for them
+        parked = set(obs.parked)
+        near = [(j, jx, jy) for j, jx, jy in near if j not in parked]
     cells = {j: (jx, jy) for j, jx, jy in near}
     ranks = {j: priority_rank(j, tick, n) for j in cells}
     waiters = sorted((ranks[j], j) for j, (jx, jy) in cells.items()

@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 
 from nnql_swarm.agent import negotiation
 from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import (
     NEGOTIATING_ALGOS, START_S_PER_AGENT, SwarmConfig, priority_rank,
 )
@@ -89,8 +90,9 @@ class EffectLog:
 @dataclass
 class Pending:
     """An observation whose decision waits for intents: whose (``awaited``), which of them the
-    brain decides with (``needed``), whom this agent asked (``asks``), until when, and, once the
-    answers are in, the ones it then asked for directly because no answer brought them
+    brain decides with (``needed``), whom this agent asked (``asks``), until when, the intents
+    it knows without asking (``staying``: parked neighbours, ``negotiation.staying``), and, once
+    the answers are in, the ones it then asked for directly because no answer brought them
     (``missing``); neighbours that cannot answer (gone, or refusing the tick) are waited for no
     more (``refused``)."""
 
@@ -99,6 +101,7 @@ class Pending:
     needed: list[int]
     asks: list[int]
     deadline: float
+    staying: dict[int, int]
     missing: list[int] | None = None
     refused: set[int] = field(default_factory=set)  # asked, and no answer is coming
 
@@ -353,15 +356,17 @@ class AgentProtocol:
             return
         awaited, asks = negotiation.plan_for(obs, self.config)
         needed = self.brain.neighbours_to_ask(obs, awaited)
+        staying = {j: STAY for j in self.brain.neighbours_to_ask(
+            obs, negotiation.staying(obs, self.config))}
         if not awaited:
-            self._decide(obs, {})
+            self._decide(obs, staying)
             return
         tick = obs.tick
         got = self._intents_of(tick)
         for j in asks:
             if j not in got.answered and j not in self.streams:
                 self._ask(j, tick, self.timeout_s)
-        self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s)
+        self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s, staying)
         self.brain.prepare(obs)  # while the answers are on their way
         self._advance(now)
 
@@ -406,7 +411,7 @@ class AgentProtocol:
     def _decide_pending(self) -> None:
         p, self.pending = self.pending, None
         known = self.intents.get(p.obs.tick, _NOTHING).actions
-        self._decide(p.obs, {j: known[j] for j in p.needed if j in known})
+        self._decide(p.obs, {**p.staying, **{j: known[j] for j in p.needed if j in known}})
 
     def _decide(self, obs: Observation, answers: dict[int, int]) -> None:
         """Decide ``obs`` with the ``answers`` of the neighbours the brain waits for; answer

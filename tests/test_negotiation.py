@@ -22,15 +22,17 @@ def config(n: int, algo: str = "nnql", radius: int = 10, wait_rule: str = "reach
 
 
 def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
-            episode_end: bool = False) -> Observation:
-    """Agent ``agent``'s observation when the agents stand on ``cells`` (view radius 10)."""
+            episode_end: bool = False, arrived=()) -> Observation:
+    """Agent ``agent``'s observation when the agents stand on ``cells`` (view radius 10), those
+    of ``arrived`` parked on their goals."""
     me = cells[agent]
     seen = tuple((j, x, y) for j, (x, y) in sorted(cells.items())
                  if j != agent and sees(*me, x, y))
     return Observation(run="neg", tick=tick, sender=WORLD_SENDER, agent=agent, episode=0, step=0,
                        position=me, goal=(0, 0), neighbours=seen,
                        rank=priority_rank(agent, tick, n), reward_ds=0.0, reward_ca=0.0,
-                       collided=False, arrived=False, episode_end=episode_end)
+                       collided=False, arrived=agent in arrived, episode_end=episode_end,
+                       parked=tuple(j for j, _, _ in seen if j in arrived))
 
 
 def learned(agent: int, tick: int, n: int, cells, asked_by: dict[int, list[int]]) -> set[int]:
@@ -60,9 +62,11 @@ def test_the_plan_covers_every_awaited_intent_on_sparse_grids(seed, radius, wait
     spots = rng.sample(list(itertools.product(range(40), range(12))), n)
     cells = dict(enumerate(spots))
     c = config(n, radius=radius, wait_rule=wait_rule)
-    asked_by = {a: negotiation.plan_for(observe(a, tick, n, cells), c)[1] for a in cells}
+    parked = set(rng.sample(range(n), 3))
+    asked_by = {a: negotiation.plan_for(observe(a, tick, n, cells, arrived=parked), c)[1]
+                for a in cells}
     for agent in cells:
-        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), c)
+        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells, arrived=parked), c)
         assert set(asks) <= set(waiting_for)
         assert set(waiting_for) <= learned(agent, tick, n, cells, asked_by)
 
@@ -88,9 +92,10 @@ def test_standing_answers_go_to_exactly_the_plans_that_ask_them(seed, radius, si
                     width=side, height=side)
     known = negotiation.plans_are_known(c)
     assert known == (radius <= 5 or side <= 11)
-    plans = {a: negotiation.plan_for(observe(a, tick, n, cells), c) for a in cells}
+    parked = set(rng.sample(range(n), 3))
+    plans = {a: negotiation.plan_for(observe(a, tick, n, cells, arrived=parked), c) for a in cells}
     for p in cells:
-        answered = negotiation.standing_answers(observe(p, tick, n, cells), c)
+        answered = negotiation.standing_answers(observe(p, tick, n, cells, arrived=parked), c)
         expected = [a for a in cells if p in plans[a][1 if known else 0]]
         assert sorted(answered) == expected
         assert answered == sorted(answered, key=lambda a: priority_rank(a, tick, n))
@@ -114,7 +119,7 @@ def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(a
         mask = negotiation_mask(c, np.array([[cells[i] for i in range(n)]]),
                                 np.array([arrived]), np.array([tick]))[0]
         for i in range(n):
-            obs = observe(i, tick, n, cells)._replace(arrived=arrived[i])
+            obs = observe(i, tick, n, cells, arrived={j for j in range(n) if arrived[j]})
             asked = brains[i].neighbours_to_ask(obs, negotiation.awaited(obs, c))
             assert set(asked) == set(np.flatnonzero(mask[i]).tolist())
         waited += int(mask.sum())
@@ -168,3 +173,20 @@ def test_the_meet_rule_leaves_out_a_neighbour_two_cells_off_along_both_axes():
     assert reach[0] == [0] and meet[0] == []
     assert negotiation.plan_for(observe(2, 0, 3, cells),
                                 config(3, radius=2, wait_rule="meet"))[0] == [0, 1]
+
+
+def test_under_the_meet_rule_nobody_waits_for_a_parked_agent_and_it_waits_for_nobody():
+    """A parked agent stays: every observation that shows it says so, so its intent (STAY) is
+    known without asking (``staying``), and it has nothing to relay. Under ``reach`` it is
+    waited for, and waits, as in the paper's chain."""
+    cells = {0: (5, 5), 1: (6, 5), 2: (6, 6)}  # ranks at tick 0: 0, 1, 2; all could meet
+    meet, reach = config(3, radius=2, wait_rule="meet"), config(3, radius=2)
+    obs = {a: observe(a, 0, 3, cells, arrived={1}) for a in cells}
+    assert negotiation.plan_for(obs[2], meet) == ([0], [0])
+    assert negotiation.staying(obs[2], meet) == [1]
+    assert negotiation.plan_for(obs[1], meet) == ([], [])  # parked: waits for nobody
+    assert negotiation.standing_answers(obs[1], meet) == []  # and nobody waits for it
+    assert negotiation.standing_answers(obs[0], meet) == [2]
+    assert negotiation.plan_for(obs[2], reach) == ([0, 1], [1])
+    assert negotiation.staying(obs[2], reach) == []
+    assert negotiation.plan_for(obs[1], reach) == ([0], [0])  # to relay 0's intent to 2

@@ -162,13 +162,15 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
 
 @pytest.mark.parametrize("preset, topology, grid", [
     ("nnql", "auto", ()), ("best-nnql", "auto", ()), ("shield-nnql", "hub-peer", ()),
-    ("shield-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25"))])
+    ("shield-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25")),
+    ("best-nnql", "auto", ("--wait-rule", "meet"))])
 def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, grid,
                                                                    tmp_path):
     """The paper's reading (each agent its own tables) and the best options (one table shared
     over Zenoh, the direction-aware reading), the default with every agent a client of the
-    world (the layout of 32 agents and more), and a grid with walls: the same episodes and
-    tables either way."""
+    world (the layout of 32 agents and more), a grid with walls, and the direction-aware
+    reading under the ``meet`` rule (a parked neighbour known to stay without an answer): the
+    same episodes and tables either way."""
     options = ("--agents", "6", "--episodes", "4", "--max-steps", "30", "--seed", "2",
                "--preset", preset, "--no-record", "--run-id", preset, *grid)
     distributed = run_swarm(tmp_path / "dist", *options, "--topology", topology)

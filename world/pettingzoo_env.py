@@ -39,8 +39,8 @@ one. ``infos[agent]`` holds the two parts (``reward_ds``, ``reward_ca``) and ``c
 ## Negotiation
 ``infos[agent]["waits_for"]`` names the agents whose intents this agent would wait for before
 its next step in the swarm's negotiation (``protocol.ranks.waits_for``: higher-ranked agents within
-``negotiation_radius``, all of them or, with ``wait_rule="meet"``, those it could meet on the next
-step; ranks rotating every step), so that a policy that reads intents can be
+``negotiation_radius``, all of them or, with ``wait_rule="meet"``, those on their way that it could
+meet on the next step; ranks rotating every step), so that a policy that reads intents can be
 stepped in that order.
 
 ## Episode end
@@ -170,8 +170,9 @@ class SwarmGridEnv(ParallelEnv):
         n, step, x, y = self.n_agents, self._steps, self._x, self._y
         rank = priority_rank(i, step, n)
         return [self.possible_agents[j] for j in range(n)
-                if j != i and waits_for(True, rank, priority_rank(j, step, n), x[i], y[i], x[j],
-                                        y[j], self.negotiation_radius, self.meet_only)]
+                if j != i and not (self.meet_only and self._arrived[j])
+                and waits_for(True, rank, priority_rank(j, step, n), x[i], y[i], x[j], y[j],
+                              self.negotiation_radius, self.meet_only)]
 
     def render(self) -> str | None:
         if self.render_mode != "ansi":

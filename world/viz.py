@@ -91,7 +91,8 @@ def with_alpha(colors: np.ndarray, alpha: int) -> np.ndarray:
 def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.ndarray,
                      ticks: np.ndarray) -> np.ndarray:
     """``asks[t, i, j]``: at tick ``ticks[t]`` agent i waits for j's intent (``positions``
-    ``(T, n, 2)``, ``arrived`` ``(T, n)``: as each tick started)."""
+    ``(T, n, 2)``, ``arrived`` ``(T, n)``: as each tick started). Under the ``meet`` rule nobody
+    waits for a parked agent (``agent.negotiation.staying``)."""
     n, radius, meet = config.n_agents, config.interaction_radius, config.meet_only
     asks = np.zeros((len(ticks), n, n), dtype=bool)
     if config.algo not in NEGOTIATING_ALGOS:
@@ -103,8 +104,8 @@ def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.nda
             if arrived[t][i]:
                 continue
             for j, (jx, jy) in enumerate(cells[t]):
-                asks[t, i, j] = j != i and waits_for(True, ranks[i], ranks[j], x, y, jx, jy,
-                                                     radius, meet)
+                asks[t, i, j] = (j != i and not (meet and arrived[t][j])
+                                 and waits_for(True, ranks[i], ranks[j], x, y, jx, jy, radius, meet))
     return asks
 
 
