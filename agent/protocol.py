@@ -356,8 +356,7 @@ class AgentProtocol:
             return
         awaited, asks = negotiation.plan_for(obs, self.config)
         needed = self.brain.neighbours_to_ask(obs, awaited)
-        staying = {j: STAY for j in self.brain.neighbours_to_ask(
-            obs, negotiation.staying(obs, self.config))}
+        staying = {j: STAY for j in negotiation.staying(obs, self.config)}
         if not awaited:
             self._decide(obs, staying)
             return

@@ -136,20 +136,20 @@ class TimedBrain(AgentBrain):
         self.last_tick = 0
         self.latencies_s: list[float] = []
         self.unanswered = 0
-        self._asked = 0
+        self._asked: set[int] = set()
         self._asked_at = 0.0
 
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         asked = super().neighbours_to_ask(obs, awaited)
-        self._asked = len(asked)
+        self._asked = set(asked)
         self._asked_at = time.perf_counter()
         return asked
 
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
-        if self._asked:
+        if self._asked:  # answers may hold more: the parked neighbours known to stay
             self.latencies_s.append(time.perf_counter() - self._asked_at)
-            self.unanswered += self._asked - len(answers)
-            self._asked = 0
+            self.unanswered += len(self._asked - answers.keys())
+            self._asked = set()
         self.last_tick = obs.tick
         return super().act(obs, answers)
 

@@ -12,10 +12,11 @@ import pytest
 import rerun as rr
 
 from nnql_swarm.agent import checkpoint
-from nnql_swarm.agent.viz import TABLES, logs_heat_maps, table_picture
+from nnql_swarm.agent.viz import TABLES, TimedBrain, logs_heat_maps, table_picture
 from nnql_swarm.recording.session import PARTS_DIR, log_experiment, rerun_binary
 from nnql_swarm.protocol.actions import RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
 from nnql_swarm.protocol.transport import free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm
 from nnql_swarm.world.metrics import read_episodes
@@ -163,6 +164,21 @@ def test_metrics_match_episodes_csv(run):
     assert all(v > 0 for _, v in recording.scalars("metrics/ticks_per_s").values())
     assert sum(int(r["collisions"]) for r in rows) > 0  # the run did show collisions
     assert recording.rows("world/collisions") > 0
+
+
+def test_a_timed_brain_counts_only_the_asked_neighbours_that_did_not_answer():
+    """The intents an agent decides with may hold parked neighbours it never asked (the meet
+    rule): they are not answers, and they make no asked neighbour answered."""
+    brain = TimedBrain(3, SwarmConfig(n_agents=6))
+    obs = Observation(run="run", tick=9, sender=WORLD_SENDER, agent=3, episode=0, step=9,
+                      position=(4, 4), goal=(0, 0), neighbours=((0, 4, 5), (1, 5, 4), (2, 3, 4)),
+                      rank=0, reward_ds=0.0, reward_ca=0.0, collided=False, arrived=False,
+                      episode_end=False, parked=(2,))
+    brain.prepare(obs)
+    assert brain.neighbours_to_ask(obs, [0, 1]) == [0, 1]
+    brain.act(obs, {0: STAY, 2: STAY})  # 1 did not answer; 2 is parked
+    latencies, unanswered = brain.take_timings()
+    assert len(latencies) == 1 and unanswered == 1
 
 
 def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run):
