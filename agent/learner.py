@@ -102,7 +102,8 @@ def learner_params(config) -> tuple[list[int], list[float]]:
     params[LP_STILL_TERMINAL] = int(config.still_terminal)
     params[LP_MEET_ONLY] = int(config.meet_only)
     params_f = [0.0] * FP_FIELDS
-    params_f[FP_ALPHA], params_f[FP_GAMMA], params_f[FP_BETA] = config.alpha, config.gamma, config.beta
+    params_f[FP_ALPHA], params_f[FP_GAMMA] = config.alpha, config.gamma
+    params_f[FP_BETA] = config.beta
     return params, params_f
 
 

@@ -51,24 +51,25 @@ def _awaited(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]
     meet = config.meet_only
     if meet and obs.arrived:
         return []  # it stays, and nobody waits for it: it has nothing to relay
-    (x, y), n, radius = obs.position, config.n_agents, config.interaction_radius
+    (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
     parked = set(obs.parked) if meet else ()
     return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
             if j not in parked
-            and waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet)]
+            and waits_for(True, rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet)]
 
 
 def staying(obs: Observation, config: SwarmConfig) -> list[int]:
     """Under the ``meet`` rule, the parked neighbours whose intents the observing agent knows
     without waiting: those ``protocol.ranks.waits_for`` names among the parked ones of the
     observation, each of which stays on its goal (its intent is STAY)."""
-    if not (config.meet_only and obs.parked) or config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
+    if (not (config.meet_only and obs.parked) or config.algo not in NEGOTIATING_ALGOS
+            or obs.episode_end):
         return []
-    (x, y), n, radius = obs.position, config.n_agents, config.interaction_radius
+    (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
     parked = set(obs.parked)
     return [j for j, jx, jy in within(obs.neighbours, x, y, radius)
             if j in parked
-            and waits_for(True, obs.rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, True)]
+            and waits_for(True, rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, True)]
 
 
 def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],

@@ -48,10 +48,10 @@ ABLATED = ("interaction_radius", "optimistic", "shared", "still_terminal", "alph
 def ablation_presets() -> dict[str, dict]:
     """``best-nnql`` with each of its options beyond the paper taken back in turn (to the
     paper's value), with the paper's nnQL reading instead of the direction-aware one, with a
-    state block for known neighbours, and waiting only for the neighbours it could meet; the
-    swarm's default (``shield-nnql``: radius 2, waiting only for the neighbours it could meet)
-    waiting for every higher-ranked neighbour within the radius, and with the full chain (the
-    paper's radius, 10, and its waits); the QL and nnQL rows they are read against."""
+    state block for known neighbours, and with the ``meet`` wait rule; the swarm's default
+    (``shield-nnql``: radius 2, the ``meet`` rule) as it is, with the ``reach`` rule, and as the
+    full chain (the paper's radius, 10, and its ``reach`` rule); the QL and nnQL rows they are
+    read against."""
     best, paper, shield = PRESETS["best-nnql"], PRESETS["nnql"], PRESETS["shield-nnql"]
     presets = {name: PRESETS[name] for name in ("ql", "nnql", "best-ql", "best-nnql")}
     for option in ABLATED:
@@ -61,8 +61,8 @@ def ablation_presets() -> dict[str, dict]:
     presets["best-nnql-wait-rule-meet"] = {**best, "wait_rule": "meet"}
     presets["shield-nnql"] = shield
     presets["shield-nnql-paper-wait-rule"] = {**shield, "wait_rule": paper["wait_rule"]}
-    presets["shield-nnql-full-chain"] = {**shield, "interaction_radius": paper["interaction_radius"],
-                                         "wait_rule": paper["wait_rule"]}
+    presets["shield-nnql-full-chain"] = {**shield, "wait_rule": paper["wait_rule"],
+                                         "interaction_radius": paper["interaction_radius"]}
     return presets
 
 

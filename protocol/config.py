@@ -13,7 +13,8 @@ import numpy as np
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.keys import validate_run_id
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_GRID
-from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank  # noqa: F401 (the nodes import it from here)
+from nnql_swarm.protocol.ranks import WAIT_RULES
+from nnql_swarm.protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
 from nnql_swarm.protocol.walls import MAX_DENSITY, layout, wall_count
 
 ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
@@ -41,8 +42,8 @@ LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "
 run's."""
 
 PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
-         "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False, "shield": False,
-         "lookahead": 1, "still_terminal": False, "stay_reward": 0.5}
+         "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
+         "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -196,7 +197,7 @@ class SwarmConfig:
     @staticmethod
     def from_json(text: str) -> "SwarmConfig":
         data = json.loads(text)
-        data.setdefault("wait_rule", "reach")  # a config from before the rule: it waited so
+        data.setdefault("wait_rule", "reach")  # written before the field: all in reach waited
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:

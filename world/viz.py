@@ -105,7 +105,8 @@ def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.nda
                 continue
             for j, (jx, jy) in enumerate(cells[t]):
                 asks[t, i, j] = (j != i and not (meet and arrived[t][j])
-                                 and waits_for(True, ranks[i], ranks[j], x, y, jx, jy, radius, meet))
+                                 and waits_for(True, ranks[i], ranks[j], x, y, jx, jy, radius,
+                                               meet))
     return asks
 
 
