@@ -26,8 +26,9 @@ from nnql_swarm.world.metrics import read_episodes
 
 RUN_ID = "rogue"
 AGENTS = 6
-OPTIONS = ("--agents", str(AGENTS), "--episodes", "10", "--max-steps", "40", "--seed", "5",
-           "--run-id", RUN_ID, "--deadline", "5", "--no-record")
+EPISODES = 200  # long enough that the swarm outlives the attack, however fast it runs
+OPTIONS = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "40", "--seed",
+           "5", "--run-id", RUN_ID, "--deadline", "5", "--no-record")
 
 
 def forged_payloads(agent: int) -> dict[str, list[bytes]]:
@@ -125,6 +126,7 @@ def test_a_rogue_session_changes_nothing_and_every_rejection_is_counted(tmp_path
     try:
         wait_for_rows(out / "episodes.csv", 1, 120, swarm)
         sent = attack(port, rounds=5)
+        assert len(read_episodes(out / "episodes.csv")) < EPISODES, "the run ended before the attack"
         stderr = swarm.finish(timeout=240)
     finally:
         if group_pids(swarm.pid):
