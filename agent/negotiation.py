@@ -35,7 +35,7 @@ from typing import Callable
 from nnql_swarm.protocol.actions import VIEW_RADIUS, within
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.messages import Observation
-from nnql_swarm.protocol.ranks import priority_rank, waits_for
+from nnql_swarm.protocol.ranks import awaits_answer, priority_rank, waits_for
 
 
 def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
@@ -48,14 +48,14 @@ def _awaited(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]
     """:func:`awaited` as ``(id, x, y)``."""
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
-    meet = config.meet_only
-    if meet and obs.arrived:
-        return []  # it stays, and nobody waits for it: it has nothing to relay
+    meet, arrived = config.meet_only, obs.arrived
+    if meet and arrived:
+        return []  # what awaits_answer says of every neighbour, without asking it
     (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
-    parked = set(obs.parked) if meet else ()
+    parked = set(obs.parked)
     return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
-            if j not in parked
-            and waits_for(True, rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet)]
+            if awaits_answer(rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet,
+                             arrived, j in parked)]
 
 
 def staying(obs: Observation, config: SwarmConfig) -> list[int]:
@@ -119,18 +119,16 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
     n, tick, radius, me = config.n_agents, obs.tick, config.interaction_radius, obs.agent
-    meet = config.meet_only
+    meet, (x, y), rank = config.meet_only, obs.position, obs.rank
     if meet and obs.arrived:
-        return []  # nobody waits for a parked agent
-    (x, y), rank = obs.position, obs.rank
+        return []  # what awaits_answer says of every neighbour, without asking it
+    parked = set(obs.parked)
     near = within(obs.neighbours, x, y, 2 * radius)  # the waiters and those they wait for
-    if meet and obs.parked:  # they wait for nobody, and nobody for them
-        parked = set(obs.parked)
-        near = [(j, jx, jy) for j, jx, jy in near if j not in parked]
     cells = {j: (jx, jy) for j, jx, jy in near}
     ranks = {j: priority_rank(j, tick, n) for j in cells}
     waiters = sorted((ranks[j], j) for j, (jx, jy) in cells.items()
-                     if waits_for(True, ranks[j], rank, jx, jy, x, y, radius, meet))
+                     if awaits_answer(ranks[j], rank, jx, jy, x, y, radius, meet, j in parked,
+                                      False))
     if not waiters or not plans_are_known(config):
         return [j for _, j in waiters]
     cells[me], ranks[me] = (x, y), rank
@@ -138,7 +136,8 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     for w_rank, w in waiters:
         wx, wy = cells[w]
         waiting_for = [j for j, (jx, jy) in cells.items()
-                       if waits_for(True, w_rank, ranks[j], wx, wy, jx, jy, radius, meet)]
+                       if awaits_answer(w_rank, ranks[j], wx, wy, jx, jy, radius, meet, False,
+                                        j in parked)]
         if me in plan_asks(waiting_for, cells, ranks.__getitem__, radius, meet):
             answered.append(w)
     return answered

@@ -13,7 +13,8 @@ two cells away along both axes is within a radius of 2 but can reach none of the
 can, so its intent cannot make the two collide; the learner then reads it as one whose intent is
 unknown. The agent process (``agent.brain``), the world's recording of the negotiation
 (``world.viz``), the PettingZoo adapter and the swarm simulator (``sim.swarm``) all ask
-:func:`waits_for`.
+:func:`waits_for` whose intents an agent knows; whose answers it waits for on the wire,
+:func:`awaits_answer` (the simulator has no wire).
 """
 
 from nnql_swarm.protocol.actions import chebyshev
@@ -54,3 +55,13 @@ def waits_for(reads_intents, rank, other_rank, x, y, other_x, other_y, radius, m
     ``other_rank`` at ``(other_x, other_y)`` before deciding."""
     return (reads_intents and other_rank < rank
             and in_reach(x, y, other_x, other_y, radius, meet_only))
+
+
+def awaits_answer(rank, other_rank, x, y, other_x, other_y, radius, meet_only, parked,
+                  other_parked):
+    """Whether an agent that reads intents waits for the other's answer before deciding: it
+    waits for its intent (:func:`waits_for`) and, under ``meet``, neither is parked on its goal
+    (``parked``, ``other_parked``): a parked agent's intent, STAY, is in every observation that
+    shows it, and a parked agent needs no intent."""
+    return (not (meet_only and (parked or other_parked))
+            and waits_for(True, rank, other_rank, x, y, other_x, other_y, radius, meet_only))

@@ -61,7 +61,7 @@ from pettingzoo import ParallelEnv
 
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
 from nnql_swarm.protocol.jit import flags, floats, ints, python_values
-from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank, waits_for
+from nnql_swarm.protocol.ranks import WAIT_RULES, awaits_answer, priority_rank
 from nnql_swarm.world.rules import GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, world_step
 from nnql_swarm.world.scenario import swarm_episode
 
@@ -170,9 +170,9 @@ class SwarmGridEnv(ParallelEnv):
         n, step, x, y = self.n_agents, self._steps, self._x, self._y
         rank = priority_rank(i, step, n)
         return [self.possible_agents[j] for j in range(n)
-                if j != i and not (self.meet_only and self._arrived[j])
-                and waits_for(True, rank, priority_rank(j, step, n), x[i], y[i], x[j], y[j],
-                              self.negotiation_radius, self.meet_only)]
+                if j != i and awaits_answer(rank, priority_rank(j, step, n), x[i], y[i], x[j],
+                                            y[j], self.negotiation_radius, self.meet_only,
+                                            self._arrived[i], self._arrived[j])]
 
     def render(self) -> str | None:
         if self.render_mode != "ansi":

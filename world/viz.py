@@ -7,9 +7,8 @@ for (``world/negotiation``) and who collided as a result (``world/collisions``, 
 ``events``). The next tick shows where everybody ended up.
 
 The negotiation is derived by the world, not reported by the agents: at tick ``t`` an agent that
-reads intents and has not arrived decides with the intent of every neighbour it waits for, by the
-one rule of ``protocol.ranks.waits_for`` that ``agent.negotiation.awaited`` and the simulator
-apply too. How each intent reached it (its own query, or relayed down the chain,
+reads intents and has not arrived waits for the answer of every neighbour that
+``protocol.ranks.awaits_answer`` names, the rule ``agent.negotiation.awaited`` applies too. How each intent reached it (its own query, or relayed down the chain,
 ``agent.negotiation``) and whether it came in time is known only to the agent; the agents log
 that themselves (``agent.viz``).
 
@@ -34,7 +33,7 @@ import rerun as rr
 
 from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.ranks import priority_rank, waits_for
+from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.scenario import swarm_episode
@@ -91,8 +90,7 @@ def with_alpha(colors: np.ndarray, alpha: int) -> np.ndarray:
 def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.ndarray,
                      ticks: np.ndarray) -> np.ndarray:
     """``asks[t, i, j]``: at tick ``ticks[t]`` agent i waits for j's intent (``positions``
-    ``(T, n, 2)``, ``arrived`` ``(T, n)``: as each tick started). Under the ``meet`` rule nobody
-    waits for a parked agent (``agent.negotiation.staying``)."""
+    ``(T, n, 2)``, ``arrived`` ``(T, n)``: as each tick started)."""
     n, radius, meet = config.n_agents, config.interaction_radius, config.meet_only
     asks = np.zeros((len(ticks), n, n), dtype=bool)
     if config.algo not in NEGOTIATING_ALGOS:
@@ -104,9 +102,8 @@ def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.nda
             if arrived[t][i]:
                 continue
             for j, (jx, jy) in enumerate(cells[t]):
-                asks[t, i, j] = (j != i and not (meet and arrived[t][j])
-                                 and waits_for(True, ranks[i], ranks[j], x, y, jx, jy, radius,
-                                               meet))
+                asks[t, i, j] = j != i and awaits_answer(ranks[i], ranks[j], x, y, jx, jy,
+                                                         radius, meet, False, arrived[t][j])
     return asks
 
 
