@@ -12,8 +12,9 @@ answered by each neighbour whose plan asks it, and, where no standing query is o
 one ask each (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked
 neighbour answered (or the negotiation timed out), it asks directly for any awaited intent that
 no answer brought; then it decides with what it knows, answers the standing and held queries it
-owes (the next in rank first), and sends its intent for the world. An announced intent never
-changes. At an episode's end it checkpoints before it sends the intent, so that no learned value
+owes (the next in rank first), and sends its intent for the world, unless the observation says
+it is settled (parked on its goal since an earlier tick: the world needs no intent from it) and
+it has nothing learned to send. An announced intent never changes. At an episode's end it checkpoints before it sends the intent, so that no learned value
 is lost to a crash.
 
 Faults it survives: an observation lost on the way (it follows the clock again after
@@ -439,9 +440,11 @@ class AgentProtocol:
             self._answer_held()
         if obs.episode_end:  # saved before the world hears of the decision: nothing to lose
             out.append(Checkpoint(obs.episode))
-        intent = Intent(answer.run, tick, answer.sender, self.agent, obs.episode, action,
-                        self.brain.learned)
-        out.append(SendIntent(intent, encode(intent)))
+        learned = self.brain.learned
+        if learned or not obs.settled:  # settled: the world expects no intent (world.engine)
+            intent = Intent(answer.run, tick, answer.sender, self.agent, obs.episode, action,
+                            learned)
+            out.append(SendIntent(intent, encode(intent)))
         if obs.episode_end:
             out.append(EpisodeEnded(obs.episode))
         peers = len(self.peers_seen) - (self.agent in self.peers_seen)

@@ -31,17 +31,18 @@ FIRST_OBS = "world: first observation handed to Zenoh -> its agent has it"
 FIRST_DECIDES = "that agent: observation in -> deciding"
 LEARNING = "each agent: deciding -> action chosen (the learning)"
 ENCODING = "each agent: action chosen -> answer encoded"
-REPLYING = "each agent: answer encoded -> the agents below answered"
+REPLYING = "each agent that sends an intent: answer encoded -> the agents below answered"
 HOP = "each answer: encoded by its sender -> its asker has it"
 ANSWER_IN = "each agent that waited: its last answer in -> deciding"
-INTENT = "each agent: answered -> intent handed to Zenoh"
+INTENT = "each agent that sends an intent: answered -> intent handed to Zenoh"
 LAST_INTENT = "the tick's last intent handed over -> the world closes the tick"
 NEXT_OBS = "the world: closing -> next tick's first observation handed over"
 TICK = "a whole tick"
 STEPS = (FIRST_OBS, FIRST_DECIDES, LEARNING, ENCODING, REPLYING, HOP, ANSWER_IN, INTENT,
          LAST_INTENT, NEXT_OBS, TICK)
-AGENT_MARKS = (trace.OBS_IN, trace.DECIDE, trace.ACTED, trace.ENCODED, trace.ANSWERED,
-               trace.INTENT_SENT)
+AGENT_MARKS = (trace.OBS_IN, trace.DECIDE, trace.ACTED, trace.ENCODED)
+SENDING_MARKS = (trace.ANSWERED, trace.INTENT_SENT)
+"""Marked only by the agents that send the world an intent (a settled agent sends none)."""
 
 
 def by_tick(marks: list) -> dict[int, dict]:
@@ -64,8 +65,9 @@ def tick_steps(world: dict[int, dict], agents: dict[int, dict[int, dict]],
     for tick in ticks:
         w, after = world.get(tick, {}), world.get(tick + 1, {})
         chain = [agents[(rank + tick) % n].get(tick, {}) for rank in range(n)]  # by rank
+        senders = [a for a in chain if all(step in a for step in SENDING_MARKS)]
         if (trace.OBS_SENT not in w or trace.CLOSE not in w or trace.OBS_SENT not in after
-                or not all(step in a for a in chain for step in AGENT_MARKS)
+                or not senders or not all(step in a for a in chain for step in AGENT_MARKS)
                 or not all(trace.ENCODED in agents.get(s, {}).get(tick, {})
                            for a in chain for s in a.get(trace.ANSWER_IN, ()))):
             continue
@@ -75,14 +77,15 @@ def tick_steps(world: dict[int, dict], agents: dict[int, dict[int, dict]],
         for a in chain:
             out[LEARNING].append(a[trace.ACTED] - a[trace.DECIDE])
             out[ENCODING].append(a[trace.ENCODED] - a[trace.ACTED])
-            out[REPLYING].append(a[trace.ANSWERED] - a[trace.ENCODED])
-            out[INTENT].append(a[trace.INTENT_SENT] - a[trace.ANSWERED])
+            if any(a is sender for sender in senders):
+                out[REPLYING].append(a[trace.ANSWERED] - a[trace.ENCODED])
+                out[INTENT].append(a[trace.INTENT_SENT] - a[trace.ANSWERED])
             came = a.get(trace.ANSWER_IN, {})
             out[HOP].extend(at - agents[sender][tick][trace.ENCODED]
                             for sender, at in came.items())
             if came:
                 out[ANSWER_IN].append(a[trace.DECIDE] - max(came.values()))
-        out[LAST_INTENT].append(w[trace.CLOSE] - max(a[trace.INTENT_SENT] for a in chain))
+        out[LAST_INTENT].append(w[trace.CLOSE] - max(a[trace.INTENT_SENT] for a in senders))
         out[NEXT_OBS].append(after[trace.OBS_SENT] - w[trace.CLOSE])
         out[TICK].append(after[trace.OBS_SENT] - w[trace.OBS_SENT])
     return out

@@ -57,7 +57,7 @@ from msgspec import Meta
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 5
+PROTOCOL_VERSION = 6
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -261,6 +261,7 @@ class Observation(NamedTuple):
     episode_end: bool
     parked: Parked = ()
     updates: Updates = ()  # where the swarm shares one table
+    settled: bool = False  # parked since an earlier tick: the world expects no intent (engine)
 
 
 @_message("intent", from_agent=True)

@@ -1,8 +1,11 @@
 """One agent's protocol machine, pure: inputs in, effects out, no network, no clock."""
 
+import dataclasses
+
 import msgpack
 
 from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.agent.learner import LS_PENDING
 from nnql_swarm.agent.protocol import PEER_WAIT_S, RESYNC_AFTER, AgentProtocol
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
@@ -126,6 +129,30 @@ def test_an_episodes_end_checkpoints_before_the_intent_goes_out():
     streams = [e for e in effects if isinstance(e, Ask)]  # a standing query on every other agent
     assert [(a.agent, a.parameters) for a in streams] == [(1, "since=1;from=0"),
                                                           (2, "since=1;from=0")]
+
+
+def test_a_settled_agent_answers_its_neighbours_but_sends_the_world_no_intent():
+    """Parked since an earlier tick, the agent still decides (STAY) and answers its standing
+    queries; the world expects no intent from it, so none goes out, unless the agent has a
+    learning record to deliver (its arrival observation was lost on the way)."""
+    protocol = ready(agent=0, config=dataclasses.replace(CONFIG, wait_rule="reach"))
+    protocol.on_query(8, "since=0;from=1", 0.0)  # agent 1 waits for it: reach relays, parked too
+
+    def settled(tick: int, arrived_before: bool) -> bytes:
+        return encode(Observation(
+            run="proto", tick=tick, sender=WORLD_SENDER, agent=0, episode=0, step=tick,
+            position=(5, 5), goal=(5, 5), neighbours=((1, 6, 6),), rank=0, reward_ds=0.0,
+            reward_ca=10.0, collided=False, arrived=True, episode_end=False,
+            settled=arrived_before))
+
+    moving = protocol.on_observation(observation(0, others=[(1, 6, 6)]), 0.0)
+    assert "SendIntent" in kinds(moving) and protocol.brain.learner.state[LS_PENDING] == 1
+    late = protocol.on_observation(settled(1, arrived_before=True), 0.1)  # tick 0's outcome
+    [record] = [e for e in late if isinstance(e, SendIntent)]
+    assert record.intent.action == 4 and record.intent.record, "the lost arrival's record"
+    quiet = protocol.on_observation(settled(2, arrived_before=True), 0.2)
+    assert "SendIntent" not in kinds(quiet) and protocol.decided_tick == 2
+    assert [e.answer.action for e in quiet if isinstance(e, Reply)] == [4]
 
 
 def test_answers_from_before_the_world_left_do_not_count_for_the_world_that_comes_back():

@@ -226,7 +226,7 @@ def test_round_trip(msg):
 
 
 def test_wire_format_is_an_array_of_version_kind_and_fields_in_order():
-    assert PROTOCOL_VERSION == 5
+    assert PROTOCOL_VERSION == 6
     wire = msgpack.unpackb(encode(intent()))
     assert wire == [PROTOCOL_VERSION, "intent", RUN, 7, "agent/2", 2, 1, 3, []]
     assert msgpack.unpackb(encode(control())) == [PROTOCOL_VERSION, "control", RUN, 7, WORLD_SENDER, "shutdown"]
@@ -357,7 +357,7 @@ def test_wrong_length_says_how_many_items():
     assert detail_of(pack([PROTOCOL_VERSION]), Intent) == "wrong-length: expected 9 items, got 1"
     assert detail_of(pack([PROTOCOL_VERSION, "intent"]), Intent) == "wrong-length: expected 9 items, got 2"
     full = to_wire(obs())
-    assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 19 items, got 5"
+    assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 20 items, got 5"
     short = pack(to_wire(answer())[:-1])
     assert detail_of(short, Answer) == "wrong-length: expected 9 items, got 8"
 
@@ -506,7 +506,7 @@ def observations(draw, run=None):
         episode=draw(counts), step=draw(counts), position=draw(cells), goal=draw(cells),
         neighbours=tuple((i, draw(coords), draw(coords)) for i in ids), rank=draw(agents),
         reward_ds=draw(rewards), reward_ca=draw(rewards), collided=draw(st.booleans()),
-        arrived=draw(st.booleans()), episode_end=draw(st.booleans()),
+        arrived=draw(st.booleans()), episode_end=draw(st.booleans()), settled=draw(st.booleans()),
     )
 
 
@@ -647,7 +647,7 @@ BAD = {
     "rank": _bad_int | _out_of(0, MAX_AGENTS), "action": _bad_int | _out_of(0, N_ACTIONS),
     "position": _bad_cell, "goal": _bad_cell, "neighbours": _bad_neighbours,
     "reward_ds": _bad_reward, "reward_ca": _bad_reward,
-    "collided": _bad_bool, "arrived": _bad_bool, "episode_end": _bad_bool,
+    "collided": _bad_bool, "arrived": _bad_bool, "episode_end": _bad_bool, "settled": _bad_bool,
     "command": _wrong_types | _bad_command, "relayed": _bad_relayed,
     "parked": _bad_parked, "updates": _bad_updates, "record": _bad_record,
 }
@@ -727,7 +727,7 @@ def _is_agent_list(v, *rest):
 
 REFERENCE_KINDS = {  # the kind tag, then the fields in wire order
     Observation: ("obs run tick sender agent episode step position goal neighbours rank reward_ds "
-                  "reward_ca collided arrived episode_end parked updates"),
+                  "reward_ca collided arrived episode_end parked updates settled"),
     Intent: "intent run tick sender agent episode action record",
     Answer: "answer run tick sender agent episode action relayed",
     Control: "control run tick sender command",
@@ -742,6 +742,7 @@ REFERENCE_FIELDS = {
     "position": _is_cell, "goal": _is_cell, "reward_ds": _is_reward, "reward_ca": _is_reward,
     "collided": lambda v: type(v) is bool, "arrived": lambda v: type(v) is bool,
     "episode_end": lambda v: type(v) is bool, "command": lambda v: v == "shutdown",
+    "settled": lambda v: type(v) is bool,
     "neighbours": lambda v: _is_agent_list(v, lambda c: _is_int(c, 0, MAX_GRID),
                                            lambda c: _is_int(c, 0, MAX_GRID)),
     "relayed": lambda v: _is_agent_list(v, lambda a: _is_int(a, 0, 5)),
@@ -947,22 +948,22 @@ def encoding_of(msg):
 
 
 def test_wire_bytes_are_pinned():
-    """The exact bytes of protocol version 5 (item order, int / float / bool types)."""
+    """The exact bytes of protocol version 6 (item order, int / float / bool types)."""
     pinned = {
-        obs():  # 19 items: an array 16 header
-            "dc001305a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
-            "d0000000000000cb4024000000000000c2c2c29090",
+        obs():  # 20 items: an array 16 header
+            "dc001406a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "d0000000000000cb4024000000000000c2c2c29090c2",
         obs(parked=(5,), updates=(((7, 2210), (0.5, 10)), ((), ()))):
-            "dc001305a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
-            "d0000000000000cb4024000000000000c2c2c2910592929207cd08a292cb3fe00000000000000a929090",
+            "dc001406a36f6273a572756e2d3107a5776f726c6402010692030492090992930003059305010101cb3f"
+            "d0000000000000cb4024000000000000c2c2c2910592929207cd08a292cb3fe00000000000000a929090c2",
         answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
-            "9905a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
+            "9906a6616e73776572a572756e2d3103a76167656e742f3202000192920004920100",
         intent():
-            "9905a6696e74656e74a572756e2d3107a76167656e742f3202010390",
+            "9906a6696e74656e74a572756e2d3107a76167656e742f3202010390",
         control():
-            "9605a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
+            "9606a7636f6e74726f6ca572756e2d3107a5776f726c64a873687574646f776e",
         control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
-            "9605a7636f6e74726f6cd940" + "72" * 64
+            "9606a7636f6e74726f6cd940" + "72" * 64
             + "cf0000010000000000a5776f726c64a873687574646f776e",
     }
     for msg, hexed in pinned.items():

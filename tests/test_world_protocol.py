@@ -5,6 +5,7 @@ import numpy as np
 from nnql_swarm.agent.brain import Learner
 from nnql_swarm.agent.learner import write_updates
 from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.actions import DOWN, LEFT, RIGHT, STAY, UP
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
@@ -256,3 +257,60 @@ def test_a_resumed_world_sends_every_agent_the_whole_table():
     assert protocol.world.syncing == (0,)
     intent(protocol, 1, 0.1, episode=1)
     assert protocol.world.syncing == (0, 1)
+
+
+def toward_goal(obs) -> int:
+    """The move that brings an agent one cell nearer its goal (STAY there)."""
+    (x, y), (gx, gy) = obs.position, obs.goal
+    if gx != x:
+        return RIGHT if gx > x else LEFT
+    if gy != y:
+        return DOWN if gy > y else UP
+    return STAY
+
+
+def test_a_settled_agent_is_not_waited_for_and_its_intent_is_taken_once():
+    """Agent 0 walks to its goal while agent 1 stays. From the tick after agent 0's first
+    arrived observation it is settled: the world needs no intent from it, so agent 1's alone
+    closes the tick and nobody missed one; an intent of agent 0 for a tick already closed is
+    stale, as any late one."""
+    config = SwarmConfig(run_id="wproto", n_agents=2, episodes=1, max_steps=40,
+                         tick_deadline_s=0.5)
+    protocol = WorldProtocol(config, 0.0)
+    alive(protocol, 0, 0.0)
+    effects, now, seen = alive(protocol, 1, 0.0), 0.0, []
+    while not protocol.world.finished:
+        [batch] = [e for e in effects if isinstance(e, SendObservations)]
+        obs = {o.agent: o for o, _ in batch.observations}
+        seen.append((obs[0].arrived, obs[0].settled, obs[1].settled))
+        now += 0.01
+        effects = intent(protocol, 1, now, action=STAY)
+        if obs[0].settled:
+            assert "TickClosed" in kinds(effects), "agent 1 alone closes a settled agent's tick"
+            [closed] = [e for e in effects if isinstance(e, TickClosed)]
+            assert closed.report.missed == ()
+            if len([s for s in seen if s[1]]) == 1:  # the first settled tick: one late intent
+                tick = closed.report.tick
+                assert kinds(intent(protocol, 0, now, tick=tick)) == []
+                assert protocol.inbox.rejections["stale-tick"] == 1
+        else:
+            assert "TickClosed" not in kinds(effects), "a moving agent is waited for"
+            effects += intent(protocol, 0, now, action=toward_goal(obs[0]))
+    arrived_at = [a for a, _, _ in seen].index(True)
+    assert [s for _, s, _ in seen] == [False] * (arrived_at + 1) + [True] * (
+        len(seen) - arrived_at - 2) + [False], "settled from the tick after, never at the end"
+    assert not any(s for _, _, s in seen) and protocol.inbox.rejections.get("duplicate-intent") is None
+
+
+def test_an_intent_of_a_settled_agent_is_taken_once_and_moves_nothing():
+    """A settled agent sends an intent only to deliver a learning record: it is taken, its
+    action stays STAY, and a second one for the tick is a duplicate."""
+    protocol, _ = started()
+    protocol.world.settled = frozenset({0})  # as the engine has it after agent 0 parked
+    protocol._out = []
+    protocol._open_tick(1.0)
+    assert protocol.awaited == {1} and protocol.actions == [STAY, None]
+    assert kinds(intent(protocol, 0, 1.1, action=UP)) == [] and protocol.actions[0] == STAY
+    intent(protocol, 0, 1.2)
+    assert protocol.inbox.rejections["duplicate-intent"] == 1
+    assert "TickClosed" in kinds(intent(protocol, 1, 1.3))

@@ -11,6 +11,9 @@ Each episode ends with one extra *end tick*: every agent is told ``episode_end``
 of its last action), finishes its learning, checkpoints and answers STAY; nothing moves. An agent
 that reaches its goal is *arrived*: it is parked on its goal, keeps answering STAY and is still an
 obstacle to the others. The episode ends when every agent has arrived or after ``max_steps``.
+From the tick after its first arrived observation (which finished its learning) until the end
+tick, an arrived agent is *settled* (:attr:`SwarmWorld.settled`): it stays, and the world needs no
+intent from it (``world.protocol``); its observations say so.
 
 The world keeps its state in the rules' buffers (plain lists; the world process runs the kernel
 uncompiled) and plays a tick with ``world.rules.world_step``, the very function the swarm
@@ -121,6 +124,7 @@ class SwarmWorld:
         self.step = 0
         self.goals = scenario.goals
         self.ending = False
+        self.settled: frozenset[int] = frozenset()  # see the module docstring
         n, bodies = c.n_agents, c.n_bodies
         self._x[:] = scenario.starts[:, 0].tolist() + self._wall_x
         self._y[:] = scenario.starts[:, 1].tolist() + self._wall_y
@@ -167,7 +171,8 @@ class SwarmWorld:
         return Observation(c.run_id, self.tick, WORLD_SENDER, i, self.episode, self.step,
                            self._cells[i], self._goal_cells[i], neighbours,
                            priority_rank(i, self.tick, c.n_agents), r_ds[i], r_ca[i],
-                           collided[i], arrived[i], self.ending, parked, updates)
+                           collided[i], arrived[i], self.ending, parked, updates,
+                           i in self.settled)
 
     def resync(self, agent: int) -> None:
         """Send ``agent`` the whole shared table, a slice with each of its next observations
@@ -243,6 +248,7 @@ class SwarmWorld:
     def _move(self, actions: list[int | None], missed: tuple[int, ...]) -> TickReport:
         """A step of the episode: everyone moves at once; rewards, arrivals and the row."""
         c = self.config
+        arrived_before = self._outcome[3]  # as this tick's observations showed it
         chosen = ints([STAY if a is None else a for a in actions] + self._stays)
         everyone = world_step(self._x, self._y, self._goal_x, self._goal_y, self._learns,
                               self._arrived, chosen, c.n_bodies, c.width, c.height, c.count_swaps,
@@ -255,6 +261,8 @@ class SwarmWorld:
         self.ending = bool(everyone) or self.step >= c.max_steps
         collided = self._outcome[2]
         n = c.n_agents
+        self.settled = (frozenset() if self.ending
+                        else frozenset(i for i in range(n) if arrived_before[i]))
         report = TickReport(self.tick, self.episode, True, tuple(python_values(chosen)[:n]),
                             tuple(i for i, hit in enumerate(collided[:n]) if hit), missed,
                             violations, None)

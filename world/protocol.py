@@ -7,8 +7,10 @@ over a simulated network in virtual time.
 
 It waits for every agent's liveliness token (at most ``startup_timeout_s``), then, per tick:
 sends every agent its observation, in rank order (the first to decide first); collects intents
-until every live agent has answered or the tick deadline passes (a missing intent counts as
-STAY and as a missed intent); applies the tick with ``world.engine``; sends the next
+until every live agent that is not settled (parked on its goal since an earlier tick:
+``world.engine``) has answered or the tick deadline passes (a missing intent counts as STAY and
+as a missed intent; a settled agent stays, and its intent, should one come with a learning
+record, is taken too); applies the tick with ``world.engine``; sends the next
 observations at once; then reports the tick (:class:`~protocol.effects.TickClosed`) and, at an
 episode's end, its row (:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a
 stalled one at most the deadline. A world started at ``first_episode`` / ``first_tick`` continues
@@ -22,6 +24,7 @@ hears its observations): its copy may be an older checkpoint's.
 import logging
 
 from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import START_S_PER_AGENT, SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
@@ -94,6 +97,7 @@ class WorldProtocol:
             self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
             self.next_shutdown = now
         self.actions: list[int | None] | None = None  # the open tick's intents, by agent
+        self.heard: set[int] = set()  # the agents whose intent for the open tick came
         self.learned: dict[int, tuple] = {}  # the accepted learning records that came with them
         self.tick_start = 0.0
         self.tick_deadline = 0.0
@@ -154,10 +158,12 @@ class WorldProtocol:
             self.inbox.reject("future-tick", f"intent for tick {intent.tick} at tick {tick}")
         elif intent.episode != self.world.episode:
             self.inbox.reject("wrong-episode", f"episode {intent.episode}")
-        elif actions[intent.agent] is not None:
+        elif intent.agent in self.heard:
             self.inbox.reject("duplicate-intent", f"agent {intent.agent} tick {tick}")
         else:
-            actions[intent.agent] = intent.action
+            self.heard.add(intent.agent)
+            if actions[intent.agent] is None:  # a settled agent's action is STAY already
+                actions[intent.agent] = intent.action
             self.awaited.discard(intent.agent)
             if intent.record:
                 self._keep_record(intent.agent, intent.record[0])
@@ -239,8 +245,12 @@ class WorldProtocol:
     def _open_tick(self, now: float) -> None:
         """Send every agent its observation of the current tick; start waiting for intents."""
         out = self._out
-        self.actions = [None] * self.n
+        actions = self.actions = [None] * self.n
         self.awaited = set(self.alive)
+        for agent in self.world.settled:
+            actions[agent] = STAY
+            self.awaited.discard(agent)
+        self.heard = set()
         self.learned = {}
         self.tick_start = now
         self.tick_deadline = now + self.config.tick_deadline_s
