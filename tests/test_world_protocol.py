@@ -314,3 +314,16 @@ def test_an_intent_of_a_settled_agent_is_taken_once_and_moves_nothing():
     intent(protocol, 0, 1.2)
     assert protocol.inbox.rejections["duplicate-intent"] == 1
     assert "TickClosed" in kinds(intent(protocol, 1, 1.3))
+
+
+def test_a_settled_agent_that_came_back_is_waited_for_to_be_sent_the_table():
+    """A restarted agent is sent the world's table from its first intent on, so the world waits
+    for its intent even while it is parked: its observation does not say settled."""
+    protocol, _ = started()
+    protocol.world.settled = frozenset({0, 1})
+    protocol.to_resync.add(1)
+    protocol._out = []
+    protocol._open_tick(1.0)
+    [batch] = [e for e in protocol._out if isinstance(e, SendObservations)]
+    assert {o.agent: o.settled for o, _ in batch.observations} == {0: True, 1: False}
+    assert protocol.awaited == {1} and protocol.actions == [STAY, None]

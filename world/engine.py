@@ -174,6 +174,11 @@ class SwarmWorld:
                            collided[i], arrived[i], self.ending, parked, updates,
                            i in self.settled)
 
+    def unsettle(self, agents: set[int]) -> None:
+        """Make ``agents`` not settled at this tick: the world must hear from them (to send a
+        restarted agent its table from its first intent on)."""
+        self.settled = self.settled - agents
+
     def resync(self, agent: int) -> None:
         """Send ``agent`` the whole shared table, a slice with each of its next observations
         (``world.shared_table``): its copy may differ from the world's (it was restarted, or the

@@ -18,7 +18,8 @@ a run (``--resume``); one started after the last episode only tells the agents s
 to stop. A completed run tells its agents to stop until every live one has left. Where the agents
 share one table, an agent that comes back after it left, and every agent of a resumed world, is
 sent the world's whole table (``SwarmWorld.resync``) from its first intent on (by then it surely
-hears its observations): its copy may be an older checkpoint's.
+hears its observations): its copy may be an older checkpoint's. Until that intent came it is
+never settled.
 """
 
 import logging
@@ -247,6 +248,8 @@ class WorldProtocol:
         out = self._out
         actions = self.actions = [None] * self.n
         self.awaited = set(self.alive)
+        if self.to_resync:
+            self.world.unsettle(self.to_resync)
         for agent in self.world.settled:
             actions[agent] = STAY
             self.awaited.discard(agent)
