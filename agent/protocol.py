@@ -17,6 +17,10 @@ it is settled (parked on its goal since an earlier tick: the world needs no inte
 it has nothing learned to send. An announced intent never changes. At an episode's end it checkpoints before it sends the intent, so that no learned value
 is lost to a crash.
 
+Once it has arrived, where settled agents are quiet (``SwarmConfig.quiet_settled``), the world
+skips its ticks until the episode's end tick or until it owes it a catch-up of the shared table
+(``world.engine``): within that episode, a later tick is not a gap.
+
 Faults it survives: an observation lost on the way (it follows the clock again after
 :data:`RESYNC_AFTER` observations in a row), an answer lost or late (the negotiation times out;
 the standing query is replaced, at once if it ends mid-negotiation), a neighbour that dies or
@@ -141,6 +145,7 @@ class AgentProtocol:
         self.peers_seen: set[int] = set()
         self.pending: Pending | None = None
         self.decided_tick = -1
+        self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
         self.decided_waiters: list[int] = []  # whom the decided tick's answer goes to by stream
         self.decided_answer: Answer | None = None
         self.decided_payload = b""
@@ -352,7 +357,8 @@ class AgentProtocol:
         if obs.tick <= self.decided_tick:
             self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
-        if self.decided_tick >= 0 and obs.tick != self.decided_tick + 1 and not self._resync(obs):
+        if (self.decided_tick >= 0 and obs.tick != self.decided_tick + 1
+                and obs.episode != self.quiet_episode and not self._resync(obs)):
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
         awaited, asks = negotiation.plan_for(obs, self.config)
@@ -430,6 +436,8 @@ class AgentProtocol:
         answer = Answer(self.config.run_id, tick, self.sender, self.agent, obs.episode, action,
                         tuple(sorted(known.items())))
         self.decided_tick, self.decided_answer = tick, answer
+        if obs.arrived and self.config.quiet_settled:  # quiet from the next tick (world.engine)
+            self.quiet_episode = obs.episode
         self.decided_waiters = negotiation.standing_answers(obs, self.config)
         self.decided_payload = encode(answer)
         trace.mark(ENCODED, tick)

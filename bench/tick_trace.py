@@ -64,7 +64,8 @@ def tick_steps(world: dict[int, dict], agents: dict[int, dict[int, dict]],
     out: dict[str, list[float]] = {step: [] for step in STEPS}
     for tick in ticks:
         w, after = world.get(tick, {}), world.get(tick + 1, {})
-        chain = [agents[(rank + tick) % n].get(tick, {}) for rank in range(n)]  # by rank
+        chain = [a for a in (agents[(rank + tick) % n].get(tick, {}) for rank in range(n))
+                 if trace.OBS_IN in a]  # by rank, the agents sent an observation (not quiet ones)
         senders = [a for a in chain if all(step in a for step in SENDING_MARKS)]
         if (trace.OBS_SENT not in w or trace.CLOSE not in w or trace.OBS_SENT not in after
                 or not senders or not all(step in a for a in chain for step in AGENT_MARKS)

@@ -174,6 +174,13 @@ class SwarmConfig:
         wait rule, ``protocol.ranks``)."""
         return self.wait_rule == "meet"
 
+    @property
+    def quiet_settled(self) -> bool:
+        """Whether the world sends a settled agent no observations until the episode's end tick
+        (``world.engine``): under ``meet`` only, where nobody waits for a parked agent and it
+        waits for nobody, so it has nothing to answer and nothing to decide but STAY."""
+        return self.meet_only
+
     @cached_property
     def n_bodies(self) -> int:
         """Agents, then walls: body ``n_agents + k`` is wall ``k``."""

@@ -2,7 +2,9 @@
 
 - After every tick, no two agents share a cell, nobody jumps more than one cell, and, where swaps
   count, no two agents pass through each other: read from the observations the world sends (all
-  of a tick's at once), tick after tick of one episode of one world.
+  of a tick's at once), tick after tick of one episode of one world. The world sends every agent
+  its observation, but for quiet ones (``world.engine``): an agent it was last sent an arrived
+  observation of the episode for, which stays where it was.
 - No announced intent changes: within one world's life (a world restarted with ``--resume``
   replays tick numbers), every word on agent ``j``'s intent at tick ``t`` (its intent to the
   world, its answers, and the relays of it in others' answers) says the same action; and an
@@ -25,6 +27,7 @@ class Checker:
         self.count_swaps = config.count_swaps
         self.failures: list[str] = []
         self._last: dict[int, tuple] = {}  # world era -> (tick, episode, cells)
+        self._arrived: dict[int, dict[int, bool]] = {}  # era -> agent -> its last one arrived
         self._sent_in: list[dict[int, int]] = [{} for _ in range(self.n)]  # agent: tick -> era
         self._said: dict[tuple[int, int, int], tuple[int, str]] = {}
         self._ends_heard = [-1] * self.n  # per agent: the last episode whose end the world heard
@@ -40,15 +43,21 @@ class Checker:
         cells = [None] * self.n
         for obs in observations:
             cells[obs.agent] = obs.position
-        if None in cells or len(observations) != self.n:
+        last = self._last.get(era)
+        arrived = self._arrived.setdefault(era, {})
+        for i, cell in enumerate(cells):
+            if cell is None and last is not None and last[1] == episode and arrived.get(i):
+                cells[i] = last[2][i]  # quiet: it stays on its goal
+        if None in cells or len(observations) != len({obs.agent for obs in observations}):
             self.fail(f"tick {tick}: the world sent {len(observations)} observations")
             return
+        for obs in observations:
+            arrived[obs.agent] = obs.arrived and not obs.episode_end
         if len(set(cells)) != self.n:
             shared = sorted({c for c in cells if cells.count(c) > 1})
             self.fail(f"tick {tick}: two agents share a cell {shared}")
         if any(not (0 <= x < self.width and 0 <= y < self.height) for x, y in cells):
             self.fail(f"tick {tick}: an agent is off the grid: {cells}")
-        last = self._last.get(era)
         if last is not None and last[0] == tick - 1 and last[1] == episode:
             before = last[2]
             was_at = {cell: i for i, cell in enumerate(before)}

@@ -227,7 +227,7 @@ class SimSwarm:
                 self._world_exit()
                 self._all_gone()
                 return
-        if sent is not None:
+        if sent:
             self.checker.tick_sent(self.era, sent)
             tick = sent[0].tick
             if tick not in self.opened:

@@ -3,6 +3,7 @@
 import dataclasses
 
 import msgpack
+import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.agent.learner import LS_PENDING
@@ -153,6 +154,27 @@ def test_a_settled_agent_answers_its_neighbours_but_sends_the_world_no_intent():
     quiet = protocol.on_observation(settled(2, arrived_before=True), 0.2)
     assert "SendIntent" not in kinds(quiet) and protocol.decided_tick == 2
     assert [e.answer.action for e in quiet if isinstance(e, Reply)] == [4]
+
+
+@pytest.mark.parametrize("wait_rule", ["meet", "reach"])
+def test_once_arrived_under_meet_a_skipped_tick_is_no_gap(wait_rule):
+    """Under ``meet`` the world sends a settled agent nothing until the episode's end tick, so
+    after its arrived observation a later tick of that episode is taken at once; under
+    ``reach``, and into another episode, a jump is a gap as ever (RESYNC_AFTER in a row)."""
+    protocol = ready(agent=0, config=dataclasses.replace(CONFIG, wait_rule=wait_rule))
+
+    def at(tick: int, episode: int = 0, arrived: bool = True, end: bool = False) -> bytes:
+        return encode(Observation(
+            run="proto", tick=tick, sender=WORLD_SENDER, agent=0, episode=episode, step=tick,
+            position=(5, 5), goal=(5, 5), neighbours=(), rank=0, reward_ds=0.0, reward_ca=10.0,
+            collided=False, arrived=arrived, episode_end=end))
+
+    protocol.on_observation(at(3), 0.0)
+    assert protocol.decided_tick == 3
+    protocol.on_observation(at(9, end=True), 0.1)
+    assert protocol.decided_tick == (9 if wait_rule == "meet" else 3)
+    protocol.on_observation(at(20, episode=1, arrived=False), 0.2)
+    assert protocol.decided_tick == (9 if wait_rule == "meet" else 3), "another episode: a gap"
 
 
 def test_answers_from_before_the_world_left_do_not_count_for_the_world_that_comes_back():

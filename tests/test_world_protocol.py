@@ -1,6 +1,7 @@
 """The world's protocol machine, pure: the lockstep clock as inputs in, effects out."""
 
 import numpy as np
+import pytest
 
 from nnql_swarm.agent.brain import Learner
 from nnql_swarm.agent.learner import write_updates
@@ -9,6 +10,7 @@ from nnql_swarm.protocol.actions import DOWN, LEFT, RIGHT, STAY, UP
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
+from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
 from nnql_swarm.world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol
 
 CONFIG = SwarmConfig(run_id="wproto", n_agents=2, episodes=2, max_steps=3, tick_deadline_s=0.5)
@@ -269,37 +271,45 @@ def toward_goal(obs) -> int:
     return STAY
 
 
-def test_a_settled_agent_is_not_waited_for_and_its_intent_is_taken_once():
+@pytest.mark.parametrize("wait_rule", ["reach", "meet"])
+def test_a_settled_agent_is_not_waited_for_and_under_meet_not_sent_observations(wait_rule):
     """Agent 0 walks to its goal while agent 1 stays. From the tick after agent 0's first
     arrived observation it is settled: the world needs no intent from it, so agent 1's alone
     closes the tick and nobody missed one; an intent of agent 0 for a tick already closed is
-    stale, as any late one."""
+    stale, as any late one. Under ``meet`` a settled agent is quiet, too: it is sent no
+    observation until the end tick (its few missed table entries come then)."""
     config = SwarmConfig(run_id="wproto", n_agents=2, episodes=1, max_steps=40,
-                         tick_deadline_s=0.5)
+                         tick_deadline_s=0.5, wait_rule=wait_rule)
     protocol = WorldProtocol(config, 0.0)
     alive(protocol, 0, 0.0)
     effects, now, seen = alive(protocol, 1, 0.0), 0.0, []
     while not protocol.world.finished:
+        settled = 0 in protocol.world.settled
         [batch] = [e for e in effects if isinstance(e, SendObservations)]
         obs = {o.agent: o for o, _ in batch.observations}
-        seen.append((obs[0].arrived, obs[0].settled, obs[1].settled))
+        mine = obs.get(0)
+        seen.append((settled, mine is not None and mine.arrived))
+        assert obs[1].settled is False
+        if wait_rule == "reach" or not settled:
+            assert mine is not None and mine.settled == settled
+        else:
+            assert mine is None, "a quiet agent hears nothing"
         now += 0.01
         effects = intent(protocol, 1, now, action=STAY)
-        if obs[0].settled:
+        if settled:
             assert "TickClosed" in kinds(effects), "agent 1 alone closes a settled agent's tick"
             [closed] = [e for e in effects if isinstance(e, TickClosed)]
             assert closed.report.missed == ()
-            if len([s for s in seen if s[1]]) == 1:  # the first settled tick: one late intent
-                tick = closed.report.tick
-                assert kinds(intent(protocol, 0, now, tick=tick)) == []
+            if sum(s for s, _ in seen) == 1:  # the first settled tick: one late intent
+                assert kinds(intent(protocol, 0, now, tick=closed.report.tick)) == []
                 assert protocol.inbox.rejections["stale-tick"] == 1
         else:
             assert "TickClosed" not in kinds(effects), "a moving agent is waited for"
-            effects += intent(protocol, 0, now, action=toward_goal(obs[0]))
-    arrived_at = [a for a, _, _ in seen].index(True)
-    assert [s for _, s, _ in seen] == [False] * (arrived_at + 1) + [True] * (
+            effects += intent(protocol, 0, now, action=toward_goal(mine))
+    arrived_at = [a for _, a in seen].index(True)
+    assert [s for s, _ in seen] == [False] * (arrived_at + 1) + [True] * (
         len(seen) - arrived_at - 2) + [False], "settled from the tick after, never at the end"
-    assert not any(s for _, _, s in seen) and protocol.inbox.rejections.get("duplicate-intent") is None
+    assert protocol.inbox.rejections.get("duplicate-intent") is None
 
 
 def test_an_intent_of_a_settled_agent_is_taken_once_and_moves_nothing():
@@ -325,5 +335,48 @@ def test_a_settled_agent_that_came_back_is_waited_for_to_be_sent_the_table():
     protocol._out = []
     protocol._open_tick(1.0)
     [batch] = [e for e in protocol._out if isinstance(e, SendObservations)]
-    assert {o.agent: o.settled for o, _ in batch.observations} == {0: True, 1: False}
+    assert CONFIG.quiet_settled  # agent 0, settled, is quiet: it gets no observation
+    assert {o.agent: o.settled for o, _ in batch.observations} == {1: False}
     assert protocol.awaited == {1} and protocol.actions == [STAY, None]
+
+
+def test_a_quiet_agent_hears_the_table_entries_it_missed_at_its_next_observation():
+    """Under ``meet`` a settled agent gets no observation; the world keeps the shared table's
+    entries it did not hear of, and its next one (once QUIET_CATCH_UP of them wait, or at the
+    end tick) brings each of them with its current value, so its copy is the world's again."""
+    config = SwarmConfig(run_id="wproto", n_agents=2, episodes=1, max_steps=40)
+    assert config.quiet_settled and config.shared
+    world = SwarmWorld(config)
+    world.settled = frozenset({0})
+    entries = world.table._learner.entries
+    sent_to_0, written = [], {}
+    for tick in range(QUIET_CATCH_UP):
+        changed = [(7 * tick) % len(entries), (7 * tick + 3) % len(entries)]
+        for e in changed:
+            entries[e] = float(tick)
+            written[e] = float(tick)
+        world._updates = world.table.current(changed)  # as a tick's records leave them
+        observed = {o.agent: o for o in world.observations_by_rank()}
+        assert 1 in observed, "a moving agent hears every tick"
+        if 0 in observed:
+            sent_to_0.append((tick, observed[0]))
+            break
+    [(tick, obs)] = sent_to_0
+    assert len(written) == QUIET_CATCH_UP == 2 * (tick + 1) and obs.settled
+    heard = {}
+    for indices, values in obs.updates:
+        heard.update(zip(indices, values))
+    assert heard == written, "every missed entry, with its value now"
+    world.settled = frozenset()  # the end tick: it is sent its observation as everyone
+    world._updates = ()
+    assert {o.agent for o in world.observations_by_rank()} == {0, 1}
+
+
+def test_an_agent_being_resynchronised_is_never_quiet():
+    config = SwarmConfig(run_id="wproto", n_agents=2, episodes=1, max_steps=40)
+    world = SwarmWorld(config)
+    world.settled = frozenset({0})
+    world.resync(0)
+    world._sync_from_next.clear()
+    [obs_0] = [o for o in world.observations_by_rank() if o.agent == 0]
+    assert obs_0.settled and obs_0.updates, "its slice of the table goes with it"

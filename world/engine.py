@@ -13,7 +13,11 @@ that reaches its goal is *arrived*: it is parked on its goal, keeps answering ST
 obstacle to the others. The episode ends when every agent has arrived or after ``max_steps``.
 From the tick after its first arrived observation (which finished its learning) until the end
 tick, an arrived agent is *settled* (:attr:`SwarmWorld.settled`): it stays, and the world needs no
-intent from it (``world.protocol``); its observations say so.
+intent from it (``world.protocol``); its observations say so. Where a settled agent has nothing
+to answer either (``SwarmConfig.quiet_settled``) it is *quiet*: :meth:`observations_by_rank`
+skips it, and keeps the shared table's entries it did not hear of; its next observation (at the
+end tick, or once :data:`QUIET_CATCH_UP` entries are waiting) brings their current values, so
+that its copy is the world's again before it checkpoints or decides.
 
 The world keeps its state in the rules' buffers (plain lists; the world process runs the kernel
 uncompiled) and plays a tick with ``world.rules.world_step``, the very function the swarm
@@ -41,6 +45,11 @@ from nnql_swarm.world.shared_table import SharedTable, Updates
 SYNC_ENTRIES = MAX_SYNC_GROUPS * MAX_AGENTS
 """Table entries sent with each observation of an agent being resynchronised (2,048: about
 25 KB; the default preset's 6,615 entries take 4 ticks)."""
+
+QUIET_CATCH_UP = 512
+"""Entries of the shared table a quiet agent may not have heard of before it is sent an
+observation again, with their current values (about 6 KB; at the end tick every quiet agent's
+come at once, and through a router one link carries them all)."""
 
 EPISODE_FIELDS = (
     "episode", "steps", "collisions", "missed_intents", "reward_sum", "arrived", "shortest_sum",
@@ -90,6 +99,7 @@ class SwarmWorld:
             self.table.restore(*table)
         self._updates: Updates = ()
         self._syncing: dict[int, int] = {}  # agent -> the first table entry it is sent next
+        self._unheard: dict[int, set[int]] = {}  # quiet agent -> the entries it missed
         self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
@@ -125,6 +135,7 @@ class SwarmWorld:
         self.goals = scenario.goals
         self.ending = False
         self.settled: frozenset[int] = frozenset()  # see the module docstring
+        self._unheard = {}
         n, bodies = c.n_agents, c.n_bodies
         self._x[:] = scenario.starts[:, 0].tolist() + self._wall_x
         self._y[:] = scenario.starts[:, 1].tolist() + self._wall_y
@@ -152,12 +163,21 @@ class SwarmWorld:
         return [self._observation(i, neighbours[i]) for i in range(self.config.n_agents)]
 
     def observations_by_rank(self) -> Iterator[Observation]:
-        """The observations in rank order, each built only when the one before it is taken: the
-        world sends the first to decide its observation before it builds the others'."""
+        """The observations to send, in rank order, each built only when the one before it is
+        taken: the world sends the first to decide its observation before it builds the others'.
+        Quiet agents get none (see the module docstring)."""
         n, tick = self.config.n_agents, self.tick
         neighbours = self._neighbours()
+        quiet = (self.settled.difference(self._syncing) if self.config.quiet_settled
+                 else frozenset())
         for rank in range(n):
             agent = (rank + tick) % n  # the inverse of priority_rank
+            if agent in quiet:
+                unheard = self._unheard.setdefault(agent, set())
+                for entries, _ in self._updates:
+                    unheard.update(entries)
+                if len(unheard) < QUIET_CATCH_UP:
+                    continue
             yield self._observation(agent, neighbours[agent])
 
     def _observation(self, i: int, neighbours: tuple[tuple[int, int, int], ...]) -> Observation:
@@ -165,6 +185,9 @@ class SwarmWorld:
         r_ds, r_ca, collided, arrived = self._outcome
         parked = tuple(j for j, _, _ in neighbours if arrived[j])
         updates = self._updates
+        unheard = self._unheard.pop(i, None)
+        if unheard:
+            updates = self.table.current(sorted(unheard)) + updates
         if i in self._syncing:
             updates += self.table.chunk(self._syncing[i], SYNC_ENTRIES)
         # Positional, in Observation's field order: keywords cost a fifth of this call.

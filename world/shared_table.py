@@ -68,6 +68,10 @@ class SharedTable:
         """How many Q-values both tables hold (entry indices are 0 to this - 1)."""
         return len(self._learner.entries)
 
+    def current(self, entries: list[int]) -> Updates:
+        """The current values of ``entries``, as update groups."""
+        return _groups(entries, self._learner.entries[entries].tolist())
+
     def chunk(self, start: int, count: int) -> Updates:
         """The current values of entries ``start`` to ``start + count - 1`` (fewer at the end),
         as update groups."""
