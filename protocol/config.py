@@ -176,10 +176,12 @@ class SwarmConfig:
 
     @property
     def quiet_settled(self) -> bool:
-        """Whether the world sends a settled agent no observations until the episode's end tick
-        (``world.engine``): under ``meet`` only, where nobody waits for a parked agent and it
-        waits for nobody, so it has nothing to answer and nothing to decide but STAY."""
-        return self.meet_only
+        """Whether an agent parked on its goal takes no part in the ticks that follow, until the
+        episode's end tick (``world.engine``: it is *settled*, and the world neither waits for
+        its intent nor sends it observations): under ``meet``, where nobody waits for a parked
+        agent and it waits for nobody, and where the agents do not negotiate. Under ``reach`` a
+        parked nnQL agent still relays the intents it learns down the chain, in lockstep."""
+        return self.meet_only or self.algo not in NEGOTIATING_ALGOS
 
     @cached_property
     def n_bodies(self) -> int:

@@ -272,12 +272,13 @@ def toward_goal(obs) -> int:
 
 
 @pytest.mark.parametrize("wait_rule", ["reach", "meet"])
-def test_a_settled_agent_is_not_waited_for_and_under_meet_not_sent_observations(wait_rule):
-    """Agent 0 walks to its goal while agent 1 stays. From the tick after agent 0's first
-    arrived observation it is settled: the world needs no intent from it, so agent 1's alone
-    closes the tick and nobody missed one; an intent of agent 0 for a tick already closed is
-    stale, as any late one. Under ``meet`` a settled agent is quiet, too: it is sent no
-    observation until the end tick (its few missed table entries come then)."""
+def test_under_meet_a_settled_agent_is_neither_waited_for_nor_sent_observations(wait_rule):
+    """Agent 0 walks to its goal while agent 1 stays. Under ``meet``, from the tick after agent
+    0's first arrived observation it is settled: the world needs no intent from it, so agent 1's
+    alone closes the tick and nobody missed one, and it is sent no observation until the end
+    tick (its few missed table entries come then); an intent of agent 0 for a tick already
+    closed is stale, as any late one. Under ``reach`` a parked agent still relays down the
+    chain: it never settles, and every tick waits for it."""
     config = SwarmConfig(run_id="wproto", n_agents=2, episodes=1, max_steps=40,
                          tick_deadline_s=0.5, wait_rule=wait_rule)
     protocol = WorldProtocol(config, 0.0)
@@ -290,10 +291,10 @@ def test_a_settled_agent_is_not_waited_for_and_under_meet_not_sent_observations(
         mine = obs.get(0)
         seen.append((settled, mine is not None and mine.arrived))
         assert obs[1].settled is False
-        if wait_rule == "reach" or not settled:
-            assert mine is not None and mine.settled == settled
+        if settled:
+            assert mine is None, "a settled agent hears nothing"
         else:
-            assert mine is None, "a quiet agent hears nothing"
+            assert mine is not None and not mine.settled
         now += 0.01
         effects = intent(protocol, 1, now, action=STAY)
         if settled:
@@ -307,8 +308,11 @@ def test_a_settled_agent_is_not_waited_for_and_under_meet_not_sent_observations(
             assert "TickClosed" not in kinds(effects), "a moving agent is waited for"
             effects += intent(protocol, 0, now, action=toward_goal(mine))
     arrived_at = [a for _, a in seen].index(True)
-    assert [s for s, _ in seen] == [False] * (arrived_at + 1) + [True] * (
-        len(seen) - arrived_at - 2) + [False], "settled from the tick after, never at the end"
+    if wait_rule == "reach":
+        assert not any(s for s, _ in seen) and len(seen) == config.max_steps + 1
+    else:
+        assert [s for s, _ in seen] == [False] * (arrived_at + 1) + [True] * (
+            len(seen) - arrived_at - 2) + [False], "settled from the tick after, never at the end"
     assert protocol.inbox.rejections.get("duplicate-intent") is None
 
 

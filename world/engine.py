@@ -11,13 +11,14 @@ Each episode ends with one extra *end tick*: every agent is told ``episode_end``
 of its last action), finishes its learning, checkpoints and answers STAY; nothing moves. An agent
 that reaches its goal is *arrived*: it is parked on its goal, keeps answering STAY and is still an
 obstacle to the others. The episode ends when every agent has arrived or after ``max_steps``.
-From the tick after its first arrived observation (which finished its learning) until the end
-tick, an arrived agent is *settled* (:attr:`SwarmWorld.settled`): it stays, and the world needs no
-intent from it (``world.protocol``); its observations say so. Where a settled agent has nothing
-to answer either (``SwarmConfig.quiet_settled``) it is *quiet*: :meth:`observations_by_rank`
-skips it, and keeps the shared table's entries it did not hear of; its next observation (at the
-end tick, or once :data:`QUIET_CATCH_UP` entries are waiting) brings their current values, so
-that its copy is the world's again before it checkpoints or decides.
+Where a parked agent takes no part in the negotiation (``SwarmConfig.quiet_settled``: the
+``meet`` rule, or agents that do not negotiate), it is *settled* from the tick after its first
+arrived observation (which finished its learning) until the end tick
+(:attr:`SwarmWorld.settled`): it stays, the world needs no intent from it (``world.protocol``),
+and :meth:`observations_by_rank` sends it nothing, keeping the shared table's entries it did not
+hear of. Its next observation (at the end tick, or once :data:`QUIET_CATCH_UP` entries are
+waiting, which then says ``settled``) brings their current values, so that its copy is the
+world's again before it checkpoints or decides.
 
 The world keeps its state in the rules' buffers (plain lists; the world process runs the kernel
 uncompiled) and plays a tick with ``world.rules.world_step``, the very function the swarm
@@ -165,11 +166,10 @@ class SwarmWorld:
     def observations_by_rank(self) -> Iterator[Observation]:
         """The observations to send, in rank order, each built only when the one before it is
         taken: the world sends the first to decide its observation before it builds the others'.
-        Quiet agents get none (see the module docstring)."""
+        Settled agents get none, but those being sent the table (see the module docstring)."""
         n, tick = self.config.n_agents, self.tick
         neighbours = self._neighbours()
-        quiet = (self.settled.difference(self._syncing) if self.config.quiet_settled
-                 else frozenset())
+        quiet = self.settled.difference(self._syncing)
         for rank in range(n):
             agent = (rank + tick) % n  # the inverse of priority_rank
             if agent in quiet:
@@ -289,7 +289,7 @@ class SwarmWorld:
         self.ending = bool(everyone) or self.step >= c.max_steps
         collided = self._outcome[2]
         n = c.n_agents
-        self.settled = (frozenset() if self.ending
+        self.settled = (frozenset() if self.ending or not c.quiet_settled
                         else frozenset(i for i in range(n) if arrived_before[i]))
         report = TickReport(self.tick, self.episode, True, tuple(python_values(chosen)[:n]),
                             tuple(i for i, hit in enumerate(collided[:n]) if hit), missed,
