@@ -14,8 +14,8 @@ neighbour answered (or the negotiation timed out), it asks directly for any awai
 no answer brought; then it decides with what it knows, answers the standing and held queries it
 owes (the next in rank first), and sends its intent for the world, unless the observation says
 it is settled (parked on its goal since an earlier tick: the world needs no intent from it) and
-it has nothing learned to send. An announced intent never changes. At an episode's end it checkpoints before it sends the intent, so that no learned value
-is lost to a crash.
+it has nothing learned to send. An announced intent never changes. At an episode's end it
+checkpoints before it sends the intent, so that no learned value is lost to a crash.
 
 Once it has arrived, where settled agents are quiet (``SwarmConfig.quiet_settled``), the world
 skips its ticks until the episode's end tick or until it owes it a catch-up of the shared table

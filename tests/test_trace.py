@@ -43,7 +43,8 @@ def test_the_steps_of_a_tick_are_lined_up_sender_by_sender():
     assert steps[LAST_INTENT] == [3.0], "from agent 1's intent at 9.0, not the last rank's"
     assert steps[NEXT_OBS] == [1.0] and steps[TICK] == [13.0]
     partial = {3: {trace.OBS_IN: 1.1, trace.DECIDE: 1.6}}
-    assert tick_steps(world, {**agents, 1: partial}, [3])[TICK] == [], "incomplete ticks are left out"
+    incomplete = tick_steps(world, {**agents, 1: partial}, [3])
+    assert incomplete[TICK] == [], "incomplete ticks are left out"
     quiet = tick_steps(world, {**agents, 1: {}}, [3])  # sent no observation: a quiet agent
     assert quiet[TICK] == [13.0] and quiet[LEARNING] == [0.5, 1.5]
     assert quiet[LAST_INTENT] == [4.0], "agent 2's intent, at 8.0, is then the last"

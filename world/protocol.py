@@ -6,12 +6,13 @@ when it next wants :meth:`WorldProtocol.on_timer`. ``world.node`` runs it over Z
 over a simulated network in virtual time.
 
 It waits for every agent's liveliness token (at most ``startup_timeout_s``), then, per tick:
-sends every agent its observation, in rank order (the first to decide first); collects intents
+sends every agent its observation (but the settled ones: ``world.engine``), in rank order (the
+first to decide first); collects intents
 until every live agent that is not settled (parked on its goal since an earlier tick, where
-that takes it out of the negotiation: ``world.engine``) has answered or the tick deadline passes (a missing intent counts as STAY and
-as a missed intent; a settled agent stays, and its intent, should one come with a learning
-record, is taken too); applies the tick with ``world.engine``; sends the next
-observations at once; then reports the tick (:class:`~protocol.effects.TickClosed`) and, at an
+that takes it out of the negotiation: ``world.engine``) has answered or the tick deadline
+passes (a missing intent counts as STAY and as a missed intent; a settled agent stays, and its
+intent, should one come with a learning record, is taken too); applies the tick with
+``world.engine``; sends the next observations at once; then reports the tick (:class:`~protocol.effects.TickClosed`) and, at an
 episode's end, its row (:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a
 stalled one at most the deadline. A world started at ``first_episode`` / ``first_tick`` continues
 a run (``--resume``); one started after the last episode only tells the agents still running
