@@ -5,22 +5,21 @@ returns the effects it causes (``protocol.effects``), in order; :meth:`WorldProt
 when it next wants :meth:`WorldProtocol.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
 over a simulated network in virtual time.
 
-It waits for every agent's liveliness token (at most ``startup_timeout_s``), then, per tick:
-sends every agent its observation (but the settled ones: ``world.engine``), in rank order (the
-first to decide first); collects intents
-until every live agent that is not settled (parked on its goal since an earlier tick, where
-that takes it out of the negotiation: ``world.engine``) has answered or the tick deadline
-passes (a missing intent counts as STAY and as a missed intent; a settled agent stays, and its
-intent, should one come with a learning record, is taken too); applies the tick with
-``world.engine``; sends the next observations at once; then reports the tick (:class:`~protocol.effects.TickClosed`) and, at an
-episode's end, its row (:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a
-stalled one at most the deadline. A world started at ``first_episode`` / ``first_tick`` continues
-a run (``--resume``); one started after the last episode only tells the agents still running
-to stop. A completed run tells its agents to stop until every live one has left. Where the agents
-share one table, an agent that comes back after it left, and every agent of a resumed world, is
-sent the world's whole table (``SwarmWorld.resync``) from its first intent on (by then it surely
-hears its observations): its copy may be an older checkpoint's. Until that intent came it is
-never settled.
+It waits for every agent's liveliness token (at most ``startup_timeout_s``), then, per tick: sends
+every agent its observation (but the settled ones: ``world.engine``), in rank order (the first to
+decide first); collects intents until every live agent that is not settled (parked on its goal since
+an earlier tick, where that takes it out of the negotiation: ``world.engine``) has answered or the
+tick deadline passes (a missing intent counts as STAY and as a missed intent; a settled agent stays,
+and its intent, should one come with a learning record, is taken too); applies the tick with
+``world.engine``; sends the next observations at once; then reports the tick
+(:class:`~protocol.effects.TickClosed`) and, at an episode's end, its row
+(:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a stalled one at most the
+deadline. A world started at ``first_episode`` / ``first_tick`` continues a run (``--resume``); one
+started after the last episode only tells the agents still running to stop. A completed run tells
+its agents to stop until every live one has left. Where the agents share one table, an agent that
+comes back after it left, and every agent of a resumed world, is sent the world's whole table
+(``SwarmWorld.resync``) from its first intent on (by then it surely hears its observations): its
+copy may be an older checkpoint's. Until that intent came it is never settled.
 """
 
 import logging
