@@ -45,6 +45,11 @@ SENDING_MARKS = (trace.ANSWERED, trace.INTENT_SENT)
 """Marked only by the agents that send the world an intent (a settled agent sends none)."""
 
 
+def sends(marks: dict) -> bool:
+    """Whether an agent's marks of a tick show it sent the world an intent."""
+    return all(step in marks for step in SENDING_MARKS)
+
+
 def by_tick(marks: list) -> dict[int, dict]:
     """One process's marks as tick -> step -> the first time it was marked; the answers in
     (marked with their senders) as tick -> ``ANSWER_IN`` -> sender -> the time it came."""
@@ -66,7 +71,7 @@ def tick_steps(world: dict[int, dict], agents: dict[int, dict[int, dict]],
         w, after = world.get(tick, {}), world.get(tick + 1, {})
         chain = [a for a in (agents[(rank + tick) % n].get(tick, {}) for rank in range(n))
                  if trace.OBS_IN in a]  # by rank, the agents sent an observation (not quiet ones)
-        senders = [a for a in chain if all(step in a for step in SENDING_MARKS)]
+        senders = [a for a in chain if sends(a)]
         if (trace.OBS_SENT not in w or trace.CLOSE not in w or trace.OBS_SENT not in after
                 or not senders or not all(step in a for a in chain for step in AGENT_MARKS)
                 or not all(trace.ENCODED in agents.get(s, {}).get(tick, {})
@@ -78,7 +83,7 @@ def tick_steps(world: dict[int, dict], agents: dict[int, dict[int, dict]],
         for a in chain:
             out[LEARNING].append(a[trace.ACTED] - a[trace.DECIDE])
             out[ENCODING].append(a[trace.ENCODED] - a[trace.ACTED])
-            if any(a is sender for sender in senders):
+            if sends(a):
                 out[REPLYING].append(a[trace.ANSWERED] - a[trace.ENCODED])
                 out[INTENT].append(a[trace.INTENT_SENT] - a[trace.ANSWERED])
             came = a.get(trace.ANSWER_IN, {})

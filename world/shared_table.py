@@ -61,7 +61,7 @@ class SharedTable:
             integers, values = learned[agent]
             apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
             written.extend(record_entries(integers))
-        return _groups(written, learner.entries[written].tolist())
+        return self.current(written)
 
     @property
     def entries(self) -> int:
