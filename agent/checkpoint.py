@@ -80,11 +80,25 @@ def check_tables(path: Path, fields: dict, tables: tuple[np.ndarray, np.ndarray]
         raise CheckpointError(f"{path}: Q-tables hold non-finite values")
 
 
-def load(path: Path, brain: AgentBrain) -> int:
-    """Restore the brain from a checkpoint; returns the episode it completes."""
+FIELDS = ("q_ds", "q_ca", "actions_taken", "episode", "agent", "n_agents", "algo", "rng_state")
+
+
+def episodes(path: Path) -> list[int]:
+    """The episodes whose state the file holds, the newest first (``protocol.slotfile`` keeps
+    two); raises CheckpointError naming the file."""
+    return [int(fields["episode"]) for fields in read_versions(path, FIELDS)]
+
+
+def load(path: Path, brain: AgentBrain, episode: int | None = None) -> int:
+    """Restore the brain from a checkpoint, its newest version or the one of ``episode``;
+    returns the episode it completes."""
     path = Path(path)
-    fields = read_fields(path, ("q_ds", "q_ca", "actions_taken", "episode", "agent", "n_agents",
-                                "algo", "rng_state"))
+    versions = read_versions(path, FIELDS)
+    fields = versions[0] if episode is None else \
+        next((v for v in versions if int(v["episode"]) == episode), None)
+    if fields is None:
+        held = sorted(int(v["episode"]) for v in versions)
+        raise CheckpointError(f"{path}: holds episodes {held}, not episode {episode}")
     check_tables(path, fields, brain.learner.tables())
     owner = (int(fields["agent"]), int(fields["n_agents"]), str(fields["algo"]))
     mine = (brain.agent, brain.config.n_agents, brain.config.algo)

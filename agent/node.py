@@ -63,6 +63,7 @@ class AgentOptions:
     transport: TransportSettings
     out_dir: Path
     resume: bool = False
+    resume_episode: int | None = None  # the checkpoint's version to load (None: the newest)
 
     @property
     def negotiation_timeout_s(self) -> float:
@@ -83,7 +84,7 @@ class AgentNode(ProtocolAdapter):
         self.checkpoint_file = checkpoint.checkpoint_path(options.out_dir / CHECKPOINT_DIR,
                                                           self.agent)
         brain, self.resumed = start_brain(self.agent, self.config, self.checkpoint_file,
-                                          options.resume, brain)
+                                          options.resume, brain, options.resume_episode)
         if self.resumed is not None:
             log.warning("resumed from %s (episode %d, tables %s)", self.checkpoint_file,
                         self.resumed["episode"], self.resumed["fingerprint"])

@@ -12,12 +12,15 @@ from nnql_swarm.protocol.config import SwarmConfig
 
 
 def start_brain(agent: int, config: SwarmConfig, checkpoint_file: Path, resume: bool,
-                brain: AgentBrain | None = None) -> tuple[AgentBrain, dict | None]:
+                brain: AgentBrain | None = None,
+                episode: int | None = None) -> tuple[AgentBrain, dict | None]:
     """``(brain, resumed)``: ``brain`` (a fresh one if None), restored from ``checkpoint_file``
-    when ``resume`` and the file exists; ``resumed`` then says from which episode and with
-    which tables (``checkpoint.fingerprint``), else None. Raises ``CheckpointError``."""
+    when ``resume`` and the file exists, its newest version or, for a resumed run, the one of
+    ``episode`` (the run's cut, ``supervision.resume``); ``resumed`` then says from which
+    episode and with which tables (``checkpoint.fingerprint``), else None. Raises
+    ``CheckpointError``."""
     brain = brain or AgentBrain(agent, config)
     if not (resume and Path(checkpoint_file).exists()):
         return brain, None
-    episode = checkpoint.load(checkpoint_file, brain)
+    episode = checkpoint.load(checkpoint_file, brain, episode)
     return brain, {"episode": episode, "fingerprint": checkpoint.fingerprint(brain)}

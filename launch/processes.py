@@ -58,9 +58,11 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
 
 
 def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
-               resume: bool = False, recording=None, hub: tuple[str, int] | None = None) -> None:
-    """An agent process (spawned); ``resume`` reloads its checkpoint if there is one; ``hub``:
-    the ``(host, port)`` of the world to wait for, where the agent is its client."""
+               resume: bool = False, recording=None, hub: tuple[str, int] | None = None,
+               resume_episode: int | None = None) -> None:
+    """An agent process (spawned); ``resume`` reloads its checkpoint if there is one (the
+    version of ``resume_episode``, or else the newest); ``hub``: the ``(host, port)`` of the
+    world to wait for, where the agent is its client."""
     from nnql_swarm.agent.node import AgentOptions, run_agent
     from nnql_swarm.recording.session import exit_without_teardown, open_agent_viz
 
@@ -70,7 +72,8 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
         wait_listening(*hub, timeout_s=HUB_WAIT_S)  # if not, opening the session says so
     brain, on_episode_end, viz = open_agent_viz(recording, agent, config)
     try:
-        code = run_agent(AgentOptions(agent, config, transport, out, resume=resume), brain,
+        code = run_agent(AgentOptions(agent, config, transport, out, resume=resume,
+                                             resume_episode=resume_episode), brain,
                          on_episode_end)
     finally:
         if viz is not None:

@@ -23,7 +23,7 @@ from nnql_swarm.operations import zenoh_files
 from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress as progress_bar
 from nnql_swarm.recording.session import RecordingSession, check_viewer_url
 from nnql_swarm.supervision.resume import (
-    ResumeError, ResumePoint, check_checkpoints, resume_point, shared_table,
+    ResumeError, ResumePoint, read_config, resume_point, rewind, shared_table,
 )
 from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
 from nnql_swarm.protocol.config import (
@@ -217,21 +217,39 @@ def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
 
 
 def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
-    """The config, start point and directory of a run to continue; raises ResumeError."""
+    """The config, start point and directory of a run to continue (its rows past the cut
+    dropped: ``supervision.resume``); raises ResumeError or UsageError."""
     if args.out is None:
         raise UsageError("--resume needs --out DIR, the run directory to continue")
     if args.in_process:
         raise UsageError("--resume continues distributed runs only")
-    config, start = resume_point(args.out)
+    agents = agent_ids(args, read_config(args.out)) if args.role != "world" else []
+    config, start = resume_point(args.out, agents, world=args.role != "agents")
+    check_same_options(args, config)
     check_zenoh_files(args, config)
-    if args.role != "world":
-        check_checkpoints(args.out, config, agent_ids(args, config))
     if args.role != "agents":
         shared_table(args.out, config, start)
+        rewind(args.out, start)
     if start.episode < config.episodes:
-        print(f"resuming {config.run_id} at episode {start.episode} (tick {start.tick})",
+        again = f"; episodes {start.episode}..{start.episode + start.replayed - 1} are played " \
+                f"again (not every process had saved them)" if start.replayed else ""
+        print(f"resuming {config.run_id} at episode {start.episode} (tick {start.tick}){again}",
               file=sys.stderr)
     return config, start, args.out
+
+
+def check_same_options(args: argparse.Namespace, config: SwarmConfig) -> None:
+    """Refuse run options given with ``--resume`` that differ from the run's ``config.json``
+    (a resumed run is the run it continues); raises UsageError."""
+    given = config_values(args)
+    if args.run_id is not None:
+        given["run_id"] = args.run_id
+    differ = [name for name, value in given.items() if getattr(config, name) != value]
+    if differ:
+        shown = ", ".join(f"{name} {given[name]!r} (the run's: {getattr(config, name)!r})"
+                          for name in differ)
+        raise UsageError(f"--resume continues the run as {Path(args.out) / CONFIG_FILE} says; "
+                         f"these options differ from it: {shown}")
 
 
 def check_zenoh_files(args: argparse.Namespace, config: SwarmConfig) -> None:
@@ -316,6 +334,7 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
     record, progress = recording.plan or False, not args.no_progress
     os.environ.update(plain_python_environment())  # the world and agents run the kernel uncompiled
     supervisor = Supervisor(mp.get_context("spawn"))
+    resumes = args.resume and start.cut >= 0  # a run started afresh loads no checkpoint
     world = None
     if args.role in ("all", "world"):
         world = supervisor.add("nnql-world", world_main, restartable=False, make_args=lambda _: (
@@ -324,8 +343,8 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
         for i in agent_ids(args, config):
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True,
                            make_args=lambda restarted, i=i: (
-                               i, config, agent_transport(i), out, restarted or args.resume,
-                               recording.plan, hub))
+                               i, config, agent_transport(i), out, restarted or resumes,
+                               recording.plan, hub, None if restarted else start.cut))
     code = supervisor.run(leader=world)
     recording.finish()
     if code == EXIT_INTERRUPTED:

@@ -110,15 +110,16 @@ class TickClosed(NamedTuple):
 
 class WriteRow(NamedTuple):
     """Append one episode's row to ``episodes.csv``, with its wall-clock columns; where the
-    agents share one table, checkpoint it first (``table``: ``Q_DS, Q_CA`` as the agents
-    checkpointed it at that episode's end)."""
+    agents share one table, checkpoint it first (``table``: a ``world.shared_table.SharedState``,
+    the tables as the agents checkpointed them at that episode's end and its end tick's
+    records)."""
 
     row: dict
     duration_s: float
     ticks: int
     slowest_s: float
     rejected: int
-    table: tuple | None = None
+    table: object = None
 
 
 class Finished(NamedTuple):

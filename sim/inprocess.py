@@ -24,6 +24,7 @@ from nnql_swarm.sim.swarm import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y
 from nnql_swarm.world.engine import TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.scenario import swarm_episode
+from nnql_swarm.world.shared_table import SharedState
 
 
 class TickView(NamedTuple):
@@ -103,7 +104,8 @@ def run_in_process(
                                 agent, batch.episode - 1)
             if config.shared:  # the world's copy, for a distributed --resume
                 world_checkpoint.save(world_checkpoint.table_path(out_dir),
-                                      agents[0].learner.tables(), batch.episode - 1, config)
+                                      SharedState(*agents[0].learner.tables()), batch.episode - 1,
+                                      config)
     return InProcessRun(results, int(results.violations.sum()))
 
 

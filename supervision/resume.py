@@ -1,9 +1,15 @@
-"""Where a stopped run continues (``--resume``): after its last complete episode, checkpoints checked.
+"""Where a stopped run continues (``--resume``): the last episode that every process made durable.
 
-The run's own ``config.json`` is the config; ``episodes.csv`` (a half-written last line dropped)
-gives the last complete episode and the tick it ended on. Every checkpoint of the agents that
-will run, and the world's shared table where the agents share one, is loaded once up front, so a
-missing, corrupt or foreign one is refused before anything starts.
+Every process writes its own files at each episode's end: an agent its checkpoint, before its
+end tick's intent; the world the shared table's checkpoint, then the episode's row. Whatever
+stopped the run, whenever, those files may stand at different episodes (a Ctrl-C can reach some
+agents before they checkpoint an end tick and others after). Each checkpoint file keeps its
+newest two versions (``protocol.slotfile``), so a run has one consistent *cut*: the last episode
+with a row in ``episodes.csv`` (a half-written last line dropped) and a checkpoint of it in every
+file of the processes this launcher starts. The resumed run starts every process from the cut's
+checkpoints; rows past the cut are dropped and played again, to the same values. A file that
+cannot reach the cut (missing, corrupt, foreign, or two episodes off) is refused with one line
+naming it. Nothing is read twice: the checks load every checkpoint the processes will load.
 """
 
 from dataclasses import dataclass
@@ -14,7 +20,8 @@ from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.world import checkpoint as world_checkpoint
-from nnql_swarm.world.metrics import drop_partial_line, read_episodes
+from nnql_swarm.world.metrics import drop_partial_line, keep_rows, read_episodes
+from nnql_swarm.world.shared_table import SharedState
 
 
 class ResumeError(ValueError):
@@ -23,52 +30,107 @@ class ResumeError(ValueError):
 
 @dataclass(frozen=True)
 class ResumePoint:
-    """The first episode and tick of the continued run."""
+    """The first episode and tick of the continued run, and how many written rows it plays
+    again (rows past the cut)."""
 
     episode: int
     tick: int
+    replayed: int = 0
+
+    @property
+    def cut(self) -> int:
+        """The episode every process resumes after (-1: none, the run starts afresh)."""
+        return self.episode - 1
 
 
-def resume_point(out: Path) -> tuple[SwarmConfig, ResumePoint]:
-    """The run's config and where it continues; raises ResumeError."""
+def read_config(out: Path) -> SwarmConfig:
+    """The run's ``config.json``; raises ResumeError naming the file."""
     config_file = Path(out) / CONFIG_FILE
     if not config_file.is_file():
         raise ResumeError(f"{config_file}: no run to resume here")
     try:
-        config = SwarmConfig.from_json(config_file.read_text())
+        return SwarmConfig.from_json(config_file.read_text())
     except (ValueError, TypeError) as error:
         raise ResumeError(f"{config_file}: not a valid run config ({error})") from None
+
+
+def _rows(out: Path) -> list[dict]:
+    """The complete rows of ``episodes.csv`` (episodes 0, 1, 2, ...); raises ResumeError."""
     episodes_file = Path(out) / EPISODES_FILE
     drop_partial_line(episodes_file)
     rows = read_episodes(episodes_file) if episodes_file.exists() else []
     try:
         numbers = [int(row["episode"]) for row in rows]
-        last_tick = int(rows[-1]["end_tick"]) if rows else -1
+        [int(row["end_tick"]) for row in rows]
     except (KeyError, ValueError, TypeError) as error:
         raise ResumeError(f"{episodes_file}: unreadable row ({error})") from None
     if numbers != list(range(len(numbers))):
         raise ResumeError(f"{episodes_file}: episodes are not 0, 1, 2, ... in order")
-    return config, ResumePoint(episode=len(numbers), tick=last_tick + 1)
+    return rows
 
 
-def check_checkpoints(out: Path, config: SwarmConfig, agents: list[int]) -> None:
-    """Load each agent's checkpoint into a scratch brain; raises ResumeError naming the file."""
-    for agent in agents:
-        path = checkpoint.checkpoint_path(Path(out) / CHECKPOINT_DIR, agent)
-        if path.exists():
-            try:
-                checkpoint.load(path, AgentBrain(agent, config))
-            except checkpoint.CheckpointError as error:
-                raise ResumeError(str(error)) from None
+def _agent_versions(out: Path, config: SwarmConfig, agent: int) -> tuple[Path, list[int]]:
+    """An agent's checkpoint file and the episodes it holds, the newest first (none if there is
+    no file); each version is loaded into a scratch brain, so a bad one is refused here."""
+    path = checkpoint.checkpoint_path(Path(out) / CHECKPOINT_DIR, agent)
+    if not path.exists():
+        return path, []
+    try:
+        return path, [checkpoint.load(path, AgentBrain(agent, config), episode)
+                      for episode in checkpoint.episodes(path)]
+    except checkpoint.CheckpointError as error:
+        raise ResumeError(str(error)) from None
 
 
-def shared_table(out: Path, config: SwarmConfig, start: ResumePoint):
-    """The shared ``(Q_DS, Q_CA)`` the world of a resumed run starts from (None where the agents
-    learn apart, or nothing was learned yet, or nothing is left to play); raises ResumeError
-    naming the file."""
+def _world_versions(out: Path) -> tuple[Path, list[int]]:
+    path = world_checkpoint.table_path(out)
+    if not path.exists():
+        return path, []
+    try:
+        return path, world_checkpoint.episodes(path)
+    except checkpoint.CheckpointError as error:
+        raise ResumeError(str(error)) from None
+
+
+def resume_point(out: Path, agents: list[int], world: bool) -> tuple[SwarmConfig, ResumePoint]:
+    """The run's config and its cut, over the rows (where this launcher runs the ``world``),
+    the shared table's checkpoint (likewise, where the agents share one) and the checkpoints of
+    ``agents``; raises ResumeError naming the file that stands in the way. Reads only."""
+    config = read_config(out)
+    rows = _rows(out) if world else []
+    files = [_agent_versions(out, config, agent) for agent in agents]
+    if world and config.shared:
+        files.append(_world_versions(out))
+    if world:
+        cut = len(rows) - 1
+    else:  # agents alone: as far as all of theirs reach
+        cut = min((max(episodes, default=-1) for _, episodes in files), default=-1)
+    if cut >= 0:
+        for path, episodes in files:
+            if not episodes:
+                raise ResumeError(f"{path}: missing (the checkpoint of episode {cut})")
+        cut = min([cut] + [max(episodes) for _, episodes in files])
+        for path, episodes in files:
+            if cut not in episodes:
+                raise ResumeError(f"{path}: holds episodes {sorted(episodes)}, not episode {cut}, "
+                                  f"the last one every process finished")
+    tick = int(rows[cut]["end_tick"]) + 1 if world and cut >= 0 else 0
+    return config, ResumePoint(episode=cut + 1, tick=tick, replayed=len(rows) - 1 - cut)
+
+
+def rewind(out: Path, start: ResumePoint) -> None:
+    """Drop the rows past the cut from ``episodes.csv``: they are played again."""
+    if start.replayed:
+        keep_rows(Path(out) / EPISODES_FILE, start.episode)
+
+
+def shared_table(out: Path, config: SwarmConfig, start: ResumePoint) -> SharedState | None:
+    """The shared state the world of a resumed run starts from (None where the agents learn
+    apart, or nothing was learned yet, or nothing is left to play); raises ResumeError naming
+    the file."""
     if not config.shared or not 0 < start.episode < config.episodes:
         return None
     try:
-        return world_checkpoint.load(world_checkpoint.table_path(out), config, start.episode - 1)
+        return world_checkpoint.load(world_checkpoint.table_path(out), config, start.cut)
     except checkpoint.CheckpointError as error:
         raise ResumeError(str(error)) from None

@@ -8,7 +8,7 @@ from nnql_swarm.agent.checkpoint import CheckpointError
 from nnql_swarm.protocol import slotfile
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.world import checkpoint as world_checkpoint
-from nnql_swarm.world.shared_table import SharedTable
+from nnql_swarm.world.shared_table import SharedState, SharedTable
 
 
 def record(episode: int) -> dict:
@@ -105,9 +105,9 @@ def test_a_world_killed_before_its_row_resumes_from_the_table_that_row_recorded(
     tables = {e: SharedTable(config).tables() for e in (3, 4)}
     for e, (q_ds, q_ca) in tables.items():
         q_ds[0, 0] = q_ca[0, 0] = float(e)
-        world_checkpoint.save(path, (q_ds, q_ca), e, config)
+        world_checkpoint.save(path, SharedState(q_ds, q_ca), e, config)
     assert world_checkpoint.load(path, config, 3)[0][0, 0] == 3.0
     assert world_checkpoint.load(path, config, 4)[0][0, 0] == 4.0
-    with pytest.raises(CheckpointError, match="holds the table after episode 4, episodes.csv "
-                                              "ends with episode 2"):
+    with pytest.raises(CheckpointError, match="holds the table after episode 4, not after "
+                                              "episode 2"):
         world_checkpoint.load(path, config, 2)

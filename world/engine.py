@@ -41,7 +41,7 @@ from nnql_swarm.world.rules import (
     Cell, shared_cells, swaps_through, world_step,
 )
 from nnql_swarm.world.scenario import swarm_episode
-from nnql_swarm.world.shared_table import SharedTable, Updates
+from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
 
 SYNC_ENTRIES = MAX_SYNC_GROUPS * MAX_AGENTS
 """Table entries sent with each observation of an agent being resynchronised (2,048: about
@@ -71,16 +71,18 @@ class TickReport:
     missed: tuple[int, ...]
     violations: tuple[str, ...]
     episode_row: dict | None
-    table: tuple[np.ndarray, np.ndarray] | None = None  # at an episode's end, if shared
+    table: SharedState | None = None  # at an episode's end, if shared
 
 
 class SwarmWorld:
     """The lockstep world of a swarm run (every agent learns, each has its own goal)."""
 
     def __init__(self, config: SwarmConfig, first_episode: int = 0, first_tick: int = 0,
-                 table: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+                 table: SharedState | None = None) -> None:
         """A world at the start of ``first_episode`` (``--resume`` starts after the last row,
-        with the shared ``table`` of its checkpoint, where the agents share one)."""
+        with the shared ``table`` of its checkpoint, where the agents share one: its end tick's
+        records are applied as that tick applied them, and the first observations carry what
+        they changed, as they did in the run that wrote the checkpoint)."""
         self.config = config
         self.tick = first_tick
         self.finished = False
@@ -96,9 +98,11 @@ class SwarmWorld:
         self._blocked = flags([False] * bodies)
         self._stays = [STAY] * (bodies - n)
         self.table = SharedTable(config) if config.shared else None
-        if table is not None and self.table is not None:
-            self.table.restore(*table)
         self._updates: Updates = ()
+        if table is not None and self.table is not None:
+            self.table.restore(table.q_ds, table.q_ca)
+            self._updates = self.table.apply({agent: (integers, rewards)
+                                              for agent, integers, rewards in table.records})
         self._syncing: dict[int, int] = {}  # agent -> the first table entry it is sent next
         self._unheard: dict[int, set[int]] = {}  # quiet agent -> the entries it missed
         self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
@@ -233,11 +237,12 @@ class SwarmWorld:
     def apply(self, actions: list[int | None], learned: dict | None = None) -> TickReport:
         """Apply every agent's action for this tick (``None``: missed, counted, stays);
         ``learned``: the accepted learning records that came with the intents, by agent (the
-        end tick's report holds the shared table from before they are applied: what the agents
-        checkpointed)."""
+        end tick's report holds the shared table from before they are applied, what the agents
+        checkpointed, with those records: what the next episode starts from)."""
         missed = tuple(i for i, a in enumerate(actions) if a is None)
         self._missed += len(missed)
-        report = self._end_tick(missed) if self.ending else self._move(actions, missed)
+        report = self._end_tick(missed, learned or {}) if self.ending else \
+            self._move(actions, missed)
         if self.table is not None:
             self._updates = self.table.apply(learned or {})
             for agent, start in list(self._syncing.items()):
@@ -259,13 +264,13 @@ class SwarmWorld:
                 "shortest_sum": self._shortest, "agent_steps": row[ROW_AGENT_STEPS],
                 "end_tick": self.tick}
 
-    def _end_tick(self, missed: tuple[int, ...]) -> TickReport:
+    def _end_tick(self, missed: tuple[int, ...], learned: dict) -> TickReport:
         """The episode's end tick: nothing moves; the row is final; the next episode starts."""
         c = self.config
         stays = (STAY,) * c.n_agents
         report = TickReport(self.tick, self.episode, False, stays, (), missed, (),
                             self.episode_row(),
-                            None if self.table is None else self.table.tables())
+                            None if self.table is None else self.table.state(learned))
         self.tick += 1
         if self.episode + 1 >= c.episodes:
             self.finished = True

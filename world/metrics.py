@@ -70,6 +70,14 @@ def drop_partial_line(path: Path) -> None:
             f.truncate(data.rfind(b"\n") + 1)
 
 
+def keep_rows(path: Path, count: int) -> None:
+    """Cut ``episodes.csv`` after its header and first ``count`` rows (synced to disk)."""
+    with open(path, "r+b") as f:
+        lines = f.read().splitlines(keepends=True)
+        f.truncate(sum(len(line) for line in lines[:1 + count]))
+        os.fsync(f.fileno())
+
+
 def read_episodes(path: Path) -> list[dict]:
     """The rows of an ``episodes.csv`` as dicts of strings."""
     with open(path, newline="") as f:

@@ -16,6 +16,8 @@ them, and every later change reaches the agent as an update, so once the last sl
 its copy equals this one.
 """
 
+from typing import NamedTuple
+
 import numpy as np
 
 from nnql_swarm.agent.brain import Learner
@@ -28,6 +30,17 @@ from nnql_swarm.protocol.messages import MAX_AGENTS
 
 Updates = tuple[tuple[tuple[int, ...], tuple[float, ...]], ...]
 """Groups of entry indices and their new values (``protocol.messages.Updates``)."""
+
+
+class SharedState(NamedTuple):
+    """What the shared table's checkpoint holds (``world.checkpoint``): the tables as an
+    episode's end tick found them, which every agent checkpointed then, and the learning records
+    that tick brought (``(agent, integers, rewards)`` in agent-id order), which the next
+    episode's first observations hand out applied."""
+
+    q_ds: np.ndarray
+    q_ca: np.ndarray
+    records: tuple[tuple[int, tuple[int, ...], tuple[float, ...]], ...] = ()
 
 
 def _groups(indices: list[int], values: list[float]) -> Updates:
@@ -79,8 +92,15 @@ class SharedTable:
         return _groups(list(range(start, stop)), self._learner.entries[start:stop].tolist())
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
-        """``Q_DS`` and ``Q_CA`` as arrays (copies), for the world's checkpoint."""
+        """``Q_DS`` and ``Q_CA`` as arrays (copies)."""
         return self._learner.tables()
+
+    def state(self, learned: dict[int, tuple]) -> SharedState:
+        """The tables as they are (copies), with the records of a tick not yet applied
+        (``agent -> (integers, rewards)``), for the world's checkpoint."""
+        records = tuple((agent, tuple(learned[agent][0]), tuple(learned[agent][1]))
+                        for agent in sorted(learned))
+        return SharedState(*self._learner.tables(), records)
 
     def restore(self, q_ds: np.ndarray, q_ca: np.ndarray) -> None:
         """Take the tables of a checkpoint (shapes checked by the caller)."""
