@@ -30,7 +30,7 @@ from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
 )
 from nnql_swarm.protocol.jit import plain_python_environment
-from nnql_swarm.protocol.runfiles import CONFIG_FILE, EPISODES_FILE
+from nnql_swarm.protocol.runfiles import CONFIG_FILE, EPISODES_FILE, write_text_atomic
 from nnql_swarm.protocol.transport import (
     HUB_FROM_AGENTS, MODES, EmbeddedLayout, TransportSettings, embedded_topology,
 )
@@ -213,7 +213,7 @@ def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
                          f"or continue it with --resume")
     out.mkdir(parents=True, exist_ok=True)
     if role != "agents":
-        (out / CONFIG_FILE).write_text(config.to_json() + "\n")
+        write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
 
 
 def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:

@@ -24,10 +24,19 @@ def stats_path(out_dir: Path, name: str) -> Path:
     return Path(out_dir) / STATS_DIR / f"{name}.json"
 
 
-def write_json_atomic(path: Path, data: dict) -> None:
-    """Write JSON to a temporary file and rename it over ``path``: readers never see half."""
+def write_text_atomic(path: Path, text: str) -> None:
+    """Write ``text`` to a temporary file, sync it and rename it over ``path``: readers, and a
+    resume after a crash, see the old file or the new, never half of one."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=2, sort_keys=True) + "\n")
+    with open(tmp, "w") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
     os.replace(tmp, path)
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    """Write JSON atomically (:func:`write_text_atomic`)."""
+    write_text_atomic(path, json.dumps(data, indent=2, sort_keys=True) + "\n")

@@ -1,0 +1,106 @@
+"""A resumed run is the run left alone: the cut over every process's files, and real runs
+stopped at seeded moments in every way and resumed (``tests/interruptions.py``)."""
+
+import re
+
+import pytest
+
+from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.supervision.resume import ResumeError, resume_point, rewind
+from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world.metrics import EpisodeWriter, read_episodes
+from nnql_swarm.world.shared_table import SharedState, SharedTable
+from tests.interruptions import STOPS, draw_trials, run_left_alone, run_trials
+from tests.swarm_helpers import run_swarm
+
+N = 4
+
+
+def lay_out_run(out, rows: int, agents: list[list[int]], world: list[int]) -> SwarmConfig:
+    """A run directory with ``rows`` rows, agent ``i``'s checkpoint holding the episodes
+    ``agents[i]`` (written in that order) and the world's holding ``world``."""
+    config = SwarmConfig(n_agents=N, run_id="cut")
+    (out / "config.json").write_text(config.to_json())
+    with EpisodeWriter(out / "episodes.csv", sync=False) as writer:
+        for e in range(rows):
+            writer.write({"episode": e, "steps": 3, "collisions": 0, "missed_intents": 0,
+                          "reward_sum": 1.0, "arrived": N, "shortest_sum": 4,
+                          "agent_steps": 4, "end_tick": 4 * e + 3}, 0.1, 4)
+    for agent, episodes in enumerate(agents):
+        for e in episodes:
+            brain = AgentBrain(agent, config)
+            brain.learner.q_ds[0, 0] = float(e)
+            checkpoint.save(checkpoint.checkpoint_path(out / "checkpoints", agent), brain, e)
+    for e in world:
+        q_ds, q_ca = SharedTable(config).tables()
+        world_checkpoint.save(world_checkpoint.table_path(out), SharedState(q_ds, q_ca), e, config)
+    return config
+
+
+def test_the_cut_is_the_last_episode_every_process_saved_and_later_rows_are_played_again(tmp_path):
+    """A Ctrl-C that reached two agents after their end tick's checkpoint and the others before
+    it: the world wrote the row of episode 45 of its table; agents 0 and 1 stand at 45, 2 and 3
+    at 44. Everyone resumes after 44, each from that version of its file."""
+    lay_out_run(tmp_path, 46, [[44, 45], [44, 45], [43, 44], [43, 44]], [44, 45])
+    config, start = resume_point(tmp_path, list(range(N)), world=True)
+    assert (start.episode, start.tick, start.replayed) == (45, 4 * 44 + 4, 1)
+    rewind(tmp_path, start)
+    assert [int(r["episode"]) for r in read_episodes(tmp_path / "episodes.csv")] == list(range(45))
+    brain = AgentBrain(0, config)
+    assert checkpoint.load(checkpoint.checkpoint_path(tmp_path / "checkpoints", 0), brain,
+                           start.cut) == 44
+    assert brain.learner.q_ds[0, 0] == 44.0
+
+
+def test_a_run_stopped_before_any_process_saved_an_episode_starts_afresh(tmp_path):
+    lay_out_run(tmp_path, 0, [[0], [], [], [0]], [])
+    _, start = resume_point(tmp_path, list(range(N)), world=True)
+    assert (start.episode, start.tick, start.replayed) == (0, 0, 0)
+
+
+@pytest.mark.parametrize("agents, world, refused", [
+    ([[9, 10]] * 3 + [[]], [9, 10], "agent-3.ckpt: missing (the checkpoint of episode 10)"),
+    ([[9, 10]] * 4, [], "world.ckpt: missing"),
+    ([[9, 10]] * 3 + [[7, 8]], [9, 10], "agent-0.ckpt: holds episodes [9, 10], not episode 8"),
+])
+def test_files_that_cannot_reach_one_cut_are_refused_naming_the_file(tmp_path, agents, world,
+                                                                     refused):
+    lay_out_run(tmp_path, 11, agents, world)
+    with pytest.raises(ResumeError, match=re.escape(refused)):
+        resume_point(tmp_path, list(range(N)), world=True)
+
+
+def test_resume_with_options_other_than_the_runs_says_so_in_one_line(tmp_path):
+    out = tmp_path / "run"
+    done = run_swarm(out, "--agents", "3", "--episodes", "2", "--max-steps", "10",
+                     "--in-process", "--no-record")
+    assert done.returncode == 0, done.stderr
+    other = run_swarm(out, "--resume", "--episodes", "5", "--seed", "2", timeout=60)
+    assert other.returncode == 2
+    [line] = other.stderr.strip().splitlines()
+    assert "config.json" in line and "episodes 5 (the run's: 2)" in line and \
+        "seed 2 (the run's: 0)" in line
+    same = run_swarm(out, "--resume", "--episodes", "2", "--agents", "3", timeout=60)
+    assert same.returncode == 0 and "already complete" in same.stderr
+
+
+def test_the_moments_are_spread_over_the_run_and_every_way_of_stopping_is_drawn():
+    trials = draw_trials(7, 10, 20.0)
+    assert [int(t.at_s // 2) for t in trials] == list(range(10))
+    assert sorted(t.stop for t in trials[:5]) == sorted(STOPS)
+    assert draw_trials(7, 10, 20.0) == trials
+
+
+@pytest.mark.parametrize("preset", ["shield-nnql", "best-nnql"])
+def test_a_run_stopped_in_every_way_and_resumed_is_the_run_left_alone(tmp_path, preset):
+    """Five seeded moments over a short run, each stopped another way (``STOPS``) and resumed:
+    the same rows and the same Q-tables, generators and shared table as the run left alone."""
+    options = ["--preset", preset, "--episodes", "20", "--no-record"]
+    expected = tmp_path / "left-alone"
+    duration = run_left_alone(expected, [*options, "--run-id", "left-alone", "--no-progress"])
+    lines: list[str] = []
+    outcomes = run_trials(tmp_path, options, draw_trials(11, 5, duration), expected, lines.append)
+    assert all(o.difference is None for o in outcomes), "\n".join(lines)
+    assert any(o.resumed_at for o in outcomes), "some run was stopped after an episode"
