@@ -235,6 +235,9 @@ def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
                 f"again (not every process had saved them)" if start.replayed else ""
         print(f"resuming {config.run_id} at episode {start.episode} (tick {start.tick}){again}",
               file=sys.stderr)
+    for lag in start.lagging:
+        print(f"warning: {lag} (its process missed episode ends): every process goes on from "
+              f"its newest checkpoint, and the run is not the one left alone", file=sys.stderr)
     return config, start, args.out
 
 
@@ -344,7 +347,8 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True,
                            make_args=lambda restarted, i=i: (
                                i, config, agent_transport(i), out, restarted or resumes,
-                               recording.plan, hub, None if restarted else start.cut))
+                               recording.plan, hub,
+                               None if restarted else start.checkpoint_episode))
     code = supervisor.run(leader=world)
     recording.finish()
     if code == EXIT_INTERRUPTED:

@@ -11,7 +11,8 @@
   agent announces only ticks it was sent an observation for.
 - Every episode is in the metrics exactly once, in order, and the run's ends are in order.
 - An agent restarted after a crash holds exactly its last checkpoint's tables, and that
-  checkpoint holds every episode whose end the world heard from it.
+  checkpoint holds every episode whose end the world heard from it; after everyone was killed,
+  every agent holds its tables of the run's cut.
 - The run ends: the world completes, and every agent still running stops.
 """
 
@@ -99,6 +100,10 @@ class Checker:
         for agent in range(self.n):
             if agent not in missed:
                 self._ends_heard[agent] = max(self._ends_heard[agent], episode)
+
+    def rewound(self, cut: int) -> None:
+        """The run was resumed after episode ``cut``: the world hears every end again."""
+        self._ends_heard = [min(heard, cut) for heard in self._ends_heard]
 
     def restarted(self, agent: int, resumed: dict | None, saved: tuple[int, str] | None) -> None:
         """Agent ``agent`` came back as ``resumed`` (episode and tables, or None for a fresh

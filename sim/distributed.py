@@ -11,7 +11,10 @@ agents a schedule may crash; of all with ``checkpoint_all``), restarts a crashed
 checkpoint through ``agent.restore`` as an agent process does, and a crashed world as
 ``--resume`` does, after the last complete row. The launcher's rule holds: once the world has
 said the run is over, no agent is restarted (the launcher stops whatever still runs when the
-world exits).
+world exits). Where a schedule kills every process at once, every file a run writes goes to
+disk (``config.json``, ``episodes.csv``, every checkpoint, the world's shared table) and the run
+is continued as ``launch/swarm.py --resume`` continues it, through the same functions
+(``supervision.resume``): from the cut of its files, rows past it dropped.
 """
 
 import hashlib
@@ -29,10 +32,12 @@ from nnql_swarm.protocol.effects import (
     SendObservations,
     Stopped, TickClosed, WriteRow,
 )
-from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, EPISODES_FILE
+from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.sim.checks import Checker
 from nnql_swarm.sim.network import Network, Process
 from nnql_swarm.sim.schedule import WINDOWS, Fault, Schedule, schedule_rng
+from nnql_swarm.supervision.resume import resume_point, rewind, shared_table
+from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.protocol import WorldProtocol
@@ -99,14 +104,23 @@ class SimSwarm:
         self.final_brains: list[AgentBrain | None] = [None] * n
         self.era = -1
         self.rows: list[dict] = []
+        self.resumable = schedule.kills_all  # every file written, for --resume
+        checkpoint_all = checkpoint_all or self.resumable
         self.checkpointed = frozenset(range(n)) if checkpoint_all else schedule.crashing_agents
         self.saving = set(self.checkpointed)  # whose checkpoints someone may still read
         self.keep_all = checkpoint_all
-        if self.checkpointed and disk is None:
+        if (self.checkpointed or self.resumable) and disk is None:
             raise ValueError("a schedule that checkpoints needs a disk")
+        self.disk = None if disk is None else Path(disk)
         self.checkpoint_dir = None if disk is None else Path(disk) / CHECKPOINT_DIR
-        self.writer = EpisodeWriter(Path(disk) / EPISODES_FILE) if write_metrics else None
+        self.write_metrics = write_metrics or self.resumable
+        if self.resumable:
+            (self.disk / CONFIG_FILE).write_text(c.to_json() + "\n")
+        self.writer = EpisodeWriter(self.disk / EPISODES_FILE, sync=False) \
+            if self.write_metrics else None
         self.saved: list[tuple[int, str] | None] = [None] * n
+        self.saved_at: list[dict[int, str]] = [{} for _ in range(n)]  # episode -> tables
+        self.generation = 0  # how often everyone was killed: restarts of earlier ones lapse
         self.received: dict[int, Query] = {}  # a query as its target numbered it -> the ask
         self.next_query = 0
         self.checker = Checker(c)
@@ -156,12 +170,13 @@ class SimSwarm:
 
     # The world's process.
 
-    def _start_world(self, first_episode: int, first_tick: int) -> None:
+    def _start_world(self, first_episode: int, first_tick: int, table=None) -> None:
         w, net = self.world, self.net
         w.incarnation += 1
         w.alive, w.stalled_until, w.waiting, w.timer_at = True, 0.0, [], None
         self.era += 1
-        self.world_protocol = WorldProtocol(self.config, net.now, first_episode, first_tick)
+        self.world_protocol = WorldProtocol(self.config, net.now, first_episode, first_tick,
+                                            table=table)
         for i, a in enumerate(self.agents):
             if a.alive:
                 net.send_reliable(w, a, self._world_token_in, i, True)
@@ -209,6 +224,9 @@ class SimSwarm:
                 if report.episode_row is not None:
                     self.checker.end_heard(report.episode, report.missed)
             elif kind is WriteRow:
+                if self.resumable and effect.table is not None:
+                    world_checkpoint.save(world_checkpoint.table_path(self.disk), effect.table,
+                                          effect.row["episode"], self.config)
                 self.rows.append({f: effect.row[f] for f in EPISODE_FIELDS})
                 if self.writer is not None:
                     self.writer.write(effect.row, effect.duration_s, effect.ticks,
@@ -271,7 +289,9 @@ class SimSwarm:
 
     # The agents' processes.
 
-    def _start_agent(self, i: int, resume: bool) -> None:
+    def _start_agent(self, i: int, resume: bool, episode: int | None = None) -> None:
+        """Start agent ``i``'s process: afresh, or (``resume``) from its checkpoint's newest
+        version, or that of ``episode`` (a resumed run's cut)."""
         if self.world_done or (resume and self.run_over):
             return
         a, net, c = self.agents[i], self.net, self.config
@@ -279,11 +299,12 @@ class SimSwarm:
         a.alive, a.stalled_until, a.waiting, a.timer_at = True, 0.0, [], None
         if i in self.checkpointed:
             brain, resumed = start_brain(i, c, checkpoint.checkpoint_path(self.checkpoint_dir, i),
-                                         resume)
+                                         resume, episode=episode)
         else:
             brain, resumed = AgentBrain(i, c), None
         if resume:
-            self.checker.restarted(i, resumed, self.saved[i])
+            saved = self.saved[i] if episode is None else (episode, self.saved_at[i][episode])
+            self.checker.restarted(i, resumed, saved)
         self.protocols[i] = AgentProtocol(i, c, brain, net.now)
         net.send_reliable(a, self.world, self._tokens_to_world, [i], True)
         present = []
@@ -349,6 +370,7 @@ class SimSwarm:
                     checkpoint.save(checkpoint.checkpoint_path(self.checkpoint_dir, i), brain,
                                     effect.episode)
                     self.saved[i] = (effect.episode, checkpoint.fingerprint(brain))
+                    self.saved_at[i][effect.episode] = self.saved[i][1]
             elif kind is Stopped:
                 self._agent_exit(i, by_world=effect.by_world)
                 return
@@ -445,11 +467,17 @@ class SimSwarm:
                 return
             resumed = self._world_timer if process is self.world else self._agent_resumed
             net.stall(process, fault.duration_s, resumed)
+        elif kind == "kill-all":
+            if self.world_done:
+                return
+            self._kill_all()
+            net.at(net.now + fault.duration_s, self._resume_all)
         elif fault.target == "world":
             if not self.world.alive or self.world_done:
                 return
             self._crash_world()
-            net.at(net.now + fault.duration_s, self._restart_world)
+            net.at(net.now + fault.duration_s, self._in_generation, self.generation,
+                   self._restart_world)
         else:
             i = int(fault.target.split("-")[1])
             if not self.agents[i].alive:
@@ -457,8 +485,45 @@ class SimSwarm:
             self._crash_agent(i)
             if not self.keep_all:  # a schedule crashes an agent once: nobody reads later ones
                 self.saving.discard(i)
-            net.at(net.now + fault.duration_s, self._start_agent, i, True)
+            net.at(net.now + fault.duration_s, self._in_generation, self.generation,
+                   self._start_agent, i, True)
         self.fired.append(kind)
+
+    def _in_generation(self, generation: int, restart, *args) -> None:
+        """A supervisor's restart, unless everyone was killed since (its launcher with them)."""
+        if generation == self.generation:
+            restart(*args)
+
+    def _kill_all(self) -> None:
+        """Every process dies at once, the launcher too: nothing restarts them."""
+        self.generation += 1
+        if self.world.alive:
+            self._crash_world()
+        for i, a in enumerate(self.agents):
+            if a.alive:
+                self._crash_agent(i)
+        self.writer.close()
+
+    def _resume_all(self) -> None:
+        """``launch/swarm.py --resume``: from the cut of the run's files, everyone again."""
+        everyone = list(range(self.n))
+        _, start = resume_point(self.disk, everyone, world=True)
+        rewind(self.disk, start)
+        del self.rows[start.episode:]
+        self.checker.rewound(start.cut)  # a lagging agent goes on from its newest
+        self.writer = EpisodeWriter(self.disk / EPISODES_FILE, sync=False)
+        self.run_over = False
+        if start.episode >= self.config.episodes:  # every row was written: nothing to play
+            for i in everyone:  # what the agents end with is what they checkpointed last
+                self.final_brains[i] = start_brain(
+                    i, self.config, checkpoint.checkpoint_path(self.checkpoint_dir, i), True)[0]
+            self.completed = self.world_done = True
+            self.net.halted = True
+            return
+        self._start_world(start.episode, start.tick, shared_table(self.disk, self.config, start))
+        for i in everyone:
+            self.net.at(self.net.now + START_SPREAD_S * self.net.rng.random(), self._start_agent,
+                        i, start.cut >= 0 or not start.exact, start.checkpoint_episode)
 
     def _heal(self, group: frozenset) -> None:
         if self.net.cut is group:
@@ -470,9 +535,10 @@ class SimSwarm:
 
 def run_schedule(schedule: Schedule, scratch: Path | None = None,
                  fingerprints: bool = False) -> Outcome:
-    """Run one schedule; ``scratch``: a directory under which the checkpoints of the agents it
-    crashes are kept while it runs (a fresh directory of their own, removed after)."""
-    if not schedule.crashing_agents:
+    """Run one schedule; ``scratch``: a directory under which the files of a run that crashes
+    an agent or kills everyone are kept while it runs (a fresh directory of their own, removed
+    after)."""
+    if not (schedule.crashing_agents or schedule.kills_all):
         return SimSwarm(schedule).run(fingerprints)
     with tempfile.TemporaryDirectory(prefix="nnql-sim-", dir=scratch) as disk:
         return SimSwarm(schedule, Path(disk)).run(fingerprints)

@@ -8,11 +8,16 @@ opens a given tick, some virtual time into it (at most one fault of each kind):
 - ``partition``: for a while no message crosses between ``group`` and the other processes;
 - ``stall``: ``target`` (the world or an agent) stops answering for a while, as under SIGSTOP;
 - ``crash``: ``target`` dies (kill -9) and its supervisor restarts it ``duration`` later: an
-  agent from its last checkpoint, the world with ``--resume`` under the running agents.
+  agent from its last checkpoint, the world with ``--resume`` under the running agents;
+- ``kill-all``: every process dies at once (kill -9 of the process group), and ``duration``
+  later the run is continued with ``--resume``, from the cut its files give
+  (``supervision.resume``). Drawn from a stream of its own (one schedule in ten), so the
+  schedules drawn before it existed are unchanged.
 
 Latency, duplicates and reordering alone cannot make anyone miss a deadline (they are far
-shorter than the time-outs): a schedule with no other fault is *benign*, and its run must equal
-the in-process run of its config bit for bit.
+shorter than the time-outs), nor can killing everyone at once, after which the run resumes as it
+was: a schedule with no other fault is *benign*, and its run must equal the in-process run of its
+config bit for bit.
 """
 
 import random
@@ -22,7 +27,9 @@ from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.protocol.seeding import SIM_STREAM, stream_rng
 
 KINDS = ("drop", "duplicate", "reorder", "partition", "stall", "crash")
-BENIGN = frozenset({"duplicate", "reorder"})
+BENIGN = frozenset({"duplicate", "reorder", "kill-all"})
+KILL_ALL_SHARE = 0.1
+"""The share of schedules that kill every process at once (and resume)."""
 WINDOWS = ("drop", "duplicate", "reorder")
 """Faults that change the network's behaviour for a while."""
 
@@ -56,7 +63,7 @@ class Fault:
     def __str__(self) -> str:
         what = {"drop": f"p={self.p:.2f}", "duplicate": f"p={self.p:.2f}",
                 "reorder": f"p={self.p:.2f}", "partition": "{" + ",".join(sorted(self.group)) + "}",
-                "stall": self.target, "crash": self.target}[self.kind]
+                "stall": self.target, "crash": self.target, "kill-all": "everyone"}[self.kind]
         return (f"{self.kind} {what} at tick {self.tick} +{self.offset_s * 1000:.2f} ms "
                 f"for {self.duration_s * 1000:.1f} ms")
 
@@ -75,6 +82,10 @@ class Schedule:
         return all(f.kind in BENIGN for f in self.faults)
 
     @property
+    def kills_all(self) -> bool:
+        return any(f.kind == "kill-all" for f in self.faults)
+
+    @property
     def crashing_agents(self) -> frozenset[int]:
         return frozenset(int(f.target.split("-")[1]) for f in self.faults
                          if f.kind == "crash" and f.target.startswith("agent-"))
@@ -89,7 +100,8 @@ class Schedule:
 
 
 def schedule_rng(seed: int, index: int) -> random.Random:
-    """A fast generator of one of a schedule's streams (0: the schedule, 1: the network),
+    """A fast generator of one of a schedule's streams (0: the schedule, 1: the network, 2: the
+    kill-all fault),
     seeded from the schedule's seed through ``protocol.seeding``."""
     return random.Random(int(stream_rng(seed, SIM_STREAM, index).integers(2**63)))
 
@@ -128,4 +140,8 @@ def draw_schedule(seed: int, agents: int = 8) -> Schedule:
             else:
                 target = "world" if rng.random() < 0.25 else f"agent-{rng.randrange(agents)}"
                 faults.append(Fault(kind, tick, offset, rng.uniform(0.05, 3.0), target=target))
+    later = schedule_rng(seed, 2)
+    if later.random() < KILL_ALL_SHARE:
+        faults.append(Fault("kill-all", later.randrange(ticks), later.uniform(0.0, 0.004),
+                            later.uniform(0.05, 3.0)))
     return Schedule(seed, config, latency, tuple(faults))

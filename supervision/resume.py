@@ -6,10 +6,16 @@ stopped the run, whenever, those files may stand at different episodes (a Ctrl-C
 agents before they checkpoint an end tick and others after). Each checkpoint file keeps its
 newest two versions (``protocol.slotfile``), so a run has one consistent *cut*: the last episode
 with a row in ``episodes.csv`` (a half-written last line dropped) and a checkpoint of it in every
-file of the processes this launcher starts. The resumed run starts every process from the cut's
-checkpoints; rows past the cut are dropped and played again, to the same values. A file that
-cannot reach the cut (missing, corrupt, foreign, or two episodes off) is refused with one line
-naming it. Nothing is read twice: the checks load every checkpoint the processes will load.
+file of the processes this launcher starts (a process with no file yet stands before episode
+0: the run starts afresh). The resumed run starts every process from the cut's checkpoints; rows
+past the cut are dropped and played again, to the same values.
+
+A process that missed its end ticks (an agent partitioned, stalled or dead while the world went
+on without it) may stand two episodes or more behind the others, past what their files keep:
+then there is no cut, the run already differs from one left alone, and it continues as it
+would have gone on, the world after its last row and every agent from its newest checkpoint,
+with a warning naming the files that lag (:attr:`ResumePoint.lagging`). A corrupt or foreign
+file is refused with one line naming it. The checks load every version the processes may load.
 """
 
 from dataclasses import dataclass
@@ -30,17 +36,27 @@ class ResumeError(ValueError):
 
 @dataclass(frozen=True)
 class ResumePoint:
-    """The first episode and tick of the continued run, and how many written rows it plays
-    again (rows past the cut)."""
+    """The first episode and tick of the continued run, how many written rows it plays again
+    (rows past the cut), and the files that lag behind any cut (none: the run resumes exactly)."""
 
     episode: int
     tick: int
     replayed: int = 0
+    lagging: tuple[str, ...] = ()
 
     @property
     def cut(self) -> int:
         """The episode every process resumes after (-1: none, the run starts afresh)."""
         return self.episode - 1
+
+    @property
+    def exact(self) -> bool:
+        return not self.lagging
+
+    @property
+    def checkpoint_episode(self) -> int | None:
+        """The version of its checkpoint every agent loads (None: its newest)."""
+        return self.cut if self.exact else None
 
 
 def read_config(out: Path) -> SwarmConfig:
@@ -95,27 +111,22 @@ def _world_versions(out: Path) -> tuple[Path, list[int]]:
 def resume_point(out: Path, agents: list[int], world: bool) -> tuple[SwarmConfig, ResumePoint]:
     """The run's config and its cut, over the rows (where this launcher runs the ``world``),
     the shared table's checkpoint (likewise, where the agents share one) and the checkpoints of
-    ``agents``; raises ResumeError naming the file that stands in the way. Reads only."""
+    ``agents``; raises ResumeError naming a file that cannot be used. Reads only."""
     config = read_config(out)
     rows = _rows(out) if world else []
     files = [_agent_versions(out, config, agent) for agent in agents]
     if world and config.shared:
         files.append(_world_versions(out))
-    if world:
-        cut = len(rows) - 1
-    else:  # agents alone: as far as all of theirs reach
-        cut = min((max(episodes, default=-1) for _, episodes in files), default=-1)
-    if cut >= 0:
-        for path, episodes in files:
-            if not episodes:
-                raise ResumeError(f"{path}: missing (the checkpoint of episode {cut})")
-        cut = min([cut] + [max(episodes) for _, episodes in files])
-        for path, episodes in files:
-            if cut not in episodes:
-                raise ResumeError(f"{path}: holds episodes {sorted(episodes)}, not episode {cut}, "
-                                  f"the last one every process finished")
+    newest = [max(episodes, default=-1) for _, episodes in files]
+    last_row = len(rows) - 1 if world else min(newest, default=-1)
+    cut = min([last_row, *newest])
+    lagging = tuple(f"{path} holds episodes {sorted(episodes)}, not {cut}"
+                    for path, episodes in files if cut >= 0 and cut not in episodes)
+    if lagging:  # no cut: everyone goes on from where it stands
+        cut = last_row
     tick = int(rows[cut]["end_tick"]) + 1 if world and cut >= 0 else 0
-    return config, ResumePoint(episode=cut + 1, tick=tick, replayed=len(rows) - 1 - cut)
+    return config, ResumePoint(episode=cut + 1, tick=tick, replayed=last_row - cut,
+                               lagging=lagging)
 
 
 def rewind(out: Path, start: ResumePoint) -> None:
