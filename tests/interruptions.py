@@ -12,8 +12,9 @@ the world's shared table with its pending records). The ways a run is stopped:
     kill-launcher  SIGKILL to the launcher (its children stop as on SIGTERM)
     kill-world     SIGKILL to the world process (the launcher ends the run)
 
-The moments are spread over the uninterrupted run's duration: the duration is cut into equal
-spans and one moment drawn in each, the first span starting with the processes' start-up.
+The moments are spread over the uninterrupted run, from its launch to its last row: that time is
+cut into equal spans and one moment drawn in each, the first span starting with the processes'
+start-up.
 
     python -m tests.interruptions --moments 12 --seed 1
     python -m tests.interruptions --moments 12 --seed 1 -- --preset best-nnql
@@ -69,13 +70,30 @@ def draw_trials(seed: int, count: int, duration_s: float) -> list[Trial]:
 
 
 def run_left_alone(out: Path, options: list[str]) -> float:
-    """Run the swarm to its end; returns its wall-clock duration."""
+    """Run the swarm to its end; returns how long after its start the last row was written (the
+    span the moments are drawn over: the start-up included, the closing after the last row not)."""
+    log = out.with_name(out.name + ".log")
+    log.parent.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
-    result = subprocess.run(swarm_command(out, *options), capture_output=True, text=True,
-                            timeout=RUN_TIMEOUT_S)
-    if result.returncode != 0:
-        raise RuntimeError(f"the uninterrupted run failed: {result.stderr[-2000:]}")
-    return time.monotonic() - started
+    with open(log, "w") as stderr:
+        swarm = subprocess.Popen(swarm_command(out, *options), stdout=subprocess.DEVNULL,
+                                 stderr=stderr)
+        rows, last_row_at = 0, 0.0
+        while swarm.poll() is None:
+            time.sleep(0.02)
+            now = _rows_written(out)
+            if now > rows:
+                rows, last_row_at = now, time.monotonic() - started
+    if swarm.returncode != 0:
+        raise RuntimeError(f"the uninterrupted run failed: {log.read_text()[-2000:]}")
+    return last_row_at
+
+
+def _rows_written(out: Path) -> int:
+    try:
+        return (out / "episodes.csv").read_bytes().count(b"\n")
+    except FileNotFoundError:
+        return 0
 
 
 def stop_at(out: Path, options: list[str], trial: Trial, run_id: str) -> None:
@@ -186,7 +204,8 @@ def main(argv: list[str] | None = None) -> int:
     work = args.work / f"seed{args.seed}-{os.getpid()}"
     expected = work / "left-alone"
     duration = run_left_alone(expected, [*options, "--run-id", "left-alone", "--no-progress"])
-    print(f"left alone: {duration:.1f} s; {args.moments} interruptions (seed {args.seed})")
+    print(f"left alone: last row {duration:.1f} s after the launch; {args.moments} "
+          f"interruptions (seed {args.seed})")
     trials = draw_trials(args.seed, args.moments, duration)
     outcomes = run_trials(work, options, trials, expected)
     same = sum(o.difference is None for o in outcomes)
