@@ -31,7 +31,9 @@ from nnql_swarm.experiment.swarm import (
     write_runs, write_tables,
 )
 from nnql_swarm.protocol.config import PRESETS
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress
+from nnql_swarm.terminal.cli import (
+    EXIT_INTERRUPTED, OneLineParser, make_directory, program_name, progress,
+)
 from nnql_swarm.recording.session import log_swarm_curves
 
 RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
@@ -106,7 +108,7 @@ def build_parser() -> OneLineParser:
     parser = OneLineParser(
         description="QL vs nnQL, the paper's experiment: one learner among scripted obstacles "
         "that announce their next action. The paper's settings are the defaults. (The swarm "
-        "experiment: experiment.py swarm --help.)",
+        "experiment: %(prog)s swarm --help.)",
     )
     add = parser.add_argument
     add("--seeds", type=bounded(int, 1), default=10, metavar="N",
@@ -164,6 +166,9 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
     held = [name for name in RESULT_FILES if (args.out / name).exists()]
     if held and not args.force:
         parser.error(f"{args.out} already holds results ({', '.join(held)}); pass --force to overwrite")
+    unusable = make_directory(args.out)
+    if unusable:
+        parser.error(unusable)
     if not args.no_plots:
         try:
             from nnql_swarm.experiment.figures import require_matplotlib
@@ -249,7 +254,7 @@ def parse_variants(text: str) -> tuple[str, ...]:
 def build_swarm_parser() -> OneLineParser:
     d = SwarmExperiment()
     parser = OneLineParser(
-        prog=f"{Path(sys.argv[0]).name} swarm",
+        prog=f"{program_name()} swarm",
         description="The swarm experiment: every learning preset (the paper's QL and nnQL, the "
         "best options, the shield, n = 2, DAQL, the oracle) over seeds, on the swarm simulator.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
@@ -304,6 +309,9 @@ def run_swarm(argv: list[str]) -> Path:
     held = [name for name in (*TABLE_FILES, "config.json") if (out / name).exists()]
     if held and not args.force:
         parser.error(f"{out} already holds results ({', '.join(held)}); pass --force to overwrite")
+    unusable = make_directory(out)
+    if unusable:
+        parser.error(unusable)
     if not args.no_plots:
         try:
             from nnql_swarm.experiment.figures import require_matplotlib

@@ -15,12 +15,15 @@ import logging
 from dataclasses import fields, replace
 import multiprocessing as mp
 import os
+import shlex
 import sys
 import time
 from pathlib import Path
 
 from nnql_swarm.operations import zenoh_files
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress as progress_bar
+from nnql_swarm.terminal.cli import (
+    EXIT_INTERRUPTED, OneLineParser, invocation, progress as progress_bar,
+)
 from nnql_swarm.recording.session import RecordingSession, check_viewer_url
 from nnql_swarm.supervision.resume import (
     ResumeError, ResumePoint, check_checkpoints, resume_point, shared_table,
@@ -68,7 +71,8 @@ def parse_ids(text: str) -> list[int]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(description=__doc__.split("\n\n")[0])
+    p = OneLineParser(description="A swarm run: a world process and one process per agent, "
+                      "negotiating over Zenoh (--in-process: the same run in one process).")
     d = SwarmConfig()
     run = p.add_argument_group("the run")
     run.add_argument("--preset", choices=tuple(PRESETS), default=None,
@@ -207,13 +211,28 @@ def check_distributable(config: SwarmConfig) -> None:
 
 
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
-    """Create the run directory; never overwrite a run that is already there."""
-    if role != "agents" and (out / EPISODES_FILE).exists():
-        raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
-                         f"or continue it with --resume")
-    out.mkdir(parents=True, exist_ok=True)
-    if role != "agents":
-        (out / CONFIG_FILE).write_text(config.to_json() + "\n")
+    """Create the run directory; never overwrite a run that is already there, nor write a run
+    into a folder that holds anything else (the agents of another host share the world's run
+    directory, so ``--role agents`` writes into one that exists). An unusable path (a file, or
+    where no folder can be made) is a UsageError."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} is a file, not a folder")
+    if role != "agents" and out.is_dir():
+        if (out / EPISODES_FILE).exists():
+            raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
+                             f"or continue it with --resume --out {out}")
+        held = sorted(entry.name for entry in out.iterdir())
+        if held:
+            raise UsageError(f"--out {out} is a folder that holds other files ({held[0]}"
+                             f"{', ...' if len(held) > 1 else ''}), not a run; choose a new or "
+                             f"empty one")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        if role != "agents":
+            (out / CONFIG_FILE).write_text(config.to_json() + "\n")
+    except OSError as error:
+        raise UsageError(f"cannot make the run directory --out {out}: "
+                         f"{error.strerror or error}") from None
 
 
 def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
@@ -329,11 +348,34 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
     code = supervisor.run(leader=world)
     recording.finish()
     if code == EXIT_INTERRUPTED:
-        print("\ninterrupted: the swarm stopped; continue it with --resume", file=sys.stderr)
+        print(f"\ninterrupted: the swarm stopped; continue it with {resume_command(args, out)}",
+              file=sys.stderr)
     elif world is not None and code != 0:
         print(f"the world ended with {describe_exit(code)}; continue the run with "
-              f"--resume --out {out}", file=sys.stderr)
+              f"{resume_command(args, out)}", file=sys.stderr)
     return code
+
+
+def resume_command(args: argparse.Namespace, out: Path) -> str:
+    """The command line that continues this run: the program as it was called, ``--resume --out``
+    and the options that are not in ``config.json`` (where the processes run and connect)."""
+    words = [*invocation(), "--resume", "--out", str(out)]
+    if args.role != "all":
+        words += ["--role", args.role]
+    if args.agent_ids is not None:
+        words += ["--agent-ids", ",".join(map(str, args.agent_ids))]
+    if args.topology != "auto":
+        words += ["--topology", args.topology]
+    for flag, value in (("--mode", args.mode), ("--zenoh-config", args.zenoh_config),
+                        ("--zenoh-config-dir", args.zenoh_config_dir)):
+        if value is not None:
+            words += [flag, value]
+    for flag, endpoints in (("--listen", args.listen), ("--connect", args.connect)):
+        for endpoint in endpoints:
+            words += [flag, endpoint]
+    if args.no_record:
+        words.append("--no-record")
+    return shlex.join(words)
 
 
 def agent_ids(args: argparse.Namespace, config: SwarmConfig) -> list[int]:
