@@ -22,7 +22,9 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from nnql_swarm.experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch
+from nnql_swarm.experiment.paper import (
+    ALGOS, PaperSettings, RunSpec, paper_run, paper_world, run_batch,
+)
 from nnql_swarm.experiment.report import (
     ResultGrid, summarize, table1_markdown, table1_rows, write_episodes_csv, write_table1_csv,
 )
@@ -31,8 +33,9 @@ from nnql_swarm.experiment.swarm import (
     write_runs, write_tables,
 )
 from nnql_swarm.protocol.config import PRESETS
+from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.terminal.cli import (
-    EXIT_INTERRUPTED, OneLineParser, make_directory, program_name, progress,
+    EXIT_INTERRUPTED, OneLineParser, make_directory, prepare_simulator, program_name, progress,
 )
 from nnql_swarm.recording.session import log_swarm_curves
 
@@ -200,6 +203,7 @@ def run(args: argparse.Namespace) -> Path:
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
     specs = [RunSpec(algo, k, seed) for algo in args.algos for k in args.ks for seed in seeds]
     args.out.mkdir(parents=True, exist_ok=True)
+    prepare_simulator(paper_world(settings), paper_run(specs[0], settings))
     started = time.monotonic()
     label = f"{len(specs)} runs x {settings.episodes} episodes"
     with progress(len(specs) * settings.episodes, "run-episode", label) as bar:
@@ -320,6 +324,8 @@ def run_swarm(argv: list[str]) -> Path:
         except RuntimeError as error:
             parser.error(str(error))
     runs = len(experiment.variants) * experiment.seeds
+    first = experiment.config(experiment.variants[0], experiment.seed_base)
+    prepare_simulator(swarm_world(first), first)
     started = time.monotonic()
     with progress(experiment.episodes, "episode", f"{runs} runs") as bar:
         results = run_experiment(experiment, args.workers, on_episode=lambda _e: bar.update())

@@ -22,7 +22,7 @@ from pathlib import Path
 
 from nnql_swarm.operations import zenoh_files
 from nnql_swarm.terminal.cli import (
-    EXIT_INTERRUPTED, OneLineParser, invocation, progress as progress_bar,
+    EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator, progress as progress_bar,
 )
 from nnql_swarm.recording.session import RecordingSession, check_viewer_url
 from nnql_swarm.supervision.resume import (
@@ -299,11 +299,13 @@ def transports(args: argparse.Namespace, config: SwarmConfig):
 def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> int:
     """``record``: a RecordingSession, or True / False for run.rrd or nothing."""
     from nnql_swarm.sim.inprocess import run_in_process as run
+    from nnql_swarm.sim.runs import swarm_world
     from nnql_swarm.recording.session import InProcessRecorder, RecordingSession
 
     session = record if isinstance(record, RecordingSession) else \
         RecordingSession.files_only(record, config, out)
     viz = InProcessRecorder(session.plan, config, out)
+    prepare_simulator(swarm_world(config), config)
     bar = progress_bar(config.episodes, "episode") if progress else None
     collisions = 0
 

@@ -6,6 +6,7 @@ import os
 import shutil
 import sys
 import threading
+import time
 from importlib import metadata
 
 from tqdm import tqdm
@@ -110,3 +111,24 @@ def make_directory(path) -> str | None:
     except OSError as error:
         return f"cannot make the folder --out {path}: {error.strerror or error}"
     return None
+
+
+COMPILING = "compiling the simulator (first run, about half a minute)..."
+
+
+def prepare_simulator(world, run) -> None:
+    """Compile or load the simulator before a progress bar starts (``sim.runs.warm_up``), so that
+    the bar's first item, and its estimate of the time left, do not include it; says so when it
+    compiles (its kernel is not in the on-disk cache, ``protocol.jit.cached``)."""
+    from nnql_swarm.protocol.jit import cache_directory
+    from nnql_swarm.sim.runs import compiled_simulator, warm_up
+
+    cold = not compiled_simulator()
+    if cold:
+        print(COMPILING, file=sys.stderr, flush=True)
+    started = time.monotonic()
+    warm_up(world, run)
+    if cold:
+        print(f"compiled in {time.monotonic() - started:.0f} s; later runs load it from "
+              f"{os.environ.get('NUMBA_CACHE_DIR', cache_directory())}", file=sys.stderr,
+              flush=True)

@@ -1,6 +1,8 @@
 """What a person sees at the command line: one line and exit code 2 for an unusable ``--out``,
-commands that name themselves as they were called, and the command that continues a run."""
+commands that name themselves as they were called, the command that continues a run, and a word
+before the simulator compiles."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -8,6 +10,10 @@ from pathlib import Path
 import pytest
 
 from nnql_swarm.launch.swarm_cli import build_parser, resume_command
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.sim import runs
+from nnql_swarm.sim.runs import compiled_simulator, swarm_world
+from nnql_swarm.terminal.cli import COMPILING, prepare_simulator
 from tests.swarm_helpers import ROOT
 
 BIN = Path(sys.executable).parent
@@ -94,3 +100,26 @@ def test_the_resume_command_carries_the_options_config_json_does_not():
     assert resume_command(remote, Path("runs/r")).endswith(
         " --resume --out runs/r --role agents --agent-ids 0,1,2,5 "
         "--connect tcp/192.0.2.1:7447 --no-record")
+
+
+def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
+    probe = ("from nnql_swarm.sim.runs import compiled_simulator; "
+             "print(compiled_simulator())")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "empty-cache")}
+    cold = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
+                          timeout=120)
+    assert cold.stdout.strip() == "False", cold.stderr
+    plain = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                           env={**env, "NNQL_KERNEL": "python"}, timeout=120)
+    assert plain.stdout.strip() == "True", plain.stderr  # nothing to compile
+    config = SwarmConfig(n_agents=2, width=5, height=5, episodes=1, max_steps=10)
+    prepare_simulator(swarm_world(config), config)  # compiles here if this cache is cold
+    assert compiled_simulator()
+
+
+def test_compiling_is_announced_before_the_progress_bar(monkeypatch, capsys):
+    monkeypatch.setattr(runs, "compiled_simulator", lambda: False)
+    config = SwarmConfig(n_agents=2, width=5, height=5, episodes=1, max_steps=10)
+    prepare_simulator(swarm_world(config), config)
+    told = capsys.readouterr().err.splitlines()
+    assert told[0] == COMPILING and told[1].startswith("compiled in ")
