@@ -302,10 +302,10 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> in
     from nnql_swarm.sim.runs import swarm_world
     from nnql_swarm.recording.session import InProcessRecorder, RecordingSession
 
+    prepare_simulator(swarm_world(config), config)  # before any recording stream opens
     session = record if isinstance(record, RecordingSession) else \
         RecordingSession.files_only(record, config, out)
     viz = InProcessRecorder(session.plan, config, out)
-    prepare_simulator(swarm_world(config), config)
     bar = progress_bar(config.episodes, "episode") if progress else None
     collisions = 0
 
