@@ -24,7 +24,7 @@ from nnql_swarm.operations import zenoh_files
 from nnql_swarm.terminal.cli import (
     EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator, progress as progress_bar,
 )
-from nnql_swarm.recording.session import RecordingSession, check_viewer_url
+from nnql_swarm.recording.session import PARTS_DIR, RecordingSession, check_viewer_url
 from nnql_swarm.supervision.resume import (
     ResumeError, ResumePoint, check_checkpoints, resume_point, shared_table,
 )
@@ -33,7 +33,9 @@ from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
 )
 from nnql_swarm.protocol.jit import plain_python_environment
-from nnql_swarm.protocol.runfiles import CONFIG_FILE, EPISODES_FILE
+from nnql_swarm.protocol.runfiles import (
+    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, STATS_DIR,
+)
 from nnql_swarm.protocol.transport import (
     HUB_FROM_AGENTS, MODES, EmbeddedLayout, TransportSettings, embedded_topology,
 )
@@ -210,18 +212,23 @@ def check_distributable(config: SwarmConfig) -> None:
         raise UsageError("--lookahead > 1 is played by the simulator only (add --in-process)")
 
 
+RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR)
+"""What a run directory holds (``protocol.runfiles``); a folder with anything else is not a run."""
+
+
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
     """Create the run directory; never overwrite a run that is already there, nor write a run
-    into a folder that holds anything else (the agents of another host share the world's run
-    directory, so ``--role agents`` writes into one that exists). An unusable path (a file, or
-    where no folder can be made) is a UsageError."""
+    into a folder that holds anything but a run's files (those of a run that never finished an
+    episode, or of the agents started first on this host, may be there). An unusable path (a
+    file, or where no folder can be made) is a UsageError."""
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out} is a file, not a folder")
     if role != "agents" and out.is_dir():
         if (out / EPISODES_FILE).exists():
             raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
                              f"or continue it with --resume --out {out}")
-        held = sorted(entry.name for entry in out.iterdir())
+        held = sorted(entry.name for entry in out.iterdir()
+                      if entry.name not in RUN_ENTRIES and not entry.name.endswith(".tmp"))
         if held:
             raise UsageError(f"--out {out} is a folder that holds other files ({held[0]}"
                              f"{', ...' if len(held) > 1 else ''}), not a run; choose a new or "

@@ -54,6 +54,18 @@ def test_an_unusable_out_gives_one_line_and_exit_2(tmp_path, kind):
         assert sorted(p.name for p in out.iterdir()) == before  # nothing written into it
 
 
+def test_a_folder_with_a_run_that_finished_no_episode_is_taken(tmp_path):
+    out = tmp_path / "started"
+    (out / "rerun-parts").mkdir(parents=True)  # e.g. the agents of this host, started first
+    (out / "config.json").write_text("{}\n")
+    done = subprocess.run([sys.executable, str(SWARM), "--out", str(out), "--agents", "2",
+                           "--episodes", "1", "--max-steps", "5", "--grid", "5x5",
+                           "--no-progress", "--no-record"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert (out / "episodes.csv").exists()
+
+
 @pytest.mark.parametrize("command", [[], ["swarm"]])
 @pytest.mark.parametrize("kind", ["/proc/x", "/dev/null/x", "file"])
 def test_the_experiments_refuse_an_unusable_out_before_simulating(tmp_path, command, kind):
