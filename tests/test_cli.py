@@ -3,6 +3,7 @@ commands that name themselves as they were called, the command that continues a 
 before the simulator compiles."""
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -135,3 +136,27 @@ def test_compiling_is_announced_before_the_progress_bar(monkeypatch, capsys):
     prepare_simulator(swarm_world(config), config)
     told = capsys.readouterr().err.splitlines()
     assert told[0] == COMPILING and told[1].startswith("compiled in ")
+
+
+def test_every_simulator_command_compiles_before_its_progress_bar_starts(monkeypatch, tmp_path):
+    from nnql_swarm.launch import experiment, swarm_cli
+
+    order = []
+    for module, bar in ((experiment, "progress"), (swarm_cli, "progress_bar")):
+        prepare, progress = module.prepare_simulator, getattr(module, bar)
+        monkeypatch.setattr(module, "prepare_simulator",
+                            lambda *a, prepare=prepare: (order.append("compile"), prepare(*a))[1])
+        monkeypatch.setattr(module, bar, lambda *a, progress=progress, **k: (
+            order.append("bar"), progress(*a, **k))[1])
+    terminate = signal.getsignal(signal.SIGTERM)  # the experiment's main sets its own
+    try:
+        assert experiment.main(["--episodes", "2", "--seeds", "1", "--ks", "2", "--no-plots",
+                                "--out", str(tmp_path / "paper")]) == 0
+        assert experiment.main(["swarm", "--episodes", "5", "--seeds", "1", "--agents", "2",
+                                "--grid", "5x5", "--variants", "ql", "--no-plots",
+                                "--out", str(tmp_path / "swarm")]) == 0
+    finally:
+        signal.signal(signal.SIGTERM, terminate)
+    assert swarm_cli.main(["--in-process", "--agents", "2", "--episodes", "2", "--grid", "5x5",
+                           "--no-record", "--out", str(tmp_path / "run")]) == 0
+    assert order == ["compile", "bar"] * 3
