@@ -169,9 +169,6 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
     held = [name for name in RESULT_FILES if (args.out / name).exists()]
     if held and not args.force:
         parser.error(f"{args.out} already holds results ({', '.join(held)}); pass --force to overwrite")
-    unusable = make_directory(args.out)
-    if unusable:
-        parser.error(unusable)
     if not args.no_plots:
         try:
             from nnql_swarm.experiment.figures import require_matplotlib
@@ -179,6 +176,9 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
             require_matplotlib()
         except RuntimeError as error:
             parser.error(str(error))
+    unusable = make_directory(args.out)
+    if unusable:
+        parser.error(unusable)
     if args.workers is None:
         args.workers = os.cpu_count() or 1
     return args
@@ -313,9 +313,6 @@ def run_swarm(argv: list[str]) -> Path:
     held = [name for name in (*TABLE_FILES, "config.json") if (out / name).exists()]
     if held and not args.force:
         parser.error(f"{out} already holds results ({', '.join(held)}); pass --force to overwrite")
-    unusable = make_directory(out)
-    if unusable:
-        parser.error(unusable)
     if not args.no_plots:
         try:
             from nnql_swarm.experiment.figures import require_matplotlib
@@ -323,6 +320,9 @@ def run_swarm(argv: list[str]) -> Path:
             require_matplotlib()
         except RuntimeError as error:
             parser.error(str(error))
+    unusable = make_directory(out)
+    if unusable:
+        parser.error(unusable)
     runs = len(experiment.variants) * experiment.seeds
     first = experiment.config(experiment.variants[0], experiment.seed_base)
     prepare_simulator(swarm_world(first), first)

@@ -1,5 +1,6 @@
 """What every command-line entry point shares: one-line usage errors with exit code 2, ``--version``,
-and the progress bar of long work."""
+the command's name as it was called, the output folder made or refused in one line, the progress
+bar of long work, and a word while the simulator compiles before that bar starts."""
 
 import argparse
 import os
