@@ -12,16 +12,19 @@ until Ctrl-C. A run directory stands for its ``run.rrd``; a run cut short before
 merged, for its ``rerun-parts/*.rrd``; an experiment's directory, for ``swarm_curves.rrd``.
 """
 
+import os
+import re
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 from urllib.parse import quote
 
 RRD_MAGIC = b"RRF2"
 """The first bytes of a Rerun recording file."""
-EXIT_USAGE = 2
 
 
 class ViewError(Exception):
@@ -53,14 +56,13 @@ def recordings(path: Path) -> list[Path]:
 
 def has_display() -> bool:
     """Whether a native window can open here: not Linux, or a display server is named."""
-    import os
-
     if not sys.platform.startswith("linux"):
         return True
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
 def web_urls(host: str, web_port: int, grpc_port: int) -> str:
+    """The web viewer's URL at ``host``, pointed at the recording's gRPC server there."""
     from nnql_swarm.recording.session import grpc_url
 
     return f"http://{host}:{web_port}/?url={quote(grpc_url(grpc_port, host), safe='')}"
@@ -68,9 +70,7 @@ def web_urls(host: str, web_port: int, grpc_port: int) -> str:
 
 def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> int:
     """Serve ``files`` to the web viewer until Ctrl-C (or SIGTERM); returns the exit code."""
-    from nnql_swarm.recording.session import (
-        grpc_url, public_host, rerun_binary, stop_process, wait_until_reachable,
-    )
+    from nnql_swarm.recording.session import public_host, rerun_binary, stop_process
 
     for port in (web_port, grpc_port):
         if port_taken(bind, port):
@@ -80,15 +80,11 @@ def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> in
             [*rerun_binary(), "--serve-web", "--bind", bind, "--web-viewer-port", str(web_port),
              "--port", str(grpc_port), *map(str, files)],
             stdout=log, stderr=log, start_new_session=True)
-        stop = _Stop()
-        previous = {s: signal.signal(s, stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             local = "127.0.0.1" if bind in ("0.0.0.0", "::") else bind
-            if not (all(wait_until_reachable(grpc_url(port, local))
-                        for port in (grpc_port, web_port)) and server.poll() is None):
-                log.seek(0)
-                last = (log.read().strip().splitlines() or ["no output"])[-1]
-                raise ViewError(f"rerun --serve-web did not start: {last}")
+            if not listening(server, local, (grpc_port, web_port)):
+                raise ViewError(f"rerun --serve-web did not start: {last_line(log)}")
             here = web_urls(local, web_port, grpc_port)
             shown = ", ".join(str(f) for f in files)
             if bind in ("0.0.0.0", "::"):
@@ -98,9 +94,8 @@ def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> in
             else:
                 print(f"serving {shown} to the web viewer at {here}; Ctrl-C to stop", flush=True)
             server.wait()
-            log.seek(0)
-            last = (log.read().strip().splitlines() or ["no output"])[-1]
-            raise ViewError(f"the web viewer server ended (exit code {server.returncode}): {last}")
+            raise ViewError(f"the web viewer server ended (exit code {server.returncode}): "
+                            f"{last_line(log)}")
         except _Stopped:
             print("stopped", file=sys.stderr)
             return 0
@@ -110,18 +105,40 @@ def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> in
             stop_process(server)
 
 
+START_S = 15.0
+"""How long ``rerun --serve-web`` may take to listen on both ports."""
+
+
+def listening(server: subprocess.Popen, host: str, ports, timeout: float = START_S) -> bool:
+    """Whether the server listens on every port before ``timeout`` (False: it exited, or not)."""
+    deadline = time.monotonic() + timeout
+    waiting = list(ports)
+    while waiting and time.monotonic() < deadline and server.poll() is None:
+        try:
+            with socket.create_connection((host, waiting[0]), timeout=0.5):
+                waiting.pop(0)
+        except OSError:
+            time.sleep(0.2)
+    return not waiting and server.poll() is None
+
+
+def last_line(log) -> str:
+    """The last line the rerun server wrote, without its terminal colours."""
+    log.seek(0)
+    lines = re.sub(r"\x1b\[[0-9;]*m", "", log.read()).strip().splitlines()
+    return lines[-1] if lines else "no output"
+
+
 class _Stopped(Exception):
     """Ctrl-C or SIGTERM while serving."""
 
 
-class _Stop:
-    def __call__(self, *_signal) -> None:
-        raise _Stopped
+def _stop(*_signal) -> None:
+    raise _Stopped
 
 
 def port_taken(bind: str, port: int) -> bool:
-    import socket
-
+    """Whether ``port`` cannot be listened on at ``bind``."""
     family = socket.AF_INET6 if ":" in bind else socket.AF_INET
     with socket.socket(family, socket.SOCK_STREAM) as probe:
         probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
@@ -177,8 +194,7 @@ def main(argv: list[str] | None = None) -> int:
             return serve_web(files, args.web_port, args.grpc_port, args.bind)
         return open_native(files)
     except ViewError as error:
-        parser.error(str(error))
-    return EXIT_USAGE  # not reached: parser.error exits
+        parser.error(str(error))  # one line, exit code 2
 
 
 if __name__ == "__main__":
