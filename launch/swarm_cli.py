@@ -15,13 +15,16 @@ import logging
 from dataclasses import fields, replace
 import multiprocessing as mp
 import os
+import shlex
 import sys
 import time
 from pathlib import Path
 
 from nnql_swarm.operations import zenoh_files
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress as progress_bar
-from nnql_swarm.recording.session import RecordingSession, check_viewer_url
+from nnql_swarm.terminal.cli import (
+    EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator, progress as progress_bar,
+)
+from nnql_swarm.recording.session import PARTS_DIR, RecordingSession, check_viewer_url
 from nnql_swarm.supervision.resume import (
     ResumeError, ResumePoint, read_config, resume_point, rewind, shared_table,
 )
@@ -30,7 +33,9 @@ from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
 )
 from nnql_swarm.protocol.jit import plain_python_environment
-from nnql_swarm.protocol.runfiles import CONFIG_FILE, EPISODES_FILE, write_text_atomic
+from nnql_swarm.protocol.runfiles import (
+    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, STATS_DIR, write_text_atomic,
+)
 from nnql_swarm.protocol.transport import (
     HUB_FROM_AGENTS, MODES, EmbeddedLayout, TransportSettings, embedded_topology,
 )
@@ -68,7 +73,8 @@ def parse_ids(text: str) -> list[int]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(description=__doc__.split("\n\n")[0])
+    p = OneLineParser(description="A swarm run: a world process and one process per agent, "
+                      "negotiating over Zenoh (--in-process: the same run in one process).")
     d = SwarmConfig()
     run = p.add_argument_group("the run")
     run.add_argument("--preset", choices=tuple(PRESETS), default=None,
@@ -206,14 +212,34 @@ def check_distributable(config: SwarmConfig) -> None:
         raise UsageError("--lookahead > 1 is played by the simulator only (add --in-process)")
 
 
+RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR)
+"""What a run directory holds (``protocol.runfiles``); a folder with anything else is not a run."""
+
+
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
-    """Create the run directory; never overwrite a run that is already there."""
-    if role != "agents" and (out / EPISODES_FILE).exists():
-        raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
-                         f"or continue it with --resume")
-    out.mkdir(parents=True, exist_ok=True)
-    if role != "agents":
-        write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
+    """Create the run directory; never overwrite a run that is already there, nor write a run
+    into a folder that holds anything but a run's files (those of a run that never finished an
+    episode, or of the agents started first on this host, may be there). An unusable path (a
+    file, or where no folder can be made) is a UsageError."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} is a file, not a folder")
+    if role != "agents" and out.is_dir():
+        if (out / EPISODES_FILE).exists():
+            raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
+                             f"or continue it with --resume --out {out}")
+        held = sorted(entry.name for entry in out.iterdir()
+                      if entry.name not in RUN_ENTRIES and not entry.name.endswith(".tmp"))
+        if held:
+            raise UsageError(f"--out {out} is a folder that holds other files ({held[0]}"
+                             f"{', ...' if len(held) > 1 else ''}), not a run; choose a new or "
+                             f"empty one")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        if role != "agents":
+            write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
+    except OSError as error:
+        raise UsageError(f"cannot make the run directory --out {out}: "
+                         f"{error.strerror or error}") from None
 
 
 def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
@@ -301,8 +327,10 @@ def transports(args: argparse.Namespace, config: SwarmConfig):
 def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> int:
     """``record``: a RecordingSession, or True / False for run.rrd or nothing."""
     from nnql_swarm.sim.inprocess import run_in_process as run
+    from nnql_swarm.sim.runs import swarm_world
     from nnql_swarm.recording.session import InProcessRecorder, RecordingSession
 
+    prepare_simulator(swarm_world(config), config)  # before any recording stream opens
     session = record if isinstance(record, RecordingSession) else \
         RecordingSession.files_only(record, config, out)
     viz = InProcessRecorder(session.plan, config, out)
@@ -352,11 +380,34 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
     code = supervisor.run(leader=world)
     recording.finish()
     if code == EXIT_INTERRUPTED:
-        print("\ninterrupted: the swarm stopped; continue it with --resume", file=sys.stderr)
+        print(f"\ninterrupted: the swarm stopped; continue it with {resume_command(args, out)}",
+              file=sys.stderr)
     elif world is not None and code != 0:
         print(f"the world ended with {describe_exit(code)}; continue the run with "
-              f"--resume --out {out}", file=sys.stderr)
+              f"{resume_command(args, out)}", file=sys.stderr)
     return code
+
+
+def resume_command(args: argparse.Namespace, out: Path) -> str:
+    """The command line that continues this run: the program as it was called, ``--resume --out``
+    and the options that are not in ``config.json`` (where the processes run and connect)."""
+    words = [*invocation(), "--resume", "--out", str(out)]
+    if args.role != "all":
+        words += ["--role", args.role]
+    if args.agent_ids is not None:
+        words += ["--agent-ids", ",".join(map(str, args.agent_ids))]
+    if args.topology != "auto":
+        words += ["--topology", args.topology]
+    for flag, value in (("--mode", args.mode), ("--zenoh-config", args.zenoh_config),
+                        ("--zenoh-config-dir", args.zenoh_config_dir)):
+        if value is not None:
+            words += [flag, value]
+    for flag, endpoints in (("--listen", args.listen), ("--connect", args.connect)):
+        for endpoint in endpoints:
+            words += [flag, endpoint]
+    if args.no_record:
+        words.append("--no-record")
+    return shlex.join(words)
 
 
 def agent_ids(args: argparse.Namespace, config: SwarmConfig) -> list[int]:

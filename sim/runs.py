@@ -21,6 +21,7 @@ from nnql_swarm.agent.learner import (
 )
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
@@ -215,6 +216,19 @@ class Batch:
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))
                 paths.append(sc.shortest)
         return np.stack(starts), np.stack(goals), np.stack(scripts), np.stack(paths)
+
+
+def compiled_simulator() -> bool:
+    """Whether the simulator's kernel loads from the on-disk cache (in a second or two) rather than
+    compiling (about half a minute on a 2-core VM): :func:`protocol.jit.cached`."""
+    return cached(run_episode)
+
+
+def warm_up(world: World, run: SwarmConfig) -> None:
+    """Compile or load the simulator's kernel: one episode of a throwaway batch of ``run``, whose
+    arguments have the types of every batch's. A batch played next starts at full speed, so that
+    its first episode times like the others."""
+    Batch(world, [run]).play(1)
 
 
 @contextlib.contextmanager
