@@ -11,6 +11,13 @@ namespaces it created. Closing the Lan kills the processes it started (by pid), 
 still inside its namespaces (which only it can have put there), then deletes the namespaces (their
 veths and the bridge go with them). :func:`sweep_stale` removes what a killed test run left behind
 (only namespaces with our prefix whose creating process is gone).
+
+Faults on one host's link (tests/test_netfaults.py, bench/netfaults.py): :meth:`Lan.netem` puts a
+``tc netem`` qdisc (delay, jitter, loss, reordering) on both ends of the host's veth, so both
+directions suffer it; :meth:`Lan.drop` drops a random share of the host's packets, in and out,
+with iptables' ``statistic`` match; :meth:`Lan.partition` detaches the host's port from the bridge
+(its own link stays up, its packets go nowhere) until :meth:`Lan.heal`. Each needs what the kernel
+may lack: :func:`netem_unavailable_reason` and :func:`drop_unavailable_reason` say why not.
 """
 
 import os
@@ -39,10 +46,76 @@ def unavailable_reason() -> str | None:
     return None
 
 
+def _probe_pair() -> tuple[str, str]:
+    """Two throw-away namespaces joined by a veth (``e0`` in the first, up); delete with _unprobe."""
+    first = f"{PREFIX}-{os.getpid()}-probe{secrets.token_hex(2)}"
+    second = f"{first}x"
+    _ip("netns", "add", first)
+    _ip("netns", "add", second)
+    _ip("link", "add", "e0", "netns", first, "type", "veth", "peer", "name", "e1", "netns", second)
+    _ip("-n", first, "link", "set", "e0", "up")
+    return first, second
+
+
+def _unprobe(*namespaces: str) -> None:
+    for namespace in namespaces:
+        _ip("netns", "del", namespace, check=False)
+
+
+def netem_unavailable_reason() -> str | None:
+    """Why ``tc qdisc add ... netem`` cannot be used here (None if it can): tried on a probe veth."""
+    reason = unavailable_reason()
+    if reason is not None:
+        return reason
+    if shutil.which("tc") is None:
+        return "the tc command (iproute2) is not installed"
+    first, second = _probe_pair()
+    try:
+        added = subprocess.run(["ip", "netns", "exec", first, "tc", "qdisc", "add", "dev", "e0",
+                                "root", "netem", "delay", "5ms", "2ms", "loss", "1%"],
+                               capture_output=True, text=True, timeout=30)
+        if added.returncode != 0:
+            return (f"the kernel has no netem qdisc (sch_netem): tc qdisc add ... netem: "
+                    f"{added.stderr.strip()}")
+        return None
+    finally:
+        _unprobe(first, second)
+
+
+def drop_unavailable_reason() -> str | None:
+    """Why :meth:`Lan.drop` (iptables' statistic match) cannot be used here (None if it can)."""
+    reason = unavailable_reason()
+    if reason is not None:
+        return reason
+    if shutil.which("iptables") is None:
+        return "the iptables command is not installed"
+    first, second = _probe_pair()
+    try:
+        added = subprocess.run(["ip", "netns", "exec", first, *_drop_rule("-A", "INPUT", 0.02)],
+                               capture_output=True, text=True, timeout=30)
+        if added.returncode != 0:
+            return f"iptables cannot drop at random here: {added.stderr.strip()}"
+        return None
+    finally:
+        _unprobe(first, second)
+
+
+def _drop_rule(action: str, chain: str, probability: float) -> list[str]:
+    return ["iptables", "-w", action, chain, "-m", "statistic", "--mode", "random",
+            "--probability", f"{probability:g}", "-j", "DROP"]
+
+
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
     result = subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30)
     if check and result.returncode != 0:
         raise RuntimeError(f"ip {' '.join(args)}: {result.stderr.strip()}")
+    return result
+
+
+def _run(argv: list[str], check: bool = True) -> subprocess.CompletedProcess:
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=30)
+    if check and result.returncode != 0:
+        raise RuntimeError(f"{' '.join(argv)}: {result.stderr.strip()}")
     return result
 
 
@@ -148,6 +221,50 @@ class Lan:
         process = subprocess.Popen(self.command(host, argv), **kwargs)
         self.processes.append(process)
         return process
+
+    # --- faults on one host's link ---
+
+    def port(self, host: str) -> str:
+        """The bridge port of ``host``'s veth, in the LAN's own namespace."""
+        return f"p{self.hosts.index(host)}"
+
+    def netem(self, host: str, *spec: str) -> None:
+        """``tc netem`` with ``spec`` (e.g. ``delay 5ms 2ms loss 1%``) on both ends of ``host``'s
+        link: what the host sends and what it receives suffers it. Replaces the one before."""
+        for namespace, device in ((self.namespace(host), "eth0"),
+                                  (f"{self.tag}-lan", self.port(host))):
+            _run(["ip", "netns", "exec", namespace, "tc", "qdisc", "replace", "dev", device,
+                  "root", "netem", *spec])
+
+    def clear_netem(self, host: str) -> None:
+        for namespace, device in ((self.namespace(host), "eth0"),
+                                  (f"{self.tag}-lan", self.port(host))):
+            _run(["ip", "netns", "exec", namespace, "tc", "qdisc", "del", "dev", device, "root"],
+                 check=False)
+
+    def drop(self, host: str, probability: float) -> None:
+        """Drop each packet ``host`` sends or receives with ``probability`` (iptables)."""
+        for chain in ("INPUT", "OUTPUT"):
+            _run(self.command(host, _drop_rule("-A", chain, probability)))
+
+    def dropped(self, host: str) -> int:
+        """Packets :meth:`drop` has dropped at ``host`` so far (iptables' counters)."""
+        listing = _run(self.command(host, ["iptables", "-w", "-L", "-n", "-v", "-x"])).stdout
+        return sum(int(line.split()[0]) for line in listing.splitlines()
+                   if "statistic mode random" in line)
+
+    def clear_drop(self, host: str, probability: float) -> None:
+        for chain in ("INPUT", "OUTPUT"):
+            _run(self.command(host, _drop_rule("-D", chain, probability)), check=False)
+
+    def partition(self, host: str) -> None:
+        """Cut ``host`` off: its port leaves the bridge, so every packet to or from it is lost
+        (its own link stays up, as behind a switch that lost its uplink)."""
+        _ip("-n", f"{self.tag}-lan", "link", "set", self.port(host), "nomaster")
+
+    def heal(self, host: str) -> None:
+        """Undo :meth:`partition`."""
+        _ip("-n", f"{self.tag}-lan", "link", "set", self.port(host), "master", "br0")
 
     def close(self) -> None:
         for process in self.processes:
