@@ -10,6 +10,9 @@ The faults (:data:`FAULTS`):
 
 - ``netem``: ``tc netem`` on hosts a and b, both directions, the whole run: 5 ms delay with 2 ms
   jitter, 25 % of packets sent at once (the rest delayed, so they overtake each other), 1 % loss;
+- ``delay``: the same delay, jitter and reordering without netem, for kernels that lack it: every
+  packet of hosts a and b, in and out, held 5 ms ± 2 ms by tests/netdelay.py (user space, through
+  an NFQUEUE), 25 % let through at once; no loss;
 - ``loss``: 2 % of hosts a's and b's packets dropped, in and out, the whole run (iptables);
 - ``partition-short``, ``partition-long``: host a cut off from the LAN for 1 s (half the tick
   deadline) or 5 s (two and a half deadlines), then back;
@@ -37,6 +40,7 @@ SWARM, ROUTER = str(ROOT / "launch" / "swarm.py"), str(ROOT / "launch" / "router
 HOSTS = ["world", "a", "b"]
 
 NETEM = ("delay", "5ms", "2ms", "reorder", "25%", "50%", "loss", "1%")
+DELAY_MS, JITTER_MS, REORDER = 5.0, 2.0, 0.25
 LOSS = 0.02
 SHORT_S, LONG_S = 1.0, 5.0
 ROUTER_DOWN_S = 1.0
@@ -48,9 +52,11 @@ class Fault:
     name: str
     what: str
     needs: str = "netns"
-    """``netns``, ``netem`` or ``drop``: which of tests/netns.py's probes must pass."""
+    """``netns``, ``netem``, ``delay`` or ``drop``: which of tests/netns.py's probes must pass."""
     before: Callable | None = None
     during: Callable | None = None
+    after: Callable | None = None
+    """Undoes ``before`` once the run's processes are stopped."""
 
 
 def _netem(lan, ctx) -> None:
@@ -58,9 +64,31 @@ def _netem(lan, ctx) -> None:
         lan.netem(host, *NETEM)
 
 
+def _clear_netem(lan, ctx) -> None:
+    for host in ("a", "b"):
+        lan.clear_netem(host)
+
+
+def _delay(lan, ctx) -> None:
+    for seed, host in enumerate(("a", "b")):
+        ctx.delayers[host] = lan.delay(host, DELAY_MS, JITTER_MS, REORDER, seed=seed)
+
+
+def _clear_delay(lan, ctx) -> None:
+    for host, delayer in ctx.delayers.items():
+        said = lan.clear_delay(host, delayer)
+        ctx.held += int(said.split()[1]) if said.startswith("held ") else 0
+
+
 def _loss(lan, ctx) -> None:
     for host in ("a", "b"):
         lan.drop(host, LOSS)
+
+
+def _clear_loss(lan, ctx) -> None:
+    ctx.dropped = sum(lan.dropped(host) for host in ("a", "b"))
+    for host in ("a", "b"):
+        lan.clear_drop(host, LOSS)
 
 
 def _partition(seconds: float):
@@ -80,9 +108,11 @@ def _restart_router(lan, ctx) -> None:
 FAULTS = {fault.name: fault for fault in (
     Fault("clean", "no fault"),
     Fault("netem", "netem on hosts a and b: delay 5 ms ± 2 ms, 25 % reordered, 1 % loss",
-          needs="netem", before=_netem),
+          needs="netem", before=_netem, after=_clear_netem),
+    Fault("delay", "hosts a and b: packets held 5 ms ± 2 ms in user space, 25 % let through "
+          "at once (tests/netdelay.py)", needs="delay", before=_delay, after=_clear_delay),
     Fault("loss", f"{LOSS:.0%} of hosts a's and b's packets dropped (iptables)", needs="drop",
-          before=_loss),
+          before=_loss, after=_clear_loss),
     Fault("partition-short", f"host a cut off for {SHORT_S:g} s", during=_partition(SHORT_S)),
     Fault("partition-long", f"host a cut off for {LONG_S:g} s", during=_partition(LONG_S)),
     Fault("router-restart", f"the router killed, started again {ROUTER_DOWN_S:g} s later",
@@ -93,6 +123,7 @@ FAULTS = {fault.name: fault for fault in (
 def unavailable(fault: Fault) -> str | None:
     """Why ``fault`` cannot be made on this machine (None if it can)."""
     return {"netns": netns.unavailable_reason, "netem": netns.netem_unavailable_reason,
+            "delay": netns.delay_unavailable_reason,
             "drop": netns.drop_unavailable_reason}[fault.needs]()
 
 
@@ -110,6 +141,8 @@ class Outcome:
     """Episodes written when the fault had ended (a fault during the run ends before the run)."""
     dropped: int | None = None
     """Packets the ``loss`` fault dropped."""
+    held: int | None = None
+    """Packets the ``delay`` fault handled (held or let through at once)."""
     fault_error: str | None = None
     wall_s: float = 0.0
     timed_out: list[str] = field(default_factory=list)
@@ -134,11 +167,14 @@ class Outcome:
 
 
 class _Context:
-    """What a fault may act on: the router (restartable on its endpoint)."""
+    """What a fault may act on (the router, restartable on its endpoint) and what it leaves."""
 
     def __init__(self, lan: netns.Lan, endpoint: str, logs: Path) -> None:
         self.lan, self.endpoint, self.logs = lan, endpoint, logs
         self.starts = 0
+        self.delayers: dict[str, subprocess.Popen] = {}
+        self.held = 0
+        self.dropped = 0
         self.router = self.start_router()
 
     def start_router(self) -> subprocess.Popen:
@@ -171,9 +207,9 @@ def run(lan: netns.Lan, out: Path, fault: Fault, *, agents: int = 4, episodes: i
     common = ["--agents", str(agents), "--episodes", str(episodes), "--max-steps", str(max_steps),
               "--seed", str(seed), "--run-id", "netfault", "--no-record", "--no-progress",
               "--mode", "client", "--connect", endpoint, *run_options]
-    if fault.before:
-        fault.before(lan, None)
     ctx = _Context(lan, endpoint, logs)
+    if fault.before:
+        fault.before(lan, ctx)
     env = {**os.environ, "NNQL_LOG": "WARNING"}
     started = []
 
@@ -241,13 +277,9 @@ def run(lan: netns.Lan, out: Path, fault: Fault, *, agents: int = 4, episodes: i
                 except subprocess.TimeoutExpired:
                     os.killpg(process.pid, signal.SIGKILL)
                     process.wait(5)
-        if fault.needs == "netem":
-            for host in ("a", "b"):
-                lan.clear_netem(host)
-        if fault.needs == "drop":
-            outcome.dropped = sum(lan.dropped(host) for host in ("a", "b"))
-            for host in ("a", "b"):
-                lan.clear_drop(host, LOSS)
+        if fault.after:
+            fault.after(lan, ctx)
+            outcome.dropped, outcome.held = ctx.dropped, ctx.held
     if (world_out / "episodes.csv").exists():
         outcome.rows = read_episodes(world_out / "episodes.csv")
     return outcome

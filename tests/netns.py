@@ -25,10 +25,12 @@ import secrets
 import shutil
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
 PREFIX = "nnqlt"
+NETDELAY = Path(__file__).resolve().parent / "netdelay.py"
 SUBNET = "10.213"
 
 
@@ -103,6 +105,34 @@ def drop_unavailable_reason() -> str | None:
 def _drop_rule(action: str, chain: str, probability: float) -> list[str]:
     return ["iptables", "-w", action, chain, "-m", "statistic", "--mode", "random",
             "--probability", f"{probability:g}", "-j", "DROP"]
+
+
+def _queue_rules(action: str) -> list[list[str]]:
+    return [["iptables", "-w", action, chain, direction, "eth0", "-j", "NFQUEUE", "--queue-num",
+             "0", "--queue-bypass"] for chain, direction in (("INPUT", "-i"), ("OUTPUT", "-o"))]
+
+
+def delay_unavailable_reason() -> str | None:
+    """Why :meth:`Lan.delay` (an NFQUEUE and tests/netdelay.py) cannot be used here."""
+    reason = unavailable_reason()
+    if reason is not None:
+        return reason
+    if shutil.which("iptables") is None:
+        return "the iptables command is not installed"
+    first, second = _probe_pair()
+    try:
+        for rule in _queue_rules("-A"):
+            added = subprocess.run(["ip", "netns", "exec", first, *rule], capture_output=True,
+                                   text=True, timeout=30)
+            if added.returncode != 0:
+                return f"iptables has no NFQUEUE target here: {added.stderr.strip()}"
+        bound = subprocess.run(["ip", "netns", "exec", first, sys.executable, str(NETDELAY),
+                                "--probe"], capture_output=True, text=True, timeout=30)
+        if bound.returncode != 0 or bound.stdout.strip() != "ready":
+            return f"tests/netdelay.py cannot bind an NFQUEUE: {bound.stderr.strip()[-300:]}"
+        return None
+    finally:
+        _unprobe(first, second)
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -246,6 +276,34 @@ class Lan:
         """Drop each packet ``host`` sends or receives with ``probability`` (iptables)."""
         for chain in ("INPUT", "OUTPUT"):
             _run(self.command(host, _drop_rule("-A", chain, probability)))
+
+    def delay(self, host: str, delay_ms: float, jitter_ms: float, reorder: float,
+              seed: int = 0) -> subprocess.Popen:
+        """Hold every packet of ``host``'s link, in and out, ``delay_ms ± jitter_ms`` (a
+        ``reorder`` share not at all) in user space (tests/netdelay.py, for kernels without
+        netem). Returns the delaying process, which the Lan stops on close; :meth:`clear_delay`
+        stops it earlier."""
+        delayer = self.popen(host, [sys.executable, str(NETDELAY), "--delay-ms", f"{delay_ms:g}",
+                                    "--jitter-ms", f"{jitter_ms:g}", "--reorder", f"{reorder:g}",
+                                    "--seed", str(seed)],
+                             stdout=subprocess.PIPE, text=True)
+        if delayer.stdout.readline().strip() != "ready":
+            raise RuntimeError(f"tests/netdelay.py did not start in {host}")
+        for rule in _queue_rules("-A"):
+            _run(self.command(host, rule))
+        return delayer
+
+    def clear_delay(self, host: str, delayer: subprocess.Popen) -> str:
+        """Stop delaying ``host``'s packets; returns the delayer's last words (``held N ...``)."""
+        for rule in _queue_rules("-D"):
+            _run(self.command(host, rule), check=False)
+        delayer.send_signal(signal.SIGTERM)
+        try:
+            said = delayer.communicate(timeout=10)[0]
+        except subprocess.TimeoutExpired:
+            delayer.kill()
+            said = delayer.communicate()[0]
+        return said.strip()
 
     def dropped(self, host: str) -> int:
         """Packets :meth:`drop` has dropped at ``host`` so far (iptables' counters)."""

@@ -2,7 +2,8 @@
 
 Each test runs tests/netfault_runs.py's layout (the router and the world on host ``world``, agents
 0-1 on host ``a``, 2-3 on host ``b``) with one fault: netem's delay, jitter, reordering and loss
-on the agents' hosts; random loss by iptables; host a cut off for half a tick deadline and for
+on the agents' hosts; the same delay, jitter and reordering in user space (for kernels without
+netem); random loss by iptables; host a cut off for half a tick deadline and for
 two and a half; the router killed and started again mid-run. Every run must complete: the
 world and both agent launchers exit 0, every episode is written once and in order, the world's
 invariants hold (``stats/world.json``: no violation), and no learned value is lost (every agent's
@@ -108,6 +109,14 @@ def test_netem_delay_jitter_reordering_and_loss(lan, reference, tmp_path):
     """5 ms ± 2 ms each way, a quarter of the packets overtaking the rest, 1 % lost."""
     outcome = run_fault("netem", lan, tmp_path, 7702)
     check_outcome(outcome, reference)
+
+
+def test_delay_jitter_and_reordering_without_netem(lan, reference, tmp_path):
+    """The same delay, jitter and reordering made in user space (tests/netdelay.py), where the
+    kernel has no netem: every packet of the agents' hosts held 5 ms ± 2 ms, a quarter not."""
+    outcome = run_fault("delay", lan, tmp_path, 7707)
+    check_outcome(outcome, reference)
+    assert outcome.held > 1000, "hardly a packet passed the delayer: the fault did not act"
 
 
 def test_random_loss(lan, reference, tmp_path):
