@@ -42,7 +42,8 @@ def in_process(out: Path, agents: int, episodes: int, max_steps: int, seed: int)
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--faults", default=",".join(runs.FAULTS))
+    p.add_argument("--faults", default=",".join(runs.DEFAULT_FAULTS),
+                   help=f"of {', '.join(runs.FAULTS)}")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--agents", type=int, default=4, help="agents, split between hosts a and b")
     p.add_argument("--episodes", type=int, default=10)
@@ -70,8 +71,10 @@ def main() -> int:
                     outcome = runs.run(lan, Path(tmp) / f"{repeat}-{fault.name}", fault,
                                        port=7800 + index, **size)
                 results.setdefault(fault.name, []).append(outcome)
-                print(f"  {fault.name:16s} {outcome.ticks_per_s:6.1f} ticks/s, missed "
-                      f"{outcome.missed}, world exit {outcome.world_code}, "
+                late = f" (timed out: {', '.join(outcome.timed_out)})" if outcome.timed_out else ""
+                print(f"  {fault.name:20s} {outcome.ticks_per_s:6.1f} ticks/s, missed "
+                      f"{outcome.missed}, exit codes {outcome.world_code} {outcome.agent_codes}"
+                      f"{late}, "
                       f"{len(outcome.rows)} of {args.episodes} episodes, "
                       f"{outcome.wall_s:.1f} s (load {os.getloadavg()[0]:.1f})",
                       file=sys.stderr, flush=True)
@@ -81,23 +84,22 @@ def main() -> int:
         return sum(float(row["duration_s"]) for row in outcome.rows)
 
     base_s = statistics.median(ticking(o) for o in clean) if clean else None
-    print(f"{'fault':16s} {'ticks_per_s':>11s} {'vs_clean':>8s} {'added_s':>7s} {'missed':>12s} "
+    print(f"{'fault':20s} {'ticks_per_s':>11s} {'vs_clean':>8s} {'added_s':>7s} {'missed':>12s} "
           f"{'complete':>8s} {'=in-process':>11s}   (medians of {args.repeats}; {args.agents} "
           f"agents, {args.episodes} episodes of <= {args.max_steps} steps, seed {args.seed})")
     for name, outcomes in results.items():
         rate = statistics.median(o.ticks_per_s for o in outcomes)
-        complete = all(o.world_code == 0 and [int(r["episode"]) for r in o.rows] ==
-                       list(range(args.episodes)) for o in outcomes)
+        complete = all(o.complete(args.episodes) for o in outcomes)
         clean_runs = [o for o in outcomes if o.missed == 0]
         equal = (f"{sum(o.deterministic() == reference for o in clean_runs)}/{len(clean_runs)}"
                  if clean_runs else "-")
         missed = ",".join(str(o.missed) for o in outcomes)
         ratio = f"{rate / base:.2f}" if base else "-"
         added = f"{statistics.median(ticking(o) for o in outcomes) - base_s:.1f}" if base else "-"
-        print(f"{name:16s} {rate:11.1f} {ratio:>8s} {added:>7s} {missed:>12s} "
+        print(f"{name:20s} {rate:11.1f} {ratio:>8s} {added:>7s} {missed:>12s} "
               f"{'yes' if complete else 'NO':>8s} {equal:>11s}")
     for name, why in skipped.items():
-        print(f"{name:16s} not run: {why}")
+        print(f"{name:20s} not run: {why}")
     print(f"load average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     return 0
 

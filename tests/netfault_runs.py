@@ -17,7 +17,11 @@ The faults (:data:`FAULTS`):
 - ``partition-short``, ``partition-long``: host a cut off from the LAN for 1 s (half the tick
   deadline) or 5 s (two and a half deadlines), then back;
 - ``router-restart``: the router killed (SIGKILL) and started again on the same endpoint 1 s
-  later.
+  later;
+- ``partition-outlasting`` (not among :data:`DEFAULT_FAULTS`): host a cut off for 14 s, longer
+  than Zenoh's lease (10 s), in a run that ends meanwhile. The world plays on without host a's
+  agents and completes; they never hear it, and host a's launcher waits for it until stopped
+  (docs/operations.md, "A partition longer than Zenoh's lease").
 """
 
 import os
@@ -42,7 +46,7 @@ HOSTS = ["world", "a", "b"]
 NETEM = ("delay", "5ms", "2ms", "reorder", "25%", "50%", "loss", "1%")
 DELAY_MS, JITTER_MS, REORDER = 5.0, 2.0, 0.25
 LOSS = 0.02
-SHORT_S, LONG_S = 1.0, 5.0
+SHORT_S, LONG_S, OUTLASTING_S = 1.0, 5.0, 14.0
 ROUTER_DOWN_S = 1.0
 
 
@@ -117,7 +121,11 @@ FAULTS = {fault.name: fault for fault in (
     Fault("partition-long", f"host a cut off for {LONG_S:g} s", during=_partition(LONG_S)),
     Fault("router-restart", f"the router killed, started again {ROUTER_DOWN_S:g} s later",
           during=_restart_router),
+    Fault("partition-outlasting", f"host a cut off for {OUTLASTING_S:g} s, past Zenoh's lease",
+          during=_partition(OUTLASTING_S)),
 )}
+DEFAULT_FAULTS = [name for name in FAULTS if name != "partition-outlasting"]
+"""The faults that every run survives whole (tests/test_netfaults.py checks each)."""
 
 
 def unavailable(fault: Fault) -> str | None:
@@ -146,6 +154,11 @@ class Outcome:
     fault_error: str | None = None
     wall_s: float = 0.0
     timed_out: list[str] = field(default_factory=list)
+
+    def complete(self, episodes: int) -> bool:
+        """Every launcher exited 0 and every episode was written once, in order."""
+        return (self.world_code == 0 and self.agent_codes == [0, 0] and not self.timed_out
+                and [int(row["episode"]) for row in self.rows] == list(range(episodes)))
 
     @property
     def missed(self) -> int:
@@ -257,7 +270,7 @@ def run(lan: netns.Lan, out: Path, fault: Fault, *, agents: int = 4, episodes: i
         except subprocess.TimeoutExpired:
             outcome.timed_out.append("world")
         if injector:
-            injector.join(LONG_S + 10)
+            injector.join(OUTLASTING_S + 10)
         for name, process in zip("ab", agent_processes):
             try:
                 outcome.agent_codes.append(process.wait(30))

@@ -49,7 +49,7 @@ def unavailable_reason() -> str | None:
 
 
 def _probe_pair() -> tuple[str, str]:
-    """Two throw-away namespaces joined by a veth (``e0`` in the first, up); delete with _unprobe."""
+    """Two throw-away namespaces joined by a veth (``e0`` in the first, up): see _unprobe."""
     first = f"{PREFIX}-{os.getpid()}-probe{secrets.token_hex(2)}"
     second = f"{first}x"
     _ip("netns", "add", first)
@@ -65,7 +65,7 @@ def _unprobe(*namespaces: str) -> None:
 
 
 def netem_unavailable_reason() -> str | None:
-    """Why ``tc qdisc add ... netem`` cannot be used here (None if it can): tried on a probe veth."""
+    """Why ``tc qdisc add ... netem`` cannot be used here (None if it can), tried on a veth."""
     reason = unavailable_reason()
     if reason is not None:
         return reason

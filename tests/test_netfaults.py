@@ -11,6 +11,10 @@ last checkpoint equals the world's copy of the shared table). The rows before th
 intent equal ``--in-process``'s; where no intent was missed at all, every row does, and so does
 the shared table.
 
+A partition that outlasts both Zenoh's lease and the run is not among them: it leaves the cut-off
+host's launcher waiting (docs/operations.md; ``bench/netfaults.py --faults
+partition-outlasting`` shows it).
+
 A fault that the machine cannot make is skipped with the reason (pytest's ``-ra`` summary): the
 namespaces need root and ``ip netns``, netem needs the kernel's ``sch_netem``, loss needs
 ``iptables`` with its ``statistic`` match (``make netfaults-tools`` installs the command).
@@ -25,6 +29,8 @@ import pytest
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import read_episodes
 from tests import netfault_runs as runs
 from tests import netns
 from tests.swarm_helpers import run_swarm
@@ -51,8 +57,6 @@ def reference(tmp_path_factory):
                        str(MAX_STEPS), "--seed", str(SEED), "--in-process", "--no-record",
                        timeout=180)
     assert result.returncode == 0, result.stderr
-    from nnql_swarm.world.metrics import read_episodes
-    from nnql_swarm.world.engine import EPISODE_FIELDS
     rows = [tuple(r[f] for f in EPISODE_FIELDS) for r in read_episodes(out / "episodes.csv")]
     config = SwarmConfig.from_json((out / "config.json").read_text())
     return rows, world_checkpoint.load(world_checkpoint.table_path(out), config, EPISODES - 1)
