@@ -49,13 +49,19 @@ def unavailable_reason() -> str | None:
 
 
 def _probe_pair() -> tuple[str, str]:
-    """Two throw-away namespaces joined by a veth (``e0`` in the first, up): see _unprobe."""
+    """Two throw-away namespaces joined by a veth (``e0`` in the first, up): see _unprobe.
+    Raises RuntimeError, having deleted what it made, if they cannot be made."""
     first = f"{PREFIX}-{os.getpid()}-probe{secrets.token_hex(2)}"
     second = f"{first}x"
-    _ip("netns", "add", first)
-    _ip("netns", "add", second)
-    _ip("link", "add", "e0", "netns", first, "type", "veth", "peer", "name", "e1", "netns", second)
-    _ip("-n", first, "link", "set", "e0", "up")
+    try:
+        _ip("netns", "add", first)
+        _ip("netns", "add", second)
+        _ip("link", "add", "e0", "netns", first, "type", "veth", "peer", "name", "e1", "netns",
+            second)
+        _ip("-n", first, "link", "set", "e0", "up")
+    except RuntimeError:
+        _unprobe(first, second)
+        raise
     return first, second
 
 
@@ -71,7 +77,10 @@ def netem_unavailable_reason() -> str | None:
         return reason
     if shutil.which("tc") is None:
         return "the tc command (iproute2) is not installed"
-    first, second = _probe_pair()
+    try:
+        first, second = _probe_pair()
+    except RuntimeError as error:
+        return f"no veth between namespaces: {error}"
     try:
         added = subprocess.run(["ip", "netns", "exec", first, "tc", "qdisc", "add", "dev", "e0",
                                 "root", "netem", "delay", "5ms", "2ms", "loss", "1%"],
@@ -91,7 +100,10 @@ def drop_unavailable_reason() -> str | None:
         return reason
     if shutil.which("iptables") is None:
         return "the iptables command is not installed"
-    first, second = _probe_pair()
+    try:
+        first, second = _probe_pair()
+    except RuntimeError as error:
+        return f"no veth between namespaces: {error}"
     try:
         added = subprocess.run(["ip", "netns", "exec", first, *_drop_rule("-A", "INPUT", 0.02)],
                                capture_output=True, text=True, timeout=30)
@@ -119,7 +131,10 @@ def delay_unavailable_reason() -> str | None:
         return reason
     if shutil.which("iptables") is None:
         return "the iptables command is not installed"
-    first, second = _probe_pair()
+    try:
+        first, second = _probe_pair()
+    except RuntimeError as error:
+        return f"no veth between namespaces: {error}"
     try:
         for rule in _queue_rules("-A"):
             added = subprocess.run(["ip", "netns", "exec", first, *rule], capture_output=True,
