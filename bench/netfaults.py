@@ -13,6 +13,8 @@ cannot make (no netem in the kernel, no iptables) are listed with the reason. Ne
 
     sudo .venv/bin/python bench/netfaults.py --repeats 3
     sudo .venv/bin/python bench/netfaults.py --faults clean,partition-long --repeats 1
+    sudo .venv/bin/python bench/netfaults.py --faults clean,router-restart \
+        --zenoh-config config/client.json5     # every process with the file's settings
 """
 
 import argparse
@@ -49,7 +51,11 @@ def main() -> int:
     p.add_argument("--episodes", type=int, default=10)
     p.add_argument("--max-steps", type=int, default=30)
     p.add_argument("--seed", type=int, default=3)
+    p.add_argument("--zenoh-config", default=None, metavar="FILE",
+                   help="a client config for the world and the agents (--connect still given)")
     args = p.parse_args()
+    options = ("--zenoh-config", str(Path(args.zenoh_config).resolve())) if args.zenoh_config \
+        else ()
     faults = [runs.FAULTS[name] for name in args.faults.split(",") if name]
     reason = netns.unavailable_reason()
     if reason:
@@ -69,7 +75,7 @@ def main() -> int:
                     continue
                 with netns.Lan(runs.HOSTS) as lan:
                     outcome = runs.run(lan, Path(tmp) / f"{repeat}-{fault.name}", fault,
-                                       port=7800 + index, **size)
+                                       port=7800 + index, run_options=options, **size)
                 results.setdefault(fault.name, []).append(outcome)
                 late = f" (timed out: {', '.join(outcome.timed_out)})" if outcome.timed_out else ""
                 print(f"  {fault.name:20s} {outcome.ticks_per_s:6.1f} ticks/s, missed "

@@ -93,13 +93,14 @@ def check_outcome(outcome: runs.Outcome, reference) -> None:
         assert np.array_equal(shared[0], table[0]) and np.array_equal(shared[1], table[1])
 
 
-def run_fault(name: str, lan, tmp_path: Path, port: int) -> runs.Outcome:
+def run_fault(name: str, lan, tmp_path: Path, port: int,
+              run_options: tuple[str, ...] = ()) -> runs.Outcome:
     fault = runs.FAULTS[name]
     reason = runs.unavailable(fault)
     if reason is not None:
         pytest.skip(f"{fault.what}: cannot be made here: {reason}")
     return runs.run(lan, tmp_path, fault, agents=AGENTS, episodes=EPISODES, max_steps=MAX_STEPS,
-                    seed=SEED, port=port)
+                    seed=SEED, port=port, run_options=run_options)
 
 
 def test_clean_run_equals_in_process(lan, reference, tmp_path):
@@ -149,10 +150,14 @@ def test_partition_longer_than_the_deadline(lan, reference, tmp_path):
     assert outcome.missed > 0, "5 s cut off and no intent missed a 2 s deadline?"
 
 
-def test_router_restarted_mid_run(lan, reference, tmp_path):
+@pytest.mark.parametrize("config", [None, "config/client.json5"])
+def test_router_restarted_mid_run(lan, reference, tmp_path, config):
     """The router killed outright mid-run and started again on its endpoint: the clients
-    reconnect, the world's and the agents' liveliness tokens come back, the run completes."""
-    outcome = run_fault("router-restart", lan, tmp_path, 7706)
+    reconnect (at Zenoh's retry period, or config/client.json5's shorter one), and the run
+    completes."""
+    options = ("--zenoh-config", str(runs.ROOT / config)) if config else ()
+    outcome = run_fault("router-restart", lan, tmp_path, 7706 if config is None else 7708,
+                        options)
     check_outcome(outcome, reference)
     assert outcome.fault_at_s is not None and outcome.rows_after_fault is not None, \
         "the restart did not fall inside the run"
