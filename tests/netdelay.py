@@ -5,7 +5,7 @@ holds it and lets it go on after its delay.
 
     ip netns exec HOST python tests/netdelay.py --delay-ms 5 --jitter-ms 2 --reorder 0.25
 
-Each packet, in or out, is held for ``delay ± jitter`` ms (uniform, as ``netem delay 5ms 2ms``),
+Each packet, in or out, is held for ``delay ± jitter`` ms (drawn uniformly),
 except a ``--reorder`` share let through at once, as netem's ``reorder``; packets whose delays
 cross overtake each other. The iptables rules (``-i eth0`` and ``-o eth0`` to queue
 ``--queue``, with ``--queue-bypass``: packets pass unheld when nobody listens) are added by
