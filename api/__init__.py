@@ -16,7 +16,8 @@ Q-tables. docs/api.md has the whole of it.
 """
 
 from nnql_swarm.api.swarm import (
-    DETERMINISTIC_COLUMNS, Run, RunError, Swarm, open_run, resume, run,
+    DETERMINISTIC_COLUMNS, EPISODE_DTYPE, Run, RunError, Swarm, open_run, resume, run,
 )
 
-__all__ = ["DETERMINISTIC_COLUMNS", "Run", "RunError", "Swarm", "open_run", "resume", "run"]
+__all__ = ["DETERMINISTIC_COLUMNS", "EPISODE_DTYPE", "Run", "RunError", "Swarm", "open_run",
+           "resume", "run"]
