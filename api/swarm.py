@@ -385,12 +385,13 @@ class _RowFollower:
         if self.error is not None:
             return True
         try:
+            size = self.file.stat().st_size
+            if size == self.size:
+                return False
             text = self.file.read_text()
         except FileNotFoundError:
             return False
-        if len(text) == self.size:
-            return False
-        self.size = len(text)
+        self.size = size
         try:
             for row in _complete_rows(text)[self.delivered:]:
                 self.delivered += 1
