@@ -1,8 +1,8 @@
 """The Python API (``nnql_swarm.api``): its options are the command's, with the command's error
 lines; the example script and the example notebook run (the notebook in a Jupyter kernel of this
 environment, through ``nbclient``) and give the episodes as a table, the Q-tables as arrays, the
-same run in-process and distributed, and the inline Rerun viewer; a run stopped from Python
-resumes to the run left alone."""
+same run in-process and distributed, and the inline Rerun viewer, which draws the run in headless
+Chromium (marker ``browser``); a run stopped from Python resumes to the run left alone."""
 
 import json
 import subprocess
@@ -239,3 +239,88 @@ def test_a_run_stopped_from_python_resumes_to_the_run_left_alone(example, tmp_pa
     with pytest.raises(ValueError, match="no run to resume"):
         resume(tmp_path / "nothing")
     assert issubclass(RunError, RuntimeError)
+
+
+WIDGET_PAGE = """<!doctype html>
+<html><head><meta charset="utf-8"><link rel="stylesheet" href="widget.css">
+<style>body {{ margin: 0; background: #fff; }}</style></head>
+<body><div id="cell"></div>
+<script type="module">
+import widget from "./widget.js";
+const state = {{_width: {width}, _height: {height}, _url: null, _panel_states: {{}},
+               _fallback_token: null, _theme: "light"}};
+const handlers = {{}};
+const model = {{
+  get: (name) => state[name],
+  on: (event, handler) => {{ handlers[event] = handler; }},
+  off: () => {{}},
+  send: async (message) => {{
+    if (message !== "ready") return;
+    for (let i = 0; i < {messages}; i++) {{
+      const data = await (await fetch(`message-${{i}}.rrd`)).arrayBuffer();
+      handlers["msg:custom"]({{type: "rrd"}}, [new DataView(data)]);
+    }}
+    document.title = "sent";
+  }},
+}};
+widget.render({{model, el: document.getElementById("cell")}});
+</script></body></html>
+"""
+"""Jupyter's part, played by a page: the widget's module (``rerun_notebook``'s own ``widget.js``
+and viewer, served from this machine) rendered as anywidget renders it, with a model that holds
+the widget's state and hands it the messages ``Run.show`` queued, once the viewer says it is
+ready, as the kernel would."""
+
+
+@pytest.mark.browser
+@pytest.mark.timeout(420)
+def test_the_inline_viewer_shows_the_run_in_a_browser(tmp_path):
+    """What ``Run.show`` gives a notebook's page draws the run: the grid and every agent's
+    colour, in headless Chromium (as ``tests/test_browser.py`` checks the web viewer)."""
+    import functools
+    import http.server
+    import threading
+
+    import rerun_notebook
+
+    from tests.browser import check_run, chromium, screenshot, wait_for
+    from nnql_swarm.world.viz import agent_colors
+
+    run = Swarm(agents=4, episodes=1, max_steps=20, seed=3, run_id="inline").run(
+        tmp_path / "run")
+    queued = run.show()._viewer._event_queue  # what the kernel sends once the page is ready
+    site = tmp_path / "site"
+    site.mkdir()
+    for name in ("widget.js", "widget.css", "re_viewer_bg.wasm"):
+        (site / name).symlink_to(rerun_notebook.STATIC_DIR / name)
+    for i, (_, (data,)) in enumerate(queued):
+        (site / f"message-{i}.rrd").write_bytes(data)
+    (site / "index.html").write_text(WIDGET_PAGE.format(width=1260, height=700,
+                                                        messages=len(queued)))
+    class Quiet(http.server.SimpleHTTPRequestHandler):
+        def log_message(self, *_) -> None:
+            pass
+
+    handler = functools.partial(Quiet, directory=str(site))
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    colours = agent_colors(run.config.n_agents)
+    try:
+        with chromium() as browser:
+            page = browser.new_page()
+            errors = []
+            page.on("pageerror", lambda error: errors.append(str(error)))
+            page.goto(f"http://127.0.0.1:{server.server_address[1]}/index.html")
+            try:
+                image, found, _ = wait_for(
+                    page, lambda image: check_run(image, run.config.width, run.config.height,
+                                                  colours), 240.0, every=2.0)
+            except AssertionError as failure:
+                screenshot(page, tmp_path / "inline.png")
+                raise AssertionError(f"{failure}; page errors: {errors}; the page: "
+                                     f"{tmp_path / 'inline.png'}") from None
+            screenshot(page, tmp_path / "inline.png")
+            assert page.title() == "sent" and not errors, errors
+    finally:
+        server.shutdown()
+    assert len(found["pixels"]) == run.config.n_agents
