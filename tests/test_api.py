@@ -212,9 +212,11 @@ def test_the_notebook_runs_in_a_kernel_and_shows_the_viewer_inline(tmp_path, mon
     assert viewers[0]["state"]["_height"] == 720
 
 
-def test_a_run_stopped_from_python_resumes_to_the_run_left_alone(example, tmp_path):
-    out, _ = example
-    swarm = Swarm(agents=AGENTS, episodes=EPISODES, max_steps=STEPS, seed=SEED, run_id="stopped")
+def test_a_run_stopped_from_python_resumes_to_the_run_left_alone(tmp_path):
+    """A progress function that raises stops a distributed run (at the supervisor's next poll,
+    some episodes later: enough of them that the run cannot end first)."""
+    episodes = 40
+    swarm = Swarm(agents=AGENTS, episodes=episodes, max_steps=STEPS, seed=SEED, run_id="stopped")
     seen = []
 
     def stop_after_two(row: dict) -> None:
@@ -225,21 +227,20 @@ def test_a_run_stopped_from_python_resumes_to_the_run_left_alone(example, tmp_pa
     with pytest.raises(RuntimeError, match="enough"):
         swarm.run(tmp_path / "stopped", distributed=True, record=False, progress=stop_after_two)
     stopped = Run.open(tmp_path / "stopped")
-    assert 2 <= len(stopped.episodes) < EPISODES and not stopped.complete
+    assert 2 <= len(stopped.episodes) < episodes and not stopped.complete
+    assert [row["episode"] for row in seen] == [0, 1]
     with pytest.raises(ValueError, match="already holds a run"):
         swarm.run(tmp_path / "stopped")
     rest = []
     run = resume(tmp_path / "stopped", progress=rest.append)
     assert run.complete
-    assert [row["episode"] for row in seen] == [0, 1]
-    assert [row["episode"] for row in rest] == list(range(rest[0]["episode"], EPISODES))
+    assert [row["episode"] for row in rest] == list(range(rest[0]["episode"], episodes))
     assert rest[0]["episode"] <= len(stopped.episodes)
-    same_run(run, Run.open(out / "in-process"))
+    same_run(run, swarm.run(tmp_path / "alone", record=False))
     assert resume(tmp_path / "stopped").complete  # a complete run comes back as it is
     with pytest.raises(ValueError, match="no run to resume"):
         resume(tmp_path / "nothing")
     assert issubclass(RunError, RuntimeError)
-
 
 WIDGET_PAGE = """<!doctype html>
 <html><head><meta charset="utf-8"><link rel="stylesheet" href="widget.css">
