@@ -19,6 +19,7 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 from nnql_swarm.operations import zenoh_files
 from nnql_swarm.terminal.cli import (
@@ -324,8 +325,10 @@ def transports(args: argparse.Namespace, config: SwarmConfig):
     return shared, lambda _agent: shared, None
 
 
-def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> int:
-    """``record``: a RecordingSession, or True / False for run.rrd or nothing."""
+def run_in_process(config: SwarmConfig, out: Path, record, progress: bool,
+                   on_row: Callable[[dict], None] | None = None) -> int:
+    """``record``: a RecordingSession, or True / False for run.rrd or nothing; ``on_row(row)``
+    follows each episode's row (its deterministic columns)."""
     from nnql_swarm.sim.inprocess import run_in_process as run
     from nnql_swarm.sim.runs import swarm_world
     from nnql_swarm.recording.session import InProcessRecorder, RecordingSession
@@ -337,18 +340,20 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> in
     bar = progress_bar(config.episodes, "episode") if progress else None
     collisions = 0
 
-    def on_row(row: dict) -> None:
+    def row_done(row: dict) -> None:
         nonlocal collisions
         collisions += row["collisions"]
         if bar is not None:
             bar.set_postfix(arrived=f"{row['arrived']}/{config.n_agents}", collisions=collisions,
                             refresh=False)
             bar.update(1)
+        if on_row is not None:
+            on_row(row)
 
     recording = viz.world is not None
     try:
         result = run(config, out, viz.on_tick if recording else None,
-                     on_episode_end=viz.on_episode_end if recording else None, on_row=on_row)
+                     on_episode_end=viz.on_episode_end if recording else None, on_row=row_done)
     finally:
         if bar is not None:
             bar.close()
@@ -358,8 +363,9 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> in
 
 
 def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
-                  start: ResumePoint) -> int:
-    """Start the world and/or agents as supervised processes and wait for the run to end."""
+                  start: ResumePoint, on_poll: Callable[[], bool | None] | None = None) -> int:
+    """Start the world and/or agents as supervised processes and wait for the run to end;
+    ``on_poll``: as ``Supervisor.run`` takes it."""
     world_transport, agent_transport, hub = transports(args, config)
     recording = RecordingSession.start(args, config, out)
     record, progress = recording.plan or False, not args.no_progress
@@ -377,7 +383,7 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
                                i, config, agent_transport(i), out, restarted or resumes,
                                recording.plan, hub,
                                None if restarted else start.checkpoint_episode))
-    code = supervisor.run(leader=world)
+    code = supervisor.run(leader=world, on_poll=on_poll)
     recording.finish()
     if code == EXIT_INTERRUPTED:
         print(f"\ninterrupted: the swarm stopped; continue it with {resume_command(args, out)}",
