@@ -2,18 +2,20 @@
 once, collision-free.
 
 Priority Inheritance with Backtracking (Okumura et al., 2022), one step at a time, on the world's
-rules: agents in a fixed priority order for the episode (the longest shortest path to its goal at
-the start first, then by id; as PIBT's priorities when all grow alike) each take the free
+rules: agents in priority order (at the start, the longest shortest path to its goal first, then
+by id; an agent gains a unit of priority at each step that finds it no nearer its goal than it
+has ever been, as PIBT's priorities grow while an agent is not home) each take the free
 neighbouring cell nearest their goal (breadth-first distances on the grid's free cells, around the
 walls and the parked agents); an agent that wants a cell someone still occupies makes that one
 move first (it inherits the priority) and tries its next cell if it cannot. No two agents are
-planned into one cell and no two swap, so the world's arbitration never finds a collision;
-arrived agents are parked obstacles, as in the swarm, and walls are obstacles that never move.
+planned into one cell and no two swap, so the world's arbitration never finds a collision.
+Arrived agents are parked obstacles, as in the swarm, and walls obstacles that never move: an
+agent next to its goal does not take it while parking there would leave another agent no way to
+its own.
 
-It learns nothing. It is a reference, not a lower bound: PIBT's paths are not optimal (on 20
-open 11 x 11 instances an optimal solver's sum of costs is 3.2 % below PIBT's), and it can fail
-where a parked agent closes the only way to another's goal. The lower bound is ``shortest_sum``,
-each agent's shortest path alone.
+It learns nothing. It is a reference, not a lower bound: PIBT's paths are not optimal, and where
+walls make corridors it does not always bring every agent home. The lower bound is
+``shortest_sum``, each agent's shortest path alone.
 """
 
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
@@ -129,15 +131,16 @@ def _closes(goal, i, x, y, goal_x, goal_y, arrived, n, width, height, distances,
 
 
 @kernel
-def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, first, priority, closest,
-         actions,
+def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, closest, actions,
          distances, occupant, reserved, decided, order, blocked, queue, stack, tried, probe):
     """Every agent's collision-free action for this step, the agents of higher ``priority``
     first: bodies ``0 .. n - 1`` are the agents, ``n .. bodies - 1`` walls (they stay). An agent
-    next to its goal whose parking there would leave another agent no way to its own does not
-    take it this step, and plans after the others. Scratch: ``distances`` (n cells each),
-    ``occupant``, ``reserved``, ``blocked``, ``queue``, ``probe`` (a slot per cell),
-    ``decided``, ``order``, ``stack``, ``tried`` (a slot per agent)."""
+    gains a unit of ``priority`` at every step that finds it no nearer its goal than it has been
+    (``closest``, its nearest so far), so that one held back in a corridor comes to outrank those
+    in its way. An agent next to its goal whose parking there would leave another agent no way
+    to its own does not take it this step, and plans after the others. Scratch: ``distances``
+    (n cells each), ``occupant``, ``reserved``, ``blocked``, ``queue``, ``probe`` (a slot per
+    cell), ``decided``, ``order``, ``stack``, ``tried`` (a slot per agent)."""
     cells = width * height
     for c in range(cells):
         occupant[c] = -1
@@ -156,10 +159,9 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, first, priorit
             goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances, i * cells,
                            queue)
             here = distances[i * cells + y[i] * width + x[i]]
-            if here < closest[i]:  # nearer than ever: back to its first priority
+            if here < closest[i]:
                 closest[i] = here
-                priority[i] = first[i]
-            else:  # no nearer than it has been: it gains on those that make way
+            else:  # no nearer than it has ever been: it gains on those that make way
                 priority[i] += 1
     for i in range(n):  # an arrival that would close another's last way waits; the arrivals
         # of this step close ways together, so each one let through counts for the next

@@ -30,10 +30,10 @@ from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
 from nnql_swarm.world.rules import shared_cells, swaps_through, world_step
 
-ORACLE_SCRATCH = 11
+ORACLE_SCRATCH = 10
 """Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
-queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal, their
-first priorities), a slot per grid cell each."""
+queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal), a
+slot per grid cell each."""
 
 OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE = 0, 1, 2
 OPT_FIELDS = 3
@@ -165,10 +165,9 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             goal_x[i] = goals[i, 0]
             goal_y[i] = goals[i, 1]
             shortest += paths[i]
-            if oracle:  # PIBT's order for the episode: the farthest from its goal first
+            if oracle:  # PIBT's first order: the farthest from its goal first
                 oracle_scratch[7, i] = paths[i]
-                oracle_scratch[9, i] = paths[i] + 1
-                oracle_scratch[10, i] = paths[i]
+                oracle_scratch[9, i] = paths[i] + 1  # nearer than ever, at first
         else:
             goal_x[i] = -1
             goal_y[i] = -1
@@ -193,10 +192,10 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             actions[i] = STAY if ending else scripts[step, i - learners]
             decided[i] = True
         if oracle and not ending:
-            plan(x, y, goal_x, goal_y, arrived, n, learners, width, height, oracle_scratch[10],
-                 oracle_scratch[7], oracle_scratch[9], actions, oracle_cells, oracle_scratch[0], oracle_scratch[1], decided,
-                 oracle_scratch[2], oracle_scratch[3], oracle_scratch[4], oracle_scratch[5],
-                 oracle_scratch[6], oracle_scratch[8])
+            plan(x, y, goal_x, goal_y, arrived, n, learners, width, height, oracle_scratch[7],
+                 oracle_scratch[9], actions, oracle_cells, oracle_scratch[0], oracle_scratch[1],
+                 decided, oracle_scratch[2], oracle_scratch[3], oracle_scratch[4],
+                 oracle_scratch[5], oracle_scratch[6], oracle_scratch[8])
         for rank in range(learners):
             i = (rank + tick) % learners  # the agent of this rank (inverse of priority_rank)
             if oracle:
