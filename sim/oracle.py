@@ -169,7 +169,7 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, clos
             goal = goal_y[i] * width + goal_x[i]
             if _closes(goal, i, x, y, goal_x, goal_y, arrived, n, width, height, distances,
                        blocked, probe, queue):
-                distances[i * cells + goal] = FAR
+                distances[i * cells + goal] = FAR + 1  # not even when pushed
             else:
                 blocked[goal] = 1
     count = 0
