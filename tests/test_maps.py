@@ -164,3 +164,19 @@ def test_the_oracle_brings_every_agent_home_on_most_random_maps():
         assert (episodes.agent_steps >= episodes.shortest).all()
         solved += int(episodes.arrived[0, 0] == 32)
     assert solved >= 0.95 * ORACLE_INSTANCES, f"{solved} of {ORACLE_INSTANCES}"
+
+
+def test_the_swarm_experiment_plays_a_map_for_every_seed(tmp_path):
+    from tests.test_experiment import experiment
+
+    result = experiment("swarm", "--map", str(MAPS / "warehouse-46x33.map"), "--scen",
+                        str(MAPS / "warehouse-46x33.scen"), "--agents", "8", "--episodes", "5",
+                        "--seeds", "2", "--variants", "oracle,shield-nnql", "--no-plots",
+                        "--out", str(tmp_path / "x"))
+    assert result.returncode == 0, result.stderr
+    config = SwarmConfig.from_json((tmp_path / "x" / "runs" / "oracle-s1" / "config.json").read_text())
+    assert (config.width, config.height) == (46, 33) and len(config.scenario) == 8
+    rows = read_episodes(tmp_path / "x" / "runs" / "oracle-s1" / "episodes.csv")
+    assert all(int(row["arrived"]) == 8 for row in rows)
+    bad = experiment("swarm", "--scen", str(MAPS / "warehouse-46x33.scen"), "--out", str(tmp_path / "y"))
+    assert bad.returncode == 2 and "--scen needs --map" in bad.stderr
