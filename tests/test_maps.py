@@ -143,6 +143,8 @@ def test_a_map_and_scenario_play_the_same_run_distributed_and_in_process(tmp_pat
     assert config.map_rows == maps.read_map(MAPS / "random-17x17-20-s0.map")
     assert config.scenario[0] == tuple(
         int(v) for v in (MAPS / "random-17x17-20-s0.scen").read_text().splitlines()[1].split("\t")[4:8])
+    resumed = run_swarm(tmp_path / "dist", "--resume", "--no-record", timeout=60)
+    assert resumed.returncode == 0 and "already complete" in resumed.stderr, resumed.stderr
 
 
 ORACLE_INSTANCES = 100
