@@ -89,7 +89,8 @@ class SwarmConfig:
     seed: int = option(0, "the run's seed: every random draw comes from it")
     algo: str = option(_DEFAULT["algo"], "how agents learn: the paper's nnQL and QL, nnQL with the "
                        "announced move in the state, Double Action Q-learning, or the oracle, "
-                       "a reference planner (PIBT; not a lower bound; in-process only)", choices=ALGOS)
+                       "a reference planner (PIBT; not a lower bound; in-process only)",
+                       choices=ALGOS)
     random_step: int = option(20, "every k-th action is random (the paper's random step)",
                               metavar="K")
     alpha: float = option(_DEFAULT["alpha"], "learning rate")
@@ -201,7 +202,6 @@ class SwarmConfig:
                     for x, y in cells):
                 raise ValueError("the scenario's starts and goals must be distinct free cells "
                                  "of the map")
-
 
     @cached_property  # the world reads it every tick: worked out once (the config is frozen)
     def n_walls(self) -> int:

@@ -70,7 +70,8 @@ def parse_map(text: str, name: str = "<map>") -> tuple[str, ...]:
             try:
                 value = int(words[1])
             except ValueError:
-                raise MapError(name, number, f"{key} must be a whole number, not {words[1]!r}") from None
+                raise MapError(name, number,
+                               f"{key} must be a whole number, not {words[1]!r}") from None
             if not 2 <= value <= MAX_SIDE:
                 raise MapError(name, number, f"{key} must be 2..{MAX_SIDE}, not {value}")
             header[key] = value
@@ -124,7 +125,8 @@ def parse_scen(text: str, rows: tuple[str, ...], agents: int,
     height, width = len(rows), len(rows[0])
     lines = text.splitlines()
     if not lines or lines[0].split() != ["version", "1"]:
-        raise MapError(name, 1, f"expected 'version 1', found {(lines[0] if lines else '').strip()!r}")
+        found = (lines[0] if lines else "").strip()
+        raise MapError(name, 1, f"expected 'version 1', found {found!r}")
     tasks: list[Task] = []
     seen: dict[tuple[int, int], int] = {}
     number = 1
@@ -207,7 +209,8 @@ def distances(rows: tuple[str, ...], x: int, y: int) -> np.ndarray:
 # -- generators --------------------------------------------------------------------------------
 
 
-def random_map(width: int, height: int, density: float, rng: np.random.Generator) -> tuple[str, ...]:
+def random_map(width: int, height: int, density: float,
+               rng: np.random.Generator) -> tuple[str, ...]:
     """``round(density * W * H)`` walls on distinct cells drawn uniformly (POGEMA's random maps:
     17 to 21 cells a side, 20 % walls)."""
     walls = set(rng.choice(width * height, size=int(round(density * width * height)),
@@ -255,8 +258,9 @@ def warehouse_map(width: int, height: int) -> tuple[str, ...]:
     grid = [[FREE] * width for _ in range(height)]
     for j in range(ny):
         for i in range(nx):
-            for y in range(top + j * (shelf_h + gap_y), top + j * (shelf_h + gap_y) + shelf_h):
-                for x in range(left + i * (shelf_w + gap_x), left + i * (shelf_w + gap_x) + shelf_w):
+            x0, y0 = left + i * (shelf_w + gap_x), top + j * (shelf_h + gap_y)
+            for y in range(y0, y0 + shelf_h):
+                for x in range(x0, x0 + shelf_w):
                     grid[y][x] = WALL
     return tuple("".join(row) for row in grid)
 

@@ -12,8 +12,9 @@ record of a tick is applied in agent-id order before the next tick.
 
 Bodies ``0 .. learners - 1`` learn; the rest are scripted obstacles whose every action is given
 (the paper's experiment: one learner, three obstacles; a swarm's walls, ``protocol.walls``, whose
-every action is to stay), outrank every learner and announce their scripted next action. An oracle run plans every learner's move with PIBT (``sim.oracle``,
-a reference planner) around the walls, and learns nothing.
+every action is to stay), outrank every learner and announce their scripted next action. An
+oracle run plans every learner's move with PIBT (``sim.oracle``, a reference planner) around the
+walls, and learns nothing.
 
 Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agent.learner``) and
 ``options`` (``OPT_*``); the world's options are the same for the whole batch.
