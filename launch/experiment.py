@@ -33,6 +33,7 @@ from nnql_swarm.experiment.swarm import (
     write_runs, write_tables,
 )
 from nnql_swarm.protocol.config import PRESETS
+from nnql_swarm.protocol.maps import run_map
 from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.terminal.cli import (
     EXIT_INTERRUPTED, OneLineParser, make_directory, prepare_simulator, program_name, progress,
@@ -272,8 +273,13 @@ def build_swarm_parser() -> OneLineParser:
     add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
     add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH")
     add("--obstacle-density", type=float, default=d.obstacle_density, metavar="P",
-        help="fraction of the grid's cells that are walls (each seed its own map); the oracle, "
-             "which plans on an open grid, is then left out")
+        help="fraction of the grid's cells that are walls (each seed its own map)")
+    add("--map", default=None, metavar="FILE|SPEC",
+        help="every seed on this map: a MovingAI .map file, or random:WxH:P[:SEED], "
+             "maze:WxH[:SEED], warehouse[:WxH] (SEED defaults to --seed-base); instead of --grid")
+    add("--scen", default=None, metavar="FILE",
+        help="with --map: a MovingAI .scen file whose first N lines (N = --agents) are every "
+             "episode's starts and goals")
     add("--variants", type=parse_variants, default=d.variants, metavar="LIST",
         help=f"comma-separated, from {','.join(VARIANTS)}")
     add("--ablation", action="store_true",
@@ -294,15 +300,21 @@ def run_swarm(argv: list[str]) -> Path:
     args = parser.parse_args(argv)
     presets = ablation_presets() if args.ablation else dict(PRESETS)
     variants = tuple(presets) if args.ablation else args.variants
-    if args.obstacle_density:
-        variants = tuple(v for v in variants if presets[v]["algo"] != "oracle")
-        if not variants:
-            parser.error("the oracle plans on an open grid: no variant left with walls")
+    grid = {"width": args.grid[0], "height": args.grid[1]}
+    if args.map is not None:
+        if args.obstacle_density or args.grid != (SwarmExperiment.width, SwarmExperiment.height):
+            parser.error("--map brings its own grid and walls: give no --grid or "
+                         "--obstacle-density with it")
+        try:
+            grid = run_map(args.map, args.scen, args.seed_base, args.agents)
+        except ValueError as error:
+            parser.error(str(error))
+    elif args.scen is not None:
+        parser.error("--scen needs --map, the map its scenarios are for")
     experiment = SwarmExperiment(agents=args.agents, seeds=args.seeds, seed_base=args.seed_base,
                                  episodes=args.episodes, max_steps=args.max_steps,
-                                 width=args.grid[0], height=args.grid[1],
                                  obstacle_density=args.obstacle_density,
-                                 variants=variants, presets=presets)
+                                 variants=variants, presets=presets, **grid)
     try:
         experiment.config(experiment.variants[0], experiment.seed_base)
     except ValueError as error:

@@ -34,6 +34,7 @@ from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
 )
 from nnql_swarm.protocol.jit import plain_python_environment
+from nnql_swarm.protocol.maps import run_map
 from nnql_swarm.protocol.runfiles import (
     CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, STATS_DIR, write_text_atomic,
 )
@@ -85,6 +86,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_options(run, exclude=LEARNING_FIELDS)
     run.add_argument("--grid", type=parse_grid, default=argparse.SUPPRESS, metavar="WxH",
                      help=f"grid size (default: {d.width}x{d.height})")
+    run.add_argument("--map", default=None, metavar="FILE|SPEC",
+                     help="the grid from a MovingAI .map file, or a generated one: "
+                          "random:WxH:P[:SEED] (e.g. random:19x19:0.2), maze:WxH[:SEED], "
+                          "warehouse[:WxH] (SEED defaults to --seed); starts and goals are "
+                          "drawn per episode from its largest free region")
+    run.add_argument("--scen", default=None, metavar="FILE",
+                     help="with --map: a MovingAI .scen file whose first N lines (N = --agents) "
+                          "are every episode's starts and goals")
     learning = p.add_argument_group("learning (each defaults to the preset's)")
     add_config_options(learning, only=LEARNING_FIELDS)
     run.add_argument("--run-id", default=None, help="default: <preset>-<agents>a-s<seed>-<time>")
@@ -166,6 +175,7 @@ def config_values(args: argparse.Namespace) -> dict:
 def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
     """The run's config and directory from the options; raises UsageError on bad values."""
     values = config_values(args)
+    values.update(map_values(args, values))
     try:
         config = SwarmConfig(run_id="pending", **values)
     except (ValueError, TypeError) as error:
@@ -203,6 +213,24 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
         raise UsageError(f"--role {args.role} needs --run-id, the same on every host")
     out = args.out or Path("runs") / run_id
     return config, out
+
+
+def map_values(args: argparse.Namespace, values: dict) -> dict:
+    """The config fields of ``--map`` and ``--scen`` (none without them); raises UsageError,
+    naming the file and line of a malformed map or scenario."""
+    if args.map is None:
+        if args.scen is not None:
+            raise UsageError("--scen needs --map, the map its scenarios are for")
+        return {}
+    if hasattr(args, "grid") or values.get("obstacle_density"):
+        raise UsageError("--map brings its own grid and walls: give no --grid or "
+                         "--obstacle-density with it")
+    d = SwarmConfig()
+    try:
+        return run_map(args.map, args.scen, values.get("seed", d.seed),
+                       values.get("n_agents", d.n_agents))
+    except ValueError as error:
+        raise UsageError(str(error)) from None
 
 
 def check_distributable(config: SwarmConfig) -> None:

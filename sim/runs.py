@@ -40,7 +40,8 @@ class World:
     """What every run of a batch shares: bodies (the first ``learners`` learn), grid, steps.
 
     The scripted bodies are the paper's obstacles or, at an ``obstacle_density`` above 0, the
-    swarm's walls (each run's own, from its seed)."""
+    swarm's walls (each run's own, from its seed), or the walls of the map ``map_rows`` (every
+    run's, with the fixed starts and goals of ``scenario`` if given)."""
 
     bodies: int
     learners: int
@@ -51,6 +52,8 @@ class World:
     goal_reward: float = GOAL_REWARD
     stay_reward: float = STAY_REWARD
     obstacle_density: float = 0.0
+    map_rows: tuple[str, ...] = ()
+    scenario: tuple = ()
 
     @property
     def scripted(self) -> int:
@@ -59,14 +62,15 @@ class World:
     @property
     def paper(self) -> bool:
         """Whether the scripted bodies are the paper's obstacles (rather than walls)."""
-        return self.scripted > 0 and not self.obstacle_density
+        return self.scripted > 0 and not self.obstacle_density and not self.map_rows
 
 
 def swarm_world(config: SwarmConfig) -> World:
     return World(bodies=config.n_bodies, learners=config.n_agents, width=config.width,
                  height=config.height, max_steps=config.max_steps,
                  count_swaps=config.count_swaps, goal_reward=config.goal_reward,
-                 stay_reward=config.stay_reward, obstacle_density=config.obstacle_density)
+                 stay_reward=config.stay_reward, obstacle_density=config.obstacle_density,
+                 map_rows=config.map_rows, scenario=config.scenario)
 
 
 class Episodes:
@@ -209,8 +213,8 @@ class Batch:
                 paths.append(np.abs(sc.starts[:1] - sc.goal).sum(axis=1))
             else:
                 sc = swarm_episode(seed, episode, w.width, w.height, w.learners,
-                                   w.obstacle_density)
-                walls = layout(seed, w.width, w.height, w.obstacle_density)[0]
+                                   w.obstacle_density, w.map_rows, w.scenario)
+                walls = layout(seed, w.width, w.height, w.obstacle_density, w.map_rows)[0]
                 starts.append(np.concatenate([sc.starts, walls]))
                 goals.append(sc.goals)
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))
@@ -249,10 +253,12 @@ def check_run(world: World, run: SwarmConfig) -> None:
     """Refuse a run the simulator cannot play, with the reason."""
     if run.algo not in READINGS and run.algo != "oracle":
         raise ValueError(f"unknown algorithm {run.algo!r}")
-    if run.algo == "oracle" and world.scripted:
+    if run.algo == "oracle" and world.paper:
         raise ValueError("the oracle plans swarms of learners, not scripted obstacles")
     if run.obstacle_density != world.obstacle_density:
         raise ValueError("every run of a batch needs the world's obstacle density")
+    if (run.map_rows, run.scenario) != (world.map_rows, world.scenario):
+        raise ValueError("every run of a batch needs the world's map and scenario")
 
 
 def _ints(*shape: int) -> np.ndarray:

@@ -134,7 +134,7 @@ class SwarmWorld:
     def _start_episode(self, episode: int) -> None:
         c = self.config
         scenario = swarm_episode(c.seed, episode, c.width, c.height, c.n_agents,
-                                 c.obstacle_density)
+                                 c.obstacle_density, c.map_rows, c.scenario)
         self.episode = episode
         self.step = 0
         self.goals = scenario.goals

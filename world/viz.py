@@ -190,7 +190,8 @@ class WorldViz:
         before = self._before
         if before is None:  # the first tick seen: it starts an episode (fresh run or resume)
             before = tuple(map(tuple, swarm_episode(c.seed, report.episode, c.width, c.height,
-                                                    c.n_agents, c.obstacle_density
+                                                    c.n_agents, c.obstacle_density, c.map_rows,
+                                                    c.scenario
                                                     ).starts.tolist()))
         if report.episode != self._goals_episode:
             self._start_episode(report)
@@ -212,7 +213,7 @@ class WorldViz:
         self._goals_episode = report.episode
         c = self.config
         episode = swarm_episode(c.seed, report.episode, c.width, c.height, c.n_agents,
-                                c.obstacle_density)
+                                c.obstacle_density, c.map_rows, c.scenario)
         self._starts[report.episode] = episode.starts.astype(np.float32)
         self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32)))
 
