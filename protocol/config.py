@@ -196,12 +196,13 @@ class SwarmConfig:
             if len(self.scenario) != self.n_agents:
                 raise ValueError(f"the scenario has {len(self.scenario)} tasks for "
                                  f"{self.n_agents} agents")
-            cells = [cell for sx, sy, gx, gy in self.scenario for cell in ((sx, sy), (gx, gy))]
-            if len(set(cells)) != len(cells) or not all(
+            starts = [(sx, sy) for sx, sy, _, _ in self.scenario]
+            goals = [(gx, gy) for _, _, gx, gy in self.scenario]
+            if len(set(starts)) != len(starts) or len(set(goals)) != len(goals) or not all(
                     0 <= x < self.width and 0 <= y < self.height and rows[y][x] == "."
-                    for x, y in cells):
-                raise ValueError("the scenario's starts and goals must be distinct free cells "
-                                 "of the map")
+                    for x, y in starts + goals):
+                raise ValueError("the scenario's starts, and its goals, must be distinct free "
+                                 "cells of the map")
 
     @cached_property  # the world reads it every tick: worked out once (the config is frozen)
     def n_walls(self) -> int:

@@ -120,15 +120,15 @@ Task = tuple[int, int, int, int]
 def parse_scen(text: str, rows: tuple[str, ...], agents: int,
                name: str = "<scen>") -> tuple[Task, ...]:
     """The first ``agents`` tasks of a ``.scen`` file, checked against the map: every cell on it
-    and free, starts and goals all distinct cells (as the swarm draws them), each goal reachable
-    from its start."""
+    and free, no two starts and no two goals on one cell (a goal may be another agent's start, as
+    in MovingAI's scenarios), each goal reachable from its start."""
     height, width = len(rows), len(rows[0])
     lines = text.splitlines()
     if not lines or lines[0].split() != ["version", "1"]:
         found = (lines[0] if lines else "").strip()
         raise MapError(name, 1, f"expected 'version 1', found {found!r}")
     tasks: list[Task] = []
-    seen: dict[tuple[int, int], int] = {}
+    seen: dict[tuple[str, int, int], int] = {}  # (start or goal, x, y) -> its line
     number = 1
     for number, line in enumerate(lines[1:], start=2):
         if len(tasks) == agents:
@@ -156,11 +156,11 @@ def parse_scen(text: str, rows: tuple[str, ...], agents: int,
                                              f"{width}x{height} map")
             if rows[cy][cx] != FREE:
                 raise MapError(name, number, f"the {what} ({cx}, {cy}) is a wall")
-            if (cx, cy) in seen:
-                raise MapError(name, number, f"the {what} ({cx}, {cy}) is also a start or goal "
-                                             f"on line {seen[cx, cy]}: every start and goal "
-                                             f"must be a cell of its own")
-            seen[cx, cy] = number
+            if (what, cx, cy) in seen:
+                raise MapError(name, number, f"the {what} ({cx}, {cy}) is also the {what} on "
+                                             f"line {seen[what, cx, cy]}: no two agents start, "
+                                             f"or end, on one cell")
+            seen[what, cx, cy] = number
         if distances(rows, gx, gy)[sy, sx] < 0:
             raise MapError(name, number, f"the goal ({gx}, {gy}) cannot be reached from the "
                                          f"start ({sx}, {sy})")

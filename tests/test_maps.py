@@ -94,7 +94,17 @@ BAD = [
     ("off", SMALL, "version 1\n" + scen_line(0, 0, 4, 2) + "\n", "x.scen:2: the goal (4, 2) is off the 4x3 map"),
     ("few", SMALL, "version 1\n" + scen_line(0, 0, 3, 2) + "\n", "x.scen:2: 2 agents need 2 scenario lines, the file has 1"),
     ("version", SMALL, "version 2\n", "x.scen:1: expected 'version 1'"),
+    ("one goal", SMALL, "version 1\n" + scen_line(0, 0, 3, 2) + "\n" + scen_line(1, 2, 3, 2) + "\n",
+     "x.scen:3: the goal (3, 2) is also the goal on line 2"),
 ]
+
+
+def test_a_goal_may_be_another_agents_start_as_in_movingai_scenarios():
+    rows = maps.parse_map(SMALL)
+    text = "version 1\n" + scen_line(0, 0, 3, 2) + "\n" + scen_line(3, 2, 0, 0) + "\n"
+    tasks = maps.parse_scen(text, rows, 2)
+    config = SwarmConfig(n_agents=2, width=4, height=3, map_rows=rows, scenario=tasks)
+    assert SwarmConfig.from_json(config.to_json()).scenario == ((0, 0, 3, 2), (3, 2, 0, 0))
 
 
 @pytest.mark.parametrize("case, map_text, scen_text, message", BAD, ids=[b[0] for b in BAD])
