@@ -13,6 +13,9 @@
 - An agent restarted after a crash holds exactly its last checkpoint's tables, and that
   checkpoint holds every episode whose end the world heard from it.
 - The run ends: the world completes, and every agent still running stops.
+- The shared table believes no forged learning record: the world applies none of those a
+  compromised agent sent (the ``forge`` fault), and refuses as forged only those
+  (``world.records``).
 """
 
 from nnql_swarm.protocol.config import SwarmConfig
@@ -31,6 +34,7 @@ class Checker:
         self._sent_in: list[dict[int, int]] = [{} for _ in range(self.n)]  # agent: tick -> era
         self._said: dict[tuple[int, int, int], tuple[int, str]] = {}
         self._ends_heard = [-1] * self.n  # per agent: the last episode whose end the world heard
+        self._forged: dict[tuple[int, int, int], tuple] = {}  # (era, tick, agent) -> its record
 
     def fail(self, message: str) -> None:
         if len(self.failures) < 20:
@@ -93,6 +97,23 @@ class Checker:
         elif known[0] != action:
             self.fail(f"tick {tick}: agent {agent}'s intent changed: {known[0]} ({known[1]}), "
                       f"then {action} ({source})")
+
+    def forged(self, agent: int, tick: int, record: tuple) -> None:
+        """Agent ``agent``'s intent of ``tick`` carries the forged ``record``."""
+        era = self._sent_in[agent].get(tick)
+        self._forged[(era, tick, agent)] = record
+
+    def records_applied(self, era: int, tick: int, records: dict) -> None:
+        """World ``era`` applied ``records`` (by agent) of ``tick`` to the shared table."""
+        for agent, record in records.items():
+            if self._forged.get((era, tick, agent)) == record:
+                self.fail(f"tick {tick}: the world applied agent {agent}'s forged record")
+
+    def forgeries_refused(self, era: int, refused) -> None:
+        """World ``era`` refused as forged the records ``(agent, tick)`` of ``refused``."""
+        for agent, tick in refused:
+            if (era, tick, agent) not in self._forged:
+                self.fail(f"tick {tick}: the world refused agent {agent}'s honest record as forged")
 
     def end_heard(self, episode: int, missed) -> None:
         """The world applied an episode's end tick; ``missed``: whose intents it lacked."""

@@ -8,7 +8,10 @@ opens a given tick, some virtual time into it (at most one fault of each kind):
 - ``partition``: for a while no message crosses between ``group`` and the other processes;
 - ``stall``: ``target`` (the world or an agent) stops answering for a while, as under SIGSTOP;
 - ``crash``: ``target`` dies (kill -9) and its supervisor restarts it ``duration`` later: an
-  agent from its last checkpoint, the world with ``--resume`` under the running agents.
+  agent from its last checkpoint, the world with ``--resume`` under the running agents;
+- ``forge``: where the agents share a table, agent ``target`` is compromised: from then on, until
+  it restarts, every learning record it sends is forged (``sim.forgery``). Drawn apart from the
+  other kinds (:data:`FORGE_P`), after them, so that they are drawn as they were.
 
 Latency, duplicates and reordering alone cannot make anyone miss a deadline (they are far
 shorter than the time-outs): a schedule with no other fault is *benign*, and its run must equal
@@ -24,6 +27,9 @@ from nnql_swarm.protocol.seeding import SIM_STREAM, stream_rng
 KINDS = ("drop", "duplicate", "reorder", "partition", "stall", "crash")
 BENIGN = frozenset({"duplicate", "reorder"})
 WINDOWS = ("drop", "duplicate", "reorder")
+FORGE = "forge"
+FORGE_P = 0.3
+"""How often a schedule with faults, where the agents share a table, also has a forging agent."""
 """Faults that change the network's behaviour for a while."""
 
 DEADLINE_S = 0.5
@@ -56,7 +62,7 @@ class Fault:
     def __str__(self) -> str:
         what = {"drop": f"p={self.p:.2f}", "duplicate": f"p={self.p:.2f}",
                 "reorder": f"p={self.p:.2f}", "partition": "{" + ",".join(sorted(self.group)) + "}",
-                "stall": self.target, "crash": self.target}[self.kind]
+                "stall": self.target, "crash": self.target, FORGE: self.target}[self.kind]
         return (f"{self.kind} {what} at tick {self.tick} +{self.offset_s * 1000:.2f} ms "
                 f"for {self.duration_s * 1000:.1f} ms")
 
@@ -128,4 +134,7 @@ def draw_schedule(seed: int, agents: int = 8) -> Schedule:
             else:
                 target = "world" if rng.random() < 0.25 else f"agent-{rng.randrange(agents)}"
                 faults.append(Fault(kind, tick, offset, rng.uniform(0.05, 3.0), target=target))
+        if config.shared and rng.random() < FORGE_P:
+            faults.append(Fault(FORGE, rng.randrange(ticks), rng.uniform(0.0, 0.004), 0.0,
+                                target=f"agent-{rng.randrange(agents)}"))
     return Schedule(seed, config, latency, tuple(faults))

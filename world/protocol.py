@@ -31,6 +31,7 @@ from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservat
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
 from nnql_swarm.protocol.trace import CLOSE, TickTrace
 from nnql_swarm.world.engine import SwarmWorld
+from nnql_swarm.world.records import BARRED, FORGED, UNCHECKED, Decision, RecordCheck, decides
 
 STARTUP_TIMEOUT_S = 60.0
 """How long the world waits at least for every agent to come alive before it gives up."""
@@ -106,6 +107,13 @@ class WorldProtocol:
         self.episode_start = now
         self.episode_tick = self.world.tick
         self.agent_of_key: dict[str, int] = {}  # intent key -> its agent, parsed once
+        shared = self.world.table is not None
+        self.records = RecordCheck(config) if shared else None  # see _checked_records
+        self.sent: dict = {}  # the open tick's observations, by agent, as they are sent
+        self.sent_before: dict = {}  # the last tick's
+        self.decisions: dict[int, Decision] = {}  # the last tick's deciders, by agent
+        self.barred: set[int] = set()  # agents that sent a forged record since they started
+        self.forged_at: list[tuple[int, int]] = []  # (agent, tick) of each forged record refused
 
     # Inputs. Each returns the effects it causes, in the order they must be carried out.
 
@@ -127,6 +135,7 @@ class WorldProtocol:
             out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
             if self.started and agent in self.joined:  # restarted: its copy is a checkpoint's
                 self.to_resync.add(agent)
+                self.barred.discard(agent)  # a new process: its records are checked again
             self.joined.add(agent)
             if not self.started and len(self.alive) == self.n:
                 self._start(now)
@@ -228,6 +237,7 @@ class WorldProtocol:
         return {"completed": self.completed, "ticks": self.world.tick,
                 "episode": self.world.episode, "accepted": self.inbox.accepted,
                 "rejected": dict(self.inbox.rejections), "violations": self.world.violations,
+                "forgers": sorted({agent for agent, _ in self.forged_at}),
                 "startup_s": self.startup_s}
 
     # The clock.
@@ -257,13 +267,15 @@ class WorldProtocol:
         self.learned = {}
         self.tick_start = now
         self.tick_deadline = now + self.config.tick_deadline_s
+        self.sent_before, self.sent = self.sent, {}
         out.append(SendObservations(self._encoded(self.world.observations_by_rank())))
 
-    @staticmethod
-    def _encoded(observations):
+    def _encoded(self, observations):
         """Each observation with its payload, built as it is taken (the first to decide is the
-        first to know)."""
+        first to know), kept to check the learning records it leads to."""
+        sent = self.sent
         for obs in observations:
+            sent[obs.agent] = obs
             yield obs, encode(obs)
 
     def _close_if_due(self, now: float) -> None:
@@ -275,7 +287,8 @@ class WorldProtocol:
         """Apply the open tick, open the next (the agents think while this one is reported)."""
         out, world = self._out, self.world
         self.trace.mark(CLOSE, world.tick)
-        report = world.apply(self.actions, self.learned)
+        learned = self._checked_records() if self.records is not None else self.learned
+        report = world.apply(self.actions, learned)
         self.slowest = max(self.slowest, now - self.tick_start)
         self.actions = None
         if not world.finished:
@@ -291,6 +304,30 @@ class WorldProtocol:
             self.episode_start, self.episode_tick, self.slowest = now, world.tick, 0.0
         if world.finished:
             self._close_run(now)
+
+    def _checked_records(self) -> dict[int, tuple]:
+        """The open tick's records that the agents' own transitions wrote
+        (``world.records``), each checked against the agent's decision of the tick before; the
+        others refused and counted (a forged one bars the agent's later records until it
+        restarts). Then this tick's decisions, for the next tick's records."""
+        checked, check, sent, intents = {}, self.records, self.sent, tuple(self.actions)
+        for agent, record in self.learned.items():
+            decision, obs = self.decisions.get(agent), sent.get(agent)
+            if agent in self.barred:
+                self.inbox.reject(BARRED, f"agent {agent}")
+            elif (decision is None or obs is None or obs.episode != decision.obs.episode
+                  or obs.tick != decision.obs.tick + 1):
+                self.inbox.reject(UNCHECKED, f"agent {agent}: no decision at tick {self.world.tick - 1}")
+            elif check.could_write(record, decision, obs, intents):
+                checked[agent] = record
+            else:
+                self.barred.add(agent)
+                self.forged_at.append((agent, self.world.tick))
+                self.inbox.reject(FORGED, f"agent {agent} at tick {self.world.tick}: {record!r:.100}")
+        self.decisions = {agent: Decision(obs, intents, self.sent_before.get(agent))
+                          for agent, obs in sent.items()
+                          if agent in self.heard and decides(obs)}
+        return checked
 
     def _close_run(self, now: float) -> None:
         """The run is complete: tell the agents until every live one has left (and
