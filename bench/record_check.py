@@ -4,10 +4,11 @@
 Runs whole swarms of the default preset (one shared table) in the deterministic simulator of the
 distributed swarm (``sim.distributed``: the world's and the agents' own protocol machines, no
 faults), the kernel uncompiled as in the world process, and times, per tick of the world, the
-record check (``WorldProtocol._checked_records``: every record of the tick), beside the rest of
+record check (``WorldProtocol._check_record``, as intents come and as the tick closes, and the
+decisions kept for the next tick's records, ``_checked_records``), beside the rest of
 the world's tick work in the same runs: applying the tick (``SwarmWorld.apply``, the shared
 table's updates included) and building and encoding the next observations. Each figure is the
-median over ``--repeats`` runs of the mean over the run's ticks.
+median over ``--repeats`` runs of the mean over the run's ticks, in CPU time of the thread.
 
     python bench/record_check.py
     python bench/record_check.py --agents 8,32 --episodes 5 --repeats 5
@@ -29,6 +30,7 @@ from nnql_swarm.sim.distributed import SimSwarm  # noqa: E402
 from nnql_swarm.sim.schedule import DEADLINE_S, Schedule  # noqa: E402
 from nnql_swarm.world.engine import SwarmWorld  # noqa: E402
 from nnql_swarm.world.protocol import WorldProtocol  # noqa: E402
+from nnql_swarm.world.records import RecordCheck  # noqa: E402
 
 GRIDS = {8: 11, 16: 16, 32: 22, 64: 32}
 """The grid side at each agent count, as ``docs/performance.md`` scales it (constant density)."""
@@ -42,17 +44,29 @@ class Timers:
         self.checks = self.ticks = 0
 
     def install(self) -> None:
-        timers, clock = self, time.perf_counter_ns
-        check, apply, encoded = (WorldProtocol._checked_records, SwarmWorld.apply,
-                                 WorldProtocol._encoded)
+        timers, clock = self, time.thread_time_ns  # CPU time: a loaded machine inflates less
+        one, closing, apply, encoded = (WorldProtocol._check_record,
+                                        WorldProtocol._checked_records, SwarmWorld.apply,
+                                        WorldProtocol._encoded)
+        self.could_write = could_write = RecordCheck.could_write
 
-        def timed_check(protocol):
+        def counted(check, *args):
+            timers.checks += 1
+            return could_write(check, *args)
+
+        def timed_one(protocol, agent, final):
             start = clock()
             try:
-                return check(protocol)
+                return one(protocol, agent, final)
             finally:
                 timers.check += clock() - start
-                timers.checks += len(protocol.learned)
+
+        def timed_closing(protocol):
+            start, nested = clock(), timers.check
+            try:
+                return closing(protocol)
+            finally:
+                timers.check += clock() - start - (timers.check - nested)
 
         def timed_apply(world, actions, learned=None):
             start = clock()
@@ -72,7 +86,9 @@ class Timers:
                     return
                 yield item
 
-        WorldProtocol._checked_records = timed_check
+        WorldProtocol._check_record = timed_one
+        RecordCheck.could_write = counted
+        WorldProtocol._checked_records = timed_closing
         SwarmWorld.apply = timed_apply
         WorldProtocol._encoded = timed_encoded
 
@@ -83,12 +99,15 @@ def one_run(agents: int, episodes: int, seed: int) -> Timers:
                          episodes=episodes, max_steps=100, width=side, height=side, seed=seed,
                          tick_deadline_s=DEADLINE_S)
     timers = Timers()
-    saved = (WorldProtocol._checked_records, SwarmWorld.apply, WorldProtocol._encoded)
+    saved = (WorldProtocol._check_record, WorldProtocol._checked_records, SwarmWorld.apply,
+             WorldProtocol._encoded)
     timers.install()
     try:
         outcome = SimSwarm(Schedule(seed, config, (50e-6, 300e-6), ())).run()
     finally:
-        WorldProtocol._checked_records, SwarmWorld.apply, WorldProtocol._encoded = saved
+        (WorldProtocol._check_record, WorldProtocol._checked_records, SwarmWorld.apply,
+         WorldProtocol._encoded) = saved
+        RecordCheck.could_write = timers.could_write
     assert outcome.failures == [], outcome.failures
     return timers
 

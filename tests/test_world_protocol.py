@@ -36,7 +36,7 @@ def believing(monkeypatch):
     """The world believes every record that fits the table: for the tests of how records are
     applied and spread, with records made up by hand (what the world checks of a record, and
     how: ``tests/test_records.py``)."""
-    monkeypatch.setattr(WorldProtocol, "_checked_records", lambda protocol: protocol.learned)
+    monkeypatch.setattr(WorldProtocol, "_check_record", lambda protocol, agent, final: None)
 
 
 def started(now: float = 0.0) -> tuple[WorldProtocol, list]:

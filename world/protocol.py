@@ -114,6 +114,7 @@ class WorldProtocol:
         self.decisions: dict[int, Decision] = {}  # the last tick's deciders, by agent
         self.barred: set[int] = set()  # agents that sent a forged record since they started
         self.forged_at: list[tuple[int, int]] = []  # (agent, tick) of each forged record refused
+        self.unchecked: set[int] = set()  # the open tick's records still to check
 
     # Inputs. Each returns the effects it causes, in the order they must be carried out.
 
@@ -193,6 +194,8 @@ class WorldProtocol:
             self.inbox.reject("bad-record", f"agent {agent}: {record!r:.100}")
         else:
             self.learned[agent] = record
+            if self.records is not None:
+                self._check_record(agent, False)
 
     def on_timer(self, now: float) -> list:
         """Time has come to ``now``: a tick's deadline, or the start-up's."""
@@ -265,6 +268,7 @@ class WorldProtocol:
             self.awaited.discard(agent)
         self.heard = set()
         self.learned = {}
+        self.unchecked = set()
         self.tick_start = now
         self.tick_deadline = now + self.config.tick_deadline_s
         self.sent_before, self.sent = self.sent, {}
@@ -305,29 +309,42 @@ class WorldProtocol:
         if world.finished:
             self._close_run(now)
 
+    def _check_record(self, agent: int, final: bool) -> None:
+        """Check agent ``agent``'s record of the open tick (``world.records``) against its
+        decision of the tick before, as soon as every intent it may have decided with is in (or
+        the tick closes: ``final``); a record that is not its own transition's is dropped and
+        counted (a forged one bars the agent's later records until it restarts)."""
+        record, check = self.learned[agent], self.records
+        decision, obs = self.decisions.get(agent), self.sent.get(agent)
+        if agent in self.barred:
+            reason = BARRED
+        elif (decision is None or obs is None or obs.episode != decision.obs.episode
+              or obs.tick != decision.obs.tick + 1):
+            reason = UNCHECKED
+        elif not (final or check.ready(obs, self.actions)):
+            self.unchecked.add(agent)
+            return
+        elif check.could_write(record, decision, obs, self.actions):
+            self.unchecked.discard(agent)
+            return
+        else:
+            reason = FORGED
+            self.barred.add(agent)
+            self.forged_at.append((agent, self.world.tick))
+        self.unchecked.discard(agent)
+        del self.learned[agent]
+        self.inbox.reject(reason, f"agent {agent} at tick {self.world.tick}: {record!r:.100}")
+
     def _checked_records(self) -> dict[int, tuple]:
-        """The open tick's records that the agents' own transitions wrote
-        (``world.records``), each checked against the agent's decision of the tick before; the
-        others refused and counted (a forged one bars the agent's later records until it
-        restarts). Then this tick's decisions, for the next tick's records."""
-        checked, check, sent, intents = {}, self.records, self.sent, tuple(self.actions)
-        for agent, record in self.learned.items():
-            decision, obs = self.decisions.get(agent), sent.get(agent)
-            if agent in self.barred:
-                self.inbox.reject(BARRED, f"agent {agent}")
-            elif (decision is None or obs is None or obs.episode != decision.obs.episode
-                  or obs.tick != decision.obs.tick + 1):
-                self.inbox.reject(UNCHECKED, f"agent {agent}: no decision at tick {self.world.tick - 1}")
-            elif check.could_write(record, decision, obs, intents):
-                checked[agent] = record
-            else:
-                self.barred.add(agent)
-                self.forged_at.append((agent, self.world.tick))
-                self.inbox.reject(FORGED, f"agent {agent} at tick {self.world.tick}: {record!r:.100}")
+        """The open tick's records, every one checked (:meth:`_check_record`); then this tick's
+        decisions, for the next tick's records."""
+        for agent in sorted(self.unchecked):
+            self._check_record(agent, True)
+        intents, heard = tuple(self.actions), self.heard
         self.decisions = {agent: Decision(obs, intents, self.sent_before.get(agent))
-                          for agent, obs in sent.items()
-                          if agent in self.heard and decides(obs)}
-        return checked
+                          for agent, obs in self.sent.items()
+                          if agent in heard and decides(obs)}
+        return self.learned
 
     def _close_run(self, now: float) -> None:
         """The run is complete: tell the agents until every live one has left (and

@@ -82,6 +82,8 @@ class RecordCheck:
         self.daql = params[LP_READING] == READ_DAQL
         self.radius = config.interaction_radius
         self._state_size, self._record_size = state_size(config.n_bodies), record_size(config.n_bodies)
+        self._negotiation: dict[int, tuple] = {}  # agent -> (tick, awaited, staying) of its last
+        self._decided: dict[int, tuple] = {}  # agent -> (tick, rows) of its last completion
 
     # What an agent could have heard, and read its neighbours as.
 
@@ -91,10 +93,25 @@ class RecordCheck:
         awaited neighbours (any of which may not have answered in time)."""
         if stops:
             return {}, []
-        waited = awaited(obs, self.config)
-        known = {j: STAY for j in staying(obs, self.config)}
+        waited, known = self._negotiated(obs)
+        known = dict(known)
         known.update((j, intents[j]) for j in waited if intents[j] is not None)
         return known, waited
+
+    def _negotiated(self, obs: Observation) -> tuple[list[int], dict]:
+        """Whom the agent waits for at ``obs`` and the parked neighbours it knows stay
+        (``agent.negotiation``), worked out once per observation."""
+        last = self._negotiation.get(obs.agent)
+        if last is None or last[0] != obs.tick:
+            last = (obs.tick, awaited(obs, self.config),
+                    {j: STAY for j in staying(obs, self.config)})
+            self._negotiation[obs.agent] = last
+        return last[1], last[2]
+
+    def ready(self, obs: Observation, intents) -> bool:
+        """Whether ``intents`` (the tick's so far) hold every intent the agent that was sent
+        ``obs`` may have decided with: then its record can be checked before the tick closes."""
+        return _stops(obs) or all(intents[j] is not None for j in self._negotiated(obs)[0])
 
     def _memories(self, obs: Observation, before: Observation | None, sure: bool) -> list:
         """DAQL's memories of the tick before, ``(previous cells, own cell then)``: those of
@@ -124,11 +141,18 @@ class RecordCheck:
         """The record the agent's transition from ``decision`` to ``obs`` writes, had every
         awaited answer come at both ticks (``intents``: this tick's, as the world heard them)."""
         before = decision.obs
-        answers, _ = self._answers(before, decision.intents, False)
-        decided = self._read(before, answers, False, self._memories(before, decision.before, True)[0])
+        decided = self._decided.get(before.agent)
+        if decided is not None and decided[0] == before.tick:
+            decided = decided[1]  # read as this record's completion before, once every intent came
+        else:
+            answers, _ = self._answers(before, decision.intents, False)
+            decided = self._read(before, answers, False,
+                                 self._memories(before, decision.before, True)[0])
         stops = _stops(obs)
         answers, _ = self._answers(obs, intents, stops)
         completed = self._read(obs, answers, stops, self._memories(obs, before, True)[0])
+        if not stops:  # the rows its next record's decision read, had every awaited answer come
+            self._decided[obs.agent] = (obs.tick, completed)
         within = [(row[NB_ID], row[NB_ROW], row[NB_X], row[NB_Y]) for row in decided
                   if chebyshev(*before.position, row[NB_X], row[NB_Y]) <= self.radius]
         return self._complete(decision, obs, within, completed)
