@@ -35,7 +35,7 @@ from nnql_swarm.agent.learner import (
     learner_params, read_rows, record_outcome, record_size, state_size, LF_FIELDS,
 )
 from nnql_swarm.agent.negotiation import awaited, staying
-from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import floats, ints, python_values, rows
 from nnql_swarm.protocol.messages import Observation
@@ -60,6 +60,12 @@ class Decision:
     before: Observation | None
 
 
+def _only(obs: Observation, neighbours) -> Observation:
+    """``obs`` with only ``neighbours`` in view: the rows of the others are not needed (each
+    neighbour's row is its own), and building them is most of a check's cost."""
+    return obs._replace(neighbours=tuple(neighbours))
+
+
 def _stops(obs: Observation) -> bool:
     """An agent that has arrived, or at an episode's end, decides nothing (``AgentBrain.act``)."""
     return obs.arrived or obs.episode_end
@@ -82,8 +88,8 @@ class RecordCheck:
         self.daql = params[LP_READING] == READ_DAQL
         self.radius = config.interaction_radius
         self._state_size, self._record_size = state_size(config.n_bodies), record_size(config.n_bodies)
-        self._negotiation: dict[int, tuple] = {}  # agent -> (tick, awaited, staying) of its last
-        self._decided: dict[int, tuple] = {}  # agent -> (tick, rows) of its last completion
+        self._negotiation: dict[tuple, tuple] = {}  # (agent, tick) -> (awaited, staying)
+        self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
 
     # What an agent could have heard, and read its neighbours as.
 
@@ -101,12 +107,13 @@ class RecordCheck:
     def _negotiated(self, obs: Observation) -> tuple[list[int], dict]:
         """Whom the agent waits for at ``obs`` and the parked neighbours it knows stay
         (``agent.negotiation``), worked out once per observation."""
-        last = self._negotiation.get(obs.agent)
-        if last is None or last[0] != obs.tick:
-            last = (obs.tick, awaited(obs, self.config),
-                    {j: STAY for j in staying(obs, self.config)})
-            self._negotiation[obs.agent] = last
-        return last[1], last[2]
+        key = (obs.agent, obs.tick)
+        known = self._negotiation.get(key)
+        if known is None:  # kept for this tick and the next: a record reads both
+            known = self._negotiation[key] = (awaited(obs, self.config),
+                                              {j: STAY for j in staying(obs, self.config)})
+            self._negotiation.pop((obs.agent, obs.tick - 2), None)
+        return known
 
     def ready(self, obs: Observation, intents) -> bool:
         """Whether ``intents`` (the tick's so far) hold every intent the agent that was sent
@@ -141,32 +148,38 @@ class RecordCheck:
         """The record the agent's transition from ``decision`` to ``obs`` writes, had every
         awaited answer come at both ticks (``intents``: this tick's, as the world heard them)."""
         before = decision.obs
+        (x, y), radius = before.position, self.radius
         decided = self._decided.get(before.agent)
         if decided is not None and decided[0] == before.tick:
-            decided = decided[1]  # read as this record's completion before, once every intent came
+            decided = decided[1]  # read as the last record's completion, every intent then in
         else:
             answers, _ = self._answers(before, decision.intents, False)
-            decided = self._read(before, answers, False,
-                                 self._memories(before, decision.before, True)[0])
+            decided = self._read(_only(before, within(before.neighbours, x, y, radius)), answers,
+                                 False, self._memories(before, decision.before, True)[0])
+        pending = [(row[NB_ID], row[NB_ROW], row[NB_X], row[NB_Y]) for row in decided
+                   if chebyshev(x, y, row[NB_X], row[NB_Y]) <= radius]
+        ids = {entry[0] for entry in pending}
         stops = _stops(obs)
         answers, _ = self._answers(obs, intents, stops)
-        completed = self._read(obs, answers, stops, self._memories(obs, before, True)[0])
-        if not stops:  # the rows its next record's decision read, had every awaited answer come
+        (x, y) = obs.position
+        near = [n for n in obs.neighbours  # those of s', and those of the next decision's s
+                if n[0] in ids or (-radius <= n[1] - x <= radius and -radius <= n[2] - y <= radius)]
+        completed = self._read(_only(obs, near), answers, stops,
+                               self._memories(obs, before, True)[0])
+        if not stops:
             self._decided[obs.agent] = (obs.tick, completed)
-        within = [(row[NB_ID], row[NB_ROW], row[NB_X], row[NB_Y]) for row in decided
-                  if chebyshev(*before.position, row[NB_X], row[NB_Y]) <= self.radius]
-        return self._complete(decision, obs, within, completed)
+        return self._complete(decision, obs, pending, completed)
 
-    def _complete(self, decision: Decision, obs: Observation, within, completed):
+    def _complete(self, decision: Decision, obs: Observation, pending, completed):
         """``agent.learner.complete`` on the agent's pending transition: its decision's goal
-        state, action and neighbours in Eq. 6 (``within``: ``(id, Q_CA row, x, y)`` each), and
+        state, action and neighbours in Eq. 6 (``pending``: ``(id, Q_CA row, x, y)`` each), and
         its outcome, completed with the neighbour rows of ``obs`` (``completed``)."""
         before = decision.obs
         (x, y), (gx, gy) = before.position, before.goal
         state = [0] * self._state_size
         state[LS_PENDING], state[LS_GOAL] = 1, offset_state(gx - x, gy - y)
-        state[LS_ACTION], state[LS_COUNT] = decision.intents[before.agent], len(within)
-        for k, entry in enumerate(within):
+        state[LS_ACTION], state[LS_COUNT] = decision.intents[before.agent], len(pending)
+        for k, entry in enumerate(pending):
             at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * k
             state[at:at + LS_PER_NEIGHBOUR] = entry
         state, state_f = ints(state), floats([0.0] * LF_FIELDS)
@@ -209,12 +222,14 @@ class RecordCheck:
         if tuple(integers[:REC_PAIRS]) != expected[0][:REC_PAIRS] or tuple(values) != expected[1]:
             return False
         before = decision.obs
-        pending = self._read(before, {}, False, ({}, None))
-        within = [row[NB_ID] for row in pending
-                  if chebyshev(*before.position, row[NB_X], row[NB_Y]) <= self.radius]
-        if len(integers) != REC_PAIRS + 2 * len(within):
+        (x, y), radius = before.position, self.radius
+        rows_before = self._read(_only(before, within(before.neighbours, x, y, radius)), {},
+                                 False, ({}, None))
+        pending = [row[NB_ID] for row in rows_before
+                   if chebyshev(x, y, row[NB_X], row[NB_Y]) <= radius]
+        if len(integers) != REC_PAIRS + 2 * len(pending):
             return False
-        for k, neighbour in enumerate(within):
+        for k, neighbour in enumerate(pending):
             pair = (integers[REC_PAIRS + 2 * k], integers[REC_PAIRS + 2 * k + 1])
             if pair not in self._pairs(decision, obs, intents, neighbour):
                 return False
