@@ -19,7 +19,13 @@ started after the last episode only tells the agents still running to stop. A co
 its agents to stop until every live one has left. Where the agents share one table, an agent that
 comes back after it left, and every agent of a resumed world, is sent the world's whole table
 (``SwarmWorld.resync``) from its first intent on (by then it surely hears its observations): its
-copy may be an older checkpoint's. Until that intent came it is never settled.
+copy may be an older checkpoint's. Until that intent came it is never settled. Each learning
+record is checked against the transition the world saw its sender make (``world.records``), as
+soon as every intent the sender may have decided with is in, or when the tick closes: one that
+is not its sender's own (``forged-record``) is refused, and so are that agent's later records
+(``barred-record``) until its liveliness token comes back; one without the sender's decision of
+the tick before to check it against (``unchecked-record``) is refused too. Its intent counts
+either way.
 """
 
 import logging
