@@ -121,7 +121,10 @@ def main() -> None:
     print("agents  ticks  records/tick  check us/tick  us/record  apply us/tick  observe us/tick")
     for agents in (int(a) for a in args.agents.split(",")):
         runs = [one_run(agents, args.episodes, seed) for seed in range(args.repeats)]
-        per_tick = lambda part: statistics.median(getattr(r, part) / r.ticks / 1e3 for r in runs)  # noqa: E731
+
+        def per_tick(part: str) -> float:
+            return statistics.median(getattr(r, part) / r.ticks / 1e3 for r in runs)
+
         per_record = statistics.median(r.check / max(r.checks, 1) / 1e3 for r in runs)
         records = statistics.median(r.checks / r.ticks for r in runs)
         ticks = statistics.median(r.ticks for r in runs)

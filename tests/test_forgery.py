@@ -39,8 +39,8 @@ def run(out, secured, run_id: str, *forger_flags: str) -> dict[str, subprocess.P
     """A secured run: the world, agents 0 to 6 and the forger, each its own process tree; waits
     until all have exited."""
     options = ["--run-id", run_id, "--agents", str(AGENTS), "--episodes", str(EPISODES),
-               "--max-steps", "30", "--seed", "4", "--deadline", "10", "--no-record", "--no-progress", "--out",
-               str(out), "--zenoh-config-dir", str(secured.dir)]
+               "--max-steps", "30", "--seed", "4", "--deadline", "10", "--no-record",
+               "--no-progress", "--out", str(out), "--zenoh-config-dir", str(secured.dir)]
     commands = {
         "world": [sys.executable, str(SWARM), "--role", "world", *options],
         "agents": [sys.executable, str(SWARM), "--role", "agents", "--agent-ids",
@@ -98,5 +98,6 @@ def test_a_forging_agents_records_are_refused_and_the_honest_agents_table_is_unc
     shared, reference = tables(forging, config), tables(mute, config)
     assert np.array_equal(shared[0], reference[0]) and np.array_equal(shared[1], reference[1])
     for agent in range(FORGER):
-        mine = checkpoint.read_fields(checkpoint.checkpoint_path(forging / "checkpoints", agent), ())
+        saved = checkpoint.checkpoint_path(forging / "checkpoints", agent)
+        mine = checkpoint.read_fields(saved, ())
         assert np.array_equal(mine["q_ds"], shared[0]) and np.array_equal(mine["q_ca"], shared[1])

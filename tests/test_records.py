@@ -7,7 +7,9 @@ from dataclasses import replace
 
 import pytest
 
-from nnql_swarm.agent.learner import REC_ACTION, REC_BLOCKS, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL
+from nnql_swarm.agent.learner import (
+    REC_ACTION, REC_BLOCKS, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL,
+)
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, VIEW_RADIUS, WINDOW, offset_state
 from nnql_swarm.protocol.config import PRESETS
 from nnql_swarm.protocol.messages import encode

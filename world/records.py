@@ -24,15 +24,21 @@ it heard the agent's intent then: a record with none to check against (the agent
 was missed, or the world has just started or resumed) is refused too (:data:`UNCHECKED`), else a
 silent tick would let any record through. An honest agent loses only such records, which a
 faulty tick makes anyway.
+
+Its cost: it reads only the neighbours a record names (those within the interaction radius at
+the decision, and the same ones for ``s'``), and the rows an agent decided with at a tick are
+those the check of its record of that tick read (kept for one tick, with whom it waited for),
+so a record costs one reading of its neighbours and one ``complete``
+(``bench/record_check.py``).
 """
 
 from dataclasses import dataclass
 
 from nnql_swarm.agent.brain import NeighbourRows
 from nnql_swarm.agent.learner import (
-    LS_ACTION, LS_COUNT, LS_GOAL, LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LP_READING,
-    NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y, READ_DAQL, REC_COUNT, REC_PAIRS, RF_FIELDS, complete,
-    learner_params, read_rows, record_outcome, record_size, state_size, LF_FIELDS,
+    LF_FIELDS, LP_READING, LS_ACTION, LS_COUNT, LS_GOAL, LS_NEIGHBOURS, LS_PENDING,
+    LS_PER_NEIGHBOUR, NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y, READ_DAQL, REC_COUNT, REC_PAIRS,
+    RF_FIELDS, complete, learner_params, read_rows, record_outcome, record_size, state_size,
 )
 from nnql_swarm.agent.negotiation import awaited, staying
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
@@ -87,7 +93,8 @@ class RecordCheck:
         self.params = ints(params)
         self.daql = params[LP_READING] == READ_DAQL
         self.radius = config.interaction_radius
-        self._state_size, self._record_size = state_size(config.n_bodies), record_size(config.n_bodies)
+        self._state_size = state_size(config.n_bodies)
+        self._record_size = record_size(config.n_bodies)
         self._negotiation: dict[tuple, tuple] = {}  # (agent, tick) -> (awaited, staying)
         self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
 
@@ -245,6 +252,7 @@ class RecordCheck:
             entry = (neighbour, row[NB_ROW], row[NB_X], row[NB_Y])
             after = self._readings(obs, intents, stops, before, False, neighbour) or [None]
             for following in after:
-                rec = self._complete(decision, obs, [entry], [] if following is None else [following])
+                completed = [] if following is None else [following]
+                rec = self._complete(decision, obs, [entry], completed)
                 pairs.add(rec[0][REC_PAIRS:REC_PAIRS + 2])
         return pairs
