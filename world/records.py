@@ -93,8 +93,9 @@ class RecordCheck:
         self.params = ints(params)
         self.daql = params[LP_READING] == READ_DAQL
         self.radius = config.interaction_radius
-        self._state_size = state_size(config.n_bodies)
-        self._record_size = record_size(config.n_bodies)
+        bodies = config.n_bodies  # the learner's buffers, for complete
+        self._state, self._state_f = ints([0] * state_size(bodies)), floats([0.0] * LF_FIELDS)
+        self._rec, self._rec_f = ints([0] * record_size(bodies)), floats([0.0] * RF_FIELDS)
         self._negotiation: dict[tuple, tuple] = {}  # (agent, tick) -> (awaited, staying)
         self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
 
@@ -169,8 +170,8 @@ class RecordCheck:
         stops = _stops(obs)
         answers, _ = self._answers(obs, intents, stops)
         (x, y) = obs.position
-        near = [n for n in obs.neighbours  # those of s', and those of the next decision's s
-                if n[0] in ids or (-radius <= n[1] - x <= radius and -radius <= n[2] - y <= radius)]
+        near = [n for n in within(obs.neighbours, x, y, radius + 2)  # s' is at most 2 further
+                if n[0] in ids or chebyshev(x, y, n[1], n[2]) <= radius]  # or the next s
         completed = self._read(_only(obs, near), answers, stops,
                                self._memories(obs, before, True)[0])
         if not stops:
@@ -183,20 +184,18 @@ class RecordCheck:
         its outcome, completed with the neighbour rows of ``obs`` (``completed``)."""
         before = decision.obs
         (x, y), (gx, gy) = before.position, before.goal
-        state = [0] * self._state_size
+        state, state_f, rec, rec_f = self._state, self._state_f, self._rec, self._rec_f
         state[LS_PENDING], state[LS_GOAL] = 1, offset_state(gx - x, gy - y)
         state[LS_ACTION], state[LS_COUNT] = decision.intents[before.agent], len(pending)
-        for k, entry in enumerate(pending):
+        for k, (neighbour, row, cx, cy) in enumerate(pending):
             at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * k
-            state[at:at + LS_PER_NEIGHBOUR] = entry
-        state, state_f = ints(state), floats([0.0] * LF_FIELDS)
+            state[at], state[at + 1], state[at + 2], state[at + 3] = neighbour, row, cx, cy
         record_outcome(state, state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
-        rec, rec_f = ints([0] * self._record_size), floats([0.0] * RF_FIELDS)
         (x, y), (gx, gy) = obs.position, obs.goal
         complete(self.params, state, state_f, x, y, gx, gy, rows(completed, NB_FIELDS),
                  len(completed), rec, rec_f)
-        integers = python_values(rec)
-        return tuple(integers[:REC_PAIRS + 2 * integers[REC_COUNT]]), tuple(python_values(rec_f))
+        written = REC_PAIRS + 2 * int(rec[REC_COUNT])
+        return tuple(python_values(rec[:written])), tuple(python_values(rec_f))
 
     def _readings(self, obs: Observation, intents, stops: bool, before: Observation | None,
                   sure: bool, neighbour: int) -> list[list[int]]:
