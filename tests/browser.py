@@ -354,3 +354,28 @@ def last_episode(recording: Path) -> Episode:
     return Episode(agents, goals, (np.array(origins), np.array(vectors), np.array(who, int)),
                    (np.array([o for o, _ in waits]).reshape(-1, 2),
                     np.array([v for _, v in waits]).reshape(-1, 2)))
+
+
+def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
+    """Everything the world view must show of a run's newest episode, the one the viewer opens
+    on (``config``: the run's ``SwarmConfig``): the grid, every wall, a label under each agent
+    and goal, the moves announced and the waits. Raises AssertionError saying what is missing."""
+    from nnql_swarm.world.viz import WAIT_COLOUR, WALL_COLOUR, agent_colors
+
+    grid = find_grid(image, config.width, config.height)
+    episode = last_episode(run_dir / "run.rrd")
+    colours = agent_colors(config.n_agents)
+    found = {"grid": grid}
+    walls = config.walls()
+    if len(walls):
+        free = sorted({(x, y) for x in range(config.width) for y in range(config.height)}
+                      - {tuple(cell) for cell in walls.tolist()})
+        found["walls"] = check_walls(image, grid, walls, free, WALL_COLOUR)
+    found["labels"] = check_labels(image, grid, np.concatenate([episode.agents, episode.goals]),
+                                   np.concatenate([colours, colours]))
+    origins, vectors, who = episode.moves
+    found["moves"] = check_arrows(image, grid, origins, vectors, colours[who])
+    origins, vectors = episode.waits
+    if len(origins):  # an episode in which nobody waited has no such arrows
+        found["waits"] = check_arrows(image, grid, origins, vectors, [WAIT_COLOUR] * len(origins))
+    return found

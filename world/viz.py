@@ -13,8 +13,12 @@ reads intents and has not arrived waits for the answer of every neighbour that
 that themselves (``agent.viz``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
-Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels) are logged
-once.
+Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
+``legend``) are logged once. Each entity holds every agent (one ``Points2D`` for all agents, one
+``Boxes2D`` for all goals, ...), whatever their number. Agents and goals share a colour
+(:data:`PALETTE`, repeating every 12 agents) and a label, the agent's id. The blueprint
+(``recording.session.blueprint``) opens on the ``episode`` timeline, where the view shows the
+intents, waits and collisions of the whole episode at once.
 
 Cost: everything is buffered, the per-tick entities, each episode's goals, metrics and event
 lines alike, and sent with ``send_columns`` (one call per entity) every :data:`FLUSH_EVERY` ticks
