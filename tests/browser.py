@@ -279,7 +279,7 @@ LABEL_BACKGROUND = (232, 232, 232)
 """The light pill the viewer draws under a label in its light theme (near this grey)."""
 
 
-def check_labels(image: np.ndarray, grid: Grid, places, colours, least: float = 0.7) -> dict:
+def check_labels(image: np.ndarray, grid: Grid, places, colours, least: float = 0.65) -> dict:
     """A label under each of ``places`` (``(k, 2)`` cells: agents and goals), in the colour of
     its thing (``colours`` ``(k, 3)``): the viewer draws a label as coloured text on a light,
     translucent pill just below the point or box. At least ``least`` of the places must show
