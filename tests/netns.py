@@ -70,48 +70,40 @@ def _unprobe(*namespaces: str) -> None:
         _ip("netns", "del", namespace, check=False)
 
 
-def netem_unavailable_reason() -> str | None:
-    """Why ``tc qdisc add ... netem`` cannot be used here (None if it can), tried on a veth."""
+def _probe(tool: str, missing: str, commands: list[tuple[list[str], str]]) -> str | None:
+    """Why ``commands`` cannot be run in a namespace with a veth (None if each can): each is a
+    command and what its failure means; ``tool`` must be installed (``missing`` says so)."""
     reason = unavailable_reason()
     if reason is not None:
         return reason
-    if shutil.which("tc") is None:
-        return "the tc command (iproute2) is not installed"
+    if shutil.which(tool) is None:
+        return missing
     try:
         first, second = _probe_pair()
     except RuntimeError as error:
         return f"no veth between namespaces: {error}"
     try:
-        added = subprocess.run(["ip", "netns", "exec", first, "tc", "qdisc", "add", "dev", "e0",
-                                "root", "netem", "delay", "5ms", "2ms", "loss", "1%"],
-                               capture_output=True, text=True, timeout=30)
-        if added.returncode != 0:
-            return (f"the kernel has no netem qdisc (sch_netem): tc qdisc add ... netem: "
-                    f"{added.stderr.strip()}")
+        for argv, failure in commands:
+            done = subprocess.run(["ip", "netns", "exec", first, *argv], capture_output=True,
+                                  text=True, timeout=30)
+            if done.returncode != 0 or (argv[-1] == "--probe" and done.stdout.strip() != "ready"):
+                return f"{failure}: {done.stderr.strip()[-300:]}"
         return None
     finally:
         _unprobe(first, second)
+
+
+def netem_unavailable_reason() -> str | None:
+    """Why ``tc qdisc add ... netem`` cannot be used here (None if it can), tried on a veth."""
+    return _probe("tc", "the tc command (iproute2) is not installed", [
+        (["tc", "qdisc", "add", "dev", "e0", "root", "netem", "delay", "5ms", "2ms", "loss", "1%"],
+         "the kernel has no netem qdisc (sch_netem): tc qdisc add ... netem")])
 
 
 def drop_unavailable_reason() -> str | None:
     """Why :meth:`Lan.drop` (iptables' statistic match) cannot be used here (None if it can)."""
-    reason = unavailable_reason()
-    if reason is not None:
-        return reason
-    if shutil.which("iptables") is None:
-        return "the iptables command is not installed"
-    try:
-        first, second = _probe_pair()
-    except RuntimeError as error:
-        return f"no veth between namespaces: {error}"
-    try:
-        added = subprocess.run(["ip", "netns", "exec", first, *_drop_rule("-A", "INPUT", 0.02)],
-                               capture_output=True, text=True, timeout=30)
-        if added.returncode != 0:
-            return f"iptables cannot drop at random here: {added.stderr.strip()}"
-        return None
-    finally:
-        _unprobe(first, second)
+    return _probe("iptables", "the iptables command is not installed", [
+        (_drop_rule("-A", "INPUT", 0.02), "iptables cannot drop at random here")])
 
 
 def _drop_rule(action: str, chain: str, probability: float) -> list[str]:
@@ -126,28 +118,9 @@ def _queue_rules(action: str) -> list[list[str]]:
 
 def delay_unavailable_reason() -> str | None:
     """Why :meth:`Lan.delay` (an NFQUEUE and tests/netdelay.py) cannot be used here."""
-    reason = unavailable_reason()
-    if reason is not None:
-        return reason
-    if shutil.which("iptables") is None:
-        return "the iptables command is not installed"
-    try:
-        first, second = _probe_pair()
-    except RuntimeError as error:
-        return f"no veth between namespaces: {error}"
-    try:
-        for rule in _queue_rules("-A"):
-            added = subprocess.run(["ip", "netns", "exec", first, *rule], capture_output=True,
-                                   text=True, timeout=30)
-            if added.returncode != 0:
-                return f"iptables has no NFQUEUE target here: {added.stderr.strip()}"
-        bound = subprocess.run(["ip", "netns", "exec", first, sys.executable, str(NETDELAY),
-                                "--probe"], capture_output=True, text=True, timeout=30)
-        if bound.returncode != 0 or bound.stdout.strip() != "ready":
-            return f"tests/netdelay.py cannot bind an NFQUEUE: {bound.stderr.strip()[-300:]}"
-        return None
-    finally:
-        _unprobe(first, second)
+    return _probe("iptables", "the iptables command is not installed", [
+        *((rule, "iptables has no NFQUEUE target here") for rule in _queue_rules("-A")),
+        ([sys.executable, str(NETDELAY), "--probe"], "tests/netdelay.py cannot bind an NFQUEUE")])
 
 
 def _ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
