@@ -21,6 +21,9 @@ ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
 """nnQL (the paper), plain QL, nnQL whose neighbour state also holds the announced move, Double
 Action Q-learning (a baseline), and the oracle planner (the lower bound; in-process only)."""
 NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
+DS_STATE_NAMES = ("goal", "waypoint", "progress")
+DS_REWARD_NAMES = ("euclid", "path", "flat")
+"""Destination seeking's state and reward (``agent.learner``: ``DS_STATES``, ``DS_REWARDS``)."""
 MAX_LOOKAHEAD = 3
 
 START_S_PER_AGENT = 1.0
@@ -37,13 +40,14 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
 
 LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
                    "known_state", "shared", "shield", "lookahead", "still_terminal",
-                   "stay_reward")
+                   "stay_reward", "ds_state", "ds_reward")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
 PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
-         "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5}
+         "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
+         "ds_state": "goal", "ds_reward": "euclid"}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -118,6 +122,15 @@ class SwarmConfig:
                             "steps ahead (in-process only for n > 1)", metavar="N")
     still_terminal: bool = option(_DEFAULT["still_terminal"], "a step that went nowhere ends its destination-seeking "
                                   "return (no bootstrap from the state it stayed in)")
+    ds_state: str = option(_DEFAULT["ds_state"], "destination seeking's state: the goal's "
+                           "offset (the paper's), the next cell of a shortest path on the walls "
+                           "the agent has seen (waypoint), or the moves that bring it nearer "
+                           "on that map (progress)", choices=DS_STATE_NAMES)
+    ds_reward: str = option(_DEFAULT["ds_reward"], "destination seeking's reward: 1/d, 0.5/d, 0 "
+                            "with d the Euclidean distance to the goal (euclid, the paper's), "
+                            "the same with d the path length on the walls the agent has seen "
+                            "(path), or 1, 0.5, 0 for a path that got shorter, stayed, grew "
+                            "(flat)", choices=DS_REWARD_NAMES)
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
                                      "largest free region)", metavar="P")
@@ -147,6 +160,12 @@ class SwarmConfig:
             (self.stay_reward >= 0, "the stay reward must be non-negative"),
             (1 <= self.lookahead <= MAX_LOOKAHEAD, f"the lookahead n must be 1..{MAX_LOOKAHEAD}"),
             (self.lookahead == 1 or self.algo in ("nnql",), "a lookahead n > 1 needs --algo nnql"),
+            (self.ds_state in DS_STATE_NAMES,
+             f"the destination-seeking state must be one of {', '.join(DS_STATE_NAMES)}"),
+            (self.ds_reward in DS_REWARD_NAMES,
+             f"the destination-seeking reward must be one of {', '.join(DS_REWARD_NAMES)}"),
+            (self.lookahead == 1 or self.ds_state == "goal",
+             "a lookahead n > 1 plans on the goal's offset: it needs --ds-state goal"),
             (self.tick_deadline_s > 0, "the tick deadline must be positive"),
             (0 <= self.obstacle_density <= MAX_DENSITY,
              f"the obstacle density must be 0..{MAX_DENSITY}"),
@@ -207,6 +226,8 @@ class SwarmConfig:
     def from_json(text: str) -> "SwarmConfig":
         data = json.loads(text)
         data.setdefault("wait_rule", "reach")  # written before the field: all in reach waited
+        data.setdefault("ds_state", "goal")  # written before the fields: the paper's
+        data.setdefault("ds_reward", "euclid")
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:

@@ -1,0 +1,155 @@
+"""What an agent knows of the walls, and the way to its goal on that map: kernel functions.
+
+The environment stays unknown to a learner: it knows a wall once the wall has been within its
+view (``protocol.actions.sees``: 10 cells along each axis) from a cell it stood on, and it keeps
+what it has seen for the rest of the run. The world sends no walls: every process has the run's
+map (``protocol.walls``) and each agent derives what it saw from that map and its own positions,
+which is what walls carried in its view would tell it.
+
+On the known map (the unknown taken as free) a breadth-first *distance field* to the goal gives
+the agent's path length ``d`` and the *waypoint*, the next cell of a shortest path. Destination
+seeking reads them (``agent.learner``: ``LP_DS_STATE``, ``LP_DS_REWARD``); the field is worked
+out again only when the goal changes or a new wall is seen.
+
+One buffer of integers per agent (``wmap``, :func:`map_size`): ``MAP_GOAL`` (the goal cell the
+field is for, -1 when stale), ``MAP_KNOWN`` (walls known), then per cell (``y * W + x``) whether
+it is a known wall, its distance to the goal (-1 where the known walls cut it off), and a queue
+the search uses.
+"""
+
+from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, sees, target_x, \
+    target_y
+from nnql_swarm.protocol.jit import kernel
+
+MAP_GOAL, MAP_KNOWN = 0, 1
+MAP_HEADER = 2
+
+
+def map_size(width: int, height: int) -> int:
+    """The length of an agent's ``wmap`` on a ``width x height`` grid."""
+    return MAP_HEADER + 3 * width * height
+
+
+def fresh_map(wmap) -> None:
+    """Forget everything (a buffer of :func:`map_size`): no wall known, no field."""
+    for c in range(len(wmap)):
+        wmap[c] = 0
+    wmap[MAP_GOAL] = -1
+
+
+def known_cells(wmap, width: int, height: int) -> list[int]:
+    """The known walls' cells (``y * W + x``, ascending): what a checkpoint keeps."""
+    return [c for c in range(width * height) if wmap[MAP_HEADER + c] != 0]
+
+
+def restore_known(wmap, cells, width: int, height: int) -> None:
+    """Take a checkpoint's known walls (:func:`known_cells`) into a fresh buffer."""
+    fresh_map(wmap)
+    for c in cells:
+        if not 0 <= c < width * height:
+            raise ValueError(f"known wall {c} outside the grid")
+        if wmap[MAP_HEADER + c] == 0:
+            wmap[MAP_HEADER + c] = 1
+            wmap[MAP_KNOWN] += 1
+
+
+@kernel
+def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width):
+    """Mark the walls ``first .. last - 1`` (cells ``wall_x[k], wall_y[k]``) within view of
+    ``(ox, oy)`` known; a wall newly known makes the distance field stale."""
+    if wmap[MAP_KNOWN] == last - first:
+        return
+    for k in range(first, last):
+        wx = wall_x[k]
+        wy = wall_y[k]
+        if sees(ox, oy, wx, wy):
+            at = MAP_HEADER + wy * width + wx
+            if wmap[at] == 0:
+                wmap[at] = 1
+                wmap[MAP_KNOWN] += 1
+                wmap[MAP_GOAL] = -1
+
+
+@kernel
+def plan_field(wmap, gx, gy, width, height):
+    """The breadth-first distance of every cell to the goal ``(gx, gy)`` around the known walls
+    (4-connected; -1 where cut off), unless the field is already this goal's."""
+    goal = gy * width + gx
+    if wmap[MAP_GOAL] == goal:
+        return
+    cells = width * height
+    dist = MAP_HEADER + cells
+    queue = MAP_HEADER + 2 * cells
+    for c in range(cells):
+        wmap[dist + c] = -1
+    wmap[dist + goal] = 0
+    wmap[queue] = goal
+    head = 0
+    tail = 1
+    while head < tail:
+        c = wmap[queue + head]
+        head += 1
+        cx = c % width
+        cy = c // width
+        d = wmap[dist + c] + 1
+        for a in range(4):
+            nc = target_y(cy, a, height) * width + target_x(cx, a, width)
+            if nc != c and wmap[MAP_HEADER + nc] == 0 and wmap[dist + nc] < 0:
+                wmap[dist + nc] = d
+                wmap[queue + tail] = nc
+                tail += 1
+    wmap[MAP_GOAL] = goal
+
+
+@kernel
+def track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height):
+    """An observation at ``(ox, oy)`` with goal ``(gx, gy)``: the walls in view learned, the
+    distance field made current."""
+    see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width)
+    plan_field(wmap, gx, gy, width, height)
+
+
+@kernel
+def path_length(wmap, x, y, width, height):
+    """The cell's distance to the goal on the known map (-1 if cut off; the field current)."""
+    return wmap[MAP_HEADER + width * height + y * width + x]
+
+
+@kernel
+def progress_moves(wmap, x, y, width, height):
+    """The moves that bring ``(x, y)`` one step nearer the goal on the known map, as bits (bit
+    ``a``: action ``a``); 0 on the goal."""
+    cells = width * height
+    dist = MAP_HEADER + cells
+    here = wmap[dist + y * width + x]
+    mask = 0
+    if here <= 0:
+        return 0
+    for a in range(4):
+        nc = target_y(y, a, height) * width + target_x(x, a, width)
+        if wmap[dist + nc] == here - 1 and wmap[dist + nc] >= 0:
+            mask |= 1 << a
+    return mask
+
+
+@kernel
+def waypoint_move(wmap, x, y, gx, gy, width, height):
+    """The first move of the agent's shortest path on the known map: of the moves that bring it
+    nearer (:func:`progress_moves`), the one along the axis where the goal is farther (the
+    vertical one on a diagonal), then the first in action order; STAY on the goal."""
+    mask = progress_moves(wmap, x, y, width, height)
+    if mask == 0:
+        return STAY
+    horizontal = abs(gx - x) > abs(gy - y)
+    best = STAY
+    for a in range(4):
+        if (mask >> a) & 1 == 0:
+            continue
+        if best == STAY:
+            best = a
+        elif horizontal and (a == LEFT or a == RIGHT) and (best == UP or best == DOWN):
+            best = a
+    return best
+
+
+assert (UP, DOWN, LEFT, RIGHT, STAY) == (0, 1, 2, 3, 4) and N_ACTIONS == 5
