@@ -21,17 +21,20 @@ from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, 
     target_y
 from nnql_swarm.protocol.jit import kernel
 
-MAP_GOAL, MAP_KNOWN = 0, 1
-MAP_HEADER = 2
+MAP_GOAL, MAP_KNOWN, MAP_PARKED, MAP_CUT = 0, 1, 2, 3
+MAP_HEADER = 4
+SECTIONS = 5
+"""Per cell: known wall, distance, queue, parked agent planned around, and the list of those."""
 
 
 def map_size(width: int, height: int) -> int:
     """The length of an agent's ``wmap`` on a ``width x height`` grid."""
-    return MAP_HEADER + 3 * width * height
+    return MAP_HEADER + SECTIONS * width * height
 
 
 def fresh_map(wmap) -> None:
-    """Forget everything (a buffer of :func:`map_size`): no wall known, no field."""
+    """Forget everything (a buffer of :func:`map_size`): no wall known, no parked agent, no
+    field."""
     for c in range(len(wmap)):
         wmap[c] = 0
     wmap[MAP_GOAL] = -1
@@ -71,15 +74,68 @@ def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width):
 
 
 @kernel
-def plan_field(wmap, gx, gy, width, height):
+def see_parked(wmap, nb, m, ox, oy, around, width, height):
+    """Take the parked agents among the neighbour rows ``nb`` (``agent.learner.NB_*``) within
+    ``around`` cells (Chebyshev; -1: none) as the obstacles the field plans around; a change
+    makes the field stale."""
+    cells = width * height
+    flag = MAP_HEADER + 3 * cells
+    listed = MAP_HEADER + 4 * cells
+    count = 0
+    same = True
+    for j in range(m):
+        if nb[j][8] == 0 or around < 0:  # NB_PARKED
+            continue
+        jx = nb[j][1]  # NB_X, NB_Y
+        jy = nb[j][2]
+        if max(abs(jx - ox), abs(jy - oy)) > around:
+            continue
+        if wmap[flag + jy * width + jx] == 0:
+            same = False
+        count += 1
+    if same and count == wmap[MAP_PARKED]:
+        return
+    for k in range(wmap[MAP_PARKED]):
+        wmap[flag + wmap[listed + k]] = 0
+    count = 0
+    for j in range(m):
+        if nb[j][8] == 0 or around < 0:
+            continue
+        jx = nb[j][1]
+        jy = nb[j][2]
+        if max(abs(jx - ox), abs(jy - oy)) > around:
+            continue
+        wmap[flag + jy * width + jx] = 1
+        wmap[listed + count] = jy * width + jx
+        count += 1
+    wmap[MAP_PARKED] = count
+    wmap[MAP_GOAL] = -1
+
+
+@kernel
+def plan_field(wmap, ox, oy, gx, gy, width, height):
     """The breadth-first distance of every cell to the goal ``(gx, gy)`` around the known walls
-    (4-connected; -1 where cut off), unless the field is already this goal's."""
+    and the parked agents taken (:func:`see_parked`; around the walls alone where those cut
+    ``(ox, oy)`` off the goal), 4-connected, -1 where cut off; unless the field is current."""
     goal = gy * width + gx
     if wmap[MAP_GOAL] == goal:
         return
+    breadth_first(wmap, goal, width, height, wmap[MAP_PARKED] > 0)
+    wmap[MAP_CUT] = 0
+    if wmap[MAP_PARKED] > 0 and wmap[MAP_HEADER + width * height + oy * width + ox] < 0:
+        breadth_first(wmap, goal, width, height, False)
+        wmap[MAP_CUT] = 1
+    wmap[MAP_GOAL] = goal
+
+
+@kernel
+def breadth_first(wmap, goal, width, height, parked):
+    """The distance field from ``goal`` around the known walls (and the parked agents taken, if
+    ``parked``)."""
     cells = width * height
     dist = MAP_HEADER + cells
     queue = MAP_HEADER + 2 * cells
+    flag = MAP_HEADER + 3 * cells
     for c in range(cells):
         wmap[dist + c] = -1
     wmap[dist + goal] = 0
@@ -94,19 +150,20 @@ def plan_field(wmap, gx, gy, width, height):
         d = wmap[dist + c] + 1
         for a in range(4):
             nc = target_y(cy, a, height) * width + target_x(cx, a, width)
-            if nc != c and wmap[MAP_HEADER + nc] == 0 and wmap[dist + nc] < 0:
+            if nc != c and wmap[MAP_HEADER + nc] == 0 and wmap[dist + nc] < 0 \
+                    and (not parked or wmap[flag + nc] == 0):
                 wmap[dist + nc] = d
                 wmap[queue + tail] = nc
                 tail += 1
-    wmap[MAP_GOAL] = goal
 
 
 @kernel
-def track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height):
+def track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m, around):
     """An observation at ``(ox, oy)`` with goal ``(gx, gy)``: the walls in view learned, the
-    distance field made current."""
+    parked neighbours within ``around`` taken (-1: none), the distance field made current."""
     see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width)
-    plan_field(wmap, gx, gy, width, height)
+    see_parked(wmap, nb, m, ox, oy, around, width, height)
+    plan_field(wmap, ox, oy, gx, gy, width, height)
 
 
 @kernel

@@ -40,14 +40,14 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
 
 LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
                    "known_state", "shared", "shield", "lookahead", "still_terminal",
-                   "stay_reward", "ds_state", "ds_reward")
+                   "stay_reward", "ds_state", "ds_reward", "push", "detour")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
 PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
          "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
-         "ds_state": "goal", "ds_reward": "euclid"}
+         "ds_state": "goal", "ds_reward": "euclid", "push": False, "detour": False}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -131,6 +131,12 @@ class SwarmConfig:
                             "the same with d the path length on the walls the agent has seen "
                             "(path), or 1, 0.5, 0 for a path that got shorter, stayed, grew "
                             "(flat)", choices=DS_REWARD_NAMES)
+    push: bool = option(_DEFAULT["push"], "priority inheritance in the announcement order: an "
+                        "agent a higher-ranked neighbour announced moving into must move away "
+                        "(it may not stay, unless it cannot move)")
+    detour: bool = option(_DEFAULT["detour"], "the path on the known map (--ds-state, "
+                          "--ds-reward) goes around the agents parked within reach, where "
+                          "another way is known")
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
                                      "largest free region)", metavar="P")
@@ -228,6 +234,8 @@ class SwarmConfig:
         data.setdefault("wait_rule", "reach")  # written before the field: all in reach waited
         data.setdefault("ds_state", "goal")  # written before the fields: the paper's
         data.setdefault("ds_reward", "euclid")
+        data.setdefault("push", False)
+        data.setdefault("detour", False)
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:
