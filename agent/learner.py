@@ -62,8 +62,8 @@ UNKNOWN_MOVE = N_ACTIONS
 """The move code of a neighbour whose intent is unknown (``READ_DIR``)."""
 
 LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP = 0, 1, 2, 3, 4
-LP_STILL_TERMINAL, LP_MEET_ONLY, LP_DS_STATE, LP_DS_REWARD, LP_PUSH, LP_DETOUR = 5, 6, 7, 8, 9, 10
-LP_FIELDS = 11
+LP_STILL_TERMINAL, LP_MEET_ONLY, LP_DS_STATE, LP_DS_REWARD, LP_DETOUR = 5, 6, 7, 8, 9
+LP_FIELDS = 10
 FP_ALPHA, FP_GAMMA, FP_BETA, FP_STAY_REWARD = 0, 1, 2, 3
 FP_FIELDS = 4
 
@@ -119,7 +119,6 @@ def learner_params(config) -> tuple[list[int], list[float]]:
     params[LP_MEET_ONLY] = int(config.meet_only)
     params[LP_DS_STATE] = DS_STATES[config.ds_state]
     params[LP_DS_REWARD] = DS_REWARDS[config.ds_reward]
-    params[LP_PUSH] = int(config.push)
     params[LP_DETOUR] = reach(config.interaction_radius) if config.detour else -1
     params_f = [0.0] * FP_FIELDS
     params_f[FP_ALPHA], params_f[FP_GAMMA] = config.alpha, config.gamma
@@ -403,20 +402,6 @@ def shield_mask(reading, ox, oy, nb, m, width, height):
 
 
 @kernel
-def push_mask(mask, ox, oy, nb, m):
-    """Priority inheritance in the announcement order (``LP_PUSH``): a known neighbour that
-    announced moving into this agent's cell pushes it, so STAY is forbidden too (bit ``STAY``
-    of the forbidden ``mask``), unless it leaves no action."""
-    for j in range(m):
-        if nb[j][NB_KNOWN] != 0 and nb[j][NB_NEXT_X] == ox and nb[j][NB_NEXT_Y] == oy \
-                and (nb[j][NB_X] != ox or nb[j][NB_Y] != oy):
-            if mask | (1 << STAY) != (1 << N_ACTIONS) - 1:
-                return mask | (1 << STAY)
-            return mask
-    return mask
-
-
-@kernel
 def choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, width, height,
            random_action, ties, values):
     """Eq. 6-8 (and the random step): the action, with the transition it starts left pending.
@@ -454,8 +439,6 @@ def choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, wid
     values[4] = beta * ds[4] + rest * ca4
     mask = shield_mask(params[LP_READING], ox, oy, nb, m, width, height) \
         if params[LP_SHIELD] != 0 else 0
-    if params[LP_PUSH] != 0:
-        mask = push_mask(mask, ox, oy, nb, m)
     greedy = -1  # the best allowed value; among equals, the largest tie-breaker
     for a in range(N_ACTIONS):
         if (mask >> a) & 1 == 0 and (greedy < 0 or values[a] > values[greedy]

@@ -40,14 +40,14 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
 
 LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
                    "known_state", "shared", "shield", "lookahead", "still_terminal",
-                   "stay_reward", "ds_state", "ds_reward", "push", "detour")
+                   "stay_reward", "ds_state", "ds_reward", "detour")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
 PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
          "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
-         "ds_state": "goal", "ds_reward": "euclid", "push": False, "detour": False}
+         "ds_state": "goal", "ds_reward": "euclid", "detour": False}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -57,6 +57,12 @@ BEST = {"interaction_radius": 2, "optimistic": 25.0, "shared": True, "still_term
 neighbours within collision reach only, optimistic tables, one table for the swarm, no future
 learned from a step that went nowhere, a gentler learning rate."""
 
+PATH = {"ds_state": "progress", "ds_reward": "flat", "detour": True, "beta": 0.9}
+"""Destination seeking on the walls an agent has seen (docs/swarm.md, "Walls"): its state the
+moves that bring it nearer on its known map, a flat reward for getting nearer, the path around
+the agents parked within reach, and destination seeking weighed 0.9 in Eq. 7 (its flat rewards
+are small beside collision avoidance's)."""
+
 PRESETS: dict[str, dict] = {
     "ql": {**PAPER, "algo": "ql"},
     "nnql": PAPER,
@@ -65,6 +71,8 @@ PRESETS: dict[str, dict] = {
     "shield-ql": {**PAPER, **BEST, "algo": "ql", "shield": True, "known_state": True},
     "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
                     "wait_rule": "meet"},
+    "path-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
+                  "wait_rule": "meet", **PATH},
     "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
     "daql": {**PAPER, **BEST, "algo": "daql"},
     "oracle": {**PAPER, "algo": "oracle"},
@@ -72,9 +80,10 @@ PRESETS: dict[str, dict] = {
 """Named learning presets: the rows of the swarm experiment, and ``launch/swarm.py --preset``."""
 assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())
 
-DEFAULT_PRESET = "shield-nnql"
+DEFAULT_PRESET = "path-nnql"
 """The learning options of a swarm run unless told otherwise: the best of the swarm experiment
-(docs/swarm.md: every agent arrives, none collide, after about 100 episodes)."""
+(docs/swarm.md: the paper's nnQL with the shield, destination seeking on the walls each agent
+has seen; on an open grid every agent arrives and none collide after about 100 episodes)."""
 _DEFAULT = PRESETS[DEFAULT_PRESET]
 
 
@@ -131,9 +140,6 @@ class SwarmConfig:
                             "the same with d the path length on the walls the agent has seen "
                             "(path), or 1, 0.5, 0 for a path that got shorter, stayed, grew "
                             "(flat)", choices=DS_REWARD_NAMES)
-    push: bool = option(_DEFAULT["push"], "priority inheritance in the announcement order: an "
-                        "agent a higher-ranked neighbour announced moving into must move away "
-                        "(it may not stay, unless it cannot move)")
     detour: bool = option(_DEFAULT["detour"], "the path on the known map (--ds-state, "
                           "--ds-reward) goes around the agents parked within reach, where "
                           "another way is known")
@@ -234,7 +240,6 @@ class SwarmConfig:
         data.setdefault("wait_rule", "reach")  # written before the field: all in reach waited
         data.setdefault("ds_state", "goal")  # written before the fields: the paper's
         data.setdefault("ds_reward", "euclid")
-        data.setdefault("push", False)
         data.setdefault("detour", False)
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
