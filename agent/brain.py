@@ -157,15 +157,16 @@ class AgentBrain:
         if stops:
             written = finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
                              learner.state, learner.state_f, learner.wmap, self._wall_x,
-                             self._wall_y, 0, walls, x, y, gx, gy, nb, m, c.width, c.height,
+                             self._wall_y, 0, walls, obs.step == 0, x, y, gx, gy, nb, m, c.width,
+                             c.height,
                              learner.rec, learner.rec_f, not shared)
             action = STAY
         else:
             random_actions, ties = self._noise
             action, written = decide(
                 learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
-                learner.state_f, learner.wmap, self._wall_x, self._wall_y, 0, walls, x, y, gx,
-                gy, nb, m, c.width, c.height, random_actions[obs.step], floats(ties[obs.step]),
+                learner.state_f, learner.wmap, self._wall_x, self._wall_y, 0, walls,
+                obs.step == 0, x, y, gx, gy, nb, m, c.width, c.height, random_actions[obs.step], floats(ties[obs.step]),
                 learner.values, learner.rec, learner.rec_f, not shared)
         self.learned = (learner.record(),) if shared and written else ()
         return int(action)

@@ -8,17 +8,21 @@ which is what walls carried in its view would tell it.
 
 On the known map (the unknown taken as free) a breadth-first *distance field* to the goal gives
 the agent's path length ``d`` and the *waypoint*, the next cell of a shortest path. Destination
-seeking reads them (``agent.learner``: ``LP_DS_STATE``, ``LP_DS_REWARD``); the field is worked
-out again only when the goal changes or a new wall is seen.
+seeking reads them (``agent.learner``: ``LP_DS_STATE``, ``LP_DS_REWARD``). With the detour
+(``LP_DETOUR``) the field also goes around the agents the agent has seen parked within reach in
+this episode (they stay there until it ends), unless they cut it off its goal. The field is worked
+out again only when the goal changes, a new wall is seen or a newly parked agent is taken.
 
 One buffer of integers per agent (``wmap``, :func:`map_size`): ``MAP_GOAL`` (the goal cell the
-field is for, -1 when stale), ``MAP_KNOWN`` (walls known), then per cell (``y * W + x``) whether
-it is a known wall, its distance to the goal (-1 where the known walls cut it off), and a queue
-the search uses.
+field is for, -1 when stale), ``MAP_KNOWN`` (walls known), ``MAP_PARKED`` (parked agents taken),
+``MAP_CUT`` (whether they cut the agent off, so the field ignores them), then per cell
+(``y * W + x``) whether it is a known wall, its distance to the goal (-1 where cut off), a queue
+the search uses, whether a parked agent taken stands there, and the list of those cells.
 """
 
-from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, sees, target_x, \
-    target_y
+from nnql_swarm.protocol.actions import (
+    DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, VIEW_RADIUS, target_x, target_y,
+)
 from nnql_swarm.protocol.jit import kernel
 
 MAP_GOAL, MAP_KNOWN, MAP_PARKED, MAP_CUT = 0, 1, 2, 3
@@ -58,14 +62,24 @@ def restore_known(wmap, cells, width: int, height: int) -> None:
 
 @kernel
 def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width):
-    """Mark the walls ``first .. last - 1`` (cells ``wall_x[k], wall_y[k]``) within view of
-    ``(ox, oy)`` known; a wall newly known makes the distance field stale."""
+    """Mark the walls ``first .. last - 1`` (cells ``wall_x[k], wall_y[k]``, in cell order)
+    within view of ``(ox, oy)`` known; a wall newly known makes the distance field stale."""
     if wmap[MAP_KNOWN] == last - first:
         return
-    for k in range(first, last):
-        wx = wall_x[k]
+    low = first  # the first wall in a row in view: rows are in order
+    high = last
+    while low < high:
+        mid = (low + high) // 2
+        if wall_y[mid] < oy - VIEW_RADIUS:
+            low = mid + 1
+        else:
+            high = mid
+    for k in range(low, last):
         wy = wall_y[k]
-        if sees(ox, oy, wx, wy):
+        if wy > oy + VIEW_RADIUS:
+            break
+        wx = wall_x[k]
+        if ox - VIEW_RADIUS <= wx <= ox + VIEW_RADIUS:
             at = MAP_HEADER + wy * width + wx
             if wmap[at] == 0:
                 wmap[at] = 1
@@ -74,42 +88,34 @@ def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width):
 
 
 @kernel
-def see_parked(wmap, nb, m, ox, oy, around, width, height):
+def see_parked(wmap, nb, m, ox, oy, around, starts, width, height):
     """Take the parked agents among the neighbour rows ``nb`` (``agent.learner.NB_*``) within
-    ``around`` cells (Chebyshev; -1: none) as the obstacles the field plans around; a change
-    makes the field stale."""
+    ``around`` cells (Chebyshev; -1: none) as obstacles the field plans around, for the rest of
+    the episode (a parked agent stays parked); ``starts``: a new episode, none taken yet. A
+    newly taken one makes the field stale."""
     cells = width * height
     flag = MAP_HEADER + 3 * cells
     listed = MAP_HEADER + 4 * cells
-    count = 0
-    same = True
+    if starts and wmap[MAP_PARKED] > 0:
+        for k in range(wmap[MAP_PARKED]):
+            wmap[flag + wmap[listed + k]] = 0
+        wmap[MAP_PARKED] = 0
+        wmap[MAP_GOAL] = -1
+    if around < 0:
+        return
     for j in range(m):
-        if nb[j][8] == 0 or around < 0:  # NB_PARKED
+        if nb[j][8] == 0:  # NB_PARKED
             continue
         jx = nb[j][1]  # NB_X, NB_Y
         jy = nb[j][2]
         if max(abs(jx - ox), abs(jy - oy)) > around:
             continue
-        if wmap[flag + jy * width + jx] == 0:
-            same = False
-        count += 1
-    if same and count == wmap[MAP_PARKED]:
-        return
-    for k in range(wmap[MAP_PARKED]):
-        wmap[flag + wmap[listed + k]] = 0
-    count = 0
-    for j in range(m):
-        if nb[j][8] == 0 or around < 0:
-            continue
-        jx = nb[j][1]
-        jy = nb[j][2]
-        if max(abs(jx - ox), abs(jy - oy)) > around:
-            continue
-        wmap[flag + jy * width + jx] = 1
-        wmap[listed + count] = jy * width + jx
-        count += 1
-    wmap[MAP_PARKED] = count
-    wmap[MAP_GOAL] = -1
+        cell = jy * width + jx
+        if wmap[flag + cell] == 0:
+            wmap[flag + cell] = 1
+            wmap[listed + wmap[MAP_PARKED]] = cell
+            wmap[MAP_PARKED] += 1
+            wmap[MAP_GOAL] = -1
 
 
 @kernel
@@ -131,13 +137,16 @@ def plan_field(wmap, ox, oy, gx, gy, width, height):
 @kernel
 def breadth_first(wmap, goal, width, height, parked):
     """The distance field from ``goal`` around the known walls (and the parked agents taken, if
-    ``parked``)."""
+    ``parked``). The four neighbours are spelled out: it is the agent's costliest step in plain
+    Python."""
     cells = width * height
     dist = MAP_HEADER + cells
     queue = MAP_HEADER + 2 * cells
     flag = MAP_HEADER + 3 * cells
     for c in range(cells):
         wmap[dist + c] = -1
+        if wmap[MAP_HEADER + c] != 0 or (parked and wmap[flag + c] != 0):
+            wmap[dist + c] = -2  # closed: never entered
     wmap[dist + goal] = 0
     wmap[queue] = goal
     head = 0
@@ -145,24 +154,37 @@ def breadth_first(wmap, goal, width, height, parked):
     while head < tail:
         c = wmap[queue + head]
         head += 1
-        cx = c % width
-        cy = c // width
         d = wmap[dist + c] + 1
-        for a in range(4):
-            nc = target_y(cy, a, height) * width + target_x(cx, a, width)
-            if nc != c and wmap[MAP_HEADER + nc] == 0 and wmap[dist + nc] < 0 \
-                    and (not parked or wmap[flag + nc] == 0):
-                wmap[dist + nc] = d
-                wmap[queue + tail] = nc
-                tail += 1
+        cx = c % width
+        if cx > 0 and wmap[dist + c - 1] == -1:
+            wmap[dist + c - 1] = d
+            wmap[queue + tail] = c - 1
+            tail += 1
+        if cx < width - 1 and wmap[dist + c + 1] == -1:
+            wmap[dist + c + 1] = d
+            wmap[queue + tail] = c + 1
+            tail += 1
+        if c >= width and wmap[dist + c - width] == -1:
+            wmap[dist + c - width] = d
+            wmap[queue + tail] = c - width
+            tail += 1
+        if c + width < cells and wmap[dist + c + width] == -1:
+            wmap[dist + c + width] = d
+            wmap[queue + tail] = c + width
+            tail += 1
+    for c in range(cells):
+        if wmap[dist + c] == -2:
+            wmap[dist + c] = -1
 
 
 @kernel
-def track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m, around):
-    """An observation at ``(ox, oy)`` with goal ``(gx, gy)``: the walls in view learned, the
-    parked neighbours within ``around`` taken (-1: none), the distance field made current."""
+def track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m, around,
+          starts):
+    """An observation at ``(ox, oy)`` with goal ``(gx, gy)`` (``starts``: the first of an
+    episode): the walls in view learned, the parked neighbours within ``around`` taken (-1:
+    none), the distance field made current."""
     see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width)
-    see_parked(wmap, nb, m, ox, oy, around, width, height)
+    see_parked(wmap, nb, m, ox, oy, around, starts, width, height)
     plan_field(wmap, ox, oy, gx, gy, width, height)
 
 

@@ -462,24 +462,27 @@ assert N_ACTIONS == 5, "choose spells out five actions"
 
 @kernel
 def observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb,
-                m):
+                m, starts):
     """Where destination seeking reads the known map: the walls ``first .. last - 1`` of
     ``wall_x``, ``wall_y`` in view of ``(ox, oy)`` learned, the parked neighbours within reach
-    taken as obstacles (``LP_DETOUR``), the distance field to the goal made current
+    taken as obstacles for the rest of the episode (``LP_DETOUR``; ``starts``: this observation
+    is an episode's first), the distance field to the goal made current
     (``agent.known_map.track``)."""
     if uses_map(params):
         track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
-              params[LP_DETOUR])
+              params[LP_DETOUR], starts)
 
 
 @kernel
 def decide(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first, last,
-           ox, oy, gx, gy, nb, m, width, height, random_action, ties, values, rec, rec_f,
+           starts, ox, oy, gx, gy, nb, m, width, height, random_action, ties, values, rec, rec_f,
            apply_now):
-    """Learn the walls in view (:func:`observe_map`), complete the pending transition (its
+    """Learn the walls in view (:func:`observe_map`; ``starts``: the episode's first
+    observation), complete the pending transition (its
     record applied at once if ``apply_now``), then choose. Returns the action and whether a
     record was written."""
-    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m)
+    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
+                starts)
     read_rows(params, ox, oy, nb, m)
     written = complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width,
                        height, rec, rec_f)
@@ -492,10 +495,11 @@ def decide(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, f
 
 @kernel
 def finish(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first, last,
-           ox, oy, gx, gy, nb, m, width, height, rec, rec_f, apply_now):
+           starts, ox, oy, gx, gy, nb, m, width, height, rec, rec_f, apply_now):
     """Complete the pending transition of a learner that stops (arrived, or the episode ended);
     its neighbours' rows carry no intent then. Returns whether a record was written."""
-    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m)
+    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
+                starts)
     read_rows(params, ox, oy, nb, m)
     written = complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width,
                        height, rec, rec_f)

@@ -77,8 +77,8 @@ def walls_presets() -> dict[str, dict]:
         "path-nnql-path-reward": {**path, "ds_reward": "path"},
         "path-nnql-euclid-reward": {**path, "ds_reward": "euclid"},
         "path-nnql-no-detour": {**path, "detour": False},
-        "path-nnql-beta-0.5": {**path, "beta": shield["beta"]},
-        "path-nnql-beta-0.7": {**path, "beta": 0.7},
+        "path-nnql-beta-05": {**path, "beta": shield["beta"]},
+        "path-nnql-beta-07": {**path, "beta": 0.7},
     }
 
 

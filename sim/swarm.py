@@ -211,14 +211,15 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
                                goal_x, goal_y, width, height, nb)
             if stops:
                 written = finish(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
-                                 wmap[i], x, y, learners, last_wall, x[i], y[i], goal_x[i],
-                                 goal_y[i], nb, m, width, height, rec[i], rec_f[i], not shared)
+                                 wmap[i], x, y, learners, last_wall, step == 0, x[i], y[i],
+                                 goal_x[i], goal_y[i], nb, m, width, height, rec[i], rec_f[i],
+                                 not shared)
                 actions[i] = STAY
             else:
                 actions[i], written = decide(
                     q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], wmap[i], x, y,
-                    learners, last_wall, x[i], y[i], goal_x[i], goal_y[i], nb, m, width, height,
-                    random_actions[i, step],
+                    learners, last_wall, step == 0, x[i], y[i], goal_x[i], goal_y[i], nb, m,
+                    width, height, random_actions[i, step],
                     ties[i, step], values, rec[i], rec_f[i], not shared)
             pending_rec[i] = shared and written
             decided[i] = True

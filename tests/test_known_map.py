@@ -62,7 +62,7 @@ def test_the_path_goes_around_the_known_walls_and_through_the_unknown():
     wall = [(3, y) for y in range(6)]
     wx, wy = walls_of(*wall)
     wmap = fresh()
-    track(wmap, wx, wy, 0, len(wall), 1, 1, 5, 1, W, H, NONE, 0, -1)
+    track(wmap, wx, wy, 0, len(wall), 1, 1, 5, 1, W, H, NONE, 0, -1, False)
     assert path_length(wmap, 1, 1, W, H) == 14  # down 5, across 4, up 5
     assert progress_moves(wmap, 1, 1, W, H) == (1 << DOWN) | (1 << RIGHT)
     assert waypoint_move(wmap, 1, 1, 5, 1, W, H) == RIGHT, "the goal is farther across"
@@ -70,39 +70,43 @@ def test_the_path_goes_around_the_known_walls_and_through_the_unknown():
     assert waypoint_move(wmap, 5, 1, 5, 1, W, H) == STAY and progress_moves(wmap, 5, 1, W, H) == 0
     # the same wall unseen (none passed): straight across
     blind = fresh()
-    track(blind, wx, wy, 0, 0, 1, 1, 5, 1, W, H, NONE, 0, -1)
+    track(blind, wx, wy, 0, 0, 1, 1, 5, 1, W, H, NONE, 0, -1, False)
     assert path_length(blind, 1, 1, W, H) == 4 and waypoint_move(blind, 1, 1, 5, 1, W, H) == RIGHT
 
 
 def test_the_waypoint_breaks_ties_along_the_axis_where_the_goal_is_farther():
     wmap = fresh()
-    track(wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1)
+    track(wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False)
     assert progress_moves(wmap, 1, 1, W, H) == (1 << DOWN) | (1 << RIGHT)
     assert waypoint_move(wmap, 1, 1, 5, 3, W, H) == RIGHT
     assert waypoint_move(wmap, 1, 1, 3, 3, W, H) == DOWN, "a diagonal: the vertical move"
-    track(wmap, *walls_of(), 0, 0, 1, 1, 1, 5, W, H, NONE, 0, -1)  # a new goal, a new field
+    track(wmap, *walls_of(), 0, 0, 1, 1, 1, 5, W, H, NONE, 0, -1, False)  # a new goal, a new field
     assert waypoint_move(wmap, 1, 1, 1, 5, W, H) == DOWN and path_length(wmap, 1, 1, W, H) == 4
 
 
 def test_the_detour_goes_around_parked_agents_within_reach_unless_they_close_the_way():
     wmap = fresh()
     rows = np.array([parked(1, 2, 1)], np.int64)
-    track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, 4)
+    track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, 4, False)
     assert path_length(wmap, 1, 1, W, H) == 5 and waypoint_move(wmap, 1, 1, 4, 1, W, H) == UP
+    for rows_again, starts in ((NONE, False), (NONE, True)):
+        track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows_again, 0, 4, starts)
+        assert path_length(wmap, 1, 1, W, H) == (5 if not starts else 3), \
+            "a parked agent is planned around until the episode ends"
     far = fresh()
-    track(far, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, -1)
+    track(far, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, -1, False)
     assert path_length(far, 1, 1, W, H) == 3, "no detour asked: straight through"
     # a corridor one cell wide, closed by the parked agent: the way through it is the only one
-    corridor = [(x, y) for x in range(W) for y in (0, 2)]
+    corridor = [(x, y) for y in (0, 2) for x in range(W)]  # walls in cell order
     closed = fresh()
-    track(closed, *walls_of(*corridor), 0, len(corridor), 1, 1, 4, 1, W, H, rows, 1, 4)
+    track(closed, *walls_of(*corridor), 0, len(corridor), 1, 1, 4, 1, W, H, rows, 1, 4, False)
     assert path_length(closed, 1, 1, W, H) == 3 and waypoint_move(closed, 1, 1, 4, 1, W, H) == RIGHT
 
 
 def test_destination_seeking_reads_the_waypoint_or_the_progress_moves():
     agent = Agent()
     agent.params[LP_DS_STATE] = DS_WAYPOINT
-    track(agent.wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1)
+    track(agent.wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False)
     assert ds_state(agent.params, agent.wmap, 1, 1, 5, 3, W, H) == offset_state(1, 0)
     agent.params[LP_DS_STATE] = DS_PROGRESS
     assert ds_state(agent.params, agent.wmap, 1, 1, 5, 3, W, H) == (1 << DOWN) | (1 << RIGHT)

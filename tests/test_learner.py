@@ -62,7 +62,8 @@ class Agent:
     def decide(self, own, goal, neighbours=(), random_action=UP, ties=PREFER_STAY):
         nb, m = self.rows(neighbours)
         action, _ = decide(self.q_ds, self.q_ca, self.params, self.params_f, self.state,
-                           self.state_f, self.wmap, *self.walls, 0, self.walls.shape[1], *own,
+                           self.state_f, self.wmap, *self.walls, 0, self.walls.shape[1], False,
+                           *own,
                            *goal, nb, m, SIZE, SIZE, random_action,
                            np.asarray(ties, float), self.values, self.rec, self.rec_f, True)
         return action
@@ -73,7 +74,8 @@ class Agent:
     def finish(self, own, goal, neighbours=()):
         nb, m = self.rows(neighbours)
         return finish(self.q_ds, self.q_ca, self.params, self.params_f, self.state, self.state_f,
-                      self.wmap, *self.walls, 0, self.walls.shape[1], *own, *goal, nb, m, SIZE,
+                      self.wmap, *self.walls, 0, self.walls.shape[1], False, *own, *goal, nb, m,
+                      SIZE,
                       SIZE, self.rec, self.rec_f, True)
 
     def row(self, own, nb_row):
