@@ -25,8 +25,9 @@ from nnql_swarm.protocol.actions import (
 )
 from nnql_swarm.protocol.jit import kernel
 
-MAP_GOAL, MAP_KNOWN, MAP_PARKED, MAP_CUT = 0, 1, 2, 3
-MAP_HEADER = 4
+MAP_GOAL, MAP_KNOWN, MAP_PARKED, MAP_CUT, MAP_PENDING = 0, 1, 2, 3, 4
+MAP_HEADER = 5
+NOTHING_PENDING = 1 << 30
 SECTIONS = 5
 """Per cell: known wall, distance, queue, parked agent planned around, and the list of those."""
 
@@ -42,6 +43,7 @@ def fresh_map(wmap) -> None:
     for c in range(len(wmap)):
         wmap[c] = 0
     wmap[MAP_GOAL] = -1
+    wmap[MAP_PENDING] = NOTHING_PENDING
 
 
 def known_cells(wmap, width: int, height: int) -> list[int]:
@@ -92,7 +94,9 @@ def see_parked(wmap, nb, m, ox, oy, around, starts, width, height):
     """Take the parked agents among the neighbour rows ``nb`` (``agent.learner.NB_*``) within
     ``around`` cells (Chebyshev; -1: none) as obstacles the field plans around, for the rest of
     the episode (a parked agent stays parked); ``starts``: a new episode, none taken yet. A
-    newly taken one makes the field stale."""
+    newly taken one is *pending* (``MAP_PENDING``: the least distance of those cells in the
+    current field): :func:`plan_field` plans around it once the agent comes near enough for it
+    to change a distance it reads."""
     cells = width * height
     flag = MAP_HEADER + 3 * cells
     listed = MAP_HEADER + 4 * cells
@@ -115,17 +119,27 @@ def see_parked(wmap, nb, m, ox, oy, around, starts, width, height):
             wmap[flag + cell] = 1
             wmap[listed + wmap[MAP_PARKED]] = cell
             wmap[MAP_PARKED] += 1
-            wmap[MAP_GOAL] = -1
+            if wmap[MAP_GOAL] >= 0 and wmap[MAP_CUT] == 0:  # (cut off: the field ignores them)
+                d = wmap[MAP_HEADER + cells + cell]
+                if 0 <= d < wmap[MAP_PENDING]:
+                    wmap[MAP_PENDING] = d
 
 
 @kernel
 def plan_field(wmap, ox, oy, gx, gy, width, height):
     """The breadth-first distance of every cell to the goal ``(gx, gy)`` around the known walls
     and the parked agents taken (:func:`see_parked`; around the walls alone where those cut
-    ``(ox, oy)`` off the goal), 4-connected, -1 where cut off; unless the field is current."""
+    ``(ox, oy)`` off the goal), 4-connected, -1 where cut off; unless the field is current.
+
+    A field that does not plan around the pending parked agents yet (:func:`see_parked`) is as
+    good as current while each of them is at least 2 steps farther from the goal than the agent:
+    a cell's distance depends only on the cells nearer the goal, and the agent reads the
+    distances of its cell, the cells next to it and the cell it came from."""
     goal = gy * width + gx
-    if wmap[MAP_GOAL] == goal:
+    here = wmap[MAP_HEADER + width * height + oy * width + ox]
+    if wmap[MAP_GOAL] == goal and 0 <= here and here + 2 <= wmap[MAP_PENDING]:
         return
+    wmap[MAP_PENDING] = NOTHING_PENDING
     breadth_first(wmap, goal, width, height, wmap[MAP_PARKED] > 0)
     wmap[MAP_CUT] = 0
     if wmap[MAP_PARKED] > 0 and wmap[MAP_HEADER + width * height + oy * width + ox] < 0:
