@@ -36,7 +36,10 @@ class Learner:
 
     The two tables are views of one array, ``Q_DS``'s rows first (:attr:`entries`, flat, is how
     a shared table's updates name its Q-values), a numpy array whether the kernel is compiled or
-    not (``protocol.jit``); the other buffers are Python lists in plain Python."""
+    not (``protocol.jit``); the other buffers are Python lists in plain Python, among them the
+    walls it has seen and its way to its goal (``wmap``, ``agent.known_map``), which the agent
+    derives from the run's map (``config.walls()``) and its own positions: the world sends no
+    walls."""
 
     def __init__(self, config: SwarmConfig) -> None:
         reading = READINGS[config.algo]

@@ -34,6 +34,15 @@ counterpart masks the neighbours' current cells; the random step is filtered too
 edge) does not bootstrap destination seeking from the state it stayed in, so waiting is not
 valued like the move it waits for (docs/swarm.md has the evidence of each).
 
+Destination seeking may read the walls the agent has seen (``agent.known_map``, a buffer
+``wmap`` per agent, kept for the run): its state (``LP_DS_STATE``: the goal's offset, the paper's;
+the next cell of a shortest path on the known map; or the moves that bring the agent nearer on
+it), its reward (``LP_DS_REWARD``: the world's Euclidean ``1/d``, the paper's; ``1/d`` with ``d``
+the path length; or a flat 1, 0.5, 0 for a path that got shorter, stayed, grew), and a detour
+around the agents it saw parked within reach (``LP_DETOUR``). The caller passes the run's walls
+(``wall_x``, ``wall_y``, ``first .. last - 1``, in cell order) and whether the observation is
+an episode's first (``starts``).
+
 Completing a transition writes a *learning record* (``rec``, ``rec_f``), applied by
 :func:`apply_record`: at once for an independent learner, or, where a swarm shares one table, in
 agent-id order before the next tick: by the simulator to its one table (``sim.swarm``), by the
@@ -87,6 +96,7 @@ NB_FIELDS = 12
 for (its cell where unknown), the cell its state is read at (the announced cell n steps ahead;
 the next cell for n = 1), whether it is parked on its goal, its cell a tick ago (-1 if unseen);
 and its Q_CA row, which :func:`read_rows` writes for the steps that read it."""
+assert (NB_X, NB_Y, NB_PARKED) == (1, 2, 8), "agent.known_map.see_parked reads them by number"
 
 LS_TAKEN, LS_PENDING, LS_GOAL, LS_ACTION, LS_TERMINAL, LS_COUNT, LS_X, LS_Y = 0, 1, 2, 3, 4, 5, 6, 7
 LS_NEIGHBOURS = 8
@@ -101,9 +111,11 @@ REC_GOAL, REC_ACTION, REC_TERMINAL, REC_NEXT_GOAL, REC_BLOCKS, REC_COUNT = 0, 1,
 REC_PAIRS = 6
 RF_R_DS, RF_R_CA = 0, 1
 RF_FIELDS = 2
-"""A learning record: Eq. 9's ``s, a, terminal, s'``, the blocks ``s'`` bootstraps over, and per
-neighbour a pair of Q_CA rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no bootstrap); its
-floats are the two rewards."""
+"""A learning record: Eq. 9's ``s, a, terminal, s'`` (destination seeking's states, as
+``LP_DS_STATE`` reads them), the blocks ``s'`` bootstraps over, and per neighbour a pair of Q_CA
+rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no bootstrap); its floats are the two rewards
+(destination seeking's as ``LP_DS_REWARD`` reads it: the world's, or the learner's own from its
+known map)."""
 
 
 def learner_params(config) -> tuple[list[int], list[float]]:
@@ -478,9 +490,8 @@ def decide(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, f
            starts, ox, oy, gx, gy, nb, m, width, height, random_action, ties, values, rec, rec_f,
            apply_now):
     """Learn the walls in view (:func:`observe_map`; ``starts``: the episode's first
-    observation), complete the pending transition (its
-    record applied at once if ``apply_now``), then choose. Returns the action and whether a
-    record was written."""
+    observation), complete the pending transition (its record applied at once if
+    ``apply_now``), then choose. Returns the action and whether a record was written."""
     observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
                 starts)
     read_rows(params, ox, oy, nb, m)
