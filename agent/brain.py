@@ -20,7 +20,9 @@ from nnql_swarm.agent.learner import (
     REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, learner_params, reach,
     record_outcome, record_size, state_size, write_updates,
 )
-from nnql_swarm.agent.known_map import fresh_map, known_cells, map_size, restore_known
+from nnql_swarm.agent.known_map import (
+    check_cell_order, fresh_map, known_cells, map_size, restore_known,
+)
 from nnql_swarm.protocol.actions import (
     N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y, within,
 )
@@ -120,6 +122,7 @@ class AgentBrain:
         self._seen: tuple = (-1, {}, None)  # DAQL: last tick's cells, and the agent's own
         self._was_at: tuple[int, int] | None = None  # DAQL: the agent's cell a tick ago
         walls = config.walls().tolist()
+        check_cell_order(walls)
         self._walls = {y * config.width + x: config.n_agents + k
                        for k, (x, y) in enumerate(walls)}
         self._wall_x, self._wall_y = ints([x for x, _ in walls]), ints([y for _, y in walls])

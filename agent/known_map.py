@@ -62,6 +62,14 @@ def restore_known(wmap, cells, width: int, height: int) -> None:
             wmap[MAP_KNOWN] += 1
 
 
+def check_cell_order(walls) -> None:
+    """Refuse walls (``(x, y)`` pairs) that are not in cell order (``y * W + x``, the order
+    ``protocol.walls`` gives them in): :func:`see_walls` finds the rows in view by bisection."""
+    keys = [(y, x) for x, y in walls]
+    if keys != sorted(keys):
+        raise ValueError("the run's walls must come in cell order (y * W + x)")
+
+
 @kernel
 def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width):
     """Mark the walls ``first .. last - 1`` (cells ``wall_x[k], wall_y[k]``, in cell order)

@@ -19,7 +19,7 @@ from nnql_swarm.agent.learner import (
     LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise, learner_params,
     record_size, state_size,
 )
-from nnql_swarm.agent.known_map import fresh_map, known_cells, map_size
+from nnql_swarm.agent.known_map import check_cell_order, fresh_map, known_cells, map_size
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
@@ -222,6 +222,7 @@ class Batch:
                 sc = swarm_episode(seed, episode, w.width, w.height, w.learners,
                                    w.obstacle_density)
                 walls = layout(seed, w.width, w.height, w.obstacle_density)[0]
+                check_cell_order(walls.tolist())
                 starts.append(np.concatenate([sc.starts, walls]))
                 goals.append(sc.goals)
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))

@@ -8,7 +8,7 @@ import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.agent.known_map import (
-    MAP_KNOWN, fresh_map, known_cells, map_size, path_length, progress_moves, restore_known,
+    MAP_KNOWN, check_cell_order, fresh_map, known_cells, map_size, path_length, progress_moves, restore_known,
     see_walls, track, waypoint_move,
 )
 from nnql_swarm.agent.learner import (
@@ -55,6 +55,12 @@ def test_a_wall_is_known_once_it_was_in_view_and_stays_known():
     again = np.zeros_like(wmap)
     restore_known(again, known_cells(wmap, 30, 3), 30, 3)
     assert known_cells(again, 30, 3) == [42, 55] and again[MAP_KNOWN] == 2
+
+
+def test_walls_out_of_cell_order_are_refused():
+    check_cell_order([(3, 0), (0, 1), (5, 1)])
+    with pytest.raises(ValueError, match="cell order"):
+        check_cell_order([(0, 1), (3, 0)])
 
 
 def test_the_path_goes_around_the_known_walls_and_through_the_unknown():
