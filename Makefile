@@ -2,6 +2,8 @@
 # Both create a local virtualenv in .venv and install the project into it first.
 # `make browser-test` installs Debian's chromium (as root, with apt-get) and Playwright, and runs
 # the tests of the web viewer in headless Chromium (`make test` runs them too when both are there).
+# `make netfault-tools` installs Debian's iproute2 (ip, tc) and iptables where missing (as root),
+# which the tests of faults on the real network between namespace hosts use (tests/test_netfaults.py).
 
 PYTHON ?= python3
 VENV := .venv
@@ -13,7 +15,7 @@ CHROMIUM := /usr/bin/chromium
 AGENTS ?= 8
 ARGS ?=
 
-.PHONY: run test chromium playwright browser-test experiment bench clean
+.PHONY: run test chromium netfault-tools playwright browser-test experiment bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -46,6 +48,26 @@ chromium:
 	  rm -f $$log; \
 	  test -x $(CHROMIUM) || { echo "chromium: installed, but $(CHROMIUM) is still missing" >&2; \
 	                           exit 1; }; \
+	}
+
+# ip and tc (iproute2) and iptables, installed only if missing; fails (saying why) where that needs
+# root or apt-get. Whether the kernel has netem is another matter: tests/netns.py probes it.
+netfault-tools:
+	@missing=""; \
+	command -v ip >/dev/null && command -v tc >/dev/null || missing=" iproute2"; \
+	command -v iptables >/dev/null || missing="$$missing iptables"; \
+	test -z "$$missing" || { \
+	  if [ "$$(id -u)" != 0 ] || ! command -v apt-get >/dev/null; then \
+	    echo "netfault-tools:$$missing missing, and installing needs root and apt-get" >&2; \
+	    exit 1; \
+	  fi; \
+	  echo "netfault-tools: installing Debian's$$missing with apt-get"; \
+	  log=$$(mktemp); \
+	  if ! { apt-get update -qq && DEBIAN_FRONTEND=noninteractive \
+	         apt-get install -y -qq $$missing; } >$$log 2>&1; then \
+	    tail -n 20 $$log >&2; rm -f $$log; exit 1; \
+	  fi; \
+	  rm -f $$log; \
 	}
 
 playwright: $(BROWSER_STAMP)

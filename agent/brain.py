@@ -90,6 +90,68 @@ class Learner:
         return tuple(ints[:REC_PAIRS + 2 * ints[REC_COUNT]]), tuple(python_values(self.rec_f))
 
 
+class NeighbourRows:
+    """The learner's neighbour rows (``agent.learner.NB_*``) for an observation: what an agent
+    reads its neighbours as, and what the world reads them as when it checks the agent's learning
+    record (``world.records``)."""
+
+    def __init__(self, config: SwarmConfig) -> None:
+        self.config = config
+        self.reads_intents = config.algo in NEGOTIATING_ALGOS
+        self.reach = reach(config.interaction_radius)
+        walls = config.walls().tolist()
+        check_cell_order(walls)
+        self._walls = {y * config.width + x: config.n_agents + k
+                       for k, (x, y) in enumerate(walls)}
+        self._walls_near: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
+        self.wall_x, self.wall_y = ints([x for x, _ in walls]), ints([y for _, y in walls])
+        """The walls' cells, in cell order, as the known map reads them (``agent.known_map``)."""
+
+    def __call__(self, obs: Observation, answers: dict[int, int], announcing: bool,
+                 previous: dict[int, tuple[int, int]],
+                 was_at: tuple[int, int] | None) -> list[list[int]]:
+        """The visible neighbours within the learner's reach (``agent.learner.reach``: no other
+        can change its decision or its learning) in id order, each with its announced move where
+        it answered (``answers``), and its cell a tick ago where DAQL remembers it
+        (``previous``); then the walls within reach, each known to stay where it is within the
+        negotiation radius (as the simulator reads a scripted obstacle), unless nobody announces
+        (``announcing``: not at an episode's end, nor once arrived), and seen a tick ago where
+        the agent's cell then (``was_at``) saw it."""
+        w, h = self.config.width, self.config.height
+        parked = set(obs.parked)
+        (x, y), far = obs.position, self.reach
+        rows = []
+        for j, jx, jy in within(obs.neighbours, x, y, far):
+            action = answers.get(j)
+            if action is None:
+                nx, ny, known = jx, jy, 0
+            else:
+                nx, ny, known = target_x(jx, action, w), target_y(jy, action, h), 1
+            px, py = previous.get(j, (-1, -1))
+            rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py, 0])
+        if self._walls:
+            knows = announcing and self.reads_intents
+            radius, meet = self.config.interaction_radius, self.config.meet_only
+            for j, jx, jy in self._walls_within(x, y):
+                px, py = (jx, jy) if was_at is not None and sees(*was_at, jx, jy) else (-1, -1)
+                known = int(knows and in_reach(x, y, jx, jy, radius, meet))
+                rows.append([j, jx, jy, known, jx, jy, jx, jy, 0, px, py, 0])
+        return rows
+
+    def _walls_within(self, x: int, y: int) -> list[tuple[int, int, int]]:
+        """The walls within reach and view of cell ``(x, y)`` as ``(id, x, y)`` in id order
+        (cell order), once per cell."""
+        near = self._walls_near.get((x, y))
+        if near is None:
+            w, h, far = self.config.width, self.config.height, min(self.reach, VIEW_RADIUS)
+            near = [(self._walls[cy * w + cx], cx, cy)
+                    for cy in range(max(0, y - far), min(h, y + far + 1))
+                    for cx in range(max(0, x - far), min(w, x + far + 1))
+                    if cy * w + cx in self._walls]
+            self._walls_near[(x, y)] = near
+        return near
+
+
 class AgentBrain:
     """An agent's learner, its noise, and what it remembers of its last observation.
 
@@ -112,7 +174,6 @@ class AgentBrain:
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
         self.rejected_updates = 0  # shared-table entries refused (outside, or uneven groups)
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
-        self._reach = reach(config.interaction_radius)
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
         self._random_actions = np.zeros(config.max_steps, dtype=np.int64)
         self._ties = np.zeros((config.max_steps, N_ACTIONS))
@@ -121,12 +182,7 @@ class AgentBrain:
         self._prepared = (-1, -1)  # the observation prepared last (episode, tick)
         self._seen: tuple = (-1, {}, None)  # DAQL: last tick's cells, and the agent's own
         self._was_at: tuple[int, int] | None = None  # DAQL: the agent's cell a tick ago
-        walls = config.walls().tolist()
-        check_cell_order(walls)
-        self._walls = {y * config.width + x: config.n_agents + k
-                       for k, (x, y) in enumerate(walls)}
-        self._wall_x, self._wall_y = ints([x for x, _ in walls]), ints([y for _, y in walls])
-        self._walls_near: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
+        self._rows = NeighbourRows(config)
 
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         """The neighbours whose intents this agent decides with, of those it waits for
@@ -159,67 +215,29 @@ class AgentBrain:
         stops = obs.arrived or obs.episode_end
         near = self._neighbour_rows(obs, {} if stops else answers, not stops)
         nb, m = rows(near, NB_FIELDS), len(near)
-        c, walls = self.config, len(self._walls)
+        c, wx, wy = self.config, self._rows.wall_x, self._rows.wall_y
         if stops:
             written = finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
-                             learner.state, learner.state_f, learner.wmap, self._wall_x,
-                             self._wall_y, 0, walls, obs.step == 0, x, y, gx, gy, nb, m, c.width,
-                             c.height,
-                             learner.rec, learner.rec_f, not shared)
+                             learner.state, learner.state_f, learner.wmap, wx, wy, 0, len(wx),
+                             obs.step == 0, x, y, gx, gy, nb, m, c.width, c.height, learner.rec,
+                             learner.rec_f, not shared)
             action = STAY
         else:
             random_actions, ties = self._noise
             action, written = decide(
                 learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
-                learner.state_f, learner.wmap, self._wall_x, self._wall_y, 0, walls,
-                obs.step == 0, x, y, gx, gy, nb, m, c.width, c.height, random_actions[obs.step], floats(ties[obs.step]),
+                learner.state_f, learner.wmap, wx, wy, 0, len(wx), obs.step == 0, x, y, gx, gy,
+                nb, m, c.width, c.height, random_actions[obs.step], floats(ties[obs.step]),
                 learner.values, learner.rec, learner.rec_f, not shared)
         self.learned = (learner.record(),) if shared and written else ()
         return int(action)
 
     def _neighbour_rows(self, obs: Observation, answers: dict[int, int],
                         announcing: bool) -> list[list[int]]:
-        """The learner's neighbour rows (``agent.learner.NB_*``) for this observation: the
-        visible neighbours within the learner's reach (``agent.learner.reach``: no other can
-        change its decision or its learning) in id order, each with its announced move where it
-        answered; then the walls within reach, each known to stay where it is within the
-        negotiation radius (as the simulator reads a scripted obstacle), unless nobody
-        announces (``announcing``: not at an episode's end, nor once arrived)."""
-        w, h = self.config.width, self.config.height
+        """The learner's neighbour rows for this observation (:class:`NeighbourRows`), with
+        DAQL's memory of the tick before."""
         previous = self._previous_cells(obs)
-        parked = set(obs.parked)
-        (x, y), far = obs.position, self._reach
-        rows = []
-        for j, jx, jy in within(obs.neighbours, x, y, far):
-            action = answers.get(j)
-            if action is None:
-                nx, ny, known = jx, jy, 0
-            else:
-                nx, ny, known = target_x(jx, action, w), target_y(jy, action, h), 1
-            px, py = previous.get(j, (-1, -1))
-            rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py, 0])
-        if self._walls:
-            knows = announcing and self.reads_intents
-            radius, meet = self.config.interaction_radius, self.config.meet_only
-            was_at = self._was_at
-            for j, jx, jy in self._walls_within(x, y):
-                px, py = (jx, jy) if was_at is not None and sees(*was_at, jx, jy) else (-1, -1)
-                known = int(knows and in_reach(x, y, jx, jy, radius, meet))
-                rows.append([j, jx, jy, known, jx, jy, jx, jy, 0, px, py, 0])
-        return rows
-
-    def _walls_within(self, x: int, y: int) -> list[tuple[int, int, int]]:
-        """The walls within reach and view of cell ``(x, y)`` as ``(id, x, y)`` in id order
-        (cell order), once per cell."""
-        near = self._walls_near.get((x, y))
-        if near is None:
-            w, h, far = self.config.width, self.config.height, min(self._reach, VIEW_RADIUS)
-            near = [(self._walls[cy * w + cx], cx, cy)
-                    for cy in range(max(0, y - far), min(h, y + far + 1))
-                    for cx in range(max(0, x - far), min(w, x + far + 1))
-                    if cy * w + cx in self._walls]
-            self._walls_near[(x, y)] = near
-        return near
+        return self._rows(obs, answers, announcing, previous, self._was_at)
 
     def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:
         """DAQL's memory: the neighbours' cells at the previous tick of this episode, where they

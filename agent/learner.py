@@ -46,8 +46,9 @@ an episode's first (``starts``).
 Completing a transition writes a *learning record* (``rec``, ``rec_f``), applied by
 :func:`apply_record`: at once for an independent learner, or, where a swarm shares one table, in
 agent-id order before the next tick: by the simulator to its one table (``sim.swarm``), by the
-world to its copy (``world.shared_table``), which hands the entries written to every agent's copy
-(:func:`write_updates`).
+world to its copy (``world.shared_table``), once it has checked that the record is the one the
+sender's own transition wrote (``world.records``, with :func:`read_rows` and :func:`complete`),
+and which hands the entries written to every agent's copy (:func:`write_updates`).
 
 Buffers (numpy arrays when compiled, Python lists in an agent process): ``params`` (``LP_*``),
 ``params_f`` (``FP_*``), the learner's state ``state`` (``LS_*``) and ``state_f`` (``LF_*``), and

@@ -3,21 +3,28 @@
 Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.node.run_agent`` and
 ``sim.inprocess.run_in_process``) each agent logs, under ``agents/<id>/``:
 
-- ``q_ds/value``: an image, one pixel per egocentric offset ``(dx, dy)`` of the *goal* from the
-  agent (the agent sits at the centre pixel, marked by ``q_ds/self``); its colour is
-  ``log(1 + max_a Q_DS[s, a])`` (viridis, dark low, bright high; grey where the state was never
-  updated; Q values are never negative here, as no reward is);
+- ``q_ds/value``: an RGB image, one pixel per egocentric offset ``(dx, dy)`` of the *goal* from
+  the agent (the agent sits at the centre pixel, marked by ``q_ds/self``; ``q_ds/frame`` outlines
+  the window); its colour is ``log(1 + max_a Q_DS[s, a])`` on a fixed scale from 0 to the most
+  the table can learn (:func:`learnable_bound`; viridis, dark low, bright high); light grey where
+  the value is still above that bound (an optimistic start not yet explored away), white
+  where no entry of the state moved off its initial value (Q values are never negative here, as
+  no reward is);
+- ``q_ds/note``: a line in the picture when no entry of the table has moved off its initial
+  value (e.g. Q_CA of a run without collisions), so that the view says why it is blank;
 - ``q_ds/policy``: an arrow per pixel for ``argmax_a Q_DS[s, a]``, ``q_ds/stay`` a dot where STAY
   is best (nothing where every action ties, e.g. never visited);
-- ``q_ca/value``, ``q_ca/policy``, ``q_ca/stay``, ``q_ca/self``: the same for ``Q_CA``, whose
-  state is a *neighbour's* offset (nnQL: its announced next cell, QL: its current cell).
+- ``q_ca/value``, ``q_ca/policy``, ``q_ca/stay``, ``q_ca/self``, ``q_ca/frame``, ``q_ca/note``:
+  the same for ``Q_CA``, whose state is a *neighbour's* offset (nnQL: its announced next cell,
+  QL: its current cell).
 
-Only the first ``recording.session.RECORDED_AGENTS`` agents log these. What an agent logs is
+Only the first ``recording.session.RECORDED_AGENTS`` agents log these, and only agent 0 where
+the agents share one table (every copy is the same table). What an agent logs is
 buffered and sent in columns every few seconds (:class:`AgentViz`).
 
 Pixel ``(column, row) = (dx + 10, dy + 10)``; rows grow downwards, like the world's ``y``, so an
-arrow points the way the agent would move on the grid. The colour scale is per image (from its
-visited minimum to its maximum), so compare shapes across episodes, not colours.
+arrow points the way the agent would move on the grid. The colour scale is fixed for the run,
+so colours compare across episodes and agents.
 
 Negotiation timing (distributed agents only, :class:`TimedBrain`): the wall time from the agent's
 first intent query of a tick to its last answer or time-out, i.e. how long it waited for its
@@ -57,7 +64,13 @@ _VIRIDIS = np.array([
     (68, 1, 84), (72, 40, 120), (62, 74, 137), (49, 104, 142), (38, 130, 142),
     (31, 158, 137), (53, 183, 121), (109, 205, 89), (180, 222, 44), (253, 231, 37),
 ], dtype=np.float64)
-UNVISITED = (45, 45, 45)
+UNVISITED = (255, 255, 255)
+"""States none of whose entries moved off the initial value: white, the view's background
+(the viewer draws an image's transparent pixels black)."""
+OPTIMISTIC = (205, 205, 205)
+"""States whose best value is still above anything the table can learn: light grey."""
+FRAME = (120, 120, 120)
+NOTHING_LEARNED = "nothing learned yet: every entry is still at its initial value"
 
 
 def agent_path(agent: int) -> str:
@@ -81,14 +94,25 @@ def viridis(t: np.ndarray) -> np.ndarray:
     return (_VIRIDIS[low] * (1 - frac) + _VIRIDIS[high] * frac).astype(np.uint8)
 
 
-def table_picture(q: np.ndarray, initial: float = 0.0) -> dict:
+def learnable_bound(table: str, config: SwarmConfig) -> float:
+    """The largest value a table can learn: Q_DS the goal reward (a step's own reward is at most
+    1, so ``1 / (1 - gamma)`` bounds a path that never arrives), Q_CA the no-collision reward 10
+    every step, discounted: ``10 / (1 - gamma)``."""
+    if table == "q_ds":
+        return max(config.goal_reward, 1.0 / (1.0 - config.gamma))
+    return 10.0 / (1.0 - config.gamma)
+
+
+def table_picture(q: np.ndarray, initial: float = 0.0, bound: float | None = None) -> dict:
     """One Q-table as a heat map and a policy over the 21 x 21 offset window.
 
     A table of several blocks of 441 states (a neighbour's state with its known move, or its
     intent known or not) shows, per offset, the block with the best value. Returns ``value``
     (max over actions, ``[row, column] = [dy + 10, dx + 10]``), ``best`` (argmax), ``visited``
     (some action's value moved off ``initial``), ``decided`` (not every action tied) and
-    ``image`` (RGB bytes).
+    ``image`` (RGB bytes): ``log(1 + value)`` from 0 to ``log(1 + bound)`` in viridis, values
+    above ``bound`` :data:`OPTIMISTIC`, states not visited :data:`UNVISITED` (white).
+    Without ``bound``, the scale ends at the largest value visited.
     """
     blocks = np.asarray(q).reshape(-1, N_STATES, N_ACTIONS)
     best_block = blocks.max(axis=-1).argmax(axis=0)
@@ -102,10 +126,10 @@ def table_picture(q: np.ndarray, initial: float = 0.0) -> dict:
     image[:] = UNVISITED
     if visited.any():
         # log scale: Q_DS spans 0.1 far from the goal to 10 next to it, Q_CA 0 to 25
-        shade = np.log1p(np.maximum(value, 0.0))
-        low, high = shade[visited].min(), shade[visited].max()
-        scaled = (shade - low) / (high - low) if high > low else np.ones_like(shade)
-        image[visited] = viridis(scaled[visited])
+        top = value[visited].max() if bound is None else bound
+        shade = np.log1p(np.maximum(value, 0.0)) / max(np.log1p(max(top, 0.0)), 1e-12)
+        image[visited] = viridis(shade[visited])
+        image[visited & (value > top * (1 + 1e-9))] = OPTIMISTIC
     return {"value": value, "best": best, "visited": visited, "decided": decided, "image": image}
 
 
@@ -168,8 +192,11 @@ class AgentViz:
     """
 
     def __init__(self, agent: int, config: SwarmConfig, stream: rr.RecordingStream,
-                 tick_of_episode_end: Callable[[], int] | None = None) -> None:
+                 tick_of_episode_end: Callable[[], int] | None = None,
+                 heat_maps: bool = True) -> None:
+        """``heat_maps``: whether this agent logs its tables (not where it shares agent 0's)."""
         self.agent = agent
+        self.heat_maps = heat_maps
         self.config = config
         self.rec = stream
         self.tick_of_episode_end = tick_of_episode_end
@@ -179,7 +206,12 @@ class AgentViz:
         self._pictures: list[tuple[int, int, list[tuple]]] = []  # tick, episode, per table
         root = agent_path(agent)
         centre = np.array([[VIEW_RADIUS + 0.5, VIEW_RADIUS + 0.5]], dtype=np.float32)
-        for table in TABLES:
+        for table in TABLES if heat_maps else ():
+            stream.log(f"{root}/{table}/frame", rr.Boxes2D(
+                centers=[[WINDOW / 2, WINDOW / 2]], sizes=[[WINDOW, WINDOW]], colors=[FRAME],
+                radii=0.05, draw_order=45.0), static=True)
+            stream.log(f"{root}/{table}/note", rr.Points2D.from_fields(
+                radii=0.01, colors=[[40, 40, 40]], show_labels=True, draw_order=60.0), static=True)
             stream.log(f"{root}/{table}/self", rr.Boxes2D(
                 centers=centre, sizes=[[1.0, 1.0]], colors=[[255, 60, 60]], radii=0.06,
                 draw_order=50.0), static=True)
@@ -198,11 +230,12 @@ class AgentViz:
             tick = self.tick_of_episode_end()
         else:
             tick = 0
-        if logs_heat_maps(episode, self.config.episodes):
+        if self.heat_maps and logs_heat_maps(episode, self.config.episodes):
             self._pictures.append((tick, episode, [
-                (picture["image"], *policy_marks(picture))
-                for picture in (table_picture(values, self.config.optimistic)
-                                for values in brain.learner.tables())]))
+                (picture["image"], *policy_marks(picture), bool(picture["visited"].any()))
+                for picture in (table_picture(values, self.config.optimistic,
+                                              learnable_bound(table, self.config))
+                                for table, values in zip(TABLES, brain.learner.tables()))]))
         if isinstance(brain, TimedBrain):
             latencies, unanswered = brain.take_timings()
             if latencies:
@@ -226,8 +259,13 @@ class AgentViz:
         image_format = rr.components.ImageFormat(width=WINDOW, height=WINDOW, color_model="RGB",
                                                  channel_datatype="U8")
         root = agent_path(self.agent)
+        note_at = np.array([[WINDOW / 2, WINDOW / 4]], dtype=np.float32)
         for table, marks in zip(TABLES, zip(*tables)):
-            images, origins, vectors, colors, stays = zip(*marks)
+            images, origins, vectors, colors, stays, learned = zip(*marks)
+            self.rec.send_columns(f"{root}/{table}/note", index, rr.Points2D.columns(
+                positions=np.concatenate([note_at[:0] if done else note_at for done in learned]),
+                labels=[NOTHING_LEARNED for done in learned if not done],
+            ).partition([0 if done else 1 for done in learned]))
             self.rec.send_columns(f"{root}/{table}/value", index, rr.Image.columns(
                 buffer=[image.tobytes() for image in images], format=[image_format] * len(images)))
             self.rec.send_columns(f"{root}/{table}/policy", index, rr.Arrows2D.columns(

@@ -1,51 +1,104 @@
 #!/usr/bin/env python3
-"""The README's picture of the viewer: a recording served by the web viewer, in headless Chromium.
+"""The pictures of the viewer in the docs: recordings served by the web viewer, in headless
+Chromium.
 
 Needs Debian's ``chromium`` and the ``browser`` extra (Playwright): ``make playwright chromium``.
-The web viewer renders with SwiftShader after about 20 s of loading; a recording of a few MB
-takes minutes more.
+The web viewer renders with SwiftShader; a recording of a few MB shows after a minute or two.
 
-    python docs/screenshot.py runs/<id>/run.rrd docs/viewer.png --wait 320 --click 1375,886
+    python docs/screenshot.py --docs
 
-A saved recording opens at its end (the blueprint follows the newest data); ``--click`` on the
-time slider moves the time cursor (1375,886 at the default size is about 90 % of the run).
+makes the three runs of the docs and their pictures: the default run (``launch/swarm.py``, 8
+agents, distributed) as ``docs/viewer.png``, the README's; 8 agents with walls
+(``--obstacle-density 0.2``) as ``docs/viewer-walls.png``; 64 agents on 32 x 32 as
+``docs/viewer-64.png`` (both ``--in-process``, the same runs as distributed). The runs go to
+``runs/screenshots/``. Each picture is taken once the viewer shows what ``tests/browser.py``
+checks of the newest episode (the grid, walls, labels, moves and waits), or after ``--wait``.
+
+    python docs/screenshot.py runs/<id>/run.rrd picture.png
+
+takes one picture of a saved run.
 """
 
 import argparse
+import subprocess
 import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
 
-from tests.browser import CHROMIUM, chromium, web_viewer  # noqa: E402
+from tests.browser import CHROMIUM, check_world, chromium, wait_for, web_viewer  # noqa: E402
+
+DOCS_RUNS = {
+    "viewer.png": ("default", ["--agents", "8"]),
+    "viewer-walls.png": ("walls", ["--agents", "8", "--obstacle-density", "0.2", "--in-process"]),
+    "viewer-64.png": ("64-agents", ["--agents", "64", "--grid", "32x32", "--in-process"]),
+}
+"""Each picture of the docs: its run's id under ``runs/screenshots/`` and options."""
+
+
+def take(browser, recording: Path, png: Path, wait: float, run_dir: Path | None = None) -> str:
+    """Open ``recording`` in a new page; screenshot it to ``png`` once the world view passes
+    ``check_world`` (with ``run_dir``), or after ``wait`` seconds. Returns what it saw."""
+    from PIL import Image
+
+    from nnql_swarm.protocol.config import SwarmConfig
+
+    with web_viewer(recording) as viewer:
+        page = browser.new_page()
+        page.goto(viewer.url())
+        if run_dir is None:
+            time.sleep(wait)
+            png.write_bytes(page.screenshot(timeout=120_000))
+            seen = f"after {wait:.0f} s"
+        else:
+            config = SwarmConfig.from_json((run_dir / "config.json").read_text())
+            try:
+                image, found, seconds = wait_for(page, lambda im: check_world(im, config, run_dir),
+                                                 wait, every=3.0)
+                time.sleep(3)  # the last chunks of plots and heat maps
+                png.write_bytes(page.screenshot(timeout=120_000))
+                seen = f"checks passed after {seconds:.0f} s: " + ", ".join(
+                    f"{key} {value}" for key, value in found.items() if key != "grid")
+            except AssertionError as failure:
+                png.write_bytes(page.screenshot(timeout=120_000))
+                seen = f"CHECKS FAILED: {failure}"
+        page.close()
+    # A palette of at most 256 colours keeps the picture small and exact enough for text.
+    Image.open(png).convert("RGB").quantize(256, dither=Image.Dither.NONE).save(png,
+                                                                                optimize=True)
+    return seen
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("recording", type=Path)
-    p.add_argument("png", type=Path)
+    p.add_argument("recording", type=Path, nargs="?")
+    p.add_argument("png", type=Path, nargs="?")
+    p.add_argument("--docs", action="store_true", help="make the docs' runs and pictures")
     p.add_argument("--size", default="1600x900", help="viewport WIDTHxHEIGHT")
-    p.add_argument("--wait", type=float, default=25.0,
-                   help="seconds to let the viewer load (minutes for a few MB on SwiftShader)")
+    p.add_argument("--wait", type=float, default=300.0,
+                   help="seconds to let the viewer load (a saved recording: the time it gets; "
+                        "--docs: the most it waits for the checks)")
     p.add_argument("--chromium", type=Path, default=CHROMIUM)
-    p.add_argument("--click", default=None, metavar="X,Y",
-                   help="once loaded, click there (e.g. on the time slider to move the cursor)")
     args = p.parse_args()
+    if not args.docs and (args.recording is None or args.png is None):
+        p.error("give a recording and a picture, or --docs")
 
     width, height = (int(v) for v in args.size.split("x"))
-    with web_viewer(args.recording) as viewer, \
-            chromium(args.chromium, size=(width, height)) as browser:
-        page = browser.new_page()
-        page.goto(viewer.url())
-        time.sleep(args.wait)
-        if args.click:
-            x, y = (float(v) for v in args.click.split(","))
-            page.mouse.click(x, y)
-            time.sleep(5)
-        args.png.parent.mkdir(parents=True, exist_ok=True)
-        page.screenshot(path=str(args.png))
-    print(f"wrote {args.png}")
+    with chromium(args.chromium, size=(width, height)) as browser:
+        if not args.docs:
+            args.png.parent.mkdir(parents=True, exist_ok=True)
+            print(f"{args.png}: {take(browser, args.recording, args.png, args.wait)}")
+            return 0
+        for picture, (run_id, options) in DOCS_RUNS.items():
+            out = ROOT / "runs" / "screenshots" / run_id
+            if not (out / "run.rrd").exists():
+                subprocess.run([sys.executable, str(ROOT / "launch" / "swarm.py"), *options,
+                                "--run-id", run_id, "--out", str(out)], check=True,
+                               stdout=subprocess.DEVNULL)
+            png = ROOT / "docs" / picture
+            print(f"{png}: {take(browser, out / 'run.rrd', png, args.wait, out)}", flush=True)
     return 0
 
 

@@ -71,6 +71,19 @@ class EpisodeMetrics:
         return [f.name for f in fields(self)]
 
 
+def paper_world(s: PaperSettings) -> World:
+    """The simulator's world of the paper's experiment: one learner among scripted obstacles."""
+    return World(bodies=1 + s.n_obstacles, learners=1, width=s.width, height=s.height,
+                 max_steps=s.max_steps, count_swaps=s.count_swaps, goal_reward=s.goal_reward)
+
+
+def paper_run(spec: RunSpec, s: PaperSettings) -> SwarmConfig:
+    """The learner's options of one run of the paper's experiment."""
+    return SwarmConfig(n_agents=1, seed=spec.seed, random_step=spec.random_step,
+                       **{**PAPER, "algo": spec.algo, "alpha": s.alpha, "beta": s.beta},
+                       gamma=s.gamma)
+
+
 def run_batch(
     specs: list[RunSpec],
     settings: PaperSettings = PaperSettings(),
@@ -83,15 +96,10 @@ def run_batch(
     for spec in specs:
         if spec.algo not in ALGOS:
             raise ValueError(f"unknown algorithm {spec.algo!r}; choose from {', '.join(ALGOS)}")
-    s = settings
-    world = World(bodies=1 + s.n_obstacles, learners=1, width=s.width, height=s.height,
-                  max_steps=s.max_steps, count_swaps=s.count_swaps, goal_reward=s.goal_reward)
-    runs = [SwarmConfig(n_agents=1, seed=spec.seed, random_step=spec.random_step,
-                        **{**PAPER, "algo": spec.algo, "alpha": s.alpha, "beta": s.beta},
-                        gamma=s.gamma) for spec in specs]
+    runs = [paper_run(spec, settings) for spec in specs]
     callback = None if on_episode is None else (lambda episode, _batch: on_episode(episode))
     with threads(workers):
-        played = Batch(world, runs).play(s.episodes, on_episode=callback)
+        played = Batch(paper_world(settings), runs).play(settings.episodes, on_episode=callback)
     return EpisodeMetrics(steps=played.steps, collisions=played.collisions,
                           reward_ds=played.reward_ds, reward_ca=played.reward_ca,
                           shortest=played.shortest, arrived=played.arrived > 0)

@@ -94,6 +94,10 @@ class SwarmExperiment:
     width: int = 11
     height: int = 11
     obstacle_density: float = 0.0
+    map_name: str = ""
+    map_rows: tuple[str, ...] = ()
+    scenario: tuple = ()
+    """The map every seed plays (``--map``; its starts and goals from ``--scen``), if any."""
     variants: tuple[str, ...] = VARIANTS
     presets: dict[str, dict] = field(default_factory=lambda: dict(PRESETS))
 
@@ -102,6 +106,7 @@ class SwarmExperiment:
         return SwarmConfig(run_id=run_name(variant, seed), n_agents=self.agents,
                            episodes=self.episodes, max_steps=self.max_steps, width=self.width,
                            height=self.height, seed=seed, obstacle_density=self.obstacle_density,
+                           map_name=self.map_name, map_rows=self.map_rows, scenario=self.scenario,
                            **self.presets[variant])
 
     @property
@@ -115,7 +120,7 @@ class SwarmExperiment:
 
     def __hash__(self) -> int:
         return hash((self.agents, self.seeds, self.seed_base, self.episodes, self.variants,
-                     self.obstacle_density))
+                     self.obstacle_density, self.map_rows, self.scenario))
 
 
 def run_name(variant: str, seed: int) -> str:
@@ -196,6 +201,7 @@ def markdown(results: SwarmResults, rows: list[dict]) -> str:
     head = (f"| variant | arrival {a0}-{a1} | arrival {b0}-{b1} | steps ratio {b0}-{b1} | "
             f"collisions [95 % CI] | vs | decrease % | difference [95 % CI] |")
     walls = f", obstacle density {e.obstacle_density}" if e.obstacle_density else ""
+    walls += f", map {e.map_name}" if e.map_name else ""
     lines = [f"# The swarm experiment: {e.agents} agents, {e.width} x {e.height}{walls}, swaps "
              f"counted, {e.episodes} episodes, seeds {e.seed_base}-{e.seed_base + e.seeds - 1}", "",
              head, "|---|---:|---:|---:|---:|---|---:|---:|"]
@@ -208,8 +214,8 @@ def markdown(results: SwarmResults, rows: list[dict]) -> str:
             f"{_interval(row['difference_ci_low'], row['difference_ci_high'])} |")
     lines += ["", "Each variant is a set of learning options (a preset of `protocol/config.py` where "
               "it has the name of one); one run of a preset is `python launch/swarm.py --preset "
-              f"<variant> --agents {e.agents} --episodes {e.episodes} --seed <seed> --grid "
-              f"{e.width}x{e.height}"
+              f"<variant> --agents {e.agents} --episodes {e.episodes} --seed <seed> "
+              + (f"--map {e.map_name}" if e.map_name else f"--grid {e.width}x{e.height}")
               + (f" --obstacle-density {e.obstacle_density}" if e.obstacle_density else "")
               + " --in-process`, whose `episodes.csv` equals "
               "`runs/<variant>-s<seed>/episodes.csv` here.", ""]

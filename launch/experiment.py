@@ -22,7 +22,9 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from nnql_swarm.experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch
+from nnql_swarm.experiment.paper import (
+    ALGOS, PaperSettings, RunSpec, paper_run, paper_world, run_batch,
+)
 from nnql_swarm.experiment.report import (
     ResultGrid, summarize, table1_markdown, table1_rows, write_episodes_csv, write_table1_csv,
 )
@@ -31,7 +33,11 @@ from nnql_swarm.experiment.swarm import (
     walls_presets, write_runs, write_tables,
 )
 from nnql_swarm.protocol.config import PRESETS
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress
+from nnql_swarm.protocol.maps import run_map
+from nnql_swarm.sim.runs import swarm_world
+from nnql_swarm.terminal.cli import (
+    EXIT_INTERRUPTED, OneLineParser, make_directory, prepare_simulator, program_name, progress,
+)
 from nnql_swarm.recording.session import log_swarm_curves
 
 RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
@@ -106,7 +112,7 @@ def build_parser() -> OneLineParser:
     parser = OneLineParser(
         description="QL vs nnQL, the paper's experiment: one learner among scripted obstacles "
         "that announce their next action. The paper's settings are the defaults. (The swarm "
-        "experiment: experiment.py swarm --help.)",
+        "experiment: %(prog)s swarm --help.)",
     )
     add = parser.add_argument
     add("--seeds", type=bounded(int, 1), default=10, metavar="N",
@@ -171,6 +177,9 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
             require_matplotlib()
         except RuntimeError as error:
             parser.error(str(error))
+    unusable = make_directory(args.out)
+    if unusable:
+        parser.error(unusable)
     if args.workers is None:
         args.workers = os.cpu_count() or 1
     return args
@@ -195,6 +204,7 @@ def run(args: argparse.Namespace) -> Path:
     seeds = list(range(args.seed_base, args.seed_base + args.seeds))
     specs = [RunSpec(algo, k, seed) for algo in args.algos for k in args.ks for seed in seeds]
     args.out.mkdir(parents=True, exist_ok=True)
+    prepare_simulator(paper_world(settings), paper_run(specs[0], settings))
     started = time.monotonic()
     label = f"{len(specs)} runs x {settings.episodes} episodes"
     with progress(len(specs) * settings.episodes, "run-episode", label) as bar:
@@ -249,7 +259,7 @@ def parse_variants(text: str) -> tuple[str, ...]:
 def build_swarm_parser() -> OneLineParser:
     d = SwarmExperiment()
     parser = OneLineParser(
-        prog=f"{Path(sys.argv[0]).name} swarm",
+        prog=f"{program_name()} swarm",
         description="The swarm experiment: every learning preset (the paper's QL and nnQL, the "
         "best options, the shield, n = 2, DAQL, the oracle) over seeds, on the swarm simulator.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
@@ -263,8 +273,13 @@ def build_swarm_parser() -> OneLineParser:
     add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
     add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH")
     add("--obstacle-density", type=float, default=d.obstacle_density, metavar="P",
-        help="fraction of the grid's cells that are walls (each seed its own map); the oracle, "
-             "which plans on an open grid, is then left out")
+        help="fraction of the grid's cells that are walls (each seed its own map)")
+    add("--map", default=None, metavar="FILE|SPEC",
+        help="every seed on this map: a MovingAI .map file, or random:WxH:P[:SEED], "
+             "maze:WxH[:SEED], warehouse[:WxH] (SEED defaults to --seed-base); instead of --grid")
+    add("--scen", default=None, metavar="FILE",
+        help="with --map: a MovingAI .scen file whose first N lines (N = --agents) are every "
+             "episode's starts and goals")
     add("--variants", type=parse_variants, default=d.variants, metavar="LIST",
         help=f"comma-separated, from {','.join(VARIANTS)}")
     add("--ablation", action="store_true",
@@ -291,15 +306,21 @@ def run_swarm(argv: list[str]) -> Path:
     presets = ablation_presets() if args.ablation else \
         walls_presets() if args.walls_ablation else dict(PRESETS)
     variants = tuple(presets) if args.ablation or args.walls_ablation else args.variants
-    if args.obstacle_density:
-        variants = tuple(v for v in variants if presets[v]["algo"] != "oracle")
-        if not variants:
-            parser.error("the oracle plans on an open grid: no variant left with walls")
+    grid = {"width": args.grid[0], "height": args.grid[1]}
+    if args.map is not None:
+        if args.obstacle_density or args.grid != (SwarmExperiment.width, SwarmExperiment.height):
+            parser.error("--map brings its own grid and walls: give no --grid or "
+                         "--obstacle-density with it")
+        try:
+            grid = run_map(args.map, args.scen, args.seed_base, args.agents)
+        except ValueError as error:
+            parser.error(str(error))
+    elif args.scen is not None:
+        parser.error("--scen needs --map, the map its scenarios are for")
     experiment = SwarmExperiment(agents=args.agents, seeds=args.seeds, seed_base=args.seed_base,
                                  episodes=args.episodes, max_steps=args.max_steps,
-                                 width=args.grid[0], height=args.grid[1],
                                  obstacle_density=args.obstacle_density,
-                                 variants=variants, presets=presets)
+                                 variants=variants, presets=presets, **grid)
     try:
         experiment.config(experiment.variants[0], experiment.seed_base)
     except ValueError as error:
@@ -317,7 +338,12 @@ def run_swarm(argv: list[str]) -> Path:
             require_matplotlib()
         except RuntimeError as error:
             parser.error(str(error))
+    unusable = make_directory(out)
+    if unusable:
+        parser.error(unusable)
     runs = len(experiment.variants) * experiment.seeds
+    first = experiment.config(experiment.variants[0], experiment.seed_base)
+    prepare_simulator(swarm_world(first), first)
     started = time.monotonic()
     with progress(experiment.episodes, "episode", f"{runs} runs") as bar:
         results = run_experiment(experiment, args.workers, on_episode=lambda _e: bar.update())

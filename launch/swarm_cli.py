@@ -15,13 +15,17 @@ import logging
 from dataclasses import fields, replace
 import multiprocessing as mp
 import os
+import shlex
 import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 from nnql_swarm.operations import zenoh_files
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser, progress as progress_bar
-from nnql_swarm.recording.session import RecordingSession, check_viewer_url
+from nnql_swarm.terminal.cli import (
+    EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator, progress as progress_bar,
+)
+from nnql_swarm.recording.session import PARTS_DIR, RecordingSession, check_viewer_url
 from nnql_swarm.supervision.resume import (
     ResumeError, ResumePoint, read_config, resume_point, rewind, shared_table,
 )
@@ -30,7 +34,10 @@ from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
 )
 from nnql_swarm.protocol.jit import plain_python_environment
-from nnql_swarm.protocol.runfiles import CONFIG_FILE, EPISODES_FILE, write_text_atomic
+from nnql_swarm.protocol.maps import run_map
+from nnql_swarm.protocol.runfiles import (
+    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, STATS_DIR, write_text_atomic,
+)
 from nnql_swarm.protocol.transport import (
     HUB_FROM_AGENTS, MODES, EmbeddedLayout, TransportSettings, embedded_topology,
 )
@@ -68,7 +75,8 @@ def parse_ids(text: str) -> list[int]:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(description=__doc__.split("\n\n")[0])
+    p = OneLineParser(description="A swarm run: a world process and one process per agent, "
+                      "negotiating over Zenoh (--in-process: the same run in one process).")
     d = SwarmConfig()
     run = p.add_argument_group("the run")
     run.add_argument("--preset", choices=tuple(PRESETS), default=None,
@@ -78,6 +86,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_config_options(run, exclude=LEARNING_FIELDS)
     run.add_argument("--grid", type=parse_grid, default=argparse.SUPPRESS, metavar="WxH",
                      help=f"grid size (default: {d.width}x{d.height})")
+    run.add_argument("--map", default=None, metavar="FILE|SPEC",
+                     help="the grid from a MovingAI .map file, or a generated one: "
+                          "random:WxH:P[:SEED] (e.g. random:19x19:0.2), maze:WxH[:SEED], "
+                          "warehouse[:WxH] (SEED defaults to --seed); starts and goals are "
+                          "drawn per episode from its largest free region")
+    run.add_argument("--scen", default=None, metavar="FILE",
+                     help="with --map: a MovingAI .scen file whose first N lines (N = --agents) "
+                          "are every episode's starts and goals")
     learning = p.add_argument_group("learning (each defaults to the preset's)")
     add_config_options(learning, only=LEARNING_FIELDS)
     run.add_argument("--run-id", default=None, help="default: <preset>-<agents>a-s<seed>-<time>")
@@ -159,6 +175,7 @@ def config_values(args: argparse.Namespace) -> dict:
 def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
     """The run's config and directory from the options; raises UsageError on bad values."""
     values = config_values(args)
+    values.update(map_values(args, values))
     try:
         config = SwarmConfig(run_id="pending", **values)
     except (ValueError, TypeError) as error:
@@ -198,6 +215,24 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
     return config, out
 
 
+def map_values(args: argparse.Namespace, values: dict) -> dict:
+    """The config fields of ``--map`` and ``--scen`` (none without them); raises UsageError,
+    naming the file and line of a malformed map or scenario."""
+    if args.map is None:
+        if args.scen is not None:
+            raise UsageError("--scen needs --map, the map its scenarios are for")
+        return {}
+    if hasattr(args, "grid") or values.get("obstacle_density"):
+        raise UsageError("--map brings its own grid and walls: give no --grid or "
+                         "--obstacle-density with it")
+    d = SwarmConfig()
+    try:
+        return run_map(args.map, args.scen, values.get("seed", d.seed),
+                       values.get("n_agents", d.n_agents))
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+
+
 def check_distributable(config: SwarmConfig) -> None:
     """Refuse options that only the in-process simulator plays; raises UsageError."""
     if config.algo == "oracle":
@@ -206,14 +241,34 @@ def check_distributable(config: SwarmConfig) -> None:
         raise UsageError("--lookahead > 1 is played by the simulator only (add --in-process)")
 
 
+RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR)
+"""What a run directory holds (``protocol.runfiles``); a folder with anything else is not a run."""
+
+
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
-    """Create the run directory; never overwrite a run that is already there."""
-    if role != "agents" and (out / EPISODES_FILE).exists():
-        raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
-                         f"or continue it with --resume")
-    out.mkdir(parents=True, exist_ok=True)
-    if role != "agents":
-        write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
+    """Create the run directory; never overwrite a run that is already there, nor write a run
+    into a folder that holds anything but a run's files (those of a run that never finished an
+    episode, or of the agents started first on this host, may be there). An unusable path (a
+    file, or where no folder can be made) is a UsageError."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} is a file, not a folder")
+    if role != "agents" and out.is_dir():
+        if (out / EPISODES_FILE).exists():
+            raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
+                             f"or continue it with --resume --out {out}")
+        held = sorted(entry.name for entry in out.iterdir()
+                      if entry.name not in RUN_ENTRIES and not entry.name.endswith(".tmp"))
+        if held:
+            raise UsageError(f"--out {out} is a folder that holds other files ({held[0]}"
+                             f"{', ...' if len(held) > 1 else ''}), not a run; choose a new or "
+                             f"empty one")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        if role != "agents":
+            write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
+    except OSError as error:
+        raise UsageError(f"cannot make the run directory --out {out}: "
+                         f"{error.strerror or error}") from None
 
 
 def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
@@ -298,29 +353,35 @@ def transports(args: argparse.Namespace, config: SwarmConfig):
     return shared, lambda _agent: shared, None
 
 
-def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> int:
-    """``record``: a RecordingSession, or True / False for run.rrd or nothing."""
+def run_in_process(config: SwarmConfig, out: Path, record, progress: bool,
+                   on_row: Callable[[dict], None] | None = None) -> int:
+    """``record``: a RecordingSession, or True / False for run.rrd or nothing; ``on_row(row)``
+    follows each episode's row (its deterministic columns)."""
     from nnql_swarm.sim.inprocess import run_in_process as run
+    from nnql_swarm.sim.runs import swarm_world
     from nnql_swarm.recording.session import InProcessRecorder, RecordingSession
 
+    prepare_simulator(swarm_world(config), config)  # before any recording stream opens
     session = record if isinstance(record, RecordingSession) else \
         RecordingSession.files_only(record, config, out)
     viz = InProcessRecorder(session.plan, config, out)
     bar = progress_bar(config.episodes, "episode") if progress else None
     collisions = 0
 
-    def on_row(row: dict) -> None:
+    def row_done(row: dict) -> None:
         nonlocal collisions
         collisions += row["collisions"]
         if bar is not None:
             bar.set_postfix(arrived=f"{row['arrived']}/{config.n_agents}", collisions=collisions,
                             refresh=False)
             bar.update(1)
+        if on_row is not None:
+            on_row(row)
 
     recording = viz.world is not None
     try:
         result = run(config, out, viz.on_tick if recording else None,
-                     on_episode_end=viz.on_episode_end if recording else None, on_row=on_row)
+                     on_episode_end=viz.on_episode_end if recording else None, on_row=row_done)
     finally:
         if bar is not None:
             bar.close()
@@ -330,8 +391,9 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool) -> in
 
 
 def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
-                  start: ResumePoint) -> int:
-    """Start the world and/or agents as supervised processes and wait for the run to end."""
+                  start: ResumePoint, on_poll: Callable[[], bool | None] | None = None) -> int:
+    """Start the world and/or agents as supervised processes and wait for the run to end;
+    ``on_poll``: as ``Supervisor.run`` takes it."""
     world_transport, agent_transport, hub = transports(args, config)
     recording = RecordingSession.start(args, config, out)
     record, progress = recording.plan or False, not args.no_progress
@@ -349,14 +411,37 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
                                i, config, agent_transport(i), out, restarted or resumes,
                                recording.plan, hub,
                                None if restarted else start.checkpoint_episode))
-    code = supervisor.run(leader=world)
+    code = supervisor.run(leader=world, on_poll=on_poll)
     recording.finish()
     if code == EXIT_INTERRUPTED:
-        print("\ninterrupted: the swarm stopped; continue it with --resume", file=sys.stderr)
+        print(f"\ninterrupted: the swarm stopped; continue it with {resume_command(args, out)}",
+              file=sys.stderr)
     elif world is not None and code != 0:
         print(f"the world ended with {describe_exit(code)}; continue the run with "
-              f"--resume --out {out}", file=sys.stderr)
+              f"{resume_command(args, out)}", file=sys.stderr)
     return code
+
+
+def resume_command(args: argparse.Namespace, out: Path) -> str:
+    """The command line that continues this run: the program as it was called, ``--resume --out``
+    and the options that are not in ``config.json`` (where the processes run and connect)."""
+    words = [*invocation(), "--resume", "--out", str(out)]
+    if args.role != "all":
+        words += ["--role", args.role]
+    if args.agent_ids is not None:
+        words += ["--agent-ids", ",".join(map(str, args.agent_ids))]
+    if args.topology != "auto":
+        words += ["--topology", args.topology]
+    for flag, value in (("--mode", args.mode), ("--zenoh-config", args.zenoh_config),
+                        ("--zenoh-config-dir", args.zenoh_config_dir)):
+        if value is not None:
+            words += [flag, value]
+    for flag, endpoints in (("--listen", args.listen), ("--connect", args.connect)):
+        for endpoint in endpoints:
+            words += [flag, endpoint]
+    if args.no_record:
+        words.append("--no-record")
+    return shlex.join(words)
 
 
 def agent_ids(args: argparse.Namespace, config: SwarmConfig) -> list[int]:

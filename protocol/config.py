@@ -19,7 +19,8 @@ from nnql_swarm.protocol.walls import MAX_DENSITY, layout, wall_count
 
 ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
 """nnQL (the paper), plain QL, nnQL whose neighbour state also holds the announced move, Double
-Action Q-learning (a baseline), and the oracle planner (the lower bound; in-process only)."""
+Action Q-learning (a baseline), and the oracle: a reference planner (PIBT, ``sim.oracle``; not a
+lower bound, which ``shortest_sum`` is; in-process only)."""
 NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
 DS_STATE_NAMES = ("goal", "waypoint", "progress")
 DS_REWARD_NAMES = ("euclid", "path", "flat")
@@ -100,8 +101,9 @@ class SwarmConfig:
     height: int = 11
     seed: int = option(0, "the run's seed: every random draw comes from it")
     algo: str = option(_DEFAULT["algo"], "how agents learn: the paper's nnQL and QL, nnQL with the "
-                       "announced move in the state, Double Action Q-learning, or the oracle "
-                       "planner (in-process only)", choices=ALGOS)
+                       "announced move in the state, Double Action Q-learning, or the oracle, "
+                       "a reference planner (PIBT; not a lower bound; in-process only)",
+                       choices=ALGOS)
     random_step: int = option(20, "every k-th action is random (the paper's random step)",
                               metavar="K")
     alpha: float = option(_DEFAULT["alpha"], "learning rate")
@@ -148,9 +150,21 @@ class SwarmConfig:
                                      "largest free region)", metavar="P")
     tick_deadline_s: float = option(2.0, "seconds the world waits for intents each tick",
                                     "--deadline")
+    map_name: str = ""
+    """Where the map came from (``--map``: a file or a generator's spec); "" without a map."""
+    map_rows: tuple[str, ...] = ()
+    """The run's map (``protocol.maps``), one string per row, ``.`` free and ``@`` wall; empty:
+    the open grid, or walls drawn at ``obstacle_density``."""
+    scenario: tuple[tuple[int, int, int, int], ...] = ()
+    """Every episode's ``(start_x, start_y, goal_x, goal_y)`` per agent (``--scen``); empty:
+    drawn per episode from the seed."""
 
     def __post_init__(self) -> None:
         validate_run_id(self.run_id)
+        # JSON gives lists: the config is frozen and hashable, so they become tuples
+        object.__setattr__(self, "map_rows", tuple(self.map_rows))
+        object.__setattr__(self, "scenario", tuple(tuple(int(v) for v in task)
+                                                   for task in self.scenario))
         checks = [
             (1 <= self.n_agents <= MAX_AGENTS, f"agents must be 1..{MAX_AGENTS}"),
             (self.episodes >= 1, "episodes must be at least 1"),
@@ -181,22 +195,51 @@ class SwarmConfig:
             (self.tick_deadline_s > 0, "the tick deadline must be positive"),
             (0 <= self.obstacle_density <= MAX_DENSITY,
              f"the obstacle density must be 0..{MAX_DENSITY}"),
-            (self.obstacle_density == 0 or self.algo != "oracle",
-             "the oracle plans on an open grid: --algo oracle takes no --obstacle-density"),
+            (self.map_rows or not self.scenario, "a scenario (--scen) needs its map (--map)"),
+            (not self.map_rows or self.obstacle_density == 0,
+             "a map brings its own walls: give --map or --obstacle-density, not both"),
         ]
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+        if self.map_rows:
+            self._check_map()
         free = len(self.open_cells())
-        if self.obstacle_density and 2 * self.n_agents > free:
+        if (self.obstacle_density or self.map_rows) and not self.scenario \
+                and 2 * self.n_agents > free:
+            where = (f"the map {self.map_name or ''}".rstrip() if self.map_rows else
+                     f"a {self.width}x{self.height} grid at obstacle density "
+                     f"{self.obstacle_density}")
             raise ValueError(
                 f"{self.n_agents} agents need {2 * self.n_agents} distinct start and goal cells; "
-                f"the largest free region of a {self.width}x{self.height} grid at obstacle density "
-                f"{self.obstacle_density} has {free}")
+                f"the largest free region of {where} has {free}")
+
+    def _check_map(self) -> None:
+        """The map fits the grid; the scenario, if any, has a task per agent on distinct free
+        cells."""
+        rows = self.map_rows
+        if len(rows) != self.height or any(len(row) != self.width for row in rows):
+            raise ValueError(f"the map's rows must be {self.height} of {self.width} cells, "
+                             f"the grid's size")
+        if any(set(row) - {".", "@"} for row in rows):
+            raise ValueError("the map's rows hold only '.' (free) and '@' (wall)")
+        if self.scenario:
+            if len(self.scenario) != self.n_agents:
+                raise ValueError(f"the scenario has {len(self.scenario)} tasks for "
+                                 f"{self.n_agents} agents")
+            starts = [(sx, sy) for sx, sy, _, _ in self.scenario]
+            goals = [(gx, gy) for _, _, gx, gy in self.scenario]
+            if len(set(starts)) != len(starts) or len(set(goals)) != len(goals) or not all(
+                    0 <= x < self.width and 0 <= y < self.height and rows[y][x] == "."
+                    for x, y in starts + goals):
+                raise ValueError("the scenario's starts, and its goals, must be distinct free "
+                                 "cells of the map")
 
     @cached_property  # the world reads it every tick: worked out once (the config is frozen)
     def n_walls(self) -> int:
         """How many walls the grid holds (``protocol.walls``)."""
+        if self.map_rows:
+            return sum(row.count("@") for row in self.map_rows)
         return wall_count(self.width, self.height, self.obstacle_density)
 
     @property
@@ -221,11 +264,11 @@ class SwarmConfig:
 
     def walls(self) -> np.ndarray:
         """The run's walls, ``(K, 2)`` cells in cell order (read-only)."""
-        return layout(self.seed, self.width, self.height, self.obstacle_density)[0]
+        return layout(self.seed, self.width, self.height, self.obstacle_density, self.map_rows)[0]
 
     def open_cells(self) -> np.ndarray:
         """The cells starts and goals are drawn from (``y * W + x``; read-only)."""
-        return layout(self.seed, self.width, self.height, self.obstacle_density)[1]
+        return layout(self.seed, self.width, self.height, self.obstacle_density, self.map_rows)[1]
 
     def learning(self) -> dict:
         """The options of :data:`LEARNING_FIELDS`, as a preset would give them."""

@@ -73,6 +73,19 @@ else:
     batch_kernel = kernel
 
 
+def cached(function) -> bool:
+    """Whether calling a kernel function will not compile it: true in plain Python, and compiled
+    when numba's on-disk index for it holds a compiled version of its current source (numba
+    discards an index whose source file changed since). Compiled code that calls other kernel
+    functions carries them inside, so the outermost function of a batch tells for all."""
+    if not COMPILED:
+        return True
+    try:
+        return bool(function._cache._cache_file._load_index())  # numba's own reading of its index
+    except (AttributeError, OSError, EOFError, ValueError):
+        return False
+
+
 def ints(values) -> "np.ndarray | list[int]":
     """An integer buffer for kernel functions: an array when compiled, a list when not."""
     return np.array(values, dtype=np.int64) if COMPILED else list(values)

@@ -2,8 +2,8 @@
 
 ``SeedSequence(seed, spawn_key=(stream, index))`` gives independent, reproducible streams: the
 scenario of episode ``index``, the noise of agent ``index``, or (the simulator, ``sim``) a fault
-schedule's draws; and, once per run, its walls (``protocol.walls``). Nothing else draws
-randomness.
+schedule's draws; and, once per run, its walls (``protocol.walls``) or its generated map
+(``protocol.maps``). Nothing else draws randomness.
 """
 
 import numpy as np
@@ -12,6 +12,7 @@ SCENARIO_STREAM = 1
 AGENT_STREAM = 2
 SIM_STREAM = 3
 WALL_STREAM = 4
+MAP_STREAM = 5
 
 
 def stream_rng(seed: int, stream: int, index: int) -> np.random.Generator:

@@ -1,10 +1,11 @@
-"""The run's walls: static obstacles that every process derives from the run's seed, never sent.
+"""The run's walls: static obstacles that every process derives from the run's config, never sent.
 
 With ``--obstacle-density P`` a run's grid holds ``round(P * W * H)`` walls, drawn once for the
 whole run from its own stream (``protocol.seeding.WALL_STREAM``), so the world, every agent and the
 simulator know the same map without a message. Starts and goals are drawn only from the largest
 4-connected region of free cells (:func:`open_cells`), so every goal can be reached; smaller pockets
-stay empty.
+stay empty. A run on a map (``--map``, ``protocol.maps``) has the map's walls instead, which its
+config carries.
 
 A wall is a body that always stays: body ``n_agents + k`` is wall ``k`` (walls in cell order,
 ``y * W + x``). The rules treat it like an agent that stays (moving into it is a collision; a wall
@@ -17,6 +18,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from nnql_swarm.protocol.maps import wall_cells as map_walls
 from nnql_swarm.protocol.seeding import WALL_STREAM, stream_rng
 
 MAX_DENSITY = 0.4
@@ -38,10 +40,12 @@ def wall_cells(seed: int, width: int, height: int, density: float) -> np.ndarray
 
 
 @lru_cache(maxsize=16)
-def layout(seed: int, width: int, height: int, density: float) -> tuple[np.ndarray, np.ndarray]:
-    """A run's walls (:func:`wall_cells`) and the cells its starts and goals come from
-    (:func:`open_cells`), computed once per process (both read-only)."""
-    walls = wall_cells(seed, width, height, density)
+def layout(seed: int, width: int, height: int, density: float,
+           rows: tuple[str, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
+    """A run's walls (its map's, ``rows``, if it has one, ``protocol.maps``; else
+    :func:`wall_cells`) and the cells its starts and goals come from (:func:`open_cells`),
+    computed once per process (both read-only)."""
+    walls = map_walls(rows) if rows else wall_cells(seed, width, height, density)
     cells = open_cells(width, height, walls) if len(walls) else np.arange(width * height)
     walls.flags.writeable = cells.flags.writeable = False
     return walls, cells

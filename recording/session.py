@@ -139,8 +139,10 @@ def plan_of(record, config: SwarmConfig, out: Path) -> RecordingPlan | None:
     return RecordingPlan.to_files(config, out) if record else None
 
 
-def open_world_viz(record, config: SwarmConfig, out: Path):
-    """The world's logger (``world.viz.WorldViz``) with the blueprint, or None if not recording."""
+def open_world_viz(record, config: SwarmConfig, out: Path, distributed: bool = True):
+    """The world's logger (``world.viz.WorldViz``) with the blueprint, or None if not recording.
+    ``distributed``: the agents are processes that time their negotiation (the blueprint plots
+    it)."""
     from nnql_swarm.world.metrics import read_episodes
     from nnql_swarm.world.viz import WorldViz
 
@@ -150,7 +152,8 @@ def open_world_viz(record, config: SwarmConfig, out: Path):
     episodes = Path(out) / "episodes.csv"  # a resumed run's complete episodes so far
     before = sum(int(row["collisions"]) for row in read_episodes(episodes)) \
         if episodes.exists() else 0
-    return WorldViz(config, plan.open("world", blueprint(config)), collisions_before=before)
+    return WorldViz(config, plan.open("world", blueprint(config, distributed)),
+                    collisions_before=before)
 
 
 RECORDED_AGENTS = 8
@@ -158,6 +161,18 @@ RECORDED_AGENTS = 8
 the others log nothing and never load Rerun. The world's entities show every agent, each entity
 all of them at once: a viewer slows down with hundreds of entities, and 128 agents logging their
 own would give it over a thousand."""
+
+
+def logs_own_heat_maps(agent: int, config: SwarmConfig) -> bool:
+    """Whether a recorded agent logs its heat maps: each of them, or only agent 0 where the
+    agents share one table (the same table in every copy)."""
+    return agent < RECORDED_AGENTS and (agent == 0 or not config.shared)
+
+
+def heat_map_agents(config: SwarmConfig) -> list[int]:
+    """The agents whose heat maps the recording holds."""
+    return [i for i in range(min(config.n_agents, RECORDED_AGENTS))
+            if logs_own_heat_maps(i, config)]
 
 
 def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):
@@ -168,7 +183,8 @@ def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):
         return None, None, None
     from nnql_swarm.agent.viz import AgentViz, TimedBrain
 
-    viz = AgentViz(agent, config, plan.open(f"agent-{agent}"))
+    viz = AgentViz(agent, config, plan.open(f"agent-{agent}"),
+                   heat_maps=logs_own_heat_maps(agent, config))
     return TimedBrain(agent, config), viz.on_episode_end, viz
 
 
@@ -178,10 +194,11 @@ class InProcessRecorder:
     def __init__(self, record, config: SwarmConfig, out: Path) -> None:
         from nnql_swarm.agent.viz import AgentViz
 
-        self.world = open_world_viz(record, config, out)
+        self.world = open_world_viz(record, config, out, distributed=False)
         self.agents = []
         if self.world is not None:
-            self.agents = [AgentViz(i, config, self.world.rec, lambda: self.world.next_tick)
+            self.agents = [AgentViz(i, config, self.world.rec, lambda: self.world.next_tick,
+                                    heat_maps=logs_own_heat_maps(i, config))
                            for i in range(min(config.n_agents, RECORDED_AGENTS))]
 
     def on_tick(self, world, report) -> None:
@@ -199,54 +216,77 @@ class InProcessRecorder:
             self.world.close()
 
 
-def blueprint(config: SwarmConfig):
-    """The first view: grid and events | metrics | each recorded agent's Q_DS and Q_CA heat maps."""
+def blueprint(config: SwarmConfig, distributed: bool = True):
+    """The first view: the world and its key | the learning curves | the heat maps.
+
+    The viewer opens on the ``episode`` timeline, following the newest episode: the curves run
+    against episodes, and the world view shows that whole episode at once (every announced move,
+    every wait, every collision; agents, goals and trails as the episode left them).
+    """
     import rerun.blueprint as rrb
 
     from nnql_swarm.world import viz as world_viz
 
+    episode = rrb.VisibleTimeRanges(timeline="episode",
+                                    start=rrb.TimeRangeBoundary.cursor_relative(seq=0),
+                                    end=rrb.TimeRangeBoundary.cursor_relative(seq=0))
     world_view = rrb.Spatial2DView(
-        origin="world", name="World: agents, goals, trails, intents, negotiation, collisions",
+        origin="world", name="World: the episode's moves, waits and collisions",
         visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
                                          y_range=[-0.6, config.height - 0.4]),
+        overrides={path: episode for path in (world_viz.INTENTS, world_viz.NEGOTIATION,
+                                              world_viz.COLLISIONS)},
     )
-    events = rrb.TextLogView(origin=world_viz.EVENTS, name="Events")
+    events = rrb.TextLogView(origin=world_viz.EVENTS, name="Events", columns=rrb.TextLogColumns(
+        timeline_columns=[rrb.encodings.TimelineColumn("episode"),
+                          rrb.encodings.TimelineColumn("tick", visible=False)],
+        text_log_columns=[rrb.components.TextLogColumn("LogLevel"),
+                          rrb.components.TextLogColumn("Body")]))
+    key = rrb.TextDocumentView(origin=world_viz.LEGEND, name="Key")
     whole_run = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
                                                       end=rrb.TimeRangeBoundary.infinite()))
 
-    def plot(**view) -> rrb.TimeSeriesView:
-        return rrb.TimeSeriesView(axis_x=whole_run, **view)
+    def plot(low: float | None = None, high: float | None = None, **view) -> rrb.TimeSeriesView:
+        axis = rrb.ScalarAxis(range=(low, high)) if high is not None else None
+        return rrb.TimeSeriesView(axis_x=whole_run, axis_y=axis,
+                                  plot_legend=rrb.PlotLegend(corner="RightBottom"), **view)
 
+    n = config.n_agents
     metrics = rrb.Grid(
-        plot(origin="metrics/collisions/per_episode", name="Collisions per episode"),
-        plot(origin="metrics/collisions/cumulative", name="Cumulative collisions"),
-        plot(origin="metrics/steps", name="Steps per agent vs shortest (mean)",
-             contents=["metrics/steps/per_agent", "metrics/steps/shortest_per_agent"]),
-        plot(origin="metrics/reward_sum", name="Reward sum"),
-        plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms, per agent)"),
+        plot(0.0, 1.05, origin="metrics/arrived_share", name="Arrived (share of agents)"),
+        plot(origin="metrics/steps", name="Steps / shortest path",
+             contents=["metrics/steps/over_shortest", "metrics/steps/shortest_path"]),
+        plot(0.0, float(max(2 * n, 8)), origin="metrics/collisions/per_episode",
+             name="Collisions per episode"),
+        plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),
+        plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)") if distributed
+        else plot(origin="metrics/steps/episode", name="Ticks per episode"),
         plot(origin="metrics/ticks_per_s", name="Ticks per second"),
-        grid_columns=2, name="Metrics (per episode)",
+        grid_columns=2, name="Learning curves (x: episode)",
     )
+    shared = config.shared
     heat_maps = rrb.Tabs(*[
         rrb.Vertical(
-            rrb.Spatial2DView(origin=f"agents/{i}/q_ds",
-                              name=f"Agent {i} Q_DS by goal offset (best move)"),
-            rrb.Spatial2DView(origin=f"agents/{i}/q_ca",
-                              name=f"Agent {i} Q_CA by neighbour offset (best move)"),
-            name=f"agent {i}",
+            rrb.Spatial2DView(origin=f"agents/{i}/q_ds", background=[255, 255, 255],
+                              name="Shared Q_DS: goal offset" if shared
+                              else f"Agent {i} Q_DS: goal offset"),
+            rrb.Spatial2DView(origin=f"agents/{i}/q_ca", background=[255, 255, 255],
+                              name="Shared Q_CA: neighbour offset" if shared
+                              else f"Agent {i} Q_CA: neighbour offset"),
+            name="shared table" if shared else f"agent {i}",
         )
-        for i in range(min(config.n_agents, RECORDED_AGENTS))
-    ], active_tab=0, name="What each agent learned")
+        for i in heat_map_agents(config)
+    ], active_tab=0, name="What the agents learned")
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(world_view, events, row_shares=[3, 1]),
-            metrics,
+            rrb.Vertical(metrics, key, row_shares=[3, 2]),
             heat_maps,
-            column_shares=[4, 4, 3],
+            column_shares=[5, 5, 3],
         ),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
-        rrb.TimePanel(timeline="tick", play_state="following", state="collapsed"),
+        rrb.TimePanel(timeline="episode", play_state="following", state="collapsed"),
         collapse_panels=False,
     )
 

@@ -14,6 +14,9 @@
   checkpoint holds every episode whose end the world heard from it; after everyone was killed,
   every agent holds its tables of the run's cut.
 - The run ends: the world completes, and every agent still running stops.
+- The shared table believes no forged learning record: the world applies none of those a
+  compromised agent sent (the ``forge`` fault), and refuses as forged only those
+  (``world.records``).
 """
 
 from nnql_swarm.protocol.config import SwarmConfig
@@ -32,6 +35,7 @@ class Checker:
         self._sent_in: list[dict[int, int]] = [{} for _ in range(self.n)]  # agent: tick -> era
         self._said: dict[tuple[int, int, int], tuple[int, str]] = {}
         self._ends_heard = [-1] * self.n  # per agent: the last episode whose end the world heard
+        self._forged: dict[tuple[int, int, int], tuple] = {}  # (era, tick, agent) -> its record
 
     def fail(self, message: str) -> None:
         if len(self.failures) < 20:
@@ -94,6 +98,23 @@ class Checker:
         elif known[0] != action:
             self.fail(f"tick {tick}: agent {agent}'s intent changed: {known[0]} ({known[1]}), "
                       f"then {action} ({source})")
+
+    def forged(self, agent: int, tick: int, record: tuple) -> None:
+        """Agent ``agent``'s intent of ``tick`` carries the forged ``record``."""
+        era = self._sent_in[agent].get(tick)
+        self._forged[(era, tick, agent)] = record
+
+    def records_applied(self, era: int, tick: int, records: dict) -> None:
+        """World ``era`` applied ``records`` (by agent) of ``tick`` to the shared table."""
+        for agent, record in records.items():
+            if self._forged.get((era, tick, agent)) == record:
+                self.fail(f"tick {tick}: the world applied agent {agent}'s forged record")
+
+    def forgeries_refused(self, era: int, refused) -> None:
+        """World ``era`` refused as forged the records ``(agent, tick)`` of ``refused``."""
+        for agent, tick in refused:
+            if (era, tick, agent) not in self._forged:
+                self.fail(f"tick {tick}: the world refused agent {agent}'s honest record as forged")
 
     def end_heard(self, episode: int, missed) -> None:
         """The world applied an episode's end tick; ``missed``: whose intents it lacked."""

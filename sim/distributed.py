@@ -32,10 +32,12 @@ from nnql_swarm.protocol.effects import (
     SendObservations,
     Stopped, TickClosed, WriteRow,
 )
+from nnql_swarm.protocol.messages import encode
 from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.sim.checks import Checker
 from nnql_swarm.sim.network import Network, Process
-from nnql_swarm.sim.schedule import WINDOWS, Fault, Schedule, schedule_rng
+from nnql_swarm.sim.forgery import forged
+from nnql_swarm.sim.schedule import FORGE, WINDOWS, Fault, Schedule, schedule_rng
 from nnql_swarm.supervision.resume import resume_point, rewind, shared_table
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
@@ -134,6 +136,7 @@ class SimSwarm:
             self.triggers.setdefault(fault.tick, []).append(fault)
         self.opened: set[int] = set()
         self.fired: list[str] = []
+        self.forging: dict[int, int] = {}  # a compromised agent -> the incarnation that forges
 
     # The run.
 
@@ -207,6 +210,7 @@ class SimSwarm:
         violations = self.world_protocol.world.violations
         if violations:
             self.checker.fail(f"the world counted {violations} broken invariants")
+        self.checker.forgeries_refused(self.era, self.world_protocol.forged_at)
 
     def _world_effects(self, effects: list) -> None:
         sent = None
@@ -221,6 +225,8 @@ class SimSwarm:
                              obs.tick, payload)
             elif kind is TickClosed:
                 report = effect.report
+                if report.records:
+                    self.checker.records_applied(self.era, report.tick, report.records)
                 if report.episode_row is not None:
                     self.checker.end_heard(report.episode, report.missed)
             elif kind is WriteRow:
@@ -349,9 +355,13 @@ class SimSwarm:
                     if arrival > q.last_reply:
                         q.last_reply = arrival
             elif kind is SendIntent:
-                intent = effect.intent
+                intent, payload = effect.intent, effect.payload
                 self.checker.announced(i, intent.tick, intent.action, (), "intent")
-                net.send(a, self.world, self._intent_in, self.intent_keys[i], effect.payload)
+                if intent.record and self.forging.get(i) == a.incarnation:
+                    intent = intent._replace(record=(forged(intent.record[0]),))
+                    payload = encode(intent)
+                    self.checker.forged(i, intent.tick, intent.record[0])
+                net.send(a, self.world, self._intent_in, self.intent_keys[i], payload)
             elif kind is Ask:
                 self._ask(i, effect)
             elif kind is ReplyError:
@@ -472,6 +482,11 @@ class SimSwarm:
                 return
             self._kill_all()
             net.at(net.now + fault.duration_s, self._resume_all)
+        elif kind == FORGE:
+            i = int(fault.target.split("-")[1])
+            if not self.agents[i].alive:
+                return
+            self.forging[i] = self.agents[i].incarnation
         elif fault.target == "world":
             if not self.world.alive or self.world_done:
                 return

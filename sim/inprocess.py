@@ -122,7 +122,8 @@ def _replay(config: SwarmConfig, batch: Batch, row: dict,
         ending = step == steps
         if ending and row["episode"] + 1 < config.episodes:
             starts = swarm_episode(config.seed, row["episode"] + 1, config.width, config.height,
-                                   config.n_agents, config.obstacle_density).starts
+                                   config.n_agents, config.obstacle_density, config.map_rows,
+                                   config.scenario).starts
             after = TickView(tuple(map(tuple, starts.tolist())), (False,) * config.n_agents, 0)
         else:
             later = trace[min(step + 1, steps)]

@@ -1,13 +1,21 @@
-"""The oracle: every goal known, moves planned for all agents at once, collision-free (PIBT).
+"""The oracle: a reference planner (PIBT) that knows every goal and plans all agents' moves at
+once, collision-free.
 
 Priority Inheritance with Backtracking (Okumura et al., 2022), one step at a time, on the world's
-rules: agents in a fixed priority order for the episode (the farthest from its goal at the start
-first, then by id; as PIBT's priorities when all grow alike) each take the free neighbouring cell
-nearest their goal (breadth-first distances around parked agents); an agent
-that wants a cell someone still occupies makes that one move first (it inherits the priority) and
-tries its next cell if it cannot. No two agents are planned into one cell and no two swap, so the
-world's arbitration never finds a collision; arrived agents are parked obstacles, as in the swarm.
-It learns nothing: it is the lower bound the learners are read against.
+rules: agents in priority order (at the start, the longest shortest path to its goal first, then
+by id; an agent gains a unit of priority at each step that finds it no nearer its goal than it
+has ever been, as PIBT's priorities grow while an agent is not home) each take the free
+neighbouring cell nearest their goal (breadth-first distances on the grid's free cells, around the
+walls and the parked agents); an agent that wants a cell someone still occupies makes that one
+move first (it inherits the priority) and tries its next cell if it cannot. No two agents are
+planned into one cell and no two swap, so the world's arbitration never finds a collision.
+Arrived agents are parked obstacles, as in the swarm, and walls obstacles that never move: an
+agent next to its goal does not take it while parking there would leave another agent no way to
+its own.
+
+It learns nothing. It is a reference, not a lower bound: PIBT's paths are not optimal, and where
+walls make corridors it does not always bring every agent home. The lower bound is
+``shortest_sum``, each agent's shortest path alone.
 """
 
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
@@ -98,21 +106,51 @@ def _push(root, x, y, width, height, distances, occupant, reserved, decided, act
 
 
 @kernel
-def plan(x, y, goal_x, goal_y, arrived, n, width, height, priority, actions, distances,
-         occupant, reserved, decided, order, blocked, queue, stack, tried):
+def _closes(goal, i, x, y, goal_x, goal_y, arrived, n, width, height, distances, blocked, probe,
+            queue):
+    """Whether agent ``i`` parked on ``goal`` would leave another agent, one that can reach its
+    goal now, no way to it."""
+    cells = width * height
+    closes = False
+    if blocked[goal] != 0:  # taken by an arrival of this step already
+        return closes
+    blocked[goal] = 1
+    for j in range(n):
+        if j == i or arrived[j] or distances[j * cells + y[j] * width + x[j]] >= FAR:
+            continue
+        goal_distances(goal_x[j], goal_y[j], blocked, width, height, probe, 0, queue)
+        reached = probe[y[j] * width + x[j]] < FAR
+        for a in range(N_ACTIONS - 1):  # it may stand on a goal taken: a way from a neighbour
+            nx, ny = target_x(x[j], a, width), target_y(y[j], a, height)
+            reached = reached or probe[ny * width + nx] < FAR
+        if not reached:
+            closes = True
+            break
+    blocked[goal] = 0
+    return closes
+
+
+@kernel
+def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, closest, actions,
+         distances, occupant, reserved, decided, order, blocked, queue, stack, tried, probe):
     """Every agent's collision-free action for this step, the agents of higher ``priority``
-    first. Scratch: ``distances`` (n cells each), ``occupant``, ``reserved``, ``blocked``,
-    ``queue`` (a slot per cell), ``decided``, ``order``, ``stack``, ``tried`` (a slot per agent)."""
+    first: bodies ``0 .. n - 1`` are the agents, ``n .. bodies - 1`` walls (they stay). An agent
+    gains a unit of ``priority`` at every step that finds it no nearer its goal than it has been
+    (``closest``, its nearest so far), so that one held back in a corridor comes to outrank those
+    in its way. An agent next to its goal whose parking there would leave another agent no way
+    to its own does not take it this step, and plans after the others. Scratch: ``distances``
+    (n cells each), ``occupant``, ``reserved``, ``blocked``, ``queue``, ``probe`` (a slot per
+    cell), ``decided``, ``order``, ``stack``, ``tried`` (a slot per agent)."""
     cells = width * height
     for c in range(cells):
         occupant[c] = -1
         reserved[c] = -1
         blocked[c] = 0
-    for i in range(n):
+    for i in range(bodies):
         occupant[y[i] * width + x[i]] = i
         decided[i] = False
         actions[i] = STAY
-        if arrived[i]:
+        if i >= n or arrived[i]:
             blocked[y[i] * width + x[i]] = 1
             reserved[y[i] * width + x[i]] = i
             decided[i] = True
@@ -120,15 +158,31 @@ def plan(x, y, goal_x, goal_y, arrived, n, width, height, priority, actions, dis
         if not arrived[i]:
             goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances, i * cells,
                            queue)
+            here = distances[i * cells + y[i] * width + x[i]]
+            if here < closest[i]:
+                closest[i] = here
+            else:  # no nearer than it has ever been: it gains on those that make way
+                priority[i] += 1
+    for i in range(n):  # an arrival that would close another's last way waits; the arrivals
+        # of this step close ways together, so each one let through counts for the next
+        if not arrived[i] and distances[i * cells + y[i] * width + x[i]] == 1:
+            goal = goal_y[i] * width + goal_x[i]
+            if _closes(goal, i, x, y, goal_x, goal_y, arrived, n, width, height, distances,
+                       blocked, probe, queue):
+                distances[i * cells + goal] = FAR + 1  # not even when pushed
+            else:
+                blocked[goal] = 1
     count = 0
     for i in range(n):
         if not arrived[i]:
             order[count] = i
             count += 1
-    for a in range(count):  # insertion sort by priority, then by id
+    for a in range(count):  # insertion sort: waiting arrivals last, then by priority, then id
         for b in range(a, 0, -1):
             i, j = order[b], order[b - 1]
-            if priority[i] > priority[j]:
+            wait_i = distances[i * cells + goal_y[i] * width + goal_x[i]] != 0
+            wait_j = distances[j * cells + goal_y[j] * width + goal_x[j]] != 0
+            if (not wait_i and wait_j) or (wait_i == wait_j and priority[i] > priority[j]):
                 order[b], order[b - 1] = j, i
             else:
                 break

@@ -22,6 +22,7 @@ from nnql_swarm.agent.learner import (
 from nnql_swarm.agent.known_map import check_cell_order, fresh_map, known_cells, map_size
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
@@ -40,7 +41,8 @@ class World:
     """What every run of a batch shares: bodies (the first ``learners`` learn), grid, steps.
 
     The scripted bodies are the paper's obstacles or, at an ``obstacle_density`` above 0, the
-    swarm's walls (each run's own, from its seed)."""
+    swarm's walls (each run's own, from its seed), or the walls of the map ``map_rows`` (every
+    run's, with the fixed starts and goals of ``scenario`` if given)."""
 
     bodies: int
     learners: int
@@ -51,6 +53,8 @@ class World:
     goal_reward: float = GOAL_REWARD
     stay_reward: float = STAY_REWARD
     obstacle_density: float = 0.0
+    map_rows: tuple[str, ...] = ()
+    scenario: tuple = ()
 
     @property
     def scripted(self) -> int:
@@ -59,14 +63,15 @@ class World:
     @property
     def paper(self) -> bool:
         """Whether the scripted bodies are the paper's obstacles (rather than walls)."""
-        return self.scripted > 0 and not self.obstacle_density
+        return self.scripted > 0 and not self.obstacle_density and not self.map_rows
 
 
 def swarm_world(config: SwarmConfig) -> World:
     return World(bodies=config.n_bodies, learners=config.n_agents, width=config.width,
                  height=config.height, max_steps=config.max_steps,
                  count_swaps=config.count_swaps, goal_reward=config.goal_reward,
-                 stay_reward=config.stay_reward, obstacle_density=config.obstacle_density)
+                 stay_reward=config.stay_reward, obstacle_density=config.obstacle_density,
+                 map_rows=config.map_rows, scenario=config.scenario)
 
 
 class Episodes:
@@ -220,14 +225,27 @@ class Batch:
                 paths.append(np.abs(sc.starts[:1] - sc.goal).sum(axis=1))
             else:
                 sc = swarm_episode(seed, episode, w.width, w.height, w.learners,
-                                   w.obstacle_density)
-                walls = layout(seed, w.width, w.height, w.obstacle_density)[0]
+                                   w.obstacle_density, w.map_rows, w.scenario)
+                walls = layout(seed, w.width, w.height, w.obstacle_density, w.map_rows)[0]
                 check_cell_order(walls.tolist())
                 starts.append(np.concatenate([sc.starts, walls]))
                 goals.append(sc.goals)
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))
                 paths.append(sc.shortest)
         return np.stack(starts), np.stack(goals), np.stack(scripts), np.stack(paths)
+
+
+def compiled_simulator() -> bool:
+    """Whether the simulator's kernel loads from the on-disk cache (in a second or two) rather than
+    compiling (about half a minute on a 2-core VM): :func:`protocol.jit.cached`."""
+    return cached(run_episode)
+
+
+def warm_up(world: World, run: SwarmConfig) -> None:
+    """Compile or load the simulator's kernel: one episode of a throwaway batch of ``run``, whose
+    arguments have the types of every batch's. A batch played next starts at full speed, so that
+    its first episode times like the others."""
+    Batch(world, [run]).play(1)
 
 
 @contextlib.contextmanager
@@ -248,10 +266,12 @@ def check_run(world: World, run: SwarmConfig) -> None:
     """Refuse a run the simulator cannot play, with the reason."""
     if run.algo not in READINGS and run.algo != "oracle":
         raise ValueError(f"unknown algorithm {run.algo!r}")
-    if run.algo == "oracle" and world.scripted:
+    if run.algo == "oracle" and world.paper:
         raise ValueError("the oracle plans swarms of learners, not scripted obstacles")
     if run.obstacle_density != world.obstacle_density:
         raise ValueError("every run of a batch needs the world's obstacle density")
+    if (run.map_rows, run.scenario) != (world.map_rows, world.scenario):
+        raise ValueError("every run of a batch needs the world's map and scenario")
 
 
 def _ints(*shape: int) -> np.ndarray:

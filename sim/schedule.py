@@ -9,6 +9,9 @@ opens a given tick, some virtual time into it (at most one fault of each kind):
 - ``stall``: ``target`` (the world or an agent) stops answering for a while, as under SIGSTOP;
 - ``crash``: ``target`` dies (kill -9) and its supervisor restarts it ``duration`` later: an
   agent from its last checkpoint, the world with ``--resume`` under the running agents;
+- ``forge``: where the agents share a table, agent ``target`` is compromised: from then on, until
+  it restarts, every learning record it sends is forged (``sim.forgery``). Drawn apart from the
+  other kinds (:data:`FORGE_P`), after them, so that they are drawn as they were.
 - ``kill-all``: every process dies at once (kill -9 of the process group), and ``duration``
   later the run is continued with ``--resume``, from the cut its files give
   (``supervision.resume``). Drawn from a stream of its own (one schedule in ten), so the
@@ -31,6 +34,9 @@ BENIGN = frozenset({"duplicate", "reorder", "kill-all"})
 KILL_ALL_SHARE = 0.1
 """The share of schedules that kill every process at once (and resume)."""
 WINDOWS = ("drop", "duplicate", "reorder")
+FORGE = "forge"
+FORGE_P = 0.3
+"""How often a schedule with faults, where the agents share a table, also has a forging agent."""
 """Faults that change the network's behaviour for a while."""
 
 DEADLINE_S = 0.5
@@ -64,7 +70,8 @@ class Fault:
     def __str__(self) -> str:
         what = {"drop": f"p={self.p:.2f}", "duplicate": f"p={self.p:.2f}",
                 "reorder": f"p={self.p:.2f}", "partition": "{" + ",".join(sorted(self.group)) + "}",
-                "stall": self.target, "crash": self.target, "kill-all": "everyone"}[self.kind]
+                "stall": self.target, "crash": self.target, "kill-all": "everyone",
+                FORGE: self.target}[self.kind]
         return (f"{self.kind} {what} at tick {self.tick} +{self.offset_s * 1000:.2f} ms "
                 f"for {self.duration_s * 1000:.1f} ms")
 
@@ -141,6 +148,9 @@ def draw_schedule(seed: int, agents: int = 8) -> Schedule:
             else:
                 target = "world" if rng.random() < 0.25 else f"agent-{rng.randrange(agents)}"
                 faults.append(Fault(kind, tick, offset, rng.uniform(0.05, 3.0), target=target))
+        if config.shared and rng.random() < FORGE_P:
+            faults.append(Fault(FORGE, rng.randrange(ticks), rng.uniform(0.0, 0.004), 0.0,
+                                target=f"agent-{rng.randrange(agents)}"))
     later = schedule_rng(seed, 2)
     if later.random() < KILL_ALL_SHARE:
         faults.append(Fault("kill-all", later.randrange(ticks), later.uniform(0.0, 0.004),

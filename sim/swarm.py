@@ -12,8 +12,9 @@ record of a tick is applied in agent-id order before the next tick.
 
 Bodies ``0 .. learners - 1`` learn; the rest are scripted obstacles whose every action is given
 (the paper's experiment: one learner, three obstacles; a swarm's walls, ``protocol.walls``, whose
-every action is to stay), outrank every learner and announce their scripted next action. An oracle run plans every learner's move with PIBT (``sim.oracle``) and
-learns nothing.
+every action is to stay), outrank every learner and announce their scripted next action. An
+oracle run plans every learner's move with PIBT (``sim.oracle``, a reference planner) around the
+walls, and learns nothing.
 
 Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agent.learner``) and
 ``options`` (``OPT_*``); the world's options are the same for the whole batch.
@@ -28,11 +29,12 @@ from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
 from nnql_swarm.protocol.jit import batch_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
-from nnql_swarm.world.rules import shared_cells, shortest_steps, swaps_through, world_step
+from nnql_swarm.world.rules import shared_cells, swaps_through, world_step
 
-ORACLE_SCRATCH = 8
+ORACLE_SCRATCH = 10
 """Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
-queue, stack, tried, the agents' priorities), a slot per grid cell each."""
+queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal), a
+slot per grid cell each."""
 
 OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS = 0, 1, 2, 3
 OPT_FIELDS = 4
@@ -166,8 +168,9 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             goal_x[i] = goals[i, 0]
             goal_y[i] = goals[i, 1]
             shortest += paths[i]
-            if oracle:  # PIBT's order for the episode: the farthest from its goal first
-                oracle_scratch[7, i] = shortest_steps(x[i], y[i], goal_x[i], goal_y[i])
+            if oracle:  # PIBT's first order: the farthest from its goal first
+                oracle_scratch[7, i] = paths[i]
+                oracle_scratch[9, i] = paths[i] + 1  # nearer than ever, at first
         else:
             goal_x[i] = -1
             goal_y[i] = -1
@@ -192,10 +195,10 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             actions[i] = STAY if ending else scripts[step, i - learners]
             decided[i] = True
         if oracle and not ending:
-            plan(x, y, goal_x, goal_y, arrived, learners, width, height, oracle_scratch[7],
-                 actions, oracle_cells, oracle_scratch[0], oracle_scratch[1], decided,
-                 oracle_scratch[2], oracle_scratch[3], oracle_scratch[4], oracle_scratch[5],
-                 oracle_scratch[6])
+            plan(x, y, goal_x, goal_y, arrived, n, learners, width, height, oracle_scratch[7],
+                 oracle_scratch[9], actions, oracle_cells, oracle_scratch[0], oracle_scratch[1],
+                 decided, oracle_scratch[2], oracle_scratch[3], oracle_scratch[4],
+                 oracle_scratch[5], oracle_scratch[6], oracle_scratch[8])
         for rank in range(learners):
             i = (rank + tick) % learners  # the agent of this rank (inverse of priority_rank)
             if oracle:

@@ -65,8 +65,10 @@ class Supervisor:
         """Signal handler: stop everything at the next poll."""
         self.stop_requested = True
 
-    def run(self, leader: Child | None) -> int:
-        """Start every child and supervise; returns the leader's exit code (130 on a stop)."""
+    def run(self, leader: Child | None, on_poll: Callable[[], bool | None] | None = None) -> int:
+        """Start every child and supervise; returns the leader's exit code (130 on a stop).
+        ``on_poll()`` is called at every poll (every :data:`POLL_S`); a true result stops the run
+        as Ctrl-C does."""
         previous = {s: signal.signal(s, self.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
         try:
             for child in self.children:
@@ -75,6 +77,9 @@ class Supervisor:
                 if self._leader_done(leader) or self._fatal_exit():
                     break
                 self._restart_dead_agents(leader)
+                if on_poll is not None and on_poll():
+                    self.stop_requested = True
+                    break
                 time.sleep(POLL_S)
             if self.fatal is not None:
                 self._let_the_others_report()

@@ -1,9 +1,13 @@
 """What every command-line entry point shares: one-line usage errors with exit code 2, ``--version``,
-and the progress bar of long work."""
+the command's name as it was called, the output folder made or refused in one line, the progress
+bar of long work, and a word while the simulator compiles before that bar starts."""
 
 import argparse
+import os
+import shutil
 import sys
 import threading
+import time
 from importlib import metadata
 
 from tqdm import tqdm
@@ -20,11 +24,43 @@ def package_version() -> str:
         return "unknown (not installed)"
 
 
+def _main_module() -> str | None:
+    """The module run with ``python -m`` (None: a script or an installed command)."""
+    spec = getattr(sys.modules.get("__main__"), "__spec__", None)
+    return spec.name if spec is not None and spec.name != "__main__" else None
+
+
+def program_name() -> str:
+    """The command's name as it was called: ``nnql-swarm`` (an installed script), ``swarm.py``
+    (a script of the checkout) or ``python -m nnql_swarm.launch.swarm``."""
+    module = _main_module()
+    return f"python -m {module}" if module else os.path.basename(sys.argv[0])
+
+
+def invocation() -> list[str]:
+    """The words that start this command again from the current directory: an installed script's
+    name where it is on PATH, else the interpreter followed by the script or ``-m`` module."""
+    module = _main_module()
+    script = sys.argv[0]
+    if module is None and not script.endswith(".py"):
+        name = os.path.basename(script)
+        found = shutil.which(name)
+        if found and os.path.samefile(found, script):
+            return [name]
+        return [script]
+    python = os.path.relpath(sys.executable)
+    python = sys.executable if python.startswith("..") else python
+    if os.sep not in python:  # an interpreter in the current directory
+        python = "./" + python
+    return [python, "-m", module] if module else [python, script]
+
+
 class OneLineParser(argparse.ArgumentParser):
     """An ArgumentParser whose errors are one line on stderr (no usage dump) and exit code 2, with
-    ``--version``. Its name is the command's as it was called (``swarm.py``, ``nnql-swarm``)."""
+    ``--version``. Its name is the command's as it was called (:func:`program_name`)."""
 
     def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("prog", program_name())
         super().__init__(*args, **kwargs)
         self.add_argument("--version", action="version",
                           version=f"%(prog)s (nnql-swarm {package_version()})")
@@ -64,3 +100,36 @@ class _Lines:
 
     def flush(self) -> None:
         sys.stderr.flush()
+
+
+def make_directory(path) -> str | None:
+    """Create the folder ``path`` (and its parents) if it is not there; returns why it cannot be
+    (one line for a usage error), or None."""
+    try:
+        os.makedirs(path, exist_ok=True)
+    except FileExistsError:
+        return f"--out {path} is a file, not a folder"
+    except OSError as error:
+        return f"cannot make the folder --out {path}: {error.strerror or error}"
+    return None
+
+
+COMPILING = "compiling the simulator (first run, about half a minute)..."
+
+
+def prepare_simulator(world, run) -> None:
+    """Compile or load the simulator before a progress bar starts (``sim.runs.warm_up``), so that
+    the bar's first item, and its estimate of the time left, do not include it; says so when it
+    compiles (its kernel is not in the on-disk cache, ``protocol.jit.cached``)."""
+    from nnql_swarm.protocol.jit import cache_directory
+    from nnql_swarm.sim.runs import compiled_simulator, warm_up
+
+    cold = not compiled_simulator()
+    if cold:
+        print(COMPILING, file=sys.stderr, flush=True)
+    started = time.monotonic()
+    warm_up(world, run)
+    if cold:
+        print(f"compiled in {time.monotonic() - started:.0f} s; later runs load it from "
+              f"{os.environ.get('NUMBA_CACHE_DIR', cache_directory())}", file=sys.stderr,
+              flush=True)

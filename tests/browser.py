@@ -105,7 +105,7 @@ def screenshot(page, path: Path | None = None) -> np.ndarray:
     """The page as RGB bytes ``(height, width, 3)``; also saved to ``path`` if given."""
     from PIL import Image
 
-    png = page.screenshot()
+    png = page.screenshot(timeout=120_000)  # a busy SwiftShader can take its time
     if path is not None:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(png)
@@ -240,3 +240,142 @@ def check_run(image: np.ndarray, columns: int, rows: int, colours: np.ndarray) -
             f"{[tuple(int(v) for v in colours[i]) for i in missing]} inside it "
             f"(pixels per agent {counts}, at least {least:.0f} wanted)")
     return {"grid": grid.box, "cell": grid.cell, "pixels": counts}
+
+
+def cell_centre(grid: Grid, x: float, y: float) -> tuple[float, float]:
+    """The pixel of the world's point ``(x, y)``, the centre of cell ``(x, y)`` at integers (the
+    view's ``y`` grows downwards, like the world's)."""
+    return grid.xs[0] + (x + 0.5) * grid.cell, grid.ys[0] + (y + 0.5) * grid.cell
+
+
+def window(image: np.ndarray, grid: Grid, x: float, y: float, half: float,
+           below: float = 0.0) -> np.ndarray:
+    """The pixels of the square of ``2 half`` cells around world point ``(x, y)``, moved down
+    by ``below`` cells."""
+    cx, cy = cell_centre(grid, x, y + below)
+    r = half * grid.cell
+    return image[max(round(cy - r), 0):round(cy + r) + 1, max(round(cx - r), 0):round(cx + r) + 1]
+
+
+def check_walls(image: np.ndarray, grid: Grid, walls, free, colour, tolerance: int = 16) -> dict:
+    """Every wall cell (``walls``, ``(k, 2)`` cells) is a block of ``colour``: at least 60 % of
+    the middle half of the cell, and no free cell (``free``) is (at most 20 %): the walls are
+    drawn where they are, each one."""
+    def share(cell) -> float:
+        return float(near(window(image, grid, *cell, 0.25), colour, tolerance).mean())
+
+    drawn = [share(cell) for cell in walls]
+    missing = [tuple(cell) for cell, s in zip(walls, drawn) if s < 0.6]
+    if missing:
+        raise AssertionError(f"{len(missing)} of {len(walls)} walls not drawn in "
+                             f"{tuple(colour)}: {missing[:8]} (shares {drawn[:8]})")
+    wrong = [tuple(cell) for cell in free if share(cell) > 0.2]
+    if wrong:
+        raise AssertionError(f"free cells drawn as walls: {wrong[:8]}")
+    return {"walls": len(walls), "least": min(drawn)}
+
+
+LABEL_BACKGROUND = (232, 232, 232)
+"""The light pill the viewer draws under a label in its light theme (near this grey)."""
+
+
+def check_labels(image: np.ndarray, grid: Grid, places, colours, least: float = 0.65) -> dict:
+    """A label under each of ``places`` (``(k, 2)`` cells: agents and goals), in the colour of
+    its thing (``colours`` ``(k, 3)``): the viewer draws a label as coloured text on a light,
+    translucent pill just below the point or box. At least ``least`` of the places must show
+    one, each with pill pixels and text of its colour (a wall or arrows under a pill hide a
+    few)."""
+    found = []
+    for (x, y), colour in zip(places, colours):
+        area = window(image, grid, x, y, 0.55, below=0.6)
+        pill = near(area, LABEL_BACKGROUND, 14).mean()
+        text = int(np.count_nonzero(near(area, colour, 60)))
+        found.append(pill > 0.05 and text >= 3)
+    share = float(np.mean(found)) if found else 0.0
+    if share < least:
+        missing = [tuple(map(int, p)) for p, ok in zip(places, found) if not ok]
+        raise AssertionError(f"labels under only {share:.0%} of {len(found)} agents and goals "
+                             f"(missing under {missing[:10]})")
+    return {"labelled": share}
+
+
+def check_arrows(image: np.ndarray, grid: Grid, origins, vectors, colours,
+                 tolerance: int = 40, least: float = 0.6) -> dict:
+    """Arrows drawn: around the middle of each arrow (``origins``, ``vectors`` in cells), pixels
+    of its colour; at least ``least`` of them (others drawn over some)."""
+    seen = []
+    for (x, y), (dx, dy), colour in zip(origins, vectors, colours):
+        area = window(image, grid, x + dx / 2, y + dy / 2, 0.12)
+        seen.append(np.count_nonzero(near(area, colour, tolerance)) >= 2)
+    share = float(np.mean(seen)) if seen else 0.0
+    if not seen or share < least:
+        raise AssertionError(f"only {share:.0%} of {len(seen)} arrows visible")
+    return {"arrows": len(seen), "visible": share}
+
+
+@dataclass(frozen=True)
+class Episode:
+    """What the world view draws of one episode, read back from a recording: where each agent
+    ended it, the goals, every announced move and every wait (arrows, in cells)."""
+
+    agents: np.ndarray  # (n, 2) cells at the episode's last tick
+    goals: np.ndarray  # (n, 2)
+    moves: tuple[np.ndarray, np.ndarray, np.ndarray]  # origins, vectors, agent of each move
+    waits: tuple[np.ndarray, np.ndarray]  # origins, vectors
+
+
+def last_episode(recording: Path) -> Episode:
+    """The newest episode of a run's ``run.rrd`` (the one the viewer opens on)."""
+    import rerun as rr
+
+    rows: dict[str, list] = {}
+    for chunk in rr.chunk.RrdReader(recording).stream():
+        entity = chunk.entity_path.lstrip("/")
+        if entity in ("world/agents", "world/goals", "world/intents", "world/negotiation") \
+                and not chunk.is_static:
+            batch = chunk.to_record_batch()
+            columns = {name: batch.column(name).to_pylist() for name in batch.schema.names}
+            rows.setdefault(entity, []).extend(
+                {name: values[i] for name, values in columns.items()} for i in range(batch.num_rows))
+    last = max(row["episode"] for row in rows["world/agents"])
+
+    def of_last(entity: str) -> list[dict]:
+        return sorted((r for r in rows[entity] if r["episode"] == last), key=lambda r: r["tick"])
+
+    agents = np.array(of_last("world/agents")[-1]["Points2D:positions"])
+    goals = np.array(of_last("world/goals")[-1]["Boxes2D:centers"])
+    origins, vectors, who = [], [], []
+    for row in of_last("world/intents"):
+        for i, (o, v) in enumerate(zip(row["Arrows2D:origins"], row["Arrows2D:vectors"])):
+            if v[0] or v[1]:
+                origins.append(o), vectors.append(v), who.append(i)
+    waits = [(o, v) for row in of_last("world/negotiation")
+             for o, v in zip(row.get("Arrows2D:origins") or [], row.get("Arrows2D:vectors") or [])]
+    return Episode(agents, goals, (np.array(origins), np.array(vectors), np.array(who, int)),
+                   (np.array([o for o, _ in waits]).reshape(-1, 2),
+                    np.array([v for _, v in waits]).reshape(-1, 2)))
+
+
+def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
+    """Everything the world view must show of a run's newest episode, the one the viewer opens
+    on (``config``: the run's ``SwarmConfig``): the grid, every wall, a label under each agent
+    and goal, the moves announced and the waits. Raises AssertionError saying what is missing."""
+    from nnql_swarm.world.viz import WAIT_COLOUR, WALL_COLOUR, agent_colors
+
+    grid = find_grid(image, config.width, config.height)
+    episode = last_episode(run_dir / "run.rrd")
+    colours = agent_colors(config.n_agents)
+    found = {"grid": grid}
+    walls = config.walls()
+    if len(walls):
+        free = sorted({(x, y) for x in range(config.width) for y in range(config.height)}
+                      - {tuple(cell) for cell in walls.tolist()})
+        found["walls"] = check_walls(image, grid, walls, free, WALL_COLOUR)
+    found["labels"] = check_labels(image, grid, np.concatenate([episode.agents, episode.goals]),
+                                   np.concatenate([colours, colours]))
+    origins, vectors, who = episode.moves
+    found["moves"] = check_arrows(image, grid, origins, vectors, colours[who])
+    origins, vectors = episode.waits
+    if len(origins):  # an episode in which nobody waited has no such arrows
+        found["waits"] = check_arrows(image, grid, origins, vectors, [WAIT_COLOUR] * len(origins))
+    return found

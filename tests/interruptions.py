@@ -12,8 +12,11 @@ the world's shared table with its pending records). The ways a run is stopped:
     kill-launcher  SIGKILL to the launcher (its children stop as on SIGTERM)
     kill-world     SIGKILL to the world process (the launcher ends the run)
 
-The moments are spread over the uninterrupted run's duration: the duration is cut into equal
-spans and one moment drawn in each, the first span starting with the processes' start-up.
+The moments are spread over the run by its progress, not by the clock, so that a busy machine
+moves them with the run: the episodes are cut into equal spans, one episode drawn in each, and
+the run is stopped a seeded fraction of a second after that episode's row appears; the first
+span's moments fall in the processes' start-up and the first episodes (episode 0: a seeded time
+after the launch, before any row).
 
     python -m tests.interruptions --moments 12 --seed 1
     python -m tests.interruptions --moments 12 --seed 1 -- --preset best-nnql
@@ -42,12 +45,24 @@ STOPS = ("int-launcher", "int-group", "kill-group", "kill-launcher", "kill-world
 RUN_TIMEOUT_S = 600
 
 
+START_UP_S = 4.0
+"""Trials of the first episode stop the run up to this long after its launch."""
+WITHIN_EPISODE_S = 0.3
+"""Other trials stop it up to this long after the row they wait for."""
+
+
 @dataclass(frozen=True)
 class Trial:
-    """One interruption: when (seconds after the launcher starts) and how."""
+    """One interruption: once ``rows`` rows are written (0: from the launch), ``after_s``
+    seconds later, and how."""
 
-    at_s: float
+    rows: int
+    after_s: float
     stop: str
+
+    def __str__(self) -> str:
+        when = "after the launch" if not self.rows else f"after row {self.rows}"
+        return f"{self.stop:>13} {self.after_s:4.2f} s {when}"
 
 
 @dataclass(frozen=True)
@@ -58,32 +73,46 @@ class Outcome:
     difference: str | None  # None: the same run
 
 
-def draw_trials(seed: int, count: int, duration_s: float) -> list[Trial]:
-    """``count`` moments, one in each equal span of ``duration_s``, each with a way to stop
-    (every way once in each five trials, in a seeded order)."""
+def draw_trials(seed: int, count: int, episodes: int) -> list[Trial]:
+    """``count`` moments, one in each equal span of the run's ``episodes``, each with a way to
+    stop (every way once in each five trials, in a seeded order)."""
     rng = np.random.default_rng(seed)
-    span = duration_s / count
     ways = [STOPS[k] for k in rng.permutation(len(STOPS))]
-    return [Trial(round(float(k * span + rng.uniform(0, span)), 2), ways[k % len(ways)])
-            for k in range(count)]
+    trials = []
+    for k in range(count):
+        rows = int(rng.integers(k * episodes // count, max((k + 1) * episodes // count,
+                                                            k * episodes // count + 1)))
+        after = rng.uniform(0, START_UP_S if rows == 0 else WITHIN_EPISODE_S)
+        trials.append(Trial(rows, round(float(after), 2), ways[k % len(ways)]))
+    return trials
 
 
-def run_left_alone(out: Path, options: list[str]) -> float:
-    """Run the swarm to its end; returns its wall-clock duration."""
-    started = time.monotonic()
+def run_left_alone(out: Path, options: list[str]) -> int:
+    """Run the swarm to its end; returns how many episodes it played."""
     result = subprocess.run(swarm_command(out, *options), capture_output=True, text=True,
                             timeout=RUN_TIMEOUT_S)
     if result.returncode != 0:
         raise RuntimeError(f"the uninterrupted run failed: {result.stderr[-2000:]}")
-    return time.monotonic() - started
+    return rows_written(out)
+
+
+def rows_written(out: Path) -> int:
+    """The complete rows of ``out``'s ``episodes.csv`` so far (its header aside)."""
+    try:
+        return max((out / "episodes.csv").read_bytes().count(b"\n") - 1, 0)
+    except FileNotFoundError:
+        return 0
 
 
 def stop_at(out: Path, options: list[str], trial: Trial, run_id: str) -> None:
     """Start the swarm and stop it as ``trial`` says (or let it end, if it ends first)."""
     swarm = subprocess.Popen(swarm_command(out, *options), stdout=subprocess.DEVNULL,
                              stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + RUN_TIMEOUT_S
+    while rows_written(out) < trial.rows and swarm.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.005)
     try:
-        swarm.wait(timeout=trial.at_s)
+        swarm.wait(timeout=trial.after_s)
         return  # it completed before the moment
     except subprocess.TimeoutExpired:
         pass
@@ -165,7 +194,7 @@ def run_trials(work: Path, options: list[str], trials: list[Trial], expected: Pa
         stop_at(out, options_k, trial, run_id)
         resumed_at, resumes = resume_to_the_end(out, options_k)
         outcome = Outcome(trial, resumed_at, resumes, difference(expected, out))
-        report(f"{trial.stop:>13} at {trial.at_s:6.2f} s: resumed at episode "
+        report(f"{trial}: resumed at episode "
                f"{'-' if resumed_at is None else resumed_at}, "
                f"{outcome.difference or 'the same run'}")
         outcomes.append(outcome)
@@ -185,9 +214,9 @@ def main(argv: list[str] | None = None) -> int:
     options = ["--no-record", *args.swarm_options]
     work = args.work / f"seed{args.seed}-{os.getpid()}"
     expected = work / "left-alone"
-    duration = run_left_alone(expected, [*options, "--run-id", "left-alone", "--no-progress"])
-    print(f"left alone: {duration:.1f} s; {args.moments} interruptions (seed {args.seed})")
-    trials = draw_trials(args.seed, args.moments, duration)
+    episodes = run_left_alone(expected, [*options, "--run-id", "left-alone", "--no-progress"])
+    print(f"left alone: {episodes} episodes; {args.moments} interruptions (seed {args.seed})")
+    trials = draw_trials(args.seed, args.moments, episodes)
     outcomes = run_trials(work, options, trials, expected)
     same = sum(o.difference is None for o in outcomes)
     print(f"{same} of {len(outcomes)} resumed runs equal the run left alone")

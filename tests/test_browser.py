@@ -1,85 +1,132 @@
-"""The web viewer in a real browser: a short real run, served by ``rerun --serve-web``, opened in
-headless Chromium; the screenshot's pixels must show the grid and every agent's colour in it.
+"""The web viewer in a real browser: short real runs, each served by ``rerun --serve-web``, opened
+in one headless Chromium; the screenshots' pixels must show what the recording tells.
+
+Two runs: 8 agents on 11 x 11 with walls (``--obstacle-density 0.2``: 24 walls), and 64 agents on
+32 x 32. In each, the viewer opens on the newest episode, and the pixels must show the grid; in
+the first every wall, each a block at its own cell, and every agent's colour; in both a label
+under every agent and every goal, in its colour; the moves announced in that episode (arrows in
+the agent's colour) and the waits (dark arrows from an agent to the neighbour it waited for).
 
 The same checks must fail on a blank page and on the viewer when the recording does not come
 (a gRPC port nobody serves: the viewer shows its welcome page), opened in the same browser at the
-same time as the real one, so that it had as long to load.
+same time as the real ones, so that they had as long to load.
 """
 
 import time
+from pathlib import Path
 
+import numpy as np
 import pytest
 from PIL import Image
 
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.transport import free_port
+from nnql_swarm.world.viz import PALETTE, WALL_COLOUR, agent_colors
 from tests.browser import (
-    BACKGROUND, check_run, chromium, near, screenshot, wait_for, web_viewer,
+    BACKGROUND, check_labels, check_run, check_walls, check_world, chromium, find_grid,
+    last_episode, near, screenshot, wait_for, web_viewer,
 )
 from tests.swarm_helpers import run_swarm
-from nnql_swarm.world.viz import agent_colors
 
-pytestmark = [pytest.mark.browser, pytest.mark.timeout(420)]
+pytestmark = [pytest.mark.browser, pytest.mark.timeout(900)]
 
-RUN = ("--agents", "4", "--episodes", "1", "--max-steps", "20", "--seed", "3", "--in-process")
-LOAD_TIMEOUT = 240.0
-"""Seconds the viewer gets to show the run (it took 30 to 45 s on a busy 2-core machine)."""
+COMMON = ("--episodes", "3", "--max-steps", "40", "--seed", "3", "--in-process")
+RUNS = {
+    "walls": ("--agents", "8", "--obstacle-density", "0.2", *COMMON),
+    "crowd": ("--agents", "64", "--grid", "32x32", *COMMON),
+}
+SIZE = (1600, 900)
+LOAD_TIMEOUT = 300.0
+"""Seconds the viewer gets to show a run (30 to 90 s each on a busy 2-core machine)."""
 
 
 @pytest.fixture(scope="module")
 def pictures(tmp_path_factory):
-    """Screenshots of the run in the viewer, once it shows, and of a broken and a blank page at
-    that moment; the seconds each step took; the run's config."""
+    """Screenshots of each run in the viewer, once it shows everything, and of a broken and a
+    blank page at that moment; the seconds each step took; the runs' configs."""
     base = tmp_path_factory.mktemp("browser")
     start = time.monotonic()
-    result = run_swarm(base / "run", *RUN, "--run-id", "browser")
-    assert result.returncode == 0, result.stderr
-    config = SwarmConfig.from_json((base / "run" / "config.json").read_text())
-    colours = agent_colors(config.n_agents)
+    configs = {}
+    for name, args in RUNS.items():
+        result = run_swarm(base / name, *args, "--run-id", f"browser-{name}")
+        assert result.returncode == 0, result.stderr
+        configs[name] = SwarmConfig.from_json((base / name / "config.json").read_text())
     seconds = {"record": time.monotonic() - start}
-    with web_viewer(base / "run" / "run.rrd", log=base / "serve-web.log") as viewer, \
-            chromium() as browser:
-        run_page, broken_page, blank_page = (browser.new_page() for _ in range(3))
-        run_page.goto(viewer.url())
-        broken_page.goto(viewer.url(grpc_port=free_port()))
-        blank_page.goto("about:blank")
-        failure = None
-        try:
-            run, _, seconds["render"] = wait_for(
-                run_page, lambda image: check_run(image, config.width, config.height, colours),
-                LOAD_TIMEOUT, every=2.0)
-            Image.fromarray(run).save(base / "run.png")
-        except AssertionError as error:
-            failure = str(error)
-            run = screenshot(run_page, base / "run.png")
-        broken = screenshot(broken_page, base / "broken.png")
-        blank = screenshot(blank_page, base / "blank.png")
+    shots, failures = {}, {}
+    with web_viewer(base / "walls" / "run.rrd", log=base / "serve-walls.log") as walls_viewer, \
+            web_viewer(base / "crowd" / "run.rrd", log=base / "serve-crowd.log") as crowd_viewer, \
+            chromium(size=SIZE) as browser:
+        pages = {name: browser.new_page() for name in ("broken", "blank")}
+        pages["broken"].goto(walls_viewer.url(grpc_port=free_port()))
+        pages["blank"].goto("about:blank")
+        # One run at a time: two viewers drawing at once on SwiftShader starve each other.
+        for name, viewer in (("walls", walls_viewer), ("crowd", crowd_viewer)):
+            begun = time.monotonic()
+            page = browser.new_page()
+            page.goto(viewer.url())
+            try:
+                shots[name], _, _ = wait_for(
+                    page, lambda image: check_world(image, configs[name], base / name),
+                    LOAD_TIMEOUT, every=3.0)
+                Image.fromarray(shots[name]).save(base / f"{name}.png")
+            except AssertionError as error:
+                failures[name] = str(error)
+                shots[name] = screenshot(page, base / f"{name}.png")
+            page.close()
+            seconds[name] = time.monotonic() - begun
+        for name in ("broken", "blank"):
+            shots[name] = screenshot(pages[name], base / f"{name}.png")
     seconds["total"] = time.monotonic() - start
     print(f"browser test: {seconds}, screenshots in {base}")
-    return {"run": run, "failure": failure, "broken": broken, "blank": blank, "config": config,
-            "colours": colours, "seconds": seconds}
+    return {"shots": shots, "failures": failures, "configs": configs, "base": base,
+            "seconds": seconds}
 
 
-def test_the_viewer_shows_the_grid_and_every_agents_colour(pictures):
-    assert pictures["failure"] is None, pictures["failure"]
-    config = pictures["config"]
-    found = check_run(pictures["run"], config.width, config.height, pictures["colours"])
-    x0, y0, x1, y1 = found["grid"]
-    assert x1 - x0 > 10 * config.width and y1 - y0 > 10 * config.height  # a readable grid
-    assert len(found["pixels"]) == config.n_agents
+def shown(pictures, name: str) -> tuple[np.ndarray, SwarmConfig, Path]:
+    assert name not in pictures["failures"], pictures["failures"][name]
+    return pictures["shots"][name], pictures["configs"][name], pictures["base"] / name
+
+
+def test_walls_are_drawn_each_at_its_cell(pictures):
+    image, config, run_dir = shown(pictures, "walls")
+    found = check_world(image, config, run_dir)
+    assert found["walls"]["walls"] == len(config.walls()) == 24
+    x0, y0, x1, y1 = found["grid"].box
+    assert x1 - x0 > 40 * config.width  # a readable grid
+    check_run(image, config.width, config.height, agent_colors(config.n_agents))
+
+
+@pytest.mark.parametrize("name", list(RUNS))
+def test_every_agent_and_goal_is_labelled_and_the_moves_and_waits_show(pictures, name):
+    image, config, run_dir = shown(pictures, name)
+    found = check_world(image, config, run_dir)
+    assert found["labels"]["labelled"] >= 0.65
+    assert found["moves"]["arrows"] > 0 and found.get("waits", {}).get("arrows", 0) > 0
+    print(name, {key: value for key, value in found.items() if key != "grid"})
 
 
 def test_the_checks_fail_on_a_blank_or_broken_page(pictures):
-    if pictures["failure"] is not None:
-        pytest.fail("the run itself never showed, so failing checks prove nothing here")
-    config, colours = pictures["config"], pictures["colours"]
+    if pictures["failures"]:
+        pytest.fail("a run itself never showed, so failing checks prove nothing here")
+    config = pictures["configs"]["walls"]
+    colours = agent_colors(config.n_agents)
     grid = f"no {config.width}x{config.height} grid"
     for page in ("broken", "blank"):
         with pytest.raises(AssertionError, match=grid):
-            check_run(pictures[page], config.width, config.height, colours)
+            check_run(pictures["shots"][page], config.width, config.height, colours)
     # The broken page is the viewer's own interface (light theme), not its dark loading screen.
-    assert near(pictures["broken"], BACKGROUND, 12).mean() > 0.3
-    # In the run's picture, colours that are none of the agents' are not found.
-    others = agent_colors(2 * config.n_agents)[1::2]
+    assert near(pictures["shots"]["broken"], BACKGROUND, 12).mean() > 0.3
+    image, _, run_dir = shown(pictures, "walls")
+    grid = find_grid(image, config.width, config.height)
+    # Colours that are none of the agents' are not found; nor walls where there are none.
+    others = np.array([(240, 160, 0), (0, 200, 200)], dtype=np.uint8)
+    assert not np.any(np.all(PALETTE[:, None] == others[None], axis=-1))
     with pytest.raises(AssertionError, match="too few pixels"):
-        check_run(pictures["run"], config.width, config.height, others)
+        check_run(image, config.width, config.height, others)
+    walls = config.walls()
+    with pytest.raises(AssertionError, match="not drawn"):
+        check_walls(image, grid, walls + np.array([1, 0]) * (walls[:, :1] < config.width - 1),
+                    [], WALL_COLOUR)
+    episode = last_episode(run_dir / "run.rrd")
+    with pytest.raises(AssertionError, match="labels under only"):
+        check_labels(image, grid, episode.goals, others[[0] * len(episode.goals)])

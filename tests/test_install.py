@@ -15,7 +15,8 @@ from nnql_swarm.terminal.cli import package_version
 from tests.swarm_helpers import ROOT
 
 BIN = Path(sys.executable).parent
-COMMANDS = ("nnql-swarm", "nnql-experiment", "nnql-faultsim", "nnql-router", "nnql-secure")
+COMMANDS = ("nnql-swarm", "nnql-experiment", "nnql-view", "nnql-faultsim", "nnql-router",
+            "nnql-secure")
 FOREIGN = ("launch", "agent", "world", "protocol", "sim", "recording")
 """Generic names that other packages use (``launch`` is ROS 2's launch system)."""
 

@@ -1,12 +1,16 @@
-"""The PettingZoo adapter: the library's API and seed tests, and the world rules seen through it."""
+"""The PettingZoo adapter: the library's API, seed and render tests, and the world rules seen
+through it."""
 
 import numpy as np
 import pytest
-from pettingzoo.test import parallel_api_test, parallel_seed_test
+import rerun as rr
+from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test, render_test
+from pettingzoo.utils.conversions import parallel_to_aec
 
 from nnql_swarm.protocol.actions import LEFT, N_STATES, RIGHT, STAY, UP, offset_state
 from nnql_swarm.world.pettingzoo_env import NOT_IN_VIEW, SwarmGridEnv
 from nnql_swarm.world.rules import CA_REWARD, GOAL_REWARD
+from nnql_swarm.world.viz import agent_colors
 
 
 @pytest.mark.filterwarnings("error::UserWarning")  # the API test reports problems as warnings
@@ -18,6 +22,29 @@ def test_parallel_api(n_agents, size, count_swaps):
 
 def test_parallel_seed():
     parallel_seed_test(lambda: SwarmGridEnv(n_agents=5, max_steps=60), num_cycles=200)
+
+
+# The API test suggests Box or Discrete observations; the paper's states are MultiDiscrete.
+@pytest.mark.filterwarnings("ignore:Observation space for each agent probably should be")
+@pytest.mark.filterwarnings("error::UserWarning")
+def test_aec_api_of_the_parallel_env():
+    api_test(parallel_to_aec(SwarmGridEnv(n_agents=4, max_steps=40)), num_cycles=200)
+
+
+def test_render_test_passes_in_every_mode_without_a_display(monkeypatch):
+    monkeypatch.setattr("sys.platform", "linux")
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    made = []
+
+    def env_fn(render_mode=None):
+        made.append(SwarmGridEnv(n_agents=4, max_steps=30, render_mode=render_mode))
+        return parallel_to_aec(made[-1])
+
+    with pytest.warns(RuntimeWarning, match="without a display"):
+        render_test(env_fn)
+    human = [env for env in made if env.render_mode == "human" and env.rerun_memory is not None]
+    assert human and human[-1].rerun_memory.num_msgs() > 0  # the frames, kept in memory
 
 
 def rollout(env: SwarmGridEnv, seed: int, policy_seed: int) -> list:
@@ -135,3 +162,38 @@ def test_ansi_render_draws_agents_and_goals():
 def test_too_many_agents_for_the_grid_is_refused():
     with pytest.raises(ValueError):
         SwarmGridEnv(n_agents=5, width=3, height=3)
+
+
+def test_rgb_array_draws_goals_and_agents_in_their_colours():
+    env = SwarmGridEnv(n_agents=2, width=4, height=3, render_mode="rgb_array", cell_pixels=10)
+    env.reset(seed=0)
+    place(env, [(0, 0), (3, 2)], [(1, 0), (0, 2)])
+    image = env.render()
+    assert image.shape == (30, 40, 3) and image.dtype == np.uint8
+    colors = agent_colors(2)
+    assert (image[5, 5] == colors[0]).all() and (image[25, 35] == colors[1]).all()  # agents
+    assert (image[1, 10 + 5] == colors[0]).all()  # agent 0's goal: an outline, hollow
+    assert (image[5, 15] == 255).all()
+    assert (image[20 + 1, 5] == colors[1]).all()
+    assert (image[15, 25] == 255).all()  # a free cell
+    assert (image[0, :] == 200).all() and (image[:, 10] == 200).all()  # grid lines
+
+
+def test_human_saves_its_frames_to_a_recording(tmp_path):
+    path = tmp_path / "frames.rrd"
+    env = SwarmGridEnv(n_agents=3, render_mode="human", rerun=path)
+    env.reset(seed=2)
+    for _ in range(4):
+        assert env.render() is None
+        env.step({agent: STAY for agent in env.agents})
+    env.close()
+    reader = rr.chunk.RrdReader(path)
+    steps = sorted({step for chunk in reader.stream()
+                    if chunk.entity_path.lstrip("/") == "world/agents" and not chunk.is_static
+                    for step in chunk.to_record_batch().column("step").to_pylist()})
+    assert steps == [0, 1, 2, 3]
+
+
+def test_an_unknown_render_mode_is_refused():
+    with pytest.raises(ValueError, match="render mode"):
+        SwarmGridEnv(render_mode="rgb")

@@ -12,7 +12,9 @@ import pytest
 import rerun as rr
 
 from nnql_swarm.agent import checkpoint
-from nnql_swarm.agent.viz import TABLES, TimedBrain, logs_heat_maps, table_picture
+from nnql_swarm.agent.viz import (
+    OPTIMISTIC, TABLES, UNVISITED, TimedBrain, learnable_bound, logs_heat_maps, table_picture,
+)
 from nnql_swarm.recording.session import PARTS_DIR, log_experiment, rerun_binary
 from nnql_swarm.protocol.actions import RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
@@ -153,6 +155,9 @@ def test_metrics_match_episodes_csv(run):
         "metrics/steps/per_agent": [int(r["agent_steps"]) / AGENTS for r in rows],
         "metrics/steps/shortest_per_agent": [int(r["shortest_sum"]) / AGENTS for r in rows],
         "metrics/arrived": [float(r["arrived"]) for r in rows],
+        "metrics/arrived_share": [int(r["arrived"]) / AGENTS for r in rows],
+        "metrics/steps/over_shortest": [int(r["agent_steps"]) / int(r["shortest_sum"])
+                                        for r in rows],
         "metrics/reward_sum": [float(r["reward_sum"]) for r in rows],
         "metrics/missed_intents": [float(r["missed_intents"]) for r in rows],
     }
@@ -187,7 +192,7 @@ def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run
     assert logged == [0, EPISODES - 1]
     for agent in range(AGENTS):
         for table in TABLES:
-            for part in ("value", "policy", "stay"):
+            for part in ("value", "policy", "stay", "note"):
                 entity = f"agents/{agent}/{table}/{part}"
                 assert sorted(recording.column(entity, "episode")) == logged, entity
         if mode == "distributed":  # the negotiation wait exists only over the wire
@@ -201,7 +206,9 @@ def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run
     last = max(((b, i) for b in batches for i in range(b.num_rows)),
                key=lambda bi: bi[0].column("episode")[bi[1]].as_py())
     buffer = np.array(last[0].column("Image:buffer")[last[1]].as_py()[0], dtype=np.uint8)
-    assert np.array_equal(buffer.reshape(21, 21, 3), table_picture(q_ds)["image"])
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    picture = table_picture(q_ds, config.optimistic, learnable_bound("q_ds", config))
+    assert np.array_equal(buffer.reshape(21, 21, 3), picture["image"])
 
 
 def test_the_negotiation_is_logged_as_the_agents_ask(run):
@@ -243,11 +250,20 @@ def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
     logged = [chunk.to_record_batch().column("Boxes2D:centers").to_pylist()
               for chunk in reader.stream() if chunk.entity_path.lstrip("/") == "world/walls"]
     assert [{tuple(map(round, c)) for c in batch[0]} for batch in logged] == [walls]
+    # one half-size per wall: the viewer draws one box per half-size, not one per centre
+    sizes = [chunk.to_record_batch().column("Boxes2D:half_sizes").to_pylist()[0]
+             for chunk in rr.chunk.RrdReader(out / "run.rrd").stream()
+             if chunk.entity_path.lstrip("/") == "world/walls"]
+    assert [len(batch) for batch in sizes] == [len(walls)]
     recording = Recording(out / "run.rrd")
     cells = {tuple(map(round, cell)) for tick in recording.column("world/agents",
                                                                  "Points2D:positions")
              for cell in tick}
     assert cells and not cells & walls
+    # the default preset shares one table: only agent 0 logs it, once for all
+    assert config.shared
+    assert {"agents/0/q_ds/value", "agents/0/q_ca/value"} <= recording.entities
+    assert not {e for e in recording.entities if e.startswith("agents/1/")}
 
 
 def test_streaming_to_a_viewer_sends_the_same_recording(in_process):
@@ -279,7 +295,7 @@ def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     rows = read_episodes(out / "episodes.csv")
     logged = recording.scalars("metrics/collisions/per_episode")
     assert [logged[e][1] for e in range(len(rows))] == [float(r["collisions"]) for r in rows]
-    assert {"world/agents", "agents/0/q_ds/value", "agents/3/q_ca/value"} <= recording.entities
+    assert {"world/agents", "agents/0/q_ds/value", "agents/0/q_ca/value"} <= recording.entities
 
 
 def test_a_bad_viewer_url_is_a_one_line_usage_error(tmp_path):
@@ -294,13 +310,20 @@ def test_heat_map_pixels_are_egocentric_offsets():
     q[offset_state(3, -2), RIGHT] = 2.0  # goal 3 right, 2 up: move right
     q[offset_state(-1, 0), UP] = 1.0
     q[offset_state(0, 4), STAY] = 0.5
-    picture = table_picture(q)
-    assert picture["visited"].sum() == 3
+    q[offset_state(5, 5), UP] = 7.0  # above the bound: not learnable, still optimistic
+    picture = table_picture(q, 0.0, bound=2.0)
+    assert picture["visited"].sum() == 4
     row, col = 10 - 2, 10 + 3  # row = dy + 10, column = dx + 10
     assert picture["best"][row, col] == RIGHT and picture["value"][row, col] == 2.0
     assert picture["best"][10, 9] == UP
-    assert tuple(picture["image"][row, col]) == (253, 231, 37)  # the maximum: brightest
-    assert tuple(picture["image"][14, 10]) == (68, 1, 84)  # the minimum: darkest
+    assert tuple(picture["image"][row, col]) == (253, 231, 37)  # the bound: brightest
+    assert tuple(picture["image"][15, 15]) == OPTIMISTIC
+    assert tuple(picture["image"][0, 0]) == UNVISITED
+    # a fixed scale: the same value, the same colour, whatever else the table holds
+    alone = np.zeros((441, 5))
+    alone[offset_state(0, 4), STAY] = 0.5
+    assert tuple(table_picture(alone, 0.0, bound=2.0)["image"][14, 10]) == \
+        tuple(picture["image"][14, 10])
 
 
 def test_experiment_curves_go_into_a_recording(tmp_path):

@@ -60,15 +60,34 @@ def test_a_run_stopped_before_any_process_saved_an_episode_starts_afresh(tmp_pat
     assert (start.episode, start.tick, start.replayed) == (0, 0, 0)
 
 
-@pytest.mark.parametrize("agents, world, refused", [
-    ([[9, 10]] * 3 + [[]], [9, 10], "agent-3.ckpt: missing (the checkpoint of episode 10)"),
-    ([[9, 10]] * 4, [], "world.ckpt: missing"),
-    ([[9, 10]] * 3 + [[7, 8]], [9, 10], "agent-0.ckpt: holds episodes [9, 10], not episode 8"),
+@pytest.mark.parametrize("agents, world", [
+    ([[9, 10]] * 3 + [[]], [9, 10]),  # an agent's file lost
+    ([[9, 10]] * 4, []),  # the world's
 ])
-def test_files_that_cannot_reach_one_cut_are_refused_naming_the_file(tmp_path, agents, world,
-                                                                     refused):
+def test_a_process_without_checkpoint_stands_before_episode_0_and_the_run_starts_afresh(
+        tmp_path, agents, world):
     lay_out_run(tmp_path, 11, agents, world)
-    with pytest.raises(ResumeError, match=re.escape(refused)):
+    _, start = resume_point(tmp_path, list(range(N)), world=True)
+    assert (start.episode, start.tick, start.replayed, start.exact) == (0, 0, 11, True)
+
+
+def test_an_agent_two_episodes_behind_leaves_no_cut_and_everyone_goes_on_from_its_newest(
+        tmp_path):
+    """An agent that missed the ends of episodes 9 and 10 (partitioned, say): the others' files
+    no longer hold its last episode, 8. The run goes on after its last row, each process from its
+    newest checkpoint, and the files that cannot reach episode 8 are named."""
+    lay_out_run(tmp_path, 11, [[9, 10]] * 3 + [[7, 8]], [9, 10])
+    _, start = resume_point(tmp_path, list(range(N)), world=True)
+    assert (start.episode, start.replayed, start.exact, start.checkpoint_episode) == \
+        (11, 0, False, None)
+    assert len(start.lagging) == 4 and "agent-0.ckpt holds episodes [9, 10], not 8" in \
+        start.lagging[0]
+
+
+def test_a_corrupt_checkpoint_is_refused_naming_the_file(tmp_path):
+    lay_out_run(tmp_path, 11, [[9, 10]] * 4, [9, 10])
+    (tmp_path / "checkpoints" / "agent-2.ckpt").write_bytes(b"garbage")
+    with pytest.raises(ResumeError, match=re.escape("agent-2.ckpt: not a readable checkpoint")):
         resume_point(tmp_path, list(range(N)), world=True)
 
 
@@ -87,10 +106,10 @@ def test_resume_with_options_other_than_the_runs_says_so_in_one_line(tmp_path):
 
 
 def test_the_moments_are_spread_over_the_run_and_every_way_of_stopping_is_drawn():
-    trials = draw_trials(7, 10, 20.0)
-    assert [int(t.at_s // 2) for t in trials] == list(range(10))
+    trials = draw_trials(7, 10, 100)
+    assert [t.rows // 10 for t in trials] == list(range(10))
     assert sorted(t.stop for t in trials[:5]) == sorted(STOPS)
-    assert draw_trials(7, 10, 20.0) == trials
+    assert draw_trials(7, 10, 100) == trials
 
 
 @pytest.mark.parametrize("preset, grid", [
@@ -102,8 +121,8 @@ def test_a_run_stopped_in_every_way_and_resumed_is_the_run_left_alone(tmp_path, 
     default among walls: the walls each agent has seen come back from its checkpoint)."""
     options = ["--preset", preset, "--episodes", "20", "--no-record", *grid]
     expected = tmp_path / "left-alone"
-    duration = run_left_alone(expected, [*options, "--run-id", "left-alone", "--no-progress"])
+    episodes = run_left_alone(expected, [*options, "--run-id", "left-alone", "--no-progress"])
     lines: list[str] = []
-    outcomes = run_trials(tmp_path, options, draw_trials(11, 5, duration), expected, lines.append)
+    outcomes = run_trials(tmp_path, options, draw_trials(11, 5, episodes), expected, lines.append)
     assert all(o.difference is None for o in outcomes), "\n".join(lines)
-    assert any(o.resumed_at for o in outcomes), "some run was stopped after an episode"
+    assert sum(bool(o.resumed_at) for o in outcomes) >= 2, "runs were stopped after episodes"

@@ -16,7 +16,7 @@ from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.runfiles import stats_path
-from tests.swarm_helpers import group_pids, run_swarm, start_swarm, stops_within
+from tests.swarm_helpers import SWARM, group_pids, run_swarm, start_swarm, stops_within
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import COLUMNS, read_episodes
 
@@ -149,6 +149,8 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
         assert group_pids(swarm.pid) == []
         assert swarm.returncode == 130
         assert "Traceback" not in swarm.stderr_text()
+        resume = next(line for line in swarm.stderr_text().splitlines() if "continue it" in line)
+        assert "python" in resume and resume.endswith(f" {SWARM} --resume --out {out}")
     finally:
         if group_pids(swarm.pid):
             os.killpg(swarm.pid, signal.SIGKILL)

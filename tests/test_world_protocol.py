@@ -31,6 +31,14 @@ def kinds(effects) -> list[str]:
     return [type(e).__name__ for e in effects if not isinstance(e, Log)]
 
 
+@pytest.fixture
+def believing(monkeypatch):
+    """The world believes every record that fits the table: for the tests of how records are
+    applied and spread, with records made up by hand (what the world checks of a record, and
+    how: ``tests/test_records.py``)."""
+    monkeypatch.setattr(WorldProtocol, "_check_record", lambda protocol, agent, final: None)
+
+
 def started(now: float = 0.0) -> tuple[WorldProtocol, list]:
     protocol = WorldProtocol(CONFIG, now)
     alive(protocol, 0, now)
@@ -166,7 +174,8 @@ def test_a_world_resumed_after_the_last_episode_only_tells_the_agents_to_stop():
     assert kinds(effects) == ["SendControl", "Finished"], "with nobody left it ends at once"
 
 
-def test_shared_records_are_checked_once_applied_in_the_world_and_their_changes_reach_everyone():
+def test_shared_records_are_checked_once_applied_in_the_world_and_their_changes_reach_everyone(
+        believing):
     """A record that fits the table is applied by the world (Eq. 9 by hand: optimistic 25,
     alpha 0.5, gamma 0.6, reward 1: 25 + 0.5 (1 + 0.6 * 25 - 25) = 20.5) and its entry goes to
     every agent; a forged one is refused, and its intent still counts."""
@@ -187,7 +196,7 @@ def test_shared_records_are_checked_once_applied_in_the_world_and_their_changes_
     assert q_ds[7, 1] == 20.5 and (q_ds == 25.0).sum() == q_ds.size - 1
 
 
-def test_the_end_ticks_row_carries_the_shared_table_as_the_agents_checkpointed_it():
+def test_the_end_ticks_row_carries_the_shared_table_as_the_agents_checkpointed_it(believing):
     """The end tick's own records are applied after the table is taken for the checkpoint."""
     protocol, _ = started()
     record = ((7, 1, 0, 9, 1, 0), (1.0, 0.0))
@@ -202,7 +211,8 @@ def test_the_end_ticks_row_carries_the_shared_table_as_the_agents_checkpointed_i
     assert protocol.world.table.tables()[0][7, 1] != 25.0, "which the world then applied"
 
 
-def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_worlds():
+def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_worlds(
+        believing):
     """Agent 1 leaves and comes back with a stale copy (all 25: what it started with); the world
     sends it the table, a slice an observation, while both agents go on learning; once the last
     slice is written its copy equals the world's. Agent 0, which never left, gets no slice."""
@@ -249,6 +259,20 @@ def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_
     q_ds, q_ca = stale.tables()
     assert (world_q_ds != 25.0).sum() > 10, "the world learned meanwhile"
     assert np.array_equal(q_ds, world_q_ds) and np.array_equal(q_ca, world_q_ca)
+
+
+def test_a_record_the_world_saw_no_decision_for_is_refused_and_its_intent_counts():
+    """At a run's first tick nobody has decided yet: a record then is none the agent's own
+    transition wrote (``world.records``)."""
+    protocol, _ = started()
+    record = ((7, 1, 0, 9, 1, 0), (1.0, 0.0))
+    for agent in (0, 1):
+        payload = encode(Intent("wproto", 0, agent_sender(agent), agent, 0, RIGHT, (record,)))
+        effects = protocol.on_intent(keys.intent_key("wproto", agent), payload, 0.1)
+    assert protocol.inbox.rejections["unchecked-record"] == 2
+    [closed] = [e for e in effects if isinstance(e, TickClosed)]
+    assert closed.report.actions == (RIGHT, RIGHT) and closed.report.records == {}
+    assert (protocol.world.table.tables()[0] == 25.0).all()
 
 
 def test_a_resumed_world_sends_every_agent_the_whole_table():

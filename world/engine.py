@@ -27,7 +27,7 @@ simulator runs compiled. The buffers hold every body: the agents, then the run's
 """
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -72,6 +72,7 @@ class TickReport:
     violations: tuple[str, ...]
     episode_row: dict | None
     table: SharedState | None = None  # at an episode's end, if shared
+    records: dict | None = None  # the learning records applied, by agent, if shared
 
 
 class SwarmWorld:
@@ -134,7 +135,7 @@ class SwarmWorld:
     def _start_episode(self, episode: int) -> None:
         c = self.config
         scenario = swarm_episode(c.seed, episode, c.width, c.height, c.n_agents,
-                                 c.obstacle_density)
+                                 c.obstacle_density, c.map_rows, c.scenario)
         self.episode = episode
         self.step = 0
         self.goals = scenario.goals
@@ -244,7 +245,8 @@ class SwarmWorld:
         report = self._end_tick(missed, learned or {}) if self.ending else \
             self._move(actions, missed)
         if self.table is not None:
-            self._updates = self.table.apply(learned or {})
+            report = replace(report, records=learned or {})
+            self._updates = self.table.apply(report.records)
             for agent, start in list(self._syncing.items()):
                 if agent in self._sync_from_next:  # its first slice goes with the next tick
                     continue

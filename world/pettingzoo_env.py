@@ -47,6 +47,22 @@ stepped in that order.
 An agent is terminated when it reaches its goal, and then leaves ``agents``. Every agent still on its
 way is truncated after ``max_steps`` steps.
 
+## Rendering
+``render_mode`` (PettingZoo's convention: chosen at construction, ``render()`` takes no argument):
+
+- ``"human"``: each ``render()`` logs the grid, the goals and the agents to Rerun on the timelines
+  ``step`` (every ``render()`` call) and ``episode``, and returns None. Where the frames go is the
+  ``rerun`` argument: a path (``.rrd``) saves them there (open it with ``nnql-view``), a viewer URL
+  (``rerun+http://host:9876/proxy``) streams them to that viewer, and None (the default) spawns
+  the native viewer where there is a display (``DISPLAY`` or ``WAYLAND_DISPLAY`` on Linux) and
+  otherwise keeps them in memory (``env.rerun_memory``, a ``rerun.MemoryRecording``) with a
+  warning that says how to see them, so that a machine without a screen never fails.
+- ``"rgb_array"``: an ``(height * cell_pixels, width * cell_pixels, 3)`` ``uint8`` picture:
+  grid lines, each goal a square outline and each agent a disc in the agent's colour (the
+  colours of the swarm's recording, ``world.viz.agent_colors``).
+- ``"ansi"``: a string, one line per row: ``.`` a free cell, ``a``, ``b``, ... goals, ``A``, ``B``,
+  ... agents.
+
 ## Seeding
 ``reset(seed=S)`` starts episode 0 of seed ``S``; each later ``reset()`` without a seed moves on to the
 next episode of the same seed. Scenarios come from :mod:`protocol.seeding` streams, and the
@@ -54,6 +70,10 @@ dynamics draw nothing, so the same seed and actions give the same trajectory.
 """
 
 import functools
+import os
+import sys
+import warnings
+from pathlib import Path
 
 import numpy as np
 from gymnasium import spaces
@@ -72,7 +92,8 @@ NOT_IN_VIEW = N_STATES
 class SwarmGridEnv(ParallelEnv):
     """N agents on a grid, each reaching for its own goal while avoiding the others."""
 
-    metadata = {"name": "nnql_swarm_grid_v0", "render_modes": ["ansi"], "is_parallelizable": True}
+    metadata = {"name": "nnql_swarm_grid_v0", "render_modes": ["human", "rgb_array", "ansi"],
+                "is_parallelizable": True, "render_fps": 4}
 
     def __init__(
         self,
@@ -85,6 +106,8 @@ class SwarmGridEnv(ParallelEnv):
         negotiation_radius: int = VIEW_RADIUS,
         wait_rule: str = "reach",
         render_mode: str | None = None,
+        rerun: str | Path | None = None,
+        cell_pixels: int = 16,
     ) -> None:
         if n_agents < 1:
             raise ValueError(f"need at least one agent, got {n_agents}")
@@ -101,7 +124,14 @@ class SwarmGridEnv(ParallelEnv):
         self.goal_reward = goal_reward
         self.negotiation_radius = negotiation_radius
         self.meet_only = wait_rule == "meet"
+        if cell_pixels < 4:
+            raise ValueError(f"cell_pixels must be at least 4, got {cell_pixels}")
         self.render_mode = render_mode
+        self.rerun_target = rerun
+        self.cell_pixels = cell_pixels
+        self.rerun_memory = None  # the frames of "human" where no viewer was there to take them
+        self._stream = None
+        self._frame = 0
         self.possible_agents = [f"agent_{i}" for i in range(n_agents)]
         self.agents: list[str] = []
         self._index = {name: i for i, name in enumerate(self.possible_agents)}
@@ -174,9 +204,30 @@ class SwarmGridEnv(ParallelEnv):
                                             y[j], self.negotiation_radius, self.meet_only,
                                             self._arrived[i], self._arrived[j])]
 
-    def render(self) -> str | None:
-        if self.render_mode != "ansi":
-            return None
+    def render(self) -> "str | np.ndarray | None":
+        """The current state in the ``render_mode`` (module docstring); None without one."""
+        if self.render_mode == "ansi":
+            return self._text()
+        if self.render_mode == "rgb_array":
+            return self._picture()
+        if self.render_mode == "human":
+            self._log_frame()
+        return None
+
+    def close(self) -> None:
+        """Flush and close the Rerun stream of ``"human"`` (a spawned viewer stays open); frames
+        kept in memory stay readable in ``rerun_memory``."""
+        if self._stream is None:
+            return
+        if self.rerun_memory is not None:
+            self._stream.flush()  # disconnecting would drop the memory sink's frames
+            return
+        from nnql_swarm.world.viz import close_stream
+
+        close_stream(self._stream)
+        self._stream = None
+
+    def _text(self) -> str:
         rows = [["." for _ in range(self.width)] for _ in range(self.height)]
         for i, (x, y) in enumerate(zip(self._goal_x, self._goal_y)):
             rows[y][x] = chr(ord("a") + i % 26)
@@ -184,8 +235,74 @@ class SwarmGridEnv(ParallelEnv):
             rows[y][x] = chr(ord("A") + i % 26)
         return "\n".join("".join(row) for row in rows)
 
-    def close(self) -> None:
-        pass
+    def _picture(self) -> np.ndarray:
+        from nnql_swarm.world.viz import agent_colors
+
+        c = self.cell_pixels
+        image = np.full((self.height * c, self.width * c, 3), 255, dtype=np.uint8)
+        image[::c, :] = image[:, ::c] = 200  # grid lines
+        image[-1, :] = image[:, -1] = 200
+        yy, xx = np.mgrid[0:c, 0:c]
+        middle = (c - 1) / 2
+        disc = (xx - middle) ** 2 + (yy - middle) ** 2 <= (0.36 * c) ** 2
+        edge = max(1, c // 8)
+        inner = (xx >= edge) & (xx < c - edge) & (yy >= edge) & (yy < c - edge)
+        outline = inner & ~((xx >= 2 * edge) & (xx < c - 2 * edge)
+                            & (yy >= 2 * edge) & (yy < c - 2 * edge))
+        colors = agent_colors(self.n_agents)
+        for shape, xs, ys in ((outline, self._goal_x, self._goal_y), (disc, self._x, self._y)):
+            for i, (x, y) in enumerate(zip(xs, ys)):
+                image[y * c:(y + 1) * c, x * c:(x + 1) * c][shape] = colors[i]
+        return image
+
+    def _log_frame(self) -> None:
+        import rerun as rr
+
+        stream = self._rerun_stream()
+        stream.set_time("step", sequence=self._frame)
+        stream.set_time("episode", sequence=max(self._episode, 0))
+        self._frame += 1
+        stream.log("world/goals", rr.Boxes2D(
+            centers=np.column_stack([self._goal_x, self._goal_y]).astype(np.float32),
+            half_sizes=[0.4, 0.4]))
+        stream.log("world/agents", rr.Points2D(
+            np.column_stack([self._x, self._y]).astype(np.float32)))
+
+    def _rerun_stream(self):
+        """The ``"human"`` mode's Rerun stream, opened on first use (module docstring)."""
+        if self._stream is not None:
+            return self._stream
+        import rerun as rr
+
+        from nnql_swarm.world.viz import agent_colors
+
+        stream = rr.RecordingStream("nnql-swarm-env")
+        target = self.rerun_target
+        if target is not None and str(target).startswith("rerun"):
+            stream.connect_grpc(str(target))
+        elif target is not None:
+            Path(target).parent.mkdir(parents=True, exist_ok=True)
+            stream.save(str(target))
+        elif not sys.platform.startswith("linux") or os.environ.get("DISPLAY") \
+                or os.environ.get("WAYLAND_DISPLAY"):
+            stream.spawn()
+        else:
+            self.rerun_memory = stream.memory_recording()
+            warnings.warn("render_mode='human' without a display: the frames stay in memory "
+                          "(env.rerun_memory); pass rerun='frames.rrd' to save them (open with "
+                          "nnql-view) or rerun='rerun+http://<host>:9876/proxy' to stream them to "
+                          "a viewer", RuntimeWarning, stacklevel=3)
+        xs = np.arange(self.width + 1) - 0.5
+        ys = np.arange(self.height + 1) - 0.5
+        lines = [[(x, ys[0]), (x, ys[-1])] for x in xs] + [[(xs[0], y), (xs[-1], y)] for y in ys]
+        stream.log("world/grid", rr.LineStrips2D(lines, colors=[90, 90, 90], radii=0.02),
+                   static=True)
+        colors = agent_colors(self.n_agents)
+        stream.log("world/agents", rr.Points2D.from_fields(
+            colors=colors, labels=self.possible_agents, radii=0.33, show_labels=True), static=True)
+        stream.log("world/goals", rr.Boxes2D.from_fields(colors=colors, radii=0.06), static=True)
+        self._stream = stream
+        return stream
 
     def _observe(self, i: int) -> np.ndarray:
         x, y = self._x, self._y

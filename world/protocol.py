@@ -19,7 +19,13 @@ started after the last episode only tells the agents still running to stop. A co
 its agents to stop until every live one has left. Where the agents share one table, an agent that
 comes back after it left, and every agent of a resumed world, is sent the world's whole table
 (``SwarmWorld.resync``) from its first intent on (by then it surely hears its observations): its
-copy may be an older checkpoint's. Until that intent came it is never settled.
+copy may be an older checkpoint's. Until that intent came it is never settled. Each learning
+record is checked against the transition the world saw its sender make (``world.records``), as
+soon as every intent the sender may have decided with is in, or when the tick closes: one that
+is not its sender's own (``forged-record``) is refused, and so are that agent's later records
+(``barred-record``) until its liveliness token comes back; one without the sender's decision of
+the tick before to check it against (``unchecked-record``) is refused too. Its intent counts
+either way.
 """
 
 import logging
@@ -31,6 +37,7 @@ from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservat
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
 from nnql_swarm.protocol.trace import CLOSE, TickTrace
 from nnql_swarm.world.engine import SwarmWorld
+from nnql_swarm.world.records import BARRED, FORGED, UNCHECKED, Decision, RecordCheck, decides
 
 STARTUP_TIMEOUT_S = 60.0
 """How long the world waits at least for every agent to come alive before it gives up."""
@@ -106,6 +113,14 @@ class WorldProtocol:
         self.episode_start = now
         self.episode_tick = self.world.tick
         self.agent_of_key: dict[str, int] = {}  # intent key -> its agent, parsed once
+        shared = self.world.table is not None
+        self.records = RecordCheck(config) if shared else None  # see _checked_records
+        self.sent: dict = {}  # the open tick's observations, by agent, as they are sent
+        self.sent_before: dict = {}  # the last tick's
+        self.decisions: dict[int, Decision] = {}  # the last tick's deciders, by agent
+        self.barred: set[int] = set()  # agents that sent a forged record since they started
+        self.forged_at: list[tuple[int, int]] = []  # (agent, tick) of each forged record refused
+        self.unchecked: set[int] = set()  # the open tick's records still to check
 
     # Inputs. Each returns the effects it causes, in the order they must be carried out.
 
@@ -127,6 +142,7 @@ class WorldProtocol:
             out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
             if self.started and agent in self.joined:  # restarted: its copy is a checkpoint's
                 self.to_resync.add(agent)
+                self.barred.discard(agent)  # a new process: its records are checked again
             self.joined.add(agent)
             if not self.started and len(self.alive) == self.n:
                 self._start(now)
@@ -184,6 +200,8 @@ class WorldProtocol:
             self.inbox.reject("bad-record", f"agent {agent}: {record!r:.100}")
         else:
             self.learned[agent] = record
+            if self.records is not None:
+                self._check_record(agent, False)
 
     def on_timer(self, now: float) -> list:
         """Time has come to ``now``: a tick's deadline, or the start-up's."""
@@ -228,6 +246,7 @@ class WorldProtocol:
         return {"completed": self.completed, "ticks": self.world.tick,
                 "episode": self.world.episode, "accepted": self.inbox.accepted,
                 "rejected": dict(self.inbox.rejections), "violations": self.world.violations,
+                "forgers": sorted({agent for agent, _ in self.forged_at}),
                 "startup_s": self.startup_s}
 
     # The clock.
@@ -255,15 +274,18 @@ class WorldProtocol:
             self.awaited.discard(agent)
         self.heard = set()
         self.learned = {}
+        self.unchecked = set()
         self.tick_start = now
         self.tick_deadline = now + self.config.tick_deadline_s
+        self.sent_before, self.sent = self.sent, {}
         out.append(SendObservations(self._encoded(self.world.observations_by_rank())))
 
-    @staticmethod
-    def _encoded(observations):
+    def _encoded(self, observations):
         """Each observation with its payload, built as it is taken (the first to decide is the
-        first to know)."""
+        first to know), kept to check the learning records it leads to."""
+        sent = self.sent
         for obs in observations:
+            sent[obs.agent] = obs
             yield obs, encode(obs)
 
     def _close_if_due(self, now: float) -> None:
@@ -275,7 +297,8 @@ class WorldProtocol:
         """Apply the open tick, open the next (the agents think while this one is reported)."""
         out, world = self._out, self.world
         self.trace.mark(CLOSE, world.tick)
-        report = world.apply(self.actions, self.learned)
+        learned = self._checked_records() if self.records is not None else self.learned
+        report = world.apply(self.actions, learned)
         self.slowest = max(self.slowest, now - self.tick_start)
         self.actions = None
         if not world.finished:
@@ -291,6 +314,43 @@ class WorldProtocol:
             self.episode_start, self.episode_tick, self.slowest = now, world.tick, 0.0
         if world.finished:
             self._close_run(now)
+
+    def _check_record(self, agent: int, final: bool) -> None:
+        """Check agent ``agent``'s record of the open tick (``world.records``) against its
+        decision of the tick before, as soon as every intent it may have decided with is in (or
+        the tick closes: ``final``); a record that is not its own transition's is dropped and
+        counted (a forged one bars the agent's later records until it restarts)."""
+        record, check = self.learned[agent], self.records
+        decision, obs = self.decisions.get(agent), self.sent.get(agent)
+        if agent in self.barred:
+            reason = BARRED
+        elif (decision is None or obs is None or obs.episode != decision.obs.episode
+              or obs.tick != decision.obs.tick + 1):
+            reason = UNCHECKED
+        elif not (final or check.ready(obs, self.actions)):
+            self.unchecked.add(agent)
+            return
+        elif check.could_write(record, decision, obs, self.actions):
+            self.unchecked.discard(agent)
+            return
+        else:
+            reason = FORGED
+            self.barred.add(agent)
+            self.forged_at.append((agent, self.world.tick))
+        self.unchecked.discard(agent)
+        del self.learned[agent]
+        self.inbox.reject(reason, f"agent {agent} at tick {self.world.tick}: {record!r:.100}")
+
+    def _checked_records(self) -> dict[int, tuple]:
+        """The open tick's records, every one checked (:meth:`_check_record`); then this tick's
+        decisions, for the next tick's records."""
+        for agent in sorted(self.unchecked):
+            self._check_record(agent, True)
+        intents, heard = tuple(self.actions), self.heard
+        self.decisions = {agent: Decision(obs, intents, self.sent_before.get(agent))
+                          for agent, obs in self.sent.items()
+                          if agent in heard and decides(obs)}
+        return self.learned
 
     def _close_run(self, now: float) -> None:
         """The run is complete: tell the agents until every live one has left (and

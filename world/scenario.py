@@ -3,8 +3,10 @@
 Each episode draws from its own generator, derived from the run's seed and the episode number
 (``protocol.seeding``), so an episode's data does not depend on
 which algorithm runs it or on how many episodes came before: QL and nnQL see identical data.
-Where the grid has walls (``protocol.walls``: one map for the whole run), starts and goals come
-from its largest free region, and each agent's shortest path goes around them.
+Where the grid has walls (``protocol.walls``: one map for the whole run, drawn from the seed or
+read from ``--map``), starts and goals come from its largest free region, and each agent's
+shortest path goes around them; a scenario (``--scen``) gives the same starts and goals every
+episode instead.
 """
 
 from dataclasses import dataclass
@@ -56,9 +58,17 @@ class SwarmEpisode:
 
 
 def swarm_episode(seed: int, episode: int, width: int, height: int, n_agents: int,
-                  obstacle_density: float = 0.0) -> SwarmEpisode:
-    """Draw ``2 * n_agents`` distinct free cells: the starts, then the goals."""
-    walls, free = layout(seed, width, height, obstacle_density)
+                  obstacle_density: float = 0.0, rows: tuple[str, ...] = (),
+                  tasks: tuple = ()) -> SwarmEpisode:
+    """Draw ``2 * n_agents`` distinct free cells: the starts, then the goals; on the map
+    ``rows`` if given (``protocol.maps``), and with ``tasks`` (a scenario's ``(start_x, start_y,
+    goal_x, goal_y)`` per agent) those starts and goals in every episode."""
+    walls, free = layout(seed, width, height, obstacle_density, rows)
+    if tasks:
+        xy = np.array(tasks[:n_agents], dtype=np.int64).reshape(-1, 4)
+        starts, goals = xy[:, :2].copy(), xy[:, 2:].copy()
+        return SwarmEpisode(starts=starts, goals=goals,
+                            shortest=path_lengths(width, height, walls, starts, goals))
     if 2 * n_agents > len(free):
         raise ValueError(
             f"{n_agents} agents need {2 * n_agents} distinct start and goal cells; "

@@ -1,7 +1,8 @@
 """The swarm's one Q-table, as the world keeps it where the agents share it (``config.shared``).
 
-Each agent's intent carries its learning record of the tick. The world checks every record once
-(:meth:`SharedTable.accepts`, as it takes the intent) and, when the tick closes, applies them all
+Each agent's intent carries its learning record of the tick. The world checks that every record
+fits the tables (:meth:`SharedTable.accepts`, as it takes the intent) and is the one the agent's
+own transition wrote (``world.records``) and, when the tick closes, applies those it believes
 in agent-id order with the learner's own ``apply_record``, the very step the simulator applies
 to its one table (``sim.swarm``). The next observations then tell every agent which entries
 changed and their new values (:meth:`SharedTable.apply` returns them, in the order the records

@@ -13,8 +13,12 @@ reads intents and has not arrived waits for the answer of every neighbour that
 that themselves (``agent.viz``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
-Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels) are logged
-once.
+Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
+``legend``) are logged once. Each entity holds every agent (one ``Points2D`` for all agents, one
+``Boxes2D`` for all goals, ...), whatever their number. Agents and goals share a colour
+(:data:`PALETTE`, repeating every 12 agents) and a label, the agent's id. The blueprint
+(``recording.session.blueprint``) opens on the ``episode`` timeline, where the view shows the
+intents, waits and collisions of the whole episode at once.
 
 Cost: everything is buffered, the per-tick entities, each episode's goals, metrics and event
 lines alike, and sent with ``send_columns`` (one call per entity) every :data:`FLUSH_EVERY` ticks
@@ -49,8 +53,18 @@ INTENTS = "world/intents"
 NEGOTIATION = "world/negotiation"
 COLLISIONS = "world/collisions"
 EVENTS = "events"
+LEGEND = "legend"
+
+WALL_HALF = 0.2
+"""Half the width of a wall's box outline; the outline is :data:`WALL_LINE` wide on each side
+of it, so that the box is a solid block 0.88 of a cell wide."""
+WALL_LINE = 0.24
 
 METRICS = {
+    "metrics/arrived_share": "share of the agents on their goal when the episode ended (0 to 1)",
+    "metrics/steps/over_shortest": "steps the agents took over their shortest paths "
+                                   "(agent_steps / shortest_sum; 1 is the best possible)",
+    "metrics/steps/shortest_path": "the reference of over_shortest: 1, every agent on a shortest path",
     "metrics/collisions/per_episode": "collisions in the episode (each colliding agent counts one)",
     "metrics/collisions/cumulative": "collisions since the run started",
     "metrics/steps/per_agent": "mean steps an agent took until it arrived (agent_steps / agents)",
@@ -64,6 +78,31 @@ METRICS = {
 }
 """Every per-episode series the world logs, with what it means (docs/recording.md repeats this)."""
 
+SERIES_NAMES = {
+    "metrics/arrived_share": "arrived (share of agents)",
+    "metrics/steps/over_shortest": "steps / shortest path",
+    "metrics/steps/shortest_path": "shortest path (1)",
+    "metrics/collisions/per_episode": "collisions in the episode",
+    "metrics/collisions/cumulative": "collisions since the start",
+    "metrics/steps/per_agent": "steps per agent",
+    "metrics/steps/shortest_per_agent": "shortest path per agent",
+    "metrics/steps/episode": "ticks in the episode",
+    "metrics/arrived": "agents arrived",
+    "metrics/reward_sum": "reward sum",
+    "metrics/missed_intents": "missed intents",
+    "metrics/ticks_per_s": "ticks per second",
+    "metrics/negotiation/awaited_per_tick": "intents awaited per tick",
+}
+"""What each series is called in the plots' legends."""
+
+SERIES_COLOURS = {
+    "metrics/arrived_share": (0, 130, 60),
+    "metrics/steps/over_shortest": (0, 90, 181),
+    "metrics/steps/shortest_path": (150, 150, 150),
+    "metrics/collisions/per_episode": (230, 40, 40),
+    "metrics/collisions/cumulative": (120, 20, 20),
+}
+
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
 
@@ -72,15 +111,24 @@ FLUSH_EVERY = 2000
 costs about a millisecond and a dozen logging calls, however few ticks it sends."""
 
 COLLISION_RED = (230, 40, 40)
-WALL_GREY = (150, 150, 150)
+WAIT_COLOUR = (25, 25, 25)
+"""The negotiation's arrows (who waited for whom): near-black, apart from the agents' colours."""
+WALL_COLOUR = (55, 60, 75)
+"""Walls: dark slate blocks, none of the agents' colours, and off the grid's grey."""
+
+PALETTE = np.array([
+    (0, 90, 181), (204, 80, 0), (0, 130, 60), (125, 50, 180), (190, 20, 120), (0, 120, 135),
+    (135, 85, 20), (95, 105, 0), (40, 45, 140), (165, 0, 200), (150, 50, 90), (80, 80, 200),
+], dtype=np.uint8)
+"""The agents' colours: twelve hues far apart, each dark enough for its label (coloured text on
+the viewer's light label background) to read, at a contrast of 4.4 to 11 against white, and none
+near the collisions' red. Agent ``i`` has colour ``i mod 12``: beyond 12 agents colours repeat,
+and the labels (the agent's id, on the agent and on its goal) tell agents apart."""
 
 
 def agent_colors(n: int) -> np.ndarray:
-    """One distinct colour per agent (evenly spaced hues), as RGB bytes ``(n, 3)``."""
-    hues = np.arange(n) / max(n, 1)
-    k = (np.array([5.0, 3.0, 1.0])[None, :] + hues[:, None] * 6.0) % 6.0
-    rgb = 1.0 - np.clip(np.minimum(k, 4.0 - k), 0.0, 1.0)
-    return (rgb * 255).astype(np.uint8)
+    """Each agent's colour, :data:`PALETTE` in turn, as RGB bytes ``(n, 3)``."""
+    return PALETTE[np.arange(n) % len(PALETTE)]
 
 
 def with_alpha(colors: np.ndarray, alpha: int) -> np.ndarray:
@@ -105,6 +153,43 @@ def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.nda
                 asks[t, i, j] = j != i and awaits_answer(ranks[i], ranks[j], x, y, jx, jy,
                                                          radius, meet, False, arrived[t][j])
     return asks
+
+
+def legend(config: SwarmConfig) -> str:
+    """The recording's key (``legend``, a markdown document): what the world view and the heat
+    maps draw, and what their colours mean."""
+    walls = " Dark blocks are walls." if config.obstacle_density > 0 else ""
+    shared = ("The agents learn into one shared table: the heat maps show it once." if config.shared
+              else "Each agent has its own tables: one tab per agent (the first "
+                   f"{min(config.n_agents, 8)}).")
+    waits = ("Black arrows from an agent to a neighbour: it waited for that neighbour's "
+             "announced move before deciding (negotiation)." if config.algo in NEGOTIATING_ALGOS
+             else f"{config.algo} agents do not negotiate: they wait for nobody.")
+    return f"""**World** ({config.width} x {config.height}, {config.n_agents} agents).
+Discs are agents, labelled with their id; the box with the same id and colour is that agent's
+goal. Colours repeat every 12 agents; the ids do not.{walls}
+On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
+move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
+discs), and the agents where the episode left them. On the `tick` timeline it shows one tick:
+where each agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
+{waits}
+
+**Learning curves** run against episodes: the share of agents that arrived, the steps they took
+over their shortest paths (1 is perfect), and collisions (each agent in one counts one).
+
+**Heat maps**: one pixel per offset of the goal (Q_DS) or of a neighbour (Q_CA) from the agent,
+the red square in the middle; the colour is the best action's value, dark purple (low) to yellow
+(high), on a fixed scale: Q_DS 0 to the goal reward {config.goal_reward:g} (bright: close to the
+goal), Q_CA 0 to {collision_bound(config):g}, the value of never colliding (dark: a neighbour
+there led to collisions). Light grey: an entry still above anything it can learn, i.e. on its
+optimistic start, not yet explored. Blank: never updated. Arrows: the best move; a dot: STAY.
+{shared}
+"""
+
+
+def collision_bound(config: SwarmConfig) -> float:
+    """The largest value Q_CA can learn: the no-collision reward (10) every step, discounted."""
+    return 10.0 / (1.0 - config.gamma)
 
 
 class WorldViz:
@@ -155,27 +240,36 @@ class WorldViz:
         xs = np.arange(c.width + 1) - 0.5
         ys = np.arange(c.height + 1) - 0.5
         lines = [[(x, ys[0]), (x, ys[-1])] for x in xs] + [[(xs[0], y), (xs[-1], y)] for y in ys]
-        rec.log(GRID, rr.LineStrips2D(lines, colors=[90, 90, 90], radii=0.02, draw_order=0.0),
+        # radius in UI points (negative): lines 2 points wide at any grid size
+        rec.log(GRID, rr.LineStrips2D(lines, colors=[90, 90, 90], radii=-1.0, draw_order=2.0),
                 static=True)
         walls = c.walls()
         if len(walls):
-            rec.log(WALLS, rr.Boxes2D(centers=walls.astype(np.float32), half_sizes=[0.4, 0.4],
-                                      colors=[WALL_GREY], radii=0.1, draw_order=5.0),
+            # A box's outline drawn with a line wider than the box fills it: a block that leaves
+            # a rim of the cell, where the grid's lines stay visible (each box its half-size).
+            rec.log(WALLS, rr.Boxes2D(centers=walls.astype(np.float32),
+                                      half_sizes=np.full(walls.shape, WALL_HALF, np.float32),
+                                      colors=[WALL_COLOUR], radii=WALL_LINE, draw_order=1.0),
                     static=True)
         labels = [str(i) for i in range(c.n_agents)]
-        rec.log(AGENTS, rr.Points2D.from_fields(colors=self.colors, labels=labels, radii=0.33,
+        rec.log(AGENTS, rr.Points2D.from_fields(colors=self.colors, labels=labels, radii=0.3,
                                                 show_labels=True, draw_order=30.0), static=True)
-        rec.log(GOALS, rr.Boxes2D.from_fields(colors=self.colors, radii=0.06, draw_order=10.0),
-                static=True)
-        rec.log(TRAILS, rr.LineStrips2D.from_fields(colors=with_alpha(self.colors, 140), radii=0.07,
+        rec.log(GOALS, rr.Boxes2D.from_fields(colors=self.colors, labels=labels, show_labels=True,
+                                              radii=0.07, draw_order=10.0), static=True)
+        rec.log(TRAILS, rr.LineStrips2D.from_fields(colors=with_alpha(self.colors, 110), radii=0.06,
                                                     draw_order=15.0), static=True)
-        rec.log(INTENTS, rr.Arrows2D.from_fields(colors=self.colors, radii=0.07, draw_order=40.0),
+        rec.log(INTENTS, rr.Arrows2D.from_fields(colors=self.colors, radii=0.09, draw_order=40.0),
                 static=True)
-        rec.log(NEGOTIATION, rr.Arrows2D.from_fields(radii=0.025, draw_order=35.0), static=True)
+        rec.log(NEGOTIATION, rr.Arrows2D.from_fields(colors=[WAIT_COLOUR], radii=0.045,
+                                                     draw_order=45.0), static=True)
+        rec.log(LEGEND, rr.TextDocument(legend(c), media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log(COLLISIONS, rr.Points2D.from_fields(colors=[COLLISION_RED], radii=0.5,
                                                     draw_order=20.0), static=True)
         for path in METRICS:
-            rec.log(path, rr.SeriesLines(names=path.rsplit("/", 1)[1], widths=2.0), static=True)
+            colour = SERIES_COLOURS.get(path)
+            rec.log(path, rr.SeriesLines(names=SERIES_NAMES[path], widths=2.0,
+                                         colors=None if colour is None else [colour]),
+                    static=True)
 
     def log_tick(self, world: SwarmWorld, report: TickReport) -> None:
         """Log one applied tick (call it right after ``world.apply``)."""
@@ -190,7 +284,8 @@ class WorldViz:
         before = self._before
         if before is None:  # the first tick seen: it starts an episode (fresh run or resume)
             before = tuple(map(tuple, swarm_episode(c.seed, report.episode, c.width, c.height,
-                                                    c.n_agents, c.obstacle_density
+                                                    c.n_agents, c.obstacle_density, c.map_rows,
+                                                    c.scenario
                                                     ).starts.tolist()))
         if report.episode != self._goals_episode:
             self._start_episode(report)
@@ -199,7 +294,7 @@ class WorldViz:
         if report.collided:
             step = f"step {world.step}" if report.moved else "end"
             self._events.add(report.tick, report.episode,
-                             f"episode {report.episode}, {step}: collision of agents "
+                             f"{step}: collision of agents "
                              f"{', '.join(map(str, report.collided))}", "WARN")
         self._before, self._arrived = world.cells, world.arrived_flags
         self.next_tick = report.tick + 1
@@ -212,7 +307,7 @@ class WorldViz:
         self._goals_episode = report.episode
         c = self.config
         episode = swarm_episode(c.seed, report.episode, c.width, c.height, c.n_agents,
-                                c.obstacle_density)
+                                c.obstacle_density, c.map_rows, c.scenario)
         self._starts[report.episode] = episode.starts.astype(np.float32)
         self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32)))
 
@@ -224,6 +319,9 @@ class WorldViz:
         self._episode_clock, self._episode_first_tick = now, report.tick + 1
         self.cumulative_collisions += row["collisions"]
         values = {
+            "metrics/arrived_share": row["arrived"] / n,
+            "metrics/steps/over_shortest": row["agent_steps"] / max(row["shortest_sum"], 1),
+            "metrics/steps/shortest_path": 1.0,
             "metrics/collisions/per_episode": row["collisions"],
             "metrics/collisions/cumulative": self.cumulative_collisions,
             "metrics/steps/per_agent": row["agent_steps"] / n,
@@ -238,10 +336,9 @@ class WorldViz:
             self._metrics.add(path, report.tick, report.episode, value)
         self._ended.append((report.tick, report.episode, max(row["steps"], 1)))
         self._events.add(report.tick, report.episode,
-                         f"episode {row['episode']} ended after {row['steps']} steps: "
-                         f"{row['arrived']}/{n} arrived, {row['collisions']} collisions, "
-                         f"{row['missed_intents']} missed intents, reward {row['reward_sum']:.1f}, "
-                         f"{rate:.0f} ticks/s", "INFO")
+                         f"{row['steps']} steps, {row['arrived']}/{n} arrived, "
+                         f"{row['collisions']} collisions, {row['missed_intents']} missed, "
+                         f"{rate:.0f} ticks/s, reward {row['reward_sum']:.0f}", "INFO")
 
     def flush(self) -> None:
         """Send everything buffered: the ticks' geometry computed at once, one call per entity."""
@@ -292,8 +389,8 @@ class WorldViz:
         gap = end - start
         unit = gap / np.maximum(np.linalg.norm(gap, axis=-1, keepdims=True), 1e-6)
         rec.send_columns(NEGOTIATION, index, rr.Arrows2D.columns(
-            origins=start + unit * 0.36, vectors=gap - unit * 0.72,
-            colors=with_alpha(self.colors[asker], 150)).partition(asks.sum(axis=(1, 2))))
+            origins=start + unit * 0.2, vectors=gap - unit * 0.4,
+        ).partition(asks.sum(axis=(1, 2))))  # in WAIT_COLOUR, logged once (static)
 
         hit = np.zeros((k, n), dtype=bool)
         for t, agents in enumerate(collided):

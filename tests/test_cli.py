@@ -1,0 +1,162 @@
+"""What a person sees at the command line: one line and exit code 2 for an unusable ``--out``,
+commands that name themselves as they were called, the command that continues a run, and a word
+before the simulator compiles."""
+
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from nnql_swarm.launch.swarm_cli import build_parser, resume_command
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.sim import runs
+from nnql_swarm.sim.runs import compiled_simulator, swarm_world
+from nnql_swarm.terminal.cli import COMPILING, prepare_simulator
+from tests.swarm_helpers import ROOT
+
+BIN = Path(sys.executable).parent
+SWARM = ROOT / "launch" / "swarm.py"
+EXPERIMENT = ROOT / "launch" / "experiment.py"
+
+
+def one_line_exit_2(done: subprocess.CompletedProcess, message: str) -> None:
+    assert done.returncode == 2, done.stderr
+    lines = [line for line in done.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and message in lines[0], done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def unusable_out(tmp_path: Path, kind: str) -> tuple[Path, str]:
+    """An ``--out`` no run can go to, and the words of its refusal."""
+    if kind == "file":
+        path = tmp_path / "a-file"
+        path.write_text("not a folder\n")
+        return path, "is a file"
+    if kind == "other files":
+        path = tmp_path / "photos"
+        path.mkdir()
+        (path / "holiday.jpg").write_bytes(b"\xff\xd8")
+        return path, "holds other files (holiday.jpg)"
+    return Path(kind), "cannot make"
+
+
+@pytest.mark.parametrize("kind", ["/proc/x", "/dev/null/x", "file", "other files"])
+def test_an_unusable_out_gives_one_line_and_exit_2(tmp_path, kind):
+    out, message = unusable_out(tmp_path, kind)
+    before = sorted(p.name for p in out.iterdir()) if out.is_dir() else None
+    done = subprocess.run([sys.executable, str(SWARM), "--out", str(out), "--agents", "2",
+                           "--episodes", "1", "--no-progress"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+    one_line_exit_2(done, message)
+    if before is not None:
+        assert sorted(p.name for p in out.iterdir()) == before  # nothing written into it
+
+
+def test_a_folder_with_a_run_that_finished_no_episode_is_taken(tmp_path):
+    out = tmp_path / "started"
+    (out / "rerun-parts").mkdir(parents=True)  # e.g. the agents of this host, started first
+    (out / "config.json").write_text("{}\n")
+    done = subprocess.run([sys.executable, str(SWARM), "--out", str(out), "--agents", "2",
+                           "--episodes", "1", "--max-steps", "5", "--grid", "5x5",
+                           "--no-progress", "--no-record"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert (out / "episodes.csv").exists()
+
+
+@pytest.mark.parametrize("command", [[], ["swarm"]])
+@pytest.mark.parametrize("kind", ["/proc/x", "/dev/null/x", "file"])
+def test_the_experiments_refuse_an_unusable_out_before_simulating(tmp_path, command, kind):
+    out, _ = unusable_out(tmp_path, kind)
+    done = subprocess.run([sys.executable, str(EXPERIMENT), *command, "--out", str(out),
+                           "--no-plots", "--episodes", "5", "--seeds", "1"],
+                          cwd=ROOT, capture_output=True, text=True, timeout=60)
+    one_line_exit_2(done, str(out))
+
+
+def help_of(*command: str) -> str:
+    done = subprocess.run([*command, "--help"], capture_output=True, text=True, timeout=60, cwd="/")
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+def test_the_installed_experiment_names_itself():
+    text = help_of(str(BIN / "nnql-experiment"))
+    assert text.startswith("usage: nnql-experiment ")
+    assert "nnql-experiment swarm --help" in " ".join(text.split())
+    assert "experiment.py" not in text
+    assert help_of(str(BIN / "nnql-experiment"), "swarm").startswith("usage: nnql-experiment swarm ")
+
+
+def test_the_experiment_script_and_module_name_themselves():
+    text = help_of(sys.executable, str(EXPERIMENT))
+    assert text.startswith("usage: experiment.py ") and "experiment.py swarm --help" in text
+    module = help_of(sys.executable, "-m", "nnql_swarm.launch.experiment")
+    assert module.startswith("usage: python -m nnql_swarm.launch.experiment ")
+
+
+def test_the_swarm_help_describes_the_run_not_the_module():
+    text = help_of(str(BIN / "nnql-swarm"))
+    assert text.startswith("usage: nnql-swarm ")
+    assert "A swarm run:" in text and "launch.processes" not in text
+
+
+def test_the_resume_command_carries_the_options_config_json_does_not():
+    parser = build_parser()
+    plain = parser.parse_args(["--agents", "4"])
+    assert resume_command(plain, Path("runs/a b")).endswith(" --resume --out 'runs/a b'")
+    remote = parser.parse_args(["--role", "agents", "--agent-ids", "0-2,5", "--run-id", "r",
+                                "--connect", "tcp/192.0.2.1:7447", "--no-record"])
+    assert resume_command(remote, Path("runs/r")).endswith(
+        " --resume --out runs/r --role agents --agent-ids 0,1,2,5 "
+        "--connect tcp/192.0.2.1:7447 --no-record")
+
+
+def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
+    probe = ("from nnql_swarm.sim.runs import compiled_simulator; "
+             "print(compiled_simulator())")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "empty-cache")}
+    cold = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
+                          timeout=120)
+    assert cold.stdout.strip() == "False", cold.stderr
+    plain = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                           env={**env, "NNQL_KERNEL": "python"}, timeout=120)
+    assert plain.stdout.strip() == "True", plain.stderr  # nothing to compile
+    config = SwarmConfig(n_agents=2, width=5, height=5, episodes=1, max_steps=10)
+    prepare_simulator(swarm_world(config), config)  # compiles here if this cache is cold
+    assert compiled_simulator()
+
+
+def test_compiling_is_announced_before_the_progress_bar(monkeypatch, capsys):
+    monkeypatch.setattr(runs, "compiled_simulator", lambda: False)
+    config = SwarmConfig(n_agents=2, width=5, height=5, episodes=1, max_steps=10)
+    prepare_simulator(swarm_world(config), config)
+    told = capsys.readouterr().err.splitlines()
+    assert told[0] == COMPILING and told[1].startswith("compiled in ")
+
+
+def test_every_simulator_command_compiles_before_its_progress_bar_starts(monkeypatch, tmp_path):
+    from nnql_swarm.launch import experiment, swarm_cli
+
+    order = []
+    for module, bar in ((experiment, "progress"), (swarm_cli, "progress_bar")):
+        prepare, progress = module.prepare_simulator, getattr(module, bar)
+        monkeypatch.setattr(module, "prepare_simulator",
+                            lambda *a, prepare=prepare: (order.append("compile"), prepare(*a))[1])
+        monkeypatch.setattr(module, bar, lambda *a, progress=progress, **k: (
+            order.append("bar"), progress(*a, **k))[1])
+    terminate = signal.getsignal(signal.SIGTERM)  # the experiment's main sets its own
+    try:
+        assert experiment.main(["--episodes", "2", "--seeds", "1", "--ks", "2", "--no-plots",
+                                "--out", str(tmp_path / "paper")]) == 0
+        assert experiment.main(["swarm", "--episodes", "5", "--seeds", "1", "--agents", "2",
+                                "--grid", "5x5", "--variants", "ql", "--no-plots",
+                                "--out", str(tmp_path / "swarm")]) == 0
+    finally:
+        signal.signal(signal.SIGTERM, terminate)
+    assert swarm_cli.main(["--in-process", "--agents", "2", "--episodes", "2", "--grid", "5x5",
+                           "--no-record", "--out", str(tmp_path / "run")]) == 0
+    assert order == ["compile", "bar"] * 3

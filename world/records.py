@@ -1,0 +1,283 @@
+"""Whether a learning record is the one the agent's own transition wrote. Pure.
+
+Where the agents share one table, each intent carries the sender's learning record of the tick
+(``agent.learner``): Eq. 9's ``s, a, terminal, s'`` with the two rewards, and a pair of Q_CA rows
+``(s_i, s'_i)`` per neighbour. The world saw the transition the record claims: what it sent the
+agent at the tick it decided (its cell, goal and neighbours, who was parked) and at the next
+(where it ended up, its rewards, whether it arrived), the intent it announced, and every intent
+of both ticks as the world heard them. :class:`RecordCheck` rebuilds the record from that with
+the agent's own code, the rows of ``agent.brain.NeighbourRows`` read and completed by
+``agent.learner.read_rows`` and ``complete``, and compares.
+
+What it cannot know is which of the intents an agent waited for reached it in time (a neighbour
+whose answer did not come is read as one whose intent is unknown), nor, where the world missed
+a neighbour's intent, what that intent was. The check first rebuilds the record as if every
+awaited answer came (what a run without faults gives); should that differ, it accepts a record
+whose every field the world knows is exactly its own, and whose every neighbour pair is one the
+agent could have written: each awaited neighbour read as known (with its intent as the world
+heard it, or any intent where the world missed it) or as unknown, and, for DAQL, a neighbour's
+predicted move remembered or not. So everything is checked but, for each awaited neighbour, one
+bit (heard or not), and for a neighbour whose intent the world missed, which move it announced.
+
+A record is checked against the agent's decision at the tick before, which the world has only if
+it heard the agent's intent then: a record with none to check against (the agent's intent before
+was missed, or the world has just started or resumed) is refused too (:data:`UNCHECKED`), else a
+silent tick would let any record through. An honest agent loses only such records, which a
+faulty tick makes anyway.
+
+Its cost: it reads only the neighbours a record names (those within the interaction radius at
+the decision, and the same ones for ``s'``), and the rows an agent decided with at a tick are
+those the check of its record of that tick read (kept for one tick, with whom it waited for),
+so a record costs one reading of its neighbours and one ``complete``
+(``bench/record_check.py``).
+"""
+
+from dataclasses import dataclass
+
+from nnql_swarm.agent.brain import NeighbourRows
+from nnql_swarm.agent.learner import (
+    DS_GOAL, LF_FIELDS, LP_DS_REWARD, LP_DS_STATE, LP_READING, LS_ACTION, LS_COUNT, LS_GOAL,
+    LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_X, LS_Y, NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y,
+    READ_DAQL, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL, REWARD_WORLD,
+    RF_FIELDS, RF_R_DS, complete, learner_params, read_rows, record_outcome, record_size,
+    state_size, uses_map,
+)
+from nnql_swarm.agent.negotiation import awaited, staying
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.jit import floats, ints, python_values, rows
+from nnql_swarm.protocol.messages import Observation
+
+FORGED = "forged-record"
+"""A record that is not the one the agent's transition wrote: refused, and the agent's later
+records with it until the agent restarts."""
+BARRED = "barred-record"
+"""A record of an agent that sent a forged one since it last started: refused unchecked."""
+UNCHECKED = "unchecked-record"
+"""A record the world has no decision of the agent's to check against: refused."""
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What the world saw of one agent's decision at a tick: the observation it sent the agent,
+    every agent's intent as it heard them (None: missed), and the agent's observation of the tick
+    before (DAQL remembers its neighbours' cells then), if it was sent one."""
+
+    obs: Observation
+    intents: tuple
+    before: Observation | None
+
+
+def _only(obs: Observation, neighbours) -> Observation:
+    """``obs`` with only ``neighbours`` in view: the rows of the others are not needed (each
+    neighbour's row is its own), and building them is most of a check's cost."""
+    return obs._replace(neighbours=tuple(neighbours))
+
+
+def _stops(obs: Observation) -> bool:
+    """An agent that has arrived, or at an episode's end, decides nothing (``AgentBrain.act``)."""
+    return obs.arrived or obs.episode_end
+
+
+def decides(obs: Observation) -> bool:
+    """Whether an agent that was sent ``obs`` and announced an intent decided on it (and so left
+    a transition for its next record)."""
+    return not _stops(obs)
+
+
+class RecordCheck:
+    """The records of one run's agents checked against the transitions the world saw."""
+
+    def __init__(self, config: SwarmConfig) -> None:
+        self.config = config
+        self.rows = NeighbourRows(config)
+        params, params_f = learner_params(config)
+        self.map_fields = bool(uses_map(params))
+        if self.map_fields:  # destination seeking read on the agent's known map: see could_write
+            params[LP_DS_STATE], params[LP_DS_REWARD] = DS_GOAL, REWARD_WORLD
+        self.params, self.params_f = ints(params), floats(params_f)
+        self.still_terminal = config.still_terminal
+        self._no_map = ints([0])
+        self.daql = params[LP_READING] == READ_DAQL
+        self.radius = config.interaction_radius
+        bodies = config.n_bodies  # the learner's buffers, for complete
+        self._state, self._state_f = ints([0] * state_size(bodies)), floats([0.0] * LF_FIELDS)
+        self._rec, self._rec_f = ints([0] * record_size(bodies)), floats([0.0] * RF_FIELDS)
+        self._negotiation: dict[tuple, tuple] = {}  # (agent, tick) -> (awaited, staying)
+        self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
+
+    # What an agent could have heard, and read its neighbours as.
+
+    def _answers(self, obs: Observation, intents, stops: bool) -> tuple[dict, list]:
+        """The intents the agent decided with, had every awaited answer come (the parked
+        neighbours it knows stay, and each awaited one whose intent the world heard), and the
+        awaited neighbours (any of which may not have answered in time)."""
+        if stops:
+            return {}, []
+        waited, known = self._negotiated(obs)
+        known = dict(known)
+        known.update((j, intents[j]) for j in waited if intents[j] is not None)
+        return known, waited
+
+    def _negotiated(self, obs: Observation) -> tuple[list[int], dict]:
+        """Whom the agent waits for at ``obs`` and the parked neighbours it knows stay
+        (``agent.negotiation``), worked out once per observation."""
+        key = (obs.agent, obs.tick)
+        known = self._negotiation.get(key)
+        if known is None:  # kept for this tick and the next: a record reads both
+            known = self._negotiation[key] = (awaited(obs, self.config),
+                                              {j: STAY for j in staying(obs, self.config)})
+            self._negotiation.pop((obs.agent, obs.tick - 2), None)
+        return known
+
+    def ready(self, obs: Observation, intents) -> bool:
+        """Whether ``intents`` (the tick's so far) hold every intent the agent that was sent
+        ``obs`` may have decided with: then its record can be checked before the tick closes."""
+        return _stops(obs) or all(intents[j] is not None for j in self._negotiated(obs)[0])
+
+    def _memories(self, obs: Observation, before: Observation | None, sure: bool) -> list:
+        """DAQL's memories of the tick before, ``(previous cells, own cell then)``: those of
+        ``before`` where it is that tick's of the same episode, and none; the first only, where
+        the agent surely took ``before`` (``sure``). Nothing to remember for the other readings."""
+        if not self.daql:
+            return [({}, None)]
+        options = []
+        if before is not None and before.tick == obs.tick - 1 and obs.step > 0:
+            options.append(({j: (x, y) for j, x, y in before.neighbours}, before.position))
+        if not (sure and options):
+            options.append(({}, None))
+        return options
+
+    def _read(self, obs: Observation, answers: dict, stops: bool, memory) -> list[list[int]]:
+        """The neighbour rows with their Q_CA rows read (``NB_ROW``), as the agent reads them."""
+        near = self.rows(obs, answers, not stops, *memory)
+        nb = rows(near, NB_FIELDS)
+        x, y = obs.position
+        read_rows(self.params, x, y, nb, len(near))
+        return [list(row) for row in python_values(nb)] if len(near) else []
+
+    # The record.
+
+    def expected(self, decision: Decision, obs: Observation,
+                 intents) -> tuple[tuple[int, ...], tuple[float, ...]]:
+        """The record the agent's transition from ``decision`` to ``obs`` writes, had every
+        awaited answer come at both ticks (``intents``: this tick's, as the world heard them)."""
+        before = decision.obs
+        (x, y), radius = before.position, self.radius
+        decided = self._decided.get(before.agent)
+        if decided is not None and decided[0] == before.tick:
+            decided = decided[1]  # read as the last record's completion, every intent then in
+        else:
+            answers, _ = self._answers(before, decision.intents, False)
+            decided = self._read(_only(before, within(before.neighbours, x, y, radius)), answers,
+                                 False, self._memories(before, decision.before, True)[0])
+        pending = [(row[NB_ID], row[NB_ROW], row[NB_X], row[NB_Y]) for row in decided
+                   if chebyshev(x, y, row[NB_X], row[NB_Y]) <= radius]
+        ids = {entry[0] for entry in pending}
+        stops = _stops(obs)
+        answers, _ = self._answers(obs, intents, stops)
+        (x, y) = obs.position
+        near = [n for n in within(obs.neighbours, x, y, radius + 2)  # s' is at most 2 further
+                if n[0] in ids or chebyshev(x, y, n[1], n[2]) <= radius]  # or the next s
+        completed = self._read(_only(obs, near), answers, stops,
+                               self._memories(obs, before, True)[0])
+        if not stops:
+            self._decided[obs.agent] = (obs.tick, completed)
+        return self._complete(decision, obs, pending, completed)
+
+    def _complete(self, decision: Decision, obs: Observation, pending, completed):
+        """``agent.learner.complete`` on the agent's pending transition: its decision's goal
+        state, action and neighbours in Eq. 6 (``pending``: ``(id, Q_CA row, x, y)`` each), and
+        its outcome, completed with the neighbour rows of ``obs`` (``completed``)."""
+        before = decision.obs
+        (x, y), (gx, gy) = before.position, before.goal
+        state, state_f, rec, rec_f = self._state, self._state_f, self._rec, self._rec_f
+        state[LS_PENDING], state[LS_GOAL] = 1, offset_state(gx - x, gy - y)
+        state[LS_ACTION], state[LS_COUNT] = decision.intents[before.agent], len(pending)
+        state[LS_X], state[LS_Y] = x, y
+        for k, (neighbour, row, cx, cy) in enumerate(pending):
+            at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * k
+            state[at], state[at + 1], state[at + 2], state[at + 3] = neighbour, row, cx, cy
+        record_outcome(state, state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
+        (x, y), (gx, gy) = obs.position, obs.goal
+        complete(self.params, self.params_f, state, state_f, self._no_map, x, y, gx, gy,
+                 rows(completed, NB_FIELDS), len(completed), self.config.width,
+                 self.config.height, rec, rec_f)
+        if self.map_fields:  # a step that went nowhere is terminal by its cell
+            still = self.still_terminal and (x, y) == tuple(before.position)
+            rec[REC_TERMINAL] = 1 if obs.arrived or still else 0
+        written = REC_PAIRS + 2 * int(rec[REC_COUNT])
+        return tuple(python_values(rec[:written])), tuple(python_values(rec_f))
+
+    def _readings(self, obs: Observation, intents, stops: bool, before: Observation | None,
+                  sure: bool, neighbour: int) -> list[list[int]]:
+        """Every row the agent could have read ``neighbour`` as at ``obs`` (none if it was out
+        of its rows): heard or not where awaited, with the intent the world heard or, where it
+        missed it, any; each DAQL memory."""
+        known, waited = self._answers(obs, intents, stops)
+        choices = [dict(known)]
+        if neighbour in waited:
+            choices = [{k: a for k, a in known.items() if k != neighbour}]
+            heard = intents[neighbour]
+            moves = range(N_ACTIONS) if heard is None else (heard,)
+            choices += [{**choices[0], neighbour: a} for a in moves]
+        found = []
+        for answers in choices:
+            for memory in self._memories(obs, before, sure):
+                for row in self._read(obs, answers, stops, memory):
+                    if row[NB_ID] == neighbour and row not in found:
+                        found.append(row)
+        return found
+
+    def could_write(self, record, decision: Decision, obs: Observation, intents) -> bool:
+        """Whether the agent could have written ``record`` for the transition from ``decision``
+        to ``obs`` (``intents``: this tick's, as the world heard them), whichever awaited
+        answers reached it (see the module docstring)."""
+        integers, values = record
+        expected = self.expected(decision, obs, intents)
+        if self.map_fields:
+            expected = _map_fields_taken(expected, integers, values)
+        if (tuple(integers), tuple(values)) == expected:
+            return True
+        if tuple(integers[:REC_PAIRS]) != expected[0][:REC_PAIRS] or tuple(values) != expected[1]:
+            return False
+        before = decision.obs
+        (x, y), radius = before.position, self.radius
+        rows_before = self._read(_only(before, within(before.neighbours, x, y, radius)), {},
+                                 False, ({}, None))
+        pending = [row[NB_ID] for row in rows_before
+                   if chebyshev(x, y, row[NB_X], row[NB_Y]) <= radius]
+        if len(integers) != REC_PAIRS + 2 * len(pending):
+            return False
+        for k, neighbour in enumerate(pending):
+            pair = (integers[REC_PAIRS + 2 * k], integers[REC_PAIRS + 2 * k + 1])
+            if pair not in self._pairs(decision, obs, intents, neighbour):
+                return False
+        return True
+
+    def _pairs(self, decision: Decision, obs: Observation, intents, neighbour: int) -> set:
+        """Every ``(s_i, s'_i)`` pair the agent could have written for ``neighbour``."""
+        before = decision.obs
+        stops = _stops(obs)
+        pairs = set()
+        for row in self._readings(before, decision.intents, False, decision.before, False,
+                                  neighbour):
+            entry = (neighbour, row[NB_ROW], row[NB_X], row[NB_Y])
+            after = self._readings(obs, intents, stops, before, False, neighbour) or [None]
+            for following in after:
+                completed = [] if following is None else [following]
+                rec = self._complete(decision, obs, [entry], completed)
+                pairs.add(rec[0][REC_PAIRS:REC_PAIRS + 2])
+        return pairs
+
+
+def _map_fields_taken(expected, integers, values):
+    """``expected`` with destination seeking's states and reward as the record gives them: read
+    on the agent's known map (``agent.known_map``: the walls it saw in its run, the agents it saw
+    parked in the episode), which the world does not follow, they are checked only to fit the
+    table (``SharedTable.accepts``)."""
+    ints_, floats_ = list(expected[0]), list(expected[1])
+    if len(integers) > REC_NEXT_GOAL and len(values) > RF_R_DS:
+        ints_[REC_GOAL], ints_[REC_NEXT_GOAL] = integers[REC_GOAL], integers[REC_NEXT_GOAL]
+        floats_[RF_R_DS] = values[RF_R_DS]
+    return tuple(ints_), tuple(floats_)
