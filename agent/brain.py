@@ -20,6 +20,9 @@ from nnql_swarm.agent.learner import (
     REC_PAIRS, RF_FIELDS, ca_rows, decide, draw_noise, finish, learner_params, reach,
     record_outcome, record_size, state_size, write_updates,
 )
+from nnql_swarm.agent.known_map import (
+    check_cell_order, fresh_map, known_cells, map_size, restore_known,
+)
 from nnql_swarm.protocol.actions import (
     N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y, within,
 )
@@ -35,7 +38,10 @@ class Learner:
 
     The two tables are views of one array, ``Q_DS``'s rows first (:attr:`entries`, flat, is how
     a shared table's updates name its Q-values), a numpy array whether the kernel is compiled or
-    not (``protocol.jit``); the other buffers are Python lists in plain Python."""
+    not (``protocol.jit``); the other buffers are Python lists in plain Python, among them the
+    walls it has seen and its way to its goal (``wmap``, ``agent.known_map``), which the agent
+    derives from the run's map (``config.walls()``) and its own positions: the world sends no
+    walls."""
 
     def __init__(self, config: SwarmConfig) -> None:
         reading = READINGS[config.algo]
@@ -50,6 +56,9 @@ class Learner:
         self.rec = ints([0] * record_size(config.n_bodies))
         self.rec_f = floats([0.0] * RF_FIELDS)
         self.values = floats([0.0] * N_ACTIONS)
+        self.width, self.height = config.width, config.height
+        self.wmap = ints([0] * map_size(config.width, config.height))
+        fresh_map(self.wmap)
 
     @property
     def actions_taken(self) -> int:
@@ -59,10 +68,17 @@ class Learner:
         """``Q_DS`` and ``Q_CA`` as arrays (copies), for checkpoints and pictures."""
         return self.q_ds.copy(), self.q_ca.copy()
 
-    def restore(self, q_ds: np.ndarray, q_ca: np.ndarray, actions_taken: int) -> None:
-        """Take the tables and count of a checkpoint (shapes checked by the caller)."""
+    def known_walls(self) -> list[int]:
+        """The cells (``y * W + x``) of the walls this learner has seen (``agent.known_map``)."""
+        return known_cells(self.wmap, self.width, self.height)
+
+    def restore(self, q_ds: np.ndarray, q_ca: np.ndarray, actions_taken: int,
+                known_walls=()) -> None:
+        """Take the tables, count and known walls of a checkpoint (shapes checked by the
+        caller)."""
         self.q_ds[:], self.q_ca[:] = q_ds, q_ca
         self.state[LS_TAKEN] = int(actions_taken)
+        restore_known(self.wmap, [int(c) for c in known_walls], self.width, self.height)
 
     def forget_pending(self) -> None:
         """Drop the pending transition (its episode was abandoned, e.g. the world restarted)."""
@@ -83,9 +99,13 @@ class NeighbourRows:
         self.config = config
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
         self.reach = reach(config.interaction_radius)
+        walls = config.walls().tolist()
+        check_cell_order(walls)
         self._walls = {y * config.width + x: config.n_agents + k
-                       for k, (x, y) in enumerate(config.walls().tolist())}
+                       for k, (x, y) in enumerate(walls)}
         self._walls_near: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
+        self.wall_x, self.wall_y = ints([x for x, _ in walls]), ints([y for _, y in walls])
+        """The walls' cells, in cell order, as the known map reads them (``agent.known_map``)."""
 
     def __call__(self, obs: Observation, answers: dict[int, int], announcing: bool,
                  previous: dict[int, tuple[int, int]],
@@ -195,19 +215,20 @@ class AgentBrain:
         stops = obs.arrived or obs.episode_end
         near = self._neighbour_rows(obs, {} if stops else answers, not stops)
         nb, m = rows(near, NB_FIELDS), len(near)
+        c, wx, wy = self.config, self._rows.wall_x, self._rows.wall_y
         if stops:
             written = finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
-                             learner.state, learner.state_f, x, y, gx, gy, nb, m, learner.rec,
+                             learner.state, learner.state_f, learner.wmap, wx, wy, 0, len(wx),
+                             obs.step == 0, x, y, gx, gy, nb, m, c.width, c.height, learner.rec,
                              learner.rec_f, not shared)
             action = STAY
         else:
             random_actions, ties = self._noise
-            c = self.config
             action, written = decide(
                 learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
-                learner.state_f, x, y, gx, gy, nb, m, c.width, c.height,
-                random_actions[obs.step], floats(ties[obs.step]), learner.values, learner.rec,
-                learner.rec_f, not shared)
+                learner.state_f, learner.wmap, wx, wy, 0, len(wx), obs.step == 0, x, y, gx, gy,
+                nb, m, c.width, c.height, random_actions[obs.step], floats(ties[obs.step]),
+                learner.values, learner.rec, learner.rec_f, not shared)
         self.learned = (learner.record(),) if shared and written else ()
         return int(action)
 

@@ -1,8 +1,8 @@
 """Q-table checkpoints of one agent, rewritten in place at every episode's end (``protocol.slotfile``:
 a reader sees the old checkpoint or the new, whatever is killed when).
 
-A checkpoint holds both tables, the exploration counter, the agent's generator state and the
-episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
+A checkpoint holds both tables, the exploration counter, the agent's generator state, the walls
+it has seen (``agent.known_map``) and the episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
 from another run shape is refused with a clear error naming the file.
 """
 
@@ -39,7 +39,8 @@ def save(path: Path, brain: AgentBrain, episode: int) -> None:
                           "actions_taken": int(brain.learner.actions_taken), "episode": episode,
                           "agent": brain.agent, "n_agents": brain.config.n_agents,
                           "algo": brain.config.algo,
-                          "rng_state": json.dumps(brain.rng.bit_generator.state)})
+                          "rng_state": json.dumps(brain.rng.bit_generator.state),
+                          "known_walls": np.array(brain.learner.known_walls(), dtype=np.int64)})
 
 
 def read_fields(path: Path, expected: tuple[str, ...]) -> dict:
@@ -107,7 +108,11 @@ def load(path: Path, brain: AgentBrain, episode: int | None = None) -> int:
             f"{path}: belongs to agent {owner[0]} of {owner[1]} ({owner[2]}), "
             f"not agent {mine[0]} of {mine[1]} ({mine[2]})"
         )
-    brain.learner.restore(fields["q_ds"], fields["q_ca"], int(fields["actions_taken"]))
+    try:  # a checkpoint written before agents kept a map knows no wall
+        brain.learner.restore(fields["q_ds"], fields["q_ca"], int(fields["actions_taken"]),
+                              np.asarray(fields.get("known_walls", ())).reshape(-1).tolist())
+    except ValueError as error:
+        raise CheckpointError(f"{path}: {error}") from None
     try:
         brain.rng.bit_generator.state = json.loads(str(fields["rng_state"]))
     except (ValueError, TypeError, KeyError) as error:

@@ -34,6 +34,15 @@ counterpart masks the neighbours' current cells; the random step is filtered too
 edge) does not bootstrap destination seeking from the state it stayed in, so waiting is not
 valued like the move it waits for (docs/swarm.md has the evidence of each).
 
+Destination seeking may read the walls the agent has seen (``agent.known_map``, a buffer
+``wmap`` per agent, kept for the run): its state (``LP_DS_STATE``: the goal's offset, the paper's;
+the next cell of a shortest path on the known map; or the moves that bring the agent nearer on
+it), its reward (``LP_DS_REWARD``: the world's Euclidean ``1/d``, the paper's; ``1/d`` with ``d``
+the path length; or a flat 1, 0.5, 0 for a path that got shorter, stayed, grew), and a detour
+around the agents it saw parked within reach (``LP_DETOUR``). The caller passes the run's walls
+(``wall_x``, ``wall_y``, ``first .. last - 1``, in cell order) and whether the observation is
+an episode's first (``starts``).
+
 Completing a transition writes a *learning record* (``rec``, ``rec_f``), applied by
 :func:`apply_record`: at once for an independent learner, or, where a swarm shares one table, in
 agent-id order before the next tick: by the simulator to its one table (``sim.swarm``), by the
@@ -51,6 +60,7 @@ import math
 
 import numpy as np
 
+from nnql_swarm.agent.known_map import path_length, progress_moves, track, waypoint_move
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, move_of, offset_state, target_x, target_y
 from nnql_swarm.protocol.jit import kernel
 
@@ -62,10 +72,23 @@ UNKNOWN_MOVE = N_ACTIONS
 """The move code of a neighbour whose intent is unknown (``READ_DIR``)."""
 
 LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP = 0, 1, 2, 3, 4
-LP_STILL_TERMINAL, LP_MEET_ONLY = 5, 6
-LP_FIELDS = 7
-FP_ALPHA, FP_GAMMA, FP_BETA = 0, 1, 2
-FP_FIELDS = 3
+LP_STILL_TERMINAL, LP_MEET_ONLY, LP_DS_STATE, LP_DS_REWARD, LP_DETOUR = 5, 6, 7, 8, 9
+LP_FIELDS = 10
+FP_ALPHA, FP_GAMMA, FP_BETA, FP_STAY_REWARD = 0, 1, 2, 3
+FP_FIELDS = 4
+
+DS_GOAL, DS_WAYPOINT, DS_PROGRESS = 0, 1, 2
+DS_STATES = {"goal": DS_GOAL, "waypoint": DS_WAYPOINT, "progress": DS_PROGRESS}
+"""Destination seeking's state (``LP_DS_STATE``): the goal's offset (the paper's); the offset of
+the next cell of a shortest path on the agent's known map (``agent.known_map``), one of the four
+cells next to it; or the set of moves that bring it nearer on that map (4 bits, 15 states)."""
+
+REWARD_WORLD, REWARD_PATH, REWARD_FLAT = 0, 1, 2
+DS_REWARDS = {"euclid": REWARD_WORLD, "path": REWARD_PATH, "flat": REWARD_FLAT}
+"""Destination seeking's reward (``LP_DS_REWARD``): the world's (the paper's ``1/d``, ``0.5/d``,
+0 with ``d`` the Euclidean distance); the same with ``d`` the path length on the known map; or a
+flat progress reward on that map, 1 nearer, the stay reward (0.5) for the same length, 0 farther.
+The goal reward on arriving is the world's in every case."""
 
 NB_ID, NB_X, NB_Y, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_STATE_X, NB_STATE_Y = 0, 1, 2, 3, 4, 5, 6, 7
 NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_ROW = 8, 9, 10, 11
@@ -74,11 +97,14 @@ NB_FIELDS = 12
 for (its cell where unknown), the cell its state is read at (the announced cell n steps ahead;
 the next cell for n = 1), whether it is parked on its goal, its cell a tick ago (-1 if unseen);
 and its Q_CA row, which :func:`read_rows` writes for the steps that read it."""
+assert (NB_X, NB_Y, NB_PARKED) == (1, 2, 8), "agent.known_map.see_parked reads them by number"
 
-LS_TAKEN, LS_PENDING, LS_GOAL, LS_ACTION, LS_TERMINAL, LS_COUNT, LS_NEIGHBOURS = 0, 1, 2, 3, 4, 5, 6
+LS_TAKEN, LS_PENDING, LS_GOAL, LS_ACTION, LS_TERMINAL, LS_COUNT, LS_X, LS_Y = 0, 1, 2, 3, 4, 5, 6, 7
+LS_NEIGHBOURS = 8
 LS_PER_NEIGHBOUR = 4
-"""A learner's state: actions taken in its life, whether a transition is pending, its goal state,
-action and whether it ended on the goal, and per neighbour of Eq. 6: id, table row, cell."""
+"""A learner's state: actions taken in its life, whether a transition is pending, its
+destination-seeking state, action and whether it ended on the goal, the cell it decided in, and
+per neighbour of Eq. 6: id, table row, cell."""
 LF_R_DS, LF_R_CA = 0, 1
 LF_FIELDS = 2
 
@@ -86,9 +112,11 @@ REC_GOAL, REC_ACTION, REC_TERMINAL, REC_NEXT_GOAL, REC_BLOCKS, REC_COUNT = 0, 1,
 REC_PAIRS = 6
 RF_R_DS, RF_R_CA = 0, 1
 RF_FIELDS = 2
-"""A learning record: Eq. 9's ``s, a, terminal, s'``, the blocks ``s'`` bootstraps over, and per
-neighbour a pair of Q_CA rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no bootstrap); its
-floats are the two rewards."""
+"""A learning record: Eq. 9's ``s, a, terminal, s'`` (destination seeking's states, as
+``LP_DS_STATE`` reads them), the blocks ``s'`` bootstraps over, and per neighbour a pair of Q_CA
+rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no bootstrap); its floats are the two rewards
+(destination seeking's as ``LP_DS_REWARD`` reads it: the world's, or the learner's own from its
+known map)."""
 
 
 def learner_params(config) -> tuple[list[int], list[float]]:
@@ -102,9 +130,13 @@ def learner_params(config) -> tuple[list[int], list[float]]:
     params[LP_RANDOM_STEP] = config.random_step
     params[LP_STILL_TERMINAL] = int(config.still_terminal)
     params[LP_MEET_ONLY] = int(config.meet_only)
+    params[LP_DS_STATE] = DS_STATES[config.ds_state]
+    params[LP_DS_REWARD] = DS_REWARDS[config.ds_reward]
+    params[LP_DETOUR] = reach(config.interaction_radius) if config.detour else -1
     params_f = [0.0] * FP_FIELDS
     params_f[FP_ALPHA], params_f[FP_GAMMA] = config.alpha, config.gamma
     params_f[FP_BETA] = config.beta
+    params_f[FP_STAY_REWARD] = config.stay_reward
     return params, params_f
 
 
@@ -254,20 +286,63 @@ def row_max(table, row):
 
 
 @kernel
-def complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f):
+def uses_map(params):
+    """Whether destination seeking reads the known map (``agent.known_map``)."""
+    return params[LP_DS_STATE] != DS_GOAL or params[LP_DS_REWARD] != REWARD_WORLD
+
+
+@kernel
+def ds_state(params, wmap, ox, oy, gx, gy, width, height):
+    """Destination seeking's state at ``(ox, oy)`` (``LP_DS_STATE``; the map's field current)."""
+    reading = params[LP_DS_STATE]
+    if reading == DS_GOAL:
+        return offset_state(gx - ox, gy - oy)
+    if reading == DS_PROGRESS:
+        return progress_moves(wmap, ox, oy, width, height)
+    move = waypoint_move(wmap, ox, oy, gx, gy, width, height)
+    return offset_state(target_x(ox, move, width) - ox, target_y(oy, move, height) - oy)
+
+
+@kernel
+def ds_reward(params, params_f, wmap, fx, fy, ox, oy, width, height, world_reward, arrived):
+    """The destination-seeking reward of the move from ``(fx, fy)`` to ``(ox, oy)``
+    (``LP_DS_REWARD``): the world's, or read from the path lengths on the known map."""
+    kind = params[LP_DS_REWARD]
+    if kind == REWARD_WORLD or arrived:
+        return world_reward
+    before = path_length(wmap, fx, fy, width, height)
+    after = path_length(wmap, ox, oy, width, height)
+    if after <= 0 or before < 0 or after > before:
+        return 0.0
+    if after < before:
+        return 1.0 if kind == REWARD_FLAT else 1.0 / after
+    stay = params_f[FP_STAY_REWARD]
+    return stay if kind == REWARD_FLAT else stay / after
+
+
+@kernel
+def complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width, height,
+             rec, rec_f):
     """Write the pending transition's learning record, ``s'`` read from this observation
-    (own cell, goal, neighbour rows with their ``NB_ROW`` read); False if nothing was pending."""
+    (own cell, goal, neighbour rows with their ``NB_ROW`` read, the known map current); False if
+    nothing was pending."""
     if state[LS_PENDING] == 0:
         return False
     reading = params[LP_READING]
     rec[REC_GOAL] = state[LS_GOAL]
     rec[REC_ACTION] = state[LS_ACTION]
     rec[REC_TERMINAL] = state[LS_TERMINAL]
-    rec[REC_NEXT_GOAL] = offset_state(gx - ox, gy - oy)
-    if params[LP_STILL_TERMINAL] != 0 and rec[REC_NEXT_GOAL] == rec[REC_GOAL]:
-        rec[REC_TERMINAL] = 1
+    rec[REC_NEXT_GOAL] = ds_state(params, wmap, ox, oy, gx, gy, width, height)
+    if params[LP_STILL_TERMINAL] != 0:
+        if params[LP_DS_STATE] == DS_GOAL:
+            still = rec[REC_NEXT_GOAL] == rec[REC_GOAL]
+        else:  # a coarse state stays the same along a straight path: ask the cell
+            still = ox == state[LS_X] and oy == state[LS_Y]
+        if still:
+            rec[REC_TERMINAL] = 1
     rec[REC_BLOCKS] = N_ACTIONS if reading == READ_DAQL else 1
-    rec_f[RF_R_DS] = state_f[LF_R_DS]
+    rec_f[RF_R_DS] = ds_reward(params, params_f, wmap, state[LS_X], state[LS_Y], ox, oy, width,
+                               height, state_f[LF_R_DS], state[LS_TERMINAL] != 0)
     rec_f[RF_R_CA] = state_f[LF_R_CA]
     count = state[LS_COUNT]
     j = 0  # the pending neighbours and the rows are both in id order: walk them together
@@ -340,7 +415,7 @@ def shield_mask(reading, ox, oy, nb, m, width, height):
 
 
 @kernel
-def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, height,
+def choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, width, height,
            random_action, ties, values):
     """Eq. 6-8 (and the random step): the action, with the transition it starts left pending.
     The five actions' sums are spelled out: it is the agent's hot path in plain Python."""
@@ -366,7 +441,7 @@ def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, he
         state[at + 2] = nb[j][NB_X]
         state[at + 3] = nb[j][NB_Y]
         count += 1
-    goal = offset_state(gx - ox, gy - oy)
+    goal = ds_state(params, wmap, ox, oy, gx, gy, width, height)
     beta = params_f[FP_BETA]
     rest = 1.0 - beta
     ds = q_ds[goal]
@@ -390,6 +465,8 @@ def choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, he
     state[LS_GOAL] = goal
     state[LS_ACTION] = action
     state[LS_COUNT] = count
+    state[LS_X] = ox
+    state[LS_Y] = oy
     return action
 
 
@@ -397,26 +474,47 @@ assert N_ACTIONS == 5, "choose spells out five actions"
 
 
 @kernel
-def decide(q_ds, q_ca, params, params_f, state, state_f, ox, oy, gx, gy, nb, m, width, height,
-           random_action, ties, values, rec, rec_f, apply_now):
-    """Complete the pending transition (its record applied at once if ``apply_now``), then
-    choose. Returns the action and whether a record was written."""
+def observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb,
+                m, starts):
+    """Where destination seeking reads the known map: the walls ``first .. last - 1`` of
+    ``wall_x``, ``wall_y`` in view of ``(ox, oy)`` learned, the parked neighbours within reach
+    taken as obstacles for the rest of the episode (``LP_DETOUR``; ``starts``: this observation
+    is an episode's first), the distance field to the goal made current
+    (``agent.known_map.track``)."""
+    if uses_map(params):
+        track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
+              params[LP_DETOUR], starts)
+
+
+@kernel
+def decide(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first, last,
+           starts, ox, oy, gx, gy, nb, m, width, height, random_action, ties, values, rec, rec_f,
+           apply_now):
+    """Learn the walls in view (:func:`observe_map`; ``starts``: the episode's first
+    observation), complete the pending transition (its record applied at once if
+    ``apply_now``), then choose. Returns the action and whether a record was written."""
+    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
+                starts)
     read_rows(params, ox, oy, nb, m)
-    written = complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f)
+    written = complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width,
+                       height, rec, rec_f)
     if written and apply_now:
         apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
-    action = choose(q_ds, q_ca, params, params_f, state, ox, oy, gx, gy, nb, m, width, height,
-                    random_action, ties, values)
+    action = choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, width,
+                    height, random_action, ties, values)
     return action, written
 
 
 @kernel
-def finish(q_ds, q_ca, params, params_f, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f,
-           apply_now):
+def finish(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first, last,
+           starts, ox, oy, gx, gy, nb, m, width, height, rec, rec_f, apply_now):
     """Complete the pending transition of a learner that stops (arrived, or the episode ended);
     its neighbours' rows carry no intent then. Returns whether a record was written."""
+    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
+                starts)
     read_rows(params, ox, oy, nb, m)
-    written = complete(params, state, state_f, ox, oy, gx, gy, nb, m, rec, rec_f)
+    written = complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width,
+                       height, rec, rec_f)
     if written and apply_now:
         apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
     return written

@@ -30,8 +30,8 @@ from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world, threads
 from nnql_swarm.world.metrics import EpisodeWriter
 
-VARIANTS = ("ql", "nnql", "best-ql", "best-nnql", "shield-ql", "shield-nnql", "nnql-n2", "daql",
-            "oracle")
+VARIANTS = ("ql", "nnql", "best-ql", "best-nnql", "shield-ql", "shield-nnql", "path-nnql",
+            "nnql-n2", "daql", "oracle")
 """The table's rows, in order."""
 
 COMPARED_WITH = {"nnql": "ql", "best-nnql": "best-ql", "shield-nnql": "shield-ql",
@@ -64,6 +64,22 @@ def ablation_presets() -> dict[str, dict]:
     presets["shield-nnql-full-chain"] = {**shield, "wait_rule": paper["wait_rule"],
                                          "interaction_radius": paper["interaction_radius"]}
     return presets
+
+
+def walls_presets() -> dict[str, dict]:
+    """The default (``path-nnql``) with each of its options beyond ``shield-nnql`` taken back in
+    turn, or read another way, beside ``shield-nnql`` (all taken back) and ``shield-ql``."""
+    path, shield = PRESETS["path-nnql"], PRESETS["shield-nnql"]
+    return {
+        "shield-ql": PRESETS["shield-ql"], "shield-nnql": shield, "path-nnql": path,
+        "path-nnql-goal-state": {**path, "ds_state": "goal"},
+        "path-nnql-waypoint-state": {**path, "ds_state": "waypoint"},
+        "path-nnql-path-reward": {**path, "ds_reward": "path"},
+        "path-nnql-euclid-reward": {**path, "ds_reward": "euclid"},
+        "path-nnql-no-detour": {**path, "detour": False},
+        "path-nnql-beta-05": {**path, "beta": shield["beta"]},
+        "path-nnql-beta-07": {**path, "beta": 0.7},
+    }
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from nnql_swarm.experiment.report import (
 )
 from nnql_swarm.experiment.swarm import (
     TABLE_FILES, VARIANTS, SwarmExperiment, ablation_presets, curves, run_experiment, table_rows,
-    write_runs, write_tables,
+    walls_presets, write_runs, write_tables,
 )
 from nnql_swarm.protocol.config import PRESETS
 from nnql_swarm.protocol.maps import run_map
@@ -285,6 +285,9 @@ def build_swarm_parser() -> OneLineParser:
     add("--ablation", action="store_true",
         help="instead of the variants: best-nnql with each of its options beyond the paper "
              "taken back in turn, beside ql, nnql and best-ql")
+    add("--walls-ablation", action="store_true",
+        help="instead of the variants: the default (path-nnql) with each of its options beyond "
+             "shield-nnql taken back in turn, beside shield-ql and shield-nnql")
     add("--out", type=Path, default=None, metavar="DIR",
         help="output directory (default runs/swarm-<time>)")
     add("--force", action="store_true", help="overwrite results already in --out")
@@ -298,8 +301,11 @@ def run_swarm(argv: list[str]) -> Path:
     """The swarm experiment's command line: run, then write every result file."""
     parser = build_swarm_parser()
     args = parser.parse_args(argv)
-    presets = ablation_presets() if args.ablation else dict(PRESETS)
-    variants = tuple(presets) if args.ablation else args.variants
+    if args.ablation and args.walls_ablation:
+        parser.error("--ablation and --walls-ablation are two tables: choose one")
+    presets = ablation_presets() if args.ablation else \
+        walls_presets() if args.walls_ablation else dict(PRESETS)
+    variants = tuple(presets) if args.ablation or args.walls_ablation else args.variants
     grid = {"width": args.grid[0], "height": args.grid[1]}
     if args.map is not None:
         if args.obstacle_density or args.grid != (SwarmExperiment.width, SwarmExperiment.height):

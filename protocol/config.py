@@ -22,6 +22,9 @@ ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
 Action Q-learning (a baseline), and the oracle: a reference planner (PIBT, ``sim.oracle``; not a
 lower bound, which ``shortest_sum`` is; in-process only)."""
 NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
+DS_STATE_NAMES = ("goal", "waypoint", "progress")
+DS_REWARD_NAMES = ("euclid", "path", "flat")
+"""Destination seeking's state and reward (``agent.learner``: ``DS_STATES``, ``DS_REWARDS``)."""
 MAX_LOOKAHEAD = 3
 
 START_S_PER_AGENT = 1.0
@@ -38,13 +41,14 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
 
 LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
                    "known_state", "shared", "shield", "lookahead", "still_terminal",
-                   "stay_reward")
+                   "stay_reward", "ds_state", "ds_reward", "detour")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
 PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
-         "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5}
+         "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
+         "ds_state": "goal", "ds_reward": "euclid", "detour": False}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -54,6 +58,12 @@ BEST = {"interaction_radius": 2, "optimistic": 25.0, "shared": True, "still_term
 neighbours within collision reach only, optimistic tables, one table for the swarm, no future
 learned from a step that went nowhere, a gentler learning rate."""
 
+PATH = {"ds_state": "progress", "ds_reward": "flat", "detour": True, "beta": 0.9}
+"""Destination seeking on the walls an agent has seen (docs/swarm.md, "Walls"): its state the
+moves that bring it nearer on its known map, a flat reward for getting nearer, the path around
+the agents parked within reach, and destination seeking weighed 0.9 in Eq. 7 (its flat rewards
+are small beside collision avoidance's)."""
+
 PRESETS: dict[str, dict] = {
     "ql": {**PAPER, "algo": "ql"},
     "nnql": PAPER,
@@ -62,6 +72,8 @@ PRESETS: dict[str, dict] = {
     "shield-ql": {**PAPER, **BEST, "algo": "ql", "shield": True, "known_state": True},
     "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
                     "wait_rule": "meet"},
+    "path-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
+                  "wait_rule": "meet", **PATH},
     "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
     "daql": {**PAPER, **BEST, "algo": "daql"},
     "oracle": {**PAPER, "algo": "oracle"},
@@ -69,9 +81,10 @@ PRESETS: dict[str, dict] = {
 """Named learning presets: the rows of the swarm experiment, and ``launch/swarm.py --preset``."""
 assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())
 
-DEFAULT_PRESET = "shield-nnql"
+DEFAULT_PRESET = "path-nnql"
 """The learning options of a swarm run unless told otherwise: the best of the swarm experiment
-(docs/swarm.md: every agent arrives, none collide, after about 100 episodes)."""
+(docs/swarm.md: the paper's nnQL with the shield, destination seeking on the walls each agent
+has seen; on an open grid every agent arrives and none collide after about 100 episodes)."""
 _DEFAULT = PRESETS[DEFAULT_PRESET]
 
 
@@ -120,6 +133,18 @@ class SwarmConfig:
                             "steps ahead (in-process only for n > 1)", metavar="N")
     still_terminal: bool = option(_DEFAULT["still_terminal"], "a step that went nowhere ends its destination-seeking "
                                   "return (no bootstrap from the state it stayed in)")
+    ds_state: str = option(_DEFAULT["ds_state"], "destination seeking's state: the goal's "
+                           "offset (the paper's), the next cell of a shortest path on the walls "
+                           "the agent has seen (waypoint), or the moves that bring it nearer "
+                           "on that map (progress)", choices=DS_STATE_NAMES)
+    ds_reward: str = option(_DEFAULT["ds_reward"], "destination seeking's reward: 1/d, 0.5/d, 0 "
+                            "with d the Euclidean distance to the goal (euclid, the paper's), "
+                            "the same with d the path length on the walls the agent has seen "
+                            "(path), or 1, 0.5, 0 for a path that got shorter, stayed, grew "
+                            "(flat)", choices=DS_REWARD_NAMES)
+    detour: bool = option(_DEFAULT["detour"], "the path on the known map (--ds-state, "
+                          "--ds-reward) goes around the agents parked within reach, where "
+                          "another way is known")
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
                                      "largest free region)", metavar="P")
@@ -161,6 +186,12 @@ class SwarmConfig:
             (self.stay_reward >= 0, "the stay reward must be non-negative"),
             (1 <= self.lookahead <= MAX_LOOKAHEAD, f"the lookahead n must be 1..{MAX_LOOKAHEAD}"),
             (self.lookahead == 1 or self.algo in ("nnql",), "a lookahead n > 1 needs --algo nnql"),
+            (self.ds_state in DS_STATE_NAMES,
+             f"the destination-seeking state must be one of {', '.join(DS_STATE_NAMES)}"),
+            (self.ds_reward in DS_REWARD_NAMES,
+             f"the destination-seeking reward must be one of {', '.join(DS_REWARD_NAMES)}"),
+            (self.lookahead == 1 or self.ds_state == "goal",
+             "a lookahead n > 1 plans on the goal's offset: it needs --ds-state goal"),
             (self.tick_deadline_s > 0, "the tick deadline must be positive"),
             (0 <= self.obstacle_density <= MAX_DENSITY,
              f"the obstacle density must be 0..{MAX_DENSITY}"),
@@ -250,6 +281,9 @@ class SwarmConfig:
     def from_json(text: str) -> "SwarmConfig":
         data = json.loads(text)
         data.setdefault("wait_rule", "reach")  # written before the field: all in reach waited
+        data.setdefault("ds_state", "goal")  # written before the fields: the paper's
+        data.setdefault("ds_reward", "euclid")
+        data.setdefault("detour", False)
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:

@@ -49,6 +49,9 @@ class SimulatedLearner:
     def actions_taken(self) -> int:
         return self._batch.actions_taken(0, self._agent)
 
+    def known_walls(self) -> list[int]:
+        return self._batch.known_walls(0, self._agent)
+
 
 @dataclass
 class SimulatedAgent:

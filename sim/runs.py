@@ -19,13 +19,14 @@ from nnql_swarm.agent.learner import (
     LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise, learner_params,
     record_size, state_size,
 )
+from nnql_swarm.agent.known_map import check_cell_order, fresh_map, known_cells, map_size
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
-    OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
+    OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_WALLS, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
     OUT_SHORTEST, OUT_VIOLATIONS, TR_FIELDS, run_episode,
 )
 from nnql_swarm.world.rules import (
@@ -129,11 +130,16 @@ class Batch:
         self.options[:, OPT_SHARED] = [run.shared for run in runs]
         self.options[:, OPT_LOOKAHEAD] = [run.lookahead for run in runs]
         self.options[:, OPT_ORACLE] = [run.algo == "oracle" for run in runs]
+        self.options[:, OPT_WALLS] = int(w.scripted > 0 and not w.paper)
         init = np.array([run.optimistic for run in runs])[:, None, None, None]
         self.q_ds = np.broadcast_to(init, (r, learners, N_STATES, N_ACTIONS)).copy()
         self.q_ca = np.broadcast_to(init, (r, learners, rows, N_ACTIONS)).copy()
         self.state = np.zeros((r, learners, state_size(n)), dtype=np.int64)
         self.state_f = np.zeros((r, learners, LF_FIELDS))
+        self.wmap = np.zeros((r, learners, map_size(w.width, w.height)), dtype=np.int64)
+        for run_maps in self.wmap:
+            for agent_map in run_maps:
+                fresh_map(agent_map)
         self.tick = np.zeros(r, dtype=np.int64)
         # Runs of one seed draw the same noise (the same streams, the same draws each episode).
         self.generators = {seed: [stream_rng(seed, AGENT_STREAM, i) for i in range(learners)]
@@ -176,7 +182,8 @@ class Batch:
                     draw_noise(rng, seed_actions[s, i], seed_ties[s, i])
             run_episode(w.bodies, w.learners, w.width, w.height, w.max_steps, w.count_swaps,
                         w.goal_reward, w.stay_reward, self.params, self.params_f, self.options,
-                        self.q_ds, self.q_ca, self.state, self.state_f, self._seed_of_run,
+                        self.q_ds, self.q_ca, self.state, self.state_f, self.wmap,
+                        self._seed_of_run,
                         starts, goals, scripts, paths, seed_actions, seed_ties, self.tick,
                         self.record,
                         self.trace,
@@ -197,6 +204,11 @@ class Batch:
         rows = ca_rows(READINGS.get(self.runs[run].algo, 0), self.runs[run].known_state)
         return self.q_ds[run, t], self.q_ca[run, t, :rows]
 
+    def known_walls(self, run: int, agent: int) -> list[int]:
+        """The cells of the walls an agent of a run has seen (``agent.known_map``)."""
+        w = self.world
+        return known_cells(self.wmap[run, agent], w.width, w.height)
+
     def actions_taken(self, run: int, agent: int) -> int:
         return int(self.state[run, agent, LS_TAKEN])
 
@@ -215,6 +227,7 @@ class Batch:
                 sc = swarm_episode(seed, episode, w.width, w.height, w.learners,
                                    w.obstacle_density, w.map_rows, w.scenario)
                 walls = layout(seed, w.width, w.height, w.obstacle_density, w.map_rows)[0]
+                check_cell_order(walls.tolist())
                 starts.append(np.concatenate([sc.starts, walls]))
                 goals.append(sc.goals)
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))

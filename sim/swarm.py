@@ -36,10 +36,11 @@ ORACLE_SCRATCH = 10
 queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal), a
 slot per grid cell each."""
 
-OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE = 0, 1, 2
-OPT_FIELDS = 3
+OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS = 0, 1, 2, 3
+OPT_FIELDS = 4
 """Per-run options of the swarm: one table for all agents; the steps an announcement covers
-(n of nnQL); the oracle instead of learners."""
+(n of nnQL); the oracle instead of learners; whether the scripted bodies are walls (which a
+learner's known map, ``agent.known_map``, learns as it sees them)."""
 
 OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS = 0, 1, 2
 OUT_FIELDS = 3
@@ -116,7 +117,7 @@ def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, 
 
 @batch_kernel
 def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
-                params, params_f, options, q_ds, q_ca, state, state_f, seed_of_run,
+                params, params_f, options, q_ds, q_ca, state, state_f, wmap, seed_of_run,
                 starts, goals, scripts, paths, random_actions, ties, tick,
                 record, trace,
                 x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
@@ -131,7 +132,7 @@ def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward,
         s = seed_of_run[r]
         _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
                  params[r], params_f[r], options[r], q_ds[r], q_ca[r], state[r], state_f[r],
-                 starts[s], goals[s], scripts[s], paths[s], random_actions[s], ties[s], tick,
+                 wmap[r], starts[s], goals[s], scripts[s], paths[s], random_actions[s], ties[s], tick,
                  record, trace[r],
                  x[r], y[r], prev_x[r], prev_y[r], goal_x[r], goal_y[r], learns, arrived[r],
                  actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
@@ -141,7 +142,7 @@ def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward,
 
 @kernel
 def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
-             params, params_f, options, q_ds, q_ca, state, state_f,
+             params, params_f, options, q_ds, q_ca, state, state_f, wmap,
              starts, goals, scripts, paths, random_actions, ties, ticks,
              record, trace,
              x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
@@ -151,6 +152,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
     tables = 1 if shared else learners
     lookahead = options[OPT_LOOKAHEAD]
     oracle = options[OPT_ORACLE] != 0
+    last_wall = n if options[OPT_WALLS] != 0 else learners  # walls: bodies learners .. n - 1
     alpha, gamma = params_f[FP_ALPHA], params_f[FP_GAMMA]
     shortest = 0
     for i in range(n):
@@ -212,13 +214,15 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
                                goal_x, goal_y, width, height, nb)
             if stops:
                 written = finish(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
-                                 x[i], y[i], goal_x[i], goal_y[i], nb, m, rec[i], rec_f[i],
+                                 wmap[i], x, y, learners, last_wall, step == 0, x[i], y[i],
+                                 goal_x[i], goal_y[i], nb, m, width, height, rec[i], rec_f[i],
                                  not shared)
                 actions[i] = STAY
             else:
                 actions[i], written = decide(
-                    q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], x[i], y[i],
-                    goal_x[i], goal_y[i], nb, m, width, height, random_actions[i, step],
+                    q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], wmap[i], x, y,
+                    learners, last_wall, step == 0, x[i], y[i], goal_x[i], goal_y[i], nb, m,
+                    width, height, random_actions[i, step],
                     ties[i, step], values, rec[i], rec_f[i], not shared)
             pending_rec[i] = shared and written
             decided[i] = True

@@ -203,7 +203,7 @@ def test_swarm_experiment_writes_its_table_runs_curves_and_recording(tmp_path):
     assert result.returncode == 0, result.stderr
     rows = read_csv(out / "swarm_table.csv")
     assert [r["variant"] for r in rows] == ["ql", "nnql", "best-ql", "best-nnql", "shield-ql",
-                                            "shield-nnql", "nnql-n2", "daql", "oracle"]
+                                            "shield-nnql", "path-nnql", "nnql-n2", "daql", "oracle"]
     for column in ("variant", "seeds", "arrival_4_8", "arrival_16_20", "steps_ratio_16_20",
                    "collisions", "collisions_ci_low", "collisions_ci_high", "decrease_vs_ql_pct"):
         assert column in rows[0]

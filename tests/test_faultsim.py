@@ -163,12 +163,13 @@ def test_ten_thousand_schedules_pass(capsys):
 @pytest.mark.parametrize("algo, grid, walls", [
     ("nnql", (11, 11), 0.0), ("nnql", (30, 14), 0.0), ("ql", (11, 11), 0.0),
     ("nnql-dir", (16, 16), 0.0), ("nnql", (14, 14), 0.25), ("daql", (14, 14), 0.25),
-    ("ql", (24, 24), 0.2)])
+    ("ql", (24, 24), 0.2), ("path-nnql", (19, 19), 0.2), ("shield-nnql", (14, 14), 0.25)])
 def test_without_faults_the_simulator_gives_the_in_process_run_file_for_file(tmp_path, algo, grid,
                                                                              walls):
+    learning = PRESETS[algo] if algo in PRESETS else dict(
+        algo=algo, interaction_radius=10 if algo == "daql" else 2)
     config = SwarmConfig(run_id="parity", n_agents=8, episodes=4, max_steps=40, seed=3,
-                         algo=algo, width=grid[0], height=grid[1], obstacle_density=walls,
-                         interaction_radius=10 if algo == "daql" else 2)
+                         width=grid[0], height=grid[1], obstacle_density=walls, **learning)
     schedule = Schedule(3, config, latency=(50e-6, 400e-6), faults=())
     (tmp_path / "sim").mkdir()
     outcome = SimSwarm(schedule, tmp_path / "sim", checkpoint_all=True, write_metrics=True).run()
@@ -187,6 +188,7 @@ def test_without_faults_the_simulator_gives_the_in_process_run_file_for_file(tmp
         b = checkpoint.read_fields(checkpoint.checkpoint_path(tmp_path / "local" / "checkpoints",
                                                               agent), ())
         assert np.array_equal(a["q_ds"], b["q_ds"]) and np.array_equal(a["q_ca"], b["q_ca"])
+        assert np.array_equal(a["known_walls"], b["known_walls"])
 
 
 def test_one_seed_gives_one_history():

@@ -12,6 +12,7 @@ from nnql_swarm.agent.learner import (
     REC_COUNT, REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, apply_record, ca_row, ca_rows, choose,
     decide, finish, planned_cell, record_outcome, record_size, shield_mask, state_size,
 )
+from nnql_swarm.agent.known_map import fresh_map, map_size
 from nnql_swarm.experiment.paper import PaperSettings, RunSpec, run_batch
 from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, N_STATES, RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
@@ -39,7 +40,7 @@ class Agent:
         self.params = np.zeros(LP_FIELDS, np.int64)
         self.params[[LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP]] = [
             reading, known_state, radius, shield, k]
-        self.params_f = np.array([alpha, gamma, beta])
+        self.params_f = np.array([alpha, gamma, beta, 0.5])
         assert self.params_f.size == FP_FIELDS
         self.q_ds = np.zeros((N_STATES, N_ACTIONS))
         self.q_ca = np.zeros((ca_rows(reading, known_state), N_ACTIONS))
@@ -48,6 +49,9 @@ class Agent:
         self.rec = np.zeros(record_size(neighbours + 1), np.int64)
         self.rec_f = np.zeros(RF_FIELDS)
         self.values = np.zeros(N_ACTIONS)
+        self.wmap = np.zeros(map_size(SIZE, SIZE), np.int64)
+        fresh_map(self.wmap)
+        self.walls = np.zeros((2, 0), np.int64)  # wall_x, wall_y
 
     def rows(self, neighbours):
         nb = np.zeros((max(len(neighbours), 1), NB_FIELDS), np.int64)
@@ -58,7 +62,9 @@ class Agent:
     def decide(self, own, goal, neighbours=(), random_action=UP, ties=PREFER_STAY):
         nb, m = self.rows(neighbours)
         action, _ = decide(self.q_ds, self.q_ca, self.params, self.params_f, self.state,
-                           self.state_f, *own, *goal, nb, m, SIZE, SIZE, random_action,
+                           self.state_f, self.wmap, *self.walls, 0, self.walls.shape[1], False,
+                           *own,
+                           *goal, nb, m, SIZE, SIZE, random_action,
                            np.asarray(ties, float), self.values, self.rec, self.rec_f, True)
         return action
 
@@ -68,7 +74,9 @@ class Agent:
     def finish(self, own, goal, neighbours=()):
         nb, m = self.rows(neighbours)
         return finish(self.q_ds, self.q_ca, self.params, self.params_f, self.state, self.state_f,
-                      *own, *goal, nb, m, self.rec, self.rec_f, True)
+                      self.wmap, *self.walls, 0, self.walls.shape[1], False, *own, *goal, nb, m,
+                      SIZE,
+                      SIZE, self.rec, self.rec_f, True)
 
     def row(self, own, nb_row):
         nb, _ = self.rows([nb_row])
@@ -269,7 +277,8 @@ def test_a_random_step_below_one_is_refused():
 def test_choose_leaves_the_transition_pending_for_the_next_observation():
     agent = Agent()
     nb, m = agent.rows([neighbour(1, 3, 3)])
-    choose(agent.q_ds, agent.q_ca, agent.params, agent.params_f, agent.state, 1, 1, 5, 5, nb, m,
+    choose(agent.q_ds, agent.q_ca, agent.params, agent.params_f, agent.state, agent.wmap, 1, 1, 5,
+           5, nb, m,
            SIZE, SIZE, UP, PREFER_STAY, agent.values)
     assert agent.state[LS_PENDING] == 1
     assert not agent.q_ds.any() and not agent.q_ca.any(), "nothing is learned before s' is seen"

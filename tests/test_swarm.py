@@ -92,6 +92,7 @@ def test_in_process_and_distributed_runs_are_identical(distributed_run, tmp_path
         a = checkpoint.read_fields(checkpoint.checkpoint_path(local / "checkpoints", agent), ())
         b = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
         assert np.array_equal(a["q_ds"], b["q_ds"]) and np.array_equal(a["q_ca"], b["q_ca"])
+        assert np.array_equal(a["known_walls"], b["known_walls"])
 
 
 def test_ql_swarm_runs_distributed(tmp_path):
@@ -165,14 +166,16 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
 @pytest.mark.parametrize("preset, topology, grid", [
     ("nnql", "auto", ()), ("best-nnql", "auto", ()), ("shield-nnql", "hub-peer", ()),
     ("shield-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25")),
+    ("path-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25")),
     ("best-nnql", "auto", ("--wait-rule", "meet"))])
 def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, grid,
                                                                    tmp_path):
     """The paper's reading (each agent its own tables) and the best options (one table shared
     over Zenoh, the direction-aware reading), the default with every agent a client of the
-    world (the layout of 32 agents and more), a grid with walls, and the direction-aware
+    world (the layout of 32 agents and more), a grid with walls, the default (``path-nnql``:
+    destination seeking on the walls each agent has seen) there, and the direction-aware
     reading under the ``meet`` rule (a parked neighbour known to stay without an answer): the
-    same episodes and tables either way."""
+    same episodes, tables and known walls either way."""
     options = ("--agents", "6", "--episodes", "4", "--max-steps", "30", "--seed", "2",
                "--preset", preset, "--no-record", "--run-id", preset, *grid)
     distributed = run_swarm(tmp_path / "dist", *options, "--topology", topology)
@@ -183,3 +186,7 @@ def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topol
     tables = [checkpoint.read_fields(checkpoint.checkpoint_path(tmp_path / side / "checkpoints", 0),
                                      ()) for side in ("dist", "local")]
     assert np.array_equal(tables[0]["q_ca"], tables[1]["q_ca"])
+    assert np.array_equal(tables[0]["q_ds"], tables[1]["q_ds"])
+    assert np.array_equal(tables[0]["known_walls"], tables[1]["known_walls"])
+    if grid and preset == "path-nnql":
+        assert len(tables[0]["known_walls"]) > 0, "the walls it saw"

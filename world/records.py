@@ -36,9 +36,11 @@ from dataclasses import dataclass
 
 from nnql_swarm.agent.brain import NeighbourRows
 from nnql_swarm.agent.learner import (
-    LF_FIELDS, LP_READING, LS_ACTION, LS_COUNT, LS_GOAL, LS_NEIGHBOURS, LS_PENDING,
-    LS_PER_NEIGHBOUR, NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y, READ_DAQL, REC_COUNT, REC_PAIRS,
-    RF_FIELDS, complete, learner_params, read_rows, record_outcome, record_size, state_size,
+    DS_GOAL, LF_FIELDS, LP_DS_REWARD, LP_DS_STATE, LP_READING, LS_ACTION, LS_COUNT, LS_GOAL,
+    LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_X, LS_Y, NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y,
+    READ_DAQL, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL, REWARD_WORLD,
+    RF_FIELDS, RF_R_DS, complete, learner_params, read_rows, record_outcome, record_size,
+    state_size, uses_map,
 )
 from nnql_swarm.agent.negotiation import awaited, staying
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
@@ -90,7 +92,12 @@ class RecordCheck:
         self.config = config
         self.rows = NeighbourRows(config)
         params, params_f = learner_params(config)
-        self.params = ints(params)
+        self.map_fields = bool(uses_map(params))
+        if self.map_fields:  # destination seeking read on the agent's known map: see could_write
+            params[LP_DS_STATE], params[LP_DS_REWARD] = DS_GOAL, REWARD_WORLD
+        self.params, self.params_f = ints(params), floats(params_f)
+        self.still_terminal = config.still_terminal
+        self._no_map = ints([0])
         self.daql = params[LP_READING] == READ_DAQL
         self.radius = config.interaction_radius
         bodies = config.n_bodies  # the learner's buffers, for complete
@@ -187,13 +194,18 @@ class RecordCheck:
         state, state_f, rec, rec_f = self._state, self._state_f, self._rec, self._rec_f
         state[LS_PENDING], state[LS_GOAL] = 1, offset_state(gx - x, gy - y)
         state[LS_ACTION], state[LS_COUNT] = decision.intents[before.agent], len(pending)
+        state[LS_X], state[LS_Y] = x, y
         for k, (neighbour, row, cx, cy) in enumerate(pending):
             at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * k
             state[at], state[at + 1], state[at + 2], state[at + 3] = neighbour, row, cx, cy
         record_outcome(state, state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
         (x, y), (gx, gy) = obs.position, obs.goal
-        complete(self.params, state, state_f, x, y, gx, gy, rows(completed, NB_FIELDS),
-                 len(completed), rec, rec_f)
+        complete(self.params, self.params_f, state, state_f, self._no_map, x, y, gx, gy,
+                 rows(completed, NB_FIELDS), len(completed), self.config.width,
+                 self.config.height, rec, rec_f)
+        if self.map_fields:  # a step that went nowhere is terminal by its cell
+            still = self.still_terminal and (x, y) == tuple(before.position)
+            rec[REC_TERMINAL] = 1 if obs.arrived or still else 0
         written = REC_PAIRS + 2 * int(rec[REC_COUNT])
         return tuple(python_values(rec[:written])), tuple(python_values(rec_f))
 
@@ -223,6 +235,8 @@ class RecordCheck:
         answers reached it (see the module docstring)."""
         integers, values = record
         expected = self.expected(decision, obs, intents)
+        if self.map_fields:
+            expected = _map_fields_taken(expected, integers, values)
         if (tuple(integers), tuple(values)) == expected:
             return True
         if tuple(integers[:REC_PAIRS]) != expected[0][:REC_PAIRS] or tuple(values) != expected[1]:
@@ -255,3 +269,15 @@ class RecordCheck:
                 rec = self._complete(decision, obs, [entry], completed)
                 pairs.add(rec[0][REC_PAIRS:REC_PAIRS + 2])
         return pairs
+
+
+def _map_fields_taken(expected, integers, values):
+    """``expected`` with destination seeking's states and reward as the record gives them: read
+    on the agent's known map (``agent.known_map``: the walls it saw in its run, the agents it saw
+    parked in the episode), which the world does not follow, they are checked only to fit the
+    table (``SharedTable.accepts``)."""
+    ints_, floats_ = list(expected[0]), list(expected[1])
+    if len(integers) > REC_NEXT_GOAL and len(values) > RF_R_DS:
+        ints_[REC_GOAL], ints_[REC_NEXT_GOAL] = integers[REC_GOAL], integers[REC_NEXT_GOAL]
+        floats_[RF_R_DS] = values[RF_R_DS]
+    return tuple(ints_), tuple(floats_)

@@ -1,0 +1,165 @@
+"""What an agent knows of the walls and the way to its goal (``agent.known_map``), by hand on
+small maps; destination seeking that reads it (``agent.learner``: the waypoint and progress
+states, the path and flat rewards, the detour around parked agents, the push); and the runs it
+plays, the same each time and checkpointed."""
+
+import numpy as np
+import pytest
+
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.agent.known_map import (
+    MAP_KNOWN, check_cell_order, fresh_map, known_cells, map_size, path_length, progress_moves, restore_known,
+    see_walls, track, waypoint_move,
+)
+from nnql_swarm.agent.learner import (
+    DS_PROGRESS, DS_WAYPOINT, LP_DS_REWARD, LP_DS_STATE,
+    LP_STILL_TERMINAL, NB_FIELDS, REC_GOAL, REC_NEXT_GOAL, REC_TERMINAL,
+    REWARD_FLAT, REWARD_PATH, RF_R_DS, ds_state,
+)
+from nnql_swarm.protocol.actions import DOWN, RIGHT, STAY, UP, offset_state
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.sim.runs import Batch, swarm_world
+
+from tests.test_learner import NEVER, Agent, neighbour
+
+W = H = 7
+NONE = np.zeros((0, NB_FIELDS), np.int64)
+
+
+def fresh(width=W, height=H):
+    wmap = np.zeros(map_size(width, height), np.int64)
+    fresh_map(wmap)
+    return wmap
+
+
+def walls_of(*cells):
+    return np.array([c[0] for c in cells], np.int64), np.array([c[1] for c in cells], np.int64)
+
+
+def parked(j, x, y):
+    return neighbour(j, x, y, parked=True)
+
+
+def test_a_wall_is_known_once_it_was_in_view_and_stays_known():
+    wmap = np.zeros(map_size(30, 3), np.int64)
+    fresh_map(wmap)
+    wx, wy = walls_of((12, 1), (25, 1))
+    see_walls(wmap, wx, wy, 0, 2, 1, 1, 30)
+    assert known_cells(wmap, 30, 3) == [], "11 columns away: out of view"
+    see_walls(wmap, wx, wy, 0, 2, 2, 1, 30)
+    assert known_cells(wmap, 30, 3) == [42]
+    see_walls(wmap, wx, wy, 0, 2, 15, 1, 30)
+    assert known_cells(wmap, 30, 3) == [42, 55] and wmap[MAP_KNOWN] == 2
+    see_walls(wmap, wx, wy, 0, 2, 0, 0, 30)
+    assert known_cells(wmap, 30, 3) == [42, 55], "what was seen is kept"
+    again = np.zeros_like(wmap)
+    restore_known(again, known_cells(wmap, 30, 3), 30, 3)
+    assert known_cells(again, 30, 3) == [42, 55] and again[MAP_KNOWN] == 2
+
+
+def test_walls_out_of_cell_order_are_refused():
+    check_cell_order([(3, 0), (0, 1), (5, 1)])
+    with pytest.raises(ValueError, match="cell order"):
+        check_cell_order([(0, 1), (3, 0)])
+
+
+def test_the_path_goes_around_the_known_walls_and_through_the_unknown():
+    # a wall from (3, 0) to (3, 5): the way from (1, 1) to (5, 1) goes down to row 6
+    wall = [(3, y) for y in range(6)]
+    wx, wy = walls_of(*wall)
+    wmap = fresh()
+    track(wmap, wx, wy, 0, len(wall), 1, 1, 5, 1, W, H, NONE, 0, -1, False)
+    assert path_length(wmap, 1, 1, W, H) == 14  # down 5, across 4, up 5
+    assert progress_moves(wmap, 1, 1, W, H) == (1 << DOWN) | (1 << RIGHT)
+    assert waypoint_move(wmap, 1, 1, 5, 1, W, H) == RIGHT, "the goal is farther across"
+    assert waypoint_move(wmap, 2, 1, 5, 1, W, H) == DOWN and path_length(wmap, 2, 1, W, H) == 13
+    assert waypoint_move(wmap, 5, 1, 5, 1, W, H) == STAY and progress_moves(wmap, 5, 1, W, H) == 0
+    # the same wall unseen (none passed): straight across
+    blind = fresh()
+    track(blind, wx, wy, 0, 0, 1, 1, 5, 1, W, H, NONE, 0, -1, False)
+    assert path_length(blind, 1, 1, W, H) == 4 and waypoint_move(blind, 1, 1, 5, 1, W, H) == RIGHT
+
+
+def test_the_waypoint_breaks_ties_along_the_axis_where_the_goal_is_farther():
+    wmap = fresh()
+    track(wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False)
+    assert progress_moves(wmap, 1, 1, W, H) == (1 << DOWN) | (1 << RIGHT)
+    assert waypoint_move(wmap, 1, 1, 5, 3, W, H) == RIGHT
+    assert waypoint_move(wmap, 1, 1, 3, 3, W, H) == DOWN, "a diagonal: the vertical move"
+    track(wmap, *walls_of(), 0, 0, 1, 1, 1, 5, W, H, NONE, 0, -1, False)  # a new goal, a new field
+    assert waypoint_move(wmap, 1, 1, 1, 5, W, H) == DOWN and path_length(wmap, 1, 1, W, H) == 4
+
+
+def test_the_detour_goes_around_parked_agents_within_reach_unless_they_close_the_way():
+    wmap = fresh()
+    rows = np.array([parked(1, 2, 1)], np.int64)
+    track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, 4, False)
+    assert path_length(wmap, 1, 1, W, H) == 5 and waypoint_move(wmap, 1, 1, 4, 1, W, H) == UP
+    for rows_again, starts in ((NONE, False), (NONE, True)):
+        track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows_again, 0, 4, starts)
+        assert path_length(wmap, 1, 1, W, H) == (5 if not starts else 3), \
+            "a parked agent is planned around until the episode ends"
+    far = fresh()
+    track(far, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, -1, False)
+    assert path_length(far, 1, 1, W, H) == 3, "no detour asked: straight through"
+    # a corridor one cell wide, closed by the parked agent: the way through it is the only one
+    corridor = [(x, y) for y in (0, 2) for x in range(W)]  # walls in cell order
+    closed = fresh()
+    track(closed, *walls_of(*corridor), 0, len(corridor), 1, 1, 4, 1, W, H, rows, 1, 4, False)
+    assert path_length(closed, 1, 1, W, H) == 3 and waypoint_move(closed, 1, 1, 4, 1, W, H) == RIGHT
+
+
+def test_destination_seeking_reads_the_waypoint_or_the_progress_moves():
+    agent = Agent()
+    agent.params[LP_DS_STATE] = DS_WAYPOINT
+    track(agent.wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False)
+    assert ds_state(agent.params, agent.wmap, 1, 1, 5, 3, W, H) == offset_state(1, 0)
+    agent.params[LP_DS_STATE] = DS_PROGRESS
+    assert ds_state(agent.params, agent.wmap, 1, 1, 5, 3, W, H) == (1 << DOWN) | (1 << RIGHT)
+
+
+@pytest.mark.parametrize("kind, nearer, same", [(REWARD_FLAT, 1.0, 0.5),
+                                                (REWARD_PATH, 1.0 / 3, 0.5 / 3)])
+def test_the_map_rewards_read_the_path_length(kind, nearer, same):
+    agent = Agent(k=NEVER)
+    agent.params[LP_DS_STATE] = DS_WAYPOINT
+    agent.params[LP_DS_REWARD] = kind
+    agent.params[LP_STILL_TERMINAL] = 1
+    agent.q_ds[:] = 1.0
+    agent.q_ds[offset_state(1, 0), RIGHT] = 5.0  # the waypoint is right: go right
+    assert agent.decide((1, 1), (5, 1)) == RIGHT
+    agent.record(0.0, 10.0)  # the world's Euclidean reward is not the one learned
+    agent.decide((2, 1), (5, 1))
+    assert agent.rec_f[RF_R_DS] == nearer and agent.rec[REC_TERMINAL] == 0
+    assert agent.rec[REC_GOAL] == agent.rec[REC_NEXT_GOAL] == offset_state(1, 0), \
+        "one state all along a straight path: a move is not taken for a step that went nowhere"
+    agent.record(0.0, 0.0)  # blocked: it stayed at (2, 1)
+    agent.decide((2, 1), (5, 1))
+    assert agent.rec_f[RF_R_DS] == same and agent.rec[REC_TERMINAL] == 1
+
+
+def known_preset(**extra):
+    return {**PRESETS["path-nnql"], **extra}
+
+
+def test_walls_known_in_a_run_are_the_ones_seen_and_a_run_is_its_seed():
+    config = SwarmConfig(n_agents=6, width=26, height=14, seed=4, episodes=3, max_steps=30,
+                         obstacle_density=0.2, **known_preset())
+    plays = []
+    for _ in range(2):
+        batch = Batch(swarm_world(config), [config])
+        episodes = batch.play(3)
+        plays.append((episodes.row.copy(), batch.q_ds.copy(), batch.wmap.copy()))
+        walls = {y * 26 + x for x, y in config.walls().tolist()}
+        for agent in range(6):
+            known = set(batch.known_walls(0, agent))
+            assert known and known <= walls
+    assert all(np.array_equal(a, b) for a, b in zip(*plays))
+    brain = AgentBrain(0, config)
+    brain.learner.restore(*batch.tables(0, 0), 0, batch.known_walls(0, 0))
+    assert brain.learner.known_walls() == batch.known_walls(0, 0)
+
+
+def test_a_lookahead_needs_the_goal_offset():
+    with pytest.raises(ValueError, match="--ds-state goal"):
+        SwarmConfig(lookahead=2, ds_state="waypoint", algo="nnql")
