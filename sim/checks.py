@@ -15,7 +15,9 @@
   every agent holds its tables of the run's cut.
 - The run ends: the world completes, and every agent still running stops.
 - The shared table believes no forged learning record: the world applies none of those a
-  compromised agent sent (the ``forge`` fault), and refuses as forged only those
+  compromised agent sent (the ``forge`` fault), and refuses as forged only those (or intents an
+  agent decided for the world before a resumed one, which replays tick numbers: such an intent
+  describes a transition the new world never saw)
   (``world.records``).
 """
 
@@ -36,6 +38,7 @@ class Checker:
         self._said: dict[tuple[int, int, int], tuple[int, str]] = {}
         self._ends_heard = [-1] * self.n  # per agent: the last episode whose end the world heard
         self._forged: dict[tuple[int, int, int], tuple] = {}  # (era, tick, agent) -> its record
+        self._stale: set[tuple[int, int, int]] = set()  # intents decided for an earlier world
 
     def fail(self, message: str) -> None:
         if len(self.failures) < 20:
@@ -110,10 +113,20 @@ class Checker:
             if self._forged.get((era, tick, agent)) == record:
                 self.fail(f"tick {tick}: the world applied agent {agent}'s forged record")
 
+    def era_of(self, agent: int, tick: int) -> int | None:
+        """The world whose observation of ``tick`` agent ``agent`` answers."""
+        return self._sent_in[agent].get(tick)
+
+    def stale_intent(self, era: int, agent: int, tick: int) -> None:
+        """World ``era`` was handed agent ``agent``'s intent of ``tick`` decided for the world
+        before it: its record describes a transition this world never saw, and the world may
+        refuse it."""
+        self._stale.add((era, tick, agent))
+
     def forgeries_refused(self, era: int, refused) -> None:
         """World ``era`` refused as forged the records ``(agent, tick)`` of ``refused``."""
         for agent, tick in refused:
-            if (era, tick, agent) not in self._forged:
+            if (era, tick, agent) not in self._forged and (era, tick, agent) not in self._stale:
                 self.fail(f"tick {tick}: the world refused agent {agent}'s honest record as forged")
 
     def end_heard(self, episode: int, missed) -> None:

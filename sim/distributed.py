@@ -290,7 +290,11 @@ class SimSwarm:
             if self.world_done:
                 return
 
-    def _intent_in(self, key: str, payload: bytes) -> None:
+    def _intent_in(self, key: str, payload: bytes, agent: int, tick: int, era: int | None) -> None:
+        """An intent reaches the world; ``era``: the world it was decided for (a world resumed
+        under running agents replays tick numbers, so one of the world before may still come)."""
+        if era != self.era:
+            self.checker.stale_intent(self.era, agent, tick)
         self._world_effects(self.world_protocol.on_intent(key, payload, self.net.now))
 
     # The agents' processes.
@@ -361,7 +365,8 @@ class SimSwarm:
                     intent = intent._replace(record=(forged(intent.record[0]),))
                     payload = encode(intent)
                     self.checker.forged(i, intent.tick, intent.record[0])
-                net.send(a, self.world, self._intent_in, self.intent_keys[i], payload)
+                net.send(a, self.world, self._intent_in, self.intent_keys[i], payload, i,
+                         intent.tick, self.checker.era_of(i, intent.tick))
             elif kind is Ask:
                 self._ask(i, effect)
             elif kind is ReplyError:
