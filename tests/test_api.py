@@ -68,7 +68,7 @@ def test_options_by_flag_or_field_and_a_config_give_the_configs_run():
     assert Swarm(config).config == config
     odd = SwarmConfig(run_id="odd", n_agents=4, alpha=0.3, gamma=0.1, shared=False, shield=False,
                       obstacle_density=0.1, width=12, height=10, lookahead=2,
-                      interaction_radius=4, wait_rule="reach", optimistic=0.0)
+                      interaction_radius=4, wait_rule="reach", optimistic=0.0, ds_state="goal")
     assert Swarm(odd).config == odd
     assert Swarm(agents=4, shared=None).config.shared  # None: the preset's
     for bad in (dict(foo=1), dict(shared=1), dict(out="x"), dict(in_process=True)):
