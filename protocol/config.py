@@ -84,7 +84,7 @@ assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())
 DEFAULT_PRESET = "path-nnql"
 """The learning options of a swarm run unless told otherwise: the best of the swarm experiment
 (docs/swarm.md: the paper's nnQL with the shield, destination seeking on the walls each agent
-has seen; on an open grid every agent arrives and none collide after about 100 episodes)."""
+has seen)."""
 _DEFAULT = PRESETS[DEFAULT_PRESET]
 
 
