@@ -344,7 +344,7 @@ def test_an_intent_of_a_settled_agent_is_taken_once_and_moves_nothing():
     """A settled agent sends an intent only to deliver a learning record: it is taken, its
     action stays STAY, and a second one for the tick is a duplicate."""
     protocol, _ = started()
-    protocol.world.settled = frozenset({0})  # as the engine has it after agent 0 parked
+    protocol.world.settled = frozenset({0})  # as the engine has it after agent 0 arrived
     protocol._out = []
     protocol._open_tick(1.0)
     assert protocol.awaited == {1} and protocol.actions == [STAY, None]
@@ -356,7 +356,7 @@ def test_an_intent_of_a_settled_agent_is_taken_once_and_moves_nothing():
 
 def test_a_settled_agent_that_came_back_is_waited_for_to_be_sent_the_table():
     """A restarted agent is sent the world's table from its first intent on, so the world waits
-    for its intent even while it is parked: its observation does not say settled."""
+    for its intent even once it has arrived: its observation does not say settled."""
     protocol, _ = started()
     protocol.world.settled = frozenset({0, 1})
     protocol.to_resync.add(1)
