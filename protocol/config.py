@@ -281,8 +281,8 @@ class SwarmConfig:
     @staticmethod
     def from_json(text: str) -> "SwarmConfig":
         data = json.loads(text)
-        data.setdefault("wait_rule", "reach")  # written before the field: all in reach waited
-        data.setdefault("ds_state", "goal")  # written before the fields: the paper's
+        data.setdefault("wait_rule", "reach")  # a config without the field: all in reach waited for
+        data.setdefault("ds_state", "goal")  # a config without these fields: the paper's
         data.setdefault("ds_reward", "euclid")
         data.setdefault("detour", False)
         known = {f.name for f in fields(SwarmConfig)}
