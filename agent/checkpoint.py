@@ -108,7 +108,7 @@ def load(path: Path, brain: AgentBrain, episode: int | None = None) -> int:
             f"{path}: belongs to agent {owner[0]} of {owner[1]} ({owner[2]}), "
             f"not agent {mine[0]} of {mine[1]} ({mine[2]})"
         )
-    try:  # a checkpoint written before agents kept a map knows no wall
+    try:  # a checkpoint without ``known_walls`` knows no wall
         brain.learner.restore(fields["q_ds"], fields["q_ca"], int(fields["actions_taken"]),
                               np.asarray(fields.get("known_walls", ())).reshape(-1).tolist())
     except ValueError as error:

@@ -9,15 +9,15 @@ which is what walls carried in its view would tell it.
 On the known map (the unknown taken as free) a breadth-first *distance field* to the goal gives
 the agent's path length ``d`` and the *waypoint*, the next cell of a shortest path. Destination
 seeking reads them (``agent.learner``: ``LP_DS_STATE``, ``LP_DS_REWARD``). With the detour
-(``LP_DETOUR``) the field also goes around the agents the agent has seen parked within reach in
+(``LP_DETOUR``) the field also goes around the arrived agents the agent has seen within reach in
 this episode (they stay there until it ends), unless they cut it off its goal. The field is worked
-out again only when the goal changes, a new wall is seen or a newly parked agent is taken.
+out again only when the goal changes, a new wall is seen or a newly arrived agent is taken.
 
 One buffer of integers per agent (``wmap``, :func:`map_size`): ``MAP_GOAL`` (the goal cell the
-field is for, -1 when stale), ``MAP_KNOWN`` (walls known), ``MAP_PARKED`` (parked agents taken),
+field is for, -1 when stale), ``MAP_KNOWN`` (walls known), ``MAP_PARKED`` (arrived agents taken),
 ``MAP_CUT`` (whether they cut the agent off, so the field ignores them), then per cell
 (``y * W + x``) whether it is a known wall, its distance to the goal (-1 where cut off), a queue
-the search uses, whether a parked agent taken stands there, and the list of those cells.
+the search uses, whether an arrived agent taken stands there, and the list of those cells.
 """
 
 from nnql_swarm.protocol.actions import (
@@ -29,7 +29,7 @@ MAP_GOAL, MAP_KNOWN, MAP_PARKED, MAP_CUT, MAP_PENDING = 0, 1, 2, 3, 4
 MAP_HEADER = 5
 NOTHING_PENDING = 1 << 30
 SECTIONS = 5
-"""Per cell: known wall, distance, queue, parked agent planned around, and the list of those."""
+"""Per cell: known wall, distance, queue, arrived agent planned around, and the list of those."""
 
 
 def map_size(width: int, height: int) -> int:
@@ -38,7 +38,7 @@ def map_size(width: int, height: int) -> int:
 
 
 def fresh_map(wmap) -> None:
-    """Forget everything (a buffer of :func:`map_size`): no wall known, no parked agent, no
+    """Forget everything (a buffer of :func:`map_size`): no wall known, no arrived agent, no
     field."""
     for c in range(len(wmap)):
         wmap[c] = 0
@@ -99,9 +99,9 @@ def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width):
 
 @kernel
 def see_parked(wmap, nb, m, ox, oy, around, starts, width, height):
-    """Take the parked agents among the neighbour rows ``nb`` (``agent.learner.NB_*``) within
+    """Take the arrived agents among the neighbour rows ``nb`` (``agent.learner.NB_*``) within
     ``around`` cells (Chebyshev; -1: none) as obstacles the field plans around, for the rest of
-    the episode (a parked agent stays parked); ``starts``: a new episode, none taken yet. A
+    the episode (an arrived agent stays on its goal); ``starts``: a new episode, none taken yet. A
     newly taken one is *pending* (``MAP_PENDING``: the least distance of those cells in the
     current field): :func:`plan_field` plans around it once the agent comes near enough for it
     to change a distance it reads."""
@@ -158,7 +158,7 @@ def plan_field(wmap, ox, oy, gx, gy, width, height):
 
 @kernel
 def breadth_first(wmap, goal, width, height, parked):
-    """The distance field from ``goal`` around the known walls (and the parked agents taken, if
+    """The distance field from ``goal`` around the known walls (and the arrived agents taken, if
     ``parked``). The four neighbours are spelled out: it is the agent's costliest step in plain
     Python."""
     cells = width * height
@@ -203,7 +203,7 @@ def breadth_first(wmap, goal, width, height, parked):
 def track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m, around,
           starts):
     """An observation at ``(ox, oy)`` with goal ``(gx, gy)`` (``starts``: the first of an
-    episode): the walls in view learned, the parked neighbours within ``around`` taken (-1:
+    episode): the walls in view learned, the arrived neighbours within ``around`` taken (-1:
     none), the distance field made current."""
     see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width)
     see_parked(wmap, nb, m, ox, oy, around, starts, width, height)

@@ -59,9 +59,9 @@ def _awaited(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]
 
 
 def staying(obs: Observation, config: SwarmConfig) -> list[int]:
-    """Under the ``meet`` rule, the parked neighbours whose intents the observing agent knows
-    without waiting: those ``protocol.ranks.waits_for`` names among the parked ones of the
-    observation, each of which stays on its goal (its intent is STAY)."""
+    """Under the ``meet`` rule, the arrived neighbours whose intents the observing agent knows
+    without waiting: those ``protocol.ranks.waits_for`` names among the observation's ``parked``
+    (the arrived neighbours in view), each of which stays on its goal (its intent is STAY)."""
     if (not (config.meet_only and obs.parked) or config.algo not in NEGOTIATING_ALGOS
             or obs.episode_end):
         return []

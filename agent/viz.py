@@ -170,7 +170,7 @@ class TimedBrain(AgentBrain):
         return asked
 
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
-        if self._asked:  # answers may hold more: the parked neighbours known to stay
+        if self._asked:  # answers may hold more: the arrived neighbours known to stay
             self.latencies_s.append(time.perf_counter() - self._asked_at)
             self.unanswered += len(self._asked - answers.keys())
             self._asked = set()

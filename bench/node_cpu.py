@@ -10,10 +10,10 @@ scheduler. Each handler is timed apart (the last intent's includes closing the t
 rules and the next observations), so the tick's critical path (world -> rank 0 -> ... -> rank
 N-1 -> world) can be added up from them.
 
-On this 2-core machine the swarm's speed drifts by a third within minutes; this figure drifts
-much less (a few percent), but it is still best compared between runs made one after the other.
-It counts what runs hot in one process: in the swarm, each process wakes from cold caches and
-the same code takes three to six times as long (docs/performance.md).
+On a small shared machine the swarm's speed drifts within minutes; this figure drifts much
+less, but it is still best compared between runs made one after the other. It counts what runs
+hot in one process: in the swarm, each process wakes from cold caches and the same code takes
+several times as long (docs/performance.md).
 
     python bench/node_cpu.py --agents 8 --episodes 20 --repeats 5
 """

@@ -2,7 +2,7 @@
 """Paired A/B runs of ``bench/swarm_ticks.py``: two versions (source trees) or two settings
 (environment variables), run alternately, compared by the median of each pair's ratio.
 
-This machine's speed drifts by a third within minutes, so only runs made together compare; a
+A shared machine's speed drifts within minutes, so only runs made together compare; a
 pair is A then B (then B then A at the next pair, so that neither always goes first), and the
 ratio of each pair's figures cancels most of the drift.
 

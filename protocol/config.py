@@ -84,7 +84,7 @@ assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())
 DEFAULT_PRESET = "path-nnql"
 """The learning options of a swarm run unless told otherwise: the best of the swarm experiment
 (docs/swarm.md: the paper's nnQL with the shield, destination seeking on the walls each agent
-has seen; on an open grid every agent arrives and none collide after about 100 episodes)."""
+has seen)."""
 _DEFAULT = PRESETS[DEFAULT_PRESET]
 
 
@@ -124,11 +124,11 @@ class SwarmConfig:
                             choices=WAIT_RULES)
     optimistic: float = option(_DEFAULT["optimistic"], "initial value of every Q-table entry (the paper: 0)")
     known_state: bool = option(_DEFAULT["known_state"], "a state block of its own for a neighbour whose next cell "
-                               "is known (announced, or parked on its goal)")
+                               "is known (announced, or arrived on its goal)")
     shared: bool = option(_DEFAULT["shared"], "the agents learn into one table, each agent's updates of a "
                           "tick applied by all in agent-id order before the next")
     shield: bool = option(_DEFAULT["shield"], "never move into a cell a known neighbour announced, into a "
-                          "swap, or into a parked agent")
+                          "swap, or into an arrived agent")
     lookahead: int = option(_DEFAULT["lookahead"], "n of nnQL: the neighbour's state is its announced cell n "
                             "steps ahead (in-process only for n > 1)", metavar="N")
     still_terminal: bool = option(_DEFAULT["still_terminal"], "a step that went nowhere ends its destination-seeking "
@@ -143,7 +143,7 @@ class SwarmConfig:
                             "(path), or 1, 0.5, 0 for a path that got shorter, stayed, grew "
                             "(flat)", choices=DS_REWARD_NAMES)
     detour: bool = option(_DEFAULT["detour"], "the path on the known map (--ds-state, "
-                          "--ds-reward) goes around the agents parked within reach, where "
+                          "--ds-reward) goes around the arrived agents within reach, where "
                           "another way is known")
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
@@ -250,11 +250,12 @@ class SwarmConfig:
 
     @property
     def quiet_settled(self) -> bool:
-        """Whether an agent parked on its goal takes no part in the ticks that follow, until the
-        episode's end tick (``world.engine``: it is *settled*, and the world neither waits for
-        its intent nor sends it observations): under ``meet``, where nobody waits for a parked
-        agent and it waits for nobody, and where the agents do not negotiate. Under ``reach`` a
-        parked nnQL agent still relays the intents it learns down the chain, in lockstep."""
+        """Whether an arrived agent takes no part in the ticks that follow, until the episode's
+        end tick (``world.engine``: it is *settled*, the world waits for no intent from it, and
+        *quiet*, the world sends it no observation): under ``meet``, where nobody waits for an
+        arrived agent and it waits for nobody, and where the agents do not negotiate. Under
+        ``reach`` an arrived nnQL agent still relays the intents it learns down the chain, in
+        lockstep."""
         return self.meet_only or self.algo not in NEGOTIATING_ALGOS
 
     @cached_property
@@ -280,8 +281,8 @@ class SwarmConfig:
     @staticmethod
     def from_json(text: str) -> "SwarmConfig":
         data = json.loads(text)
-        data.setdefault("wait_rule", "reach")  # written before the field: all in reach waited
-        data.setdefault("ds_state", "goal")  # written before the fields: the paper's
+        data.setdefault("wait_rule", "reach")  # a config without the field: all in reach waited for
+        data.setdefault("ds_state", "goal")  # a config without these fields: the paper's
         data.setdefault("ds_reward", "euclid")
         data.setdefault("detour", False)
         known = {f.name for f in fields(SwarmConfig)}

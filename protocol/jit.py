@@ -9,7 +9,8 @@ simulator, which runs compiled).
 
 A process that sets ``NNQL_KERNEL=python`` before its first import runs the functions as written
 and never imports numba: the swarm's agent and world processes do (the launcher sets it for its
-children), since numba's LLVM alone would make each agent weigh over 100 MB and start in seconds.
+children), since loading numba's LLVM would make each agent process several times larger and
+slower to start.
 Kernel functions therefore only index and assign into their buffers, which may be numpy arrays
 (compiled) or Python lists (plain: :func:`ints`, :func:`floats`, :func:`rows`, where reading a list
 is several times faster), and never allocate on the hot path. The Q-tables are numpy arrays

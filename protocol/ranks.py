@@ -60,8 +60,8 @@ def waits_for(reads_intents, rank, other_rank, x, y, other_x, other_y, radius, m
 def awaits_answer(rank, other_rank, x, y, other_x, other_y, radius, meet_only, parked,
                   other_parked):
     """Whether an agent that reads intents waits for the other's answer before deciding: it
-    waits for its intent (:func:`waits_for`) and, under ``meet``, neither is parked on its goal
-    (``parked``, ``other_parked``): a parked agent's intent, STAY, is in every observation that
-    shows it, and a parked agent needs no intent."""
+    waits for its intent (:func:`waits_for`) and, under ``meet``, neither has arrived on its goal
+    (``parked``, ``other_parked``): an arrived agent's intent, STAY, is in every observation that
+    shows it, and an arrived agent needs no intent."""
     return (not (meet_only and (parked or other_parked))
             and waits_for(True, rank, other_rank, x, y, other_x, other_y, radius, meet_only))

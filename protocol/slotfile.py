@@ -7,10 +7,10 @@ the whole slot with the higher sequence number. A process killed at any point, o
 loses power in the middle of a write, leaves the other slot whole: readers get the old record or
 the new, never half of one.
 
-Why in place: writing a new ``.npz`` beside the old and renaming it over took about 0.7 ms on
-ext4 (creating and truncating files; the zip's Python), in each of the nine processes at every
-episode's end, and held up that episode's last tick (docs/performance.md, "Checkpoints"). A
-rewrite in place is one ``pwrite``.
+Why in place: every process writes its checkpoint at every episode's end, and the episode's
+last tick waits for the slowest of them; a rewrite in place is one ``pwrite`` and one
+``fdatasync``, where a new file renamed over the old costs the file system a create, a truncate
+and a rename (docs/design.md, "Checkpoints").
 
 The payload is msgpack: a map of names to plain values, a numpy array as ``[dtype, shape,
 bytes]``. A file is created (or grown, if a record outgrows its slots) whole, under a temporary

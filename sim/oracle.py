@@ -6,10 +6,10 @@ rules: agents in priority order (at the start, the longest shortest path to its 
 by id; an agent gains a unit of priority at each step that finds it no nearer its goal than it
 has ever been, as PIBT's priorities grow while an agent is not home) each take the free
 neighbouring cell nearest their goal (breadth-first distances on the grid's free cells, around the
-walls and the parked agents); an agent that wants a cell someone still occupies makes that one
+walls and the arrived agents); an agent that wants a cell someone still occupies makes that one
 move first (it inherits the priority) and tries its next cell if it cannot. No two agents are
 planned into one cell and no two swap, so the world's arbitration never finds a collision.
-Arrived agents are parked obstacles, as in the swarm, and walls obstacles that never move: an
+Arrived agents are obstacles on their goals, as in the swarm, and walls obstacles that never move: an
 agent next to its goal does not take it while parking there would leave another agent no way to
 its own.
 

@@ -11,11 +11,11 @@ opens a given tick, some virtual time into it (at most one fault of each kind):
   agent from its last checkpoint, the world with ``--resume`` under the running agents;
 - ``forge``: where the agents share a table, agent ``target`` is compromised: from then on, until
   it restarts, every learning record it sends is forged (``sim.forgery``). Drawn apart from the
-  other kinds (:data:`FORGE_P`), after them, so that they are drawn as they were.
+  other kinds (:data:`FORGE_P`), after them, so that it leaves their draws alone.
 - ``kill-all``: every process dies at once (kill -9 of the process group), and ``duration``
   later the run is continued with ``--resume``, from the cut its files give
-  (``supervision.resume``). Drawn from a stream of its own (one schedule in ten), so the
-  schedules drawn before it existed are unchanged.
+  (``supervision.resume``). Drawn from a stream of its own (one schedule in ten), so that it
+  leaves the other draws alone.
 
 Latency, duplicates and reordering alone cannot make anyone miss a deadline (they are far
 shorter than the time-outs), nor can killing everyone at once, after which the run resumes as it

@@ -176,8 +176,8 @@ def test_once_arrived_under_meet_a_skipped_tick_is_no_gap(wait_rule):
 
 
 def test_answers_from_before_the_world_left_do_not_count_for_the_world_that_comes_back():
-    """Seed 508 of launch/faultsim.py: a world resumed under running agents replays tick
-    numbers, and an answer still on its way from the world before counted for the new one."""
+    """A world resumed under running agents replays tick numbers: an answer still on its way
+    from the world before must not count for the new one."""
     protocol = ready(agent=1)
     effects = protocol.on_observation(observation(0, agent=1, others=[(0, 2, 2)]), 0.0)
     [ask] = [e for e in effects if isinstance(e, Ask)]
@@ -191,8 +191,8 @@ def test_answers_from_before_the_world_left_do_not_count_for_the_world_that_come
 
 
 def test_a_standing_query_that_ends_mid_negotiation_is_replaced_by_a_direct_ask():
-    """Seed 2151 of launch/faultsim.py: the standing query ended while the agent waited for
-    its answer, and the agent waited out the negotiation's time-out instead of asking."""
+    """A standing query that ends while the agent waits for its answer is replaced by a direct
+    ask at once, not waited out to the negotiation's time-out."""
     protocol = ready(agent=1)
     others = [(0, 2, 2)]
     protocol.on_observation(observation(1, agent=1, others=others), 0.0)  # decides: it is first

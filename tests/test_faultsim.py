@@ -52,11 +52,11 @@ BUGS = {
 
 
 def PAPER_CONFIG(**values) -> SwarmConfig:  # noqa: N802 (reads as the SwarmConfig it makes)
-    """A config with the paper's learning options, the defaults when these schedules were drawn."""
+    """A config with the paper's learning options, which these schedules run."""
     return SwarmConfig(**{**PRESETS["nnql"], **values})
 
 
-FOUND = {  # the schedules, as drawn when each found its bug (sim/schedule.py changed since)
+FOUND = {  # the schedules written out whole, so that sim/schedule.py's draws cannot change them
     116: Schedule(
         116, PAPER_CONFIG(run_id='sim116', episodes=2, max_steps=8, width=11,
                        height=11, seed=116, count_swaps=False, tick_deadline_s=0.5),
@@ -135,8 +135,8 @@ def test_the_schedules_that_found_a_bug_pass(seed, tmp_path):
 
 
 def test_a_workers_schedules_do_not_see_each_others_files(tmp_path):
-    """(the simulator) a worker kept one directory for the checkpoints of all its schedules,
-    and an agent restarted in one schedule loaded another's (seeds 142 and 147 at the time)."""
+    """(the simulator) Each schedule has a checkpoint directory of its own: an agent restarted in
+    one schedule never loads another's from a worker's shared directory."""
     crashing = [seed for seed in range(200) if draw_schedule(seed).crashing_agents][:4]
     for name in [f"alone-{seed}" for seed in crashing] + ["shared"]:
         (tmp_path / name).mkdir()

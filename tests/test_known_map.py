@@ -98,11 +98,11 @@ def test_the_detour_goes_around_parked_agents_within_reach_unless_they_close_the
     for rows_again, starts in ((NONE, False), (NONE, True)):
         track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows_again, 0, 4, starts)
         assert path_length(wmap, 1, 1, W, H) == (5 if not starts else 3), \
-            "a parked agent is planned around until the episode ends"
+            "an arrived agent is planned around until the episode ends"
     far = fresh()
     track(far, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, -1, False)
     assert path_length(far, 1, 1, W, H) == 3, "no detour asked: straight through"
-    # a corridor one cell wide, closed by the parked agent: the way through it is the only one
+    # a corridor one cell wide, closed by the arrived agent: the way through it is the only one
     corridor = [(x, y) for y in (0, 2) for x in range(W)]  # walls in cell order
     closed = fresh()
     track(closed, *walls_of(*corridor), 0, len(corridor), 1, 1, 4, 1, W, H, rows, 1, 4, False)

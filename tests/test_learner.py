@@ -151,7 +151,7 @@ def test_readings_of_a_neighbours_state():
     assert d.q_ca.shape[0] == N_STATES * (N_ACTIONS + 1)
     assert d.row(own, moving) == s(0, 2) + N_STATES * DOWN
     assert d.row(own, unknown) == s(3, 0) + N_STATES * UNKNOWN_MOVE
-    # A distinct block for what is known: a parked neighbour differs from an unknown one.
+    # A distinct block for what is known: an arrived neighbour differs from an unknown one.
     known_ql, known_nnql = Agent(READ_QL, known_state=True), Agent(READ_NNQL, known_state=True)
     assert known_ql.q_ca.shape[0] == 2 * N_STATES
     assert [known_ql.row(own, r) for r in (moving, unknown, parked)] == [

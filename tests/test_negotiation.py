@@ -24,7 +24,7 @@ def config(n: int, algo: str = "nnql", radius: int = 10, wait_rule: str = "reach
 def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
             episode_end: bool = False, arrived=()) -> Observation:
     """Agent ``agent``'s observation when the agents stand on ``cells`` (view radius 10), those
-    of ``arrived`` parked on their goals."""
+    of ``arrived`` on their goals."""
     me = cells[agent]
     seen = tuple((j, x, y) for j, (x, y) in sorted(cells.items())
                  if j != agent and sees(*me, x, y))
@@ -175,8 +175,8 @@ def test_the_meet_rule_leaves_out_a_neighbour_two_cells_off_along_both_axes():
                                 config(3, radius=2, wait_rule="meet"))[0] == [0, 1]
 
 
-def test_under_the_meet_rule_nobody_waits_for_a_parked_agent_and_it_waits_for_nobody():
-    """A parked agent stays: every observation that shows it says so, so its intent (STAY) is
+def test_under_the_meet_rule_nobody_waits_for_an_arrived_agent_and_it_waits_for_nobody():
+    """An arrived agent stays: every observation that shows it says so, so its intent (STAY) is
     known without asking (``staying``), and it has nothing to relay. Under ``reach`` it is
     waited for, and waits, as in the paper's chain."""
     cells = {0: (5, 5), 1: (6, 5), 2: (6, 6)}  # ranks at tick 0: 0, 1, 2; all could meet
@@ -184,7 +184,7 @@ def test_under_the_meet_rule_nobody_waits_for_a_parked_agent_and_it_waits_for_no
     obs = {a: observe(a, 0, 3, cells, arrived={1}) for a in cells}
     assert negotiation.plan_for(obs[2], meet) == ([0], [0])
     assert negotiation.staying(obs[2], meet) == [1]
-    assert negotiation.plan_for(obs[1], meet) == ([], [])  # parked: waits for nobody
+    assert negotiation.plan_for(obs[1], meet) == ([], [])  # arrived: waits for nobody
     assert negotiation.standing_answers(obs[1], meet) == []  # and nobody waits for it
     assert negotiation.standing_answers(obs[0], meet) == [2]
     assert negotiation.plan_for(obs[2], reach) == ([0, 1], [1])

@@ -1,5 +1,5 @@
 """The paper's runner: determinism, threads, per-episode bookkeeping, learning, Table 1's
-numbers as the code before the kernel gave them."""
+numbers pinned."""
 
 import numpy as np
 import pytest

@@ -113,7 +113,7 @@ def test_rewards_collisions_arrival_and_removal():
     # Staying put: same distance, 0.5 / d.
     assert infos["agent_1"]["reward_ds"] == pytest.approx(0.5 / np.hypot(3, 1))
     assert env.agents == ["agent_1", "agent_2"]
-    # The arrived agent stays parked on its goal, and running into it is a collision.
+    # The arrived agent stays on its goal, and running into it is a collision.
     place(env, [(1, 0), (1, 1), (4, 3)], [(1, 0), (0, 4), (4, 0)])
     _, _, _, _, infos = env.step({"agent_1": UP, "agent_2": STAY})
     assert infos["agent_1"]["collided"] and "agent_0" not in infos

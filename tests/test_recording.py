@@ -172,7 +172,7 @@ def test_metrics_match_episodes_csv(run):
 
 
 def test_a_timed_brain_counts_only_the_asked_neighbours_that_did_not_answer():
-    """The intents an agent decides with may hold parked neighbours it never asked (the meet
+    """The intents an agent decides with may hold arrived neighbours it never asked (the meet
     rule): they are not answers, and they make no asked neighbour answered."""
     brain = TimedBrain(3, SwarmConfig(n_agents=6))
     obs = Observation(run="run", tick=9, sender=WORLD_SENDER, agent=3, episode=0, step=9,
@@ -181,7 +181,7 @@ def test_a_timed_brain_counts_only_the_asked_neighbours_that_did_not_answer():
                       episode_end=False, parked=(2,))
     brain.prepare(obs)
     assert brain.neighbours_to_ask(obs, [0, 1]) == [0, 1]
-    brain.act(obs, {0: STAY, 2: STAY})  # 1 did not answer; 2 is parked
+    brain.act(obs, {0: STAY, 2: STAY})  # 1 did not answer; 2 has arrived
     latencies, unanswered = brain.take_timings()
     assert len(latencies) == 1 and unanswered == 1
 

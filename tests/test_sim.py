@@ -33,8 +33,8 @@ def test_the_oracle_brings_everyone_home_without_a_collision(agents, grid):
     assert (episodes.agent_steps >= episodes.shortest).all()
 
 
-def test_in_a_crowd_the_oracle_never_collides_though_parked_agents_may_wall_some_in():
-    """30 agents on 12 x 12: arrived agents stay parked on their goals, and now and then they
+def test_in_a_crowd_the_oracle_never_collides_though_arrived_agents_may_wall_some_in():
+    """30 agents on 12 x 12: arrived agents stay on their goals, and now and then they
     close the last way to another's goal; PIBT still never plans a collision."""
     episodes = play(configs("oracle", range(6), n_agents=30, width=12, height=12), 15)
     assert not episodes.collisions.any() and not episodes.violations.any()

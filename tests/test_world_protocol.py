@@ -97,8 +97,8 @@ def test_an_episodes_row_follows_its_end_tick_with_the_time_it_took():
 
 
 def test_a_completed_run_tells_its_agents_until_they_leave():
-    """Seed 116 of launch/faultsim.py: the one shutdown message was lost on the way and an
-    agent waited for ever for a world that had gone."""
+    """A shutdown lost on the way is sent again until every live agent has left, so that no
+    agent waits for ever for a world that has gone."""
     protocol, _ = started()
     now, effects = 0.0, []
     while not any(isinstance(e, SendControl) for e in effects):
@@ -117,8 +117,8 @@ def test_a_completed_run_tells_its_agents_until_they_leave():
 
 
 def test_an_agent_that_comes_up_while_the_others_leave_is_told_too():
-    """Seed 9582 of launch/faultsim.py: a stalled world handled, all at once, the last agents
-    leaving and a restarted one coming up, and ended before it saw the newcomer."""
+    """A stalled world that handles, all at once, the last agents leaving and a restarted one
+    coming up tells the newcomer too before it ends."""
     protocol, _ = started()
     protocol.world.finished = True
     protocol._close_run(1.0)
@@ -129,8 +129,8 @@ def test_an_agent_that_comes_up_while_the_others_leave_is_told_too():
 
 
 def test_agents_that_never_leave_are_told_a_few_times_only_however_long_it_takes():
-    """Seed 9563 of launch/faultsim.py: the world stalled for longer than it meant to tell its
-    agents to stop, and gave up without telling those a partition had cut off."""
+    """A world stalled for longer than its shutdown's repeats still makes every try (tries, not
+    a time limit), so that agents a partition cut off are told too."""
     protocol, _ = started()
     protocol.world.finished = True  # as if the last tick had just closed
     protocol._close_run(1.0)
@@ -160,8 +160,8 @@ def test_bad_intents_are_counted_never_raised():
 
 
 def test_a_world_resumed_after_the_last_episode_only_tells_the_agents_to_stop():
-    """Seed 5382 of launch/faultsim.py: the world crashed while telling its agents the run was
-    over, and the resumed world, finding every row written, ended without telling them."""
+    """A world resumed after the last episode (it crashed while telling its agents the run was
+    over, and finds every row written) tells the agents still running to stop."""
     protocol = WorldProtocol(CONFIG, 5.0, first_episode=CONFIG.episodes, first_tick=8)
     assert protocol.timer() == 5.0
     assert kinds(protocol.on_timer(5.0)) == ["SendControl"]
@@ -344,7 +344,7 @@ def test_an_intent_of_a_settled_agent_is_taken_once_and_moves_nothing():
     """A settled agent sends an intent only to deliver a learning record: it is taken, its
     action stays STAY, and a second one for the tick is a duplicate."""
     protocol, _ = started()
-    protocol.world.settled = frozenset({0})  # as the engine has it after agent 0 parked
+    protocol.world.settled = frozenset({0})  # as the engine has it after agent 0 arrived
     protocol._out = []
     protocol._open_tick(1.0)
     assert protocol.awaited == {1} and protocol.actions == [STAY, None]
@@ -356,7 +356,7 @@ def test_an_intent_of_a_settled_agent_is_taken_once_and_moves_nothing():
 
 def test_a_settled_agent_that_came_back_is_waited_for_to_be_sent_the_table():
     """A restarted agent is sent the world's table from its first intent on, so the world waits
-    for its intent even while it is parked: its observation does not say settled."""
+    for its intent even once it has arrived: its observation does not say settled."""
     protocol, _ = started()
     protocol.world.settled = frozenset({0, 1})
     protocol.to_resync.add(1)

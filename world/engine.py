@@ -9,13 +9,13 @@ observations hand everyone the entries they changed.
 
 Each episode ends with one extra *end tick*: every agent is told ``episode_end`` (with the rewards
 of its last action), finishes its learning, checkpoints and answers STAY; nothing moves. An agent
-that reaches its goal is *arrived*: it is parked on its goal, keeps answering STAY and is still an
+that reaches its goal is *arrived*: it stays on its goal, keeps answering STAY and is still an
 obstacle to the others. The episode ends when every agent has arrived or after ``max_steps``.
-Where a parked agent takes no part in the negotiation (``SwarmConfig.quiet_settled``: the
+Where an arrived agent takes no part in the negotiation (``SwarmConfig.quiet_settled``: the
 ``meet`` rule, or agents that do not negotiate), it is *settled* from the tick after its first
 arrived observation (which finished its learning) until the end tick
 (:attr:`SwarmWorld.settled`): it stays, the world needs no intent from it (``world.protocol``),
-and :meth:`observations_by_rank` sends it nothing, keeping the shared table's entries it did not
+and it is *quiet*: :meth:`observations_by_rank` sends it nothing, keeping the shared table's entries it did not
 hear of. Its next observation (at the end tick, or once :data:`QUIET_CATCH_UP` entries are
 waiting, which then says ``settled``) brings their current values, so that its copy is the
 world's again before it checkpoints or decides.

@@ -28,7 +28,7 @@ offsets ``(dx, dy)`` in ``[-10, 10]^2``, :func:`protocol.actions.offset_state`):
 
 This is the QL reading of the neighbour state: a parallel step has no moment at which neighbours
 could announce their next actions, so nnQL's negotiation lives in the swarm runtime, not here.
-Agents that have arrived stay parked on their goals and are still seen (and can still be run into).
+Agents that have arrived stay on their goals and are still seen (and can still be run into).
 
 ## Rewards
 Per step, the paper's two rewards added (:mod:`world.rules`): destination seeking ``1/d`` if the
@@ -169,7 +169,7 @@ class SwarmGridEnv(ParallelEnv):
     def step(self, actions: dict):
         live = list(self.agents)
         n = self.n_agents
-        chosen = [STAY] * n  # parked agents stay
+        chosen = [STAY] * n  # arrived agents stay
         for agent in live:
             chosen[self._index[agent]] = int(actions.get(agent, STAY))
         x, y, arrived = ints(self._x), ints(self._y), flags(self._arrived)

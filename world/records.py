@@ -3,7 +3,7 @@
 Where the agents share one table, each intent carries the sender's learning record of the tick
 (``agent.learner``): Eq. 9's ``s, a, terminal, s'`` with the two rewards, and a pair of Q_CA rows
 ``(s_i, s'_i)`` per neighbour. The world saw the transition the record claims: what it sent the
-agent at the tick it decided (its cell, goal and neighbours, who was parked) and at the next
+agent at the tick it decided (its cell, goal and neighbours, who had arrived) and at the next
 (where it ended up, its rewards, whether it arrived), the intent it announced, and every intent
 of both ticks as the world heard them. :class:`RecordCheck` rebuilds the record from that with
 the agent's own code, the rows of ``agent.brain.NeighbourRows`` read and completed by
@@ -109,7 +109,7 @@ class RecordCheck:
     # What an agent could have heard, and read its neighbours as.
 
     def _answers(self, obs: Observation, intents, stops: bool) -> tuple[dict, list]:
-        """The intents the agent decided with, had every awaited answer come (the parked
+        """The intents the agent decided with, had every awaited answer come (the arrived
         neighbours it knows stay, and each awaited one whose intent the world heard), and the
         awaited neighbours (any of which may not have answered in time)."""
         if stops:
@@ -120,7 +120,7 @@ class RecordCheck:
         return known, waited
 
     def _negotiated(self, obs: Observation) -> tuple[list[int], dict]:
-        """Whom the agent waits for at ``obs`` and the parked neighbours it knows stay
+        """Whom the agent waits for at ``obs`` and the arrived neighbours it knows stay
         (``agent.negotiation``), worked out once per observation."""
         key = (obs.agent, obs.tick)
         known = self._negotiation.get(key)
@@ -273,8 +273,8 @@ class RecordCheck:
 
 def _map_fields_taken(expected, integers, values):
     """``expected`` with destination seeking's states and reward as the record gives them: read
-    on the agent's known map (``agent.known_map``: the walls it saw in its run, the agents it saw
-    parked in the episode), which the world does not follow, they are checked only to fit the
+    on the agent's known map (``agent.known_map``: the walls it saw in its run, the arrived agents it
+    saw in the episode), which the world does not follow, they are checked only to fit the
     table (``SharedTable.accepts``)."""
     ints_, floats_ = list(expected[0]), list(expected[1])
     if len(integers) > REC_NEXT_GOAL and len(values) > RF_R_DS:

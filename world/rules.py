@@ -25,7 +25,7 @@ stayed, was blocked or bumped the edge): ``stay_reward`` (the paper's 0.5) is wh
 
 Bodies are learners, each with its own goal, or scripted obstacles (the paper's experiment), which
 have no goal, earn nothing and are not counted. A learner that reaches its goal has *arrived*:
-parked on its goal for the rest of the episode, it stays and is still an obstacle. The episode is
+it stays on its goal for the rest of the episode, and is still an obstacle. The episode is
 over when every learner has arrived (or, the caller's business, after its last step).
 """
 

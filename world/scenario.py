@@ -77,7 +77,7 @@ def swarm_episode(seed: int, episode: int, width: int, height: int, n_agents: in
     rng = episode_rng(seed, episode)
     if len(walls):
         cells = rng.choice(free, size=2 * n_agents, replace=False)
-    else:  # the draw of runs without walls, as it always was
+    else:  # without walls: any cell of the grid
         cells = rng.choice(width * height, size=2 * n_agents, replace=False)
     xy = np.stack([cells % width, cells // width], axis=-1).astype(np.int64)
     starts, goals = xy[:n_agents], xy[n_agents:]

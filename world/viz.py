@@ -23,9 +23,10 @@ intents, waits and collisions of the whole episode at once.
 Cost: everything is buffered, the per-tick entities, each episode's goals, metrics and event
 lines alike, and sent with ``send_columns`` (one call per entity) every :data:`FLUSH_EVERY` ticks
 or :data:`recording.columns.FLUSH_SECONDS` of wall time, whichever comes first, and at the end.
-That costs about a tenth of logging tick by tick (``bench/recording_cost.py``), and it bounds the
-memory the Rerun SDK keeps per logging call (``recording.columns``): one flush spans many
-episodes late in a run, when they are short.
+That makes a dozen calls a flush instead of a dozen a tick (what it costs:
+``bench/recording_cost.py``, ``bench/recording_cpu.py``), and it bounds the memory the Rerun
+SDK keeps per logging call (``recording.columns``): one flush spans many episodes late in a
+run, when they are short.
 """
 
 import sys
@@ -108,7 +109,7 @@ TRAIL_LENGTH = 10
 
 FLUSH_EVERY = 2000
 """The most ticks buffered before a flush (which also comes after ``FLUSH_SECONDS``); a flush
-costs about a millisecond and a dozen logging calls, however few ticks it sends."""
+costs a dozen logging calls, however few ticks it sends."""
 
 COLLISION_RED = (230, 40, 40)
 WAIT_COLOUR = (25, 25, 25)
