@@ -2,7 +2,7 @@
 fault schedule, checked as it runs.
 
 This module plays the part that Zenoh, the kernel, the disk and the launcher play for real:
-it carries every effect of a protocol (``protocol.effects``) to where it goes, over
+it carries every effect of a protocol (``machines.effects``) to where it goes, over
 ``sim.network``'s links: observations and control to the agents, intents to the world, an
 agent's asks to its neighbours as queries and their replies back, liveliness tokens to everyone
 who subscribes (with the tokens already there, as Zenoh's history gives them). It writes the
@@ -27,13 +27,13 @@ from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.agent.protocol import AgentProtocol
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.protocol import keys
-from nnql_swarm.protocol.effects import (
+from nnql_swarm.machines.effects import (
     Ask, Checkpoint, EndQuery, Finished, Reply, ReplyError, SendControl, SendIntent,
     SendObservations,
     Stopped, TickClosed, WriteRow,
 )
 from nnql_swarm.protocol.messages import encode
-from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
+from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.sim.checks import Checker
 from nnql_swarm.sim.network import Network, Process
 from nnql_swarm.sim.forgery import forged
