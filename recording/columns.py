@@ -1,7 +1,7 @@
 """Per-episode scalars and text logs buffered and sent to Rerun as columns, a few calls at a time.
 
-The Rerun SDK keeps native memory for every logging call it has seen (``bench/rerun_calls.py``:
-about 140 bytes a call, never given back, however small the value), so a process that logs a
+The Rerun SDK keeps native memory for every logging call it has seen (``bench/rerun_calls.py``
+measures it: never given back, however small the value), so a process that logs a
 dozen scalars per episode at tens of episodes a second grows without bound. Sent as columns, a
 batch of values costs one call per entity path. :class:`FlushClock` says when a batch is due:
 after ``most`` items or ``seconds`` of wall time, whichever comes first, so a live viewer lags by

@@ -7,10 +7,9 @@ the whole slot with the higher sequence number. A process killed at any point, o
 loses power in the middle of a write, leaves the other slot whole: readers get the old record or
 the new, never half of one.
 
-Why in place: writing a new ``.npz`` beside the old and renaming it over took about 0.7 ms on
-ext4 (creating and truncating files; the zip's Python), in each of the nine processes at every
-episode's end, and held up that episode's last tick (docs/performance.md, "Checkpoints"). A
-rewrite in place is one ``pwrite``.
+Why in place: every process checkpoints at every episode's end, on that episode's last tick; a
+rewrite in place is one ``pwrite``, where a new file beside the old, renamed over it, creates
+and truncates files (docs/performance.md, "Checkpoints").
 
 The payload is msgpack: a map of names to plain values, a numpy array as ``[dtype, shape,
 bytes]``. A file is created (or grown, if a record outgrows its slots) whole, under a temporary
