@@ -88,9 +88,12 @@ def spawn_viewer(port: int) -> str:
         raise RecordingError("no display for the native viewer (DISPLAY and WAYLAND_DISPLAY are "
                              "unset); --rerun-serve-web serves a web viewer instead")
     binary = rerun_binary()
-    with _quiet_children():  # the viewer's log lines would break into the progress bars
-        rr.spawn(port=port, connect=False, recording=rr.RecordingStream(APP_ID),
-                 executable_path=binary[0] if len(binary) == 1 else None)
+    try:
+        with _quiet_children():  # the viewer's log lines would break into the progress bars
+            rr.spawn(port=port, connect=False, recording=rr.RecordingStream(APP_ID),
+                     executable_path=binary[0] if len(binary) == 1 else None)
+    except Exception as error:  # noqa: BLE001 - Rerun's own errors (no executable)
+        raise RecordingError(f"cannot start the viewer: {error}") from None
     if wait_until_reachable(url, SPAWNED_S):  # rr.spawn has waited for it to listen
         time.sleep(0.5)
         if reachable(url, timeout=0.5):
