@@ -27,7 +27,7 @@ from nnql_swarm.protocol.actions import (
     N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, sees, target_x, target_y, within,
 )
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import floats, ints, python_values, rows
+from nnql_swarm.kernel.jit import floats, ints, python_values, rows
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.ranks import in_reach
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
@@ -38,7 +38,7 @@ class Learner:
 
     The two tables are views of one array, ``Q_DS``'s rows first (:attr:`entries`, flat, is how
     a shared table's updates name its Q-values), a numpy array whether the kernel is compiled or
-    not (``protocol.jit``); the other buffers are Python lists in plain Python, among them the
+    not (``kernel.jit``); the other buffers are Python lists in plain Python, among them the
     walls it has seen and its way to its goal (``wmap``, ``agent.known_map``), which the agent
     derives from the run's map (``config.walls()``) and its own positions: the world sends no
     walls."""

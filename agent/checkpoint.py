@@ -1,4 +1,4 @@
-"""Q-table checkpoints of one agent, rewritten in place at every episode's end (``protocol.slotfile``:
+"""Q-table checkpoints of one agent, rewritten in place at every episode's end (``storage.slotfile``:
 a reader sees the old checkpoint or the new, whatever is killed when).
 
 A checkpoint holds both tables, the exploration counter, the agent's generator state, the walls
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.protocol import slotfile
+from nnql_swarm.storage import slotfile
 
 
 class CheckpointError(ValueError):
@@ -50,7 +50,7 @@ def read_fields(path: Path, expected: tuple[str, ...]) -> dict:
 
 
 def read_versions(path: Path, expected: tuple[str, ...]) -> list[dict]:
-    """The checkpoint file's whole versions, the newest first (``protocol.slotfile.read_all``:
+    """The checkpoint file's whole versions, the newest first (``storage.slotfile.read_all``:
     the last and the one before), as :func:`read_fields` gives each."""
     return _read(path, expected, all_versions=True)
 
@@ -85,7 +85,7 @@ FIELDS = ("q_ds", "q_ca", "actions_taken", "episode", "agent", "n_agents", "algo
 
 
 def episodes(path: Path) -> list[int]:
-    """The episodes whose state the file holds, the newest first (``protocol.slotfile`` keeps
+    """The episodes whose state the file holds, the newest first (``storage.slotfile`` keeps
     two); raises CheckpointError naming the file."""
     return [int(fields["episode"]) for fields in read_versions(path, FIELDS)]
 

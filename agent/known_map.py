@@ -23,7 +23,7 @@ the search uses, whether an arrived agent taken stands there, and the list of th
 from nnql_swarm.protocol.actions import (
     DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, VIEW_RADIUS, target_x, target_y,
 )
-from nnql_swarm.protocol.jit import kernel
+from nnql_swarm.kernel.jit import kernel
 
 MAP_GOAL, MAP_KNOWN, MAP_PARKED, MAP_CUT, MAP_PENDING = 0, 1, 2, 3, 4
 MAP_HEADER = 5

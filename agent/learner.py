@@ -62,7 +62,7 @@ import numpy as np
 
 from nnql_swarm.agent.known_map import path_length, progress_moves, track, waypoint_move
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, move_of, offset_state, target_x, target_y
-from nnql_swarm.protocol.jit import kernel
+from nnql_swarm.kernel.jit import kernel
 
 READ_QL, READ_NNQL, READ_DIR, READ_DAQL = 0, 1, 2, 3
 READINGS = {"ql": READ_QL, "nnql": READ_NNQL, "nnql-dir": READ_DIR, "daql": READ_DAQL}

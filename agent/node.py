@@ -8,13 +8,13 @@ own intent key, finish a query, write the checkpoint, log.
 Threads, in three sentences. Every input reaches the protocol under the node's one lock, and its
 effects are carried out right there, in order, before the lock is let go (a checkpoint is
 written before the intent that follows it is published). Observations, replies and queries are
-handled on the thread Zenoh calls back on (its receiving thread, ``protocol.transport``), so the
+handled on the thread Zenoh calls back on (its receiving thread, ``transport.runtime``), so the
 last awaited intent is acted on without waking another thread, while liveliness and control
 messages and the ends of asks are only queued there, because Zenoh calls those callbacks holding
 a lock of its own (eclipse-zenoh/zenoh#1092: when a peer dies, Zenoh ends the asks on it under
 that lock while the main thread, holding the node's, ends that peer's standing query, and one
 waited for the other forever). The main thread handles that queue and the protocol's timers,
-sleeping on the queue until the next timer is due, at most ``protocol.transport.POLL_S``.
+sleeping on the queue until the next timer is due, at most ``transport.adapter.POLL_S``.
 """
 
 import logging
@@ -32,15 +32,18 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.agent.protocol import AgentProtocol
 from nnql_swarm.agent.restore import start_brain
-from nnql_swarm.protocol import keys, trace
+from nnql_swarm.machines import trace
+from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.effects import (
+from nnql_swarm.machines.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
 )
-from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
-from nnql_swarm.protocol.transport import (
-    EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback,
-    declare_lockstep_publisher, enqueue, open_session,
+from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
+from nnql_swarm.transport.adapter import ProtocolAdapter
+from nnql_swarm.transport.callbacks import callback, enqueue
+from nnql_swarm.transport.runtime import declare_lockstep_publisher
+from nnql_swarm.transport.settings import (
+    EXIT_TRANSPORT, TransportError, TransportSettings, open_session,
 )
 
 log = logging.getLogger("nnql.agent")

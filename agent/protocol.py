@@ -41,13 +41,13 @@ from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import (
     NEGOTIATING_ALGOS, START_S_PER_AGENT, SwarmConfig, priority_rank,
 )
-from nnql_swarm.protocol.effects import (
+from nnql_swarm.machines.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
 )
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, Answer, Control, Inbox, Intent, Observation, agent_sender, encode,
 )
-from nnql_swarm.protocol.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
+from nnql_swarm.machines.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
 
 RESYNC_AFTER = 3
 """Consecutive observations past a gap in the ticks after which an agent follows them."""

@@ -23,8 +23,8 @@ import numpy as np
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.launch import swarm_cli
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.jit import MODE_VARIABLE
-from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE
+from nnql_swarm.kernel.jit import MODE_VARIABLE
+from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint
 from nnql_swarm.supervision.supervisor import describe_exit
 from nnql_swarm.terminal.cli import EXIT_INTERRUPTED
@@ -229,7 +229,7 @@ class Run:
 
     def show(self, width: int | str = "auto", height: int | str = 720):
         """The run's recording in Rerun's notebook viewer, on the layout the command's viewer
-        opens on (``recording.session.blueprint``): returned as a ``rerun.notebook.Viewer``,
+        opens on (``recording.blueprint``): returned as a ``rerun.notebook.Viewer``,
         which a notebook cell shows inline when it is the cell's value (or call its
         ``display()``). ``width``, ``height``: pixels, or ``"auto"`` (the cell's width; a 16:9
         height).
@@ -244,7 +244,8 @@ class Run:
         import rerun.notebook
         from rerun.chunk import RrdReader
 
-        from nnql_swarm.recording.session import APP_ID, blueprint
+        from nnql_swarm.recording.blueprint import blueprint
+        from nnql_swarm.recording.sinks import APP_ID
 
         path = self.recording
         if path is None:

@@ -6,10 +6,11 @@ import os
 from pathlib import Path
 from typing import Callable
 
-from nnql_swarm.recording.session import RecordingPlan
+from nnql_swarm.recording.sinks import RecordingPlan
 from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
-from nnql_swarm.protocol.jit import plain_python_environment
-from nnql_swarm.protocol.transport import EmbeddedLayout, wait_listening
+from nnql_swarm.kernel.jit import plain_python_environment
+from nnql_swarm.transport.ports import wait_listening
+from nnql_swarm.transport.topology import EmbeddedLayout
 from nnql_swarm.world.metrics import read_episodes
 
 

@@ -24,10 +24,11 @@ import msgpack
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.procstat import MemorySampler  # noqa: E402
-from nnql_swarm.protocol.transport import (  # noqa: E402
-    TOPOLOGIES, EmbeddedLayout, TransportSettings, callback, declare_lockstep_publisher,
-    open_session, wait_listening,
-)
+from nnql_swarm.transport.callbacks import callback  # noqa: E402
+from nnql_swarm.transport.ports import wait_listening  # noqa: E402
+from nnql_swarm.transport.runtime import declare_lockstep_publisher  # noqa: E402
+from nnql_swarm.transport.settings import TransportSettings, open_session  # noqa: E402
+from nnql_swarm.transport.topology import TOPOLOGIES, EmbeddedLayout  # noqa: E402
 
 START_TIMEOUT_S = 120.0
 

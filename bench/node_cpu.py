@@ -38,7 +38,7 @@ from nnql_swarm.protocol import keys  # noqa: E402
 from nnql_swarm.protocol.actions import STAY  # noqa: E402
 from bench.harness import add_preset_option, grid_side, swarm_config  # noqa: E402
 from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
-from nnql_swarm.protocol.transport import TransportSettings  # noqa: E402
+from nnql_swarm.transport.settings import TransportSettings  # noqa: E402
 from nnql_swarm.world.node import WorldNode, WorldOptions  # noqa: E402
 
 

@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.harness import add_preset_option, run_distributed, run_local, swarm_config  # noqa: E402
-from nnql_swarm.recording.session import merge_parts  # noqa: E402
+from nnql_swarm.recording.merge import merge_parts  # noqa: E402
 
 TARGET = 0.10
 """Recording may cost at most 10 % of the tick rate."""

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The recording's own CPU time in one process: the seconds the in-process runner's thread spends
-in its recorder (``recording.session.InProcessRecorder``: the world's and the agents' logging,
+in its recorder (``recording.loggers.InProcessRecorder``: the world's and the agents' logging,
 and the final flush) over a whole run, per tick, and the size of ``run.rrd``.
 
 Thread CPU time, unlike ``bench/recording_cost.py``'s tick rates, hardly moves with the machine's
@@ -20,7 +20,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.harness import add_preset_option, swarm_config  # noqa: E402
 from nnql_swarm.launch.swarm_cli import run_in_process  # noqa: E402
-from nnql_swarm.recording import session  # noqa: E402
+from nnql_swarm.recording import loggers  # noqa: E402
 from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
 SPENT = [0.0]
@@ -45,7 +45,7 @@ def main() -> int:
     add_preset_option(p)
     args = p.parse_args()
     for name in ("on_tick", "on_episode_end", "close"):
-        setattr(session.InProcessRecorder, name, timed(getattr(session.InProcessRecorder, name)))
+        setattr(loggers.InProcessRecorder, name, timed(getattr(loggers.InProcessRecorder, name)))
     config = swarm_config(args.preset, run_id="recording-cpu", n_agents=args.agents,
                           width=args.grid, height=args.grid, episodes=args.episodes)
     seconds, ticks, sizes = [], 0, []

@@ -36,8 +36,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from bench import lockstep  # noqa: E402
 from bench.harness import add_preset_option, grid_side, run_distributed, swarm_config  # noqa: E402
 from bench.procstat import MemorySampler  # noqa: E402
-from nnql_swarm.protocol.runfiles import stats_path  # noqa: E402
-from nnql_swarm.protocol.transport import TOPOLOGIES, EmbeddedLayout, embedded_topology  # noqa: E402
+from nnql_swarm.storage.runfiles import stats_path  # noqa: E402
+from nnql_swarm.transport.topology import (
+    TOPOLOGIES, EmbeddedLayout, embedded_topology,
+)  # noqa: E402
 from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
 def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,

@@ -28,7 +28,7 @@ from nnql_swarm.agent.brain import AgentBrain  # noqa: E402
 from bench.harness import add_preset_option, run_distributed, run_local, swarm_config  # noqa: E402
 from nnql_swarm.protocol.actions import STAY  # noqa: E402
 from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
-from nnql_swarm.protocol.transport import TransportSettings  # noqa: E402
+from nnql_swarm.transport.settings import TransportSettings  # noqa: E402
 
 
 class BareBrain(AgentBrain):

@@ -2,7 +2,7 @@
 """Where a tick's time goes: the distributed swarm, with every process marking each step it takes.
 
 Runs the launcher's world and agent processes (embedded Zenoh, recording off) with ``NNQL_TRACE``
-set (``protocol.trace``), then lines up the marks of every tick after the first episode: from the
+set (``machines.trace``), then lines up the marks of every tick after the first episode: from the
 world's first observation through each agent's decision and each answer (from the agent that
 sent it to the one that got it) to the world closing the tick after the last intent. Medians and
 90th percentiles in microseconds. With the paper's preset (``--preset nnql``, radius 10) the
@@ -24,7 +24,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config  # noqa: E402
-from nnql_swarm.protocol import trace  # noqa: E402
+from nnql_swarm.machines import trace  # noqa: E402
 from nnql_swarm.world.metrics import read_episodes  # noqa: E402
 
 FIRST_OBS = "world: first observation handed to Zenoh -> its agent has it"

@@ -32,7 +32,9 @@ import zenoh
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from nnql_swarm.protocol.transport import TransportSettings, enqueue, free_port, open_session  # noqa: E402
+from nnql_swarm.transport.callbacks import enqueue  # noqa: E402
+from nnql_swarm.transport.ports import free_port  # noqa: E402
+from nnql_swarm.transport.settings import TransportSettings, open_session  # noqa: E402
 
 PATTERNS = ("pubsub", "query", "standing", "token")
 NONE = zenoh.ConsolidationMode.NONE

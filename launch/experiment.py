@@ -33,12 +33,12 @@ from nnql_swarm.experiment.swarm import (
     walls_presets, write_runs, write_tables,
 )
 from nnql_swarm.protocol.config import PRESETS
-from nnql_swarm.protocol.maps import run_map
+from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.terminal.cli import (
     EXIT_INTERRUPTED, OneLineParser, make_directory, prepare_simulator, program_name, progress,
 )
-from nnql_swarm.recording.session import log_swarm_curves
+from nnql_swarm.recording.curves import log_swarm_curves
 
 RESULT_FILES = ("table1.csv", "table1.md", "episodes.csv", "config.json")
 

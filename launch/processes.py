@@ -13,14 +13,15 @@ import time
 from pathlib import Path
 
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.transport import TransportSettings, wait_listening
+from nnql_swarm.transport.ports import wait_listening
+from nnql_swarm.transport.settings import TransportSettings
 from nnql_swarm.supervision.resume import ResumePoint
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
                progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> None:
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
-    from nnql_swarm.recording.session import exit_without_teardown, open_world_viz
+    from nnql_swarm.recording.loggers import open_world_viz
     from nnql_swarm.terminal.cli import progress as progress_bar
     from nnql_swarm.world.node import WorldOptions, run_world
 
@@ -52,8 +53,6 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
             bar.close()
         if viz is not None:
             viz.close()
-    if viz is not None:
-        exit_without_teardown(code)
     sys.exit(code)  # a spawned process's exit code is its target's SystemExit, not its return
 
 
@@ -64,7 +63,7 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
     version of ``resume_episode``, or else the newest); ``hub``: the ``(host, port)`` of the
     world to wait for, where the agent is its client."""
     from nnql_swarm.agent.node import AgentOptions, run_agent
-    from nnql_swarm.recording.session import exit_without_teardown, open_agent_viz
+    from nnql_swarm.recording.loggers import open_agent_viz
 
     name_process(f"nnql-agent {agent}", config)
     setup_logging(f"agent {agent}")
@@ -78,8 +77,6 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
     finally:
         if viz is not None:
             viz.close()
-    if viz is not None:
-        exit_without_teardown(code)
     sys.exit(code)
 
 

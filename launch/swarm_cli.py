@@ -21,11 +21,12 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from nnql_swarm.operations import zenoh_files
+from nnql_swarm.transport import zenoh_files
 from nnql_swarm.terminal.cli import (
     EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator, progress as progress_bar,
 )
-from nnql_swarm.recording.session import PARTS_DIR, RecordingSession, check_viewer_url
+from nnql_swarm.recording.session import RecordingSession
+from nnql_swarm.recording.viewers import check_viewer_url
 from nnql_swarm.supervision.resume import (
     ResumeError, ResumePoint, read_config, resume_point, rewind, shared_table,
 )
@@ -33,18 +34,18 @@ from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
 from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
 )
-from nnql_swarm.protocol.jit import plain_python_environment
-from nnql_swarm.protocol.maps import run_map
-from nnql_swarm.protocol.runfiles import (
-    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, STATS_DIR, write_text_atomic,
+from nnql_swarm.kernel.jit import plain_python_environment
+from nnql_swarm.terrain.maps import run_map
+from nnql_swarm.storage.runfiles import (
+    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, PARTS_DIR, RECORDING_FILE, STATS_DIR,
+    write_text_atomic,
 )
-from nnql_swarm.protocol.transport import (
-    HUB_FROM_AGENTS, MODES, EmbeddedLayout, TransportSettings, embedded_topology,
-)
+from nnql_swarm.transport.settings import MODES, TransportSettings
+from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
 from nnql_swarm.launch.processes import agent_main, world_main
 
 LAUNCHER_TOPOLOGIES = ("mesh", "hub-peer", "hub-router", "star-peers")
-"""The one-machine topologies the launcher starts (``protocol.transport.EmbeddedLayout``; the
+"""The one-machine topologies the launcher starts (``transport.topology.EmbeddedLayout``; the
 ``router`` one needs a router process of its own)."""
 
 log = logging.getLogger("nnql.launch")
@@ -242,7 +243,7 @@ def check_distributable(config: SwarmConfig) -> None:
 
 
 RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR)
-"""What a run directory holds (``protocol.runfiles``); a folder with anything else is not a run."""
+"""What a run directory holds (``storage.runfiles``); a folder with anything else is not a run."""
 
 
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
@@ -359,7 +360,8 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool,
     follows each episode's row (its deterministic columns)."""
     from nnql_swarm.sim.inprocess import run_in_process as run
     from nnql_swarm.sim.runs import swarm_world
-    from nnql_swarm.recording.session import InProcessRecorder, RecordingSession
+    from nnql_swarm.recording.loggers import InProcessRecorder
+    from nnql_swarm.recording.session import RecordingSession
 
     prepare_simulator(swarm_world(config), config)  # before any recording stream opens
     session = record if isinstance(record, RecordingSession) else \

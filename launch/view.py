@@ -23,6 +23,8 @@ import time
 from pathlib import Path
 from urllib.parse import quote
 
+from nnql_swarm.recording.viewers import port_taken
+
 RRD_MAGIC = b"RRF2"
 """The first bytes of a Rerun recording file."""
 
@@ -63,14 +65,15 @@ def has_display() -> bool:
 
 def web_urls(host: str, web_port: int, grpc_port: int) -> str:
     """The web viewer's URL at ``host``, pointed at the recording's gRPC server there."""
-    from nnql_swarm.recording.session import grpc_url
+    from nnql_swarm.recording.viewers import grpc_url
 
     return f"http://{host}:{web_port}/?url={quote(grpc_url(grpc_port, host), safe='')}"
 
 
 def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> int:
     """Serve ``files`` to the web viewer until Ctrl-C (or SIGTERM); returns the exit code."""
-    from nnql_swarm.recording.session import public_host, rerun_binary, stop_process
+    from nnql_swarm.recording.binary import rerun_binary
+    from nnql_swarm.recording.viewers import public_host, stop_process
 
     for port in (web_port, grpc_port):
         if port_taken(bind, port):
@@ -137,21 +140,9 @@ def _stop(*_signal) -> None:
     raise _Stopped
 
 
-def port_taken(bind: str, port: int) -> bool:
-    """Whether ``port`` cannot be listened on at ``bind``."""
-    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
-    with socket.socket(family, socket.SOCK_STREAM) as probe:
-        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            probe.bind((bind, port))
-        except OSError:
-            return True
-    return False
-
-
 def open_native(files: list[Path]) -> int:
     """The native viewer on ``files``, until its window closes; returns its exit code."""
-    from nnql_swarm.recording.session import rerun_binary
+    from nnql_swarm.recording.binary import rerun_binary
 
     try:
         code = subprocess.call([*rerun_binary(), *map(str, files)])

@@ -25,7 +25,7 @@ from pathlib import Path
 import zenoh
 
 from nnql_swarm.terminal.cli import OneLineParser
-from nnql_swarm.protocol.transport import TransportSettings
+from nnql_swarm.transport.settings import TransportSettings
 
 DEFAULT_LISTEN = "tcp/0.0.0.0:7447"
 EXIT_FAILED = 1

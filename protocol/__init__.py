@@ -1,1 +1,2 @@
-"""What the agents and the world share: the action set, the egocentric window, keys and messages."""
+"""What the agents and the world agree on: actions, ranks, keys, messages, the run's config,
+its seeded streams and its walls."""

@@ -29,8 +29,8 @@ MAX_LOOKAHEAD = 3
 
 START_S_PER_AGENT = 1.0
 """The start-up a swarm is given per agent, where that is longer than a fixed wait: the world
-waits so long for every agent to come alive, and an agent to see every other (128 spawned agents
-importing on two cores took 28 s, once over 60 s: ``bench/scale.py --agents 128``)."""
+waits so long for every agent to come alive, and an agent to see every other (spawned agents
+import in parallel, slowly where they outnumber the cores: ``bench/scale.py --agents 128``)."""
 
 
 def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argparse_options):
@@ -153,7 +153,7 @@ class SwarmConfig:
     map_name: str = ""
     """Where the map came from (``--map``: a file or a generator's spec); "" without a map."""
     map_rows: tuple[str, ...] = ()
-    """The run's map (``protocol.maps``), one string per row, ``.`` free and ``@`` wall; empty:
+    """The run's map (``terrain.maps``), one string per row, ``.`` free and ``@`` wall; empty:
     the open grid, or walls drawn at ``obstacle_density``."""
     scenario: tuple[tuple[int, int, int, int], ...] = ()
     """Every episode's ``(start_x, start_y, goal_x, goal_y)`` per agent (``--scen``); empty:

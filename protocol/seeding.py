@@ -3,7 +3,7 @@
 ``SeedSequence(seed, spawn_key=(stream, index))`` gives independent, reproducible streams: the
 scenario of episode ``index``, the noise of agent ``index``, or (the simulator, ``sim``) a fault
 schedule's draws; and, once per run, its walls (``protocol.walls``) or its generated map
-(``protocol.maps``). Nothing else draws randomness.
+(``terrain.maps``). Nothing else draws randomness.
 """
 
 import numpy as np

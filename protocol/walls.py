@@ -4,7 +4,7 @@ With ``--obstacle-density P`` a run's grid holds ``round(P * W * H)`` walls, dra
 whole run from its own stream (``protocol.seeding.WALL_STREAM``), so the world, every agent and the
 simulator know the same map without a message. Starts and goals are drawn only from the largest
 4-connected region of free cells (:func:`open_cells`), so every goal can be reached; smaller pockets
-stay empty. A run on a map (``--map``, ``protocol.maps``) has the map's walls instead, which its
+stay empty. A run on a map (``--map``, ``terrain.maps``) has the map's walls instead, which its
 config carries.
 
 A wall is a body that always stays: body ``n_agents + k`` is wall ``k`` (walls in cell order,
@@ -18,8 +18,10 @@ from functools import lru_cache
 
 import numpy as np
 
-from nnql_swarm.protocol.maps import wall_cells as map_walls
 from nnql_swarm.protocol.seeding import WALL_STREAM, stream_rng
+
+FREE, WALL = ".", "@"
+"""A free cell and a wall in a map's rows (``SwarmConfig.map_rows``)."""
 
 MAX_DENSITY = 0.4
 """The largest obstacle density: beyond it random walls split most grids into small pockets."""
@@ -28,6 +30,12 @@ MAX_DENSITY = 0.4
 def wall_count(width: int, height: int, density: float) -> int:
     """How many walls a grid holds at ``density``."""
     return int(round(density * width * height))
+
+
+def map_walls(rows: tuple[str, ...]) -> np.ndarray:
+    """A map's walls (``rows``) as ``(K, 2)`` cells ``(x, y)``, in cell order (``y * W + x``)."""
+    cells = [(x, y) for y, row in enumerate(rows) for x, c in enumerate(row) if c != FREE]
+    return np.array(cells, dtype=np.int64).reshape(-1, 2)
 
 
 def wall_cells(seed: int, width: int, height: int, density: float) -> np.ndarray:
@@ -42,7 +50,7 @@ def wall_cells(seed: int, width: int, height: int, density: float) -> np.ndarray
 @lru_cache(maxsize=16)
 def layout(seed: int, width: int, height: int, density: float,
            rows: tuple[str, ...] = ()) -> tuple[np.ndarray, np.ndarray]:
-    """A run's walls (its map's, ``rows``, if it has one, ``protocol.maps``; else
+    """A run's walls (its map's, ``rows``, if it has one, :func:`map_walls`; else
     :func:`wall_cells`) and the cells its starts and goals come from (:func:`open_cells`),
     computed once per process (both read-only)."""
     walls = map_walls(rows) if rows else wall_cells(seed, width, height, density)

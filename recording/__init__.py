@@ -1,1 +1,1 @@
-"""The Rerun recording of a run: sinks (files, a live viewer), the layout, merging, the experiments' curves."""
+"""The Rerun recording of a run: sinks, viewers, the layout, merging, the experiments' curves."""

@@ -19,7 +19,7 @@ walls make corridors it does not always bring every agent home. The lower bound 
 """
 
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
-from nnql_swarm.protocol.jit import kernel
+from nnql_swarm.kernel.jit import kernel
 
 FAR = 1 << 30
 """The distance of a cell its agent cannot reach."""

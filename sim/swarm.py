@@ -26,7 +26,7 @@ from nnql_swarm.agent.learner import (
     apply_record, decide, finish, planned_cell, record_outcome,
 )
 from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
-from nnql_swarm.protocol.jit import batch_kernel, kernel, prange
+from nnql_swarm.kernel.jit import batch_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
 from nnql_swarm.world.rules import shared_cells, swaps_through, world_step

@@ -14,7 +14,7 @@ import time
 from dataclasses import dataclass, field
 from typing import Callable
 
-from nnql_swarm.protocol.transport import EXIT_TRANSPORT
+from nnql_swarm.transport.settings import EXIT_TRANSPORT
 
 log = logging.getLogger("nnql.supervisor")
 

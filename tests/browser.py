@@ -23,8 +23,9 @@ from urllib.parse import quote
 
 import numpy as np
 
-from nnql_swarm.recording.session import grpc_url, rerun_binary, stop_process, wait_until_reachable
-from nnql_swarm.protocol.transport import free_port
+from nnql_swarm.recording.binary import rerun_binary
+from nnql_swarm.recording.viewers import grpc_url, stop_process, wait_until_reachable
+from nnql_swarm.transport.ports import free_port
 
 CHROMIUM = Path(os.environ.get("NNQL_CHROMIUM", "/usr/bin/chromium"))
 """Debian's ``chromium`` (``apt-get install chromium``); ``NNQL_CHROMIUM`` names another."""

@@ -11,7 +11,7 @@ from nnql_swarm.agent.node import AgentNode, AgentOptions
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation, encode
-from nnql_swarm.protocol.transport import TransportSettings
+from nnql_swarm.transport.settings import TransportSettings
 
 CONFIG = SwarmConfig(run_id="node", n_agents=1, episodes=10, max_steps=50)
 

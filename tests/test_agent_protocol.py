@@ -10,7 +10,7 @@ from nnql_swarm.agent.learner import LS_PENDING
 from nnql_swarm.agent.protocol import PEER_WAIT_S, RESYNC_AFTER, AgentProtocol
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
+from nnql_swarm.machines.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
 from nnql_swarm.world.protocol import STARTUP_TIMEOUT_S, WorldProtocol
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode, to_wire,

@@ -18,7 +18,7 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.transport import free_port
+from nnql_swarm.transport.ports import free_port
 from tests.swarm_helpers import (
     ROOT, SwarmProcess, find_process, group_pids, run_swarm, start_swarm, stops_within,
     swarm_command, wait_for_rows,

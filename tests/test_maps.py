@@ -1,4 +1,4 @@
-"""Maps as input (``--map``, ``--scen``, ``protocol.maps``): the MovingAI formats read and
+"""Maps as input (``--map``, ``--scen``, ``terrain.maps``): the MovingAI formats read and
 written, one-line errors naming the file and line, the generators, the repository's ``maps/``,
 the map carried by the config to every process, and the oracle planning around walls."""
 
@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from nnql_swarm.protocol import maps
+from nnql_swarm.terrain import maps
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
-from nnql_swarm.protocol.walls import open_cells
+from nnql_swarm.protocol.walls import map_walls, open_cells
 from nnql_swarm.world.metrics import read_episodes
 from nnql_swarm.world.scenario import swarm_episode
 from tests.swarm_helpers import ROOT, run_swarm
@@ -27,7 +27,7 @@ def scen_line(sx, sy, gx, gy, width=4, height=3, name="small.map"):
 def test_a_map_reads_with_the_top_left_cell_first_and_every_other_character_a_wall():
     rows = maps.parse_map(SMALL, "small.map")
     assert rows == ("..@.", "@...", "..@.")
-    assert maps.wall_cells(rows).tolist() == [[2, 0], [0, 1], [2, 2]]
+    assert map_walls(rows).tolist() == [[2, 0], [0, 1], [2, 2]]
     assert maps.parse_map(maps.format_map(rows)) == rows
 
 
@@ -62,7 +62,7 @@ def test_generators_are_seeded_and_their_free_cells_connected(spec, size):
     rows = maps.load(spec, 0)
     assert (len(rows[0]), len(rows)) == size and maps.load(spec, 0) == rows
     free = sum(row.count(".") for row in rows)
-    region = open_cells(size[0], size[1], maps.wall_cells(rows))
+    region = open_cells(size[0], size[1], map_walls(rows))
     if spec.startswith("random"):
         assert free == size[0] * size[1] - round(0.2 * size[0] * size[1])
         assert maps.load("random:17x21:0.2:4", 0) != rows

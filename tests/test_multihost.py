@@ -19,8 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from nnql_swarm.protocol.runfiles import stats_path
-from nnql_swarm.protocol.transport import free_port
+from nnql_swarm.storage.runfiles import stats_path
+from nnql_swarm.transport.ports import free_port
 from tests import netns
 from tests.swarm_helpers import ROOT, SWARM, run_swarm
 from nnql_swarm.world.engine import EPISODE_FIELDS
@@ -357,7 +357,7 @@ def test_bad_several_machine_options_give_one_line(tmp_path, options, message):
 
 
 def test_the_session_mode_is_the_option_else_the_file_else_peer():
-    from nnql_swarm.operations.zenoh_files import settings
+    from nnql_swarm.transport.zenoh_files import settings
 
     client = ROOT / "config" / "client.json5"
     assert settings(None, [], [], client).mode == "client"

@@ -15,11 +15,13 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.viz import (
     OPTIMISTIC, TABLES, UNVISITED, TimedBrain, learnable_bound, logs_heat_maps, table_picture,
 )
-from nnql_swarm.recording.session import PARTS_DIR, log_experiment, rerun_binary
+from nnql_swarm.recording.binary import rerun_binary
+from nnql_swarm.recording.curves import log_experiment
+from nnql_swarm.storage.runfiles import PARTS_DIR
 from nnql_swarm.protocol.actions import RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
-from nnql_swarm.protocol.transport import free_port
+from nnql_swarm.transport.ports import free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm
 from nnql_swarm.world.metrics import read_episodes
 from nnql_swarm.world.scenario import swarm_episode
@@ -350,7 +352,8 @@ def test_processes_that_do_not_record_never_load_rerun():
     probe = (
         "import sys\n"
         "from nnql_swarm.protocol.config import SwarmConfig\n"
-        "from nnql_swarm.recording.session import RECORDED_AGENTS, RecordingPlan, open_agent_viz\n"
+        "from nnql_swarm.recording.loggers import RECORDED_AGENTS, open_agent_viz\n"
+        "from nnql_swarm.recording.sinks import RecordingPlan\n"
         "config = SwarmConfig(n_agents=16)\n"
         "assert open_agent_viz(None, 0, config) == (None, None, None)\n"
         "assert 'rerun' not in sys.modules, 'open_agent_viz(None) loaded rerun'\n"

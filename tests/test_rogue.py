@@ -19,7 +19,8 @@ from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.messages import (
     WORLD_SENDER, Control, Intent, Observation, agent_sender, encode, to_wire,
 )
-from nnql_swarm.protocol.transport import TransportSettings, free_port
+from nnql_swarm.transport.ports import free_port
+from nnql_swarm.transport.settings import TransportSettings
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm, wait_for_rows
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes

@@ -1,4 +1,4 @@
-"""What every process sets up around Zenoh (protocol/transport.py), on real sessions on loopback.
+"""What every process sets up around Zenoh (transport/), on real sessions on loopback.
 
 Zenoh's runtime threads and Python thread states are per process, and what one test sets up lasts
 for the rest of its process, so each check runs in a fresh spawned process.
@@ -11,14 +11,15 @@ import threading
 import time
 from pathlib import Path
 
-from nnql_swarm.protocol import transport
-from nnql_swarm.protocol.transport import TransportSettings, free_port
+from nnql_swarm.transport import callbacks, runtime
+from nnql_swarm.transport.ports import LOWEST_CHOSEN_PORT, _ephemeral_low, free_port
+from nnql_swarm.transport.settings import TransportError, TransportSettings, open_session
 
 MESSAGES = 20
 
 
 def _counts_seen_by_a_subscriber(mode: str | None) -> dict[int, list[int]]:
-    """Publish MESSAGES samples to a subscriber (its handler made by ``transport.callback`` in
+    """Publish MESSAGES samples to a subscriber (its handler made by ``callbacks.callback`` in
     ``mode``, None: the switch's) whose callback counts them in a ``threading.local``, the way
     the codec keeps its packer: by thread, what it counted at each."""
     local = threading.local()
@@ -31,10 +32,10 @@ def _counts_seen_by_a_subscriber(mode: str | None) -> dict[int, list[int]]:
         if sum(map(len, seen.values())) == MESSAGES:
             received.set()
 
-    handler = transport.callback(count, mode=mode)
+    handler = callbacks.callback(count, mode=mode)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with transport.open_session(TransportSettings(listen=(endpoint,))) as publishing, \
-            transport.open_session(TransportSettings(connect=(endpoint,))) as subscribing:
+    with open_session(TransportSettings(listen=(endpoint,))) as publishing, \
+            open_session(TransportSettings(connect=(endpoint,))) as subscribing:
         with subscribing.declare_subscriber("transport-test/count", handler):
             with publishing.declare_publisher("transport-test/count") as publisher:
                 time.sleep(0.5)  # let the subscription reach the publisher
@@ -52,25 +53,25 @@ def _thread_names() -> list[str]:
 
 def _run(mode: str | None, results) -> None:
     seen = _counts_seen_by_a_subscriber(mode)
-    results.put((transport.CALLBACK_MODE, seen, _thread_names()))
+    results.put((callbacks.CALLBACK_MODE, seen, _thread_names()))
 
 
 def _in_fresh_process(mode: str | None,
                       switch: str | None = None) -> tuple[str, dict, list[str]]:
     """``(the switch's mode, what the subscriber saw, the process's thread names after it)`` in
-    a fresh process whose :data:`transport.CALLBACKS_ENV` is ``switch``."""
+    a fresh process whose :data:`callbacks.CALLBACKS_ENV` is ``switch``."""
     ctx = mp.get_context("spawn")
     results = ctx.Queue()
-    old = os.environ.pop(transport.CALLBACKS_ENV, None)
+    old = os.environ.pop(callbacks.CALLBACKS_ENV, None)
     if switch is not None:
-        os.environ[transport.CALLBACKS_ENV] = switch
+        os.environ[callbacks.CALLBACKS_ENV] = switch
     try:
         process = ctx.Process(target=_run, args=(mode, results))
         process.start()
     finally:
-        os.environ.pop(transport.CALLBACKS_ENV, None)
+        os.environ.pop(callbacks.CALLBACKS_ENV, None)
         if old is not None:
-            os.environ[transport.CALLBACKS_ENV] = old
+            os.environ[callbacks.CALLBACKS_ENV] = old
     try:
         return results.get(timeout=60)
     finally:
@@ -81,7 +82,7 @@ def test_zenohs_thread_keeps_its_python_state_from_one_callback_to_the_next():
     mode, seen, _ = _in_fresh_process(mode=None)
     assert mode == "kept", "the default"
     assert sum(map(len, seen.values())) == MESSAGES
-    for counts in seen.values():  # one receiving thread by default (transport.RUNTIME_DEFAULT)
+    for counts in seen.values():  # one receiving thread by default (runtime.RUNTIME_DEFAULT)
         assert counts == list(range(1, len(counts) + 1))
 
 
@@ -105,7 +106,7 @@ def test_the_one_switch_turns_the_tricks_off():
 
 
 def test_one_thread_waits_on_every_socket_receives_and_sends():
-    """transport.RUNTIME_DEFAULT: the acceptor's, the application's, the network and the sending
+    """runtime.RUNTIME_DEFAULT: the acceptor's, the application's, the network and the sending
     runtimes are handed over to the one receiving thread, which both a listening session (its
     accepted link) and a connecting one used. (Tokio names the threads of a runtime's blocking
     pool as its workers, so two sessions opened in one process may show more than ``rx-0``.)"""
@@ -128,17 +129,17 @@ def _burst_from_a_handler(results) -> None:
             done.set()
 
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    with transport.open_session(TransportSettings(listen=(endpoint,))) as sender, \
-            transport.open_session(TransportSettings(connect=(endpoint,))) as receiver:
-        out = [transport.declare_lockstep_publisher(sender, f"transport-test/burst/{i}")
+    with open_session(TransportSettings(listen=(endpoint,))) as sender, \
+            open_session(TransportSettings(connect=(endpoint,))) as receiver:
+        out = [runtime.declare_lockstep_publisher(sender, f"transport-test/burst/{i}")
                for i in range(BURST)]
 
         def burst(_sample) -> None:
             for publisher in out:
                 publisher.put(b"x" * 1000)
 
-        with receiver.declare_subscriber("transport-test/burst/*", transport.callback(count)), \
-                sender.declare_subscriber("transport-test/go", transport.callback(burst)), \
+        with receiver.declare_subscriber("transport-test/burst/*", callbacks.callback(count)), \
+                sender.declare_subscriber("transport-test/go", callbacks.callback(burst)), \
                 receiver.declare_publisher("transport-test/go") as go:
             time.sleep(0.5)  # let the subscriptions reach the other session
             start = time.monotonic()
@@ -151,7 +152,7 @@ def _burst_from_a_handler(results) -> None:
 
 def test_a_handlers_many_sends_onto_one_link_leave_at_once():
     """The sending tasks run on the network thread, so what a handler sends leaves after it
-    returns: the queue of a link must hold it all (transport.QUEUE_BATCHES), and the lockstep's
+    returns: the queue of a link must hold it all (runtime.QUEUE_BATCHES), and the lockstep's
     messages share batches (not express). Otherwise the handler waits for itself, 5 s, and the
     link closes."""
     ctx = mp.get_context("spawn")
@@ -166,12 +167,12 @@ def test_a_handlers_many_sends_onto_one_link_leave_at_once():
 
 
 def test_the_runtime_default_leaves_a_users_setting_alone(monkeypatch):
-    monkeypatch.setenv(transport.RUNTIME_ENV, "(rx: (worker_threads: 2))")
+    monkeypatch.setenv(runtime.RUNTIME_ENV, "(rx: (worker_threads: 2))")
     try:
-        transport.open_session(TransportSettings(mode="peer")).close()
-    except transport.TransportError:
+        open_session(TransportSettings(mode="peer")).close()
+    except TransportError:
         pass
-    assert os.environ[transport.RUNTIME_ENV] == "(rx: (worker_threads: 2))"
+    assert os.environ[runtime.RUNTIME_ENV] == "(rx: (worker_threads: 2))"
 
 
 def _zenoh_shared_memory_mapped(results) -> None:
@@ -197,7 +198,7 @@ def test_sessions_map_no_shared_memory():
 
 def test_a_client_of_the_hub_keeps_connecting_until_the_hub_listens():
     """The embedded hub's agents retry their connect (128 of them at once were refused)."""
-    from nnql_swarm.protocol.transport import EmbeddedLayout, TransportError
+    from nnql_swarm.transport.topology import EmbeddedLayout
 
     layout = EmbeddedLayout(topology="hub-peer")
     agent = layout.agent()
@@ -206,20 +207,20 @@ def test_a_client_of_the_hub_keeps_connecting_until_the_hub_listens():
 
     def hub_later() -> None:
         time.sleep(1.5)
-        with transport.open_session(layout.world()):
+        with open_session(layout.world()):
             hub_up.set()
             time.sleep(5)
 
     late = threading.Thread(target=hub_later)
     late.start()
     try:
-        with transport.open_session(agent):
+        with open_session(agent):
             assert hub_up.is_set()
     finally:
         late.join()
     impatient = TransportSettings(mode="client", connect=(f"tcp/127.0.0.1:{free_port()}",))
     try:
-        transport.open_session(impatient).close()
+        open_session(impatient).close()
         raise AssertionError("a client without the retry connected to nobody")
     except TransportError:
         pass
@@ -229,14 +230,14 @@ def test_free_ports_lie_below_the_kernels_ephemeral_range_and_differ_call_by_cal
     """A port the kernel could hand to a bind to port 0 or an outgoing connection is never
     chosen (the world of a test once lost its port that way), and one process choosing several
     gets several, skipping one that is taken."""
-    low = transport._ephemeral_low()
+    low = _ephemeral_low()
     ports = [free_port() for _ in range(5)]
     assert len(set(ports)) == 5
-    assert all(transport.LOWEST_CHOSEN_PORT <= p < low for p in ports)
-    span = low - transport.LOWEST_CHOSEN_PORT
+    assert all(LOWEST_CHOSEN_PORT <= p < low for p in ports)
+    span = low - LOWEST_CHOSEN_PORT
 
     def after(port):  # the next port the search tries
-        return transport.LOWEST_CHOSEN_PORT + (port + 1 - transport.LOWEST_CHOSEN_PORT) % span
+        return LOWEST_CHOSEN_PORT + (port + 1 - LOWEST_CHOSEN_PORT) % span
 
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", after(ports[-1])))

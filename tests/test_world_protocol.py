@@ -8,7 +8,7 @@ from nnql_swarm.agent.learner import write_updates
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import DOWN, LEFT, RIGHT, STAY, UP
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
 from nnql_swarm.world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol

@@ -11,8 +11,8 @@ from pathlib import Path
 
 from nnql_swarm.agent.checkpoint import CheckpointError, check_tables, read_versions
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol import slotfile
-from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR
+from nnql_swarm.storage import slotfile
+from nnql_swarm.storage.runfiles import CHECKPOINT_DIR
 from nnql_swarm.world.shared_table import SharedState, SharedTable
 
 FILE = "world.ckpt"

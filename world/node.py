@@ -10,11 +10,11 @@ world starts from the shared table of its checkpoint (``world.checkpoint``).
 Threads, in three sentences. Every input reaches the protocol under the node's one lock, and its
 effects are carried out right there, in order, before the lock is let go, except the episode
 rows: they sync a file, so they go to the main thread through its queue, in order. Intents are
-handled on the thread Zenoh calls back on (its receiving thread, ``protocol.transport``), so the
+handled on the thread Zenoh calls back on (its receiving thread, ``transport.runtime``), so the
 last intent of a tick closes it and sends the next observations at once, while liveliness
 changes are only queued there, because Zenoh calls those callbacks holding a lock of its own.
 The main thread handles that queue (rows, liveliness) and the protocol's timers, sleeping on the
-queue until the next timer is due, at most ``protocol.transport.POLL_S``.
+queue until the next timer is due, at most ``transport.adapter.POLL_S``.
 """
 
 import logging
@@ -28,13 +28,16 @@ from typing import Callable
 
 import zenoh
 
-from nnql_swarm.protocol import keys, trace
+from nnql_swarm.machines import trace
+from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
-from nnql_swarm.protocol.runfiles import EPISODES_FILE, stats_path, write_json_atomic
-from nnql_swarm.protocol.transport import (
-    EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback,
-    declare_lockstep_publisher, enqueue, open_session,
+from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.storage.runfiles import EPISODES_FILE, stats_path, write_json_atomic
+from nnql_swarm.transport.adapter import ProtocolAdapter
+from nnql_swarm.transport.callbacks import callback, enqueue
+from nnql_swarm.transport.runtime import declare_lockstep_publisher
+from nnql_swarm.transport.settings import (
+    EXIT_TRANSPORT, TransportError, TransportSettings, open_session,
 )
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
 from nnql_swarm.world import checkpoint as world_checkpoint

@@ -80,7 +80,7 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
-from nnql_swarm.protocol.jit import flags, floats, ints, python_values
+from nnql_swarm.kernel.jit import flags, floats, ints, python_values
 from nnql_swarm.protocol.ranks import WAIT_RULES, awaits_answer, priority_rank
 from nnql_swarm.world.rules import GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, world_step
 from nnql_swarm.world.scenario import swarm_episode

@@ -45,7 +45,7 @@ from nnql_swarm.agent.learner import (
 from nnql_swarm.agent.negotiation import awaited, staying
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.jit import floats, ints, python_values, rows
+from nnql_swarm.kernel.jit import floats, ints, python_values, rows
 from nnql_swarm.protocol.messages import Observation
 
 FORGED = "forged-record"

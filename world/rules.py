@@ -32,7 +32,7 @@ over when every learner has arrived (or, the caller's business, after its last s
 import math
 
 from nnql_swarm.protocol.actions import STAY, target_x, target_y
-from nnql_swarm.protocol.jit import kernel
+from nnql_swarm.kernel.jit import kernel
 
 Cell = tuple[int, int]
 

@@ -2,7 +2,7 @@
 of the field's map families (random, maze, warehouse).
 
 A map reaches every process inside the run's config (``protocol.config.SwarmConfig.map_rows``:
-one string per row, ``.`` free and ``@`` wall), never as a file: the launcher reads or generates
+one string per row, ``.`` free and ``@`` wall; ``protocol.walls`` reads its walls), never as a file: the launcher reads or generates
 it once, ``config.json`` holds it, and the world, the agents, the simulator and ``--resume`` read
 it from there. A scenario (``SwarmConfig.scenario``: ``(start_x, start_y, goal_x, goal_y)`` per
 agent) fixes every episode's starts and goals.
@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.protocol.seeding import MAP_STREAM, stream_rng
+from nnql_swarm.protocol.walls import FREE, WALL, map_walls, open_cells
 
-FREE, WALL = ".", "@"
 PASSABLE = frozenset(".G")
 """The passable characters of a MovingAI map; every other character is a wall."""
 
@@ -103,12 +103,6 @@ def read_map(path: str | Path) -> tuple[str, ...]:
     except (OSError, UnicodeDecodeError) as error:
         raise MapError(str(path), 0, f"cannot be read ({error.__class__.__name__})") from None
     return parse_map(text, str(path))
-
-
-def wall_cells(rows: tuple[str, ...]) -> np.ndarray:
-    """A map's walls as ``(K, 2)`` cells ``(x, y)``, in cell order (``y * W + x``)."""
-    cells = [(x, y) for y, row in enumerate(rows) for x, c in enumerate(row) if c != FREE]
-    return np.array(cells, dtype=np.int64).reshape(-1, 2)
 
 
 # -- the .scen format --------------------------------------------------------------------------
@@ -320,10 +314,8 @@ def load(spec: str, seed: int) -> tuple[str, ...]:
 def draw_tasks(rows: tuple[str, ...], count: int, rng: np.random.Generator) -> tuple[Task, ...]:
     """``count`` tasks on ``2 * count`` distinct cells of the map's largest free region (as the
     swarm draws starts and goals): the tasks a ``.scen`` of the map holds."""
-    from nnql_swarm.protocol.walls import open_cells  # walls reads this module's wall cells
-
     width = len(rows[0])
-    region = open_cells(width, len(rows), wall_cells(rows))
+    region = open_cells(width, len(rows), map_walls(rows))
     if 2 * count > len(region):
         raise ValueError(f"{count} tasks need {2 * count} free cells, the map's largest free "
                          f"region has {len(region)}")

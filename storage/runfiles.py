@@ -2,10 +2,11 @@
 
     <out>/config.json          the resolved SwarmConfig
     <out>/episodes.csv         one row per finished episode (world.metrics)
-    <out>/checkpoints/agent-<id>.ckpt  each agent's Q-tables (agent.checkpoint; protocol.slotfile)
+    <out>/checkpoints/agent-<id>.ckpt  each agent's Q-tables (agent.checkpoint; storage.slotfile)
     <out>/checkpoints/world.ckpt       the shared Q-table, where the agents share one (world.checkpoint)
     <out>/stats/world.json, <out>/stats/agent-<id>.json   closing statistics of each process
     <out>/run.rrd              the Rerun recording
+    <out>/rerun-parts/<role>.<pid>.rrd  each process's part of it, until merged into run.rrd
 """
 
 import json
@@ -15,6 +16,7 @@ from pathlib import Path
 CONFIG_FILE = "config.json"
 EPISODES_FILE = "episodes.csv"
 RECORDING_FILE = "run.rrd"
+PARTS_DIR = "rerun-parts"
 CHECKPOINT_DIR = "checkpoints"
 STATS_DIR = "stats"
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import zenoh
 
-from nnql_swarm.protocol.transport import MODES, TransportSettings
+from nnql_swarm.transport.settings import MODES, TransportSettings
 
 WORLD_FILE = "world.json5"
 

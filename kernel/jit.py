@@ -35,7 +35,7 @@ PLAIN = "python"
 COMPILED = os.environ.get(MODE_VARIABLE, "compiled") != PLAIN
 """Whether kernel functions are compiled in this process (fixed at import)."""
 
-KERNEL_ROOMS = ("agent", "protocol", "sim", "world")
+KERNEL_ROOMS = ("agent", "kernel", "protocol", "sim", "world")
 """The packages whose modules may define kernel functions."""
 
 
@@ -46,7 +46,7 @@ def cache_directory() -> Path:
     for room in KERNEL_ROOMS:
         for path in sorted((root / room).glob("*.py")):
             source = path.read_bytes()
-            if b"protocol.jit import" in source or path.name == "jit.py":
+            if b"kernel.jit import" in source or path.name == "jit.py":
                 digest.update(path.name.encode() + source)
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
     return cache / "nnql-swarm" / "kernels" / digest.hexdigest()[:16]

@@ -1,0 +1,79 @@
+"""The viewer's first view of a run: the world and its key | the learning curves | the heat maps."""
+
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.recording.loggers import heat_map_agents
+
+
+def blueprint(config: SwarmConfig, distributed: bool = True):
+    """The first view: the world and its key | the learning curves | the heat maps.
+
+    The viewer opens on the ``episode`` timeline, following the newest episode: the curves run
+    against episodes, and the world view shows that whole episode at once (every announced move,
+    every wait, every collision; agents, goals and trails as the episode left them).
+    """
+    import rerun.blueprint as rrb
+
+    from nnql_swarm.world import viz as world_viz
+
+    episode = rrb.VisibleTimeRanges(timeline="episode",
+                                    start=rrb.TimeRangeBoundary.cursor_relative(seq=0),
+                                    end=rrb.TimeRangeBoundary.cursor_relative(seq=0))
+    world_view = rrb.Spatial2DView(
+        origin="world", name="World: the episode's moves, waits and collisions",
+        visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
+                                         y_range=[-0.6, config.height - 0.4]),
+        overrides={path: episode for path in (world_viz.INTENTS, world_viz.NEGOTIATION,
+                                              world_viz.COLLISIONS)},
+    )
+    events = rrb.TextLogView(origin=world_viz.EVENTS, name="Events", columns=rrb.TextLogColumns(
+        timeline_columns=[rrb.encodings.TimelineColumn("episode"),
+                          rrb.encodings.TimelineColumn("tick", visible=False)],
+        text_log_columns=[rrb.components.TextLogColumn("LogLevel"),
+                          rrb.components.TextLogColumn("Body")]))
+    key = rrb.TextDocumentView(origin=world_viz.LEGEND, name="Key")
+    whole_run = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
+                                                      end=rrb.TimeRangeBoundary.infinite()))
+
+    def plot(low: float | None = None, high: float | None = None, **view) -> rrb.TimeSeriesView:
+        axis = rrb.ScalarAxis(range=(low, high)) if high is not None else None
+        return rrb.TimeSeriesView(axis_x=whole_run, axis_y=axis,
+                                  plot_legend=rrb.PlotLegend(corner="RightBottom"), **view)
+
+    n = config.n_agents
+    metrics = rrb.Grid(
+        plot(0.0, 1.05, origin="metrics/arrived_share", name="Arrived (share of agents)"),
+        plot(origin="metrics/steps", name="Steps / shortest path",
+             contents=["metrics/steps/over_shortest", "metrics/steps/shortest_path"]),
+        plot(0.0, float(max(2 * n, 8)), origin="metrics/collisions/per_episode",
+             name="Collisions per episode"),
+        plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),
+        plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)") if distributed
+        else plot(origin="metrics/steps/episode", name="Ticks per episode"),
+        plot(origin="metrics/ticks_per_s", name="Ticks per second"),
+        grid_columns=2, name="Learning curves (x: episode)",
+    )
+    shared = config.shared
+    heat_maps = rrb.Tabs(*[
+        rrb.Vertical(
+            rrb.Spatial2DView(origin=f"agents/{i}/q_ds", background=[255, 255, 255],
+                              name="Shared Q_DS: goal offset" if shared
+                              else f"Agent {i} Q_DS: goal offset"),
+            rrb.Spatial2DView(origin=f"agents/{i}/q_ca", background=[255, 255, 255],
+                              name="Shared Q_CA: neighbour offset" if shared
+                              else f"Agent {i} Q_CA: neighbour offset"),
+            name="shared table" if shared else f"agent {i}",
+        )
+        for i in heat_map_agents(config)
+    ], active_tab=0, name="What the agents learned")
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(world_view, events, row_shares=[3, 1]),
+            rrb.Vertical(metrics, key, row_shares=[3, 2]),
+            heat_maps,
+            column_shares=[5, 5, 3],
+        ),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
+        rrb.TimePanel(timeline="episode", play_state="following", state="collapsed"),
+        collapse_panels=False,
+    )

@@ -1,0 +1,56 @@
+"""Where each process of a run sends its part of the recording: Rerun's own sinks.
+
+Every process of a run (the world, each agent, or the one in-process runner) logs into the same
+recording, whose id is the run id. By default each process saves its own part,
+``<out>/rerun-parts/<role>.<pid>.rrd`` (``rr.FileSink``), which the launcher merges into
+``<out>/run.rrd`` when the run ends (``recording.merge``); with a viewer, every process also
+streams to it (``rr.GrpcSink``).
+"""
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.storage.runfiles import PARTS_DIR
+
+APP_ID = "nnql-swarm"
+
+
+@dataclass(frozen=True)
+class RecordingPlan:
+    """Where every process of a run sends its part of the recording (picklable, for spawn)."""
+
+    run_id: str
+    parts_dir: Path | None = None  # save a part here (None: no file)
+    url: str | None = None  # also stream to this viewer
+
+    @staticmethod
+    def to_files(config: SwarmConfig, out: Path) -> "RecordingPlan":
+        return RecordingPlan(config.run_id, parts_dir=Path(out) / PARTS_DIR)
+
+    @property
+    def enabled(self) -> bool:
+        return self.parts_dir is not None or self.url is not None
+
+    def open(self, role: str, default_blueprint=None):
+        """This process's ``rr.RecordingStream`` into the run's recording; ``role`` names its
+        part file."""
+        import rerun as rr
+
+        stream = rr.RecordingStream(APP_ID, recording_id=self.run_id)
+        sinks = []
+        if self.parts_dir is not None:
+            Path(self.parts_dir).mkdir(parents=True, exist_ok=True)
+            sinks.append(rr.FileSink(str(Path(self.parts_dir) / f"{role}.{os.getpid()}.rrd")))
+        if self.url is not None:
+            sinks.append(rr.GrpcSink(self.url))
+        stream.set_sinks(*sinks, default_blueprint=default_blueprint)
+        return stream
+
+
+def plan_of(record, config: SwarmConfig, out: Path) -> RecordingPlan | None:
+    """A plan from what a launcher function was given: a plan, True (files), False/None (off)."""
+    if isinstance(record, RecordingPlan):
+        return record if record.enabled else None
+    return RecordingPlan.to_files(config, out) if record else None

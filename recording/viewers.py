@@ -1,0 +1,165 @@
+"""Live viewers for a run: the native viewer spawned, or the web viewer served, with Rerun's own
+``rr.spawn``, ``rr.serve_grpc`` and ``rr.serve_web_viewer``; the viewer URLs and their checks."""
+
+import argparse
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import time
+from urllib.parse import quote, urlparse
+
+from nnql_swarm.recording.binary import rerun_binary
+from nnql_swarm.recording.sinks import APP_ID
+
+DEFAULT_GRPC_PORT = 9876
+DEFAULT_WEB_PORT = 9090
+VIEWER_START_S = 15.0
+"""How long a viewer or server started for a run may take to accept connections."""
+SPAWNED_S = 2.0
+"""How long a spawned viewer may still take to accept connections once ``rr.spawn``, which
+waits for it to listen, has returned."""
+
+
+class RecordingError(RuntimeError):
+    """The recording cannot go where it was asked to (no viewer at the URL, bad URL)."""
+
+
+def grpc_url(port: int, host: str = "127.0.0.1") -> str:
+    return f"rerun+http://{host}:{port}/proxy"
+
+
+def check_viewer_url(url: str) -> str:
+    """A viewer URL as ``--rerun-connect`` takes it; raises ArgumentTypeError otherwise."""
+    parsed = urlparse(url)
+    if parsed.scheme not in ("rerun", "rerun+http", "rerun+https") or not parsed.hostname \
+            or parsed.path.rstrip("/") != "/proxy":
+        raise argparse.ArgumentTypeError(
+            f"expected a viewer URL such as {grpc_url(DEFAULT_GRPC_PORT)}, not {url!r}")
+    return url
+
+
+def reachable(url: str, timeout: float = 1.0) -> bool:
+    """Whether something accepts TCP connections where the viewer URL points."""
+    parsed = urlparse(url)
+    default = 443 if parsed.scheme == "rerun+https" else DEFAULT_GRPC_PORT
+    try:
+        with socket.create_connection((parsed.hostname, parsed.port or default), timeout=timeout):
+            return True
+    except OSError:
+        return False
+
+
+def wait_until_reachable(url: str, timeout: float = VIEWER_START_S) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if reachable(url, timeout=0.5):
+            return True
+        time.sleep(0.2)
+    return False
+
+
+def port_taken(bind: str, port: int) -> bool:
+    """Whether ``port`` cannot be listened on at ``bind``."""
+    family = socket.AF_INET6 if ":" in bind else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            probe.bind((bind, port))
+        except OSError:
+            return True
+    return False
+
+
+def spawn_viewer(port: int) -> str:
+    """Start the native viewer on ``port`` (``rr.spawn``, which uses the one already there);
+    returns its URL. The viewer is detached: it stays open after the run and Ctrl-C.
+
+    Checked here, as ``rr.spawn`` does not: a display to open on, and a viewer still listening
+    once started (one that cannot open its window listens briefly, then exits)."""
+    import rerun as rr
+
+    url = grpc_url(port)
+    if reachable(url):
+        return url
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        raise RecordingError("no display for the native viewer (DISPLAY and WAYLAND_DISPLAY are "
+                             "unset); --rerun-serve-web serves a web viewer instead")
+    binary = rerun_binary()
+    try:
+        with _quiet_children():  # the viewer's log lines would break into the progress bars
+            rr.spawn(port=port, connect=False, recording=rr.RecordingStream(APP_ID),
+                     executable_path=binary[0] if len(binary) == 1 else None)
+    except Exception as error:  # noqa: BLE001 - Rerun's own errors (no executable)
+        raise RecordingError(f"cannot start the viewer: {error}") from None
+    if wait_until_reachable(url, SPAWNED_S):  # rr.spawn has waited for it to listen
+        time.sleep(0.5)
+        if reachable(url, timeout=0.5):
+            return url
+    raise RecordingError(f"the viewer did not start on port {port}")
+
+
+@contextlib.contextmanager
+def _quiet_children():
+    """Standard output and error on /dev/null while inside, for the children started there."""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        for fd, old in zip((1, 2), saved):
+            os.dup2(old, fd)
+            os.close(old)
+
+
+def serve_web(run_id: str, grpc_port: int, web_port: int):
+    """Serve the run to the web viewer from this process: a gRPC server the run's processes
+    stream into, which keeps what they sent for viewers that come later (``rr.serve_grpc``),
+    and the web viewer pointed at it (``rr.serve_web_viewer``), both on every interface.
+    Returns ``(stream, url, web_url)``; the server lives as long as ``stream``."""
+    import rerun as rr
+
+    for port in (grpc_port, web_port):
+        if port_taken("0.0.0.0", port):  # rr.serve_grpc would only log it
+            raise RecordingError(f"port {port} is in use")
+    stream = rr.RecordingStream(APP_ID, recording_id=run_id)
+    try:
+        url = stream.serve_grpc(grpc_port=grpc_port)
+        rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=url)
+    except Exception as error:  # noqa: BLE001 - Rerun's own errors (a port in use)
+        stream.disconnect()
+        raise RecordingError(f"cannot serve the web viewer on ports {grpc_port}/{web_port}: "
+                             f"{error}") from None
+    host = public_host()
+    web_url = f"http://{host}:{web_port}/?url={quote(grpc_url(grpc_port, host), safe='')}"
+    print(f"rerun: web viewer at {web_url}", file=sys.stderr)
+    return stream, url, web_url
+
+
+def public_host() -> str:
+    """This machine's address as another machine would reach it (the outgoing interface's IP)."""
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("8.8.8.8", 53))  # UDP: no packet is sent, this only picks a route
+            address = probe.getsockname()[0]
+        if not address.startswith("127."):
+            return address
+    except OSError:
+        pass
+    return socket.gethostname() or "localhost"
+
+
+def stop_process(process: subprocess.Popen) -> None:
+    if process.poll() is None:
+        process.terminate()
+        try:
+            process.wait(timeout=3)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()

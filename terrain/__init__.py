@@ -1,0 +1,1 @@
+"""Maps and scenarios as input: MovingAI's .map and .scen files, and seeded map generators."""

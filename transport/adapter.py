@@ -1,0 +1,71 @@
+"""What the agent and world nodes share as adapters of their protocol machines.
+
+A node feeds each input to its machine under the node's one lock and carries out the effects it
+returns there, in order; its main thread takes the node's queue of events and fires the
+machine's timer (:class:`ProtocolAdapter`).
+"""
+
+import queue
+import threading
+import time
+from typing import Callable
+
+POLL_S = 0.05
+"""The longest a node's main thread sleeps on its queue: a timer set meanwhile on Zenoh's thread
+(a tick's deadline, a negotiation's time-out) is noticed at most this late, and so is a request
+to stop."""
+
+
+class ProtocolAdapter:
+    """The base of the agent and world nodes: an input is fed under the node's one lock and its
+    effects are carried out there, in order, each by the handler ``_do`` names for its type. A
+    bug in either stops the node (its ``run`` re-raises ``failure`` on the main thread) instead
+    of vanishing into Zenoh's thread. The main thread takes the node's queue of ``events``
+    (:meth:`next_event`) and fires the protocol's timer (:meth:`fire_timer_if_due`).
+
+    A node sets ``lock``, ``stopping``, ``failure``, ``protocol``, ``events`` and ``_do``, and
+    says how it stops."""
+
+    lock: threading.RLock
+    stopping: bool
+    failure: BaseException | None
+    protocol: object  # a protocol machine: timer(), on_timer(now)
+    events: queue.SimpleQueue
+    _do: dict[type, Callable]
+
+    def stop(self) -> None:
+        raise NotImplementedError
+
+    def feed(self, handler: Callable, *args) -> None:
+        """``handler(*args, now)``, a protocol input, then its effects."""
+        with self.lock:
+            if self.stopping:
+                return
+            try:
+                self.perform(handler(*args, time.monotonic()))
+            except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
+                self.failure = error
+                self.stop()
+
+    def perform(self, effects: list) -> None:
+        do = self._do
+        for effect in effects:
+            do[type(effect)](effect)
+
+    def next_event(self) -> tuple:
+        """The next ``(kind, item)`` of the main thread's queue; ``(None, None)`` if none came
+        before the protocol's timer is due, or within :data:`POLL_S`."""
+        with self.lock:
+            due = self.protocol.timer()
+        wait = POLL_S if due is None else min(max(due - time.monotonic(), 0.0), POLL_S)
+        try:
+            return self.events.get(timeout=wait)
+        except queue.Empty:
+            return None, None
+
+    def fire_timer_if_due(self) -> None:
+        """Feed the protocol its timer if that is due."""
+        with self.lock:
+            due = self.protocol.timer()
+        if due is not None and time.monotonic() >= due:
+            self.feed(self.protocol.on_timer)
