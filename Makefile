@@ -85,12 +85,12 @@ experiment: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/table1.py
-	$(PY) bench/sweep.py
-	$(PY) bench/swarm_ticks.py
-	$(PY) bench/recording_cost.py
-	$(PY) bench/codec.py
-	$(PY) bench/world_tick.py
-	$(PY) bench/node_cpu.py
+	$(PY) -m bench.sweep
+	$(PY) -m bench.swarm_ticks
+	$(PY) -m bench.recording_cost
+	$(PY) -m bench.codec
+	$(PY) -m bench.world_tick
+	$(PY) -m bench.node_cpu
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

@@ -8,7 +8,7 @@ arrives, from Zenoh's callback; the world waits for every intent, then opens the
 its own callback. No negotiation, no codec, no rules, no learning: the floor under the swarm's
 tick, for the same number of processes and the same topology.
 
-    python bench/lockstep.py --agents 8,32,64 --repeats 3 --topology mesh
+    python -m bench.lockstep --agents 8,32,64 --repeats 3 --topology mesh
 """
 
 import argparse
@@ -17,14 +17,11 @@ import statistics
 import sys
 import threading
 import time
-from pathlib import Path
 
 import msgpack
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from bench.procstat import MemorySampler  # noqa: E402
-from nnql_swarm.protocol.transport import (  # noqa: E402
+from bench.procstat import MemorySampler
+from nnql_swarm.protocol.transport import (
     TOPOLOGIES, EmbeddedLayout, TransportSettings, callback, declare_lockstep_publisher,
     open_session, wait_listening,
 )

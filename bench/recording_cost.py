@@ -11,7 +11,7 @@ The rate is ticks / seconds over every episode but the first (which includes sta
 own off/on difference, which drift in the machine's load disturbs less); the merge into
 ``run.rrd`` after the run is timed separately. ``--in-process`` measures the one-process runner instead.
 
-    python bench/recording_cost.py --agents 8 --repeats 5
+    python -m bench.recording_cost --agents 8 --repeats 5
 """
 
 import argparse
@@ -21,10 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from bench.harness import add_preset_option, run_distributed, run_local, swarm_config  # noqa: E402
-from nnql_swarm.recording.session import merge_parts  # noqa: E402
+from bench.harness import add_preset_option, run_distributed, run_local, swarm_config
+from nnql_swarm.recording.session import merge_parts
 
 TARGET = 0.10
 """Recording may cost at most 10 % of the tick rate."""

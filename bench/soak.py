@@ -8,7 +8,7 @@ reports ticks, faults injected and survived, episodes lost (missing or duplicate
 0), learned values lost (agents whose tables went back to zero, must be 0) and the memory
 growth (RSS) of each process role.
 
-    python bench/soak.py --minutes 10 --agents 8
+    python -m bench.soak --minutes 10 --agents 8
 """
 
 import argparse
@@ -22,13 +22,11 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from nnql_swarm.agent import checkpoint  # noqa: E402
-from tests.swarm_helpers import find_process, group_pids, swarm_command  # noqa: E402
-from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+from nnql_swarm.agent import checkpoint
+from tests.swarm_helpers import find_process, group_pids, swarm_command
+from nnql_swarm.world.metrics import read_episodes
 
 
 WARM_UP_S = 20.0

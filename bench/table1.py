@@ -15,15 +15,11 @@ import resource
 import statistics
 import sys
 import time
-from pathlib import Path
 
-if __package__ in (None, ""):  # run as a script: make the repository's packages importable
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from nnql_swarm.experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
-from nnql_swarm.experiment.report import ResultGrid, summarize, summary_lines, table1_rows  # noqa: E402
+from nnql_swarm.experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch
+from nnql_swarm.experiment.report import ResultGrid, summarize, summary_lines, table1_rows
 
 TARGET_SECONDS = 5.0
 SEEDS = range(10)
