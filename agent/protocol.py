@@ -36,6 +36,7 @@ import logging
 from dataclasses import dataclass, field
 
 from nnql_swarm.agent import negotiation
+from nnql_swarm.learning import neighbours
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import (
@@ -363,7 +364,7 @@ class AgentProtocol:
             return
         awaited, asks = negotiation.plan_for(obs, self.config)
         needed = self.brain.neighbours_to_ask(obs, awaited)
-        staying = {j: STAY for j in negotiation.staying(obs, self.config)}
+        staying = {j: STAY for j in neighbours.staying(obs, self.config)}
         if not awaited:
             self._decide(obs, staying)
             return

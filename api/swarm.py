@@ -22,6 +22,7 @@ import numpy as np
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.launch import swarm_cli
+from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import MODE_VARIABLE
 from nnql_swarm.protocol.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE
@@ -206,7 +207,7 @@ class Run:
         if not (isinstance(agent, (int, np.integer)) and 0 <= agent < self.config.n_agents):
             raise ValueError(f"agent {agent!r} out of range 0..{self.config.n_agents - 1}")
         path = checkpoint.checkpoint_path(self.path / CHECKPOINT_DIR, int(agent))
-        saved = checkpoint.read_fields(path, ("q_ds", "q_ca"))
+        saved = read_fields(path, ("q_ds", "q_ca"))
         return np.array(saved["q_ds"]), np.array(saved["q_ca"])
 
     def shared_table(self) -> tuple[np.ndarray, np.ndarray]:
@@ -217,7 +218,7 @@ class Run:
             raise ValueError("the agents of this run learn each into its own tables "
                              "(shared is off): read them with q_tables(agent)")
         path = world_checkpoint.table_path(self.path)
-        saved = checkpoint.read_fields(path, ("q_ds", "q_ca"))
+        saved = read_fields(path, ("q_ds", "q_ca"))
         return np.array(saved["q_ds"]), np.array(saved["q_ca"])
 
     @property

@@ -4,8 +4,8 @@
 Each repeat runs the same config twice, recording off and on (alternating which goes first, so
 drift in the machine's load hits both alike): a world process and one process per agent over
 embedded Zenoh, exactly as ``launch/swarm.py`` starts them. Recording on means the full default
-recording: the world logs every tick (``world.viz``), every agent logs its heat maps and
-negotiation timing each episode (``agent.viz``), each process saves its part of ``run.rrd``.
+recording: the world logs every tick (``recording.world``), every agent logs its heat maps and
+negotiation timing each episode (``recording.agent``), each process saves its part of ``run.rrd``.
 The rate is ticks / seconds over every episode but the first (which includes start-up), from
 ``episodes.csv``; the figures are the medians over repeats (and the median of each repeat's
 own off/on difference, which drift in the machine's load disturbs less); the merge into

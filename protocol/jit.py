@@ -34,7 +34,7 @@ PLAIN = "python"
 COMPILED = os.environ.get(MODE_VARIABLE, "compiled") != PLAIN
 """Whether kernel functions are compiled in this process (fixed at import)."""
 
-KERNEL_ROOMS = ("agent", "protocol", "sim", "world")
+KERNEL_ROOMS = ("learning", "protocol", "sim", "world")
 """The packages whose modules may define kernel functions."""
 
 

@@ -140,11 +140,11 @@ def plan_of(record, config: SwarmConfig, out: Path) -> RecordingPlan | None:
 
 
 def open_world_viz(record, config: SwarmConfig, out: Path, distributed: bool = True):
-    """The world's logger (``world.viz.WorldViz``) with the blueprint, or None if not recording.
+    """The world's logger (``recording.world.WorldViz``) with the blueprint, or None if not recording.
     ``distributed``: the agents are processes that time their negotiation (the blueprint plots
     it)."""
     from nnql_swarm.world.metrics import read_episodes
-    from nnql_swarm.world.viz import WorldViz
+    from nnql_swarm.recording.world import WorldViz
 
     plan = plan_of(record, config, out)
     if plan is None:
@@ -181,7 +181,7 @@ def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):
         return None, None, None
     if agent >= RECORDED_AGENTS:
         return None, None, None
-    from nnql_swarm.agent.viz import AgentViz, TimedBrain
+    from nnql_swarm.recording.agent import AgentViz, TimedBrain
 
     viz = AgentViz(agent, config, plan.open(f"agent-{agent}"),
                    heat_maps=logs_own_heat_maps(agent, config))
@@ -192,7 +192,7 @@ class InProcessRecorder:
     """World and agents of the in-process runner logging into one stream."""
 
     def __init__(self, record, config: SwarmConfig, out: Path) -> None:
-        from nnql_swarm.agent.viz import AgentViz
+        from nnql_swarm.recording.agent import AgentViz
 
         self.world = open_world_viz(record, config, out, distributed=False)
         self.agents = []
@@ -225,7 +225,7 @@ def blueprint(config: SwarmConfig, distributed: bool = True):
     """
     import rerun.blueprint as rrb
 
-    from nnql_swarm.world import viz as world_viz
+    from nnql_swarm.recording import world as world_viz
 
     episode = rrb.VisibleTimeRanges(timeline="episode",
                                     start=rrb.TimeRangeBoundary.cursor_relative(seq=0),
@@ -492,7 +492,7 @@ def log_experiment(specs, metrics, target, *, recording_id: str = "experiment"):
     """
     import rerun as rr
 
-    from nnql_swarm.world.viz import close_stream
+    from nnql_swarm.recording.world import close_stream
 
     groups: dict[tuple[str, int], list[int]] = {}
     for row, spec in enumerate(specs):
@@ -531,7 +531,7 @@ def log_swarm_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from nnql_swarm.world.viz import close_stream
+    from nnql_swarm.recording.world import close_stream
 
     stream = rr.RecordingStream(APP_ID, recording_id=recording_id)
     blueprint = rrb.Blueprint(rrb.Grid(*(rrb.TimeSeriesView(origin=f"swarm/{metric}", name=metric)

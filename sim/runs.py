@@ -15,11 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nnql_swarm.agent.learner import (
-    LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise, learner_params,
-    record_size, state_size,
+from nnql_swarm.learning.fields import (
+    LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, learner_params, record_size,
+    state_size,
 )
-from nnql_swarm.agent.known_map import check_cell_order, fresh_map, known_cells, map_size
+from nnql_swarm.learning.known_map import check_cell_order, fresh_map, known_cells, map_size
+from nnql_swarm.learning.learner import draw_noise
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import cached

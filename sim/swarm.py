@@ -20,11 +20,12 @@ Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agen
 ``options`` (``OPT_*``); the world's options are the same for the whole batch.
 """
 
-from nnql_swarm.agent.learner import (
+from nnql_swarm.learning.fields import (
     FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
     NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
-    apply_record, decide, finish, planned_cell, record_outcome,
 )
+from nnql_swarm.learning.learner import decide, finish, planned_cell
+from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
 from nnql_swarm.protocol.jit import batch_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for

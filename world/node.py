@@ -5,7 +5,8 @@ feeds it the intents and liveliness changes Zenoh delivers, with the time, and c
 effects: publish each observation on ``world/obs/<id>`` and the control messages, hand each
 closed tick to ``on_tick`` (the launcher records it to Rerun there), write each episode's row
 to ``episodes.csv`` (and, where the agents share one table, its checkpoint first), log. A resumed
-world starts from the shared table of its checkpoint (``world.checkpoint``).
+world starts from the shared table of its checkpoint (``world.checkpoint``), which whoever starts
+it reads (``WorldOptions.table``).
 
 Threads, in three sentences. Every input reaches the protocol under the node's one lock, and its
 effects are carried out right there, in order, before the lock is let go, except the episode
@@ -36,11 +37,11 @@ from nnql_swarm.protocol.transport import (
     EXIT_TRANSPORT, ProtocolAdapter, TransportError, TransportSettings, callback,
     declare_lockstep_publisher, enqueue, open_session,
 )
-from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.shared_table import SharedState
 
 log = logging.getLogger("nnql.world")
 
@@ -61,6 +62,7 @@ class WorldOptions:
     startup_timeout_s: float | None = None  # None: protocol.startup_timeout of the agents
     first_episode: int = 0
     first_tick: int = 0
+    table: SharedState | None = None  # the shared state a resumed run starts from
 
 
 class WorldNode(ProtocolAdapter):
@@ -73,12 +75,10 @@ class WorldNode(ProtocolAdapter):
         self.session = session
         self.trace = trace.TickTrace.from_env("world")
         self.created_at = time.time()  # wall clock, for the stats' start-up: the protocol's is monotonic
-        table = shared_table(options.out_dir, self.config,
-                             ResumePoint(options.first_episode, options.first_tick))
         self.table_file = world_checkpoint.table_path(options.out_dir)
         self.protocol = WorldProtocol(self.config, time.monotonic(), options.first_episode,
                                       options.first_tick, options.startup_timeout_s, self.trace,
-                                      table)
+                                      options.table)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False
@@ -194,11 +194,7 @@ def run_world(options: WorldOptions,
         log.error("%s", error)
         return EXIT_TRANSPORT
     with session:
-        try:
-            node = WorldNode(options, session, on_tick)
-        except ResumeError as error:
-            log.error("%s", error)
-            return 1
+        node = WorldNode(options, session, on_tick)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
         try:

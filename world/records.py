@@ -34,15 +34,15 @@ so a record costs one reading of its neighbours and one ``complete``
 
 from dataclasses import dataclass
 
-from nnql_swarm.agent.brain import NeighbourRows
-from nnql_swarm.agent.learner import (
+from nnql_swarm.learning.fields import (
     DS_GOAL, LF_FIELDS, LP_DS_REWARD, LP_DS_STATE, LP_READING, LS_ACTION, LS_COUNT, LS_GOAL,
     LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_X, LS_Y, NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y,
-    READ_DAQL, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL, REWARD_WORLD,
-    RF_FIELDS, RF_R_DS, complete, learner_params, read_rows, record_outcome, record_size,
-    state_size, uses_map,
+    READ_DAQL, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL, REWARD_WORLD, RF_FIELDS,
+    RF_R_DS, learner_params, record_size, state_size,
 )
-from nnql_swarm.agent.negotiation import awaited, staying
+from nnql_swarm.learning.neighbours import NeighbourRows, awaited, staying
+from nnql_swarm.learning.readings import read_rows, uses_map
+from nnql_swarm.learning.record import complete, record_outcome
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import floats, ints, python_values, rows

@@ -10,7 +10,7 @@ The negotiation is derived by the world, not reported by the agents: at tick ``t
 reads intents and has not arrived waits for the answer of every neighbour that
 ``protocol.ranks.awaits_answer`` names, the rule ``agent.negotiation.awaited`` applies too. How each intent reached it (its own query, or relayed down the chain,
 ``agent.negotiation``) and whether it came in time is known only to the agent; the agents log
-that themselves (``agent.viz``).
+that themselves (``recording.agent``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key

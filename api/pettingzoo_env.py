@@ -59,7 +59,7 @@ way is truncated after ``max_steps`` steps.
   warning that says how to see them, so that a machine without a screen never fails.
 - ``"rgb_array"``: an ``(height * cell_pixels, width * cell_pixels, 3)`` ``uint8`` picture:
   grid lines, each goal a square outline and each agent a disc in the agent's colour (the
-  colours of the swarm's recording, ``world.viz.agent_colors``).
+  colours of the swarm's recording, ``recording.world.agent_colors``).
 - ``"ansi"``: a string, one line per row: ``.`` a free cell, ``a``, ``b``, ... goals, ``A``, ``B``,
   ... agents.
 
@@ -222,7 +222,7 @@ class SwarmGridEnv(ParallelEnv):
         if self.rerun_memory is not None:
             self._stream.flush()  # disconnecting would drop the memory sink's frames
             return
-        from nnql_swarm.world.viz import close_stream
+        from nnql_swarm.recording.world import close_stream
 
         close_stream(self._stream)
         self._stream = None
@@ -236,7 +236,7 @@ class SwarmGridEnv(ParallelEnv):
         return "\n".join("".join(row) for row in rows)
 
     def _picture(self) -> np.ndarray:
-        from nnql_swarm.world.viz import agent_colors
+        from nnql_swarm.recording.world import agent_colors
 
         c = self.cell_pixels
         image = np.full((self.height * c, self.width * c, 3), 255, dtype=np.uint8)
@@ -274,7 +274,7 @@ class SwarmGridEnv(ParallelEnv):
             return self._stream
         import rerun as rr
 
-        from nnql_swarm.world.viz import agent_colors
+        from nnql_swarm.recording.world import agent_colors
 
         stream = rr.RecordingStream("nnql-swarm-env")
         target = self.rerun_target
