@@ -1,12 +1,12 @@
 """One swarm agent's decisions, pure: observation and neighbours' answers in, action out.
 
 The agent process (``agent.node``) runs it; it calls the learner's kernel functions
-(``agent.learner``) on Python lists and its tables' array, the very functions the swarm
+(``learning.learner``) on Python lists and its tables' array, the very functions the swarm
 simulator (``sim.swarm``) runs compiled, so that for the same seed the distributed swarm and the
 simulator play the same run.
 
 Negotiation: at every tick an agent that reads intents waits for the intents of its higher-ranked
-neighbours within reach (``agent.negotiation.awaited``, by ``protocol.ranks.waits_for``; how it
+neighbours within reach (``learning.neighbours.awaited``, by ``protocol.ranks.waits_for``; how it
 learns them is that module's plan), and decides with those of them it needs
 (:meth:`AgentBrain.neighbours_to_ask`), with whatever came back
 (:meth:`AgentBrain.act`), and then answers for itself. A neighbour whose intent did not come is
@@ -61,7 +61,7 @@ class AgentBrain:
 
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         """The neighbours whose intents this agent decides with, of those it waits for
-        (``awaited``, ``agent.negotiation.awaited``): none once it has arrived or at an
+        (``awaited``, ``learning.neighbours.awaited``): none once it has arrived or at an
         episode's end, where it stays (it still waits, to relay them down the chain)."""
         if obs.arrived or obs.episode_end or not self.reads_intents:
             return []

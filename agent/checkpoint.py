@@ -2,7 +2,7 @@
 a reader sees the old checkpoint or the new, whatever is killed when).
 
 A checkpoint holds both tables, the exploration counter, the agent's generator state, the walls
-it has seen (``agent.known_map``) and the episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
+it has seen (``learning.known_map``) and the episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
 from another run shape is refused with a clear error naming the file.
 """
 

@@ -97,7 +97,7 @@ class EffectLog:
 class Pending:
     """An observation whose decision waits for intents: whose (``awaited``), which of them the
     brain decides with (``needed``), whom this agent asked (``asks``), until when, the intents
-    it knows without asking (``staying``: parked neighbours, ``negotiation.staying``), and, once
+    it knows without asking (``staying``: parked neighbours, ``neighbours.staying``), and, once
     the answers are in, the ones it then asked for directly because no answer brought them
     (``missing``); neighbours that cannot answer (gone, or refusing the tick) are waited for no
     more (``refused``)."""

@@ -25,7 +25,7 @@ FP_FIELDS = 4
 DS_GOAL, DS_WAYPOINT, DS_PROGRESS = 0, 1, 2
 DS_STATES = {"goal": DS_GOAL, "waypoint": DS_WAYPOINT, "progress": DS_PROGRESS}
 """Destination seeking's state (``LP_DS_STATE``): the goal's offset (the paper's); the offset of
-the next cell of a shortest path on the agent's known map (``agent.known_map``), one of the four
+the next cell of a shortest path on the agent's known map (``learning.known_map``), one of the four
 cells next to it; or the set of moves that bring it nearer on that map (4 bits, 15 states)."""
 
 REWARD_WORLD, REWARD_PATH, REWARD_FLAT = 0, 1, 2
@@ -42,7 +42,7 @@ NB_FIELDS = 12
 for (its cell where unknown), the cell its state is read at (the announced cell n steps ahead;
 the next cell for n = 1), whether it is parked on its goal, its cell a tick ago (-1 if unseen);
 and its Q_CA row, which :func:`read_rows` writes for the steps that read it."""
-assert (NB_X, NB_Y, NB_PARKED) == (1, 2, 8), "agent.known_map.see_parked reads them by number"
+assert (NB_X, NB_Y, NB_PARKED) == (1, 2, 8), "learning.known_map.see_parked reads them by number"
 
 LS_TAKEN, LS_PENDING, LS_GOAL, LS_ACTION, LS_TERMINAL, LS_COUNT, LS_X, LS_Y = 0, 1, 2, 3, 4, 5, 6, 7
 LS_NEIGHBOURS = 8

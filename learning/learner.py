@@ -34,7 +34,7 @@ counterpart masks the neighbours' current cells; the random step is filtered too
 edge) does not bootstrap destination seeking from the state it stayed in, so waiting is not
 valued like the move it waits for (docs/swarm.md has the evidence of each).
 
-Destination seeking may read the walls the agent has seen (``agent.known_map``, a buffer
+Destination seeking may read the walls the agent has seen (``learning.known_map``, a buffer
 ``wmap`` per agent, kept for the run): its state (``LP_DS_STATE``: the goal's offset, the paper's;
 the next cell of a shortest path on the known map; or the moves that bring the agent nearer on
 it), its reward (``LP_DS_REWARD``: the world's Euclidean ``1/d``, the paper's; ``1/d`` with ``d``
@@ -145,7 +145,7 @@ def observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width
     ``wall_x``, ``wall_y`` in view of ``(ox, oy)`` learned, the parked neighbours within reach
     taken as obstacles for the rest of the episode (``LP_DETOUR``; ``starts``: this observation
     is an episode's first), the distance field to the goal made current
-    (``agent.known_map.track``)."""
+    (``learning.known_map.track``)."""
     if uses_map(params):
         track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
               params[LP_DETOUR], starts)

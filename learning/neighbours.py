@@ -47,7 +47,7 @@ def staying(obs: Observation, config: SwarmConfig) -> list[int]:
 
 
 class NeighbourRows:
-    """The learner's neighbour rows (``agent.learner.NB_*``) for an observation: what an agent
+    """The learner's neighbour rows (``learning.fields.NB_*``) for an observation: what an agent
     reads its neighbours as, and what the world reads them as when it checks the agent's learning
     record (``world.records``)."""
 
@@ -61,12 +61,12 @@ class NeighbourRows:
                        for k, (x, y) in enumerate(walls)}
         self._walls_near: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
         self.wall_x, self.wall_y = ints([x for x, _ in walls]), ints([y for _, y in walls])
-        """The walls' cells, in cell order, as the known map reads them (``agent.known_map``)."""
+        """The walls' cells, in cell order, as the known map reads them (``learning.known_map``)."""
 
     def __call__(self, obs: Observation, answers: dict[int, int], announcing: bool,
                  previous: dict[int, tuple[int, int]],
                  was_at: tuple[int, int] | None) -> list[list[int]]:
-        """The visible neighbours within the learner's reach (``agent.learner.reach``: no other
+        """The visible neighbours within the learner's reach (``learning.fields.reach``: no other
         can change its decision or its learning) in id order, each with its announced move where
         it answered (``answers``), and its cell a tick ago where DAQL remembers it
         (``previous``); then the walls within reach, each known to stay where it is within the

@@ -59,7 +59,7 @@ def predicted_move(nb, j, parked):
 
 @kernel
 def uses_map(params):
-    """Whether destination seeking reads the known map (``agent.known_map``)."""
+    """Whether destination seeking reads the known map (``learning.known_map``)."""
     return params[LP_DS_STATE] != DS_GOAL or params[LP_DS_REWARD] != REWARD_WORLD
 
 

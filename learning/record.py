@@ -52,7 +52,7 @@ def record_entries(ints) -> list[int]:
 def write_updates(entries: np.ndarray, groups) -> int:
     """Write a shared table's updates (groups of entry indices and their values,
     ``protocol.messages.Updates``) into a learner's Q-values, both tables flat
-    (``agent.brain.Learner.entries``); returns how many it refused: those outside its tables,
+    (``learning.tables.Learner.entries``); returns how many it refused: those outside its tables,
     and every entry of a group whose values are not as many as its entries."""
     end = len(entries)
     refused = 0

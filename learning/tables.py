@@ -20,7 +20,7 @@ class Learner:
     The two tables are views of one array, ``Q_DS``'s rows first (:attr:`entries`, flat, is how
     a shared table's updates name its Q-values), a numpy array whether the kernel is compiled or
     not (``protocol.jit``); the other buffers are Python lists in plain Python, among them the
-    walls it has seen and its way to its goal (``wmap``, ``agent.known_map``), which the agent
+    walls it has seen and its way to its goal (``wmap``, ``learning.known_map``), which the agent
     derives from the run's map (``config.walls()``) and its own positions: the world sends no
     walls."""
 
@@ -50,7 +50,7 @@ class Learner:
         return self.q_ds.copy(), self.q_ca.copy()
 
     def known_walls(self) -> list[int]:
-        """The cells (``y * W + x``) of the walls this learner has seen (``agent.known_map``)."""
+        """The cells (``y * W + x``) of the walls this learner has seen (``learning.known_map``)."""
         return known_cells(self.wmap, self.width, self.height)
 
     def restore(self, q_ds: np.ndarray, q_ca: np.ndarray, actions_taken: int,

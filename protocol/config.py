@@ -24,7 +24,7 @@ lower bound, which ``shortest_sum`` is; in-process only)."""
 NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
 DS_STATE_NAMES = ("goal", "waypoint", "progress")
 DS_REWARD_NAMES = ("euclid", "path", "flat")
-"""Destination seeking's state and reward (``agent.learner``: ``DS_STATES``, ``DS_REWARDS``)."""
+"""Destination seeking's state and reward (``learning.learner``: ``DS_STATES``, ``DS_REWARDS``)."""
 MAX_LOOKAHEAD = 3
 
 START_S_PER_AGENT = 1.0

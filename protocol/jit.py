@@ -13,7 +13,7 @@ children), since numba's LLVM alone would make each agent weigh over 100 MB and 
 Kernel functions therefore only index and assign into their buffers, which may be numpy arrays
 (compiled) or Python lists (plain: :func:`ints`, :func:`floats`, :func:`rows`, where reading a list
 is several times faster), and never allocate on the hot path. The Q-tables are numpy arrays
-either way (``agent.brain.Learner``): a decision reads a few of their rows, while a shared
+either way (``learning.tables.Learner``): a decision reads a few of their rows, while a shared
 table's updates write all over them, which in one compact array costs a cache line an entry.
 
 numba's cache knows only the file of each compiled function, not those of the functions it calls:

@@ -123,17 +123,17 @@ MAX_TABLE_ROW = N_STATES * (N_ACTIONS + 1)
 """Above every Q-table row index of a learner (the largest table: offsets x 6 move codes)."""
 RecordInts = Annotated[tuple[Annotated[int, Meta(ge=-1, lt=MAX_TABLE_ROW)], ...],
                        Meta(max_length=8 + 2 * MAX_AGENTS)]
-"""A learning record's integers (``agent.learner.REC_*``: states, action, and a pair of table
+"""A learning record's integers (``learning.fields.REC_*``: states, action, and a pair of table
 rows per neighbour; the learner checks the layout against its own tables)."""
 Record = tuple[RecordInts, tuple[Reward, Reward]]
 """A learning record: its integers and its two rewards."""
 Learned = Annotated[tuple[Record, ...], Meta(max_length=1)]
 """The learning record an intent carries (none, or its sender's of this tick)."""
 MAX_TABLE_ENTRY = (N_STATES + MAX_TABLE_ROW) * N_ACTIONS
-"""Above every entry index of a learner's two tables stacked (``agent.learner.record_entries``)."""
+"""Above every entry index of a learner's two tables stacked (``learning.record.record_entries``)."""
 TableEntries = Annotated[tuple[Annotated[int, Meta(ge=0, lt=MAX_TABLE_ENTRY)], ...],
                          Meta(max_length=MAX_AGENTS)]
-"""Q-values of the shared table by entry index (``agent.learner.record_entries``)."""
+"""Q-values of the shared table by entry index (``learning.record.record_entries``)."""
 TableValues = Annotated[tuple[Reward, ...], Meta(max_length=MAX_AGENTS)]
 """Their new values, finite, bounded as a reward is (a Q-value is at most a reward over
 1 - gamma)."""

@@ -206,7 +206,7 @@ class Batch:
         return self.q_ds[run, t], self.q_ca[run, t, :rows]
 
     def known_walls(self, run: int, agent: int) -> list[int]:
-        """The cells of the walls an agent of a run has seen (``agent.known_map``)."""
+        """The cells of the walls an agent of a run has seen (``learning.known_map``)."""
         w = self.world
         return known_cells(self.wmap[run, agent], w.width, w.height)
 

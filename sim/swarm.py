@@ -4,7 +4,7 @@ One call of :func:`run_episode` plays one episode of every run of a batch, each 
 (``prange`` spreads the runs over the cores; no run reads another's buffers, so the results do not
 depend on how they are spread). A run is exactly what the distributed swarm plays for the same
 options: at every tick the agents decide in rank order (``protocol.ranks``), each with the intents
-of the higher-ranked neighbours it waits for, by the same learner (``agent.learner``); then the
+of the higher-ranked neighbours it waits for, by the same learner (``learning.learner``); then the
 world applies every move at once by the same rules (``world.rules``). Each episode ends with one
 extra *end tick* in which nothing moves and every agent completes its last transition, as the
 world's end tick does. Where a run shares one table among its agents, every agent's learning
@@ -16,7 +16,7 @@ every action is to stay), outrank every learner and announce their scripted next
 oracle run plans every learner's move with PIBT (``sim.oracle``, a reference planner) around the
 walls, and learns nothing.
 
-Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agent.learner``) and
+Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``learning.learner``) and
 ``options`` (``OPT_*``); the world's options are the same for the whole batch.
 """
 
@@ -41,7 +41,7 @@ OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS = 0, 1, 2, 3
 OPT_FIELDS = 4
 """Per-run options of the swarm: one table for all agents; the steps an announcement covers
 (n of nnQL); the oracle instead of learners; whether the scripted bodies are walls (which a
-learner's known map, ``agent.known_map``, learns as it sees them)."""
+learner's known map, ``learning.known_map``, learns as it sees them)."""
 
 OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS = 0, 1, 2
 OUT_FIELDS = 3

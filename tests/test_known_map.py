@@ -1,5 +1,5 @@
-"""What an agent knows of the walls and the way to its goal (``agent.known_map``), by hand on
-small maps; destination seeking that reads it (``agent.learner``: the waypoint and progress
+"""What an agent knows of the walls and the way to its goal (``learning.known_map``), by hand on
+small maps; destination seeking that reads it (``learning.learner``: the waypoint and progress
 states, the path and flat rewards, the detour around parked agents, the push); and the runs it
 plays, the same each time and checkpointed."""
 

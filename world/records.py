@@ -1,13 +1,13 @@
 """Whether a learning record is the one the agent's own transition wrote. Pure.
 
 Where the agents share one table, each intent carries the sender's learning record of the tick
-(``agent.learner``): Eq. 9's ``s, a, terminal, s'`` with the two rewards, and a pair of Q_CA rows
+(``learning.learner``): Eq. 9's ``s, a, terminal, s'`` with the two rewards, and a pair of Q_CA rows
 ``(s_i, s'_i)`` per neighbour. The world saw the transition the record claims: what it sent the
 agent at the tick it decided (its cell, goal and neighbours, who was parked) and at the next
 (where it ended up, its rewards, whether it arrived), the intent it announced, and every intent
 of both ticks as the world heard them. :class:`RecordCheck` rebuilds the record from that with
-the agent's own code, the rows of ``agent.brain.NeighbourRows`` read and completed by
-``agent.learner.read_rows`` and ``complete``, and compares.
+the agent's own code, the rows of ``learning.neighbours.NeighbourRows`` read and completed by
+``learning.readings.read_rows`` and ``complete``, and compares.
 
 What it cannot know is which of the intents an agent waited for reached it in time (a neighbour
 whose answer did not come is read as one whose intent is unknown), nor, where the world missed
@@ -186,7 +186,7 @@ class RecordCheck:
         return self._complete(decision, obs, pending, completed)
 
     def _complete(self, decision: Decision, obs: Observation, pending, completed):
-        """``agent.learner.complete`` on the agent's pending transition: its decision's goal
+        """``learning.record.complete`` on the agent's pending transition: its decision's goal
         state, action and neighbours in Eq. 6 (``pending``: ``(id, Q_CA row, x, y)`` each), and
         its outcome, completed with the neighbour rows of ``obs`` (``completed``)."""
         before = decision.obs
@@ -273,7 +273,7 @@ class RecordCheck:
 
 def _map_fields_taken(expected, integers, values):
     """``expected`` with destination seeking's states and reward as the record gives them: read
-    on the agent's known map (``agent.known_map``: the walls it saw in its run, the agents it saw
+    on the agent's known map (``learning.known_map``: the walls it saw in its run, the agents it saw
     parked in the episode), which the world does not follow, they are checked only to fit the
     table (``SharedTable.accepts``)."""
     ints_, floats_ = list(expected[0]), list(expected[1])

@@ -6,7 +6,7 @@ own transition wrote (``world.records``) and, when the tick closes, applies thos
 in agent-id order with the learner's own ``apply_record``, the very step the simulator applies
 to its one table (``sim.swarm``). The next observations then tell every agent which entries
 changed and their new values (:meth:`SharedTable.apply` returns them, in the order the records
-wrote them), and each agent writes them into its copy (``agent.learner.write_updates``). All
+wrote them), and each agent writes them into its copy (``learning.record.write_updates``). All
 copies stay equal to this one and to the simulator's, and a tick costs every agent one write per
 changed entry, where applying every record itself cost it the whole learning step N times over.
 
