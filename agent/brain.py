@@ -98,7 +98,9 @@ class AgentBrain:
                              learner.rec_f, not shared)
             action = STAY
         else:
-            random_actions, ties = self._noise
+            noise = self._noise
+            assert noise is not None, "prepare draws the episode's noise before a decision"
+            random_actions, ties = noise
             action, written = decide(
                 learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
                 learner.state_f, learner.wmap, wx, wy, 0, len(wx), obs.step == 0, x, y, gx, gy,

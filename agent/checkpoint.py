@@ -9,15 +9,46 @@ from another run shape is refused with a clear error naming the file.
 import hashlib
 import json
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.saved import CheckpointError, check_tables, read_versions
 from nnql_swarm.protocol import slotfile
+from nnql_swarm.protocol.config import SwarmConfig
 
 
-def fingerprint(brain: AgentBrain) -> str:
+class SavedTables(Protocol):
+    """What a checkpoint reads of a learner (``learning.tables.Learner``, or the simulator's
+    view of one)."""
+
+    @property
+    def actions_taken(self) -> int: ...
+
+    def tables(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def known_walls(self) -> list[int]: ...
+
+
+class Saved(Protocol):
+    """What a checkpoint saves of an agent: an ``agent.brain.AgentBrain``, or the simulator's
+    view of one (``sim.inprocess.SimulatedAgent``)."""
+
+    @property
+    def agent(self) -> int: ...
+
+    @property
+    def config(self) -> SwarmConfig: ...
+
+    @property
+    def learner(self) -> SavedTables: ...
+
+    @property
+    def rng(self) -> np.random.Generator: ...
+
+
+def fingerprint(brain: Saved) -> str:
     """A short digest of the brain's Q-tables: equal digests, equal learned values."""
     q_ds, q_ca = brain.learner.tables()
     digest = hashlib.sha256(q_ds.tobytes())
@@ -29,7 +60,7 @@ def checkpoint_path(directory: Path, agent: int) -> Path:
     return Path(directory) / f"agent-{agent}.ckpt"
 
 
-def save(path: Path, brain: AgentBrain, episode: int) -> None:
+def save(path: Path, brain: Saved, episode: int) -> None:
     """Write the brain's learned state after ``episode``; readers see the old file or the new."""
     q_ds, q_ca = brain.learner.tables()
     slotfile.write(path, {"q_ds": q_ds, "q_ca": q_ca,

@@ -74,6 +74,7 @@ import os
 import sys
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -92,7 +93,7 @@ NOT_IN_VIEW = N_STATES
 class SwarmGridEnv(ParallelEnv):
     """N agents on a grid, each reaching for its own goal while avoiding the others."""
 
-    metadata = {"name": "nnql_swarm_grid_v0", "render_modes": ["human", "rgb_array", "ansi"],
+    metadata: dict[str, Any] = {"name": "nnql_swarm_grid_v0", "render_modes": ["human", "rgb_array", "ansi"],
                 "is_parallelizable": True, "render_fps": 4}
 
     def __init__(
@@ -155,7 +156,9 @@ class SwarmGridEnv(ParallelEnv):
             self._seed, self._episode = int(seed), 0
         else:
             if self._seed is None:
-                self._seed = int(np.random.SeedSequence().entropy % 2**63)
+                entropy = np.random.SeedSequence().entropy
+                assert isinstance(entropy, int), "a SeedSequence made without entropy draws it"
+                self._seed = int(entropy % 2**63)
             self._episode += 1
         scenario = swarm_episode(self._seed, self._episode, self.width, self.height, self.n_agents)
         self._x, self._y = scenario.starts[:, 0].tolist(), scenario.starts[:, 1].tolist()

@@ -64,7 +64,7 @@ if COMPILED:
         return njit(cache=True, parallel=True)(function)
 
 else:
-    prange = range
+    from builtins import range as prange
 
     def kernel(function):
         """Plain Python: the function as written."""

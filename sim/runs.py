@@ -219,20 +219,20 @@ class Batch:
         starts, goals, scripts, paths = [], [], [], []
         for seed in self._seeds:
             if w.paper:
-                sc = paper_episode(seed, episode, w.width, w.height, w.scripted, w.max_steps)
-                starts.append(sc.starts)
-                goals.append(sc.goal[None, :])
-                scripts.append(sc.obstacle_actions)
-                paths.append(np.abs(sc.starts[:1] - sc.goal).sum(axis=1))
+                paper = paper_episode(seed, episode, w.width, w.height, w.scripted, w.max_steps)
+                starts.append(paper.starts)
+                goals.append(paper.goal[None, :])
+                scripts.append(paper.obstacle_actions)
+                paths.append(np.abs(paper.starts[:1] - paper.goal).sum(axis=1))
             else:
-                sc = swarm_episode(seed, episode, w.width, w.height, w.learners,
-                                   w.obstacle_density, w.map_rows, w.scenario)
+                swarm = swarm_episode(seed, episode, w.width, w.height, w.learners,
+                                      w.obstacle_density, w.map_rows, w.scenario)
                 walls = layout(seed, w.width, w.height, w.obstacle_density, w.map_rows)[0]
                 check_cell_order(walls.tolist())
-                starts.append(np.concatenate([sc.starts, walls]))
-                goals.append(sc.goals)
+                starts.append(np.concatenate([swarm.starts, walls]))
+                goals.append(swarm.goals)
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))
-                paths.append(sc.shortest)
+                paths.append(swarm.shortest)
         return np.stack(starts), np.stack(goals), np.stack(scripts), np.stack(paths)
 
 

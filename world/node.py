@@ -68,6 +68,8 @@ class WorldOptions:
 class WorldNode(ProtocolAdapter):
     """The protocol's adapter to one Zenoh session (see the module docstring)."""
 
+    protocol: WorldProtocol
+
     def __init__(self, options: WorldOptions, session: zenoh.Session,
                  on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> None:
         self.options = options
@@ -84,8 +86,8 @@ class WorldNode(ProtocolAdapter):
         self.stopping = False
         self.failure: BaseException | None = None
         self.on_tick = on_tick
-        self.publishers: list = []
-        self.control = None
+        self.publishers: list[zenoh.Publisher] = []
+        self.control: zenoh.Publisher | None = None
         self.writer: EpisodeWriter | None = None
         self._do = {SendObservations: self._send_observations, SendControl: self._send_control,
                     TickClosed: self._tick_closed, Log: self._log,
@@ -111,11 +113,14 @@ class WorldNode(ProtocolAdapter):
             publishers[obs.agent].put(payload)
 
     def _send_control(self, effect: SendControl) -> None:
+        assert self.control is not None, "control is sent only while the node runs"
         self.control.put(effect.payload)
 
     def _tick_closed(self, effect: TickClosed) -> None:
         if self.on_tick is not None:
-            self.on_tick(self.protocol.world, effect.report)
+            report = effect.report
+            assert isinstance(report, TickReport), report
+            self.on_tick(self.protocol.world, report)
 
     def _log(self, effect: Log) -> None:
         log.log(effect.level, effect.message, *effect.args)
@@ -169,6 +174,7 @@ class WorldNode(ProtocolAdapter):
         """Append an episode's row (the file is opened at the first: a world that never
         started leaves no ``episodes.csv``), after the shared table's checkpoint, if any."""
         if row.table is not None:
+            assert isinstance(row.table, SharedState), row.table
             world_checkpoint.save(self.table_file, row.table, row.row["episode"], self.config)
         if self.writer is None:
             self.writer = EpisodeWriter(self.options.out_dir / EPISODES_FILE)

@@ -141,7 +141,7 @@ class RecordCheck:
         the agent surely took ``before`` (``sure``). Nothing to remember for the other readings."""
         if not self.daql:
             return [({}, None)]
-        options = []
+        options: list[tuple[dict[int, tuple[int, int]], tuple[int, int] | None]] = []
         if before is not None and before.tick == obs.tick - 1 and obs.step > 0:
             options.append(({j: (x, y) for j, x, y in before.neighbours}, before.position))
         if not (sure and options):
@@ -164,9 +164,9 @@ class RecordCheck:
         awaited answer come at both ticks (``intents``: this tick's, as the world heard them)."""
         before = decision.obs
         (x, y), radius = before.position, self.radius
-        decided = self._decided.get(before.agent)
-        if decided is not None and decided[0] == before.tick:
-            decided = decided[1]  # read as the last record's completion, every intent then in
+        known = self._decided.get(before.agent)
+        if known is not None and known[0] == before.tick:
+            decided = known[1]  # read as the last record's completion, every intent then in
         else:
             answers, _ = self._answers(before, decision.intents, False)
             decided = self._read(_only(before, within(before.neighbours, x, y, radius)), answers,
@@ -263,8 +263,9 @@ class RecordCheck:
         for row in self._readings(before, decision.intents, False, decision.before, False,
                                   neighbour):
             entry = (neighbour, row[NB_ROW], row[NB_X], row[NB_Y])
-            after = self._readings(obs, intents, stops, before, False, neighbour) or [None]
-            for following in after:
+            after: list[list[int] | None] = list(
+                self._readings(obs, intents, stops, before, False, neighbour))
+            for following in after or [None]:
                 completed = [] if following is None else [following]
                 rec = self._complete(decision, obs, [entry], completed)
                 pairs.add(rec[0][REC_PAIRS:REC_PAIRS + 2])
