@@ -48,7 +48,7 @@ import logging
 import re
 from collections import Counter
 from collections.abc import Callable
-from typing import Annotated, Literal, NamedTuple, get_type_hints
+from typing import TYPE_CHECKING, Annotated, Literal, NamedTuple, Protocol, get_type_hints
 
 import msgspec
 import numpy as np
@@ -112,10 +112,14 @@ def agent_list(*rest) -> object:
     return Annotated[tuple[tuple[(AgentId, *rest)], ...], Meta(max_length=MAX_AGENTS), AGENT_LIST]
 
 
-Neighbours = agent_list(Coord, Coord)
-"""``(id, x, y)`` of each visible other agent."""
-Relayed = agent_list(Action)
-"""``(id, action)`` of each relayed intent."""
+if TYPE_CHECKING:  # what a type checker reads: agent_list's tuples, without msgspec's limits
+    Neighbours = tuple[tuple[int, int, int], ...]
+    Relayed = tuple[tuple[int, int], ...]
+else:
+    Neighbours = agent_list(Coord, Coord)
+    """``(id, x, y)`` of each visible other agent."""
+    Relayed = agent_list(Action)
+    """``(id, action)`` of each relayed intent."""
 Parked = Annotated[tuple[AgentId, ...], Meta(max_length=MAX_AGENTS)]
 """The ids of the visible others that are parked on their goals."""
 
@@ -488,6 +492,13 @@ def to_wire(msg) -> list:
 
 # ---------------------------------------------------------------- receiving
 
+class WarningLog(Protocol):
+    """Where an :class:`Inbox` logs its rejections: a ``logging.Logger``, or a protocol
+    machine's log of effects."""
+
+    def warning(self, message: str, /, *args: object) -> None: ...
+
+
 class Inbox:
     """The receiving end of one node: decodes payloads, counts and logs rejections, never raises.
 
@@ -500,7 +511,7 @@ class Inbox:
     LOG_FIRST = 10
     LOG_EVERY = 1000
 
-    def __init__(self, run_id: str, logger: logging.Logger | None = None):
+    def __init__(self, run_id: str, logger: WarningLog | None = None):
         self.run_id = validate_run_id(run_id)
         self.log = logger or logging.getLogger(__name__)
         self.rejections: Counter = Counter()

@@ -23,7 +23,7 @@ import socket
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Protocol
 
 import zenoh
 
@@ -193,6 +193,14 @@ POLL_S = 0.05
 to stop."""
 
 
+class Machine(Protocol):
+    """A protocol machine as its adapter drives it: when its timer is next due, and that input."""
+
+    def timer(self) -> float | None: ...
+
+    def on_timer(self, now: float) -> list: ...
+
+
 class ProtocolAdapter:
     """What the agent and world nodes share as adapters of their protocol machines: an input is
     fed under the node's one lock and its effects are carried out there, in order, each by the
@@ -207,7 +215,7 @@ class ProtocolAdapter:
     lock: threading.RLock
     stopping: bool
     failure: BaseException | None
-    protocol: object  # a protocol machine: timer(), on_timer(now)
+    protocol: Machine
     events: queue.SimpleQueue
     _do: dict[type, Callable]
 

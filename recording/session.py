@@ -107,7 +107,7 @@ class RecordingPlan:
         import rerun as rr
 
         stream = rr.RecordingStream(APP_ID, recording_id=self.run_id)
-        sinks = []
+        sinks: list[rr.FileSink | rr.GrpcSink] = []
         if self.parts_dir is not None:
             Path(self.parts_dir).mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(str(Path(self.parts_dir) / f"{role}.{os.getpid()}.rrd")))
@@ -549,7 +549,7 @@ def log_swarm_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
 _ALGO_COLORS = {"ql": (230, 120, 40), "nnql": (40, 140, 230), "nnql-dir": (60, 180, 90)}
 
 
-def _series_color(algo: str, k: int) -> tuple[int, int, int]:
+def _series_color(algo: str, k: int) -> tuple[int, ...]:
     """QL in oranges, nnQL in blues; larger k (less exploration) darker."""
     base = np.array(_ALGO_COLORS.get(algo, (160, 160, 160)), dtype=float)
     shade = 1.25 - 0.6 * min(max(k, 1), 20) / 20
