@@ -8,7 +8,6 @@ sends SIGTERM to every child, waits a grace period, then kills what is left.
 """
 
 import logging
-import multiprocessing as mp
 from multiprocessing.context import SpawnContext
 from multiprocessing.process import BaseProcess
 import signal
