@@ -8,11 +8,11 @@ sends SIGTERM to every child, waits a grace period, then kills what is left.
 """
 
 import logging
-from multiprocessing.context import SpawnContext
-from multiprocessing.process import BaseProcess
 import signal
 import time
 from dataclasses import dataclass, field
+from multiprocessing.context import SpawnContext
+from multiprocessing.process import BaseProcess
 from typing import Callable
 
 from nnql_swarm.protocol.transport import EXIT_TRANSPORT
