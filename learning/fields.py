@@ -41,7 +41,7 @@ NB_FIELDS = 12
 """A neighbour row: id, cell, whether its intent is known, the cell it announced it is heading
 for (its cell where unknown), the cell its state is read at (the announced cell n steps ahead;
 the next cell for n = 1), whether it is parked on its goal, its cell a tick ago (-1 if unseen);
-and its Q_CA row, which :func:`read_rows` writes for the steps that read it."""
+and its Q_CA row, which ``learning.readings.read_rows`` writes for the steps that read it."""
 assert (NB_X, NB_Y, NB_PARKED) == (1, 2, 8), "learning.known_map.see_parked reads them by number"
 
 LS_TAKEN, LS_PENDING, LS_GOAL, LS_ACTION, LS_TERMINAL, LS_COUNT, LS_X, LS_Y = 0, 1, 2, 3, 4, 5, 6, 7

@@ -43,17 +43,20 @@ around the agents it saw parked within reach (``LP_DETOUR``). The caller passes 
 (``wall_x``, ``wall_y``, ``first .. last - 1``, in cell order) and whether the observation is
 an episode's first (``starts``).
 
-Completing a transition writes a *learning record* (``rec``, ``rec_f``), applied by
-:func:`apply_record`: at once for an independent learner, or, where a swarm shares one table, in
-agent-id order before the next tick: by the simulator to its one table (``sim.swarm``), by the
-world to its copy (``world.shared_table``), once it has checked that the record is the one the
-sender's own transition wrote (``world.records``, with :func:`read_rows` and :func:`complete`),
-and which hands the entries written to every agent's copy (:func:`write_updates`).
+Completing a transition writes a *learning record* (``rec``, ``rec_f``; ``learning.record``),
+applied by ``apply_record``: at once for an independent learner, or, where a swarm shares one
+table, in agent-id order before the next tick: by the simulator to its one table (``sim.swarm``),
+by the world to its copy (``world.shared_table``), once it has checked that the record is the one
+the sender's own transition wrote (``world.records``, with ``learning.readings.read_rows`` and
+``learning.record.complete``), and which hands the entries written to every agent's copy
+(``learning.record.write_updates``).
 
-Buffers (numpy arrays when compiled, Python lists in an agent process): ``params`` (``LP_*``),
-``params_f`` (``FP_*``), the learner's state ``state`` (``LS_*``) and ``state_f`` (``LF_*``), and
-the neighbour rows ``nb`` (``NB_*``), one per visible neighbour, in agent-id order (as the world
-lists them). The tables ``q_ds`` and ``q_ca`` are numpy arrays either way.
+Buffers (numpy arrays when compiled, Python lists in an agent process; their fields in
+``learning.fields``): ``params`` (``LP_*``), ``params_f`` (``FP_*``), the learner's state
+``state`` (``LS_*``) and ``state_f`` (``LF_*``), and the neighbour rows ``nb`` (``NB_*``), one per
+visible neighbour, in agent-id order (as the world lists them). The tables ``q_ds`` and ``q_ca``
+are numpy arrays either way. This module holds the choice and a tick's learning; the readings
+are in ``learning.readings``.
 """
 
 import math
