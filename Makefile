@@ -86,7 +86,7 @@ experiment: $(STAMP)
 	$(PY) launch/experiment.py $(ARGS)
 
 bench: $(STAMP)
-	$(PY) bench/table1.py
+	$(PY) -m bench.table1
 	$(PY) -m bench.sweep
 	$(PY) -m bench.swarm_ticks
 	$(PY) -m bench.recording_cost

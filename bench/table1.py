@@ -1,7 +1,7 @@
 """Times the paper's whole Table 1 (k = 1..10, QL and nnQL, 10 seeds, 500 episodes): median of runs.
 
-    python bench/table1.py               # 3 repeats, one thread per core
-    python bench/table1.py --repeats 5 --workers 1
+    python -m bench.table1               # 3 repeats, one thread per core
+    python -m bench.table1 --repeats 5 --workers 1
 
 Runs the kernel once untimed (loading or compiling it), then prints each repeat's wall time and
 CPU time (a fairer figure when other work shares the cores), the median wall time against the
