@@ -1,4 +1,5 @@
-# Two commands for a fresh machine: `make run` (the swarm) and `make test` (the test suite).
+# Two commands for a fresh machine: `make run` (the swarm) and `make test` (the type checker over
+# the package, then the test suite).
 # Both create a local virtualenv in .venv and install the project into it first.
 # `make browser-test` installs Debian's chromium (as root, with apt-get) and Playwright, and runs
 # the tests of the web viewer in headless Chromium (`make test` runs them too when both are there).
@@ -30,6 +31,7 @@ run: $(STAMP)
 	$(PY) launch/swarm.py --agents $(AGENTS) $(ARGS)
 
 test: $(STAMP)
+	$(PY) -m mypy
 	$(PY) -m pytest -q
 
 # Debian's chromium, installed only if missing; fails (saying why) where that needs root or apt-get.
@@ -84,13 +86,13 @@ experiment: $(STAMP)
 	$(PY) launch/experiment.py $(ARGS)
 
 bench: $(STAMP)
-	$(PY) bench/table1.py
-	$(PY) bench/sweep.py
-	$(PY) bench/swarm_ticks.py
-	$(PY) bench/recording_cost.py
-	$(PY) bench/codec.py
-	$(PY) bench/world_tick.py
-	$(PY) bench/node_cpu.py
+	$(PY) -m bench.table1
+	$(PY) -m bench.sweep
+	$(PY) -m bench.swarm_ticks
+	$(PY) -m bench.recording_cost
+	$(PY) -m bench.codec
+	$(PY) -m bench.world_tick
+	$(PY) -m bench.node_cpu
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis

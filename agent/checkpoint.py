@@ -2,25 +2,53 @@
 a reader sees the old checkpoint or the new, whatever is killed when).
 
 A checkpoint holds both tables, the exploration counter, the agent's generator state, the walls
-it has seen (``agent.known_map``) and the episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
+it has seen (``learning.known_map``) and the episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
 from another run shape is refused with a clear error naming the file.
 """
 
 import hashlib
 import json
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 
 from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.learning.saved import CheckpointError, check_tables, read_versions
 from nnql_swarm.storage import slotfile
+from nnql_swarm.protocol.config import SwarmConfig
 
 
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be used: unreadable, corrupt or from another run shape."""
+class SavedTables(Protocol):
+    """What a checkpoint reads of a learner (``learning.tables.Learner``, or the simulator's
+    view of one)."""
+
+    @property
+    def actions_taken(self) -> int: ...
+
+    def tables(self) -> tuple[np.ndarray, np.ndarray]: ...
+
+    def known_walls(self) -> list[int]: ...
 
 
-def fingerprint(brain: AgentBrain) -> str:
+class Saved(Protocol):
+    """What a checkpoint saves of an agent: an ``agent.brain.AgentBrain``, or the simulator's
+    view of one (``sim.inprocess.SimulatedAgent``)."""
+
+    @property
+    def agent(self) -> int: ...
+
+    @property
+    def config(self) -> SwarmConfig: ...
+
+    @property
+    def learner(self) -> SavedTables: ...
+
+    @property
+    def rng(self) -> np.random.Generator: ...
+
+
+def fingerprint(brain: Saved) -> str:
     """A short digest of the brain's Q-tables: equal digests, equal learned values."""
     q_ds, q_ca = brain.learner.tables()
     digest = hashlib.sha256(q_ds.tobytes())
@@ -32,7 +60,7 @@ def checkpoint_path(directory: Path, agent: int) -> Path:
     return Path(directory) / f"agent-{agent}.ckpt"
 
 
-def save(path: Path, brain: AgentBrain, episode: int) -> None:
+def save(path: Path, brain: Saved, episode: int) -> None:
     """Write the brain's learned state after ``episode``; readers see the old file or the new."""
     q_ds, q_ca = brain.learner.tables()
     slotfile.write(path, {"q_ds": q_ds, "q_ca": q_ca,
@@ -41,44 +69,6 @@ def save(path: Path, brain: AgentBrain, episode: int) -> None:
                           "algo": brain.config.algo,
                           "rng_state": json.dumps(brain.rng.bit_generator.state),
                           "known_walls": np.array(brain.learner.known_walls(), dtype=np.int64)})
-
-
-def read_fields(path: Path, expected: tuple[str, ...]) -> dict:
-    """Every field of a checkpoint, by name (the tables as arrays); raises CheckpointError naming
-    the file if it cannot be read or lacks one of ``expected``."""
-    return _read(path, expected, all_versions=False)[0]
-
-
-def read_versions(path: Path, expected: tuple[str, ...]) -> list[dict]:
-    """The checkpoint file's whole versions, the newest first (``storage.slotfile.read_all``:
-    the last and the one before), as :func:`read_fields` gives each."""
-    return _read(path, expected, all_versions=True)
-
-
-def _read(path: Path, expected: tuple[str, ...], all_versions: bool) -> list[dict]:
-    path = Path(path)
-    try:
-        versions = slotfile.read_all(path) if all_versions else [slotfile.read(path)]
-    except (OSError, slotfile.SlotFileError) as error:
-        raise CheckpointError(f"{path}: not a readable checkpoint ({error})") from None
-    for fields in versions:
-        missing = [key for key in expected if key not in fields]
-        if missing:
-            raise CheckpointError(f"{path}: corrupt checkpoint, missing {', '.join(missing)}")
-    return versions
-
-
-def check_tables(path: Path, fields: dict, tables: tuple[np.ndarray, np.ndarray]) -> None:
-    """That a checkpoint's ``q_ds`` and ``q_ca`` have the shapes of ``tables`` and hold only
-    finite values; raises CheckpointError naming the file."""
-    for name, current in zip(("q_ds", "q_ca"), tables):
-        shape = current.shape
-        if not isinstance(fields[name], np.ndarray):
-            raise CheckpointError(f"{path}: {name} is not a table")
-        if fields[name].shape != shape:
-            raise CheckpointError(f"{path}: {name} of shape {fields[name].shape}, expected {shape}")
-    if not (np.isfinite(fields["q_ds"]).all() and np.isfinite(fields["q_ca"]).all()):
-        raise CheckpointError(f"{path}: Q-tables hold non-finite values")
 
 
 FIELDS = ("q_ds", "q_ca", "actions_taken", "episode", "agent", "n_agents", "algo", "rng_state")

@@ -32,44 +32,11 @@ view); otherwise it answers every agent that waits for it, a superset of the pla
 from dataclasses import dataclass, field
 from typing import Callable
 
+from nnql_swarm.learning.neighbours import awaited_cells
 from nnql_swarm.protocol.actions import VIEW_RADIUS, within
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank, waits_for
-
-
-def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
-    """The neighbours whose intents the observing agent waits for at this tick (none for QL, and
-    none at an episode's end, where everybody stays)."""
-    return [j for j, _, _ in _awaited(obs, config)]
-
-
-def _awaited(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]]:
-    """:func:`awaited` as ``(id, x, y)``."""
-    if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
-        return []
-    meet, arrived = config.meet_only, obs.arrived
-    if meet and arrived:
-        return []  # what awaits_answer says of every neighbour, without asking it
-    (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
-    parked = set(obs.parked)
-    return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
-            if awaits_answer(rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet,
-                             arrived, j in parked)]
-
-
-def staying(obs: Observation, config: SwarmConfig) -> list[int]:
-    """Under the ``meet`` rule, the arrived neighbours whose intents the observing agent knows
-    without waiting: those ``protocol.ranks.waits_for`` names among the observation's ``parked``
-    (the arrived neighbours in view), each of which stays on its goal (its intent is STAY)."""
-    if (not (config.meet_only and obs.parked) or config.algo not in NEGOTIATING_ALGOS
-            or obs.episode_end):
-        return []
-    (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
-    parked = set(obs.parked)
-    return [j for j, jx, jy in within(obs.neighbours, x, y, radius)
-            if j in parked
-            and waits_for(True, rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, True)]
 
 
 def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
@@ -94,7 +61,7 @@ def plan_asks(waiting_for: list[int], cells: dict[int, tuple[int, int]],
 
 def plan_for(obs: Observation, config: SwarmConfig) -> tuple[list[int], list[int]]:
     """``(awaited, asks)`` for one observation: whose intents to learn, and whom to ask."""
-    near = _awaited(obs, config)
+    near = awaited_cells(obs, config)
     if not near:
         return [], []
     waiting_for = [j for j, _, _ in near]

@@ -76,6 +76,8 @@ class AgentOptions:
 class AgentNode(ProtocolAdapter):
     """The protocol's adapter to one Zenoh session (see the module docstring)."""
 
+    protocol: AgentProtocol
+
     def __init__(self, options: AgentOptions, session: zenoh.Session,
                  brain: AgentBrain | None = None,
                  on_episode_end: Callable[[AgentBrain, int], None] | None = None) -> None:
@@ -99,7 +101,7 @@ class AgentNode(ProtocolAdapter):
         self.lock = threading.RLock()
         self.stopping = False
         self.failure: BaseException | None = None
-        self.publisher = None
+        self.publisher: zenoh.Publisher | None = None
         self.queries: dict[int, zenoh.Query] = {}
         self.next_query = 0
         run_id = self.config.run_id
@@ -153,6 +155,7 @@ class AgentNode(ProtocolAdapter):
         tick = effect.intent.tick
         self.trace.mark(trace.ANSWERED, tick)
         self.trace.mark(trace.INTENT_SENT, tick)
+        assert self.publisher is not None, "intents are sent only while the node runs"
         self.publisher.put(effect.payload)
 
     def _ask(self, effect: Ask) -> None:

@@ -1,4 +1,4 @@
-"""One agent's side of the swarm protocol, pure: inputs in, effects (``protocol.effects``) out.
+"""One agent's side of the swarm protocol, pure: inputs in, effects (``machines.effects``) out.
 
 No sockets, no threads, no clock reads, no files. Every input carries the time ``now`` it
 happens at; every input returns the effects it causes, in order. :meth:`AgentProtocol.timer` is
@@ -36,6 +36,7 @@ import logging
 from dataclasses import dataclass, field
 
 from nnql_swarm.agent import negotiation
+from nnql_swarm.learning import neighbours
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import (
@@ -73,7 +74,7 @@ _NO_TRACE = TickTrace("agent", None)
 
 
 class EffectLog:
-    """A logger whose lines become :class:`~protocol.effects.Log` effects of the protocol's
+    """A logger whose lines become :class:`~machines.effects.Log` effects of the protocol's
     current input (what ``Inbox`` is given, so that its rejections are effects too)."""
 
     def __init__(self, owner) -> None:
@@ -96,7 +97,7 @@ class EffectLog:
 class Pending:
     """An observation whose decision waits for intents: whose (``awaited``), which of them the
     brain decides with (``needed``), whom this agent asked (``asks``), until when, the intents
-    it knows without asking (``staying``: parked neighbours, ``negotiation.staying``), and, once
+    it knows without asking (``staying``: parked neighbours, ``neighbours.staying``), and, once
     the answers are in, the ones it then asked for directly because no answer brought them
     (``missing``); neighbours that cannot answer (gone, or refusing the tick) are waited for no
     more (``refused``)."""
@@ -127,7 +128,7 @@ class AgentProtocol:
     def __init__(self, agent: int, config: SwarmConfig, brain, now: float,
                  negotiation_timeout_s: float | None = None, trace: TickTrace = _NO_TRACE) -> None:
         """``brain`` is an ``agent.brain.AgentBrain`` (fresh, or restored from a checkpoint);
-        ``trace`` only records the time of each step (``protocol.trace``), never decides."""
+        ``trace`` only records the time of each step (``machines.trace``), never decides."""
         self.agent = agent
         self.config = config
         self.brain = brain
@@ -363,7 +364,7 @@ class AgentProtocol:
             return
         awaited, asks = negotiation.plan_for(obs, self.config)
         needed = self.brain.neighbours_to_ask(obs, awaited)
-        staying = {j: STAY for j in negotiation.staying(obs, self.config)}
+        staying = {j: STAY for j in neighbours.staying(obs, self.config)}
         if not awaited:
             self._decide(obs, staying)
             return

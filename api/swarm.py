@@ -16,18 +16,19 @@ import os
 from contextlib import contextmanager
 from dataclasses import fields
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Literal, NoReturn
 
 import numpy as np
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.launch import swarm_cli
+from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import MODE_VARIABLE
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint
 from nnql_swarm.supervision.supervisor import describe_exit
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED
+from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import COLUMNS
@@ -206,7 +207,7 @@ class Run:
         if not (isinstance(agent, (int, np.integer)) and 0 <= agent < self.config.n_agents):
             raise ValueError(f"agent {agent!r} out of range 0..{self.config.n_agents - 1}")
         path = checkpoint.checkpoint_path(self.path / CHECKPOINT_DIR, int(agent))
-        saved = checkpoint.read_fields(path, ("q_ds", "q_ca"))
+        saved = read_fields(path, ("q_ds", "q_ca"))
         return np.array(saved["q_ds"]), np.array(saved["q_ca"])
 
     def shared_table(self) -> tuple[np.ndarray, np.ndarray]:
@@ -217,7 +218,7 @@ class Run:
             raise ValueError("the agents of this run learn each into its own tables "
                              "(shared is off): read them with q_tables(agent)")
         path = world_checkpoint.table_path(self.path)
-        saved = checkpoint.read_fields(path, ("q_ds", "q_ca"))
+        saved = read_fields(path, ("q_ds", "q_ca"))
         return np.array(saved["q_ds"]), np.array(saved["q_ca"])
 
     @property
@@ -227,7 +228,7 @@ class Run:
         path = self.path / RECORDING_FILE
         return path if path.is_file() else None
 
-    def show(self, width: int | str = "auto", height: int | str = 720):
+    def show(self, width: int | Literal["auto"] = "auto", height: int | Literal["auto"] = 720):
         """The run's recording in Rerun's notebook viewer, on the layout the command's viewer
         opens on (``recording.blueprint``): returned as a ``rerun.notebook.Viewer``,
         which a notebook cell shows inline when it is the cell's value (or call its
@@ -301,13 +302,14 @@ def config_options(config: SwarmConfig) -> dict:
 def parse(argv: list[str]) -> argparse.Namespace:
     """The command's parser on ``argv``, raising ValueError with its one-line message where the
     command would print it and exit."""
-    parser = swarm_cli.build_parser()
+    return swarm_cli.build_parser(_RaisingParser).parse_args(argv)
 
-    def error(message: str):
+
+class _RaisingParser(OneLineParser):
+    """The swarm command's parser, raising ValueError with its one-line message."""
+
+    def error(self, message: str) -> NoReturn:
         raise ValueError(message)
-
-    parser.error = error
-    return parser.parse_args(argv)
 
 
 def _actions(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:

@@ -9,8 +9,8 @@ calls to take about 0.2 s. With ``--baseline FILE``, another version of ``protoc
 messages, in alternating order, after both are checked to give the same bytes and messages; the
 ratio is the median of each repeat's own baseline / current ratio (above 1: the current is faster).
 
-    python bench/codec.py --repeats 5 --neighbours 4
-    python bench/codec.py --repeats 9 --baseline /tmp/messages_main.py
+    python -m bench.codec --repeats 5 --neighbours 4
+    python -m bench.codec --repeats 9 --baseline /tmp/messages_main.py
 """
 
 import argparse
@@ -21,9 +21,7 @@ import timeit
 from pathlib import Path
 from types import ModuleType
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from nnql_swarm.protocol import messages  # noqa: E402
+from nnql_swarm.protocol import messages
 
 RUN = "bench"
 

@@ -8,7 +8,7 @@ arrives, from Zenoh's callback; the world waits for every intent, then opens the
 its own callback. No negotiation, no codec, no rules, no learning: the floor under the swarm's
 tick, for the same number of processes and the same topology.
 
-    python bench/lockstep.py --agents 8,32,64 --repeats 3 --topology mesh
+    python -m bench.lockstep --agents 8,32,64 --repeats 3 --topology mesh
 """
 
 import argparse
@@ -17,18 +17,15 @@ import statistics
 import sys
 import threading
 import time
-from pathlib import Path
 
 import msgpack
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from bench.procstat import MemorySampler  # noqa: E402
-from nnql_swarm.transport.callbacks import callback  # noqa: E402
-from nnql_swarm.transport.ports import wait_listening  # noqa: E402
-from nnql_swarm.transport.runtime import declare_lockstep_publisher  # noqa: E402
-from nnql_swarm.transport.settings import TransportSettings, open_session  # noqa: E402
-from nnql_swarm.transport.topology import TOPOLOGIES, EmbeddedLayout  # noqa: E402
+from bench.procstat import MemorySampler
+from nnql_swarm.transport.callbacks import callback
+from nnql_swarm.transport.ports import wait_listening
+from nnql_swarm.transport.runtime import declare_lockstep_publisher
+from nnql_swarm.transport.settings import TransportSettings, open_session
+from nnql_swarm.transport.topology import TOPOLOGIES, EmbeddedLayout
 
 START_TIMEOUT_S = 120.0
 

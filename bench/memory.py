@@ -7,8 +7,8 @@ process's resident set size (``VmRSS`` of ``/proc/<pid>/status``, found by the p
 the run with Ctrl-C (SIGINT to its process group) and prints, per process, the size after the
 warm-up, at the end, the growth, and the growth per minute.
 
-    python bench/memory.py --minutes 20
-    python bench/memory.py --minutes 2 --every 10 --preset nnql
+    python -m bench.memory --minutes 20
+    python -m bench.memory --minutes 2 --every 10 --preset nnql
 """
 
 import argparse

@@ -16,8 +16,8 @@ mTLS + password + access-control router of launch/secure.py), ``mesh`` (peers; e
 on its host's address, gossip connects them all), ``world-hub`` (the world a peer, the agents its
 clients: the world relays), and ``one-host`` (the default embedded layout, all in host world).
 
-    sudo .venv/bin/python bench/multihost.py --episodes 20 --repeats 3
-    sudo .venv/bin/python bench/multihost.py --agents 64 --layouts router --episodes 5 --repeats 1
+    sudo .venv/bin/python -m bench.multihost --episodes 20 --repeats 3
+    sudo .venv/bin/python -m bench.multihost --agents 64 --layouts router --episodes 5 --repeats 1
 """
 
 import argparse
@@ -30,11 +30,9 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from bench.harness import grid_side  # noqa: E402
-from tests import netns  # noqa: E402
-from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+from bench.harness import grid_side
+from tests import netns
+from nnql_swarm.world.metrics import read_episodes
 
 PY = sys.executable
 SWARM, ROUTER = str(ROOT / "launch" / "swarm.py"), str(ROOT / "launch" / "router.py")

@@ -11,9 +11,9 @@ written once, and how many of the repeats without a missed intent have the rows 
 ``--in-process``. Faults the machine
 cannot make (no netem in the kernel, no iptables) are listed with the reason. Needs root.
 
-    sudo .venv/bin/python bench/netfaults.py --repeats 3
-    sudo .venv/bin/python bench/netfaults.py --faults clean,partition-long --repeats 1
-    sudo .venv/bin/python bench/netfaults.py --faults clean,router-restart \
+    sudo .venv/bin/python -m bench.netfaults --repeats 3
+    sudo .venv/bin/python -m bench.netfaults --faults clean,partition-long --repeats 1
+    sudo .venv/bin/python -m bench.netfaults --faults clean,router-restart \
         --zenoh-config config/client.json5     # every process with the file's settings
 """
 
@@ -26,12 +26,10 @@ import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from tests import netfault_runs as runs  # noqa: E402
-from tests import netns  # noqa: E402
-from nnql_swarm.world.engine import EPISODE_FIELDS  # noqa: E402
-from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+from tests import netfault_runs as runs
+from tests import netns
+from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.world.metrics import read_episodes
 
 
 def in_process(out: Path, agents: int, episodes: int, max_steps: int, seed: int) -> list[tuple]:

@@ -15,7 +15,7 @@ less, but it is still best compared between runs made one after the other. It co
 hot in one process: in the swarm, each process wakes from cold caches and the same code takes
 several times as long (docs/performance.md).
 
-    python bench/node_cpu.py --agents 8 --episodes 20 --repeats 5
+    python -m bench.node_cpu --agents 8 --episodes 20 --repeats 5
 """
 
 import argparse
@@ -27,19 +27,18 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 os.environ["NNQL_KERNEL"] = "python"  # as in the swarm's processes
 
-import zenoh  # noqa: E402
+import zenoh
 
-from nnql_swarm.agent.brain import AgentBrain  # noqa: E402
-from nnql_swarm.agent.node import AgentNode, AgentOptions  # noqa: E402
-from nnql_swarm.protocol import keys  # noqa: E402
-from nnql_swarm.protocol.actions import STAY  # noqa: E402
-from bench.harness import add_preset_option, grid_side, swarm_config  # noqa: E402
-from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
-from nnql_swarm.transport.settings import TransportSettings  # noqa: E402
-from nnql_swarm.world.node import WorldNode, WorldOptions  # noqa: E402
+from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.agent.node import AgentNode, AgentOptions
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.actions import STAY
+from bench.harness import add_preset_option, grid_side, swarm_config
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.transport.settings import TransportSettings
+from nnql_swarm.world.node import WorldNode, WorldOptions
 
 
 class _Callback:

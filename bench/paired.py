@@ -6,15 +6,16 @@ A shared machine's speed drifts within minutes, so only runs made together compa
 pair is A then B (then B then A at the next pair, so that neither always goes first), and the
 ratio of each pair's figures cancels most of the drift.
 
-    python bench/paired.py --pairs 3 --a-dir /tmp/before --b-dir . \\
+    python -m bench.paired --pairs 3 --a-dir /tmp/before --b-dir . \\
         -- --agents 8 --repeats 5 --episodes 10
-    python bench/paired.py --pairs 3 --a-env NNQL_ZENOH_CALLBACKS=direct \\
+    python -m bench.paired --pairs 3 --a-env NNQL_ZENOH_CALLBACKS=direct \\
         --b-env NNQL_ZENOH_CALLBACKS=kept -- --agents 8 --repeats 5 --episodes 10
 
 Everything after ``--`` goes to ``swarm_ticks.py``. Both sides run with this Python. The
 editable install maps ``nnql_swarm`` to the checkout it was made from, whichever tree a side runs
-in; so each side runs with ``PYTHONPATH`` on a directory of its own whose ``nnql_swarm/<part>``
-links to its tree's folders (its ``pyproject.toml``'s package-dir), which Python finds first.
+in; so each side's tree is first built (``pip install --no-deps --target``, as a wheel installs
+it) into a directory of its own, and runs as ``python -m bench.swarm_ticks`` in its tree with
+``PYTHONPATH`` on that directory, which Python searches before the installed packages.
 """
 
 import argparse
@@ -24,7 +25,6 @@ import statistics
 import subprocess
 import sys
 import tempfile
-import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -32,14 +32,15 @@ LINE = re.compile(r"^\s*(\d+)\s+(distributed|bare|in-process)\s+(\d+)\s")
 
 
 def package_path(directory: Path, under: Path) -> Path:
-    """A directory under ``under`` in which ``nnql_swarm.<part>`` is ``directory``'s own code."""
-    with open(directory / "pyproject.toml", "rb") as f:
-        parts = tomllib.load(f)["tool"]["setuptools"]["package-dir"]
-    root = Path(tempfile.mkdtemp(dir=under)) / "nnql_swarm"
-    root.mkdir()
-    for package, folder in parts.items():
-        (root / package.removeprefix("nnql_swarm.")).symlink_to(directory / folder)
-    return root.parent
+    """A directory under ``under`` holding ``directory``'s package as a wheel installs it."""
+    target = Path(tempfile.mkdtemp(dir=under))
+    done = subprocess.run([sys.executable, "-m", "pip", "install", "--no-deps", "--quiet",
+                           "--target", str(target), str(directory)],
+                          capture_output=True, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"paired.py: cannot build {directory}: "
+                         f"{done.stderr.strip().splitlines()[-1:]}")
+    return target
 
 
 def run_side(directory: Path, env: dict[str, str], args: list[str],
@@ -48,9 +49,8 @@ def run_side(directory: Path, env: dict[str, str], args: list[str],
     ticks/s by mode (a failed run is said and tried once more)."""
     python_path = os.pathsep.join(filter(None, [str(path), os.environ.get("PYTHONPATH")]))
     for attempt in (1, 2):
-        done = subprocess.run([sys.executable, str(directory / "bench" / "swarm_ticks.py"),
-                               *args], capture_output=True, text=True, cwd=directory,
-                              env={**os.environ, **env, "PYTHONPATH": python_path})
+        done = subprocess.run([sys.executable, "-m", "bench.swarm_ticks", *args],
+                              capture_output=True, text=True, cwd=directory, env={**os.environ, **env, "PYTHONPATH": python_path})
         if done.returncode == 0:
             break
         print(f"  swarm_ticks.py failed ({done.returncode}), attempt {attempt}: "

@@ -10,27 +10,24 @@ the world's tick work in the same runs: applying the tick (``SwarmWorld.apply``,
 table's updates included) and building and encoding the next observations. Each figure is the
 median over ``--repeats`` runs of the mean over the run's ticks, in CPU time of the thread.
 
-    python bench/record_check.py
-    python bench/record_check.py --agents 8,32 --episodes 5 --repeats 5
+    python -m bench.record_check
+    python -m bench.record_check --agents 8,32 --episodes 5 --repeats 5
 """
 
 import argparse
 import os
 import statistics
-import sys
 import time
 from dataclasses import replace
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 os.environ["NNQL_KERNEL"] = "python"  # as in the world process
 
-from nnql_swarm.protocol.config import PRESETS, SwarmConfig  # noqa: E402
-from nnql_swarm.sim.distributed import SimSwarm  # noqa: E402
-from nnql_swarm.sim.schedule import DEADLINE_S, Schedule  # noqa: E402
-from nnql_swarm.world.engine import SwarmWorld  # noqa: E402
-from nnql_swarm.world.protocol import WorldProtocol  # noqa: E402
-from nnql_swarm.world.records import RecordCheck  # noqa: E402
+from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.sim.distributed import SimSwarm
+from nnql_swarm.sim.schedule import DEADLINE_S, Schedule
+from nnql_swarm.world.engine import SwarmWorld
+from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.records import RecordCheck
 
 GRIDS = {8: 11, 16: 16, 32: 22, 64: 32}
 """The grid side at each agent count, as ``docs/performance.md`` scales it (constant density)."""

@@ -4,14 +4,14 @@
 Each repeat runs the same config twice, recording off and on (alternating which goes first, so
 drift in the machine's load hits both alike): a world process and one process per agent over
 embedded Zenoh, exactly as ``launch/swarm.py`` starts them. Recording on means the full default
-recording: the world logs every tick (``world.viz``), every agent logs its heat maps and
-negotiation timing each episode (``agent.viz``), each process saves its part of ``run.rrd``.
+recording: the world logs every tick (``recording.world``), every agent logs its heat maps and
+negotiation timing each episode (``recording.agent``), each process saves its part of ``run.rrd``.
 The rate is ticks / seconds over every episode but the first (which includes start-up), from
 ``episodes.csv``; the figures are the medians over repeats (and the median of each repeat's
 own off/on difference, which drift in the machine's load disturbs less); the merge into
 ``run.rrd`` after the run is timed separately. ``--in-process`` measures the one-process runner instead.
 
-    python bench/recording_cost.py --agents 8 --repeats 5
+    python -m bench.recording_cost --agents 8 --repeats 5
 """
 
 import argparse
@@ -21,10 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from bench.harness import add_preset_option, run_distributed, run_local, swarm_config  # noqa: E402
-from nnql_swarm.recording.merge import merge_parts  # noqa: E402
+from bench.harness import add_preset_option, run_distributed, run_local, swarm_config
+from nnql_swarm.recording.merge import merge_parts
 
 TARGET = 0.10
 """Recording may cost at most 10 % of the tick rate."""

@@ -6,7 +6,7 @@ and the final flush) over a whole run, per tick, and the size of ``run.rrd``.
 Thread CPU time, unlike ``bench/recording_cost.py``'s tick rates, hardly moves with the machine's
 other load, so it compares two versions of the logging on a busy machine.
 
-    python bench/recording_cpu.py --agents 8 --grid 11 --episodes 100 --repeats 5
+    python -m bench.recording_cpu --agents 8 --grid 11 --episodes 100 --repeats 5
 """
 
 import argparse
@@ -16,12 +16,10 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from bench.harness import add_preset_option, swarm_config  # noqa: E402
-from nnql_swarm.launch.swarm_cli import run_in_process  # noqa: E402
-from nnql_swarm.recording import loggers  # noqa: E402
-from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+from bench.harness import add_preset_option, swarm_config
+from nnql_swarm.launch.swarm_cli import run_in_process
+from nnql_swarm.recording import loggers
+from nnql_swarm.world.metrics import read_episodes
 
 SPENT = [0.0]
 

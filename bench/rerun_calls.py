@@ -7,7 +7,7 @@ much each process's resident set grew after a warm-up. A recorded swarm's proces
 what their calls leave behind (docs/performance.md, "Recording"), so this says what batching
 their per-episode logging would save.
 
-    python bench/rerun_calls.py --values 200000
+    python -m bench.rerun_calls --values 200000
 """
 
 import argparse

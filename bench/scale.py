@@ -19,7 +19,7 @@ Prints one row per size (medians over the repeats; each repeat's figures on stde
 of a tick per agent (ms a tick / N: flat where cost grows linearly) and, with ``--png``, draws
 ticks a second and milliseconds a tick per agent against N for both.
 
-    python bench/scale.py --agents 8,16,32,64 --repeats 3 --png docs/scale.png
+    python -m bench.scale --agents 8,16,32,64 --repeats 3 --png docs/scale.png
 """
 
 import argparse
@@ -31,16 +31,14 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from bench import lockstep  # noqa: E402
-from bench.harness import add_preset_option, grid_side, run_distributed, swarm_config  # noqa: E402
-from bench.procstat import MemorySampler  # noqa: E402
-from nnql_swarm.storage.runfiles import stats_path  # noqa: E402
+from bench import lockstep
+from bench.harness import add_preset_option, grid_side, run_distributed, swarm_config
+from bench.procstat import MemorySampler
+from nnql_swarm.storage.runfiles import stats_path
 from nnql_swarm.transport.topology import (
     TOPOLOGIES, EmbeddedLayout, embedded_topology,
-)  # noqa: E402
-from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+)
+from nnql_swarm.world.metrics import read_episodes
 
 def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
                topology: str, obstacle_density: float = 0.0) -> dict:

@@ -8,7 +8,7 @@ reports ticks, faults injected and survived, episodes lost (missing or duplicate
 0), learned values lost (agents whose tables went back to zero, must be 0) and the memory
 growth (RSS) of each process role.
 
-    python bench/soak.py --minutes 10 --agents 8
+    python -m bench.soak --minutes 10 --agents 8
 """
 
 import argparse
@@ -22,13 +22,12 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from nnql_swarm.agent import checkpoint  # noqa: E402
-from tests.swarm_helpers import find_process, group_pids, swarm_command  # noqa: E402
-from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+from nnql_swarm.agent import checkpoint
+from tests.swarm_helpers import find_process, group_pids, swarm_command
+from nnql_swarm.learning.saved import read_fields
+from nnql_swarm.world.metrics import read_episodes
 
 
 WARM_UP_S = 20.0
@@ -105,7 +104,7 @@ def main() -> int:
     lost = len(set(range(max(episodes) + 1)) - set(episodes)) + (len(episodes) - len(set(episodes)))
     zeroed = 0
     for agent in range(args.agents):
-        data = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
+        data = read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
         zeroed += int(np.abs(data["q_ds"]).sum() == 0 or np.abs(data["q_ca"]).sum() == 0)
     ticks = int(rows[-1]["end_tick"]) + 1
     print(f"\nsoak: {args.minutes:g} min, {args.agents} agents, {ticks} ticks, {len(rows)} episodes")

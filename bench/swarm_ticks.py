@@ -13,7 +13,7 @@ end of the first episode (start-up excluded). The ratio is also given as the med
 repeat's own distributed / bare ratio: the two run back to back, so a machine whose speed drifts
 between repeats disturbs it less. Rerun recording is off unless ``--record``.
 
-    python bench/swarm_ticks.py --agents 8,16,32 --repeats 3
+    python -m bench.swarm_ticks --agents 8,16,32 --repeats 3
 """
 
 import argparse
@@ -22,13 +22,12 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from nnql_swarm.agent.brain import AgentBrain  # noqa: E402
-from bench.harness import add_preset_option, run_distributed, run_local, swarm_config  # noqa: E402
-from nnql_swarm.protocol.actions import STAY  # noqa: E402
-from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
-from nnql_swarm.transport.settings import TransportSettings  # noqa: E402
+from nnql_swarm.agent.brain import AgentBrain
+from bench.harness import add_preset_option, run_distributed, run_local, swarm_config
+from nnql_swarm.protocol.actions import STAY
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.transport.settings import TransportSettings
 
 
 class BareBrain(AgentBrain):

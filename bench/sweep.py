@@ -6,8 +6,8 @@ played by ``experiment.swarm.run_experiment`` in one batch over the cores. The k
 (or compiled) by an untimed warm-up; each repeat's wall time is printed, then the median against
 the 20 s target, and the runs are checked to give the same episodes every time.
 
-    python bench/sweep.py
-    python bench/sweep.py --repeats 5 --workers 1
+    python -m bench.sweep
+    python -m bench.sweep --repeats 5 --workers 1
 """
 
 import argparse
@@ -15,13 +15,10 @@ import os
 import statistics
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from nnql_swarm.experiment.swarm import SwarmExperiment, run_experiment  # noqa: E402
+from nnql_swarm.experiment.swarm import SwarmExperiment, run_experiment
 
 TARGET_SECONDS = 20.0
 

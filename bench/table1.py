@@ -1,7 +1,7 @@
 """Times the paper's whole Table 1 (k = 1..10, QL and nnQL, 10 seeds, 500 episodes): median of runs.
 
-    python bench/table1.py               # 3 repeats, one thread per core
-    python bench/table1.py --repeats 5 --workers 1
+    python -m bench.table1               # 3 repeats, one thread per core
+    python -m bench.table1 --repeats 5 --workers 1
 
 Runs the kernel once untimed (loading or compiling it), then prints each repeat's wall time and
 CPU time (a fairer figure when other work shares the cores), the median wall time against the
@@ -15,15 +15,11 @@ import resource
 import statistics
 import sys
 import time
-from pathlib import Path
 
-if __package__ in (None, ""):  # run as a script: make the repository's packages importable
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from nnql_swarm.experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch  # noqa: E402
-from nnql_swarm.experiment.report import ResultGrid, summarize, summary_lines, table1_rows  # noqa: E402
+from nnql_swarm.experiment.paper import ALGOS, PaperSettings, RunSpec, run_batch
+from nnql_swarm.experiment.report import ResultGrid, summarize, summary_lines, table1_rows
 
 TARGET_SECONDS = 5.0
 SEEDS = range(10)

@@ -7,7 +7,7 @@ and reads each process's user + system time from ``/proc/<pid>/stat`` at two epi
 microseconds of CPU per tick by process, their sum, and that sum as a share of what the machine's
 cores offer in a tick: near 1, the tick waits for CPU, not for messages.
 
-    python bench/tick_cpu.py --episodes 25 -- --preset shield-nnql --agents 8
+    python -m bench.tick_cpu --episodes 25 -- --preset shield-nnql --agents 8
 """
 
 import argparse
@@ -19,9 +19,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
-
-from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+from nnql_swarm.world.metrics import read_episodes
 
 HZ = os.sysconf("SC_CLK_TCK")
 

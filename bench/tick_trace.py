@@ -9,7 +9,7 @@ sent it to the one that got it) to the world closing the tick after the last int
 negotiation is one chain of every agent; with the default (radius 2) the waits are only among
 agents in reach: fewer answers a tick, several short chains side by side (docs/performance.md).
 
-    python bench/tick_trace.py --agents 8 --episodes 15
+    python -m bench.tick_trace --agents 8 --episodes 15
 """
 
 import argparse
@@ -21,11 +21,9 @@ import tempfile
 from collections import defaultdict
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config  # noqa: E402
-from nnql_swarm.machines import trace  # noqa: E402
-from nnql_swarm.world.metrics import read_episodes  # noqa: E402
+from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config
+from nnql_swarm.machines import trace
+from nnql_swarm.world.metrics import read_episodes
 
 FIRST_OBS = "world: first observation handed to Zenoh -> its agent has it"
 FIRST_DECIDES = "that agent: observation in -> deciding"

@@ -6,8 +6,8 @@ and no Zenoh: the part of the swarm's lockstep tick between the last agent's int
 observations, on seeded random actions. Each figure is the median over ``--repeats`` of the mean
 over ``--ticks`` ticks (episode ends included, as in a run).
 
-    python bench/world_tick.py
-    python bench/world_tick.py --agents 8,16,32 --repeats 9 --grid 40x40
+    python -m bench.world_tick
+    python -m bench.world_tick --agents 8,16,32 --repeats 9 --grid 40x40
 """
 
 import argparse
@@ -15,16 +15,14 @@ import os
 import statistics
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 os.environ["NNQL_KERNEL"] = "python"  # as in the world process
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from nnql_swarm.protocol.actions import N_ACTIONS  # noqa: E402
-from nnql_swarm.protocol.config import SwarmConfig  # noqa: E402
-from nnql_swarm.world.engine import SwarmWorld  # noqa: E402
+from nnql_swarm.protocol.actions import N_ACTIONS
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.world.engine import SwarmWorld
 
 
 def time_ticks(world: SwarmWorld, actions: list[list[int]]) -> tuple[float, float]:

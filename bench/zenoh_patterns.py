@@ -16,7 +16,7 @@ Except in ``token``, the world gets every intent by subscription. Messages are b
 tuples. This is what ``docs/performance.md`` quotes; the swarm itself
 uses ``standing`` (``agent.negotiation``), with its codec, rules and learning on top.
 
-    python bench/zenoh_patterns.py --agents 8 --repeats 3
+    python -m bench.zenoh_patterns --agents 8 --repeats 3
 """
 
 import argparse
@@ -25,16 +25,14 @@ import queue
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import msgpack
 import zenoh
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-from nnql_swarm.transport.callbacks import enqueue  # noqa: E402
-from nnql_swarm.transport.ports import free_port  # noqa: E402
-from nnql_swarm.transport.settings import TransportSettings, open_session  # noqa: E402
+from nnql_swarm.transport.callbacks import enqueue
+from nnql_swarm.transport.ports import free_port
+from nnql_swarm.transport.settings import TransportSettings, open_session
 
 PATTERNS = ("pubsub", "query", "standing", "token")
 NONE = zenoh.ConsolidationMode.NONE

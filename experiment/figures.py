@@ -132,7 +132,7 @@ def _collisions(plt, grid: ResultGrid, k: int):
 def _collisions_vs_k(plt, grid: ResultGrid, k: int):
     """Fig. 13: total collisions against the random step, with 95 % intervals, beside the paper's."""
     rows = table1_rows(grid)
-    ks = [row["random_step"] for row in rows]
+    ks = [int(row["random_step"]) for row in rows]
     figure, ax = plt.subplots(figsize=(7, 4))
     for algo in grid.algos:
         means = np.array([row[f"{algo}_collisions"] for row in rows])

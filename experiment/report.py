@@ -151,8 +151,8 @@ def summarize(grid: ResultGrid, figure_k: int) -> Summary:
     learning_ks = [k for k in grid.ks if k >= 2] or grid.ks
     ql = _pooled(grid, "ql", learning_ks)
     nnql = _pooled(grid, "nnql", learning_ks)
-    pairs = [grid.paired(k) for k in learning_ks]
-    if all(p is not None for p in pairs) and pairs:
+    pairs = [p for p in (grid.paired(k) for k in learning_ks) if p is not None]
+    if pairs and len(pairs) == len(learning_ks):
         per_seed = np.mean([p[0] - p[1] for p in pairs], axis=0)
         diff = mean_interval(per_seed)
     else:
@@ -232,8 +232,8 @@ def summary_lines(summary: Summary) -> list[str]:
 
 
 def _paper_learning_decrease() -> float:
-    ql = np.mean([PAPER_TABLE1[k][0] for k in range(2, 11)])
-    nnql = np.mean([PAPER_TABLE1[k][1] for k in range(2, 11)])
+    ql = float(np.mean([PAPER_TABLE1[k][0] for k in range(2, 11)]))
+    nnql = float(np.mean([PAPER_TABLE1[k][1] for k in range(2, 11)]))
     return float(_decrease(ql, nnql))
 
 

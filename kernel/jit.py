@@ -14,7 +14,7 @@ slower to start.
 Kernel functions therefore only index and assign into their buffers, which may be numpy arrays
 (compiled) or Python lists (plain: :func:`ints`, :func:`floats`, :func:`rows`, where reading a list
 is several times faster), and never allocate on the hot path. The Q-tables are numpy arrays
-either way (``agent.brain.Learner``): a decision reads a few of their rows, while a shared
+either way (``learning.tables.Learner``): a decision reads a few of their rows, while a shared
 table's updates write all over them, which in one compact array costs a cache line an entry.
 
 numba's cache knows only the file of each compiled function, not those of the functions it calls:
@@ -35,7 +35,7 @@ PLAIN = "python"
 COMPILED = os.environ.get(MODE_VARIABLE, "compiled") != PLAIN
 """Whether kernel functions are compiled in this process (fixed at import)."""
 
-KERNEL_ROOMS = ("agent", "kernel", "protocol", "sim", "world")
+KERNEL_ROOMS = ("kernel", "learning", "protocol", "sim", "world")
 """The packages whose modules may define kernel functions."""
 
 
@@ -65,7 +65,7 @@ if COMPILED:
         return njit(cache=True, parallel=True)(function)
 
 else:
-    prange = range
+    from builtins import range as prange
 
     def kernel(function):
         """Plain Python: the function as written."""

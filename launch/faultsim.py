@@ -64,6 +64,7 @@ def check_schedule(seed: int, agents: int, scratch: Path | None = None,
         outcome = run_schedule(schedule, scratch, fingerprints=schedule.benign)
         failures = list(outcome.failures)
         if schedule.benign and not failures:
+            assert outcome.fingerprints is not None, "a benign schedule's run keeps them"
             failures += parity_failures(schedule.config, outcome.rows, outcome.fingerprints,
                                         scratch)
         return Result(seed, tuple(failures), outcome.digest, outcome.ticks, outcome.events,

@@ -15,7 +15,7 @@ from pathlib import Path
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.settings import TransportSettings
-from nnql_swarm.supervision.resume import ResumePoint
+from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
@@ -46,8 +46,14 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
     viz = open_world_viz(record, config, out)
     started = time.monotonic()
     try:
-        code = run_world(WorldOptions(config, transport, out,
-                                      first_episode=start.episode, first_tick=start.tick), on_tick)
+        try:
+            table = shared_table(out, config, start)
+        except ResumeError as error:
+            logging.getLogger("nnql.world").error("%s", error)
+            code = 1
+        else:
+            code = run_world(WorldOptions(config, transport, out, first_episode=start.episode,
+                                          first_tick=start.tick, table=table), on_tick)
     finally:
         if bar is not None:
             bar.close()

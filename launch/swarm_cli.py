@@ -19,7 +19,7 @@ import shlex
 import sys
 import time
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 from nnql_swarm.transport import zenoh_files
 from nnql_swarm.terminal.cli import (
@@ -75,8 +75,9 @@ def parse_ids(text: str) -> list[int]:
     return ids
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = OneLineParser(description="A swarm run: a world process and one process per agent, "
+def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
+    """The command's parser, of class ``parser`` (the Python API raises where it would exit)."""
+    p = parser(description="A swarm run: a world process and one process per agent, "
                       "negotiating over Zenoh (--in-process: the same run in one process).")
     d = SwarmConfig()
     run = p.add_argument_group("the run")
@@ -154,7 +155,8 @@ def add_config_options(group, only=None, exclude=()) -> None:
         flags = meta.pop("flag") or "--" + f.name.replace("_", "-")
         text = meta.pop("help")
         shown = "on" if f.default is True else "off" if f.default is False else f.default
-        kwargs = dict(dest=f.name, default=argparse.SUPPRESS, help=f"{text} (default: {shown})")
+        kwargs: dict[str, Any] = dict(dest=f.name, default=argparse.SUPPRESS,
+                                      help=f"{text} (default: {shown})")
         if f.type is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         else:
@@ -408,11 +410,11 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
             config, world_transport, out, record, progress, start))
     if args.role in ("all", "agents"):
         for i in agent_ids(args, config):
-            supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True,
-                           make_args=lambda restarted, i=i: (
-                               i, config, agent_transport(i), out, restarted or resumes,
-                               recording.plan, hub,
-                               None if restarted else start.checkpoint_episode))
+            def agent_args(restarted: bool, i: int = i) -> tuple:
+                return (i, config, agent_transport(i), out, restarted or resumes, recording.plan,
+                        hub, None if restarted else start.checkpoint_episode)
+
+            supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True, make_args=agent_args)
     code = supervisor.run(leader=world, on_poll=on_poll)
     recording.finish()
     if code == EXIT_INTERRUPTED:

@@ -21,9 +21,13 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import quote
 
 from nnql_swarm.recording.viewers import port_taken
+
+if TYPE_CHECKING:
+    from nnql_swarm.terminal.cli import OneLineParser
 
 RRD_MAGIC = b"RRF2"
 """The first bytes of a Rerun recording file."""
@@ -154,7 +158,7 @@ def open_native(files: list[Path]) -> int:
     return code
 
 
-def build_parser():
+def build_parser() -> "OneLineParser":
     from nnql_swarm.terminal.cli import OneLineParser
 
     p = OneLineParser(description="Open a saved run's Rerun recording: the native viewer where "

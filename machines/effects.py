@@ -15,6 +15,8 @@ numbers the queries it receives (``on_query(query, ...)``), and effects refer to
 from collections.abc import Iterator
 from typing import NamedTuple
 
+from nnql_swarm.protocol.messages import Answer, Control, Intent, Observation
+
 
 class Log(NamedTuple):
     """A line for the process's log: ``logging`` level, message, and its %-arguments."""
@@ -29,7 +31,7 @@ class Log(NamedTuple):
 class SendIntent(NamedTuple):
     """Publish this agent's intent on its intent key (the world listens)."""
 
-    intent: object  # protocol.messages.Intent
+    intent: Intent
     payload: bytes
 
 
@@ -49,7 +51,7 @@ class Reply(NamedTuple):
 
     query: int
     payload: bytes
-    answer: object  # protocol.messages.Answer
+    answer: Answer
 
 
 class ReplyError(NamedTuple):
@@ -92,13 +94,13 @@ class SendObservations(NamedTuple):
     before it is taken, so that the first to decide is the first to know. Taken whole before
     the next input, as every effect is carried out."""
 
-    observations: Iterator[tuple[object, bytes]]  # (protocol.messages.Observation, payload)
+    observations: Iterator[tuple[Observation, bytes]]
 
 
 class SendControl(NamedTuple):
     """Publish a control message to every process of the run."""
 
-    control: object  # protocol.messages.Control
+    control: Control
     payload: bytes
 
 

@@ -34,7 +34,7 @@ class TickTrace:
     def __init__(self, name: str, directory: str | os.PathLike | None) -> None:
         self.path = Path(directory) / f"{name}.json" if directory else None
         self.on = self.path is not None
-        self.marks: list[tuple[str, int, float]] = []
+        self.marks: list[tuple[str, int, float] | tuple[str, int, float, int]] = []
 
     @classmethod
     def from_env(cls, name: str) -> "TickTrace":
@@ -53,6 +53,6 @@ class TickTrace:
             self.marks.append((step, tick, at) if peer is None else (step, tick, at, peer))
 
     def save(self) -> None:
-        if self.on:
+        if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.path.write_text(json.dumps(self.marks))

@@ -162,7 +162,7 @@ def access_control(n_agents: int, run_id: str | None, by_cert: bool, by_user: bo
 
 
 def _subject(name: str, by_cert: bool, by_user: bool) -> dict:
-    subject = {"id": name}
+    subject: dict[str, str | list[str]] = {"id": name}
     if by_cert:
         subject["cert_common_names"] = [name]
     if by_user:

@@ -7,6 +7,7 @@ every process, so that a distributed run and an in-process run of one config are
 import json
 from dataclasses import asdict, dataclass, field, fields
 from functools import cached_property
+from typing import Any
 
 import numpy as np
 
@@ -24,7 +25,7 @@ lower bound, which ``shortest_sum`` is; in-process only)."""
 NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
 DS_STATE_NAMES = ("goal", "waypoint", "progress")
 DS_REWARD_NAMES = ("euclid", "path", "flat")
-"""Destination seeking's state and reward (``agent.learner``: ``DS_STATES``, ``DS_REWARDS``)."""
+"""Destination seeking's state and reward (``learning.learner``: ``DS_STATES``, ``DS_REWARDS``)."""
 MAX_LOOKAHEAD = 3
 
 START_S_PER_AGENT = 1.0
@@ -45,14 +46,14 @@ LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
-PAPER = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
+PAPER: dict[str, Any] = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
          "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
          "ds_state": "goal", "ds_reward": "euclid", "detour": False}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
-BEST = {"interaction_radius": 2, "optimistic": 25.0, "shared": True, "still_terminal": True,
+BEST: dict[str, Any] = {"interaction_radius": 2, "optimistic": 25.0, "shared": True, "still_terminal": True,
         "alpha": 0.5}
 """The learning options beyond the paper that the swarm experiment found best (docs/swarm.md):
 neighbours within collision reach only, optimistic tables, one table for the swarm, no future

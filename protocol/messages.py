@@ -48,7 +48,7 @@ import logging
 import re
 from collections import Counter
 from collections.abc import Callable
-from typing import Annotated, Literal, NamedTuple, get_type_hints
+from typing import TYPE_CHECKING, Annotated, Literal, NamedTuple, Protocol, get_type_hints
 
 import msgspec
 import numpy as np
@@ -112,10 +112,14 @@ def agent_list(*rest) -> object:
     return Annotated[tuple[tuple[(AgentId, *rest)], ...], Meta(max_length=MAX_AGENTS), AGENT_LIST]
 
 
-Neighbours = agent_list(Coord, Coord)
-"""``(id, x, y)`` of each visible other agent."""
-Relayed = agent_list(Action)
-"""``(id, action)`` of each relayed intent."""
+if TYPE_CHECKING:  # what a type checker reads: agent_list's tuples, without msgspec's limits
+    Neighbours = tuple[tuple[int, int, int], ...]
+    Relayed = tuple[tuple[int, int], ...]
+else:
+    Neighbours = agent_list(Coord, Coord)
+    """``(id, x, y)`` of each visible other agent."""
+    Relayed = agent_list(Action)
+    """``(id, action)`` of each relayed intent."""
 Parked = Annotated[tuple[AgentId, ...], Meta(max_length=MAX_AGENTS)]
 """The ids of the visible others that are parked on their goals."""
 
@@ -123,17 +127,17 @@ MAX_TABLE_ROW = N_STATES * (N_ACTIONS + 1)
 """Above every Q-table row index of a learner (the largest table: offsets x 6 move codes)."""
 RecordInts = Annotated[tuple[Annotated[int, Meta(ge=-1, lt=MAX_TABLE_ROW)], ...],
                        Meta(max_length=8 + 2 * MAX_AGENTS)]
-"""A learning record's integers (``agent.learner.REC_*``: states, action, and a pair of table
+"""A learning record's integers (``learning.fields.REC_*``: states, action, and a pair of table
 rows per neighbour; the learner checks the layout against its own tables)."""
 Record = tuple[RecordInts, tuple[Reward, Reward]]
 """A learning record: its integers and its two rewards."""
 Learned = Annotated[tuple[Record, ...], Meta(max_length=1)]
 """The learning record an intent carries (none, or its sender's of this tick)."""
 MAX_TABLE_ENTRY = (N_STATES + MAX_TABLE_ROW) * N_ACTIONS
-"""Above every entry index of a learner's two tables stacked (``agent.learner.record_entries``)."""
+"""Above every entry index of a learner's two tables stacked (``learning.record.record_entries``)."""
 TableEntries = Annotated[tuple[Annotated[int, Meta(ge=0, lt=MAX_TABLE_ENTRY)], ...],
                          Meta(max_length=MAX_AGENTS)]
-"""Q-values of the shared table by entry index (``agent.learner.record_entries``)."""
+"""Q-values of the shared table by entry index (``learning.record.record_entries``)."""
 TableValues = Annotated[tuple[Reward, ...], Meta(max_length=MAX_AGENTS)]
 """Their new values, finite, bounded as a reward is (a Q-value is at most a reward over
 1 - gamma)."""
@@ -488,6 +492,13 @@ def to_wire(msg) -> list:
 
 # ---------------------------------------------------------------- receiving
 
+class WarningLog(Protocol):
+    """Where an :class:`Inbox` logs its rejections: a ``logging.Logger``, or a protocol
+    machine's log of effects."""
+
+    def warning(self, message: str, /, *args: object) -> None: ...
+
+
 class Inbox:
     """The receiving end of one node: decodes payloads, counts and logs rejections, never raises.
 
@@ -500,7 +511,7 @@ class Inbox:
     LOG_FIRST = 10
     LOG_EVERY = 1000
 
-    def __init__(self, run_id: str, logger: logging.Logger | None = None):
+    def __init__(self, run_id: str, logger: WarningLog | None = None):
         self.run_id = validate_run_id(run_id)
         self.log = logger or logging.getLogger(__name__)
         self.rejections: Counter = Counter()

@@ -1,1 +1,2 @@
-"""The Rerun recording of a run: sinks, viewers, the layout, merging, the experiments' curves."""
+"""The Rerun recording of a run: the world's and each agent's logging, sinks (files, a live
+viewer), the layout, merging, the experiments' curves."""

@@ -13,7 +13,7 @@ def blueprint(config: SwarmConfig, distributed: bool = True):
     """
     import rerun.blueprint as rrb
 
-    from nnql_swarm.world import viz as world_viz
+    from nnql_swarm.recording import world as world_viz
 
     episode = rrb.VisibleTimeRanges(timeline="episode",
                                     start=rrb.TimeRangeBoundary.cursor_relative(seq=0),

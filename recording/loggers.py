@@ -26,12 +26,12 @@ def heat_map_agents(config: SwarmConfig) -> list[int]:
 
 
 def open_world_viz(record, config: SwarmConfig, out: Path, distributed: bool = True):
-    """The world's logger (``world.viz.WorldViz``) with the blueprint, or None if not recording.
+    """The world's logger (``recording.world.WorldViz``) with the blueprint, or None if not recording.
     ``distributed``: the agents are processes that time their negotiation (the blueprint plots
     it)."""
     from nnql_swarm.recording.blueprint import blueprint
     from nnql_swarm.world.metrics import read_episodes
-    from nnql_swarm.world.viz import WorldViz
+    from nnql_swarm.recording.world import WorldViz
 
     plan = plan_of(record, config, out)
     if plan is None:
@@ -49,7 +49,7 @@ def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):
         return None, None, None
     if agent >= RECORDED_AGENTS:
         return None, None, None
-    from nnql_swarm.agent.viz import AgentViz, TimedBrain
+    from nnql_swarm.recording.agent import AgentViz, TimedBrain
 
     viz = AgentViz(agent, config, plan.open(f"agent-{agent}"),
                    heat_maps=logs_own_heat_maps(agent, config))
@@ -60,7 +60,7 @@ class InProcessRecorder:
     """World and agents of the in-process runner logging into one stream."""
 
     def __init__(self, record, config: SwarmConfig, out: Path) -> None:
-        from nnql_swarm.agent.viz import AgentViz
+        from nnql_swarm.recording.agent import AgentViz
 
         self.world = open_world_viz(record, config, out, distributed=False)
         self.agents = []

@@ -37,7 +37,7 @@ class Checker:
         self._sent_in: list[dict[int, int]] = [{} for _ in range(self.n)]  # agent: tick -> era
         self._said: dict[tuple[int, int, int], tuple[int, str]] = {}
         self._ends_heard = [-1] * self.n  # per agent: the last episode whose end the world heard
-        self._forged: dict[tuple[int, int, int], tuple] = {}  # (era, tick, agent) -> its record
+        self._forged: dict[tuple[int | None, int, int], tuple] = {}  # (era, tick, agent) -> its record
         self._stale: set[tuple[int, int, int]] = set()  # intents decided for an earlier world
 
     def fail(self, message: str) -> None:
@@ -48,15 +48,16 @@ class Checker:
         """One tick's observations, as world number ``era`` sends them."""
         first = observations[0]
         tick, episode = first.tick, first.episode
-        cells = [None] * self.n
+        sent: list[tuple[int, int] | None] = [None] * self.n
         for obs in observations:
-            cells[obs.agent] = obs.position
+            sent[obs.agent] = obs.position
         last = self._last.get(era)
         arrived = self._arrived.setdefault(era, {})
-        for i, cell in enumerate(cells):
+        for i, cell in enumerate(sent):
             if cell is None and last is not None and last[1] == episode and arrived.get(i):
-                cells[i] = last[2][i]  # quiet: it stays on its goal
-        if None in cells or len(observations) != len({obs.agent for obs in observations}):
+                sent[i] = last[2][i]  # quiet: it stays on its goal
+        cells = [cell for cell in sent if cell is not None]
+        if len(cells) < self.n or len(observations) != len({obs.agent for obs in observations}):
             self.fail(f"tick {tick}: the world sent {len(observations)} observations")
             return
         for obs in observations:

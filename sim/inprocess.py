@@ -28,7 +28,7 @@ from nnql_swarm.world.shared_table import SharedState
 
 
 class TickView(NamedTuple):
-    """The world as a tick left it, as the recording reads it (``world.viz.WorldViz``)."""
+    """The world as a tick left it, as the recording reads it (``recording.world.WorldViz``)."""
 
     cells: tuple[tuple[int, int], ...]
     arrived_flags: tuple[bool, ...]

@@ -15,11 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nnql_swarm.agent.learner import (
-    LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, draw_noise, learner_params,
-    record_size, state_size,
+from nnql_swarm.learning.fields import (
+    LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, learner_params, record_size,
+    state_size,
 )
-from nnql_swarm.agent.known_map import check_cell_order, fresh_map, known_cells, map_size
+from nnql_swarm.learning.known_map import check_cell_order, fresh_map, known_cells, map_size
+from nnql_swarm.learning.learner import draw_noise
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import cached
@@ -205,7 +206,7 @@ class Batch:
         return self.q_ds[run, t], self.q_ca[run, t, :rows]
 
     def known_walls(self, run: int, agent: int) -> list[int]:
-        """The cells of the walls an agent of a run has seen (``agent.known_map``)."""
+        """The cells of the walls an agent of a run has seen (``learning.known_map``)."""
         w = self.world
         return known_cells(self.wmap[run, agent], w.width, w.height)
 
@@ -218,20 +219,20 @@ class Batch:
         starts, goals, scripts, paths = [], [], [], []
         for seed in self._seeds:
             if w.paper:
-                sc = paper_episode(seed, episode, w.width, w.height, w.scripted, w.max_steps)
-                starts.append(sc.starts)
-                goals.append(sc.goal[None, :])
-                scripts.append(sc.obstacle_actions)
-                paths.append(np.abs(sc.starts[:1] - sc.goal).sum(axis=1))
+                paper = paper_episode(seed, episode, w.width, w.height, w.scripted, w.max_steps)
+                starts.append(paper.starts)
+                goals.append(paper.goal[None, :])
+                scripts.append(paper.obstacle_actions)
+                paths.append(np.abs(paper.starts[:1] - paper.goal).sum(axis=1))
             else:
-                sc = swarm_episode(seed, episode, w.width, w.height, w.learners,
-                                   w.obstacle_density, w.map_rows, w.scenario)
+                swarm = swarm_episode(seed, episode, w.width, w.height, w.learners,
+                                      w.obstacle_density, w.map_rows, w.scenario)
                 walls = layout(seed, w.width, w.height, w.obstacle_density, w.map_rows)[0]
                 check_cell_order(walls.tolist())
-                starts.append(np.concatenate([sc.starts, walls]))
-                goals.append(sc.goals)
+                starts.append(np.concatenate([swarm.starts, walls]))
+                goals.append(swarm.goals)
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))
-                paths.append(sc.shortest)
+                paths.append(swarm.shortest)
         return np.stack(starts), np.stack(goals), np.stack(scripts), np.stack(paths)
 
 

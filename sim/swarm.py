@@ -4,7 +4,7 @@ One call of :func:`run_episode` plays one episode of every run of a batch, each 
 (``prange`` spreads the runs over the cores; no run reads another's buffers, so the results do not
 depend on how they are spread). A run is exactly what the distributed swarm plays for the same
 options: at every tick the agents decide in rank order (``protocol.ranks``), each with the intents
-of the higher-ranked neighbours it waits for, by the same learner (``agent.learner``); then the
+of the higher-ranked neighbours it waits for, by the same learner (``learning.learner``); then the
 world applies every move at once by the same rules (``world.rules``). Each episode ends with one
 extra *end tick* in which nothing moves and every agent completes its last transition, as the
 world's end tick does. Where a run shares one table among its agents, every agent's learning
@@ -16,15 +16,16 @@ every action is to stay), outrank every learner and announce their scripted next
 oracle run plans every learner's move with PIBT (``sim.oracle``, a reference planner) around the
 walls, and learns nothing.
 
-Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agent.learner``) and
+Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``learning.learner``) and
 ``options`` (``OPT_*``); the world's options are the same for the whole batch.
 """
 
-from nnql_swarm.agent.learner import (
+from nnql_swarm.learning.fields import (
     FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
     NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
-    apply_record, decide, finish, planned_cell, record_outcome,
 )
+from nnql_swarm.learning.learner import decide, finish, planned_cell
+from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
 from nnql_swarm.kernel.jit import batch_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
@@ -40,7 +41,7 @@ OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS = 0, 1, 2, 3
 OPT_FIELDS = 4
 """Per-run options of the swarm: one table for all agents; the steps an announcement covers
 (n of nnQL); the oracle instead of learners; whether the scripted bodies are walls (which a
-learner's known map, ``agent.known_map``, learns as it sees them)."""
+learner's known map, ``learning.known_map``, learns as it sees them)."""
 
 OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS = 0, 1, 2
 OUT_FIELDS = 3

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
+from nnql_swarm.learning.saved import CheckpointError
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.world import checkpoint as world_checkpoint
@@ -94,7 +95,7 @@ def _agent_versions(out: Path, config: SwarmConfig, agent: int) -> tuple[Path, l
     try:
         return path, [checkpoint.load(path, AgentBrain(agent, config), episode)
                       for episode in checkpoint.episodes(path)]
-    except checkpoint.CheckpointError as error:
+    except CheckpointError as error:
         raise ResumeError(str(error)) from None
 
 
@@ -104,7 +105,7 @@ def _world_versions(out: Path) -> tuple[Path, list[int]]:
         return path, []
     try:
         return path, world_checkpoint.episodes(path)
-    except checkpoint.CheckpointError as error:
+    except CheckpointError as error:
         raise ResumeError(str(error)) from None
 
 
@@ -143,5 +144,5 @@ def shared_table(out: Path, config: SwarmConfig, start: ResumePoint) -> SharedSt
         return None
     try:
         return world_checkpoint.load(world_checkpoint.table_path(out), config, start.cut)
-    except checkpoint.CheckpointError as error:
+    except CheckpointError as error:
         raise ResumeError(str(error)) from None

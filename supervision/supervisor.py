@@ -8,10 +8,11 @@ sends SIGTERM to every child, waits a grace period, then kills what is left.
 """
 
 import logging
-import multiprocessing as mp
 import signal
 import time
 from dataclasses import dataclass, field
+from multiprocessing.context import SpawnContext
+from multiprocessing.process import BaseProcess
 from typing import Callable
 
 from nnql_swarm.transport.settings import EXIT_TRANSPORT
@@ -38,18 +39,24 @@ class Child:
     target: Callable
     make_args: Callable[[bool], tuple]
     restartable: bool
-    process: mp.Process | None = None
+    process: BaseProcess | None = None
     started_at: float = 0.0
     restarts: int = 0
     failures_in_a_row: int = 0
     restart_at: float | None = None
     exit_codes: list[int] = field(default_factory=list)
 
+    @property
+    def started(self) -> BaseProcess:
+        """Its process: every child is started before it is supervised."""
+        assert self.process is not None, f"{self.name} was never started"
+        return self.process
+
 
 class Supervisor:
     """Runs children until the leader (the world, or else every agent) is done."""
 
-    def __init__(self, context: mp.context.BaseContext) -> None:
+    def __init__(self, context: SpawnContext) -> None:
         self.context = context
         self.children: list[Child] = []
         self.stop_requested = False
@@ -90,55 +97,60 @@ class Supervisor:
             self.stop_all(signal_first=True)
             return 130
         if self.fatal is not None:
+            code = self.fatal.started.exitcode
             log.error("%s could not start (%s); stopping the run", self.fatal.name,
-                      describe_exit(self.fatal.process.exitcode))
+                      describe_exit(code))
             self.stop_all(signal_first=True)
-            return self.fatal.process.exitcode
-        leader_failed = leader is not None and leader.process.exitcode != 0
-        if leader_failed:
-            log.error("%s exited (%s)", leader.name, describe_exit(leader.process.exitcode))
+            return code if code is not None else 1
+        leader_code = leader.started.exitcode if leader is not None else None
+        leader_failed = leader is not None and leader_code != 0
+        if leader is not None and leader_failed:
+            log.error("%s exited (%s)", leader.name, describe_exit(leader_code))
         self.stop_all(signal_first=leader_failed)
         if leader is not None:
-            return leader.process.exitcode if leader.process.exitcode is not None else 1
-        return max((abs(c.process.exitcode or 0) for c in self.children), default=0)
+            return leader_code if leader_code is not None else 1
+        return max((abs(c.started.exitcode or 0) for c in self.children), default=0)
 
     def _let_the_others_report(self) -> None:
         """Give the other children :data:`FATAL_GRACE_S` to fail the same way and say so."""
         deadline = time.monotonic() + FATAL_GRACE_S
-        while (any(c.process.is_alive() for c in self.children)
+        while (any(c.started.is_alive() for c in self.children)
                and time.monotonic() < deadline and not self.stop_requested):
             time.sleep(POLL_S)
 
     def _fatal_exit(self) -> Child | None:
         """A child that cannot work at all (e.g. no Zenoh session): restarting would not help."""
         for child in self.children:
-            if child.process.exitcode in FATAL_EXIT_CODES:
+            code = child.started.exitcode
+            if code is not None and code in FATAL_EXIT_CODES:
                 self.fatal = child
                 return child
         return None
 
     def _leader_done(self, leader: Child | None) -> bool:
         if leader is not None:
-            return not leader.process.is_alive()
-        return all(not c.process.is_alive() and c.process.exitcode == 0 for c in self.children)
+            return not leader.started.is_alive()
+        return all(not c.started.is_alive() and c.started.exitcode == 0 for c in self.children)
 
     def _start(self, child: Child, restarted: bool) -> None:
-        child.process = self.context.Process(
+        process = self.context.Process(
             target=child.target, name=child.name, args=child.make_args(restarted)
         )
-        child.process.start()
+        child.process = process
+        process.start()
         child.started_at = time.monotonic()
         child.restart_at = None
 
     def _restart_dead_agents(self, leader: Child | None) -> None:
         now = time.monotonic()
         for child in self.children:
-            if not child.restartable or child.process.is_alive():
+            if not child.restartable or child.started.is_alive():
                 continue
-            if child.process.exitcode == 0:
+            code = child.started.exitcode
+            if code == 0:
                 continue  # told by the world that the run is over
             if child.restart_at is None:
-                code = child.process.exitcode
+                assert code is not None, "a process that is not alive has exited"
                 child.exit_codes.append(code)
                 lived = now - child.started_at
                 child.failures_in_a_row = 1 if lived > HEALTHY_AFTER_S else child.failures_in_a_row + 1

@@ -9,6 +9,7 @@ import sys
 import threading
 import time
 from importlib import metadata
+from typing import NoReturn
 
 from tqdm import tqdm
 
@@ -65,7 +66,7 @@ class OneLineParser(argparse.ArgumentParser):
         self.add_argument("--version", action="version",
                           version=f"%(prog)s (nnql-swarm {package_version()})")
 
-    def error(self, message: str):
+    def error(self, message: str) -> NoReturn:
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
 
 

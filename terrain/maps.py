@@ -51,7 +51,7 @@ class MapError(ValueError):
 def parse_map(text: str, name: str = "<map>") -> tuple[str, ...]:
     """A ``.map`` file's rows, each normalised to ``.`` (free) and ``@`` (wall)."""
     lines = text.splitlines()
-    header = {}
+    sides: dict[str, int] = {}  # height and width
     expected = ("type", "height", "width", "map")
     for number, key in enumerate(expected, start=1):
         if number > len(lines):
@@ -65,7 +65,6 @@ def parse_map(text: str, name: str = "<map>") -> tuple[str, ...]:
             continue
         if len(words) != 2:
             raise MapError(name, number, f"expected '{key} <value>'")
-        header[key] = words[1]
         if key in ("height", "width"):
             try:
                 value = int(words[1])
@@ -74,8 +73,8 @@ def parse_map(text: str, name: str = "<map>") -> tuple[str, ...]:
                                f"{key} must be a whole number, not {words[1]!r}") from None
             if not 2 <= value <= MAX_SIDE:
                 raise MapError(name, number, f"{key} must be 2..{MAX_SIDE}, not {value}")
-            header[key] = value
-    height, width = header["height"], header["width"]
+            sides[key] = value
+    height, width = sides["height"], sides["width"]
     body = lines[4:]
     while body and not body[-1].strip():
         body.pop()  # trailing blank lines

@@ -35,7 +35,7 @@ CHROMIUM_ARGS = ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
 the rest: no sandbox (which root needs), no background networking, no component updates."""
 
 GRID_GREY = (90, 90, 90)
-"""The colour ``world/viz.py`` draws the grid's lines in."""
+"""The colour ``recording/world.py`` draws the grid's lines in."""
 
 BACKGROUND = (255, 255, 255)
 """The 2D view's background in the viewer's light theme (the page asks for it)."""
@@ -361,7 +361,7 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     """Everything the world view must show of a run's newest episode, the one the viewer opens
     on (``config``: the run's ``SwarmConfig``): the grid, every wall, a label under each agent
     and goal, the moves announced and the waits. Raises AssertionError saying what is missing."""
-    from nnql_swarm.world.viz import WAIT_COLOUR, WALL_COLOUR, agent_colors
+    from nnql_swarm.recording.world import WAIT_COLOUR, WALL_COLOUR, agent_colors
 
     grid = find_grid(image, config.width, config.height)
     episode = last_episode(run_dir / "run.rrd")

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.agent import checkpoint
+from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
@@ -87,7 +88,7 @@ def assert_copies_equal_the_worlds(out, config, agents) -> None:
     restarted agent, or a restarted world, was sent the whole table and caught up."""
     shared = world_checkpoint.load(world_checkpoint.table_path(out), config, config.episodes - 1)
     for agent in agents:
-        mine = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
+        mine = read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
         assert np.array_equal(mine["q_ds"], shared[0]), agent
         assert np.array_equal(mine["q_ca"], shared[1]), agent
 

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from nnql_swarm.agent import checkpoint
+from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage.runfiles import stats_path
 from nnql_swarm.world import checkpoint as world_checkpoint
@@ -99,5 +100,5 @@ def test_a_forging_agents_records_are_refused_and_the_honest_agents_table_is_unc
     assert np.array_equal(shared[0], reference[0]) and np.array_equal(shared[1], reference[1])
     for agent in range(FORGER):
         saved = checkpoint.checkpoint_path(forging / "checkpoints", agent)
-        mine = checkpoint.read_fields(saved, ())
+        mine = read_fields(saved, ())
         assert np.array_equal(mine["q_ds"], shared[0]) and np.array_equal(mine["q_ca"], shared[1])

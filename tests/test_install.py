@@ -42,9 +42,9 @@ def test_the_wheel_installs_one_top_level_name_and_the_console_scripts(wheel):
         scripts = z.read(entry_points).decode()
     top = {n.split("/")[0] for n in names if not n.split("/")[0].endswith(".dist-info")}
     assert top == {"nnql_swarm"}
-    for room in ("agent", "world", "protocol", "launch", "sim", "experiment", "recording",
-                 "operations", "supervision", "terminal", "transport", "kernel", "storage",
-                 "machines", "terrain"):
+    for room in ("agent", "world", "learning", "protocol", "launch", "sim", "experiment",
+                 "recording", "operations", "supervision", "terminal", "api", "transport",
+                 "kernel", "storage", "machines", "terrain"):
         assert f"nnql_swarm/{room}/__init__.py" in names, room
     assert not any(n.startswith(("nnql_swarm/tests/", "nnql_swarm/bench/")) for n in names)
     for command in COMMANDS:

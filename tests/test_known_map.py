@@ -1,5 +1,5 @@
-"""What an agent knows of the walls and the way to its goal (``agent.known_map``), by hand on
-small maps; destination seeking that reads it (``agent.learner``: the waypoint and progress
+"""What an agent knows of the walls and the way to its goal (``learning.known_map``), by hand on
+small maps; destination seeking that reads it (``learning.learner``: the waypoint and progress
 states, the path and flat rewards, the detour around parked agents, the push); and the runs it
 plays, the same each time and checkpointed."""
 
@@ -7,15 +7,15 @@ import numpy as np
 import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.known_map import (
-    MAP_KNOWN, check_cell_order, fresh_map, known_cells, map_size, path_length, progress_moves, restore_known,
-    see_walls, track, waypoint_move,
+from nnql_swarm.learning.known_map import (
+    MAP_KNOWN, check_cell_order, fresh_map, known_cells, map_size, path_length, progress_moves,
+    restore_known, see_walls, track, waypoint_move,
 )
-from nnql_swarm.agent.learner import (
-    DS_PROGRESS, DS_WAYPOINT, LP_DS_REWARD, LP_DS_STATE,
-    LP_STILL_TERMINAL, NB_FIELDS, REC_GOAL, REC_NEXT_GOAL, REC_TERMINAL,
-    REWARD_FLAT, REWARD_PATH, RF_R_DS, ds_state,
+from nnql_swarm.learning.fields import (
+    DS_PROGRESS, DS_WAYPOINT, LP_DS_REWARD, LP_DS_STATE, LP_STILL_TERMINAL, NB_FIELDS, REC_GOAL,
+    REC_NEXT_GOAL, REC_TERMINAL, REWARD_FLAT, REWARD_PATH, RF_R_DS,
 )
+from nnql_swarm.learning.readings import ds_state
 from nnql_swarm.protocol.actions import DOWN, RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.sim.runs import Batch, swarm_world

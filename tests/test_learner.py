@@ -6,13 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from nnql_swarm.agent.learner import (
+from nnql_swarm.learning.fields import (
     FP_FIELDS, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS, LP_RANDOM_STEP, LP_READING,
-    LP_SHIELD, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READ_DIR, READ_NNQL, READ_QL,
-    REC_COUNT, REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, apply_record, ca_row, ca_rows, choose,
-    decide, finish, planned_cell, record_outcome, record_size, shield_mask, state_size,
+    LP_SHIELD, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READ_DIR, READ_NNQL, READ_QL, REC_COUNT,
+    REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, ca_rows, record_size, state_size,
 )
-from nnql_swarm.agent.known_map import fresh_map, map_size
+from nnql_swarm.learning.known_map import fresh_map, map_size
+from nnql_swarm.learning.learner import choose, decide, finish, planned_cell
+from nnql_swarm.learning.readings import ca_row, shield_mask
+from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.experiment.paper import PaperSettings, RunSpec, run_batch
 from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, N_STATES, RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
@@ -285,7 +287,7 @@ def test_choose_leaves_the_transition_pending_for_the_next_observation():
 
 
 def test_a_learning_record_from_elsewhere_is_checked_against_the_tables():
-    from nnql_swarm.agent.learner import record_is_valid
+    from nnql_swarm.learning.record import record_is_valid
 
     good = (7, RIGHT, 0, 9, 1, 2, 3, 4, 11, -1)
     assert record_is_valid(good, (1.0, 10.0), N_STATES)

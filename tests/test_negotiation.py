@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from nnql_swarm.agent import negotiation
+from nnql_swarm.learning import neighbours
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.actions import N_ACTIONS, sees, target_x, target_y
 from nnql_swarm.protocol.config import ALGOS, SwarmConfig
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
 from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank, waits_for
-from nnql_swarm.world.viz import negotiation_mask
+from nnql_swarm.recording.world import negotiation_mask
 
 
 def config(n: int, algo: str = "nnql", radius: int = 10, wait_rule: str = "reach") -> SwarmConfig:
@@ -120,7 +121,7 @@ def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(a
                                 np.array([arrived]), np.array([tick]))[0]
         for i in range(n):
             obs = observe(i, tick, n, cells, arrived={j for j in range(n) if arrived[j]})
-            asked = brains[i].neighbours_to_ask(obs, negotiation.awaited(obs, c))
+            asked = brains[i].neighbours_to_ask(obs, neighbours.awaited(obs, c))
             assert set(asked) == set(np.flatnonzero(mask[i]).tolist())
         waited += int(mask.sum())
     assert (waited > 0) == (algo in ("nnql", "nnql-dir")), "only intent readers wait"
@@ -183,10 +184,10 @@ def test_under_the_meet_rule_nobody_waits_for_an_arrived_agent_and_it_waits_for_
     meet, reach = config(3, radius=2, wait_rule="meet"), config(3, radius=2)
     obs = {a: observe(a, 0, 3, cells, arrived={1}) for a in cells}
     assert negotiation.plan_for(obs[2], meet) == ([0], [0])
-    assert negotiation.staying(obs[2], meet) == [1]
+    assert neighbours.staying(obs[2], meet) == [1]
     assert negotiation.plan_for(obs[1], meet) == ([], [])  # arrived: waits for nobody
     assert negotiation.standing_answers(obs[1], meet) == []  # and nobody waits for it
     assert negotiation.standing_answers(obs[0], meet) == [2]
     assert negotiation.plan_for(obs[2], reach) == ([0, 1], [1])
-    assert negotiation.staying(obs[2], reach) == []
+    assert neighbours.staying(obs[2], reach) == []
     assert negotiation.plan_for(obs[1], reach) == ([0], [0])  # to relay 0's intent to 2

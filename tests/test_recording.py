@@ -12,9 +12,10 @@ import pytest
 import rerun as rr
 
 from nnql_swarm.agent import checkpoint
-from nnql_swarm.agent.viz import (
+from nnql_swarm.recording.agent import (
     OPTIMISTIC, TABLES, UNVISITED, TimedBrain, learnable_bound, logs_heat_maps, table_picture,
 )
+from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.recording.binary import rerun_binary
 from nnql_swarm.recording.curves import log_experiment
 from nnql_swarm.storage.runfiles import PARTS_DIR
@@ -25,7 +26,7 @@ from nnql_swarm.transport.ports import free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm
 from nnql_swarm.world.metrics import read_episodes
 from nnql_swarm.world.scenario import swarm_episode
-from nnql_swarm.world.viz import METRICS, negotiation_mask
+from nnql_swarm.recording.world import METRICS, negotiation_mask
 
 AGENTS, EPISODES = 8, 3
 RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5",
@@ -203,7 +204,7 @@ def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run
             assert all(0 < v < 2000 for _, v in latency.values())
     # the last heat map is the picture of the agent's checkpointed table
     agent = 3
-    q_ds = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())["q_ds"]
+    q_ds = read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())["q_ds"]
     batches = recording.temporal[f"agents/{agent}/q_ds/value"]
     last = max(((b, i) for b in batches for i in range(b.num_rows)),
                key=lambda bi: bi[0].column("episode")[bi[1]].as_py())

@@ -7,7 +7,7 @@ from dataclasses import replace
 
 import pytest
 
-from nnql_swarm.agent.learner import (
+from nnql_swarm.learning.fields import (
     REC_ACTION, REC_BLOCKS, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL,
 )
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, VIEW_RADIUS, WINDOW, offset_state

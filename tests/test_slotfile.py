@@ -4,7 +4,7 @@ checkpoint, which keeps the table of the episode before for a world killed befor
 import numpy as np
 import pytest
 
-from nnql_swarm.agent.checkpoint import CheckpointError
+from nnql_swarm.learning.saved import CheckpointError
 from nnql_swarm.storage import slotfile
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.world import checkpoint as world_checkpoint

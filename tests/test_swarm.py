@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from nnql_swarm.agent import checkpoint
+from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
@@ -89,8 +90,8 @@ def test_in_process_and_distributed_runs_are_identical(distributed_run, tmp_path
     assert deterministic(read_episodes(local / "episodes.csv")) == deterministic(
         read_episodes(out / "episodes.csv"))
     for agent in range(8):
-        a = checkpoint.read_fields(checkpoint.checkpoint_path(local / "checkpoints", agent), ())
-        b = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
+        a = read_fields(checkpoint.checkpoint_path(local / "checkpoints", agent), ())
+        b = read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
         assert np.array_equal(a["q_ds"], b["q_ds"]) and np.array_equal(a["q_ca"], b["q_ca"])
         assert np.array_equal(a["known_walls"], b["known_walls"])
 
@@ -183,7 +184,7 @@ def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topol
     assert distributed.returncode == 0 and local.returncode == 0, distributed.stderr
     assert deterministic(read_episodes(tmp_path / "dist" / "episodes.csv")) == deterministic(
         read_episodes(tmp_path / "local" / "episodes.csv"))
-    tables = [checkpoint.read_fields(checkpoint.checkpoint_path(tmp_path / side / "checkpoints", 0),
+    tables = [read_fields(checkpoint.checkpoint_path(tmp_path / side / "checkpoints", 0),
                                      ()) for side in ("dist", "local")]
     assert np.array_equal(tables[0]["q_ca"], tables[1]["q_ca"])
     assert np.array_equal(tables[0]["q_ds"], tables[1]["q_ds"])

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from nnql_swarm.agent.brain import Learner
-from nnql_swarm.agent.learner import write_updates
+from nnql_swarm.learning.tables import Learner
+from nnql_swarm.learning.record import write_updates
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import DOWN, LEFT, RIGHT, STAY, UP
 from nnql_swarm.protocol.config import SwarmConfig

@@ -9,7 +9,7 @@ their first observations carry are those of the run left alone.
 
 from pathlib import Path
 
-from nnql_swarm.agent.checkpoint import CheckpointError, check_tables, read_versions
+from nnql_swarm.learning.saved import CheckpointError, check_tables, read_versions
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage import slotfile
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR

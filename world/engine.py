@@ -191,10 +191,13 @@ class SwarmWorld:
         parked = tuple(j for j, _, _ in neighbours if arrived[j])
         updates = self._updates
         unheard = self._unheard.pop(i, None)
-        if unheard:
-            updates = self.table.current(sorted(unheard)) + updates
-        if i in self._syncing:
-            updates += self.table.chunk(self._syncing[i], SYNC_ENTRIES)
+        if unheard or i in self._syncing:
+            table = self.table
+            assert table is not None, "only a shared table leaves entries to send"
+            if unheard:
+                updates = table.current(sorted(unheard)) + updates
+            if i in self._syncing:
+                updates += table.chunk(self._syncing[i], SYNC_ENTRIES)
         # Positional, in Observation's field order: keywords cost a fifth of this call.
         return Observation(c.run_id, self.tick, WORLD_SENDER, i, self.episode, self.step,
                            self._cells[i], self._goal_cells[i], neighbours,
@@ -245,8 +248,9 @@ class SwarmWorld:
         report = self._end_tick(missed, learned or {}) if self.ending else \
             self._move(actions, missed)
         if self.table is not None:
-            report = replace(report, records=learned or {})
-            self._updates = self.table.apply(report.records)
+            records = learned or {}
+            report = replace(report, records=records)
+            self._updates = self.table.apply(records)
             for agent, start in list(self._syncing.items()):
                 if agent in self._sync_from_next:  # its first slice goes with the next tick
                     continue

@@ -5,7 +5,8 @@ feeds it the intents and liveliness changes Zenoh delivers, with the time, and c
 effects: publish each observation on ``world/obs/<id>`` and the control messages, hand each
 closed tick to ``on_tick`` (the launcher records it to Rerun there), write each episode's row
 to ``episodes.csv`` (and, where the agents share one table, its checkpoint first), log. A resumed
-world starts from the shared table of its checkpoint (``world.checkpoint``).
+world starts from the shared table of its checkpoint (``world.checkpoint``), which whoever starts
+it reads (``WorldOptions.table``).
 
 Threads, in three sentences. Every input reaches the protocol under the node's one lock, and its
 effects are carried out right there, in order, before the lock is let go, except the episode
@@ -39,11 +40,11 @@ from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.settings import (
     EXIT_TRANSPORT, TransportError, TransportSettings, open_session,
 )
-from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.shared_table import SharedState
 
 log = logging.getLogger("nnql.world")
 
@@ -64,10 +65,13 @@ class WorldOptions:
     startup_timeout_s: float | None = None  # None: protocol.startup_timeout of the agents
     first_episode: int = 0
     first_tick: int = 0
+    table: SharedState | None = None  # the shared state a resumed run starts from
 
 
 class WorldNode(ProtocolAdapter):
     """The protocol's adapter to one Zenoh session (see the module docstring)."""
+
+    protocol: WorldProtocol
 
     def __init__(self, options: WorldOptions, session: zenoh.Session,
                  on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> None:
@@ -76,19 +80,17 @@ class WorldNode(ProtocolAdapter):
         self.session = session
         self.trace = trace.TickTrace.from_env("world")
         self.created_at = time.time()  # wall clock, for the stats' start-up: the protocol's is monotonic
-        table = shared_table(options.out_dir, self.config,
-                             ResumePoint(options.first_episode, options.first_tick))
         self.table_file = world_checkpoint.table_path(options.out_dir)
         self.protocol = WorldProtocol(self.config, time.monotonic(), options.first_episode,
                                       options.first_tick, options.startup_timeout_s, self.trace,
-                                      table)
+                                      options.table)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False
         self.failure: BaseException | None = None
         self.on_tick = on_tick
-        self.publishers: list = []
-        self.control = None
+        self.publishers: list[zenoh.Publisher] = []
+        self.control: zenoh.Publisher | None = None
         self.writer: EpisodeWriter | None = None
         self._do = {SendObservations: self._send_observations, SendControl: self._send_control,
                     TickClosed: self._tick_closed, Log: self._log,
@@ -114,11 +116,14 @@ class WorldNode(ProtocolAdapter):
             publishers[obs.agent].put(payload)
 
     def _send_control(self, effect: SendControl) -> None:
+        assert self.control is not None, "control is sent only while the node runs"
         self.control.put(effect.payload)
 
     def _tick_closed(self, effect: TickClosed) -> None:
         if self.on_tick is not None:
-            self.on_tick(self.protocol.world, effect.report)
+            report = effect.report
+            assert isinstance(report, TickReport), report
+            self.on_tick(self.protocol.world, report)
 
     def _log(self, effect: Log) -> None:
         log.log(effect.level, effect.message, *effect.args)
@@ -172,6 +177,7 @@ class WorldNode(ProtocolAdapter):
         """Append an episode's row (the file is opened at the first: a world that never
         started leaves no ``episodes.csv``), after the shared table's checkpoint, if any."""
         if row.table is not None:
+            assert isinstance(row.table, SharedState), row.table
             world_checkpoint.save(self.table_file, row.table, row.row["episode"], self.config)
         if self.writer is None:
             self.writer = EpisodeWriter(self.options.out_dir / EPISODES_FILE)
@@ -197,11 +203,7 @@ def run_world(options: WorldOptions,
         log.error("%s", error)
         return EXIT_TRANSPORT
     with session:
-        try:
-            node = WorldNode(options, session, on_tick)
-        except ResumeError as error:
-            log.error("%s", error)
-            return 1
+        node = WorldNode(options, session, on_tick)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
         try:

@@ -1,7 +1,7 @@
 """The world's side of the swarm protocol, pure: the lockstep clock as inputs in, effects out.
 
 No sockets, no threads, no clock reads, no files: every input carries its time ``now`` and
-returns the effects it causes (``protocol.effects``), in order; :meth:`WorldProtocol.timer` is
+returns the effects it causes (``machines.effects``), in order; :meth:`WorldProtocol.timer` is
 when it next wants :meth:`WorldProtocol.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
 over a simulated network in virtual time.
 
@@ -12,8 +12,8 @@ an earlier tick, where that takes it out of the negotiation: ``world.engine``) h
 tick deadline passes (a missing intent counts as STAY and as a missed intent; a settled agent stays,
 and its intent, should one come with a learning record, is taken too); applies the tick with
 ``world.engine``; sends the next observations at once; then reports the tick
-(:class:`~protocol.effects.TickClosed`) and, at an episode's end, its row
-(:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a stalled one at most the
+(:class:`~machines.effects.TickClosed`) and, at an episode's end, its row
+(:class:`~machines.effects.WriteRow`). A dead agent costs nothing, a stalled one at most the
 deadline. A world started at ``first_episode`` / ``first_tick`` continues a run (``--resume``); one
 started after the last episode only tells the agents still running to stop. A completed run tells
 its agents to stop until every live one has left. Where the agents share one table, an agent that

@@ -1,13 +1,13 @@
 """Whether a learning record is the one the agent's own transition wrote. Pure.
 
 Where the agents share one table, each intent carries the sender's learning record of the tick
-(``agent.learner``): Eq. 9's ``s, a, terminal, s'`` with the two rewards, and a pair of Q_CA rows
+(``learning.learner``): Eq. 9's ``s, a, terminal, s'`` with the two rewards, and a pair of Q_CA rows
 ``(s_i, s'_i)`` per neighbour. The world saw the transition the record claims: what it sent the
 agent at the tick it decided (its cell, goal and neighbours, who had arrived) and at the next
 (where it ended up, its rewards, whether it arrived), the intent it announced, and every intent
 of both ticks as the world heard them. :class:`RecordCheck` rebuilds the record from that with
-the agent's own code, the rows of ``agent.brain.NeighbourRows`` read and completed by
-``agent.learner.read_rows`` and ``complete``, and compares.
+the agent's own code, the rows of ``learning.neighbours.NeighbourRows`` read and completed by
+``learning.readings.read_rows`` and ``complete``, and compares.
 
 What it cannot know is which of the intents an agent waited for reached it in time (a neighbour
 whose answer did not come is read as one whose intent is unknown), nor, where the world missed
@@ -34,15 +34,15 @@ so a record costs one reading of its neighbours and one ``complete``
 
 from dataclasses import dataclass
 
-from nnql_swarm.agent.brain import NeighbourRows
-from nnql_swarm.agent.learner import (
+from nnql_swarm.learning.fields import (
     DS_GOAL, LF_FIELDS, LP_DS_REWARD, LP_DS_STATE, LP_READING, LS_ACTION, LS_COUNT, LS_GOAL,
     LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_X, LS_Y, NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y,
-    READ_DAQL, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL, REWARD_WORLD,
-    RF_FIELDS, RF_R_DS, complete, learner_params, read_rows, record_outcome, record_size,
-    state_size, uses_map,
+    READ_DAQL, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL, REWARD_WORLD, RF_FIELDS,
+    RF_R_DS, learner_params, record_size, state_size,
 )
-from nnql_swarm.agent.negotiation import awaited, staying
+from nnql_swarm.learning.neighbours import NeighbourRows, awaited, staying
+from nnql_swarm.learning.readings import read_rows, uses_map
+from nnql_swarm.learning.record import complete, record_outcome
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import floats, ints, python_values, rows
@@ -141,7 +141,7 @@ class RecordCheck:
         the agent surely took ``before`` (``sure``). Nothing to remember for the other readings."""
         if not self.daql:
             return [({}, None)]
-        options = []
+        options: list[tuple[dict[int, tuple[int, int]], tuple[int, int] | None]] = []
         if before is not None and before.tick == obs.tick - 1 and obs.step > 0:
             options.append(({j: (x, y) for j, x, y in before.neighbours}, before.position))
         if not (sure and options):
@@ -164,9 +164,9 @@ class RecordCheck:
         awaited answer come at both ticks (``intents``: this tick's, as the world heard them)."""
         before = decision.obs
         (x, y), radius = before.position, self.radius
-        decided = self._decided.get(before.agent)
-        if decided is not None and decided[0] == before.tick:
-            decided = decided[1]  # read as the last record's completion, every intent then in
+        known = self._decided.get(before.agent)
+        if known is not None and known[0] == before.tick:
+            decided = known[1]  # read as the last record's completion, every intent then in
         else:
             answers, _ = self._answers(before, decision.intents, False)
             decided = self._read(_only(before, within(before.neighbours, x, y, radius)), answers,
@@ -186,7 +186,7 @@ class RecordCheck:
         return self._complete(decision, obs, pending, completed)
 
     def _complete(self, decision: Decision, obs: Observation, pending, completed):
-        """``agent.learner.complete`` on the agent's pending transition: its decision's goal
+        """``learning.record.complete`` on the agent's pending transition: its decision's goal
         state, action and neighbours in Eq. 6 (``pending``: ``(id, Q_CA row, x, y)`` each), and
         its outcome, completed with the neighbour rows of ``obs`` (``completed``)."""
         before = decision.obs
@@ -263,8 +263,9 @@ class RecordCheck:
         for row in self._readings(before, decision.intents, False, decision.before, False,
                                   neighbour):
             entry = (neighbour, row[NB_ROW], row[NB_X], row[NB_Y])
-            after = self._readings(obs, intents, stops, before, False, neighbour) or [None]
-            for following in after:
+            after: list[list[int] | None] = list(
+                self._readings(obs, intents, stops, before, False, neighbour))
+            for following in after or [None]:
                 completed = [] if following is None else [following]
                 rec = self._complete(decision, obs, [entry], completed)
                 pairs.add(rec[0][REC_PAIRS:REC_PAIRS + 2])
@@ -273,7 +274,7 @@ class RecordCheck:
 
 def _map_fields_taken(expected, integers, values):
     """``expected`` with destination seeking's states and reward as the record gives them: read
-    on the agent's known map (``agent.known_map``: the walls it saw in its run, the arrived agents it
+    on the agent's known map (``learning.known_map``: the walls it saw in its run, the arrived agents it
     saw in the episode), which the world does not follow, they are checked only to fit the
     table (``SharedTable.accepts``)."""
     ints_, floats_ = list(expected[0]), list(expected[1])

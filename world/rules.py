@@ -1,6 +1,6 @@
 """The world's rules, once: simultaneous moves, collisions, rewards and the end of an episode.
 
-Kernel functions (``protocol.jit``) over one world's buffers, indexed by body (agent) id: the
+Kernel functions (``kernel.jit``) over one world's buffers, indexed by body (agent) id: the
 world process calls them on Python lists, the swarm simulator compiled on rows of its arrays.
 
 Collision rules:

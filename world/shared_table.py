@@ -6,7 +6,7 @@ own transition wrote (``world.records``) and, when the tick closes, applies thos
 in agent-id order with the learner's own ``apply_record``, the very step the simulator applies
 to its one table (``sim.swarm``). The next observations then tell every agent which entries
 changed and their new values (:meth:`SharedTable.apply` returns them, in the order the records
-wrote them), and each agent writes them into its copy (``agent.learner.write_updates``). All
+wrote them), and each agent writes them into its copy (``learning.record.write_updates``). All
 copies stay equal to this one and to the simulator's, and a tick costs every agent one write per
 changed entry, where applying every record itself cost it the whole learning step N times over.
 
@@ -21,10 +21,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from nnql_swarm.agent.brain import Learner
-from nnql_swarm.agent.learner import (
-    FP_ALPHA, FP_GAMMA, apply_record, record_entries, record_is_valid,
-)
+from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA
+from nnql_swarm.learning.record import apply_record, record_entries, record_is_valid
+from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import floats, ints
 from nnql_swarm.protocol.messages import MAX_AGENTS

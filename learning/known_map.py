@@ -8,7 +8,7 @@ which is what walls carried in its view would tell it.
 
 On the known map (the unknown taken as free) a breadth-first *distance field* to the goal gives
 the agent's path length ``d`` and the *waypoint*, the next cell of a shortest path. Destination
-seeking reads them (``agent.learner``: ``LP_DS_STATE``, ``LP_DS_REWARD``). With the detour
+seeking reads them (``learning.learner``: ``LP_DS_STATE``, ``LP_DS_REWARD``). With the detour
 (``LP_DETOUR``) the field also goes around the arrived agents the agent has seen within reach in
 this episode (they stay there until it ends), unless they cut it off its goal. The field is worked
 out again only when the goal changes, a new wall is seen or a newly arrived agent is taken.
@@ -99,7 +99,7 @@ def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width):
 
 @kernel
 def see_parked(wmap, nb, m, ox, oy, around, starts, width, height):
-    """Take the arrived agents among the neighbour rows ``nb`` (``agent.learner.NB_*``) within
+    """Take the arrived agents among the neighbour rows ``nb`` (``learning.fields.NB_*``) within
     ``around`` cells (Chebyshev; -1: none) as obstacles the field plans around, for the rest of
     the episode (an arrived agent stays on its goal); ``starts``: a new episode, none taken yet. A
     newly taken one is *pending* (``MAP_PENDING``: the least distance of those cells in the

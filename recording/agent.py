@@ -18,7 +18,7 @@ Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.no
   the same for ``Q_CA``, whose state is a *neighbour's* offset (nnQL: its announced next cell,
   QL: its current cell).
 
-Only the first ``recording.session.RECORDED_AGENTS`` agents log these, and only agent 0 where
+Only the first ``recording.loggers.RECORDED_AGENTS`` agents log these, and only agent 0 where
 the agents share one table (every copy is the same table). What an agent logs is
 buffered and sent in columns every few seconds (:class:`AgentViz`).
 

@@ -59,7 +59,7 @@ way is truncated after ``max_steps`` steps.
   warning that says how to see them, so that a machine without a screen never fails.
 - ``"rgb_array"``: an ``(height * cell_pixels, width * cell_pixels, 3)`` ``uint8`` picture:
   grid lines, each goal a square outline and each agent a disc in the agent's colour (the
-  colours of the swarm's recording, ``world.viz.agent_colors``).
+  colours of the swarm's recording, ``recording.world.agent_colors``).
 - ``"ansi"``: a string, one line per row: ``.`` a free cell, ``a``, ``b``, ... goals, ``A``, ``B``,
   ... agents.
 
@@ -74,6 +74,7 @@ import os
 import sys
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -92,7 +93,7 @@ NOT_IN_VIEW = N_STATES
 class SwarmGridEnv(ParallelEnv):
     """N agents on a grid, each reaching for its own goal while avoiding the others."""
 
-    metadata = {"name": "nnql_swarm_grid_v0", "render_modes": ["human", "rgb_array", "ansi"],
+    metadata: dict[str, Any] = {"name": "nnql_swarm_grid_v0", "render_modes": ["human", "rgb_array", "ansi"],
                 "is_parallelizable": True, "render_fps": 4}
 
     def __init__(
@@ -155,7 +156,9 @@ class SwarmGridEnv(ParallelEnv):
             self._seed, self._episode = int(seed), 0
         else:
             if self._seed is None:
-                self._seed = int(np.random.SeedSequence().entropy % 2**63)
+                entropy = np.random.SeedSequence().entropy
+                assert isinstance(entropy, int), "a SeedSequence made without entropy draws it"
+                self._seed = int(entropy % 2**63)
             self._episode += 1
         scenario = swarm_episode(self._seed, self._episode, self.width, self.height, self.n_agents)
         self._x, self._y = scenario.starts[:, 0].tolist(), scenario.starts[:, 1].tolist()
@@ -222,7 +225,7 @@ class SwarmGridEnv(ParallelEnv):
         if self.rerun_memory is not None:
             self._stream.flush()  # disconnecting would drop the memory sink's frames
             return
-        from nnql_swarm.world.viz import close_stream
+        from nnql_swarm.recording.world import close_stream
 
         close_stream(self._stream)
         self._stream = None
@@ -236,7 +239,7 @@ class SwarmGridEnv(ParallelEnv):
         return "\n".join("".join(row) for row in rows)
 
     def _picture(self) -> np.ndarray:
-        from nnql_swarm.world.viz import agent_colors
+        from nnql_swarm.recording.world import agent_colors
 
         c = self.cell_pixels
         image = np.full((self.height * c, self.width * c, 3), 255, dtype=np.uint8)
@@ -274,7 +277,7 @@ class SwarmGridEnv(ParallelEnv):
             return self._stream
         import rerun as rr
 
-        from nnql_swarm.world.viz import agent_colors
+        from nnql_swarm.recording.world import agent_colors
 
         stream = rr.RecordingStream("nnql-swarm-env")
         target = self.rerun_target

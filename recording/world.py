@@ -8,16 +8,16 @@ for (``world/negotiation``) and who collided as a result (``world/collisions``, 
 
 The negotiation is derived by the world, not reported by the agents: at tick ``t`` an agent that
 reads intents and has not arrived waits for the answer of every neighbour that
-``protocol.ranks.awaits_answer`` names, the rule ``agent.negotiation.awaited`` applies too. How each intent reached it (its own query, or relayed down the chain,
+``protocol.ranks.awaits_answer`` names, the rule ``learning.neighbours.awaited`` applies too. How each intent reached it (its own query, or relayed down the chain,
 ``agent.negotiation``) and whether it came in time is known only to the agent; the agents log
-that themselves (``agent.viz``).
+that themselves (``recording.agent``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
 ``legend``) are logged once. Each entity holds every agent (one ``Points2D`` for all agents, one
 ``Boxes2D`` for all goals, ...), whatever their number. Agents and goals share a colour
 (:data:`PALETTE`, repeating every 12 agents) and a label, the agent's id. The blueprint
-(``recording.session.blueprint``) opens on the ``episode`` timeline, where the view shows the
+(``recording.blueprint.blueprint``) opens on the ``episode`` timeline, where the view shows the
 intents, waits and collisions of the whole episode at once.
 
 Cost: everything is buffered, the per-tick entities, each episode's goals, metrics and event

@@ -1,0 +1,207 @@
+"""The learner, once: QL, nnQL and their variants, as kernel functions over one learner's buffers.
+
+An agent holds two tables over the 441 egocentric states (``protocol.actions``): ``Q_DS[s_goal]``
+seeks the destination, ``Q_CA[s_i]`` avoids neighbours (one table for all neighbours), five
+actions each. At every tick it completes the transition it left pending (Eq. 9 and 10, with the
+new observation as ``s'``), then chooses (Eq. 6, 7, 8)::
+
+    Q_CA(a)    = sum_i (1 / d_i) Q_CA[s_i, a]     over the neighbours within the interaction radius
+    Q_final(a) = beta Q_DS[s_goal, a] + (1 - beta) Q_CA(a)
+    a_t        = argmax_a Q_final(a), ties broken by the agent's seeded tie-breakers,
+
+and every ``k``-th action of its life (the paper's "random step") is its seeded random action.
+
+The readings of a neighbour's state ``s_i`` (``READ_*``; docs/paper.md has the evidence):
+
+- ``READ_QL``: the neighbour's current offset (QL cannot know its move).
+- ``READ_NNQL``: the offset of the cell it announced it is heading for, where its intent is known
+  (it outranks this agent and is one it waits for: ``protocol.ranks.waits_for``), else its
+  current offset (the paper's nnQL, n = 1).
+- ``READ_DIR``: nnQL's offset and the announced move (6 codes: 5 moves, unknown), so that a
+  neighbour stepping in from the left differs from one coming from the right: a swap can be seen.
+- ``READ_DAQL``: Double Action Q-learning (Ngai and Yung; the paper's Eq. 2): the current offset
+  and the neighbour's action, predicted at the decision as its last move (STAY when unknown),
+  learned with the move it was then seen to make; ``s'`` bootstraps from the best pair of actions.
+
+Options beyond the paper, each one field of the parameters (``LP_*``): the interaction radius
+(only neighbours within it, Chebyshev, enter Eq. 6 and get Eq. 10; the paper's reading is the
+whole view, 10), a distinct state block for a neighbour known to stay or whose intent is known
+(``LP_KNOWN_STATE``: a parked agent then differs from one whose intent is unknown), and the
+announcement shield (``LP_SHIELD``: never move into a cell a known neighbour announced, into a known
+neighbour's cell when it announced moving into this one, or into a parked agent; QL's fair
+counterpart masks the neighbours' current cells; the random step is filtered too), and
+``LP_STILL_TERMINAL``: a step that left the agent where it was (it stayed, was blocked, bumped the
+edge) does not bootstrap destination seeking from the state it stayed in, so waiting is not
+valued like the move it waits for (docs/swarm.md has the evidence of each).
+
+Destination seeking may read the walls the agent has seen (``learning.known_map``, a buffer
+``wmap`` per agent, kept for the run): its state (``LP_DS_STATE``: the goal's offset, the paper's;
+the next cell of a shortest path on the known map; or the moves that bring the agent nearer on
+it), its reward (``LP_DS_REWARD``: the world's Euclidean ``1/d``, the paper's; ``1/d`` with ``d``
+the path length; or a flat 1, 0.5, 0 for a path that got shorter, stayed, grew), and a detour
+around the agents it saw parked within reach (``LP_DETOUR``). The caller passes the run's walls
+(``wall_x``, ``wall_y``, ``first .. last - 1``, in cell order) and whether the observation is
+an episode's first (``starts``).
+
+Completing a transition writes a *learning record* (``rec``, ``rec_f``; ``learning.record``),
+applied by ``apply_record``: at once for an independent learner, or, where a swarm shares one
+table, in agent-id order before the next tick: by the simulator to its one table (``sim.swarm``),
+by the world to its copy (``world.shared_table``), once it has checked that the record is the one
+the sender's own transition wrote (``world.records``, with ``learning.readings.read_rows`` and
+``learning.record.complete``), and which hands the entries written to every agent's copy
+(``learning.record.write_updates``).
+
+Buffers (numpy arrays when compiled, Python lists in an agent process; their fields in
+``learning.fields``): ``params`` (``LP_*``), ``params_f`` (``FP_*``), the learner's state
+``state`` (``LS_*``) and ``state_f`` (``LF_*``), and the neighbour rows ``nb`` (``NB_*``), one per
+visible neighbour, in agent-id order (as the world lists them). The tables ``q_ds`` and ``q_ca``
+are numpy arrays either way. This module holds the choice and a tick's learning; the readings
+are in ``learning.readings``.
+"""
+
+import math
+
+import numpy as np
+
+from nnql_swarm.learning.fields import (
+    FP_ALPHA, FP_BETA, FP_GAMMA, LP_DETOUR, LP_RADIUS, LP_RANDOM_STEP, LP_READING, LP_SHIELD,
+    LS_ACTION, LS_COUNT, LS_GOAL, LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_TAKEN, LS_X,
+    LS_Y, NB_ID, NB_ROW, NB_X, NB_Y,
+)
+from nnql_swarm.learning.known_map import track
+from nnql_swarm.learning.readings import ds_state, read_rows, shield_mask, uses_map
+from nnql_swarm.learning.record import apply_record, complete
+from nnql_swarm.protocol.actions import N_ACTIONS, offset_state, target_x, target_y
+from nnql_swarm.kernel.jit import kernel
+
+def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.ndarray) -> None:
+    """Draw an agent's noise for one episode into its buffers: an exploring action per step
+    (``random_actions``, one per step) and five tie-breakers in [0, 1) per step (``ties``,
+    ``(steps, 5)``). The order of the draws is part of the determinism contract."""
+    random_actions[:] = rng.integers(0, N_ACTIONS, size=random_actions.shape[0], dtype=np.int64)
+    rng.random(out=ties)
+
+
+@kernel
+def choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, width, height,
+           random_action, ties, values):
+    """Eq. 6-8 (and the random step): the action, with the transition it starts left pending.
+    The five actions' sums are spelled out: it is the agent's hot path in plain Python."""
+    radius = params[LP_RADIUS]
+    ca0 = ca1 = ca2 = ca3 = ca4 = 0.0
+    count = 0
+    for j in range(m):
+        dx = nb[j][NB_X] - ox
+        dy = nb[j][NB_Y] - oy
+        if max(abs(dx), abs(dy)) > radius:
+            continue
+        weight = 1.0 / max(math.sqrt(dx * dx + dy * dy), 1.0)
+        row = nb[j][NB_ROW]
+        q = q_ca[row]
+        ca0 += weight * q[0]
+        ca1 += weight * q[1]
+        ca2 += weight * q[2]
+        ca3 += weight * q[3]
+        ca4 += weight * q[4]
+        at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * count
+        state[at] = nb[j][NB_ID]
+        state[at + 1] = row
+        state[at + 2] = nb[j][NB_X]
+        state[at + 3] = nb[j][NB_Y]
+        count += 1
+    goal = ds_state(params, wmap, ox, oy, gx, gy, width, height)
+    beta = params_f[FP_BETA]
+    rest = 1.0 - beta
+    ds = q_ds[goal]
+    values[0] = beta * ds[0] + rest * ca0
+    values[1] = beta * ds[1] + rest * ca1
+    values[2] = beta * ds[2] + rest * ca2
+    values[3] = beta * ds[3] + rest * ca3
+    values[4] = beta * ds[4] + rest * ca4
+    mask = shield_mask(params[LP_READING], ox, oy, nb, m, width, height) \
+        if params[LP_SHIELD] != 0 else 0
+    greedy = -1  # the best allowed value; among equals, the largest tie-breaker
+    for a in range(N_ACTIONS):
+        if (mask >> a) & 1 == 0 and (greedy < 0 or values[a] > values[greedy]
+                                     or values[a] == values[greedy] and ties[a] > ties[greedy]):
+            greedy = a
+    state[LS_TAKEN] += 1
+    action = greedy
+    if state[LS_TAKEN] % params[LP_RANDOM_STEP] == 0 and (mask >> random_action) & 1 == 0:
+        action = random_action
+    state[LS_PENDING] = 1
+    state[LS_GOAL] = goal
+    state[LS_ACTION] = action
+    state[LS_COUNT] = count
+    state[LS_X] = ox
+    state[LS_Y] = oy
+    return action
+
+
+assert N_ACTIONS == 5, "choose spells out five actions"
+
+
+@kernel
+def observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb,
+                m, starts):
+    """Where destination seeking reads the known map: the walls ``first .. last - 1`` of
+    ``wall_x``, ``wall_y`` in view of ``(ox, oy)`` learned, the parked neighbours within reach
+    taken as obstacles for the rest of the episode (``LP_DETOUR``; ``starts``: this observation
+    is an episode's first), the distance field to the goal made current
+    (``learning.known_map.track``)."""
+    if uses_map(params):
+        track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
+              params[LP_DETOUR], starts)
+
+
+@kernel
+def decide(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first, last,
+           starts, ox, oy, gx, gy, nb, m, width, height, random_action, ties, values, rec, rec_f,
+           apply_now):
+    """Learn the walls in view (:func:`observe_map`; ``starts``: the episode's first
+    observation), complete the pending transition (its record applied at once if
+    ``apply_now``), then choose. Returns the action and whether a record was written."""
+    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
+                starts)
+    read_rows(params, ox, oy, nb, m)
+    written = complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width,
+                       height, rec, rec_f)
+    if written and apply_now:
+        apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
+    action = choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, width,
+                    height, random_action, ties, values)
+    return action, written
+
+
+@kernel
+def finish(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first, last,
+           starts, ox, oy, gx, gy, nb, m, width, height, rec, rec_f, apply_now):
+    """Complete the pending transition of a learner that stops (arrived, or the episode ended);
+    its neighbours' rows carry no intent then. Returns whether a record was written."""
+    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
+                starts)
+    read_rows(params, ox, oy, nb, m)
+    written = complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width,
+                       height, rec, rec_f)
+    if written and apply_now:
+        apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
+    return written
+
+
+@kernel
+def planned_cell(q_ds, x, y, gx, gy, steps, width, height):
+    """Where this agent expects to be ``steps`` moves after ``(x, y)``, following its
+    destination-seeking policy greedily (first best action; it stops on its goal): the cells an
+    n-step announcement carries beyond the binding first move."""
+    for _ in range(steps):
+        if x == gx and y == gy:
+            break
+        action = 0
+        values = q_ds[offset_state(gx - x, gy - y)]
+        for a in range(1, N_ACTIONS):
+            if values[a] > values[action]:
+                action = a
+        nx = target_x(x, action, width)
+        y = target_y(y, action, height)
+        x = nx
+    return x, y

@@ -1,0 +1,108 @@
+"""The neighbours as a learner reads them at an observation: whose intents it waits for
+(:func:`awaited`), whose it knows without waiting (:func:`staying`), and their rows
+(:class:`NeighbourRows`, ``learning.fields.NB_*``). The agent decides with them; the world reads
+the same when it checks the agent's learning record (``world.records``)."""
+
+from nnql_swarm.learning.fields import reach
+from nnql_swarm.learning.known_map import check_cell_order
+from nnql_swarm.protocol.actions import VIEW_RADIUS, sees, target_x, target_y, within
+from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
+from nnql_swarm.kernel.jit import ints
+from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.ranks import awaits_answer, in_reach, priority_rank, waits_for
+
+
+def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
+    """The neighbours whose intents the observing agent waits for at this tick (none for QL, and
+    none at an episode's end, where everybody stays)."""
+    return [j for j, _, _ in awaited_cells(obs, config)]
+
+
+def awaited_cells(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]]:
+    """:func:`awaited` as ``(id, x, y)``."""
+    if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
+        return []
+    meet, arrived = config.meet_only, obs.arrived
+    if meet and arrived:
+        return []  # what awaits_answer says of every neighbour, without asking it
+    (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
+    parked = set(obs.parked)
+    return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
+            if awaits_answer(rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet,
+                             arrived, j in parked)]
+
+
+def staying(obs: Observation, config: SwarmConfig) -> list[int]:
+    """Under the ``meet`` rule, the parked neighbours whose intents the observing agent knows
+    without waiting: those ``protocol.ranks.waits_for`` names among the parked ones of the
+    observation, each of which stays on its goal (its intent is STAY)."""
+    if (not (config.meet_only and obs.parked) or config.algo not in NEGOTIATING_ALGOS
+            or obs.episode_end):
+        return []
+    (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
+    parked = set(obs.parked)
+    return [j for j, jx, jy in within(obs.neighbours, x, y, radius)
+            if j in parked
+            and waits_for(True, rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, True)]
+
+
+class NeighbourRows:
+    """The learner's neighbour rows (``learning.fields.NB_*``) for an observation: what an agent
+    reads its neighbours as, and what the world reads them as when it checks the agent's learning
+    record (``world.records``)."""
+
+    def __init__(self, config: SwarmConfig) -> None:
+        self.config = config
+        self.reads_intents = config.algo in NEGOTIATING_ALGOS
+        self.reach = reach(config.interaction_radius)
+        walls = config.walls().tolist()
+        check_cell_order(walls)
+        self._walls = {y * config.width + x: config.n_agents + k
+                       for k, (x, y) in enumerate(walls)}
+        self._walls_near: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
+        self.wall_x, self.wall_y = ints([x for x, _ in walls]), ints([y for _, y in walls])
+        """The walls' cells, in cell order, as the known map reads them (``learning.known_map``)."""
+
+    def __call__(self, obs: Observation, answers: dict[int, int], announcing: bool,
+                 previous: dict[int, tuple[int, int]],
+                 was_at: tuple[int, int] | None) -> list[list[int]]:
+        """The visible neighbours within the learner's reach (``learning.fields.reach``: no other
+        can change its decision or its learning) in id order, each with its announced move where
+        it answered (``answers``), and its cell a tick ago where DAQL remembers it
+        (``previous``); then the walls within reach, each known to stay where it is within the
+        negotiation radius (as the simulator reads a scripted obstacle), unless nobody announces
+        (``announcing``: not at an episode's end, nor once arrived), and seen a tick ago where
+        the agent's cell then (``was_at``) saw it."""
+        w, h = self.config.width, self.config.height
+        parked = set(obs.parked)
+        (x, y), far = obs.position, self.reach
+        rows = []
+        for j, jx, jy in within(obs.neighbours, x, y, far):
+            action = answers.get(j)
+            if action is None:
+                nx, ny, known = jx, jy, 0
+            else:
+                nx, ny, known = target_x(jx, action, w), target_y(jy, action, h), 1
+            px, py = previous.get(j, (-1, -1))
+            rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py, 0])
+        if self._walls:
+            knows = announcing and self.reads_intents
+            radius, meet = self.config.interaction_radius, self.config.meet_only
+            for j, jx, jy in self._walls_within(x, y):
+                px, py = (jx, jy) if was_at is not None and sees(*was_at, jx, jy) else (-1, -1)
+                known = int(knows and in_reach(x, y, jx, jy, radius, meet))
+                rows.append([j, jx, jy, known, jx, jy, jx, jy, 0, px, py, 0])
+        return rows
+
+    def _walls_within(self, x: int, y: int) -> list[tuple[int, int, int]]:
+        """The walls within reach and view of cell ``(x, y)`` as ``(id, x, y)`` in id order
+        (cell order), once per cell."""
+        near = self._walls_near.get((x, y))
+        if near is None:
+            w, h, far = self.config.width, self.config.height, min(self.reach, VIEW_RADIUS)
+            near = [(self._walls[cy * w + cx], cx, cy)
+                    for cy in range(max(0, y - far), min(h, y + far + 1))
+                    for cx in range(max(0, x - far), min(w, x + far + 1))
+                    if cy * w + cx in self._walls]
+            self._walls_near[(x, y)] = near
+        return near

@@ -1,0 +1,116 @@
+"""What the learner reads: each neighbour's Q_CA row (``READ_*``), destination seeking's state
+and reward (``LP_DS_STATE``, ``LP_DS_REWARD``, on the known map where they read it), and the
+actions the announcement shield forbids. Kernel functions (``learning.learner`` has the rules).
+"""
+
+from nnql_swarm.learning.fields import (
+    DS_GOAL, DS_PROGRESS, FP_STAY_REWARD, LP_DS_REWARD, LP_DS_STATE, LP_KNOWN_STATE, LP_READING,
+    NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_ROW, NB_STATE_X,
+    NB_STATE_Y, NB_X, NB_Y, READ_DAQL, READ_DIR, READ_QL, REWARD_FLAT, REWARD_WORLD, UNKNOWN_MOVE,
+)
+from nnql_swarm.learning.known_map import path_length, progress_moves, waypoint_move
+from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, move_of, offset_state, target_x, target_y
+from nnql_swarm.kernel.jit import kernel
+
+@kernel
+def ca_row(reading, known_state, ox, oy, nb, j):
+    """The Q_CA row of neighbour row ``j`` for an agent at ``(ox, oy)``."""
+    cx = nb[j][NB_X]
+    cy = nb[j][NB_Y]
+    parked = known_state and nb[j][NB_PARKED] != 0
+    if reading == READ_QL:
+        return offset_state(cx - ox, cy - oy) + (N_STATES if parked else 0)
+    if reading == READ_DAQL:
+        return offset_state(cx - ox, cy - oy) + N_STATES * predicted_move(nb, j, parked)
+    announced = nb[j][NB_KNOWN] != 0
+    if announced or parked:
+        if announced:
+            state = offset_state(nb[j][NB_STATE_X] - ox, nb[j][NB_STATE_Y] - oy)
+            move = move_of(nb[j][NB_NEXT_X] - cx, nb[j][NB_NEXT_Y] - cy)
+        else:
+            state = offset_state(cx - ox, cy - oy)
+            move = STAY
+        if reading == READ_DIR:
+            return state + N_STATES * move
+        return state + (N_STATES if known_state else 0)
+    state = offset_state(cx - ox, cy - oy)
+    if reading == READ_DIR:
+        return state + N_STATES * UNKNOWN_MOVE
+    return state
+
+
+@kernel
+def read_rows(params, ox, oy, nb, m):
+    """Write each neighbour's Q_CA row (:func:`ca_row`) into its ``NB_ROW``: read once, by the
+    completion of the last transition (as ``s'``) and by the choice (as ``s``)."""
+    reading = params[LP_READING]
+    known_state = params[LP_KNOWN_STATE] != 0
+    for j in range(m):
+        nb[j][NB_ROW] = ca_row(reading, known_state, ox, oy, nb, j)
+
+
+@kernel
+def predicted_move(nb, j, parked):
+    """DAQL's prediction of a neighbour's action: its last move (STAY if parked or unseen)."""
+    if parked or nb[j][NB_PREV_X] < 0:
+        return STAY
+    return move_of(nb[j][NB_X] - nb[j][NB_PREV_X], nb[j][NB_Y] - nb[j][NB_PREV_Y])
+
+
+@kernel
+def uses_map(params):
+    """Whether destination seeking reads the known map (``learning.known_map``)."""
+    return params[LP_DS_STATE] != DS_GOAL or params[LP_DS_REWARD] != REWARD_WORLD
+
+
+@kernel
+def ds_state(params, wmap, ox, oy, gx, gy, width, height):
+    """Destination seeking's state at ``(ox, oy)`` (``LP_DS_STATE``; the map's field current)."""
+    reading = params[LP_DS_STATE]
+    if reading == DS_GOAL:
+        return offset_state(gx - ox, gy - oy)
+    if reading == DS_PROGRESS:
+        return progress_moves(wmap, ox, oy, width, height)
+    move = waypoint_move(wmap, ox, oy, gx, gy, width, height)
+    return offset_state(target_x(ox, move, width) - ox, target_y(oy, move, height) - oy)
+
+
+@kernel
+def ds_reward(params, params_f, wmap, fx, fy, ox, oy, width, height, world_reward, arrived):
+    """The destination-seeking reward of the move from ``(fx, fy)`` to ``(ox, oy)``
+    (``LP_DS_REWARD``): the world's, or read from the path lengths on the known map."""
+    kind = params[LP_DS_REWARD]
+    if kind == REWARD_WORLD or arrived:
+        return world_reward
+    before = path_length(wmap, fx, fy, width, height)
+    after = path_length(wmap, ox, oy, width, height)
+    if after <= 0 or before < 0 or after > before:
+        return 0.0
+    if after < before:
+        return 1.0 if kind == REWARD_FLAT else 1.0 / after
+    stay = params_f[FP_STAY_REWARD]
+    return stay if kind == REWARD_FLAT else stay / after
+
+
+@kernel
+def shield_mask(reading, ox, oy, nb, m, width, height):
+    """The actions the announcement shield forbids, as bits (bit ``a`` set: ``a`` forbidden)."""
+    mask = 0
+    for a in range(N_ACTIONS):
+        tx = target_x(ox, a, width)
+        ty = target_y(oy, a, height)
+        for j in range(m):
+            cx = nb[j][NB_X]
+            cy = nb[j][NB_Y]
+            if reading == READ_QL or reading == READ_DAQL:
+                hit = tx == cx and ty == cy
+            elif nb[j][NB_KNOWN] != 0:
+                nx = nb[j][NB_NEXT_X]
+                ny = nb[j][NB_NEXT_Y]
+                hit = (tx == nx and ty == ny) or (nx == ox and ny == oy and tx == cx and ty == cy)
+            else:
+                hit = nb[j][NB_PARKED] != 0 and tx == cx and ty == cy
+            if hit:
+                mask |= 1 << a
+                break
+    return 0 if mask == (1 << N_ACTIONS) - 1 else mask
