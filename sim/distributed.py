@@ -22,6 +22,8 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import msgspec
+
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.agent.protocol import AgentProtocol
@@ -362,7 +364,7 @@ class SimSwarm:
                 intent, payload = effect.intent, effect.payload
                 self.checker.announced(i, intent.tick, intent.action, (), "intent")
                 if intent.record and self.forging.get(i) == a.incarnation:
-                    intent = intent._replace(record=(forged(intent.record[0]),))
+                    intent = msgspec.structs.replace(intent, record=(forged(intent.record[0]),))
                     payload = encode(intent)
                     self.checker.forged(i, intent.tick, intent.record[0])
                 net.send(a, self.world, self._intent_in, self.intent_keys[i], payload, i,

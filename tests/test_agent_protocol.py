@@ -212,7 +212,7 @@ def test_the_worlds_shutdown_stops_the_agent_and_finishes_its_queries():
     protocol.on_query(4, "tick=5;from=1", 0.0)
     protocol.on_query(5, "since=5;from=2", 0.0)
     wire = to_wire(Control("proto", 1, WORLD_SENDER, CONTROL_SHUTDOWN))
-    wire[4] = agent_sender(1)  # an agent sending the world's shutdown
+    wire[3] = agent_sender(1)  # an agent sending the world's shutdown
     assert kinds(protocol.on_control(msgpack.packb(wire), 0.0)) == [] and not protocol.stopped
     effects = protocol.on_control(encode(Control("proto", 1, WORLD_SENDER, CONTROL_SHUTDOWN)), 0.0)
     assert [e for e in effects if not isinstance(e, Log)] == [EndQuery(4), EndQuery(5),

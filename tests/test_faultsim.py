@@ -12,6 +12,7 @@ import time
 from collections import Counter
 from dataclasses import replace
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -209,7 +210,7 @@ def test_a_broken_protocol_is_caught_and_reported_with_the_seed_that_reproduces_
         answer = self.decided_answer
         if answer.relayed and obs.tick % 3 == 2:
             (j, action), *rest = answer.relayed
-            wrong = answer._replace(relayed=((j, (action + 1) % 5), *rest))
+            wrong = msgspec.structs.replace(answer, relayed=((j, (action + 1) % 5), *rest))
             self.decided_answer, self.decided_payload = wrong, encode(wrong)
 
     monkeypatch.setattr(AgentProtocol, "_decide", forgetful)
