@@ -1,4 +1,4 @@
-"""The agent process: ``agent.protocol.AgentProtocol`` over a Zenoh session.
+"""The agent process: ``agent.machine.AgentMachine`` over a Zenoh session.
 
 The protocol decides everything (what to ask, when to answer, when to decide); this adapter
 feeds it what Zenoh delivers, with the time, and carries out its effects: publish the intent on
@@ -30,7 +30,7 @@ import zenoh
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.agent.machine import AgentMachine
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.protocol import keys, trace
 from nnql_swarm.protocol.config import SwarmConfig
@@ -90,7 +90,7 @@ class AgentNode(ProtocolAdapter):
                         self.resumed["episode"], self.resumed["fingerprint"])
         self.brain = brain
         self.trace = trace.TickTrace.from_env(f"agent-{self.agent}")
-        self.protocol = AgentProtocol(self.agent, self.config, brain, time.monotonic(),
+        self.protocol = AgentMachine(self.agent, self.config, brain, time.monotonic(),
                                       options.negotiation_timeout_s, self.trace)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()

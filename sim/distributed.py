@@ -26,7 +26,7 @@ import msgspec
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.agent.machine import AgentMachine
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.effects import (
@@ -44,7 +44,7 @@ from nnql_swarm.supervision.resume import resume_point, rewind, shared_table
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import EpisodeWriter
-from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.machine import WorldMachine
 
 VIRTUAL_LIMIT_S = 3600.0
 """A run still going after this much virtual time did not end."""
@@ -103,8 +103,8 @@ class SimSwarm:
         self.world = Process("world")
         self.agents = [Process(f"agent-{i}") for i in range(n)]
         self.processes = {p.name: p for p in (self.world, *self.agents)}
-        self.world_protocol: WorldProtocol | None = None
-        self.protocols: list[AgentProtocol | None] = [None] * n
+        self.world_protocol: WorldMachine | None = None
+        self.protocols: list[AgentMachine | None] = [None] * n
         self.final_brains: list[AgentBrain | None] = [None] * n
         self.era = -1
         self.rows: list[dict] = []
@@ -180,7 +180,7 @@ class SimSwarm:
         w.incarnation += 1
         w.alive, w.stalled_until, w.waiting, w.timer_at = True, 0.0, [], None
         self.era += 1
-        self.world_protocol = WorldProtocol(self.config, net.now, first_episode, first_tick,
+        self.world_protocol = WorldMachine(self.config, net.now, first_episode, first_tick,
                                             table=table)
         for i, a in enumerate(self.agents):
             if a.alive:
@@ -317,7 +317,7 @@ class SimSwarm:
         if resume:
             saved = self.saved[i] if episode is None else (episode, self.saved_at[i][episode])
             self.checker.restarted(i, resumed, saved)
-        self.protocols[i] = AgentProtocol(i, c, brain, net.now)
+        self.protocols[i] = AgentMachine(i, c, brain, net.now)
         net.send_reliable(a, self.world, self._tokens_to_world, [i], True)
         present = []
         for j, b in enumerate(self.agents):

@@ -1,4 +1,4 @@
-"""The world process: ``world.protocol.WorldProtocol`` over a Zenoh session.
+"""The world process: ``world.machine.WorldMachine`` over a Zenoh session.
 
 The protocol keeps the clock (when a tick opens and closes, what goes to whom); this adapter
 feeds it the intents and liveliness changes Zenoh delivers, with the time, and carries out its
@@ -40,7 +40,7 @@ from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
-from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.machine import WorldMachine
 
 log = logging.getLogger("nnql.world")
 
@@ -76,7 +76,7 @@ class WorldNode(ProtocolAdapter):
         table = shared_table(options.out_dir, self.config,
                              ResumePoint(options.first_episode, options.first_tick))
         self.table_file = world_checkpoint.table_path(options.out_dir)
-        self.protocol = WorldProtocol(self.config, time.monotonic(), options.first_episode,
+        self.protocol = WorldMachine(self.config, time.monotonic(), options.first_episode,
                                       options.first_tick, options.startup_timeout_s, self.trace,
                                       table)
         self.events: queue.SimpleQueue = queue.SimpleQueue()

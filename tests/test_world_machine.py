@@ -11,16 +11,16 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
-from nnql_swarm.world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol
+from nnql_swarm.world.machine import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldMachine
 
 CONFIG = SwarmConfig(run_id="wproto", n_agents=2, episodes=2, max_steps=3, tick_deadline_s=0.5)
 
 
-def alive(protocol: WorldProtocol, agent: int, now: float, up: bool = True) -> list:
+def alive(protocol: WorldMachine, agent: int, now: float, up: bool = True) -> list:
     return protocol.on_liveliness(keys.alive_key("wproto", keys.ROLE_AGENT, agent), up, now)
 
 
-def intent(protocol: WorldProtocol, agent: int, now: float, action: int = 4, tick=None,
+def intent(protocol: WorldMachine, agent: int, now: float, action: int = 4, tick=None,
            episode: int = 0) -> list:
     tick = protocol.world.tick if tick is None else tick
     payload = encode(Intent("wproto", tick, agent_sender(agent), agent, episode, action))
@@ -36,17 +36,17 @@ def believing(monkeypatch):
     """The world believes every record that fits the table: for the tests of how records are
     applied and spread, with records made up by hand (what the world checks of a record, and
     how: ``tests/test_records.py``)."""
-    monkeypatch.setattr(WorldProtocol, "_check_record", lambda protocol, agent, final: None)
+    monkeypatch.setattr(WorldMachine, "_check_record", lambda protocol, agent, final: None)
 
 
-def started(now: float = 0.0) -> tuple[WorldProtocol, list]:
-    protocol = WorldProtocol(CONFIG, now)
+def started(now: float = 0.0) -> tuple[WorldMachine, list]:
+    protocol = WorldMachine(CONFIG, now)
     alive(protocol, 0, now)
     return protocol, alive(protocol, 1, now)
 
 
 def test_the_first_tick_opens_once_every_agent_is_alive_in_rank_order():
-    protocol = WorldProtocol(CONFIG, 0.0)
+    protocol = WorldMachine(CONFIG, 0.0)
     assert kinds(alive(protocol, 1, 0.1)) == [] and protocol.timer() == 60.0
     effects = alive(protocol, 0, 0.2)
     [batch] = [e for e in effects if isinstance(e, SendObservations)]
@@ -56,7 +56,7 @@ def test_the_first_tick_opens_once_every_agent_is_alive_in_rank_order():
 
 
 def test_an_agent_that_never_comes_alive_ends_the_start_up_with_a_reason():
-    protocol = WorldProtocol(CONFIG, 0.0, startup_timeout_s=5.0)
+    protocol = WorldMachine(CONFIG, 0.0, startup_timeout_s=5.0)
     alive(protocol, 0, 1.0)
     effects = protocol.on_timer(5.0)
     assert kinds(effects) == ["SendControl", "Finished"]
@@ -162,14 +162,14 @@ def test_bad_intents_are_counted_never_raised():
 def test_a_world_resumed_after_the_last_episode_only_tells_the_agents_to_stop():
     """Seed 5382 of launch/faultsim.py: the world crashed while telling its agents the run was
     over, and the resumed world, finding every row written, ended without telling them."""
-    protocol = WorldProtocol(CONFIG, 5.0, first_episode=CONFIG.episodes, first_tick=8)
+    protocol = WorldMachine(CONFIG, 5.0, first_episode=CONFIG.episodes, first_tick=8)
     assert protocol.timer() == 5.0
     assert kinds(protocol.on_timer(5.0)) == ["SendControl"]
     assert kinds(alive(protocol, 0, 5.01)) == []  # an agent still running, from the history
     assert kinds(protocol.on_timer(protocol.timer())) == ["SendControl"]
     alive(protocol, 0, 5.3, up=False)
     assert protocol.on_timer(protocol.timer())[-1] == Finished(True, None)
-    nobody = WorldProtocol(CONFIG, 0.0, first_episode=CONFIG.episodes)
+    nobody = WorldMachine(CONFIG, 0.0, first_episode=CONFIG.episodes)
     effects = nobody.on_timer(0.0) + nobody.on_timer(nobody.timer())
     assert kinds(effects) == ["SendControl", "Finished"], "with nobody left it ends at once"
 
@@ -218,7 +218,7 @@ def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_
     slice is written its copy equals the world's. Agent 0, which never left, gets no slice."""
     config = SwarmConfig(run_id="wproto", n_agents=2, episodes=4, max_steps=40,
                          tick_deadline_s=0.5)
-    protocol = WorldProtocol(config, 0.0)
+    protocol = WorldMachine(config, 0.0)
     alive(protocol, 0, 0.0)
     effects = alive(protocol, 1, 0.0)
     stale = Learner(config)
@@ -276,7 +276,7 @@ def test_a_record_the_world_saw_no_decision_for_is_refused_and_its_intent_counts
 
 
 def test_a_resumed_world_sends_every_agent_the_whole_table():
-    protocol = WorldProtocol(CONFIG, 0.0, first_episode=1, first_tick=4)
+    protocol = WorldMachine(CONFIG, 0.0, first_episode=1, first_tick=4)
     alive(protocol, 0, 0.0)
     alive(protocol, 1, 0.0)
     intent(protocol, 0, 0.1, episode=1)
@@ -305,7 +305,7 @@ def test_under_meet_a_settled_agent_is_neither_waited_for_nor_sent_observations(
     chain: it never settles, and every tick waits for it."""
     config = SwarmConfig(run_id="wproto", n_agents=2, episodes=1, max_steps=40,
                          tick_deadline_s=0.5, wait_rule=wait_rule)
-    protocol = WorldProtocol(config, 0.0)
+    protocol = WorldMachine(config, 0.0)
     alive(protocol, 0, 0.0)
     effects, now, seen = alive(protocol, 1, 0.0), 0.0, []
     while not protocol.world.finished:

@@ -1,8 +1,8 @@
 """The world's side of the swarm protocol, pure: the lockstep clock as inputs in, effects out.
 
 No sockets, no threads, no clock reads, no files: every input carries its time ``now`` and
-returns the effects it causes (``protocol.effects``), in order; :meth:`WorldProtocol.timer` is
-when it next wants :meth:`WorldProtocol.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
+returns the effects it causes (``protocol.effects``), in order; :meth:`WorldMachine.timer` is
+when it next wants :meth:`WorldMachine.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
 over a simulated network in virtual time.
 
 It waits for every agent's liveliness token (at most ``startup_timeout_s``), then, per tick: sends
@@ -71,7 +71,7 @@ class _EffectLog:
         self.owner._out.append(Log(logging.WARNING, message, args))
 
 
-class WorldProtocol:
+class WorldMachine:
     """The lockstep world of a run (see the module docstring)."""
 
     def __init__(self, config: SwarmConfig, now: float, first_episode: int = 0,
