@@ -11,7 +11,10 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
-from nnql_swarm.world.machine import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldMachine
+from nnql_swarm.world.machine import (
+    SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, TRANSITIONS, Event, Phase, WorldMachine,
+)
+from nnql_swarm.protocol.phases import PhaseError
 
 CONFIG = SwarmConfig(run_id="wproto", n_agents=2, episodes=2, max_steps=3, tick_deadline_s=0.5)
 
@@ -105,7 +108,7 @@ def test_a_completed_run_tells_its_agents_until_they_leave():
         now += 0.01
         effects = intent(protocol, 0, now, episode=protocol.world.episode) + intent(
             protocol, 1, now, episode=protocol.world.episode)
-    assert protocol.world.finished and not protocol.done
+    assert protocol.world.finished and protocol.phase is Phase.CLOSING
     [control] = [e for e in effects if isinstance(e, SendControl)]
     assert control.control.command == CONTROL_SHUTDOWN
     assert kinds(protocol.on_timer(now + SHUTDOWN_REPEAT_S)) == ["SendControl"]
@@ -113,7 +116,7 @@ def test_a_completed_run_tells_its_agents_until_they_leave():
     assert kinds(alive(protocol, 1, now + 0.4, up=False)) == []
     assert "Finished" not in kinds(protocol.on_timer(now + 0.4 + SHUTDOWN_QUIET_S / 2))
     assert protocol.on_timer(now + 0.4 + SHUTDOWN_QUIET_S)[-1] == Finished(True, None)
-    assert protocol.done and protocol.completed and protocol.timer() is None
+    assert protocol.phase is Phase.DONE and protocol.completed and protocol.timer() is None
 
 
 def test_an_agent_that_comes_up_while_the_others_leave_is_told_too():
@@ -408,3 +411,22 @@ def test_an_agent_being_resynchronised_is_never_quiet():
     world._sync_from_next.clear()
     [obs_0] = [o for o in world.observations_by_rank() if o.agent == 0]
     assert obs_0.settled and obs_0.updates, "its slice of the table goes with it"
+
+
+def test_the_phases_move_only_as_the_transition_table_says():
+    """Start, tick after tick, close, done: every phase but the last can end, only a start or a
+    closed tick opens one, and an event the table does not allow is a bug, raised."""
+    assert {phase for phase, _ in TRANSITIONS} == set(Phase) - {Phase.DONE}
+    assert [key for key, to in TRANSITIONS.items() if to is Phase.TICK_OPEN] == [
+        (Phase.STARTING, Event.STARTED), (Phase.TICK_OPEN, Event.TICK_CLOSED)]
+    protocol = WorldMachine(CONFIG, now=0.0)
+    assert protocol.phase is Phase.STARTING
+    with pytest.raises(PhaseError, match="TICK_CLOSED in phase STARTING"):
+        protocol._go(Event.TICK_CLOSED)
+    alive(protocol, 0, 0.1)
+    alive(protocol, 1, 0.1)
+    assert protocol.phase is Phase.TICK_OPEN and protocol.timer() == 0.1 + CONFIG.tick_deadline_s
+    assert kinds(protocol.stop(0.2))[-1] == "Finished" and protocol.phase is Phase.DONE
+    assert protocol.on_timer(9.0) == [] and protocol.stop(9.0) == [] and protocol.timer() is None
+    finished = WorldMachine(CONFIG, now=0.0, first_episode=CONFIG.episodes)
+    assert finished.phase is Phase.CLOSING  # resumed after the last row: only the goodbyes
