@@ -238,8 +238,7 @@ _DECODER, _HEADS, _TAGS = reading(MESSAGES)
 
 # ---------------------------------------------------------------- the rules between fields
 
-_AGENT_SENDERS = tuple(map(agent_sender, range(MAX_AGENTS)))
-"""The sender of every agent, looked up rather than formatted for each message."""
+_AGENT_SENDERS = tuple(map(agent_sender, range(MAX_AGENTS)))  # looked up, not formatted
 
 
 def _check_rules(msg: Message, key_agent: int | None) -> None:
@@ -247,13 +246,14 @@ def _check_rules(msg: Message, key_agent: int | None) -> None:
     the agent of the key it came on (or None). Raises Rejected."""
     cls = type(msg)
     lists = cls.agent_lists
-    ids_of = []
-    for name in lists:
-        entries = getattr(msg, name)
-        ids = {entry[0] for entry in entries}
-        if len(ids) != len(entries):
-            raise Rejected(f"bad-field:{name}", "the same agent twice")
-        ids_of.append((name, ids))
+    if lists:
+        ids_of = []
+        for name in lists:
+            entries = getattr(msg, name)
+            ids = {entry[0] for entry in entries}
+            if len(ids) != len(entries):
+                raise Rejected(f"bad-field:{name}", "the same agent twice")
+            ids_of.append((name, ids))
     if cls.from_agent:
         agent = msg.agent
         if msg.sender != _AGENT_SENDERS[agent]:
@@ -264,7 +264,7 @@ def _check_rules(msg: Message, key_agent: int | None) -> None:
                                             "key")
     elif msg.sender != WORLD_SENDER:
         raise Rejected("forged-sender", f"{cls.__name__} sent by {msg.sender!r}")
-    for name, ids in ids_of:
+    for name, ids in ids_of if lists else ():
         if msg.agent in ids:
             raise Rejected(f"bad-field:{name}", f"agent {msg.agent} lists itself")
 
