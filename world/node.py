@@ -1,19 +1,19 @@
 """The world process: ``world.machine.WorldMachine`` over a Zenoh session.
 
-The protocol keeps the clock (when a tick opens and closes, what goes to whom); this adapter
+The machine keeps the clock (when a tick opens and closes, what goes to whom); this adapter
 feeds it the intents and liveliness changes Zenoh delivers, with the time, and carries out its
 effects: publish each observation on ``world/obs/<id>`` and the control messages, hand each
 closed tick to ``on_tick`` (the launcher records it to Rerun there), write each episode's row
 to ``episodes.csv`` (and, where the agents share one table, its checkpoint first), log. A resumed
 world starts from the shared table of its checkpoint (``world.checkpoint``).
 
-Threads, in three sentences. Every input reaches the protocol under the node's one lock, and its
+Threads, in three sentences. Every input reaches the machine under the node's one lock, and its
 effects are carried out right there, in order, before the lock is let go, except the episode
 rows: they sync a file, so they go to the main thread through its queue, in order. Intents are
 handled on the thread Zenoh calls back on (its receiving thread, ``protocol.transport``), so the
 last intent of a tick closes it and sends the next observations at once, while liveliness
 changes are only queued there, because Zenoh calls those callbacks holding a lock of its own.
-The main thread handles that queue (rows, liveliness) and the protocol's timers, sleeping on the
+The main thread handles that queue (rows, liveliness) and the machine's timers, sleeping on the
 queue until the next timer is due, at most ``protocol.transport.POLL_S``.
 """
 
@@ -58,13 +58,13 @@ class WorldOptions:
     config: SwarmConfig
     transport: TransportSettings
     out_dir: Path
-    startup_timeout_s: float | None = None  # None: protocol.startup_timeout of the agents
+    startup_timeout_s: float | None = None  # None: world.machine.startup_timeout of the agents
     first_episode: int = 0
     first_tick: int = 0
 
 
 class WorldNode(ProtocolAdapter):
-    """The protocol's adapter to one Zenoh session (see the module docstring)."""
+    """The machine's adapter to one Zenoh session (see the module docstring)."""
 
     def __init__(self, options: WorldOptions, session: zenoh.Session,
                  on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> None:
@@ -72,7 +72,7 @@ class WorldNode(ProtocolAdapter):
         self.config = options.config
         self.session = session
         self.trace = trace.TickTrace.from_env("world")
-        self.created_at = time.time()  # wall clock, for the stats' start-up: the protocol's is monotonic
+        self.created_at = time.time()  # wall clock, for the stats' start-up: the machine's is monotonic
         table = shared_table(options.out_dir, self.config,
                              ResumePoint(options.first_episode, options.first_tick))
         self.table_file = world_checkpoint.table_path(options.out_dir)
