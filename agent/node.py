@@ -91,7 +91,7 @@ class AgentNode(ProtocolAdapter):
         self.brain = brain
         self.trace = trace.TickTrace.from_env(f"agent-{self.agent}")
         self.protocol = AgentMachine(self.agent, self.config, brain, time.monotonic(),
-                                      options.negotiation_timeout_s, self.trace)
+                                     options.negotiation_timeout_s, self.trace)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False

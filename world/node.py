@@ -77,8 +77,8 @@ class WorldNode(ProtocolAdapter):
                              ResumePoint(options.first_episode, options.first_tick))
         self.table_file = world_checkpoint.table_path(options.out_dir)
         self.protocol = WorldMachine(self.config, time.monotonic(), options.first_episode,
-                                      options.first_tick, options.startup_timeout_s, self.trace,
-                                      table)
+                                     options.first_tick, options.startup_timeout_s, self.trace,
+                                     table)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False
