@@ -1,11 +1,11 @@
-"""The agent process: ``agent.protocol.AgentProtocol`` over a Zenoh session.
+"""The agent process: ``agent.machine.AgentMachine`` over a Zenoh session.
 
-The protocol decides everything (what to ask, when to answer, when to decide); this adapter
+The machine decides everything (what to ask, when to answer, when to decide); this adapter
 feeds it what Zenoh delivers, with the time, and carries out its effects: publish the intent on
 ``agent/<id>/intent``, ask a neighbour's intent key (``session.get``), reply to a query on its
 own intent key, finish a query, write the checkpoint, log.
 
-Threads, in three sentences. Every input reaches the protocol under the node's one lock, and its
+Threads, in three sentences. Every input reaches the machine under the node's one lock, and its
 effects are carried out right there, in order, before the lock is let go (a checkpoint is
 written before the intent that follows it is published). Observations, replies and queries are
 handled on the thread Zenoh calls back on (its receiving thread, ``transport.runtime``), so the
@@ -13,7 +13,7 @@ last awaited intent is acted on without waking another thread, while liveliness 
 messages and the ends of asks are only queued there, because Zenoh calls those callbacks holding
 a lock of its own (eclipse-zenoh/zenoh#1092: when a peer dies, Zenoh ends the asks on it under
 that lock while the main thread, holding the node's, ends that peer's standing query, and one
-waited for the other forever). The main thread handles that queue and the protocol's timers,
+waited for the other forever). The main thread handles that queue and the machine's timers,
 sleeping on the queue until the next timer is due, at most ``transport.adapter.POLL_S``.
 """
 
@@ -30,7 +30,7 @@ import zenoh
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.agent.machine import AgentMachine
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.machines import trace
 from nnql_swarm.protocol import keys
@@ -74,9 +74,9 @@ class AgentOptions:
 
 
 class AgentNode(ProtocolAdapter):
-    """The protocol's adapter to one Zenoh session (see the module docstring)."""
+    """The machine's adapter to one Zenoh session (see the module docstring)."""
 
-    protocol: AgentProtocol
+    protocol: AgentMachine
 
     def __init__(self, options: AgentOptions, session: zenoh.Session,
                  brain: AgentBrain | None = None,
@@ -95,8 +95,8 @@ class AgentNode(ProtocolAdapter):
                         self.resumed["episode"], self.resumed["fingerprint"])
         self.brain = brain
         self.trace = trace.TickTrace.from_env(f"agent-{self.agent}")
-        self.protocol = AgentProtocol(self.agent, self.config, brain, time.monotonic(),
-                                      options.negotiation_timeout_s, self.trace)
+        self.protocol = AgentMachine(self.agent, self.config, brain, time.monotonic(),
+                                     options.negotiation_timeout_s, self.trace)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False

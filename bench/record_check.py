@@ -4,7 +4,7 @@
 Runs whole swarms of the default preset (one shared table) in the deterministic simulator of the
 distributed swarm (``sim.distributed``: the world's and the agents' own protocol machines, no
 faults), the kernel uncompiled as in the world process, and times, per tick of the world, the
-record check (``WorldProtocol._check_record``, as intents come and as the tick closes, and the
+record check (``WorldMachine._check_record``, as intents come and as the tick closes, and the
 decisions kept for the next tick's records, ``_checked_records``), beside the rest of
 the world's tick work in the same runs: applying the tick (``SwarmWorld.apply``, the shared
 table's updates included) and building and encoding the next observations. Each figure is the
@@ -26,7 +26,7 @@ from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.sim.distributed import SimSwarm
 from nnql_swarm.sim.schedule import DEADLINE_S, Schedule
 from nnql_swarm.world.engine import SwarmWorld
-from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.machine import WorldMachine
 from nnql_swarm.world.records import RecordCheck
 
 GRIDS = {8: 11, 16: 16, 32: 22, 64: 32}
@@ -42,9 +42,9 @@ class Timers:
 
     def install(self) -> None:
         timers, clock = self, time.thread_time_ns  # CPU time: a loaded machine inflates less
-        one, closing, apply, encoded = (WorldProtocol._check_record,
-                                        WorldProtocol._checked_records, SwarmWorld.apply,
-                                        WorldProtocol._encoded)
+        one, closing, apply, encoded = (WorldMachine._check_record,
+                                        WorldMachine._checked_records, SwarmWorld.apply,
+                                        WorldMachine._encoded)
         self.could_write = could_write = RecordCheck.could_write
 
         def counted(check, *args):
@@ -83,11 +83,11 @@ class Timers:
                     return
                 yield item
 
-        WorldProtocol._check_record = timed_one
+        WorldMachine._check_record = timed_one
         RecordCheck.could_write = counted
-        WorldProtocol._checked_records = timed_closing
+        WorldMachine._checked_records = timed_closing
         SwarmWorld.apply = timed_apply
-        WorldProtocol._encoded = timed_encoded
+        WorldMachine._encoded = timed_encoded
 
 
 def one_run(agents: int, episodes: int, seed: int) -> Timers:
@@ -96,14 +96,14 @@ def one_run(agents: int, episodes: int, seed: int) -> Timers:
                          episodes=episodes, max_steps=100, width=side, height=side, seed=seed,
                          tick_deadline_s=DEADLINE_S)
     timers = Timers()
-    saved = (WorldProtocol._check_record, WorldProtocol._checked_records, SwarmWorld.apply,
-             WorldProtocol._encoded)
+    saved = (WorldMachine._check_record, WorldMachine._checked_records, SwarmWorld.apply,
+             WorldMachine._encoded)
     timers.install()
     try:
         outcome = SimSwarm(Schedule(seed, config, (50e-6, 300e-6), ())).run()
     finally:
-        (WorldProtocol._check_record, WorldProtocol._checked_records, SwarmWorld.apply,
-         WorldProtocol._encoded) = saved
+        (WorldMachine._check_record, WorldMachine._checked_records, SwarmWorld.apply,
+         WorldMachine._encoded) = saved
         RecordCheck.could_write = timers.could_write
     assert outcome.failures == [], outcome.failures
     return timers

@@ -1,6 +1,6 @@
 """What the protocol machines ask their adapters to do: small typed records, one per effect.
 
-``agent.protocol.AgentProtocol`` and ``world.protocol.WorldProtocol`` are pure: every input
+``agent.machine.AgentMachine`` and ``world.machine.WorldMachine`` are pure: every input
 (a payload that arrived, a query, a liveliness change, a timer at time ``now``) returns the list
 of effects it causes, in the order they must be carried out. The Zenoh nodes (``agent.node``,
 ``world.node``) carry them out on a real network and disk; the simulator (``sim``) carries them

@@ -1,54 +1,48 @@
 """Every wire message of the swarm, and the one msgpack codec that encodes and validates them.
 
-On the wire a message is a msgpack array: ``[version, kind tag, run id, tick, sender, ...]``, then
-the other fields of its kind in its class's field order. An array, not a map with a short key per
-field (protocol version 1), because the codec is on the critical path of the lockstep loop: no keys
-to pack, unpack, hash and match, a smaller payload, and one shape to check (exactly as many items as
-the kind has fields). The version and the kind lead, so that a message of another version or kind
-says so whatever its length.
+Each message is a frozen, tagged, array-like :class:`msgspec.Struct`: on the wire a msgpack array
+``[tag, run, tick, sender, ...]``, then the other fields of its kind in its class's order. The tag
+names the kind and the protocol version at once (``"intent/7"``), so that a message of another
+version or kind says so in its first item, whatever its length. An array, not a map: no keys to
+pack, unpack and match on the critical path of the lockstep loop, and one shape to check. The
+annotations are the schema (msgspec types with :class:`msgspec.Meta` bounds: ``Count``,
+``AgentId``, ``Reward``, ...), checked in C by one decoder of the union of every kind, which tells
+them apart by their tag; the rules between fields (:func:`_check_rules`) follow in Python.
 
-Each message is a :class:`typing.NamedTuple` whose annotations are its schema: msgspec types with
-:class:`msgspec.Meta` bounds (``Count``, ``AgentId``, ``Reward``, ...). :func:`_message` registers a
-class under its kind tag and builds one ``msgspec.msgpack.Decoder`` for its whole wire array, which
-checks every type and range in C; a few rules between fields (:func:`_rules`) follow in Python.
-No source text is generated: the types are the checks.
-
-To add a field, write one annotated line in the class where its item goes in the array (after the
-header ``run, tick, sender``, and ``agent`` if the kind names one); with a default, as the last
-line, existing constructor calls need no change. For example, a per-neighbour "parked" flag is
-``Neighbours = agent_list(Coord, Coord, bool)``, and planned later moves are
-``plan: Annotated[tuple[Action, ...], Meta(max_length=8)] = ()`` at the end of ``Intent``. A list
-with one entry per agent (:func:`agent_list`) also gets the agent-list rules. Bump
-:data:`PROTOCOL_VERSION` whenever the array changes, so that other versions say so.
+To add a field, write one annotated line in the class where its item goes in the array; with a
+default, as the last line, existing constructor calls need no change (a per-neighbour "parked"
+flag: ``Neighbours = agent_list(Coord, Coord, bool)``; planned moves: ``plan:
+Annotated[tuple[Action, ...], Meta(max_length=8)] = ()`` at the end of ``Intent``). A field of one
+entry per agent (:func:`agent_list`) is named in its class's ``agent_lists``. A new kind is a
+subclass of :class:`Message` (of :class:`AgentMessage` if it names an agent) with its own
+:func:`tag`, listed in :data:`MESSAGES`. Bump :data:`PROTOCOL_VERSION` whenever the array changes.
 
 :func:`parse` checks, in order, and raises :class:`Rejected` with the reason in brackets: bytes
 (``not-bytes``); size, before unpacking (``oversize``); msgpack, with no maps and no ext types
-anywhere, no string or binary longer than MAX_STR_LEN characters or bytes and no array longer than
-MAX_AGENTS items (``not-msgpack``); an array at the top level (``not-array``; a map there is told by
-its first byte, whatever follows, so a version-1 message is ``not-array``, never ``not-msgpack``);
-the version, if the array has an item (``bad-version``); the kind, if it has two (``wrong-kind``);
-exactly the kind's number of items (``wrong-length``); run id (``wrong-run``); each field's type
-and range, the first bad one named (``bad-field:<name>``); then the rules between fields: an
-agent-list naming an agent twice (``bad-field:<name>``), the sender (``forged-sender``: the world,
-or the agent the message is of, on its own key), the message's own agent in one of its
-agent-lists (``bad-field:<name>``). Types are strict: a bool is not an int, an int is not a bool;
-float fields take ints but must be finite. The decoder and the rules decide; when the decoder
-refuses, :func:`_rejection` reads the payload again, untyped, only to name the first rule broken.
-:class:`Inbox` turns a rejection into a counted, rate-limited log line and None, and never raises.
+anywhere, no string or binary longer than MAX_STR_LEN and no array longer than MAX_AGENTS items
+(``not-msgpack``); an array at the top level (``not-array``; a map there is told by its first
+byte); the first item, if any, a tag of this version (``bad-version``) and of the kind expected
+(``wrong-kind``); exactly the kind's number of items (``wrong-length``); run id (``wrong-run``);
+each field's type and range, the first bad one named (``bad-field:<name>``); then the rules
+between fields: an agent-list naming an agent twice (``bad-field:<name>``), the sender
+(``forged-sender``: the world, or the agent the message is of, on its own key), the message's own
+agent in one of its agent-lists (``bad-field:<name>``). Types are strict: a bool is not an int, an
+int is not a bool; float fields take ints but must be finite. The decoder and the rules decide;
+when the decoder refuses, :func:`_rejection` reads the payload again, untyped, and each item with
+its field's own decoder, only to name the first rule broken. :class:`Inbox` turns a rejection
+into a counted, rate-limited log line and None, and never raises.
 
 :func:`encode` packs a message (numpy scalars and arrays become plain values); it refuses only what
 msgpack cannot carry and a bad run id. It does not parse what it made: every receiver parses every
-payload anyway (input can be forged), so a malformed message is refused and counted where it
-arrives, and the tests check that no node's own message is ever refused there. Parsing on the way
-out too cost the world 40 % of its Python at 64 agents (``bench/node_cpu.py``, docs/performance.md).
-An int given for a float field goes on the wire as an int, which parses to the same float.
+payload (input can be forged), so a malformed message is refused and counted where it arrives, and
+the tests check that no node's own message ever is. An int given for a float field goes on the
+wire as an int, which parses to the same float.
 """
 
+import functools
 import logging
-import re
 from collections import Counter
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Annotated, Literal, NamedTuple, Protocol, get_type_hints
+from typing import TYPE_CHECKING, Annotated, ClassVar, Literal, Protocol, Union, get_type_hints
 
 import msgspec
 import numpy as np
@@ -57,7 +51,7 @@ from msgspec import Meta
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 6
+PROTOCOL_VERSION = 7
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -70,16 +64,15 @@ WORLD_SENDER = "world"
 CONTROL_SHUTDOWN = "shutdown"
 CONTROL_COMMANDS = frozenset({CONTROL_SHUTDOWN})
 
-__all__ = [
-    "PROTOCOL_VERSION", "MAX_AGENTS", "MAX_GRID", "MAX_PAYLOAD_BYTES", "WORLD_SENDER",
-    "CONTROL_SHUTDOWN", "CONTROL_COMMANDS", "agent_sender", "Observation", "Intent", "Answer",
-    "Control", "SCHEMA", "Kind", "Rejected", "encode", "to_wire", "parse", "Inbox",
-]
-
 
 def agent_sender(agent: int) -> str:
     """The sender name of an agent: ``"agent/<id>"``."""
     return f"agent/{agent}"
+
+
+def tag(kind: str) -> str:
+    """The wire tag of a message kind in this protocol version: ``"<kind>/<version>"``."""
+    return f"{kind}/{PROTOCOL_VERSION}"
 
 
 # ---------------------------------------------------------------- field types
@@ -97,19 +90,10 @@ Reward = Annotated[float, Meta(ge=-MAX_REWARD, le=MAX_REWARD)]
 Command = Literal[tuple(sorted(CONTROL_COMMANDS))]
 
 
-class _AgentList:
-    """The mark of an agent-list field: each agent at most once, never the message's own agent."""
-
-    def __repr__(self) -> str:
-        return "agent list"
-
-
-AGENT_LIST = _AgentList()
-
-
 def agent_list(*rest) -> object:
-    """The type of a tuple of ``(agent id, *rest)`` entries, at most one per agent."""
-    return Annotated[tuple[tuple[(AgentId, *rest)], ...], Meta(max_length=MAX_AGENTS), AGENT_LIST]
+    """The type of a tuple of ``(agent id, *rest)`` entries, at most one per agent (name the field
+    in its class's ``agent_lists``)."""
+    return Annotated[tuple[tuple[(AgentId, *rest)], ...], Meta(max_length=MAX_AGENTS)]
 
 
 if TYPE_CHECKING:  # what a type checker reads: agent_list's tuples, without msgspec's limits
@@ -139,8 +123,7 @@ TableEntries = Annotated[tuple[Annotated[int, Meta(ge=0, lt=MAX_TABLE_ENTRY)], .
                          Meta(max_length=MAX_AGENTS)]
 """Q-values of the shared table by entry index (``learning.record.record_entries``)."""
 TableValues = Annotated[tuple[Reward, ...], Meta(max_length=MAX_AGENTS)]
-"""Their new values, finite, bounded as a reward is (a Q-value is at most a reward over
-1 - gamma)."""
+"""Their new values, finite, bounded as a reward is (a Q-value is at most a reward / (1 - gamma))."""
 MAX_SYNC_GROUPS = 2
 """Groups of the whole table an observation carries at most beside the tick's, for an agent
 being resynchronised (``world.shared_table``)."""
@@ -151,8 +134,7 @@ values: groups of two sequences, the entries and their values, as many of each (
 refuses a group where they differ); the tick's in the order the records were applied (agent-id
 order), at most MAX_AGENTS entries a group; then, for an agent being resynchronised, up to
 :data:`MAX_SYNC_GROUPS` groups of the whole table's values. Two flat sequences a group, not a
-pair per entry: at 64 agents an observation carries about 160 updates, and a pair each cost the
-decoder a tuple each (``bench/node_cpu.py``, docs/performance.md)."""
+pair per entry: a pair each would cost the decoder a tuple per entry."""
 
 
 class Rejected(ValueError):
@@ -164,94 +146,29 @@ class Rejected(ValueError):
         self.detail = detail
 
 
-# ---------------------------------------------------------------- the rules between fields
-
-_AGENT_SENDERS = tuple(map(agent_sender, range(MAX_AGENTS)))
-"""The sender of every agent, looked up rather than formatted for each message."""
-
-
-def _rules(tag: str, fields: tuple[str, ...], from_agent: bool, lists: tuple[int, ...]):
-    """The rules between the fields of a kind, as one function ``(items, key_agent)`` that raises
-    Rejected: ``items`` its wire array, each field valid, ``key_agent`` the agent of the key it
-    came on (or None). ``lists`` are where its agent-lists are in the array."""
-
-    def sent_by_agent(items: tuple, key_agent: int | None) -> None:
-        agent = items[5]
-        if items[4] != _AGENT_SENDERS[agent]:
-            raise Rejected("forged-sender", f"agent {agent}'s {tag} sent by {items[4]!r}")
-        if key_agent is not None and agent != key_agent:
-            raise Rejected("forged-sender", f"agent {agent}'s {tag} on {key_agent}'s key")
-
-    def sent_by_world(items: tuple, key_agent: int | None) -> None:
-        if items[4] != WORLD_SENDER:
-            raise Rejected("forged-sender", f"{tag} sent by {items[4]!r}")
-
-    sender_rule = sent_by_agent if from_agent else sent_by_world
-    if not lists:
-        return sender_rule
-
-    def with_agent_lists(items: tuple, key_agent: int | None) -> None:
-        ids_of = []
-        for i in lists:
-            ids = {entry[0] for entry in items[i]}
-            if len(ids) != len(items[i]):
-                raise Rejected(f"bad-field:{fields[i - 2]}", "the same agent twice")
-            ids_of.append((i, ids))
-        sender_rule(items, key_agent)
-        for i, ids in ids_of:
-            if items[5] in ids:
-                raise Rejected(f"bad-field:{fields[i - 2]}", f"agent {items[5]} lists itself")
-
-    return with_agent_lists
-
-
-# ---------------------------------------------------------------- the registry of kinds
-
-class Kind(NamedTuple):
-    """How one message class goes on the wire."""
-
-    tag: str
-    fields: tuple[str, ...]  # the class's, in wire order
-    head: tuple[int, str]  # the items before the fields: the version and the tag
-    decoder: msgspec.msgpack.Decoder  # of its whole wire array
-    rules: Callable[[tuple, int | None], None]  # the rules between its fields, see _rules
-
-
-SCHEMA: dict[type, Kind] = {}
-"""Message class -> its :class:`Kind`."""
-
-_HEADER = ("run", "tick", "sender")
-
-
-def _message(tag: str, *, from_agent: bool):
-    """Register a NamedTuple as the message of kind ``tag``, sent by the agent it names (in its
-    ``agent`` field, right after the header) or else by the world; its annotations are its
-    schema."""
-    def register(cls: type) -> type:
-        hints = get_type_hints(cls, include_extras=True)
-        types = tuple(hints[name] for name in cls._fields)
-        lists = tuple(2 + i for i, t in enumerate(types)
-                      if AGENT_LIST in getattr(t, "__metadata__", ()))
-        if cls._fields[:3] != _HEADER or (from_agent or lists) and cls._fields[3] != "agent":
-            raise TypeError(f"{cls.__name__} must start with {_HEADER}, then agent if it names "
-                            "one")
-        decoder = msgspec.msgpack.Decoder(tuple[(Literal[PROTOCOL_VERSION], Literal[tag], *types)])
-        rules = _rules(tag, cls._fields, from_agent, lists)
-        SCHEMA[cls] = Kind(tag, cls._fields, (PROTOCOL_VERSION, tag), decoder, rules)
-        return cls
-    return register
-
-
 # ---------------------------------------------------------------- the messages
 
-@_message("obs", from_agent=False)
-class Observation(NamedTuple):
-    """World -> one agent, each tick: where it is, what it sees, how its previous action went."""
+class Message(msgspec.Struct, array_like=True, frozen=True, forbid_unknown_fields=True, gc=False):
+    """What every message starts with. ``from_agent``: sent by the agent it names, else by the
+    world; ``agent_lists``: its fields of one entry per agent (:func:`agent_list`)."""
 
     run: Name
     tick: Count
     sender: Name
+
+    from_agent: ClassVar[bool] = False
+    agent_lists: ClassVar[tuple[str, ...]] = ()
+
+
+class AgentMessage(Message):
+    """A message of one agent: it names it right after the header."""
+
     agent: AgentId
+
+
+class Observation(AgentMessage, tag=tag("obs")):
+    """World -> one agent, each tick: where it is, what it sees, how its previous action went."""
+
     episode: Count
     step: Count
     position: Cell
@@ -267,22 +184,20 @@ class Observation(NamedTuple):
     updates: Updates = ()  # where the swarm shares one table
     settled: bool = False  # parked since an earlier tick: the world expects no intent (engine)
 
+    agent_lists = ("neighbours",)
 
-@_message("intent", from_agent=True)
-class Intent(NamedTuple):
+
+class Intent(AgentMessage, tag=tag("intent")):
     """Agent -> world and neighbours: its action at this tick (never changed once sent)."""
 
-    run: Name
-    tick: Count
-    sender: Name
-    agent: AgentId
     episode: Count
     action: Action
     record: Learned = ()  # where the swarm shares one table: this tick's learning record
 
+    from_agent = True
 
-@_message("answer", from_agent=True)
-class Answer(NamedTuple):
+
+class Answer(AgentMessage, tag=tag("answer")):
     """Agent -> a neighbour that asked for its intent: its action at this tick, and the actions
     of the higher-ranked agents it learned while negotiating (relayed: ``(agent, action)``).
 
@@ -290,30 +205,72 @@ class Answer(NamedTuple):
     (``agent.negotiation``); they are what those agents announced, which never changes.
     """
 
-    run: Name
-    tick: Count
-    sender: Name
-    agent: AgentId
     episode: Count
     action: Action
     relayed: Relayed
 
+    from_agent = True
+    agent_lists = ("relayed",)
 
-@_message("control", from_agent=False)
-class Control(NamedTuple):
+
+class Control(Message, tag=tag("control")):
     """World -> everyone: a command from CONTROL_COMMANDS."""
 
-    run: Name
-    tick: Count
-    sender: Name
     command: Command
 
 
-def _kind(cls) -> Kind:
-    try:
-        return SCHEMA[cls]
-    except (KeyError, TypeError):
-        raise TypeError(f"not a message class: {cls!r}") from None
+MESSAGES = (Observation, Intent, Answer, Control)
+
+
+def _head(cls: type) -> bytes:
+    """The bytes every message of ``cls`` starts with: its array's header, then its tag."""
+    items = 1 + len(cls.__struct_fields__)
+    header = bytes([0x90 + items]) if items < 16 else b"\xdc" + items.to_bytes(2, "big")
+    return header + msgspec.msgpack.encode(cls.__struct_config__.tag)
+
+
+def reading(kinds: tuple[type, ...]):
+    """How the codec reads ``kinds``: one decoder of them all (the tag, the first item, says
+    which), how each kind's payloads start as :func:`encode` writes them (its length and tag at
+    once), and each tag's kind."""
+    return (msgspec.msgpack.Decoder(Union[kinds]), {cls: _head(cls) for cls in kinds},
+            {cls.__struct_config__.tag: cls for cls in kinds})
+
+
+_DECODER, _HEADS, _TAGS = reading(MESSAGES)
+
+
+# ---------------------------------------------------------------- the rules between fields
+
+_AGENT_SENDERS = tuple(map(agent_sender, range(MAX_AGENTS)))  # looked up, not formatted
+
+
+def _check_rules(msg: Message, key_agent: int | None) -> None:
+    """The rules between the fields of a message whose every field is valid; ``key_agent`` is
+    the agent of the key it came on (or None). Raises Rejected."""
+    cls = type(msg)
+    lists = cls.agent_lists
+    if lists:
+        ids_of = []
+        for name in lists:
+            entries = getattr(msg, name)
+            ids = {entry[0] for entry in entries}
+            if len(ids) != len(entries):
+                raise Rejected(f"bad-field:{name}", "the same agent twice")
+            ids_of.append((name, ids))
+    if cls.from_agent:
+        agent = msg.agent
+        if msg.sender != _AGENT_SENDERS[agent]:
+            raise Rejected("forged-sender", f"agent {agent}'s {cls.__name__} sent by "
+                                            f"{msg.sender!r}")
+        if key_agent is not None and agent != key_agent:
+            raise Rejected("forged-sender", f"agent {agent}'s {cls.__name__} on {key_agent}'s "
+                                            "key")
+    elif msg.sender != WORLD_SENDER:
+        raise Rejected("forged-sender", f"{cls.__name__} sent by {msg.sender!r}")
+    for name, ids in ids_of if lists else ():
+        if msg.agent in ids:
+            raise Rejected(f"bad-field:{name}", f"agent {msg.agent} lists itself")
 
 
 # ---------------------------------------------------------------- parsing
@@ -323,8 +280,6 @@ _MAP_HEADS = frozenset({*range(0x80, 0x90), 0xDE, 0xDF})
 
 _UNTYPED = msgspec.msgpack.Decoder()
 _PLAIN = (int, float, bool, type(None))
-_ITEM = re.compile(r" - at `\$\[(\d+)\]")
-"""The top-level item a msgspec ValidationError names: `` - at `$[7]` `` or `` `$[7][0][2]` ``."""
 
 
 def _foreign(value) -> str | None:
@@ -348,9 +303,16 @@ def _foreign(value) -> str | None:
     return None
 
 
-def _rejection(data: bytes, kind: Kind, run_id: str, error: Exception) -> Rejected:
-    """Why the decoder of ``kind`` refused ``data``: the first rule broken, in the order of the
-    module docstring (the decoder stops at the first error it meets, which may come later)."""
+@functools.cache
+def _field_decoders(cls: type) -> tuple[tuple[str, msgspec.msgpack.Decoder], ...]:
+    """A decoder of each field of ``cls`` alone, in wire order: what names a bad item."""
+    hints = get_type_hints(cls, include_extras=True)
+    return tuple((name, msgspec.msgpack.Decoder(hints[name])) for name in cls.__struct_fields__)
+
+
+def _rejection(data: bytes, kind: type, run_id: str) -> Rejected | None:
+    """The first rule ``data`` breaks as a message of ``kind``, in the order of the module
+    docstring, read untyped and item by item; None if its items break none."""
     if data and data[0] in _MAP_HEADS:
         return Rejected("not-array", "top level is a map")
     try:
@@ -362,18 +324,22 @@ def _rejection(data: bytes, kind: Kind, run_id: str, error: Exception) -> Reject
         return Rejected("not-msgpack", f"{foreign} is not allowed")
     if type(items) is not list:
         return Rejected("not-array", f"top level is {type(items).__name__}")
-    if items and (type(items[0]) is not int or items[0] != PROTOCOL_VERSION):
-        return Rejected("bad-version", f"expected {PROTOCOL_VERSION}, got {items[0]!r}")
-    if len(items) > 1 and items[1] != kind.tag:
-        return Rejected("wrong-kind", f"expected {kind.tag!r}, got {items[1]!r}")
-    if len(items) != 2 + len(kind.fields):
-        return Rejected("wrong-length", f"expected {2 + len(kind.fields)} items, got {len(items)}")
-    if items[2] != run_id:
-        return Rejected("wrong-run", f"expected {run_id!r}, got {items[2]!r}")
-    item = _ITEM.search(str(error))
-    if item is None or not 3 <= int(item[1]) < len(items):  # not an error msgspec words so
-        return Rejected("decode-error", str(error))
-    return Rejected(f"bad-field:{kind.fields[int(item[1]) - 2]}", str(error))
+    expected = kind.__struct_config__.tag
+    if items and (type(items[0]) is not str or items[0] not in _TAGS):
+        return Rejected("bad-version", f"expected {expected!r}, got {items[0]!r}")
+    if items and items[0] != expected:
+        return Rejected("wrong-kind", f"expected {expected!r}, got {items[0]!r}")
+    fields = _field_decoders(kind)
+    if len(items) != 1 + len(fields):
+        return Rejected("wrong-length", f"expected {1 + len(fields)} items, got {len(items)}")
+    if items[1] != run_id:
+        return Rejected("wrong-run", f"expected {run_id!r}, got {items[1]!r}")
+    for (name, decoder), item in zip(fields, items[1:]):
+        try:
+            decoder.decode(_ENCODER.encode(item))
+        except msgspec.ValidationError as e:
+            return Rejected(f"bad-field:{name}", str(e))
+    return None
 
 
 _VIA_TO_BYTES: set[type] = set()
@@ -406,9 +372,6 @@ def _as_bytes(payload) -> bytes:
     return data
 
 
-_new = tuple.__new__
-
-
 def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None):
     """Decode and validate one message of class ``kind`` for run ``run_id``; raises Rejected.
 
@@ -416,20 +379,24 @@ def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None)
     parsed from the key an Intent arrived on: the intent must be that agent's own.
     """
     try:
-        info = SCHEMA[kind]
+        head = _HEADS[kind]
     except (KeyError, TypeError):
         raise TypeError(f"not a message class: {kind!r}") from None
     data = payload if type(payload) is bytes else _as_bytes(payload)
     if len(data) > MAX_PAYLOAD_BYTES:
         raise Rejected("oversize", f"{len(data)} bytes")
     try:
-        items = info.decoder.decode(data)
-    except msgspec.DecodeError as error:  # ValidationError is one too
-        raise _rejection(data, info, run_id, error) from None
-    if items[2] != run_id:
-        raise Rejected("wrong-run", f"expected {run_id!r}, got {items[2]!r}")
-    info.rules(items, key_agent)
-    return _new(kind, items[2:])  # kind(*items[2:]), without the call
+        msg = _DECODER.decode(data)
+    except msgspec.DecodeError:  # ValidationError is one too
+        raise _rejection(data, kind, run_id) or Rejected("decode-error", "") from None
+    if type(msg) is not kind or not data.startswith(head):  # another kind, or another length
+        rejected = _rejection(data, kind, run_id)  # (or a valid one in a longer msgpack form)
+        if rejected is not None:
+            raise rejected
+    if msg.run != run_id:
+        raise Rejected("wrong-run", f"expected {run_id!r}, got {msg.run!r}")
+    _check_rules(msg, key_agent)
+    return msg
 
 
 # ---------------------------------------------------------------- encoding
@@ -446,8 +413,7 @@ def _plain(value):
 _ENCODER = msgspec.msgpack.Encoder(enc_hook=_plain)
 
 
-_VALID_RUNS: set[str] = set()
-"""The run ids of the messages encoded so far (a few), checked once each."""
+_VALID_RUNS: set[str] = set()  # the run ids encoded so far (a few), checked once each
 
 
 def _check_run(run) -> None:
@@ -460,11 +426,11 @@ def _check_run(run) -> None:
     _VALID_RUNS.add(run)
 
 
-def _unpackable(kind: Kind, msg: tuple) -> str:
+def _unpackable(msg: Message) -> str:
     """The first field of ``msg`` msgpack cannot carry (some field could not be packed)."""
-    for name, value in zip(kind.fields, msg):
+    for name in msg.__struct_fields__:
         try:
-            _ENCODER.encode(value)
+            _ENCODER.encode(getattr(msg, name))
         except (TypeError, ValueError, OverflowError, msgspec.EncodeError):
             return name
     return "?"
@@ -473,21 +439,20 @@ def _unpackable(kind: Kind, msg: tuple) -> str:
 def encode(msg) -> bytes:
     """msgpack bytes of a message, unchecked beyond what msgpack can carry (the receiver parses
     them); raises Rejected (a ValueError) for a field msgpack cannot pack or a bad run id."""
-    kind = SCHEMA.get(type(msg))
-    if kind is None or len(msg) != len(kind.fields):  # the latter only tuple.__new__ can make
+    if type(msg) not in _HEADS:
         raise TypeError(f"not a message: {msg!r:.100}")
-    run = msg[0]
+    run = msg.run
     if type(run) is not str or run not in _VALID_RUNS:
         _check_run(run)
     try:
-        return _ENCODER.encode(kind.head + msg)
+        return _ENCODER.encode(msg)
     except (TypeError, ValueError, OverflowError, msgspec.EncodeError) as error:  # not packable
-        raise Rejected(f"bad-field:{_unpackable(kind, msg)}", str(error)) from None
+        raise Rejected(f"bad-field:{_unpackable(msg)}", str(error)) from None
 
 
 def to_wire(msg) -> list:
-    """The validated wire array of a message (what :func:`encode` packs, as plain values)."""
-    return list(SCHEMA[type(msg)].decoder.decode(encode(msg)))
+    """The wire array of a message (what :func:`encode` packs), as plain values."""
+    return _UNTYPED.decode(encode(msg))
 
 
 # ---------------------------------------------------------------- receiving
@@ -528,7 +493,8 @@ class Inbox:
         except Rejected as e:
             return self.reject(e.reason, f"{kind.__name__}: {e.detail}")
         except Exception as e:  # parse raises only Rejected for any payload; this guards the loop
-            _kind(kind)  # but a wrong class is a bug in the caller, not bad input: raised
+            if not isinstance(kind, type) or kind not in _HEADS:  # a bug in the caller: raised
+                raise
             return self.reject("decode-error", f"{kind.__name__}: {type(e).__name__}: {e}")
         self.accepted += 1
         return msg

@@ -3,7 +3,7 @@
 Two of them, for two questions. ``sim.swarm`` (with ``sim.runs`` and ``sim.oracle``) steps the
 world and every agent's learner inside the compiled kernel, many seeds and options at once: the
 sweeps and the experiments run on it. ``sim.distributed`` runs the very protocol machines that run
-over Zenoh (``agent.protocol``, ``world.protocol``) over a simulated network (``sim.network``) in
+over Zenoh (``agent.machine``, ``world.machine``) over a simulated network (``sim.network``) in
 virtual time: every effect one of them produces is carried to the others with a seeded latency,
 and the network injects drops, duplicates, reordering, partitions, stalls (a process that stops
 answering for a while) and crashes with a restart from the last checkpoint. One seed gives one

@@ -5,9 +5,11 @@ world, asks to its neighbours as queries and their replies back, checkpoints to 
 
 from dataclasses import dataclass
 
+import msgspec
+
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.agent.machine import AgentMachine
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.machines.effects import (
     Ask, Checkpoint, EndQuery, Reply, ReplyError, SendIntent, Stopped,
@@ -51,7 +53,7 @@ class AgentProcesses:
         if resume:
             saved = self.saved[i] if episode is None else (episode, self.saved_at[i][episode])
             self.checker.restarted(i, resumed, saved)
-        self.protocols[i] = AgentProtocol(i, c, brain, net.now)
+        self.protocols[i] = AgentMachine(i, c, brain, net.now)
         net.send_reliable(a, self.world, self._tokens_to_world, [i], True)
         present = []
         for j, b in enumerate(self.agents):
@@ -98,7 +100,7 @@ class AgentProcesses:
                 intent, payload = effect.intent, effect.payload
                 self.checker.announced(i, intent.tick, intent.action, (), "intent")
                 if intent.record and self.forging.get(i) == a.incarnation:
-                    intent = intent._replace(record=(forged(intent.record[0]),))
+                    intent = msgspec.structs.replace(intent, record=(forged(intent.record[0]),))
                     payload = encode(intent)
                     self.checker.forged(i, intent.tick, intent.record[0])
                 net.send(a, self.world, self._intent_in, self.intent_keys[i], payload, i,

@@ -22,9 +22,11 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import msgspec
+
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.agent.machine import AgentMachine
 from nnql_swarm.protocol import keys
 from nnql_swarm.sim.agent_processes import START_SPREAD_S, AgentProcesses, Query
 from nnql_swarm.sim.checks import Checker
@@ -34,7 +36,7 @@ from nnql_swarm.sim.schedule import Fault, Schedule, schedule_rng
 from nnql_swarm.sim.world_process import WorldProcess
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.world.metrics import EpisodeWriter
-from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.machine import WorldMachine
 
 VIRTUAL_LIMIT_S = 3600.0
 """A run still going after this much virtual time did not end."""
@@ -76,8 +78,8 @@ class SimSwarm(WorldProcess, AgentProcesses, Faults):
         self.world = Process("world")
         self.agents = [Process(f"agent-{i}") for i in range(n)]
         self.processes = {p.name: p for p in (self.world, *self.agents)}
-        self.world_protocol: WorldProtocol | None = None
-        self.protocols: list[AgentProtocol | None] = [None] * n
+        self.world_protocol: WorldMachine | None = None
+        self.protocols: list[AgentMachine | None] = [None] * n
         self.final_brains: list[AgentBrain | None] = [None] * n
         self.era = -1
         self.rows: list[dict] = []

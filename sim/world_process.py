@@ -5,7 +5,7 @@ checks. A part of ``sim.distributed.SimSwarm``, whose state it shares."""
 from nnql_swarm.machines.effects import Finished, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
-from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.machine import WorldMachine
 
 
 class WorldProcess:
@@ -16,7 +16,7 @@ class WorldProcess:
         w.incarnation += 1
         w.alive, w.stalled_until, w.waiting, w.timer_at = True, 0.0, [], None
         self.era += 1
-        self.world_protocol = WorldProtocol(self.config, net.now, first_episode, first_tick,
+        self.world_protocol = WorldMachine(self.config, net.now, first_episode, first_tick,
                                             table=table)
         for i, a in enumerate(self.agents):
             if a.alive:

@@ -1,5 +1,5 @@
 """The agent process's adapter over a real (unconnected) Zenoh session: what it adds to the
-protocol (tests/test_agent_protocol.py) is carrying out effects and keeping bugs visible."""
+protocol (tests/test_agent_machine.py) is carrying out effects and keeping bugs visible."""
 
 import threading
 from types import SimpleNamespace

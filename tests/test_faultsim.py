@@ -12,11 +12,12 @@ import time
 from collections import Counter
 from dataclasses import replace
 
+import msgspec
 import numpy as np
 import pytest
 
 from nnql_swarm.agent import checkpoint
-from nnql_swarm.agent.protocol import AgentProtocol
+from nnql_swarm.agent.machine import AgentMachine
 from nnql_swarm.launch import faultsim
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.sim.inprocess import run_in_process
@@ -203,17 +204,17 @@ def test_one_seed_gives_one_history():
 
 def test_a_broken_protocol_is_caught_and_reported_with_the_seed_that_reproduces_it(
         monkeypatch, capsys):
-    decide = AgentProtocol._decide
+    decide = AgentMachine._decide
 
     def forgetful(self, obs, answers):  # a bug: an agent relays a wrong intent now and then
         decide(self, obs, answers)
         answer = self.decided_answer
         if answer.relayed and obs.tick % 3 == 2:
             (j, action), *rest = answer.relayed
-            wrong = answer._replace(relayed=((j, (action + 1) % 5), *rest))
+            wrong = msgspec.structs.replace(answer, relayed=((j, (action + 1) % 5), *rest))
             self.decided_answer, self.decided_payload = wrong, encode(wrong)
 
-    monkeypatch.setattr(AgentProtocol, "_decide", forgetful)
+    monkeypatch.setattr(AgentMachine, "_decide", forgetful)
     seed = next(s for s in range(200) if faultsim.check_schedule(s, 8).failures)
     first, again = faultsim.check_schedule(seed, 8), faultsim.check_schedule(seed, 8)
     assert first == again and "intent changed" in first.failures[0]

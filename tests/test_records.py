@@ -5,6 +5,7 @@ then equals the one of a run in which its records were never sent."""
 
 from dataclasses import replace
 
+import msgspec
 import pytest
 
 from nnql_swarm.learning.fields import (
@@ -191,7 +192,7 @@ def _without_records_when_forging(monkeypatch) -> None:
             for k, effect in enumerate(out):
                 intent = getattr(effect, "intent", None)
                 if intent is not None and intent.record:
-                    intent = intent._replace(record=())
+                    intent = msgspec.structs.replace(intent, record=())
                     out[k] = effect._replace(intent=intent, payload=encode(intent))
         original(sim, i, out)
 

@@ -44,9 +44,9 @@ def forged_payloads(agent: int) -> dict[str, list[bytes]]:
     wrong_types.append(msgpack.packb({"v": 1, "k": "intent", "r": RUN_ID, "t": 1}))  # version 1
 
     def mutated(msg, **changes) -> bytes:
-        """The wire array of ``msg`` with some items changed: ``version``, ``kind`` or fields."""
+        """The wire array of ``msg`` with some items changed: ``tag`` or fields."""
         wire = to_wire(msg)
-        names = ("version", "kind", *type(msg)._fields)
+        names = ("tag", *type(msg).__struct_fields__)
         for name, value in changes.items():
             wire[names.index(name)] = value
         return msgpack.packb(wire)
@@ -58,7 +58,7 @@ def forged_payloads(agent: int) -> dict[str, list[bytes]]:
         mutated(obs, tick=10**12),  # future tick
         mutated(obs, agent=(agent + 1) % AGENTS),  # someone else's observation
         mutated(obs, position=[True, 2]), mutated(obs, reward_ds=float("nan")),
-        mutated(obs, version=99), mutated(obs, neighbours=[[agent, 1, 1]]),
+        mutated(obs, tag="obs/99"), mutated(obs, neighbours=[[agent, 1, 1]]),
         msgpack.packb(to_wire(obs)[:-1]), msgpack.packb([*to_wire(obs), 0]),  # wrong lengths
     ]
     bad_intents = [
@@ -67,7 +67,7 @@ def forged_payloads(agent: int) -> dict[str, list[bytes]]:
                 sender=agent_sender((agent + 1) % AGENTS)),  # on the wrong key
         mutated(intent, run="another-run"),
         mutated(intent, tick=0), mutated(intent, tick=10**12),  # stale and future ticks
-        mutated(intent, action=7), mutated(intent, action=True), mutated(intent, kind="obs"),
+        mutated(intent, action=7), mutated(intent, action=True), mutated(intent, tag="obs/7"),
         msgpack.packb(to_wire(intent)[:-1]),  # wrong length
         encode(shutdown),
     ]

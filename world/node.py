@@ -1,6 +1,6 @@
-"""The world process: ``world.protocol.WorldProtocol`` over a Zenoh session.
+"""The world process: ``world.machine.WorldMachine`` over a Zenoh session.
 
-The protocol keeps the clock (when a tick opens and closes, what goes to whom); this adapter
+The machine keeps the clock (when a tick opens and closes, what goes to whom); this adapter
 feeds it the intents and liveliness changes Zenoh delivers, with the time, and carries out its
 effects: publish each observation on ``world/obs/<id>`` and the control messages, hand each
 closed tick to ``on_tick`` (the launcher records it to Rerun there), write each episode's row
@@ -8,13 +8,13 @@ to ``episodes.csv`` (and, where the agents share one table, its checkpoint first
 world starts from the shared table of its checkpoint (``world.checkpoint``), which whoever starts
 it reads (``WorldOptions.table``).
 
-Threads, in three sentences. Every input reaches the protocol under the node's one lock, and its
+Threads, in three sentences. Every input reaches the machine under the node's one lock, and its
 effects are carried out right there, in order, before the lock is let go, except the episode
 rows: they sync a file, so they go to the main thread through its queue, in order. Intents are
 handled on the thread Zenoh calls back on (its receiving thread, ``transport.runtime``), so the
 last intent of a tick closes it and sends the next observations at once, while liveliness
 changes are only queued there, because Zenoh calls those callbacks holding a lock of its own.
-The main thread handles that queue (rows, liveliness) and the protocol's timers, sleeping on the
+The main thread handles that queue (rows, liveliness) and the machine's timers, sleeping on the
 queue until the next timer is due, at most ``transport.adapter.POLL_S``.
 """
 
@@ -43,7 +43,7 @@ from nnql_swarm.transport.settings import (
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
-from nnql_swarm.world.protocol import WorldProtocol
+from nnql_swarm.world.machine import WorldMachine
 from nnql_swarm.world.shared_table import SharedState
 
 log = logging.getLogger("nnql.world")
@@ -62,16 +62,16 @@ class WorldOptions:
     config: SwarmConfig
     transport: TransportSettings
     out_dir: Path
-    startup_timeout_s: float | None = None  # None: protocol.startup_timeout of the agents
+    startup_timeout_s: float | None = None  # None: world.machine.startup_timeout of the agents
     first_episode: int = 0
     first_tick: int = 0
     table: SharedState | None = None  # the shared state a resumed run starts from
 
 
 class WorldNode(ProtocolAdapter):
-    """The protocol's adapter to one Zenoh session (see the module docstring)."""
+    """The machine's adapter to one Zenoh session (see the module docstring)."""
 
-    protocol: WorldProtocol
+    protocol: WorldMachine
 
     def __init__(self, options: WorldOptions, session: zenoh.Session,
                  on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> None:
@@ -81,7 +81,7 @@ class WorldNode(ProtocolAdapter):
         self.trace = trace.TickTrace.from_env("world")
         self.created_at = time.time()  # wall clock, for the stats' start-up: the protocol's is monotonic
         self.table_file = world_checkpoint.table_path(options.out_dir)
-        self.protocol = WorldProtocol(self.config, time.monotonic(), options.first_episode,
+        self.protocol = WorldMachine(self.config, time.monotonic(), options.first_episode,
                                       options.first_tick, options.startup_timeout_s, self.trace,
                                       options.table)
         self.events: queue.SimpleQueue = queue.SimpleQueue()

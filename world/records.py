@@ -34,6 +34,8 @@ so a record costs one reading of its neighbours and one ``complete``
 
 from dataclasses import dataclass
 
+import msgspec
+
 from nnql_swarm.learning.fields import (
     DS_GOAL, LF_FIELDS, LP_DS_REWARD, LP_DS_STATE, LP_READING, LS_ACTION, LS_COUNT, LS_GOAL,
     LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_X, LS_Y, NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y,
@@ -71,7 +73,7 @@ class Decision:
 def _only(obs: Observation, neighbours) -> Observation:
     """``obs`` with only ``neighbours`` in view: the rows of the others are not needed (each
     neighbour's row is its own), and building them is most of a check's cost."""
-    return obs._replace(neighbours=tuple(neighbours))
+    return msgspec.structs.replace(obs, neighbours=tuple(neighbours))
 
 
 def _stops(obs: Observation) -> bool:

@@ -1,33 +1,41 @@
 """The world's side of the swarm protocol, pure: the lockstep clock as inputs in, effects out.
 
 No sockets, no threads, no clock reads, no files: every input carries its time ``now`` and
-returns the effects it causes (``machines.effects``), in order; :meth:`WorldProtocol.timer` is
-when it next wants :meth:`WorldProtocol.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
+returns the effects it causes (``machines.effects``), in order; :meth:`WorldMachine.timer` is
+when it next wants :meth:`WorldMachine.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
 over a simulated network in virtual time.
 
-It waits for every agent's liveliness token (at most ``startup_timeout_s``), then, per tick: sends
-every agent its observation (but the settled ones: ``world.engine``), in rank order (the first to
-decide first); collects intents until every live agent that is not settled (parked on its goal since
-an earlier tick, where that takes it out of the negotiation: ``world.engine``) has answered or the
-tick deadline passes (a missing intent counts as STAY and as a missed intent; a settled agent stays,
-and its intent, should one come with a learning record, is taken too); applies the tick with
-``world.engine``; sends the next observations at once; then reports the tick
-(:class:`~machines.effects.TickClosed`) and, at an episode's end, its row
-(:class:`~machines.effects.WriteRow`). A dead agent costs nothing, a stalled one at most the
-deadline. A world started at ``first_episode`` / ``first_tick`` continues a run (``--resume``); one
-started after the last episode only tells the agents still running to stop. A completed run tells
-its agents to stop until every live one has left. Where the agents share one table, an agent that
-comes back after it left, and every agent of a resumed world, is sent the world's whole table
-(``SwarmWorld.resync``) from its first intent on (by then it surely hears its observations): its
-copy may be an older checkpoint's. Until that intent came it is never settled. Each learning
-record is checked against the transition the world saw its sender make (``world.records``), as
-soon as every intent the sender may have decided with is in, or when the tick closes: one that
-is not its sender's own (``forged-record``) is refused, and so are that agent's later records
-(``barred-record``) until its liveliness token comes back; one without the sender's decision of
-the tick before to check it against (``unchecked-record``) is refused too. Its intent counts
-either way.
+Theory of operation. The machine is in one :class:`Phase` at a time, moved only by
+:data:`TRANSITIONS` (``machines.phases``):
+
+- ``STARTING``: it waits for every agent's liveliness token (at most ``startup_timeout_s``; then
+  it is ``DONE``, the run failed).
+- ``TICK_OPEN``: it has sent every agent its observation of the tick (but the settled ones:
+  ``world.engine``), in rank order (the first to decide first), and collects intents until every
+  live agent that is not settled (parked on its goal since an earlier tick, where that takes it
+  out of the negotiation) has answered or the tick deadline passes (a missing intent counts as
+  STAY and as a missed intent; a settled agent stays, and its intent, should one come with a
+  learning record, is taken too). Then it applies the tick with ``world.engine``, sends the next
+  observations at once, and reports the tick (:class:`~machines.effects.TickClosed`) and, at an
+  episode's end, its row (:class:`~machines.effects.WriteRow`). A dead agent costs nothing, a
+  stalled one at most the deadline.
+- ``CLOSING``: the run is complete; it tells its agents to stop until every live one has left.
+- ``DONE``: inputs do nothing.
+
+A world started at ``first_episode`` / ``first_tick`` continues a run (``--resume``); one started
+after the last episode is ``CLOSING`` from the start, and only tells the agents still running to
+stop. Where the agents share one table, an agent that comes back after it left, and every agent
+of a resumed world, is sent the world's whole table (``SwarmWorld.resync``) from its first
+intent on (by then it surely hears its observations): its copy may be an older checkpoint's.
+Until that intent came it is never settled. Each learning record is checked against the
+transition the world saw its sender make (``world.records``), as soon as every intent the sender
+may have decided with is in, or when the tick closes: one that is not its sender's own
+(``forged-record``) is refused, and so are that agent's later records (``barred-record``) until
+its liveliness token comes back; one without the sender's decision of the tick before to check
+it against (``unchecked-record``) is refused too. Its intent counts either way.
 """
 
+import enum
 import logging
 
 from nnql_swarm.protocol import keys
@@ -35,6 +43,7 @@ from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import START_S_PER_AGENT, SwarmConfig
 from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
+from nnql_swarm.machines.phases import EffectLog, Machine, an_input
 from nnql_swarm.machines.trace import CLOSE, TickTrace
 from nnql_swarm.world.engine import SwarmWorld
 from nnql_swarm.world.records import BARRED, FORGED, UNCHECKED, Decision, RecordCheck, decides
@@ -52,27 +61,48 @@ SHUTDOWN_REPEAT_S = 0.2
 """A world that completed its run tells its agents to stop up to :data:`SHUTDOWN_TRIES` times,
 this far apart, until every live one has left: a shutdown lost on the way would leave an agent
 waiting for a world that never comes back. Tries, not a time limit: a world stalled meanwhile
-still makes them all (faultsim seed 9563)."""
+still makes them all."""
 SHUTDOWN_QUIET_S = 0.1
 """With no live agent left, the world still waits this long after the last liveliness change
 before it ends: a world that was stalled handles what queued meanwhile all at once, and an
-agent that came up in the meantime is told too (faultsim seed 9582)."""
+agent that came up in the meantime is told too."""
 
 _NO_TRACE = TickTrace("world", None)
 
 
-class _EffectLog:
-    """A logger whose lines become Log effects of the protocol's current input (for ``Inbox``)."""
+class Phase(enum.Enum):
+    """Where the world is in its run (see the module docstring)."""
 
-    def __init__(self, owner) -> None:
-        self.owner = owner
+    STARTING = "waiting for every agent to come alive"
+    TICK_OPEN = "collecting the open tick's intents"
+    CLOSING = "the run complete: telling the agents to leave"
+    DONE = "done"
 
-    def warning(self, message: str, *args) -> None:
-        self.owner._out.append(Log(logging.WARNING, message, args))
+
+class Event(enum.Enum):
+    """What moves the world from one phase to another."""
+
+    STARTED = "every agent alive: the first tick opens"
+    TICK_CLOSED = "a tick applied: the next one opens"
+    COMPLETE = "the run's last tick applied, or nothing left to play"
+    FINISH = "the end: the agents left, time ran out, or the process is stopping"
 
 
-class WorldProtocol:
+TRANSITIONS = {
+    (Phase.STARTING, Event.STARTED): Phase.TICK_OPEN,
+    (Phase.STARTING, Event.COMPLETE): Phase.CLOSING,
+    (Phase.TICK_OPEN, Event.TICK_CLOSED): Phase.TICK_OPEN,
+    (Phase.TICK_OPEN, Event.COMPLETE): Phase.CLOSING,
+    **{(phase, Event.FINISH): Phase.DONE for phase in Phase if phase is not Phase.DONE},
+}
+"""Every move the world's machine makes: ``(phase, event) -> next phase``."""
+
+
+class WorldMachine(Machine):
     """The lockstep world of a run (see the module docstring)."""
+
+    TRANSITIONS = TRANSITIONS
+    FINAL = Phase.DONE
 
     def __init__(self, config: SwarmConfig, now: float, first_episode: int = 0,
                  first_tick: int = 0, startup_timeout_s: float | None = None,
@@ -83,28 +113,26 @@ class WorldProtocol:
         self.world = SwarmWorld(config, first_episode, first_tick, table)
         self.trace = trace
         self._out: list = []
-        self.inbox = Inbox(config.run_id, _EffectLog(self))
+        self.inbox = Inbox(config.run_id, EffectLog(self))
         self.alive: set[int] = set()
         self.awaited: set[int] = set()  # the live agents whose intent the open tick still awaits
         self.joined: set[int] = set()  # every agent seen alive once
         self.to_resync: set[int] = set()  # to be sent the whole table from their next intent
         self.resumed = first_episode > 0 or first_tick > 0
-        self.started = False
+        self.phase = Phase.STARTING
         self.startup_timeout_s = startup_timeout_s or startup_timeout(config.n_agents)
         self.startup_by = now + self.startup_timeout_s
         self.created = now
         self.startup_s: float | None = None  # until every agent was alive
-        self.done = False
         self.completed = False
-        self.closing = False  # completed: telling the agents to leave
         self.shutdowns_left = SHUTDOWN_TRIES
         self.leave_by = 0.0  # with no live agent, done from then on
         self.next_shutdown = 0.0
         if first_episode >= config.episodes:  # resumed after the last row: only the goodbyes
-            self.started = self.closing = True
+            self.phase = Phase.CLOSING
             self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
             self.next_shutdown = now
-        self.actions: list[int | None] | None = None  # the open tick's intents, by agent
+        self.actions: list[int | None] = []  # the open tick's intents, by agent
         self.heard: set[int] = set()  # the agents whose intent for the open tick came
         self.learned: dict[int, tuple] = {}  # the accepted learning records that came with them
         self.tick_start = 0.0
@@ -124,40 +152,36 @@ class WorldProtocol:
 
     # Inputs. Each returns the effects it causes, in the order they must be carried out.
 
-    def on_liveliness(self, key: str, alive: bool, now: float) -> list:
+    @an_input
+    def on_liveliness(self, key: str, alive: bool, now: float) -> None:
         """An agent's liveliness token (``alive/agent/<id>``) appeared or went."""
-        out = self._out = []
-        if self.done:
-            return out
+        out, phase = self._out, self.phase
         agent = keys.agent_from_key(key, self.config.run_id)
         if agent is None or agent >= self.n:
             self.inbox.reject("unknown-agent", str(key))
-        elif self.closing:
+        elif phase is Phase.CLOSING:
             (self.alive.add if alive else self.alive.discard)(agent)
             self.leave_by = max(self.leave_by, now + SHUTDOWN_QUIET_S)
         elif alive:
             self.alive.add(agent)
-            if self.actions is not None and self.actions[agent] is None:
+            if phase is Phase.TICK_OPEN and self.actions[agent] is None:
                 self.awaited.add(agent)
             out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
-            if self.started and agent in self.joined:  # restarted: its copy is a checkpoint's
+            if phase is Phase.TICK_OPEN and agent in self.joined:  # restarted: from a checkpoint
                 self.to_resync.add(agent)
                 self.barred.discard(agent)  # a new process: its records are checked again
             self.joined.add(agent)
-            if not self.started and len(self.alive) == self.n:
+            if phase is Phase.STARTING and len(self.alive) == self.n:
                 self._start(now)
         else:
             self.alive.discard(agent)
             self.awaited.discard(agent)
             out.append(Log(logging.WARNING, "agent %d left", (agent,)))
             self._close_if_due(now)
-        return out
 
-    def on_intent(self, key: str, payload, now: float) -> list:
+    @an_input
+    def on_intent(self, key: str, payload, now: float) -> None:
         """A sample on ``agent/*/intent``: keep the intent; the last one of the tick closes it."""
-        out = self._out = []
-        if self.done:
-            return out
         key_agent = self.agent_of_key.get(key)
         if key_agent is None:
             key_agent = keys.agent_from_key(key, self.config.run_id)
@@ -165,11 +189,11 @@ class WorldProtocol:
                 self.agent_of_key[key] = key_agent  # at most one entry per agent
         intent = self.inbox.decode(payload, Intent, key_agent=key_agent)
         if intent is None:
-            return out
+            return
         tick, actions = self.world.tick, self.actions
         if intent.agent >= self.n:
             self.inbox.reject("unknown-agent", f"agent {intent.agent}")
-        elif actions is None or intent.tick < tick:
+        elif self.phase is not Phase.TICK_OPEN or intent.tick < tick:
             self.inbox.reject("stale-tick", f"intent for tick {intent.tick} at tick {tick}")
         elif intent.tick > tick:
             self.inbox.reject("future-tick", f"intent for tick {intent.tick} at tick {tick}")
@@ -188,7 +212,6 @@ class WorldProtocol:
                 self.to_resync.discard(intent.agent)
                 self.world.resync(intent.agent)
             self._close_if_due(now)
-        return out
 
     def _keep_record(self, agent: int, record: tuple) -> None:
         """Keep a learning record for the shared table, if it fits it (its intent counts
@@ -203,12 +226,11 @@ class WorldProtocol:
             if self.records is not None:
                 self._check_record(agent, False)
 
-    def on_timer(self, now: float) -> list:
+    @an_input
+    def on_timer(self, now: float) -> None:
         """Time has come to ``now``: a tick's deadline, or the start-up's."""
-        out = self._out = []
-        if self.done:
-            return out
-        if self.closing:
+        phase = self.phase
+        if phase is Phase.CLOSING:
             if not self.alive and now >= self.leave_by:
                 self._finish(True, None)
             elif now >= self.next_shutdown:
@@ -216,31 +238,31 @@ class WorldProtocol:
                     self._send_shutdown(now)
                 else:
                     self._finish(True, None)
-        elif not self.started:
+        elif phase is Phase.STARTING:
             if now >= self.startup_by:
                 missing = sorted(set(range(self.n)) - self.alive)
                 self._finish(False, f"agents {missing} did not come alive within "
                                     f"{self.startup_timeout_s:.0f} s")
         else:
             self._close_if_due(now)
-        return out
 
-    def stop(self, now: float) -> list:
+    @an_input
+    def stop(self, now: float) -> None:
         """The process is stopping (a signal): tell everyone and end."""
-        out = self._out = []
-        if not self.done:
-            self._finish(self.closing, None)
-        return out
+        self._finish(self.phase is Phase.CLOSING, None)
+
+    @property
+    def done(self) -> bool:
+        return self.phase is Phase.DONE
 
     def timer(self) -> float | None:
         """When :meth:`on_timer` is next due (None: no timer)."""
-        if self.done:
-            return None
-        if self.closing:
+        phase = self.phase
+        if phase is Phase.CLOSING:
             return self.next_shutdown if self.alive else min(self.next_shutdown, self.leave_by)
-        if not self.started:
+        if phase is Phase.STARTING:
             return self.startup_by
-        return self.tick_deadline if self.actions is not None else None
+        return self.tick_deadline if phase is Phase.TICK_OPEN else None
 
     def stats(self) -> dict:
         return {"completed": self.completed, "ticks": self.world.tick,
@@ -252,7 +274,6 @@ class WorldProtocol:
     # The clock.
 
     def _start(self, now: float) -> None:
-        self.started = True
         self.startup_s = now - self.created
         if self.resumed:  # agents that kept running learned past this world's checkpoint
             self.to_resync.update(range(self.n))
@@ -260,6 +281,7 @@ class WorldProtocol:
         if self.world.finished:
             self._close_run(now)
         else:
+            self._go(Event.STARTED)
             self._open_tick(now)
 
     def _open_tick(self, now: float) -> None:
@@ -290,7 +312,7 @@ class WorldProtocol:
 
     def _close_if_due(self, now: float) -> None:
         """Close the open tick if every live agent's intent is in or its deadline passed."""
-        if self.actions is not None and (now >= self.tick_deadline or not self.awaited):
+        if self.phase is Phase.TICK_OPEN and (now >= self.tick_deadline or not self.awaited):
             self._close_tick(now)
 
     def _close_tick(self, now: float) -> None:
@@ -300,8 +322,8 @@ class WorldProtocol:
         learned = self._checked_records() if self.records is not None else self.learned
         report = world.apply(self.actions, learned)
         self.slowest = max(self.slowest, now - self.tick_start)
-        self.actions = None
         if not world.finished:
+            self._go(Event.TICK_CLOSED)
             self._open_tick(now)
         if report.violations:
             out.append(Log(logging.ERROR, "tick %d broke the world's invariants: %s",
@@ -355,7 +377,8 @@ class WorldProtocol:
     def _close_run(self, now: float) -> None:
         """The run is complete: tell the agents until every live one has left (and
         :data:`SHUTDOWN_QUIET_S` passed), :data:`SHUTDOWN_TRIES` times at most."""
-        self.closing, self.leave_by = True, now + SHUTDOWN_QUIET_S
+        self._go(Event.COMPLETE)
+        self.leave_by = now + SHUTDOWN_QUIET_S
         self._send_shutdown(now)
 
     def _send_shutdown(self, now: float) -> None:
@@ -366,8 +389,8 @@ class WorldProtocol:
 
     def _finish(self, completed: bool, error: str | None) -> None:
         """The end: a completed run has told its agents already; otherwise tell them now."""
-        if not self.closing:
+        if self.phase is not Phase.CLOSING:
             self._send_shutdown(0.0)
-        self.done, self.completed = True, completed
-        self.actions = None
+        self._go(Event.FINISH)
+        self.completed = completed
         self._out.append(Finished(completed, error))

@@ -6,12 +6,15 @@ import msgpack
 import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.learning.fields import LS_PENDING
-from nnql_swarm.agent.protocol import PEER_WAIT_S, RESYNC_AFTER, AgentProtocol
+from nnql_swarm.agent.learner import LS_PENDING
+from nnql_swarm.agent.machine import (
+    PEER_WAIT_S, RESYNC_AFTER, TRANSITIONS, AgentMachine, Event, Phase,
+)
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.machines.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
-from nnql_swarm.world.protocol import STARTUP_TIMEOUT_S, WorldProtocol
+from nnql_swarm.machines.phases import PhaseError
+from nnql_swarm.world.machine import STARTUP_TIMEOUT_S, WorldMachine
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode, to_wire,
 )
@@ -32,12 +35,12 @@ def answer(tick: int, agent: int, action: int, relayed=()) -> bytes:
     return encode(Answer("proto", tick, agent_sender(agent), agent, 0, action, tuple(relayed)))
 
 
-def ready(agent: int = 0, config: SwarmConfig = CONFIG) -> AgentProtocol:
+def ready(agent: int = 0, config: SwarmConfig = CONFIG) -> AgentMachine:
     """A protocol that has seen every peer."""
-    protocol = AgentProtocol(agent, config, AgentBrain(agent, config), now=0.0)
+    protocol = AgentMachine(agent, config, AgentBrain(agent, config), now=0.0)
     for j in range(config.n_agents):
         protocol.on_liveliness(keys.alive_key(config.run_id, keys.ROLE_AGENT, j), True, 0.0)
-    assert protocol.ready
+    assert protocol.phase is Phase.IDLE
     return protocol
 
 
@@ -65,7 +68,7 @@ def test_ticks_must_follow_on_and_a_gap_is_crossed_only_by_a_run_of_observations
 
 
 def test_observations_wait_for_the_peers_then_are_handled_in_order():
-    protocol = AgentProtocol(0, CONFIG, AgentBrain(0, CONFIG), now=5.0)
+    protocol = AgentMachine(0, CONFIG, AgentBrain(0, CONFIG), now=5.0)
     assert protocol.timer() == 5.0 + PEER_WAIT_S
     assert protocol.on_observation(observation(0), 6.0) == []
     assert protocol.on_observation(observation(1), 6.0) == []
@@ -80,9 +83,9 @@ def test_the_wait_for_peers_grows_with_a_large_swarm():
     """Over a second per agent at start-up where that is longer than the fixed wait, as the world's
     wait for its agents: 128 spawned processes need about half a minute to come up."""
     large = SwarmConfig(run_id="proto", n_agents=128, width=45, height=45)
-    assert AgentProtocol(0, large, AgentBrain(0, large), now=5.0).timer() == 5.0 + 128 * 1.0
-    assert WorldProtocol(large, 5.0).timer() == 5.0 + 128 * 1.0
-    assert WorldProtocol(CONFIG, 5.0).timer() == 5.0 + STARTUP_TIMEOUT_S
+    assert AgentMachine(0, large, AgentBrain(0, large), now=5.0).timer() == 5.0 + 128 * 1.0
+    assert WorldMachine(large, 5.0).timer() == 5.0 + 128 * 1.0
+    assert WorldMachine(CONFIG, 5.0).timer() == 5.0 + STARTUP_TIMEOUT_S
 
 
 def test_an_agent_asks_and_decides_once_the_answer_is_in_or_the_time_is_up():
@@ -101,7 +104,7 @@ def test_an_agent_asks_and_decides_once_the_answer_is_in_or_the_time_is_up():
     # tick 3: agent 0 first again; no answer comes: the time-out decides
     protocol.on_observation(observation(2, agent=1, others=[(0, 2, 2)]), 10.3)
     protocol.on_observation(observation(3, agent=1, others=[(0, 2, 2)]), 10.4)
-    assert protocol.decided_tick == 2 and protocol.pending is not None
+    assert protocol.decided_tick == 2 and protocol.phase is Phase.NEGOTIATING
     assert protocol.on_timer(10.5) == []
     assert "SendIntent" in kinds(protocol.on_timer(protocol.timer()))
     assert protocol.decided_tick == 3
@@ -199,7 +202,7 @@ def test_a_standing_query_that_ends_mid_negotiation_is_replaced_by_a_direct_ask(
     [stream] = [a for a, open_ask in protocol.asks.items()
                 if open_ask.generation is not None and open_ask.agent == 0]
     effects = protocol.on_observation(observation(2, agent=1, others=others), 0.1)  # 0 first: waits
-    assert protocol.pending is not None and not any(isinstance(e, Ask) for e in effects)
+    assert protocol.phase is Phase.NEGOTIATING and not any(isinstance(e, Ask) for e in effects)
     assert not any(
         isinstance(e, Ask) for e in protocol.on_answer(stream, answer(1, 0, 2), 0.1))
     effects = protocol.on_ask_end(stream, 0.2)
@@ -212,8 +215,9 @@ def test_the_worlds_shutdown_stops_the_agent_and_finishes_its_queries():
     protocol.on_query(4, "tick=5;from=1", 0.0)
     protocol.on_query(5, "since=5;from=2", 0.0)
     wire = to_wire(Control("proto", 1, WORLD_SENDER, CONTROL_SHUTDOWN))
-    wire[4] = agent_sender(1)  # an agent sending the world's shutdown
-    assert kinds(protocol.on_control(msgpack.packb(wire), 0.0)) == [] and not protocol.stopped
+    wire[3] = agent_sender(1)  # an agent sending the world's shutdown
+    assert kinds(protocol.on_control(msgpack.packb(wire), 0.0)) == []
+    assert protocol.phase is Phase.IDLE
     effects = protocol.on_control(encode(Control("proto", 1, WORLD_SENDER, CONTROL_SHUTDOWN)), 0.0)
     assert [e for e in effects if not isinstance(e, Log)] == [EndQuery(4), EndQuery(5),
                                                               Stopped(by_world=True)]
@@ -248,9 +252,10 @@ def test_a_neighbour_that_is_gone_or_refuses_the_tick_is_waited_for_no_more():
     assert ask.agent == 1
     effects = protocol.on_ask_end(ask.ask, 0.001)  # its body is there, its queryable is not
     [missing] = [e for e in effects if isinstance(e, Ask)]  # so agent 0 is asked directly
-    assert missing.agent == 0 and protocol.pending is not None
+    assert missing.agent == 0 and protocol.phase is Phase.ASKING_MISSING
     effects = protocol.on_refusal(missing.ask, 0.002)  # and cannot answer that tick
     assert "SendIntent" in kinds(effects) and protocol.decided_tick == 0
+    assert protocol.phase is Phase.IDLE
 
 
 def test_shared_table_updates_are_written_and_entries_outside_the_tables_refused():
@@ -279,3 +284,21 @@ def test_a_token_of_an_agent_outside_the_run_is_rejected_and_never_asked():
     assert kinds(effects) == [] and protocol.inbox.rejections["unknown-agent"] == 1
     effects = protocol.on_observation(observation(0), 0.0)
     assert sorted(e.agent for e in effects if isinstance(e, Ask)) == [1, 2]
+
+
+def test_the_phases_move_only_as_the_transition_table_says():
+    """Every phase but the last can stop; only a negotiation can ask for the missing intents;
+    an event the table does not allow is a bug, raised, and leaves the phase as it was."""
+    assert {phase for phase, _ in TRANSITIONS} == set(Phase) - {Phase.STOPPED}
+    assert all(TRANSITIONS[phase, Event.STOP] is Phase.STOPPED for phase in Phase
+               if phase is not Phase.STOPPED)
+    assert [key for key, to in TRANSITIONS.items() if to is Phase.ASKING_MISSING] == [
+        (Phase.NEGOTIATING, Event.ANSWERS_IN)]
+    protocol = AgentMachine(0, CONFIG, AgentBrain(0, CONFIG), now=0.0)
+    assert protocol.phase is Phase.PEERS and protocol.timer() == PEER_WAIT_S
+    with pytest.raises(PhaseError, match="DECIDED in phase PEERS"):
+        protocol._go(Event.DECIDED)
+    assert protocol.phase is Phase.PEERS
+    protocol.stop(0.0)
+    assert protocol.phase is Phase.STOPPED and protocol.timer() is None
+    assert protocol.on_timer(PEER_WAIT_S) == [] and protocol.stop(1.0) == []

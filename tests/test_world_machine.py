@@ -11,16 +11,19 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
-from nnql_swarm.world.protocol import SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, WorldProtocol
+from nnql_swarm.world.machine import (
+    SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, TRANSITIONS, Event, Phase, WorldMachine,
+)
+from nnql_swarm.machines.phases import PhaseError
 
 CONFIG = SwarmConfig(run_id="wproto", n_agents=2, episodes=2, max_steps=3, tick_deadline_s=0.5)
 
 
-def alive(protocol: WorldProtocol, agent: int, now: float, up: bool = True) -> list:
+def alive(protocol: WorldMachine, agent: int, now: float, up: bool = True) -> list:
     return protocol.on_liveliness(keys.alive_key("wproto", keys.ROLE_AGENT, agent), up, now)
 
 
-def intent(protocol: WorldProtocol, agent: int, now: float, action: int = 4, tick=None,
+def intent(protocol: WorldMachine, agent: int, now: float, action: int = 4, tick=None,
            episode: int = 0) -> list:
     tick = protocol.world.tick if tick is None else tick
     payload = encode(Intent("wproto", tick, agent_sender(agent), agent, episode, action))
@@ -36,17 +39,17 @@ def believing(monkeypatch):
     """The world believes every record that fits the table: for the tests of how records are
     applied and spread, with records made up by hand (what the world checks of a record, and
     how: ``tests/test_records.py``)."""
-    monkeypatch.setattr(WorldProtocol, "_check_record", lambda protocol, agent, final: None)
+    monkeypatch.setattr(WorldMachine, "_check_record", lambda protocol, agent, final: None)
 
 
-def started(now: float = 0.0) -> tuple[WorldProtocol, list]:
-    protocol = WorldProtocol(CONFIG, now)
+def started(now: float = 0.0) -> tuple[WorldMachine, list]:
+    protocol = WorldMachine(CONFIG, now)
     alive(protocol, 0, now)
     return protocol, alive(protocol, 1, now)
 
 
 def test_the_first_tick_opens_once_every_agent_is_alive_in_rank_order():
-    protocol = WorldProtocol(CONFIG, 0.0)
+    protocol = WorldMachine(CONFIG, 0.0)
     assert kinds(alive(protocol, 1, 0.1)) == [] and protocol.timer() == 60.0
     effects = alive(protocol, 0, 0.2)
     [batch] = [e for e in effects if isinstance(e, SendObservations)]
@@ -56,7 +59,7 @@ def test_the_first_tick_opens_once_every_agent_is_alive_in_rank_order():
 
 
 def test_an_agent_that_never_comes_alive_ends_the_start_up_with_a_reason():
-    protocol = WorldProtocol(CONFIG, 0.0, startup_timeout_s=5.0)
+    protocol = WorldMachine(CONFIG, 0.0, startup_timeout_s=5.0)
     alive(protocol, 0, 1.0)
     effects = protocol.on_timer(5.0)
     assert kinds(effects) == ["SendControl", "Finished"]
@@ -105,7 +108,7 @@ def test_a_completed_run_tells_its_agents_until_they_leave():
         now += 0.01
         effects = intent(protocol, 0, now, episode=protocol.world.episode) + intent(
             protocol, 1, now, episode=protocol.world.episode)
-    assert protocol.world.finished and not protocol.done
+    assert protocol.world.finished and protocol.phase is Phase.CLOSING
     [control] = [e for e in effects if isinstance(e, SendControl)]
     assert control.control.command == CONTROL_SHUTDOWN
     assert kinds(protocol.on_timer(now + SHUTDOWN_REPEAT_S)) == ["SendControl"]
@@ -113,7 +116,7 @@ def test_a_completed_run_tells_its_agents_until_they_leave():
     assert kinds(alive(protocol, 1, now + 0.4, up=False)) == []
     assert "Finished" not in kinds(protocol.on_timer(now + 0.4 + SHUTDOWN_QUIET_S / 2))
     assert protocol.on_timer(now + 0.4 + SHUTDOWN_QUIET_S)[-1] == Finished(True, None)
-    assert protocol.done and protocol.completed and protocol.timer() is None
+    assert protocol.phase is Phase.DONE and protocol.completed and protocol.timer() is None
 
 
 def test_an_agent_that_comes_up_while_the_others_leave_is_told_too():
@@ -160,16 +163,16 @@ def test_bad_intents_are_counted_never_raised():
 
 
 def test_a_world_resumed_after_the_last_episode_only_tells_the_agents_to_stop():
-    """A world resumed after the last episode (it crashed while telling its agents the run was
-    over, and finds every row written) tells the agents still running to stop."""
-    protocol = WorldProtocol(CONFIG, 5.0, first_episode=CONFIG.episodes, first_tick=8)
+    """Seed 5382 of launch/faultsim.py: the world crashed while telling its agents the run was
+    over, and the resumed world, finding every row written, ended without telling them."""
+    protocol = WorldMachine(CONFIG, 5.0, first_episode=CONFIG.episodes, first_tick=8)
     assert protocol.timer() == 5.0
     assert kinds(protocol.on_timer(5.0)) == ["SendControl"]
     assert kinds(alive(protocol, 0, 5.01)) == []  # an agent still running, from the history
     assert kinds(protocol.on_timer(protocol.timer())) == ["SendControl"]
     alive(protocol, 0, 5.3, up=False)
     assert protocol.on_timer(protocol.timer())[-1] == Finished(True, None)
-    nobody = WorldProtocol(CONFIG, 0.0, first_episode=CONFIG.episodes)
+    nobody = WorldMachine(CONFIG, 0.0, first_episode=CONFIG.episodes)
     effects = nobody.on_timer(0.0) + nobody.on_timer(nobody.timer())
     assert kinds(effects) == ["SendControl", "Finished"], "with nobody left it ends at once"
 
@@ -218,7 +221,7 @@ def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_
     slice is written its copy equals the world's. Agent 0, which never left, gets no slice."""
     config = SwarmConfig(run_id="wproto", n_agents=2, episodes=4, max_steps=40,
                          tick_deadline_s=0.5)
-    protocol = WorldProtocol(config, 0.0)
+    protocol = WorldMachine(config, 0.0)
     alive(protocol, 0, 0.0)
     effects = alive(protocol, 1, 0.0)
     stale = Learner(config)
@@ -276,7 +279,7 @@ def test_a_record_the_world_saw_no_decision_for_is_refused_and_its_intent_counts
 
 
 def test_a_resumed_world_sends_every_agent_the_whole_table():
-    protocol = WorldProtocol(CONFIG, 0.0, first_episode=1, first_tick=4)
+    protocol = WorldMachine(CONFIG, 0.0, first_episode=1, first_tick=4)
     alive(protocol, 0, 0.0)
     alive(protocol, 1, 0.0)
     intent(protocol, 0, 0.1, episode=1)
@@ -305,7 +308,7 @@ def test_under_meet_a_settled_agent_is_neither_waited_for_nor_sent_observations(
     chain: it never settles, and every tick waits for it."""
     config = SwarmConfig(run_id="wproto", n_agents=2, episodes=1, max_steps=40,
                          tick_deadline_s=0.5, wait_rule=wait_rule)
-    protocol = WorldProtocol(config, 0.0)
+    protocol = WorldMachine(config, 0.0)
     alive(protocol, 0, 0.0)
     effects, now, seen = alive(protocol, 1, 0.0), 0.0, []
     while not protocol.world.finished:
@@ -408,3 +411,22 @@ def test_an_agent_being_resynchronised_is_never_quiet():
     world._sync_from_next.clear()
     [obs_0] = [o for o in world.observations_by_rank() if o.agent == 0]
     assert obs_0.settled and obs_0.updates, "its slice of the table goes with it"
+
+
+def test_the_phases_move_only_as_the_transition_table_says():
+    """Start, tick after tick, close, done: every phase but the last can end, only a start or a
+    closed tick opens one, and an event the table does not allow is a bug, raised."""
+    assert {phase for phase, _ in TRANSITIONS} == set(Phase) - {Phase.DONE}
+    assert [key for key, to in TRANSITIONS.items() if to is Phase.TICK_OPEN] == [
+        (Phase.STARTING, Event.STARTED), (Phase.TICK_OPEN, Event.TICK_CLOSED)]
+    protocol = WorldMachine(CONFIG, now=0.0)
+    assert protocol.phase is Phase.STARTING
+    with pytest.raises(PhaseError, match="TICK_CLOSED in phase STARTING"):
+        protocol._go(Event.TICK_CLOSED)
+    alive(protocol, 0, 0.1)
+    alive(protocol, 1, 0.1)
+    assert protocol.phase is Phase.TICK_OPEN and protocol.timer() == 0.1 + CONFIG.tick_deadline_s
+    assert kinds(protocol.stop(0.2))[-1] == "Finished" and protocol.phase is Phase.DONE
+    assert protocol.on_timer(9.0) == [] and protocol.stop(9.0) == [] and protocol.timer() is None
+    finished = WorldMachine(CONFIG, now=0.0, first_episode=CONFIG.episodes)
+    assert finished.phase is Phase.CLOSING  # resumed after the last row: only the goodbyes

@@ -1,64 +1,66 @@
 """One agent's side of the swarm protocol, pure: inputs in, effects (``machines.effects``) out.
 
 No sockets, no threads, no clock reads, no files. Every input carries the time ``now`` it
-happens at; every input returns the effects it causes, in order. :meth:`AgentProtocol.timer` is
-when the protocol next wants :meth:`AgentProtocol.on_timer`. ``agent.node`` runs it over Zenoh,
-``sim`` over a simulated network in virtual time.
+happens at and returns the effects it causes, in order; :meth:`AgentMachine.timer` is when it
+next wants :meth:`AgentMachine.on_timer`. ``agent.node`` runs it over Zenoh, ``sim`` over a
+simulated network in virtual time.
 
-Per tick: an observation comes in (:meth:`~AgentProtocol.on_observation`), in tick order; the
-agent learns the intents of the visible higher-ranked neighbours as ``agent.negotiation`` plans
-it: from the standing queries it keeps open on every other agent (``?since=T;from=<id>``),
-answered by each neighbour whose plan asks it, and, where no standing query is open yet, with
-one ask each (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked
-neighbour answered (or the negotiation timed out), it asks directly for any awaited intent that
-no answer brought; then it decides with what it knows, answers the standing and held queries it
-owes (the next in rank first), and sends its intent for the world, unless the observation says
-it is settled (parked on its goal since an earlier tick: the world needs no intent from it) and
-it has nothing learned to send. An announced intent never changes. At an episode's end it
-checkpoints before it sends the intent, so that no learned value is lost to a crash.
+Theory of operation. The machine is in one :class:`Phase` at a time, moved only by
+:data:`TRANSITIONS` (``machines.phases``):
 
-Once it has arrived, where settled agents are quiet (``SwarmConfig.quiet_settled``), the world
-skips its ticks until the episode's end tick or until it owes it a catch-up of the shared table
-(``world.engine``): within that episode, a later tick is not a gap.
+- ``PEERS``: until it has seen every other agent's liveliness token (or given up waiting, at
+  ``ready_by``), observations are kept in order, and handled once it is ``IDLE``.
+- ``IDLE``: waiting for an observation, in tick order. One whose decision awaits no intent (as
+  ``agent.negotiation`` plans it) is decided at once; otherwise the agent is ``NEGOTIATING``.
+- ``NEGOTIATING``: it learns the intents of the visible higher-ranked neighbours from the
+  standing queries it keeps open on every other agent (``?since=T;from=<id>``), answered by each
+  neighbour whose plan asks it, and, where no standing query is open yet, with one ask each
+  (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked neighbour
+  answered, refused, or the negotiation timed out, it asks directly for any awaited intent no
+  answer brought (``ASKING_MISSING``), then decides with what it knows and is ``IDLE`` again.
+- ``STOPPED``: the world said so, or the process is stopping; inputs do nothing.
+
+A decision answers the standing and held queries the agent owes (the next in rank first) and
+sends its intent for the world, unless the observation says it is settled (parked on its goal
+since an earlier tick: the world needs no intent from it) and it has nothing learned to send. An
+announced intent never changes. At an episode's end it checkpoints before it sends the intent,
+so that no learned value is lost to a crash. Queries for its intent are answered in every phase
+but ``STOPPED``: at once for a decided tick, else held until the decision. Once it has arrived,
+where settled agents are quiet (``SwarmConfig.quiet_settled``), the world skips its ticks until
+the episode's end tick or until it owes it a catch-up of the shared table (``world.engine``):
+within that episode, a later tick is not a gap.
 
 Faults it survives: an observation lost on the way (it follows the clock again after
 :data:`RESYNC_AFTER` observations in a row), an answer lost or late (the negotiation times out;
 the standing query is replaced, at once if it ends mid-negotiation), a neighbour that dies or
 refuses the tick (its ask ends unanswered, or with an error: it is waited for no more), a world
-that dies and
-comes back with its own clock (``--resume``: the agent starts afresh, and ignores whatever is
-still on its way from the world before), forged or malformed input (rejected and counted by
-reason, never raised). ``launch/faultsim.py`` runs it through thousands of seeded fault
-schedules (``sim``).
+that dies and comes back with its own clock (``--resume``: the agent starts afresh, and ignores
+whatever is still on its way from the world before), forged or malformed input (rejected and
+counted by reason, never raised). ``launch/faultsim.py`` runs it through thousands of seeded
+fault schedules (``sim``).
 """
 
+import enum
 import logging
 from dataclasses import dataclass, field
 
 from nnql_swarm.agent import negotiation
+from nnql_swarm.agent.answering import AHEAD_TICKS, QueryAnswering
 from nnql_swarm.learning import neighbours
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
-from nnql_swarm.protocol.config import (
-    NEGOTIATING_ALGOS, START_S_PER_AGENT, SwarmConfig, priority_rank,
-)
+from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, START_S_PER_AGENT, SwarmConfig
 from nnql_swarm.machines.effects import (
-    Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
+    Ask, Checkpoint, EndQuery, EpisodeEnded, Log, SendIntent, Stopped,
 )
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, Answer, Control, Inbox, Intent, Observation, agent_sender, encode,
 )
+from nnql_swarm.machines.phases import EffectLog, Machine, an_input, any_phase_input
 from nnql_swarm.machines.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
 
 RESYNC_AFTER = 3
 """Consecutive observations past a gap in the ticks after which an agent follows them."""
-
-MAX_HELD_QUERIES = 4 * 1024
-"""Queries for the coming tick held at once; legitimately at most one per other agent."""
-
-AHEAD_TICKS = 2
-"""How far past its last decision an agent holds queries and keeps answers: a neighbour that has
-decided this tick may ask for, or answer, the next one before this agent decides this one."""
 
 STANDING_QUERY_S = 600.0
 """Lifetime of a standing query; when it ends, the agent opens another after its next decision."""
@@ -73,24 +75,40 @@ _NOTHING = negotiation.TickIntents()
 _NO_TRACE = TickTrace("agent", None)
 
 
-class EffectLog:
-    """A logger whose lines become :class:`~machines.effects.Log` effects of the protocol's
-    current input (what ``Inbox`` is given, so that its rejections are effects too)."""
+class Phase(enum.Enum):
+    """Where an agent is in its run (see the module docstring)."""
 
-    def __init__(self, owner) -> None:
-        self.owner = owner
+    PEERS = "waiting to see every other agent"
+    IDLE = "waiting for an observation"
+    NEGOTIATING = "waiting for the answers of the neighbours asked"
+    ASKING_MISSING = "waiting for the awaited intents no answer brought, asked directly"
+    STOPPED = "stopped"
 
-    def log(self, level: int, message: str, *args) -> None:
-        self.owner._out.append(Log(level, message, args))
 
-    def info(self, message: str, *args) -> None:
-        self.log(logging.INFO, message, *args)
+class Event(enum.Enum):
+    """What moves an agent from one phase to another."""
 
-    def warning(self, message: str, *args) -> None:
-        self.log(logging.WARNING, message, *args)
+    READY = "every other agent seen, or the wait for them over"
+    AWAITS = "an observation whose decision waits for intents"
+    ANSWERS_IN = "every asked neighbour answered, refused, or time ran out"
+    DECIDED = "the awaited tick decided"
+    WORLD_LEFT = "the world left: a new one starts afresh"
+    STOP = "the world's shutdown, or the process stopping"
 
-    def error(self, message: str, *args) -> None:
-        self.log(logging.ERROR, message, *args)
+
+_WAITING = (Phase.NEGOTIATING, Phase.ASKING_MISSING)
+TRANSITIONS = {
+    (Phase.PEERS, Event.READY): Phase.IDLE,
+    (Phase.PEERS, Event.WORLD_LEFT): Phase.PEERS,
+    **{(phase, Event.AWAITS): Phase.NEGOTIATING for phase in (Phase.IDLE, *_WAITING)},
+    (Phase.NEGOTIATING, Event.ANSWERS_IN): Phase.ASKING_MISSING,
+    **{(phase, Event.DECIDED): Phase.IDLE for phase in _WAITING},
+    **{(phase, Event.WORLD_LEFT): Phase.IDLE for phase in (Phase.IDLE, *_WAITING)},
+    **{(phase, Event.STOP): Phase.STOPPED for phase in Phase if phase is not Phase.STOPPED},
+}
+"""Every move an agent's machine makes: ``(phase, event) -> next phase``. A new observation
+while waiting for intents (the world moved on, or the clock was followed again after a gap)
+starts a new negotiation."""
 
 
 @dataclass
@@ -108,7 +126,7 @@ class Pending:
     asks: list[int]
     deadline: float
     staying: dict[int, int]
-    missing: list[int] | None = None
+    missing: list[int] = field(default_factory=list)
     refused: set[int] = field(default_factory=set)  # asked, and no answer is coming
 
 
@@ -122,8 +140,11 @@ class OpenAsk:
     generation: int | None = None
 
 
-class AgentProtocol:
+class AgentMachine(QueryAnswering, Machine):
     """The negotiation of one agent (see the module docstring); ``brain`` decides."""
+
+    TRANSITIONS = TRANSITIONS
+    FINAL = Phase.STOPPED
 
     def __init__(self, agent: int, config: SwarmConfig, brain, now: float,
                  negotiation_timeout_s: float | None = None, trace: TickTrace = _NO_TRACE) -> None:
@@ -140,11 +161,11 @@ class AgentProtocol:
         self.trace = trace
         self._out: list = []
         self.inbox = Inbox(config.run_id, EffectLog(self))
-        self.ready = self.n == 1  # every peer seen (or given up on): observations are handled
+        self.phase = Phase.IDLE if self.n == 1 else Phase.PEERS
         self.ready_by = now + max(PEER_WAIT_S, START_S_PER_AGENT * self.n)
-        self.early: list = []  # observations that came before ready, in order
+        self.early: list = []  # observations that came while waiting for the peers, in order
         self.peers_seen: set[int] = set()
-        self.pending: Pending | None = None
+        self.pending: Pending | None = None  # while NEGOTIATING or ASKING_MISSING
         self.decided_tick = -1
         self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
         self.decided_waiters: list[int] = []  # whom the decided tick's answer goes to by stream
@@ -158,125 +179,80 @@ class AgentProtocol:
         self.streams: dict[int, int] = {}  # neighbour -> generation of its open standing query
         self.stream_generation = 0
         self.gap_tick, self.gap_run = -1, 0
-        self.shutdown = False
-        self.stopped = False
+        self.shutdown = False  # stopped by the world
+
+    @property
+    def stopped(self) -> bool:
+        return self.phase is Phase.STOPPED
 
     # Inputs. Each returns the effects it causes, in the order they must be carried out.
 
-    def on_observation(self, payload, now: float) -> list:
+    @an_input
+    def on_observation(self, payload, now: float) -> None:
         """The world's observation for this agent."""
-        out = self._out = []
-        if self.stopped:
-            return out
-        if self.ready:
-            self._observe(payload, now)
-        else:
+        if self.phase is Phase.PEERS:
             self.early.append(payload)
-        return out
+        else:
+            self._observe(payload, now)
 
-    def on_answer(self, ask: int, payload, now: float) -> list:
+    @an_input
+    def on_answer(self, ask: int, payload, now: float) -> None:
         """A reply to one of this agent's asks (a standing one brings one per tick)."""
-        out = self._out = []
-        if self.stopped:
-            return out
         open_ask = self.asks.get(ask)
         if open_ask is not None:
             self._answer_in(open_ask.agent, payload, now)
-        return out
 
-    def on_ask_end(self, ask: int, now: float) -> list:
+    @an_input
+    def on_ask_end(self, ask: int, now: float) -> None:
         """One of this agent's asks ended: timed out, finished, or its target is gone."""
-        out = self._out = []
         open_ask = self.asks.pop(ask, None)
-        if open_ask is None or self.stopped:
-            return out
+        if open_ask is None:
+            return
         p = self.pending
         if open_ask.generation is not None:
             j = open_ask.agent
             if self.streams.get(j) == open_ask.generation:
                 del self.streams[j]
-                if (p is not None and p.missing is None and p.deadline > now and j in p.asks
+                if (self.phase is Phase.NEGOTIATING and p.deadline > now and j in p.asks
                         and j not in self._intents_of(p.obs.tick).answered):
                     self._ask(j, p.obs.tick, p.deadline - now)  # not by the stream
         elif open_ask.agent not in self.peers_seen:  # gone: no answer is coming
             self._refused(open_ask, now)
-        return out
 
-    def on_refusal(self, ask: int, now: float) -> list:
+    @an_input
+    def on_refusal(self, ask: int, now: float) -> None:
         """An error reply to one of this agent's asks: the neighbour cannot answer that tick
         (it is behind, or past it)."""
-        out = self._out = []
         open_ask = self.asks.get(ask)
-        if open_ask is not None and open_ask.generation is None and not self.stopped:
+        if open_ask is not None and open_ask.generation is None:
             self._refused(open_ask, now)
-        return out
 
-    def on_query(self, query: int, parameters, now: float) -> list:
-        """A neighbour's query on this agent's intent key; ``parameters`` are its selector's
-        (a str such as ``"tick=12;from=3"``, or anything ``protocol.keys`` parses)."""
-        out = self._out = []
-        if self.stopped:
-            out.append(EndQuery(query))
-            return out
-        tick = keys.parse_intent_query(parameters)
-        since = keys.parse_standing_since(parameters) if tick is None else None
-        if since is not None:
-            self._standing_query(query, since, keys.parse_intent_asker(parameters))
-        elif tick is None:
-            self.inbox.reject("bad-query", f"?{parameters}")
-            out.append(ReplyError(query, b"bad query: expected ?tick=T or ?since=T;from=A"))
-            out.append(EndQuery(query))
-        elif tick <= self.decided_tick:
-            self._answer(tick, query)
-        elif self.decided_tick >= 0 and tick > self.decided_tick + AHEAD_TICKS:
-            self.inbox.reject("future-query", f"tick {tick}, decided {self.decided_tick}")
-            out.append(ReplyError(query, b"future tick"))
-            out.append(EndQuery(query))
-        elif len(self.held) >= MAX_HELD_QUERIES:
-            self.inbox.reject("query-flood", f"{len(self.held)} queries held")
-            out.append(ReplyError(query, b"too many queries"))
-            out.append(EndQuery(query))
-        else:
-            asker = keys.parse_intent_asker(parameters)
-            order = self.n if asker is None else priority_rank(asker, tick, self.n)
-            self.held.append((tick, order, query))
-        return out
-
-    def on_reply_failed(self, query: int, now: float) -> list:
-        """A reply to a standing query could not be sent: its asker is gone (it opens a new
-        one if it comes back)."""
-        out = self._out = []
-        for asker, held in list(self.standing.items()):
-            if held == query:
-                del self.standing[asker]
-                out.append(EndQuery(query))
-        return out
-
-    def on_liveliness(self, key: str, alive: bool, now: float) -> list:
+    @any_phase_input
+    def on_liveliness(self, key: str, alive: bool, now: float) -> None:
         """An agent's liveliness token (``alive/agent/<id>``) appeared or went."""
-        out = self._out = []
         agent = keys.agent_from_key(key, self.config.run_id)
         if agent is None or agent >= self.n:  # a token of no agent of this run: nobody to ask
             self.inbox.reject("unknown-agent", str(key))
         elif alive:
             self.peers_seen.add(agent)
-            if not self.ready and self._every_peer_seen():
+            if self.phase is Phase.PEERS and self._every_peer_seen():
                 self._become_ready(now)
         else:
             self.peers_seen.discard(agent)
             self.streams.pop(agent, None)  # ask its next incarnation afresh
             query = self.standing.pop(agent, None)
             if query is not None:
-                out.append(EndQuery(query))
-        return out
+                self._out.append(EndQuery(query))
 
-    def on_world(self, alive: bool, now: float) -> list:
+    @any_phase_input
+    def on_world(self, alive: bool, now: float) -> None:
         """The world's liveliness token appeared or went. A world that leaves may come back
         (``--resume``) with its own clock: start afresh."""
-        out = self._out = []
         if not alive:
-            out.append(Log(logging.INFO, "the world left; waiting for it to come back"))
+            self._out.append(Log(logging.INFO, "the world left; waiting for it to come back"))
             self.decided_tick = -1
+            if self.phase is not Phase.STOPPED:
+                self._go(Event.WORLD_LEFT)
             self.pending = None
             self.brain.learner.forget_pending()
             self.intents = {}
@@ -286,45 +262,38 @@ class AgentProtocol:
             # are ignored from now on, and the standing queries are opened afresh.
             self.asks = {}
             self.streams = {}
-        return out
 
-    def on_control(self, payload, now: float) -> list:
+    @any_phase_input
+    def on_control(self, payload, now: float) -> None:
         """A control message from the world (shutdown)."""
-        out = self._out = []
         control = self.inbox.decode(payload, Control)
-        if control is not None and control.command == CONTROL_SHUTDOWN and not self.stopped:
-            out.append(Log(logging.INFO, "shutdown from the world"))
+        if (control is not None and control.command == CONTROL_SHUTDOWN
+                and self.phase is not Phase.STOPPED):
+            self._out.append(Log(logging.INFO, "shutdown from the world"))
             self.shutdown = True
             self._stop(by_world=True)
-        return out
 
-    def on_timer(self, now: float) -> list:
+    @an_input
+    def on_timer(self, now: float) -> None:
         """Time has come to ``now``: start without the peers not seen, or end a negotiation."""
-        out = self._out = []
-        if self.stopped:
-            return out
-        if not self.ready and now >= self.ready_by:
-            out.append(Log(logging.WARNING, "only saw agents %s; negotiating with whoever answers",
-                           (sorted(self.peers_seen),)))
+        if self.phase is Phase.PEERS and now >= self.ready_by:
+            self._out.append(Log(logging.WARNING, "only saw agents %s; negotiating with whoever "
+                                                  "answers", (sorted(self.peers_seen),)))
             self._become_ready(now)
-        if self.pending is not None and now >= self.pending.deadline:
+        if self.phase in _WAITING and now >= self.pending.deadline:
             self._advance(now)
-        return out
 
-    def stop(self, now: float) -> list:
+    @an_input
+    def stop(self, now: float) -> None:
         """The process is stopping (a signal): finish every query held."""
-        out = self._out = []
-        if not self.stopped:
-            self._stop(by_world=False)
-        return out
+        self._stop(by_world=False)
 
     def timer(self) -> float | None:
         """When :meth:`on_timer` is next due (None: no timer)."""
-        if self.stopped:
-            return None
-        if not self.ready:
+        phase = self.phase
+        if phase is Phase.PEERS:
             return self.ready_by
-        return None if self.pending is None else self.pending.deadline
+        return self.pending.deadline if phase in _WAITING else None
 
     def stats(self) -> dict:
         return {"agent": self.agent, "decided_tick": self.decided_tick,
@@ -338,7 +307,7 @@ class AgentProtocol:
 
     def _become_ready(self, now: float) -> None:
         """Handle the observations that came while waiting for the peers, in order."""
-        self.ready = True
+        self._go(Event.READY)
         early, self.early = self.early, []
         for payload in early:
             self._observe(payload, now)
@@ -353,7 +322,7 @@ class AgentProtocol:
         if obs.agent != self.agent:
             self.inbox.reject("wrong-agent", f"observation for agent {obs.agent}")
             return
-        if self.pending is not None and obs.tick == self.pending.obs.tick + 1:
+        if self.phase in _WAITING and obs.tick == self.pending.obs.tick + 1:
             self._decide_pending()  # the world has moved on (this agent stalled): decide now
         if obs.tick <= self.decided_tick:
             self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
@@ -373,6 +342,7 @@ class AgentProtocol:
         for j in asks:
             if j not in got.answered and j not in self.streams:
                 self._ask(j, tick, self.timeout_s)
+        self._go(Event.AWAITS)
         self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s, staying)
         self.brain.prepare(obs)  # while the answers are on their way
         self._advance(now)
@@ -380,7 +350,7 @@ class AgentProtocol:
     def _refused(self, open_ask: OpenAsk, now: float) -> None:
         """No answer is coming for this ask: the pending negotiation waits for it no more."""
         p = self.pending
-        if (p is not None and open_ask.tick == p.obs.tick
+        if (self.phase in _WAITING and open_ask.tick == p.obs.tick
                 and open_ask.agent not in self._intents_of(p.obs.tick).answered):
             p.refused.add(open_ask.agent)
             self._advance(now)
@@ -400,12 +370,13 @@ class AgentProtocol:
         got = self._intents_of(p.obs.tick)
         remaining = p.deadline - now
         refused = p.refused
-        if p.missing is None:
+        if self.phase is Phase.NEGOTIATING:
             if remaining > 0 and not all(j in got.answered or j in refused for j in p.asks):
                 return
             for j in p.asks:
                 if j not in got.answered:
                     self.streams.pop(j, None)  # it did not answer in time: open a fresh one
+            self._go(Event.ANSWERS_IN)
             p.missing = [j for j in p.awaited if j not in got.actions and j not in refused]
             if p.missing and remaining > 0:
                 for j in p.missing:
@@ -416,6 +387,7 @@ class AgentProtocol:
         self._decide_pending()
 
     def _decide_pending(self) -> None:
+        self._go(Event.DECIDED)
         p, self.pending = self.pending, None
         known = self.intents.get(p.obs.tick, _NOTHING).actions
         self._decide(p.obs, {**p.staying, **{j: known[j] for j in p.needed if j in known}})
@@ -516,57 +488,8 @@ class AgentProtocol:
             self.inbox.reject("conflicting-relay", f"agent {sender} at tick {answer.tick}")
         while len(self.intents) > AHEAD_TICKS + 1:  # a flood of forged ticks stays bounded
             del self.intents[min(self.intents)]
-        p = self.pending
-        if p is not None and p.obs.tick == answer.tick:
+        if self.phase in _WAITING and self.pending.obs.tick == answer.tick:
             self._advance(now)
-
-    def _standing_query(self, query: int, since: int, asker: int | None) -> None:
-        """Keep a neighbour's standing query (one per asker: a newer one replaces it), and
-        answer it at once if the tick it starts from is already decided."""
-        out = self._out
-        if asker is None or asker == self.agent or asker >= self.n:
-            self.inbox.reject("bad-query", f"?since={since};from={asker}")
-            out.append(ReplyError(query, b"bad standing query: expected ?since=T;from=<another "
-                                         b"agent>"))
-            out.append(EndQuery(query))
-            return
-        old = self.standing.pop(asker, None)
-        if old is not None:
-            out.append(EndQuery(old))
-        self.standing[asker] = query
-        if since <= self.decided_tick and asker in self.decided_waiters:
-            self._out.append(Reply(query, self.decided_payload, self.decided_answer))
-
-    def _answer_standing_queries(self) -> None:
-        """Answer the standing queries owed at the decided tick, the next in rank first."""
-        standing, out = self.standing, self._out
-        for asker in self.decided_waiters:
-            query = standing.get(asker)
-            if query is not None:
-                out.append(Reply(query, self.decided_payload, self.decided_answer))
-
-    def _answer_held(self) -> None:
-        """Answer what was asked for the decided tick, the next in rank first: its decision
-        is the one the rest of the chain waits for."""
-        tick = self.decided_tick
-        due = sorted((h for h in self.held if h[0] <= tick), key=lambda h: h[1])
-        self.held = [h for h in self.held if h[0] > tick]
-        for held_tick, _, query in due:
-            self._answer(held_tick, query)
-
-    def _answer(self, tick: int, query: int) -> None:
-        out = self._out
-        if tick == self.decided_tick:
-            out.append(Reply(query, self.decided_payload, self.decided_answer))
-        else:
-            self.inbox.reject("stale-query", f"tick {tick}, decided {self.decided_tick}")
-            out.append(ReplyError(query, b"stale tick"))
-        out.append(EndQuery(query))
-
-    def _drop_held(self) -> None:
-        for _, _, query in self.held:
-            self._out.append(EndQuery(query))
-        self.held = []
 
     def _stop(self, by_world: bool) -> None:
         self._drop_held()
@@ -574,5 +497,5 @@ class AgentProtocol:
             self._out.append(EndQuery(query))
         self.standing = {}
         self.pending = None
-        self.stopped = True
+        self._go(Event.STOP)
         self._out.append(Stopped(by_world))

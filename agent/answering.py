@@ -1,0 +1,115 @@
+"""How an agent answers its neighbours' queries for its intent: the half of its machine
+(``agent.machine.AgentMachine``) that serves what others ask, pure as the rest of it.
+
+A query for a decided tick is answered at once; one for a coming tick (at most
+:data:`AHEAD_TICKS` past the decision) is held until the decision, and the held ones are then
+answered the next in rank first; one for an older tick, or too far ahead, or one too many, is
+refused with a reason and counted. A standing query (``?since=T;from=<id>``, one per asker: a
+newer one replaces it) stays open and is answered at every decided tick whose plan asks this
+agent. The state lives on the machine: ``held``, ``standing``, and the decided tick's
+``decided_tick``, ``decided_answer``, its ``decided_payload`` and ``decided_waiters``.
+"""
+
+from nnql_swarm.protocol import keys
+from nnql_swarm.protocol.config import priority_rank
+from nnql_swarm.machines.effects import EndQuery, Reply, ReplyError
+from nnql_swarm.machines.phases import any_phase_input
+
+MAX_HELD_QUERIES = 4 * 1024
+"""Queries for the coming tick held at once; legitimately at most one per other agent."""
+
+AHEAD_TICKS = 2
+"""How far past its last decision an agent holds queries and keeps answers: a neighbour that has
+decided this tick may ask for, or answer, the next one before this agent decides this one."""
+
+
+class QueryAnswering:
+    """The inputs and steps of an agent's machine that answer the queries it receives."""
+
+    @any_phase_input
+    def on_query(self, query: int, parameters, now: float) -> None:
+        """A neighbour's query on this agent's intent key; ``parameters`` are its selector's
+        (a str such as ``"tick=12;from=3"``, or anything ``protocol.keys`` parses)."""
+        out = self._out
+        if self.phase is self.FINAL:
+            out.append(EndQuery(query))
+            return
+        tick = keys.parse_intent_query(parameters)
+        since = keys.parse_standing_since(parameters) if tick is None else None
+        if since is not None:
+            self._standing_query(query, since, keys.parse_intent_asker(parameters))
+        elif tick is None:
+            self.inbox.reject("bad-query", f"?{parameters}")
+            out.append(ReplyError(query, b"bad query: expected ?tick=T or ?since=T;from=A"))
+            out.append(EndQuery(query))
+        elif tick <= self.decided_tick:
+            self._answer(tick, query)
+        elif self.decided_tick >= 0 and tick > self.decided_tick + AHEAD_TICKS:
+            self.inbox.reject("future-query", f"tick {tick}, decided {self.decided_tick}")
+            out.append(ReplyError(query, b"future tick"))
+            out.append(EndQuery(query))
+        elif len(self.held) >= MAX_HELD_QUERIES:
+            self.inbox.reject("query-flood", f"{len(self.held)} queries held")
+            out.append(ReplyError(query, b"too many queries"))
+            out.append(EndQuery(query))
+        else:
+            asker = keys.parse_intent_asker(parameters)
+            order = self.n if asker is None else priority_rank(asker, tick, self.n)
+            self.held.append((tick, order, query))
+
+    @any_phase_input
+    def on_reply_failed(self, query: int, now: float) -> None:
+        """A reply to a standing query could not be sent: its asker is gone (it opens a new
+        one if it comes back)."""
+        for asker, held in list(self.standing.items()):
+            if held == query:
+                del self.standing[asker]
+                self._out.append(EndQuery(query))
+
+    def _standing_query(self, query: int, since: int, asker: int | None) -> None:
+        """Keep a neighbour's standing query (one per asker: a newer one replaces it), and
+        answer it at once if the tick it starts from is already decided."""
+        out = self._out
+        if asker is None or asker == self.agent or asker >= self.n:
+            self.inbox.reject("bad-query", f"?since={since};from={asker}")
+            out.append(ReplyError(query, b"bad standing query: expected ?since=T;from=<another "
+                                         b"agent>"))
+            out.append(EndQuery(query))
+            return
+        old = self.standing.pop(asker, None)
+        if old is not None:
+            out.append(EndQuery(old))
+        self.standing[asker] = query
+        if since <= self.decided_tick and asker in self.decided_waiters:
+            self._out.append(Reply(query, self.decided_payload, self.decided_answer))
+
+    def _answer_standing_queries(self) -> None:
+        """Answer the standing queries owed at the decided tick, the next in rank first."""
+        standing, out = self.standing, self._out
+        for asker in self.decided_waiters:
+            query = standing.get(asker)
+            if query is not None:
+                out.append(Reply(query, self.decided_payload, self.decided_answer))
+
+    def _answer_held(self) -> None:
+        """Answer what was asked for the decided tick, the next in rank first: its decision
+        is the one the rest of the chain waits for."""
+        tick = self.decided_tick
+        due = sorted((h for h in self.held if h[0] <= tick), key=lambda h: h[1])
+        self.held = [h for h in self.held if h[0] > tick]
+        for held_tick, _, query in due:
+            self._answer(held_tick, query)
+
+    def _answer(self, tick: int, query: int) -> None:
+        out = self._out
+        if tick == self.decided_tick:
+            out.append(Reply(query, self.decided_payload, self.decided_answer))
+        else:
+            self.inbox.reject("stale-query", f"tick {tick}, decided {self.decided_tick}")
+            out.append(ReplyError(query, b"stale tick"))
+        out.append(EndQuery(query))
+
+    def _drop_held(self) -> None:
+        for _, _, query in self.held:
+            self._out.append(EndQuery(query))
+        self.held = []
