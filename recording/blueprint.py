@@ -34,17 +34,17 @@ def blueprint(config: SwarmConfig, distributed: bool = True):
     whole_run = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
                                                       end=rrb.TimeRangeBoundary.infinite()))
 
-    def plot(low: float | None = None, high: float | None = None, **view) -> rrb.TimeSeriesView:
-        axis = rrb.ScalarAxis(range=(low, high)) if high is not None else None
+    def plot(span: tuple[float, float] | None = None, **view) -> rrb.TimeSeriesView:
+        axis = None if span is None else rrb.ScalarAxis(range=span)
         return rrb.TimeSeriesView(axis_x=whole_run, axis_y=axis,
                                   plot_legend=rrb.PlotLegend(corner="RightBottom"), **view)
 
     n = config.n_agents
     metrics = rrb.Grid(
-        plot(0.0, 1.05, origin="metrics/arrived_share", name="Arrived (share of agents)"),
+        plot((0.0, 1.05), origin="metrics/arrived_share", name="Arrived (share of agents)"),
         plot(origin="metrics/steps", name="Steps / shortest path",
              contents=["metrics/steps/over_shortest", "metrics/steps/shortest_path"]),
-        plot(0.0, float(max(2 * n, 8)), origin="metrics/collisions/per_episode",
+        plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",
              name="Collisions per episode"),
         plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),
         plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)") if distributed

@@ -82,7 +82,8 @@ def _series_color(algo: str, k: int) -> tuple[int, int, int]:
     """QL in oranges, nnQL in blues; larger k (less exploration) darker."""
     base = np.array(_ALGO_COLORS.get(algo, (160, 160, 160)), dtype=float)
     shade = 1.25 - 0.6 * min(max(k, 1), 20) / 20
-    return tuple(int(v) for v in np.clip(base * shade, 0, 255))
+    r, g, b = (int(v) for v in np.clip(base * shade, 0, 255))
+    return r, g, b
 
 
 def experiment_blueprint():

@@ -28,7 +28,6 @@ def merge_parts(out: Path) -> Path | None:
     target = out / RECORDING_FILE
     inputs = ([target] if target.exists() else []) + parts
     tmp = target.with_name(target.name + ".tmp")
-    result = None
     for extra in ([], ["--continue-on-error"]):
         try:
             result = subprocess.run(
@@ -40,7 +39,7 @@ def merge_parts(out: Path) -> Path | None:
             return None
         if result.returncode == 0:
             break
-    if result.returncode != 0:
+    else:
         tmp.unlink(missing_ok=True)
         reason = result.stderr.strip().splitlines()[-1:] or ["unknown error"]
         print(f"rerun: merging the recording failed ({reason[0]}); the parts are in {parts_dir}",

@@ -39,7 +39,7 @@ class RecordingPlan:
         import rerun as rr
 
         stream = rr.RecordingStream(APP_ID, recording_id=self.run_id)
-        sinks = []
+        sinks: list[rr.FileSink | rr.GrpcSink] = []
         if self.parts_dir is not None:
             Path(self.parts_dir).mkdir(parents=True, exist_ok=True)
             sinks.append(rr.FileSink(str(Path(self.parts_dir) / f"{role}.{os.getpid()}.rrd")))

@@ -300,7 +300,7 @@ class WorldViz:
         self._before, self._arrived = world.cells, world.arrived_flags
         self.next_tick = report.tick + 1
         if report.episode_row is not None:
-            self._end_episode(report)
+            self._end_episode(report, report.episode_row)
         if self.clock.due(len(self._buffer)):
             self.flush()
 
@@ -312,11 +312,12 @@ class WorldViz:
         self._starts[report.episode] = episode.starts.astype(np.float32)
         self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32)))
 
-    def _end_episode(self, report: TickReport) -> None:
-        row, n = report.episode_row, self.config.n_agents
+    def _end_episode(self, report: TickReport, row: dict) -> None:
+        n, started = self.config.n_agents, self._episode_clock
+        assert started is not None, "an episode ends after its first tick"
         now = time.perf_counter()
         ticks = report.tick + 1 - self._episode_first_tick
-        rate = ticks / max(now - self._episode_clock, 1e-9)
+        rate = ticks / max(now - started, 1e-9)
         self._episode_clock, self._episode_first_tick = now, report.tick + 1
         self.cumulative_collisions += row["collisions"]
         values = {
@@ -394,8 +395,8 @@ class WorldViz:
         ).partition(asks.sum(axis=(1, 2))))  # in WAIT_COLOUR, logged once (static)
 
         hit = np.zeros((k, n), dtype=bool)
-        for t, agents in enumerate(collided):
-            hit[t, list(agents)] = True
+        for row, agents in enumerate(collided):
+            hit[row, list(agents)] = True
         hit_t, hit_agent = np.nonzero(hit)
         rec.send_columns(COLLISIONS, index, rr.Points2D.columns(
             positions=cells[hit_t, hit_agent]).partition(hit.sum(axis=1)))

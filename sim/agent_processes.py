@@ -3,8 +3,6 @@ its checkpoint as ``agent.restore`` starts it, crashed, and its effects carried:
 world, asks to its neighbours as queries and their replies back, checkpoints to disk. A part of
 ``sim.distributed.SimSwarm``, whose state it shares."""
 
-from dataclasses import dataclass
-
 import msgspec
 
 from nnql_swarm.agent import checkpoint
@@ -16,25 +14,13 @@ from nnql_swarm.machines.effects import (
 )
 from nnql_swarm.protocol.messages import encode
 from nnql_swarm.sim.forgery import forged
+from nnql_swarm.sim.swarm_state import Query, SwarmState
 
 START_SPREAD_S = 0.005
 """The agents' processes come up within this long of the world's."""
 
 
-@dataclass(slots=True)
-class Query:
-    """One ask in flight: who asked (which incarnation, its ask number), whom, and whether the
-    asker still listens."""
-
-    asker: int
-    asker_incarnation: int
-    ask: int
-    target: int
-    open: bool = True
-    last_reply: float = 0.0  # when its latest reply arrives: its end comes after
-
-
-class AgentProcesses:
+class AgentProcesses(SwarmState):
     """The agents' side of :class:`~sim.distributed.SimSwarm`."""
 
     def _start_agent(self, i: int, resume: bool, episode: int | None = None) -> None:
@@ -46,7 +32,7 @@ class AgentProcesses:
         a.incarnation += 1
         a.alive, a.stalled_until, a.waiting, a.timer_at = True, 0.0, [], None
         if i in self.checkpointed:
-            brain, resumed = start_brain(i, c, checkpoint.checkpoint_path(self.checkpoint_dir, i),
+            brain, resumed = start_brain(i, c, checkpoint.checkpoint_path(self._checkpoints(), i),
                                          resume, episode=episode)
         else:
             brain, resumed = AgentBrain(i, c), None
@@ -67,7 +53,7 @@ class AgentProcesses:
     def _agent_exit(self, i: int, by_world: bool) -> None:
         a, net = self.agents[i], self.net
         if by_world:
-            self.final_brains[i] = self.protocols[i].brain
+            self.final_brains[i] = self._machine(i).brain
         a.alive, a.waiting, a.timer_at = False, [], None
         self.protocols[i] = None
         net.send_reliable(None, self.world, self._tokens_to_world, [i], False)
@@ -119,11 +105,12 @@ class AgentProcesses:
                     net.send(a, self.agents[q.asker], self._ask_ended, q, not_before=q.last_reply)
             elif kind is Checkpoint:
                 if i in self.saving:
-                    brain = self.protocols[i].brain
-                    checkpoint.save(checkpoint.checkpoint_path(self.checkpoint_dir, i), brain,
+                    brain = self._machine(i).brain
+                    checkpoint.save(checkpoint.checkpoint_path(self._checkpoints(), i), brain,
                                     effect.episode)
-                    self.saved[i] = (effect.episode, checkpoint.fingerprint(brain))
-                    self.saved_at[i][effect.episode] = self.saved[i][1]
+                    tables = checkpoint.fingerprint(brain)
+                    self.saved[i] = (effect.episode, tables)
+                    self.saved_at[i][effect.episode] = tables
             elif kind is Stopped:
                 self._agent_exit(i, by_world=effect.by_world)
                 return
@@ -143,7 +130,7 @@ class AgentProcesses:
         a = self.agents[i]
         if not a.alive:
             return
-        due = self.protocols[i].timer()
+        due = self._machine(i).timer()
         if due is not None and (a.timer_at is None or due < a.timer_at):
             a.timer_at = due
             self.net.local(a, max(due - self.net.now, 0.0), self._agent_wake, i, due)
@@ -156,7 +143,7 @@ class AgentProcesses:
         self._agent_timer(i)
 
     def _agent_timer(self, i: int) -> None:
-        protocol = self.protocols[i]
+        protocol = self._machine(i)
         due = protocol.timer()
         if due is not None and due <= self.net.now:
             self._agent_effects(i, protocol.on_timer(self.net.now))
@@ -165,13 +152,13 @@ class AgentProcesses:
 
     def _observation_in(self, i: int, era: int, tick: int, payload: bytes) -> None:
         self.checker.observation_in(i, era, tick)
-        self._agent_effects(i, self.protocols[i].on_observation(payload, self.net.now))
+        self._agent_effects(i, self._machine(i).on_observation(payload, self.net.now))
 
     def _control_in(self, i: int, payload: bytes) -> None:
-        self._agent_effects(i, self.protocols[i].on_control(payload, self.net.now))
+        self._agent_effects(i, self._machine(i).on_control(payload, self.net.now))
 
     def _world_token_in(self, i: int, alive: bool) -> None:
-        self._agent_effects(i, self.protocols[i].on_world(alive, self.net.now))
+        self._agent_effects(i, self._machine(i).on_world(alive, self.net.now))
 
     def _tokens_in(self, i: int, agents: list[int], alive: bool) -> None:
         now = self.net.now
@@ -185,20 +172,20 @@ class AgentProcesses:
         number = self.next_query  # each query that arrives is one to its target (a duplicate too)
         self.next_query += 1
         self.received[number] = q
-        self._agent_effects(i, self.protocols[i].on_query(number, parameters, self.net.now))
+        self._agent_effects(i, self._machine(i).on_query(number, parameters, self.net.now))
 
     def _answer_in(self, q: Query, payload: bytes) -> None:
         if q.open and self.agents[q.asker].incarnation == q.asker_incarnation:
-            self._agent_effects(q.asker, self.protocols[q.asker].on_answer(q.ask, payload,
+            self._agent_effects(q.asker, self._machine(q.asker).on_answer(q.ask, payload,
                                                                            self.net.now))
 
     def _refusal_in(self, q: Query) -> None:
         if q.open and self.agents[q.asker].incarnation == q.asker_incarnation:
-            self._agent_effects(q.asker, self.protocols[q.asker].on_refusal(q.ask, self.net.now))
+            self._agent_effects(q.asker, self._machine(q.asker).on_refusal(q.ask, self.net.now))
 
     def _ask_ended(self, q: Query) -> None:
         if q.open:
             q.open = False
             if self.agents[q.asker].incarnation == q.asker_incarnation:
-                self._agent_effects(q.asker, self.protocols[q.asker].on_ask_end(q.ask,
+                self._agent_effects(q.asker, self._machine(q.asker).on_ask_end(q.ask,
                                                                                 self.net.now))

@@ -8,6 +8,7 @@ from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.sim.agent_processes import START_SPREAD_S
 from nnql_swarm.sim.network import Process
 from nnql_swarm.sim.schedule import FORGE, WINDOWS, Fault
+from nnql_swarm.sim.swarm_state import SwarmState
 from nnql_swarm.storage.runfiles import EPISODES_FILE
 from nnql_swarm.supervision.resume import resume_point, rewind, shared_table
 from nnql_swarm.world.metrics import EpisodeWriter
@@ -16,7 +17,7 @@ REORDER_S = 0.005
 """How long a reordered message is held back at most."""
 
 
-class Faults:
+class Faults(SwarmState):
     """The faults' side of :class:`~sim.distributed.SimSwarm`."""
 
     def _fault(self, fault: Fault) -> None:
@@ -74,25 +75,27 @@ class Faults:
         for i, a in enumerate(self.agents):
             if a.alive:
                 self._crash_agent(i)
+        assert self.writer is not None, "a run killed whole writes its rows"
         self.writer.close()
 
     def _resume_all(self) -> None:
         """``launch/swarm.py --resume``: from the cut of the run's files, everyone again."""
         everyone = list(range(self.n))
-        _, start = resume_point(self.disk, everyone, world=True)
-        rewind(self.disk, start)
+        disk = self._disk()
+        _, start = resume_point(disk, everyone, world=True)
+        rewind(disk, start)
         del self.rows[start.episode:]
         self.checker.rewound(start.cut)  # a lagging agent goes on from its newest
-        self.writer = EpisodeWriter(self.disk / EPISODES_FILE, sync=False)
+        self.writer = EpisodeWriter(disk / EPISODES_FILE, sync=False)
         self.run_over = False
         if start.episode >= self.config.episodes:  # every row was written: nothing to play
             for i in everyone:  # what the agents end with is what they checkpointed last
                 self.final_brains[i] = start_brain(
-                    i, self.config, checkpoint.checkpoint_path(self.checkpoint_dir, i), True)[0]
+                    i, self.config, checkpoint.checkpoint_path(self._checkpoints(), i), True)[0]
             self.completed = self.world_done = True
             self.net.halted = True
             return
-        self._start_world(start.episode, start.tick, shared_table(self.disk, self.config, start))
+        self._start_world(start.episode, start.tick, shared_table(disk, self.config, start))
         for i in everyone:
             self.net.at(self.net.now + START_SPREAD_S * self.net.rng.random(), self._start_agent,
                         i, start.cut >= 0 or not start.exact, start.checkpoint_episode)

@@ -5,13 +5,17 @@ checks. A part of ``sim.distributed.SimSwarm``, whose state it shares."""
 from nnql_swarm.machines.effects import Finished, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
+from nnql_swarm.sim.network import Process
+from nnql_swarm.sim.swarm_state import SwarmState
 from nnql_swarm.world.machine import WorldMachine
+from nnql_swarm.world.shared_table import SharedState
 
 
-class WorldProcess:
+class WorldProcess(SwarmState):
     """The world's side of :class:`~sim.distributed.SimSwarm`."""
 
-    def _start_world(self, first_episode: int, first_tick: int, table=None) -> None:
+    def _start_world(self, first_episode: int, first_tick: int,
+                     table: SharedState | None = None) -> None:
         w, net = self.world, self.net
         w.incarnation += 1
         w.alive, w.stalled_until, w.waiting, w.timer_at = True, 0.0, [], None
@@ -69,7 +73,7 @@ class WorldProcess:
                     self.checker.end_heard(report.episode, report.missed)
             elif kind is WriteRow:
                 if self.resumable and effect.table is not None:
-                    world_checkpoint.save(world_checkpoint.table_path(self.disk), effect.table,
+                    world_checkpoint.save(world_checkpoint.table_path(self._disk()), effect.table,
                                           effect.row["episode"], self.config)
                 self.rows.append({f: effect.row[f] for f in EPISODE_FIELDS})
                 if self.writer is not None:
@@ -113,7 +117,7 @@ class WorldProcess:
         self.world.timer_at = None
         self._world_timer()
 
-    def _world_timer(self, _process=None) -> None:
+    def _world_timer(self, _process: Process | None = None) -> None:
         protocol = self.world_protocol
         due = protocol.timer()
         if due is not None and due <= self.net.now:

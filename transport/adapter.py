@@ -8,12 +8,22 @@ machine's timer (:class:`ProtocolAdapter`).
 import queue
 import threading
 import time
-from typing import Callable
+from typing import Callable, Protocol
 
 POLL_S = 0.05
 """The longest a node's main thread sleeps on its queue: a timer set meanwhile on Zenoh's thread
 (a tick's deadline, a negotiation's time-out) is noticed at most this late, and so is a request
 to stop."""
+
+
+class Machine(Protocol):
+    """A protocol machine as its node's main thread drives it: its timer."""
+
+    def timer(self) -> float | None:
+        """When :meth:`on_timer` is next due (None: no timer)."""
+
+    def on_timer(self, now: float) -> list:
+        """Time has come to ``now``: the effects."""
 
 
 class ProtocolAdapter:
@@ -29,7 +39,7 @@ class ProtocolAdapter:
     lock: threading.RLock
     stopping: bool
     failure: BaseException | None
-    protocol: object  # a protocol machine: timer(), on_timer(now)
+    protocol: Machine  # a node declares the machine it drives
     events: queue.SimpleQueue
     _do: dict[type, Callable]
 
