@@ -128,6 +128,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(launch/secure.py writes them)")
     v = p.add_argument_group("Rerun")
     v.add_argument("--no-record", action="store_true", help="do not write run.rrd")
+    v.add_argument("--reference", action="store_true",
+                   help="also play these settings with the paper's QL (in this process, "
+                        "compiled) and plot its learning curves beside the run's")
+    v.add_argument("--map-agent", type=int, default=0, metavar="ID",
+                   help="the agent whose known map and planned path the recording shows, where "
+                        "the learners read a map (default: 0)")
     viewer = v.add_mutually_exclusive_group()
     viewer.add_argument("--rerun-spawn", action="store_true",
                         help="spawn the native Rerun viewer; every process streams to it")
@@ -203,6 +209,8 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
     if args.port is not None and (args.role != "all" or args.listen or args.connect):
         raise UsageError("--port sets the one-machine layout; with --role, --listen or --connect "
                          "give endpoints instead")
+    if not 0 <= args.map_agent < config.n_agents:
+        raise UsageError(f"--map-agent {args.map_agent} out of range 0..{config.n_agents - 1}")
     if args.port is not None and not 1 <= args.port <= 65535:
         raise UsageError(f"--port must be 1..65535, not {args.port}")
     check_zenoh_files(args, config)
@@ -354,9 +362,10 @@ def transports(args: argparse.Namespace, config: SwarmConfig):
 
 
 def run_in_process(config: SwarmConfig, out: Path, record, progress: bool,
-                   on_row: Callable[[dict], None] | None = None) -> int:
+                   on_row: Callable[[dict], None] | None = None, reference: bool = False) -> int:
     """``record``: a RecordingSession, or True / False for run.rrd or nothing; ``on_row(row)``
-    follows each episode's row (its deterministic columns)."""
+    follows each episode's row (its deterministic columns); ``reference``: the paper's QL
+    curves into the recording too (``recording.reference``)."""
     from nnql_swarm.sim.inprocess import run_in_process as run
     from nnql_swarm.sim.runs import swarm_world
     from nnql_swarm.recording.session import InProcessRecorder, RecordingSession
@@ -365,6 +374,8 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool,
     session = record if isinstance(record, RecordingSession) else \
         RecordingSession.files_only(record, config, out)
     viz = InProcessRecorder(session.plan, config, out)
+    if reference and session.plan is not None:
+        play_reference(config, session.plan)
     bar = progress_bar(config.episodes, "episode") if progress else None
     collisions = 0
 
@@ -397,6 +408,8 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
     world_transport, agent_transport, hub = transports(args, config)
     recording = RecordingSession.start(args, config, out)
     record, progress = recording.plan or False, not args.no_progress
+    if args.reference and recording.plan is not None and args.role != "agents":
+        play_reference(config, recording.plan)
     os.environ.update(plain_python_environment())  # the world and agents run the kernel uncompiled
     supervisor = Supervisor(mp.get_context("spawn"))
     resumes = args.resume and start.cut >= 0  # a run started afresh loads no checkpoint
@@ -420,6 +433,16 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
         print(f"the world ended with {describe_exit(code)}; continue the run with "
               f"{resume_command(args, out)}", file=sys.stderr)
     return code
+
+
+def play_reference(config: SwarmConfig, plan) -> None:
+    """The paper's QL on these settings, its curves into the run's recording (a part of its
+    own: ``recording.reference``)."""
+    from nnql_swarm.recording.reference import log_reference
+
+    print("playing the paper's QL on these settings for the reference curves", file=sys.stderr,
+          flush=True)
+    log_reference(config, plan.open("reference"))
 
 
 def resume_command(args: argparse.Namespace, out: Path) -> str:
@@ -470,7 +493,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.in_process:
         try:
             code = run_in_process(config, out, RecordingSession.start(args, config, out),
-                                  not args.no_progress)
+                                  not args.no_progress, reference=args.reference)
         except KeyboardInterrupt:
             print("\ninterrupted", file=sys.stderr)
             return EXIT_INTERRUPTED
