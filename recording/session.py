@@ -302,7 +302,7 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
             rrb.Vertical(world_view, events, row_shares=[3, 1]),
             rrb.Vertical(metrics, key, row_shares=[3, 2]),
             learned,
-            column_shares=[5, 5, 3],
+            column_shares=[5, 5, 3] if n < 64 else [8, 4, 3],  # a large swarm: a larger world
         ),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),

@@ -139,10 +139,11 @@ def test_compiling_is_announced_before_the_progress_bar(monkeypatch, capsys):
 
 
 def test_every_simulator_command_compiles_before_its_progress_bar_starts(monkeypatch, tmp_path):
+    from nnql_swarm.api import command
     from nnql_swarm.launch import experiment, swarm_cli
 
     order = []
-    for module, bar in ((experiment, "progress"), (swarm_cli, "progress_bar")):
+    for module, bar in ((experiment, "progress"), (command, "progress_bar")):
         prepare, progress = module.prepare_simulator, getattr(module, bar)
         monkeypatch.setattr(module, "prepare_simulator",
                             lambda *a, prepare=prepare: (order.append("compile"), prepare(*a))[1])
