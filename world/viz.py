@@ -16,7 +16,9 @@ Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
 ``legend``) are logged once. Each entity holds every agent (one ``Points2D`` for all agents, one
 ``Boxes2D`` for all goals, ...), whatever their number. Agents and goals share a colour
-(:data:`PALETTE`, repeating every 12 agents) and a label, the agent's id. The blueprint
+(:func:`agent_colors`, one per agent, all different) and a label, the agent's id. With a learner
+that reads the known map, one agent's map and planned path go with the world's ticks too
+(``recording.known_map``). The blueprint
 (``recording.session.blueprint``) opens on the ``episode`` timeline, where the view shows the
 intents, waits and collisions of the whole episode at once.
 
@@ -228,7 +230,7 @@ def legend(config: SwarmConfig) -> str:
              else f"{config.algo} agents do not negotiate: they wait for nobody.")
     return f"""**World** ({config.width} x {config.height}, {config.n_agents} agents).
 Discs are agents, labelled with their id; the box with the same id and colour is that agent's
-goal. Colours repeat every 12 agents; the ids do not.{walls}
+goal. Every agent has a colour of its own.{walls}
 On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
 move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
 discs), and the agents where the episode left them. On the `tick` timeline it shows one tick:
