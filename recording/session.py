@@ -299,10 +299,10 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
             heat_maps, row_shares=[2, 3])
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(world_view, events, row_shares=[3, 1]),
+            rrb.Vertical(world_view, events, row_shares=[3, 1] if n < 64 else [4, 1]),
             rrb.Vertical(metrics, key, row_shares=[3, 2]),
             learned,
-            column_shares=[5, 5, 3] if n < 64 else [8, 4, 3],  # a large swarm: a larger world
+            column_shares=[5, 5, 3],
         ),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),

@@ -381,7 +381,8 @@ def last_episode(recording: Path) -> Episode:
 def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     """Everything the world view must show of a run's newest episode, the one the viewer opens
     on (``config``: the run's ``SwarmConfig``): the grid, every wall, a label under each agent
-    and goal, each agent in its own colour, the moves announced and the waits. Raises AssertionError saying what is missing."""
+    and goal, each agent in its own colour, the moves announced and the waits. Raises
+    AssertionError saying what is missing."""
     from nnql_swarm.world.viz import WAIT_COLOUR, WALL_COLOUR, agent_colors
 
     grid = find_grid(image, config.width, config.height)
