@@ -323,26 +323,25 @@ def check_arrows(image: np.ndarray, grid: Grid, origins, vectors, colours,
     return {"arrows": len(seen), "visible": share}
 
 
-def check_colours(image: np.ndarray, grid: Grid, places, colours, tolerance: int = 5,
-                  least: float = 0.6) -> dict:
-    """Each agent's disc (at ``places``, ``(n, 2)`` cells) in its own colour, told apart from
-    every other agent's: pixels within ``tolerance`` of its colour, a tolerance under half the
-    least difference between two agents' colours, so that no pixel counts for two agents. At
-    least ``least`` of them (a neighbour's arrow drawn over a disc hides some)."""
+def check_colours(image: np.ndarray, grid: Grid, colours, tolerance: int = 5,
+                  least: float = 0.9) -> dict:
+    """Every agent in a colour of its own: inside the grid, pixels of each agent's colour (its
+    disc, goal, trail and moves) on at least a tenth of a cell's area, within a tolerance under
+    half the least difference between two agents' colours, so that no pixel counts for two
+    agents. At least ``least`` of the agents (one that stayed put, under others' labels, shows
+    little)."""
     colours = np.asarray(colours, dtype=np.int16)
     apart = np.abs(colours[:, None] - colours[None]).max(axis=2)
     np.fill_diagonal(apart, 255)
     if len(colours) > 1 and 2 * tolerance >= apart.min():
         raise AssertionError(f"agents' colours only {apart.min()} apart: a tolerance of "
                              f"{tolerance} cannot tell them apart")
-    seen = [np.count_nonzero(near(window(image, grid, x, y, 0.2), colour, tolerance)) >= 3
-            for (x, y), colour in zip(places, colours)]
-    share = float(np.mean(seen)) if seen else 0.0
-    if share < least:
-        missing = [tuple(map(int, p)) for p, ok in zip(places, seen) if not ok]
-        raise AssertionError(f"only {share:.0%} of {len(seen)} agents in their own colour "
-                             f"(missing at {missing[:10]})")
-    return {"own colour": share}
+    counts = np.array(colour_pixels(image, grid, colours.astype(np.uint8), tolerance))
+    seen = counts >= 0.1 * grid.cell ** 2
+    if seen.mean() < least:
+        raise AssertionError(f"only {seen.mean():.0%} of {len(seen)} agents show their own "
+                             f"colour (missing: {np.flatnonzero(~seen)[:10].tolist()})")
+    return {"own colour": float(seen.mean())}
 
 
 @dataclass(frozen=True)
@@ -406,7 +405,7 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
         found["walls"] = check_walls(image, grid, walls, free, WALL_COLOUR)
     found["labels"] = check_labels(image, grid, np.concatenate([episode.agents, episode.goals]),
                                    np.concatenate([colours, colours]))
-    found["colours"] = check_colours(image, grid, episode.agents, colours)
+    found["colours"] = check_colours(image, grid, colours)
     origins, vectors, who = episode.moves
     found["moves"] = check_arrows(image, grid, origins, vectors, colours[who])
     origins, vectors = episode.waits

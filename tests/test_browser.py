@@ -4,8 +4,8 @@ in one headless Chromium; the screenshots' pixels must show what the recording t
 Two runs: 8 agents on 11 x 11 with walls (``--obstacle-density 0.2``: 24 walls), and 128 agents
 on 40 x 40. In each, the viewer opens on the newest episode, and the pixels must show the grid;
 in the first every wall, each a block at its own cell; in both a label under every agent and
-every goal, in its colour; each agent's disc in its own colour, told apart from all the others'
-(128 colours, no two alike); the moves announced in that episode (arrows in the agent's colour)
+every goal, in its colour; each agent's own colour (128 colours, no two alike, each told apart
+from all the others); the moves announced in that episode (arrows in the agent's colour)
 and the waits (dark arrows from an agent to the neighbour it waited for). The recording of 128
 agents holds about as many entities as that of 8: each world entity holds every agent.
 
@@ -104,7 +104,7 @@ def test_every_agent_and_goal_is_labelled_and_the_moves_and_waits_show(pictures,
     image, config, run_dir = shown(pictures, name)
     found = check_world(image, config, run_dir)
     assert found["labels"]["labelled"] >= 0.65
-    assert found["colours"]["own colour"] >= 0.6
+    assert found["colours"]["own colour"] >= 0.9
     assert found["moves"]["arrows"] > 0 and found.get("waits", {}).get("arrows", 0) > 0
     print(name, {key: value for key, value in found.items() if key != "grid"})
 
