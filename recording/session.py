@@ -293,9 +293,10 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     if map_agent is not None and 0 <= map_agent < n and known_map.shows_known_map(config):
         learned = rrb.Vertical(rrb.Spatial2DView(
             origin=known_map.ROOT, background=[255, 255, 255],
-            name=f"Agent {map_agent}'s known map and planned path",
+            name=f"Agent {map_agent}'s known map and planned paths",
             visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
-                                             y_range=[-0.6, config.height - 0.4])),
+                                             y_range=[-0.6, config.height - 0.4]),
+            overrides={known_map.PATH: episode}),  # every path it planned in the episode
             heat_maps, row_shares=[2, 3])
     return rrb.Blueprint(
         rrb.Horizontal(

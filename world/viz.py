@@ -261,8 +261,9 @@ def tables(config: SwarmConfig) -> str:
              else "the moves that bring it nearer its goal")
     return (f"**Known map** (one agent's, `--map-agent`): the walls it has seen (dark blocks) "
             f"and those it has not (pale outlines), the parked agents it plans around (grey), "
-            f"and its planned path to its goal on the map it knows (a line in its colour), "
-            f"unknown cells taken as free.\n\n"
+            f"and its planned path to its goal on the map it knows (a line in its colour; on the "
+            f"`episode` timeline every path it planned in the episode), unknown cells taken as "
+            f"free.\n\n"
             f"**Q_DS** is read on that map: its state is {state}, so it is a table, one row per "
             f"state: the best move, its value (up to {config.goal_reward:g}, the goal reward), "
             f"and whether that move follows the planned path. **Q_CA heat map**: one pixel per "
