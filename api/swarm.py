@@ -1,12 +1,12 @@
 """The Python API: :class:`Swarm` configures a run, :meth:`Swarm.run` plays it in this process or
 as the world and agent processes over Zenoh, and :class:`Run` reads what it left.
 
-The API is the command's own flow (``launch.swarm_cli``) with exceptions instead of exit codes:
-options become the command's arguments, which its parser and ``resolve`` check, so a bad option
-raises ValueError with the very line the command prints; the run directory is prepared, played
-and recorded by the same functions (``prepare_out_dir``, ``run_in_process``, ``run_processes``,
-``resume``), so a run made here and one made by ``launch/swarm.py`` with the same options are the
-same run, file for file.
+The command (``launch/swarm.py``) is a Swarm made from its parsed options
+(:meth:`Swarm.from_args`) and played (:meth:`Swarm.play`). Options given here by name become the
+command's arguments, which its parser and ``api.command.resolve`` check (one path from options to
+config), so a bad option raises ValueError with the very line the command prints; the run
+directory is prepared, played and recorded by the same functions, so a run made here and one
+made by ``launch/swarm.py`` with the same options are the same run, file for file.
 """
 
 import argparse
@@ -21,7 +21,7 @@ from typing import Callable, Literal, NoReturn
 import numpy as np
 
 from nnql_swarm.agent import checkpoint
-from nnql_swarm.launch import swarm_cli
+from nnql_swarm.api import command
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import MODE_VARIABLE
@@ -73,17 +73,52 @@ class Swarm:
     ``<preset>-<agents>a-s<seed>-<time>``, fixed when the Swarm is made).
     """
 
+    _args: argparse.Namespace
+    _argv: list[str] | None
+    config: SwarmConfig
+    out: Path
+
     def __init__(self, config: SwarmConfig | None = None, **options) -> None:
         if config is not None:
             if options:
                 raise ValueError("give a SwarmConfig or options, not both")
             options = config_options(config)
         self._argv = command_arguments(options)
-        args = parse([*self._argv, "--in-process"])
-        self.config, _ = _usage(swarm_cli.resolve, args)
+        self._take(_usage(Swarm.from_args, parse([*self._argv, "--in-process"])))
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> "Swarm":
+        """The Swarm of the command's parsed options (``api.command.build_parser``), every one
+        of them kept: where the run goes, how its processes connect, what it records. Raises
+        ``api.command.UsageError`` (the command's one line) for a bad one."""
+        swarm = cls.__new__(cls)
+        swarm._args = args
+        swarm._argv = None
+        swarm.config, swarm.out = command.resolve(args)
+        return swarm
+
+    def _take(self, other: "Swarm") -> None:
+        self._args, self.config, self.out = other._args, other.config, other.out
 
     def __repr__(self) -> str:
-        return f"Swarm({' '.join(self._argv)})"
+        return f"Swarm({' '.join(self._argv or [])})"
+
+    def prepare(self) -> None:
+        """Make the run directory (:attr:`out`) and write its config; raises
+        ``api.command.UsageError`` for a directory that is not usable or holds a run."""
+        command.prepare_out_dir(self.out, self.config, self._args.role)
+
+    def play(self, on_row: "Progress | None" = None) -> int:
+        """Play the prepared run as its options say (in this process, or as the world and the
+        agent processes of ``--role``); returns the command's exit code. ``on_row(row)`` follows
+        each episode's row."""
+        args, config, path = self._args, self.config, self.out
+        if args.in_process:
+            return command.run_in_process(config, path,
+                                          command.RecordingSession.start(args, config, path),
+                                          not args.no_progress, on_row=on_row,
+                                          reference=args.reference)
+        return _play_processes(args, config, path, ResumePoint(0, 0), on_row)
 
     def run(self, out: str | Path | None = None, *, distributed: bool = False,
             record: bool = True, progress: Progress | bool | None = None) -> "Run":
@@ -102,25 +137,14 @@ class Swarm:
         """
         if not (progress is None or isinstance(progress, bool) or callable(progress)):
             raise ValueError(f"progress must be a callable, True or False, not {progress!r}")
-        argv = [*self._argv, "--run-id", self.config.run_id]
-        if out is not None:
-            argv += ["--out", str(out)]
-        if not distributed:
-            argv.append("--in-process")
-        if not record:
-            argv.append("--no-record")
-        if progress is not True:
-            argv.append("--no-progress")
-        args = parse(argv)
-        config, path = _usage(swarm_cli.resolve, args)
-        _usage(swarm_cli.prepare_out_dir, path, config, args.role)
-        on_row = progress if callable(progress) else None
-        if distributed:
-            return _play_processes(args, config, path, ResumePoint(0, 0), on_row)
-        session = swarm_cli.RecordingSession.start(args, config, path)
-        code = swarm_cli.run_in_process(config, path, session, not args.no_progress,
-                                        on_row=on_row)
-        return _finished(code, path, distributed=False)
+        args = argparse.Namespace(**vars(self._args))
+        args.run_id, args.in_process = self.config.run_id, not distributed
+        args.out = None if out is None else Path(out)
+        args.no_record, args.no_progress = not record, progress is not True
+        swarm = _usage(Swarm.from_args, args)
+        _usage(swarm.prepare)
+        code = swarm.play(progress if callable(progress) else None)
+        return _finished(code, swarm.out, distributed)
 
 
 def run(out: str | Path | None = None, *, config: SwarmConfig | None = None,
@@ -138,10 +162,11 @@ def resume(out: str | Path, *, progress: Progress | bool | None = None) -> "Run"
     Raises ValueError where the directory cannot be resumed (the line names the file)."""
     argv = ["--resume", "--out", str(out)] + ([] if progress is True else ["--no-progress"])
     args = parse(argv)
-    config, start, path = _usage(swarm_cli.resume, args)
+    config, start, path = _usage(command.resume, args)
     if start.episode >= config.episodes:
         return Run.open(path)
-    return _play_processes(args, config, path, start, progress if callable(progress) else None)
+    code = _play_processes(args, config, path, start, progress if callable(progress) else None)
+    return _finished(code, path, distributed=True)
 
 
 def open_run(path: str | Path) -> "Run":
@@ -263,7 +288,7 @@ class Run:
 def command_arguments(options: dict) -> list[str]:
     """The command's arguments for API options (:class:`Swarm`); raises ValueError for a name
     that is no option of the command, or a value an on/off option cannot take."""
-    actions = _actions(swarm_cli.build_parser())
+    actions = _actions(command.build_parser())
     argv: list[str] = []
     for name, value in options.items():
         action = actions.get(name)
@@ -302,7 +327,7 @@ def config_options(config: SwarmConfig) -> dict:
 def parse(argv: list[str]) -> argparse.Namespace:
     """The command's parser on ``argv``, raising ValueError with its one-line message where the
     command would print it and exit."""
-    return swarm_cli.build_parser(_RaisingParser).parse_args(argv)
+    return command.build_parser(_RaisingParser).parse_args(argv)
 
 
 class _RaisingParser(OneLineParser):
@@ -332,23 +357,23 @@ def _usage(function, *args):
     ValueError with the same line."""
     try:
         return function(*args)
-    except (swarm_cli.UsageError, ResumeError) as error:
+    except (command.UsageError, ResumeError) as error:
         raise ValueError(str(error)) from None
 
 
 def _play_processes(args: argparse.Namespace, config: SwarmConfig, path: Path,
-                    start: ResumePoint, progress: Progress | None) -> "Run":
-    """The world and agent processes of a run, as the command starts them; ``progress`` follows
-    ``episodes.csv`` as the world writes it."""
+                    start: ResumePoint, progress: Progress | None) -> int:
+    """The world and agent processes of a run, as the command starts them, and their exit code;
+    ``progress`` follows ``episodes.csv`` as the world writes it."""
     follower = _RowFollower(path / EPISODES_FILE, start.episode, progress) if progress else None
     with _kernel_mode_kept():
-        code = swarm_cli.run_processes(args, config, path, start,
-                                       on_poll=follower.poll if follower else None)
+        code = command.run_processes(args, config, path, start,
+                                     on_poll=follower.poll if follower else None)
     if follower is not None:
         follower.poll()
         if follower.error is not None:
             raise follower.error
-    return _finished(code, path, distributed=True)
+    return code
 
 
 def _finished(code: int, path: Path, distributed: bool) -> "Run":

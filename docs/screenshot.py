@@ -7,10 +7,11 @@ The web viewer renders with SwiftShader; a recording of a few MB shows after a m
 
     python docs/screenshot.py --docs
 
-makes the three runs of the docs and their pictures: the default run (``launch/swarm.py``, 8
-agents, distributed) as ``docs/viewer.png``, the README's; 8 agents with walls
-(``--obstacle-density 0.2``) as ``docs/viewer-walls.png``; 64 agents on 32 x 32 as
-``docs/viewer-64.png`` (both ``--in-process``, the same runs as distributed). The runs go to
+makes the four runs of the docs and their pictures: the default run (``launch/swarm.py``, 8
+agents, distributed, with the paper's QL as the curves' reference) as ``docs/viewer.png``, the
+README's; 8 agents with walls (``--obstacle-density 0.2``, the reference too) as
+``docs/viewer-walls.png``; 64 agents on 32 x 32 as ``docs/viewer-64.png``; 128 agents on
+40 x 40 as ``docs/viewer-128.png`` (``--in-process``, the same runs as distributed). The runs go to
 ``runs/screenshots/``. Each picture is taken once the viewer shows what ``tests/browser.py``
 checks of the newest episode (the grid, walls, labels, moves and waits), or after ``--wait``.
 
@@ -31,9 +32,11 @@ sys.path.insert(0, str(ROOT))
 from tests.browser import CHROMIUM, check_world, chromium, wait_for, web_viewer  # noqa: E402
 
 DOCS_RUNS = {
-    "viewer.png": ("default", ["--agents", "8"]),
-    "viewer-walls.png": ("walls", ["--agents", "8", "--obstacle-density", "0.2", "--in-process"]),
+    "viewer.png": ("default", ["--agents", "8", "--reference"]),
+    "viewer-walls.png": ("walls", ["--agents", "8", "--obstacle-density", "0.2", "--in-process",
+                                   "--reference"]),
     "viewer-64.png": ("64-agents", ["--agents", "64", "--grid", "32x32", "--in-process"]),
+    "viewer-128.png": ("128-agents", ["--agents", "128", "--grid", "40x40", "--in-process"]),
 }
 """Each picture of the docs: its run's id under ``runs/screenshots/`` and options."""
 

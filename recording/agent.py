@@ -18,6 +18,13 @@ Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.no
   the same for ``Q_CA``, whose state is a *neighbour's* offset (nnQL: its announced next cell,
   QL: its current cell).
 
+Where destination seeking reads the agent's known map instead of the goal's offset
+(``--ds-state waypoint`` or ``progress``, the default preset's), its few states have no place on
+the offset window: ``q_ds/table`` is then a markdown table (:func:`ds_table`), one row per state
+saying what the state is (the next cell of the planned path; or the moves that bring the agent
+nearer on its map), whether it was met yet, the best move and its value, and whether that move
+follows the planned path.
+
 Only the first ``recording.loggers.RECORDED_AGENTS`` agents log these, and only agent 0 where
 the agents share one table (every copy is the same table). What an agent logs is
 buffered and sent in columns every few seconds (:class:`AgentViz`).
@@ -41,7 +48,9 @@ import numpy as np
 import rerun as rr
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.protocol.actions import MOVES, N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, WINDOW
+from nnql_swarm.protocol.actions import (
+    ACTION_NAMES, MOVES, N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, WINDOW, offset_state,
+)
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, time_columns
@@ -71,6 +80,12 @@ OPTIMISTIC = (205, 205, 205)
 """States whose best value is still above anything the table can learn: light grey."""
 FRAME = (120, 120, 120)
 NOTHING_LEARNED = "nothing learned yet: every entry is still at its initial value"
+DS_STATE_TITLES = {
+    "goal": "by the goal's offset from the agent",
+    "waypoint": "by the next cell of its planned path on the map it knows",
+    "progress": "by the moves that bring it nearer its goal on the map it knows",
+}
+"""What destination seeking's state is, per ``--ds-state``: the heat maps' titles say it."""
 
 
 def agent_path(agent: int) -> str:
@@ -131,6 +146,56 @@ def table_picture(q: np.ndarray, initial: float = 0.0, bound: float | None = Non
         image[visited] = viridis(shade[visited])
         image[visited & (value > top * (1 + 1e-9))] = OPTIMISTIC
     return {"value": value, "best": best, "visited": visited, "decided": decided, "image": image}
+
+
+def ds_states(ds_state: str) -> list[tuple[int, str, int]]:
+    """The destination-seeking states of a map-reading learner (``learning.learner.ds_state``), each
+    as ``(state, what it is, moves that follow the planned path as bits)``; empty for the goal's
+    offset, which the 21 x 21 picture shows."""
+    moves = [name.lower() for name in ACTION_NAMES[:STAY]]
+    if ds_state == "waypoint":
+        return [(offset_state(int(dx), int(dy)), name, 1 << a)
+                for a, (name, (dx, dy)) in enumerate(zip(moves, MOVES[:STAY]))] + \
+            [(offset_state(0, 0), "none: on the goal, or cut off", 1 << STAY)]
+    if ds_state == "progress":
+        return [(mask, " or ".join(m for a, m in enumerate(moves) if mask >> a & 1)
+                 if mask else "none: on the goal, or cut off", mask or 1 << STAY)
+                for mask in range(1 << STAY)]
+    return []
+
+
+DS_STATE_HEADS = {"waypoint": "the next cell of the path", "progress": "moves that bring it nearer"}
+"""The state column's heading in :func:`ds_table`."""
+
+
+def ds_table(q_ds: np.ndarray, ds_state: str, initial: float, bound: float) -> tuple[str, bool]:
+    """Q_DS of a map-reading learner as a markdown table, one row per state (:func:`ds_states`):
+    what the state is, the best move and its value (or that the state was never met, or that
+    every move ties), and whether that move follows the planned path; a value still above
+    ``bound`` (what the table can learn: an optimistic start not explored yet) is starred.
+    Returns the table and whether any entry moved off ``initial``."""
+    lines = [f"| {DS_STATE_HEADS[ds_state]} | best move (value) | on the path |",
+             "| --- | --- | --- |"]
+    learned = optimistic = False
+    for state, meaning, path_moves in ds_states(ds_state):
+        values = np.asarray(q_ds[state], dtype=float)
+        if np.all(values == initial):
+            lines.append(f"| {meaning} | not met yet | |")
+            continue
+        learned = True
+        best = int(values.argmax())
+        star = "*" if values[best] > bound else ""
+        optimistic |= bool(star)
+        if np.all(values == values[best]):
+            lines.append(f"| {meaning} | all tie ({values[best]:.2f}{star}) | |")
+            continue
+        follows = "yes" if path_moves >> best & 1 else "no"
+        lines.append(f"| {meaning} | {ACTION_NAMES[best].lower()} ({values[best]:.2f}{star}) "
+                     f"| {follows} |")
+    if optimistic:
+        lines.append(f"\n\\* above {bound:g}, all it can learn: its optimistic start "
+                     f"({initial:g}), not explored yet")
+    return "\n".join(lines), learned
 
 
 def policy_marks(picture: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -204,9 +269,13 @@ class AgentViz:
         self._episodes = 0  # buffered
         self._series = SeriesColumns()
         self._pictures: list[tuple[int, int, list[tuple]]] = []  # tick, episode, per table
+        self._ds_tables: list[str] = []  # per entry of _pictures, where Q_DS is a table
+        self.pictured = tuple(table for table in TABLES if table != "q_ds" or
+                              config.ds_state == "goal") if heat_maps else ()
+        """The tables drawn as 21 x 21 pictures; Q_DS of a map-reading learner is a table."""
         root = agent_path(agent)
         centre = np.array([[VIEW_RADIUS + 0.5, VIEW_RADIUS + 0.5]], dtype=np.float32)
-        for table in TABLES if heat_maps else ():
+        for table in self.pictured:
             stream.log(f"{root}/{table}/frame", rr.Boxes2D(
                 centers=[[WINDOW / 2, WINDOW / 2]], sizes=[[WINDOW, WINDOW]], colors=[FRAME],
                 radii=0.05, draw_order=45.0), static=True)
@@ -231,11 +300,17 @@ class AgentViz:
         else:
             tick = 0
         if self.heat_maps and logs_heat_maps(episode, self.config.episodes):
+            c, tables = self.config, dict(zip(TABLES, brain.learner.tables()))
             self._pictures.append((tick, episode, [
                 (picture["image"], *policy_marks(picture), bool(picture["visited"].any()))
-                for picture in (table_picture(values, self.config.optimistic,
-                                              learnable_bound(table, self.config))
-                                for table, values in zip(TABLES, brain.learner.tables()))]))
+                for picture in (table_picture(tables[table], c.optimistic,
+                                              learnable_bound(table, c))
+                                for table in self.pictured)]))
+            if "q_ds" not in self.pictured:
+                text, _ = ds_table(tables["q_ds"], c.ds_state, c.optimistic,
+                                   learnable_bound("q_ds", c))
+                self._ds_tables.append(f"**Q_DS {DS_STATE_TITLES[c.ds_state]}**, at "
+                                       f"episode {episode}\n\n{text}")
         if isinstance(brain, TimedBrain):
             latencies, unanswered = brain.take_timings()
             if latencies:
@@ -256,11 +331,17 @@ class AgentViz:
         ticks, episodes, tables = zip(*self._pictures)
         self._pictures = []
         index = time_columns(ticks, episodes)
+        if self._ds_tables:
+            self.rec.send_columns(f"{agent_path(self.agent)}/q_ds/table", index,
+                                  rr.TextDocument.columns(
+                                      text=self._ds_tables,
+                                      media_type=[rr.MediaType.MARKDOWN] * len(self._ds_tables)))
+            self._ds_tables = []
         image_format = rr.components.ImageFormat(width=WINDOW, height=WINDOW, color_model="RGB",
                                                  channel_datatype="U8")
         root = agent_path(self.agent)
         note_at = np.array([[WINDOW / 2, WINDOW / 4]], dtype=np.float32)
-        for table, marks in zip(TABLES, zip(*tables)):
+        for table, marks in zip(self.pictured, zip(*tables)):
             images, origins, vectors, colors, stays, learned = zip(*marks)
             self.rec.send_columns(f"{root}/{table}/note", index, rr.Points2D.columns(
                 positions=np.concatenate([note_at[:0] if done else note_at for done in learned]),

@@ -4,7 +4,7 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.recording.loggers import heat_map_agents
 
 
-def blueprint(config: SwarmConfig, distributed: bool = True):
+def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | None = 0):
     """The first view: the world and its key | the learning curves | the heat maps.
 
     The viewer opens on the ``episode`` timeline, following the newest episode: the curves run
@@ -41,23 +41,34 @@ def blueprint(config: SwarmConfig, distributed: bool = True):
 
     n = config.n_agents
     metrics = rrb.Grid(
-        plot((0.0, 1.05), origin="metrics/arrived_share", name="Arrived (share of agents)"),
-        plot(origin="metrics/steps", name="Steps / shortest path",
-             contents=["metrics/steps/over_shortest", "metrics/steps/shortest_path"]),
+        plot((0.0, 1.05), origin="metrics/arrived_share",
+             name="Share of agents on their goal at the episode's end"),
+        plot(origin="metrics/steps", name="Steps taken / shortest path (1: perfect)",
+             contents=["metrics/steps/over_shortest", "metrics/steps/shortest_path",
+                       "metrics/steps/paper_ql"]),
         plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",
-             name="Collisions per episode"),
+             name="Agents in a collision, per episode"),
         plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),
         plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)") if distributed
         else plot(origin="metrics/steps/episode", name="Ticks per episode"),
         plot(origin="metrics/ticks_per_s", name="Ticks per second"),
         grid_columns=2, name="Learning curves (x: episode)",
     )
+    from nnql_swarm.recording import known_map
+    from nnql_swarm.recording.agent import DS_STATE_TITLES
+
     shared = config.shared
+
+    def q_ds(i: int, whose: str):
+        if config.ds_state == "goal":
+            return rrb.Spatial2DView(origin=f"agents/{i}/q_ds", background=[255, 255, 255],
+                                     name=f"{whose} Q_DS: goal offset")
+        return rrb.TextDocumentView(origin=f"agents/{i}/q_ds/table",
+                                    name=f"{whose} Q_DS {DS_STATE_TITLES[config.ds_state]}")
+
     heat_maps = rrb.Tabs(*[
         rrb.Vertical(
-            rrb.Spatial2DView(origin=f"agents/{i}/q_ds", background=[255, 255, 255],
-                              name="Shared Q_DS: goal offset" if shared
-                              else f"Agent {i} Q_DS: goal offset"),
+            q_ds(i, "Shared" if shared else f"Agent {i}"),
             rrb.Spatial2DView(origin=f"agents/{i}/q_ca", background=[255, 255, 255],
                               name="Shared Q_CA: neighbour offset" if shared
                               else f"Agent {i} Q_CA: neighbour offset"),
@@ -65,11 +76,20 @@ def blueprint(config: SwarmConfig, distributed: bool = True):
         )
         for i in heat_map_agents(config)
     ], active_tab=0, name="What the agents learned")
+    learned: rrb.Tabs | rrb.Vertical = heat_maps
+    if map_agent is not None and 0 <= map_agent < n and known_map.shows_known_map(config):
+        learned = rrb.Vertical(rrb.Spatial2DView(
+            origin=known_map.ROOT, background=[255, 255, 255],
+            name=f"Agent {map_agent}'s known map and planned paths",
+            visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
+                                             y_range=[-0.6, config.height - 0.4]),
+            overrides={known_map.PATH: episode}),  # every path it planned in the episode
+            heat_maps, row_shares=[2, 3])
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(world_view, events, row_shares=[3, 1]),
+            rrb.Vertical(world_view, events, row_shares=[3, 1] if n < 64 else [4, 1]),
             rrb.Vertical(metrics, key, row_shares=[3, 2]),
-            heat_maps,
+            learned,
             column_shares=[5, 5, 3],
         ),
         rrb.BlueprintPanel(state="collapsed"),

@@ -16,8 +16,10 @@ Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
 ``legend``) are logged once. Each entity holds every agent (one ``Points2D`` for all agents, one
 ``Boxes2D`` for all goals, ...), whatever their number. Agents and goals share a colour
-(:data:`PALETTE`, repeating every 12 agents) and a label, the agent's id. The blueprint
-(``recording.blueprint.blueprint``) opens on the ``episode`` timeline, where the view shows the
+(:func:`agent_colors`, one per agent, all different) and a label, the agent's id. With a learner
+that reads the known map, one agent's map and planned path go with the world's ticks too
+(``recording.known_map``). The blueprint
+(``recording.session.blueprint``) opens on the ``episode`` timeline, where the view shows the
 intents, waits and collisions of the whole episode at once.
 
 Cost: everything is buffered, the per-tick entities, each episode's goals, metrics and event
@@ -121,15 +123,76 @@ PALETTE = np.array([
     (0, 90, 181), (204, 80, 0), (0, 130, 60), (125, 50, 180), (190, 20, 120), (0, 120, 135),
     (135, 85, 20), (95, 105, 0), (40, 45, 140), (165, 0, 200), (150, 50, 90), (80, 80, 200),
 ], dtype=np.uint8)
-"""The agents' colours: twelve hues far apart, each dark enough for its label (coloured text on
-the viewer's light label background) to read, at a contrast of 4.4 to 11 against white, and none
-near the collisions' red. Agent ``i`` has colour ``i mod 12``: beyond 12 agents colours repeat,
-and the labels (the agent's id, on the agent and on its goal) tell agents apart."""
+"""The first twelve agents' colours: hues far apart, each dark enough for its label (coloured
+text on the viewer's light label background) to read, at a contrast of 4.4 to 11 against white,
+and none near the collisions' red. Beyond twelve agents :func:`agent_colors` adds more."""
+
+LABEL_LIGHTNESS = (25.0, 49.0)
+"""CIE L* of the colours added beyond :data:`PALETTE`: at most 49, a contrast of at least 4.5
+against white, so that a label in that colour reads; at least 25, apart from the waits' black."""
+
+KEEP_APART = ((COLLISION_RED, 60), (WAIT_COLOUR, 60), (WALL_COLOUR, 40), ((90, 90, 90), 30))
+"""Colours an agent's must stay away from (most channel difference), so that no agent is read as
+a collision, a wait, a wall or the grid: the collisions' red, the waits, the walls, the grid."""
+
+
+def _lab_to_rgb(lab: np.ndarray) -> np.ndarray:
+    """CIE L*a*b* (D65) to sRGB in [0, 1], unclipped (outside [0, 1]: out of gamut)."""
+    fy = (lab[:, 0] + 16.0) / 116.0
+    f = np.stack([fy + lab[:, 1] / 500.0, fy, fy - lab[:, 2] / 200.0], axis=1)
+    xyz = np.where(f > 6 / 29, f ** 3, 3 * (6 / 29) ** 2 * (f - 4 / 29)) * [0.95047, 1.0, 1.08883]
+    linear = xyz @ np.array([[3.2406, -0.9689, 0.0557], [-1.5372, 1.8758, -0.2040],
+                             [-0.4986, 0.0415, 1.0570]])
+    return np.where(linear <= 0.0031308, 12.92 * linear,
+                    1.055 * np.abs(linear) ** (1 / 2.4) - 0.055)
+
+
+def _rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
+    """sRGB bytes to CIE L*a*b* (D65)."""
+    c = np.asarray(rgb, dtype=np.float64) / 255.0
+    linear = np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+    xyz = linear @ np.array([[0.4124, 0.2126, 0.0193], [0.3576, 0.7152, 0.1192],
+                             [0.1805, 0.0722, 0.9505]]) / [0.95047, 1.0, 1.08883]
+    f = np.where(xyz > (6 / 29) ** 3, np.cbrt(xyz), xyz / (3 * (6 / 29) ** 2) + 4 / 29)
+    return np.stack([116 * f[:, 1] - 16, 500 * (f[:, 0] - f[:, 1]), 200 * (f[:, 1] - f[:, 2])],
+                    axis=1)
+
+
+def _candidates() -> np.ndarray:
+    """Every colour :func:`agent_colors` may add: a lattice of L*a*b* within
+    :data:`LABEL_LIGHTNESS`, in the sRGB gamut, away from :data:`KEEP_APART`."""
+    lightness, a, b = np.meshgrid(np.arange(LABEL_LIGHTNESS[0], LABEL_LIGHTNESS[1] + 1, 4.0),
+                                  np.arange(-80.0, 81.0, 5.0), np.arange(-80.0, 81.0, 5.0),
+                                  indexing="ij")
+    rgb = _lab_to_rgb(np.stack([lightness.ravel(), a.ravel(), b.ravel()], axis=1))
+    rgb = np.round(rgb[np.all((rgb >= 0) & (rgb <= 1), axis=1)] * 255).astype(np.uint8)
+    keep = np.ones(len(rgb), dtype=bool)
+    for colour, apart in KEEP_APART:
+        keep &= np.abs(rgb.astype(int) - colour).max(axis=1) > apart
+    return np.unique(rgb[keep], axis=0)
+
+
+_COLOURS = [PALETTE]
 
 
 def agent_colors(n: int) -> np.ndarray:
-    """Each agent's colour, :data:`PALETTE` in turn, as RGB bytes ``(n, 3)``."""
-    return PALETTE[np.arange(n) % len(PALETTE)]
+    """Each agent's colour as RGB bytes ``(n, 3)``, all different: :data:`PALETTE`, then, one
+    at a time, the candidate (:func:`_candidates`) farthest in L*a*b* from every colour taken,
+    so that each new colour is as distinct as it can be from those before (deterministic; an
+    agent keeps its colour whatever the number of agents)."""
+    taken = _COLOURS[0]
+    if len(taken) < n:
+        pool = _candidates()
+        pool_lab = _rgb_to_lab(pool)
+        nearest = np.min(np.linalg.norm(pool_lab[:, None] - _rgb_to_lab(taken)[None], axis=2),
+                         axis=1)
+        added: list[np.ndarray] = []
+        while len(taken) + len(added) < n:
+            k = int(nearest.argmax())
+            added.append(pool[k])
+            nearest = np.minimum(nearest, np.linalg.norm(pool_lab - pool_lab[k], axis=1))
+        taken = _COLOURS[0] = np.concatenate([taken, np.array(added, dtype=np.uint8)])
+    return taken[:n]
 
 
 def with_alpha(colors: np.ndarray, alpha: int) -> np.ndarray:
@@ -168,7 +231,7 @@ def legend(config: SwarmConfig) -> str:
              else f"{config.algo} agents do not negotiate: they wait for nobody.")
     return f"""**World** ({config.width} x {config.height}, {config.n_agents} agents).
 Discs are agents, labelled with their id; the box with the same id and colour is that agent's
-goal. Colours repeat every 12 agents; the ids do not.{walls}
+goal. Every agent has a colour of its own.{walls}
 On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
 move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
 discs), and the agents where the episode left them. On the `tick` timeline it shows one tick:
@@ -178,14 +241,35 @@ where each agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
 **Learning curves** run against episodes: the share of agents that arrived, the steps they took
 over their shortest paths (1 is perfect), and collisions (each agent in one counts one).
 
-**Heat maps**: one pixel per offset of the goal (Q_DS) or of a neighbour (Q_CA) from the agent,
-the red square in the middle; the colour is the best action's value, dark purple (low) to yellow
-(high), on a fixed scale: Q_DS 0 to the goal reward {config.goal_reward:g} (bright: close to the
-goal), Q_CA 0 to {collision_bound(config):g}, the value of never colliding (dark: a neighbour
-there led to collisions). Light grey: an entry still above anything it can learn, i.e. on its
-optimistic start, not yet explored. Blank: never updated. Arrows: the best move; a dot: STAY.
+{tables(config)}
 {shared}
 """
+
+
+def tables(config: SwarmConfig) -> str:
+    """The key's paragraphs on the known map and the Q-tables, for this run's learners."""
+    scale = ("the colour is the best action's value, dark purple (low) to yellow (high), on a "
+             "fixed scale: ")
+    rest = ("Light grey: an entry still above anything it can learn, i.e. on its optimistic "
+            "start, not yet explored. Blank: never updated. Arrows: the best move; a dot: STAY.")
+    ca = (f"Q_CA 0 to {collision_bound(config):g}, the value of never colliding (dark: a "
+          f"neighbour there led to collisions)")
+    if config.ds_state == "goal":
+        return (f"**Heat maps**: one pixel per offset of the goal (Q_DS) or of a neighbour (Q_CA)"
+                f" from the agent, the red square in the middle; {scale}Q_DS 0 to the goal "
+                f"reward {config.goal_reward:g} (bright: close to the goal), {ca}. {rest}")
+    state = ("the next cell of its planned path" if config.ds_state == "waypoint"
+             else "the moves that bring it nearer its goal")
+    return (f"**Known map** (one agent's, `--map-agent`): the walls it has seen (dark blocks) "
+            f"and those it has not (pale outlines), the parked agents it plans around (grey), "
+            f"and its planned path to its goal on the map it knows (a line in its colour; on the "
+            f"`episode` timeline every path it planned in the episode), unknown cells taken as "
+            f"free.\n\n"
+            f"**Q_DS** is read on that map: its state is {state}, so it is a table, one row per "
+            f"state: the best move, its value (up to {config.goal_reward:g}, the goal reward), "
+            f"and whether that move follows the planned path. **Q_CA heat map**: one pixel per "
+            f"offset of a neighbour from the agent, the red square in the middle; {scale}{ca}. "
+            f"{rest}")
 
 
 def collision_bound(config: SwarmConfig) -> float:
@@ -203,8 +287,11 @@ class WorldViz:
     """
 
     def __init__(self, config: SwarmConfig, stream: rr.RecordingStream,
-                 flush_every: int = FLUSH_EVERY, collisions_before: int = 0) -> None:
-        """``collisions_before``: the collisions of the episodes a resumed run already has."""
+                 flush_every: int = FLUSH_EVERY, collisions_before: int = 0,
+                 map_agent: int | None = 0) -> None:
+        """``collisions_before``: the collisions of the episodes a resumed run already has;
+        ``map_agent``: the agent whose known map and planned path the recording shows
+        (``recording.known_map``; None: nobody's)."""
         self.config = config
         self.rec = stream
         self.clock = FlushClock(flush_every)
@@ -228,7 +315,14 @@ class WorldViz:
         self._goals: list[tuple[int, int, np.ndarray]] = []
         self._metrics = SeriesColumns()
         self._events = TextColumns(EVENTS)
+        self._goal_cells: list = []  # the current episode's goals
         self._log_static()
+        self.known_map = None
+        if map_agent is not None and 0 <= map_agent < n:
+            from nnql_swarm.recording.known_map import KnownMapViz, shows_known_map
+
+            if shows_known_map(config):
+                self.known_map = KnownMapViz(config, map_agent, stream, self.colors[map_agent])
 
     @staticmethod
     def to_file(config: SwarmConfig, path: Path) -> "WorldViz":
@@ -288,8 +382,13 @@ class WorldViz:
                                                     c.n_agents, c.obstacle_density, c.map_rows,
                                                     c.scenario
                                                     ).starts.tolist()))
-        if report.episode != self._goals_episode:
+        starts = report.episode != self._goals_episode
+        if starts:
             self._start_episode(report)
+        if self.known_map is not None:
+            agent = self.known_map.agent
+            self.known_map.observe(report.tick, report.episode, starts, before, self._arrived,
+                                   self._goal_cells[agent])
         self._buffer.append((report.tick, report.episode, report.moved, before, self._arrived,
                              report.actions, report.collided))
         if report.collided:
@@ -311,6 +410,7 @@ class WorldViz:
                                 c.obstacle_density, c.map_rows, c.scenario)
         self._starts[report.episode] = episode.starts.astype(np.float32)
         self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32)))
+        self._goal_cells = episode.goals.tolist()
 
     def _end_episode(self, report: TickReport, row: dict) -> None:
         n, started = self.config.n_agents, self._episode_clock
@@ -360,6 +460,8 @@ class WorldViz:
         self._ended = []
         self._metrics.send(self.rec)
         self._events.send(self.rec)
+        if self.known_map is not None:
+            self.known_map.flush()
 
     def _send_ticks(self) -> None:
         k, n = len(self._buffer), self.config.n_agents

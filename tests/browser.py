@@ -209,15 +209,25 @@ def find_grid(image: np.ndarray, columns: int, rows: int, colour=GRID_GREY) -> G
     y0, y1 = grid.ys[0], grid.ys[-1]
     if abs((y1 - y0) / rows - grid.cell) > 2:
         raise AssertionError(f"grid lines at x {grid.xs} and y {grid.ys} make no square cells")
+    covered = ~near(image, BACKGROUND, 12)  # something drawn there, maybe over a line
     for x in grid.xs:
-        drawn = np.mean(lines[y0:y1 + 1, max(x - 1, 0):x + 2].max(axis=1) > 0)
-        if drawn < 0.8:
-            raise AssertionError(f"vertical grid line at x={x} drawn over {drawn:.0%} only")
+        band = np.s_[y0:y1 + 1, max(x - 1, 0):x + 2]
+        check_line(lines[band].max(axis=1) > 0, covered[band].all(axis=1), f"vertical grid "
+                   f"line at x={x}")
     for y in grid.ys:
-        drawn = np.mean(lines[max(y - 1, 0):y + 2, x0:x1 + 1].max(axis=0) > 0)
-        if drawn < 0.8:
-            raise AssertionError(f"horizontal grid line at y={y} drawn over {drawn:.0%} only")
+        band = np.s_[max(y - 1, 0):y + 2, x0:x1 + 1]
+        check_line(lines[band].max(axis=0) > 0, covered[band].all(axis=0), f"horizontal grid "
+                   f"line at y={y}")
     return grid
+
+
+def check_line(inked: np.ndarray, covered: np.ndarray, name: str) -> None:
+    """A grid line drawn along its whole length where nothing hides it: its ink over at least
+    half of it, and ink or something drawn over it (arrows, labels, agents) along 80 %."""
+    drawn, seen = float(np.mean(inked | covered)), float(np.mean(inked))
+    if drawn < 0.8 or seen < 0.5:
+        raise AssertionError(f"{name} drawn over {seen:.0%} only ({drawn:.0%} with what "
+                             f"covers it)")
 
 
 def colour_pixels(image: np.ndarray, grid: Grid, colours: np.ndarray,
@@ -314,6 +324,27 @@ def check_arrows(image: np.ndarray, grid: Grid, origins, vectors, colours,
     return {"arrows": len(seen), "visible": share}
 
 
+def check_colours(image: np.ndarray, grid: Grid, colours, tolerance: int = 5,
+                  least: float = 0.9) -> dict:
+    """Every agent in a colour of its own: inside the grid, pixels of each agent's colour (its
+    disc, goal, trail and moves) on at least a tenth of a cell's area, within a tolerance under
+    half the least difference between two agents' colours, so that no pixel counts for two
+    agents. At least ``least`` of the agents (one that stayed put, under others' labels, shows
+    little)."""
+    colours = np.asarray(colours, dtype=np.int16)
+    apart = np.abs(colours[:, None] - colours[None]).max(axis=2)
+    np.fill_diagonal(apart, 255)
+    if len(colours) > 1 and 2 * tolerance >= apart.min():
+        raise AssertionError(f"agents' colours only {apart.min()} apart: a tolerance of "
+                             f"{tolerance} cannot tell them apart")
+    counts = np.array(colour_pixels(image, grid, colours.astype(np.uint8), tolerance))
+    seen = counts >= 0.1 * grid.cell ** 2
+    if seen.mean() < least:
+        raise AssertionError(f"only {seen.mean():.0%} of {len(seen)} agents show their own "
+                             f"colour (missing: {np.flatnonzero(~seen)[:10].tolist()})")
+    return {"own colour": float(seen.mean())}
+
+
 @dataclass(frozen=True)
 class Episode:
     """What the world view draws of one episode, read back from a recording: where each agent
@@ -360,7 +391,8 @@ def last_episode(recording: Path) -> Episode:
 def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     """Everything the world view must show of a run's newest episode, the one the viewer opens
     on (``config``: the run's ``SwarmConfig``): the grid, every wall, a label under each agent
-    and goal, the moves announced and the waits. Raises AssertionError saying what is missing."""
+    and goal, each agent in its own colour, the moves announced and the waits. Raises
+    AssertionError saying what is missing."""
     from nnql_swarm.recording.world import WAIT_COLOUR, WALL_COLOUR, agent_colors
 
     grid = find_grid(image, config.width, config.height)
@@ -374,6 +406,7 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
         found["walls"] = check_walls(image, grid, walls, free, WALL_COLOUR)
     found["labels"] = check_labels(image, grid, np.concatenate([episode.agents, episode.goals]),
                                    np.concatenate([colours, colours]))
+    found["colours"] = check_colours(image, grid, colours)
     origins, vectors, who = episode.moves
     found["moves"] = check_arrows(image, grid, origins, vectors, colours[who])
     origins, vectors = episode.waits

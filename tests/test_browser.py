@@ -1,11 +1,13 @@
 """The web viewer in a real browser: short real runs, each served by ``rerun --serve-web``, opened
 in one headless Chromium; the screenshots' pixels must show what the recording tells.
 
-Two runs: 8 agents on 11 x 11 with walls (``--obstacle-density 0.2``: 24 walls), and 64 agents on
-32 x 32. In each, the viewer opens on the newest episode, and the pixels must show the grid; in
-the first every wall, each a block at its own cell, and every agent's colour; in both a label
-under every agent and every goal, in its colour; the moves announced in that episode (arrows in
-the agent's colour) and the waits (dark arrows from an agent to the neighbour it waited for).
+Two runs: 8 agents on 11 x 11 with walls (``--obstacle-density 0.2``: 24 walls), and 128 agents
+on 40 x 40. In each, the viewer opens on the newest episode, and the pixels must show the grid;
+in the first every wall, each a block at its own cell; in both a label under every agent and
+every goal, in its colour; each agent's own colour (128 colours, no two alike, each told apart
+from all the others); the moves announced in that episode (arrows in the agent's colour)
+and the waits (dark arrows from an agent to the neighbour it waited for). The recording of 128
+agents holds about as many entities as that of 8: each world entity holds every agent.
 
 The same checks must fail on a blank page and on the viewer when the recording does not come
 (a gRPC port nobody serves: the viewer shows its welcome page), opened in the same browser at the
@@ -17,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rerun as rr
 from PIL import Image
 
 from nnql_swarm.protocol.config import SwarmConfig
@@ -33,7 +36,7 @@ pytestmark = [pytest.mark.browser, pytest.mark.timeout(900)]
 COMMON = ("--episodes", "3", "--max-steps", "40", "--seed", "3", "--in-process")
 RUNS = {
     "walls": ("--agents", "8", "--obstacle-density", "0.2", *COMMON),
-    "crowd": ("--agents", "64", "--grid", "32x32", *COMMON),
+    "crowd": ("--agents", "128", "--grid", "40x40", *COMMON),
 }
 SIZE = (1600, 900)
 LOAD_TIMEOUT = 300.0
@@ -101,6 +104,7 @@ def test_every_agent_and_goal_is_labelled_and_the_moves_and_waits_show(pictures,
     image, config, run_dir = shown(pictures, name)
     found = check_world(image, config, run_dir)
     assert found["labels"]["labelled"] >= 0.65
+    assert found["colours"]["own colour"] >= 0.9
     assert found["moves"]["arrows"] > 0 and found.get("waits", {}).get("arrows", 0) > 0
     print(name, {key: value for key, value in found.items() if key != "grid"})
 
@@ -130,3 +134,13 @@ def test_the_checks_fail_on_a_blank_or_broken_page(pictures):
     episode = last_episode(run_dir / "run.rrd")
     with pytest.raises(AssertionError, match="labels under only"):
         check_labels(image, grid, episode.goals, others[[0] * len(episode.goals)])
+
+
+def test_128_agents_cost_the_viewer_no_more_entities_than_8(pictures):
+    """The viewer slows down with hundreds of entities: the world's hold every agent each."""
+    counts = {}
+    for name in RUNS:
+        reader = rr.chunk.RrdReader(pictures["base"] / name / "run.rrd")
+        counts[name] = len({chunk.entity_path for chunk in reader.stream()})
+    assert pictures["configs"]["crowd"].n_agents == 128
+    assert counts["crowd"] <= counts["walls"] + 20 < 150, counts

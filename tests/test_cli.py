@@ -139,10 +139,11 @@ def test_compiling_is_announced_before_the_progress_bar(monkeypatch, capsys):
 
 
 def test_every_simulator_command_compiles_before_its_progress_bar_starts(monkeypatch, tmp_path):
+    from nnql_swarm.api import command
     from nnql_swarm.launch import experiment, swarm_cli
 
     order = []
-    for module, bar in ((experiment, "progress"), (swarm_cli, "progress_bar")):
+    for module, bar in ((experiment, "progress"), (command, "progress_bar")):
         prepare, progress = module.prepare_simulator, getattr(module, bar)
         monkeypatch.setattr(module, "prepare_simulator",
                             lambda *a, prepare=prepare: (order.append("compile"), prepare(*a))[1])
@@ -160,3 +161,19 @@ def test_every_simulator_command_compiles_before_its_progress_bar_starts(monkeyp
     assert swarm_cli.main(["--in-process", "--agents", "2", "--episodes", "2", "--grid", "5x5",
                            "--no-record", "--out", str(tmp_path / "run")]) == 0
     assert order == ["compile", "bar"] * 3
+
+
+def test_the_command_is_a_swarm_made_from_its_options(monkeypatch, tmp_path):
+    """``launch/swarm.py`` makes a Swarm of its parsed options and plays it: the same config as
+    the API's Swarm of the same options, its directory prepared first."""
+    from nnql_swarm.api import Swarm
+    from nnql_swarm.launch import swarm_cli
+
+    played = []
+    monkeypatch.setattr(Swarm, "play", lambda self, on_row=None: played.append(self) or 0)
+    out = tmp_path / "run"
+    assert swarm_cli.main(["--agents", "3", "--seed", "4", "--run-id", "cmd", "--out", str(out),
+                           "--in-process", "--no-progress"]) == 0
+    (swarm,) = played
+    assert swarm.config == Swarm(agents=3, seed=4, run_id="cmd").config
+    assert swarm.out == out and (out / "config.json").is_file()

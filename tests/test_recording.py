@@ -13,7 +13,8 @@ import rerun as rr
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.recording.agent import (
-    OPTIMISTIC, TABLES, UNVISITED, TimedBrain, learnable_bound, logs_heat_maps, table_picture,
+    OPTIMISTIC, TABLES, UNVISITED, TimedBrain, ds_table, learnable_bound, logs_heat_maps,
+    table_picture,
 )
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.recording.binary import rerun_binary
@@ -26,7 +27,7 @@ from nnql_swarm.transport.ports import free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm
 from nnql_swarm.world.metrics import read_episodes
 from nnql_swarm.world.scenario import swarm_episode
-from nnql_swarm.recording.world import METRICS, negotiation_mask
+from nnql_swarm.recording.world import KEEP_APART, METRICS, PALETTE, agent_colors, negotiation_mask
 
 AGENTS, EPISODES = 8, 3
 RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5",
@@ -265,7 +266,7 @@ def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
     assert cells and not cells & walls
     # the default preset shares one table: only agent 0 logs it, once for all
     assert config.shared
-    assert {"agents/0/q_ds/value", "agents/0/q_ca/value"} <= recording.entities
+    assert {"agents/0/q_ds/table", "agents/0/q_ca/value"} <= recording.entities
     assert not {e for e in recording.entities if e.startswith("agents/1/")}
 
 
@@ -298,7 +299,8 @@ def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     rows = read_episodes(out / "episodes.csv")
     logged = recording.scalars("metrics/collisions/per_episode")
     assert [logged[e][1] for e in range(len(rows))] == [float(r["collisions"]) for r in rows]
-    assert {"world/agents", "agents/0/q_ds/value", "agents/0/q_ca/value"} <= recording.entities
+    # the default preset's destination seeking reads the known map: its Q_DS is a table
+    assert {"world/agents", "agents/0/q_ds/table", "agents/0/q_ca/value"} <= recording.entities
 
 
 def test_a_bad_viewer_url_is_a_one_line_usage_error(tmp_path):
@@ -366,3 +368,92 @@ def test_processes_that_do_not_record_never_load_rerun():
     done = subprocess.run([os.sys.executable, "-c", probe, "/tmp/unused-recording"],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
+
+
+def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_reference(tmp_path):
+    """The chosen agent's known map, replayed by the recording, ends as the walls its learner
+    kept (its checkpoint); each tick's planned path runs from its cell to its goal around the
+    walls it knew; the Q_DS table is the checkpointed table's; the reference curves are those of
+    a run of the paper's QL on the same settings."""
+    options = ("--agents", "6", "--episodes", "12", "--max-steps", "60", "--grid", "21x21",
+               "--obstacle-density", "0.2", "--seed", "4", "--in-process")
+    out = tmp_path / "map"
+    result = run_swarm(out, *options, "--map-agent", "2", "--reference")
+    assert result.returncode == 0, result.stderr
+    verify(out / "run.rrd")
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    assert config.ds_state == "progress" and config.shared  # the default preset
+    recording = Recording(out / "run.rrd")
+    walls = {tuple(cell) for cell in config.walls().tolist()}
+    known_at = dict(zip(recording.column("known_map/walls/known", "tick"),
+                        recording.column("known_map/walls/known", "Boxes2D:centers")))
+    unseen_at = dict(zip(recording.column("known_map/walls/unseen", "tick"),
+                         recording.column("known_map/walls/unseen", "Boxes2D:centers")))
+    assert len(known_at) > 1 and known_at.keys() == unseen_at.keys()  # it learned as it went
+    cells_of = lambda boxes: {tuple(map(round, c)) for c in boxes or []}  # noqa: E731
+    sizes = [len(cells_of(known_at[t])) for t in sorted(known_at)]
+    assert sizes == sorted(sizes) and sizes[0] < len(walls)
+    for tick in known_at:
+        assert cells_of(known_at[tick]) | cells_of(unseen_at[tick]) == walls
+        assert not cells_of(known_at[tick]) & cells_of(unseen_at[tick])
+    kept = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", 2), ())
+    learner_known = {(c % config.width, c // config.width) for c in kept["known_walls"].tolist()}
+    assert cells_of(known_at[max(known_at)]) == learner_known
+    # every planned path: from the agent's cell to its goal, step by step, off the known walls
+    ticks = recording.column("known_map/path", "tick")
+    paths = recording.column("known_map/path", "LineStrips2D:strips")
+    here = dict(zip(recording.column("known_map/agent", "tick"),
+                    recording.column("known_map/agent", "Points2D:positions")))
+    goals = dict(zip(recording.column("known_map/goal", "tick"),
+                     recording.column("known_map/goal", "Boxes2D:centers")))
+    world = dict(zip(recording.column("world/agents", "tick"),
+                     recording.column("world/agents", "Points2D:positions")))
+    changes = sorted(known_at)
+    reached = 0
+    for tick, strips in zip(ticks, paths):
+        path = [tuple(map(round, c)) for c in strips[0]]
+        assert path[0] == tuple(map(round, here[tick][0])) == tuple(map(round, world[tick][2]))
+        known = cells_of(known_at[max(t for t in changes if t <= tick)])
+        assert not set(path) & known
+        assert all(abs(ax - bx) + abs(ay - by) == 1 for (ax, ay), (bx, by) in zip(path, path[1:]))
+        if len(path) > 1:
+            assert path[-1] == tuple(map(round, goals[tick][0]))
+            reached += 1
+    assert reached > len(ticks) / 2
+    # Q_DS: a table of its 16 progress states, the checkpointed table's at the run's end
+    q_ds = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", 0), ())["q_ds"]
+    texts = dict(zip(recording.column("agents/0/q_ds/table", "episode"),
+                     recording.column("agents/0/q_ds/table", "TextDocument:text")))
+    table, learned = ds_table(q_ds, "progress", config.optimistic, learnable_bound("q_ds", config))
+    assert learned and table in texts[config.episodes - 1][0]
+    assert table.count("\n| ") == 17  # a heading row and one row per state
+    assert "agents/0/q_ds/value" not in recording.entities
+    # the reference: the paper's QL on the same settings, episode for episode
+    ql = tmp_path / "ql"
+    assert run_swarm(ql, *options, "--preset", "ql", "--no-record").returncode == 0
+    rows = read_episodes(ql / "episodes.csv")
+    reference = recording.column("metrics/collisions/per_episode/paper_ql", "Scalars:scalars")
+    assert [v[0] for v in reference] == [float(r["collisions"]) for r in rows]
+    arrived = recording.column("metrics/arrived_share/paper_ql", "Scalars:scalars")
+    assert [v[0] for v in arrived] == [int(r["arrived"]) / 6 for r in rows]
+
+
+def test_a_map_agent_out_of_range_is_a_one_line_usage_error(tmp_path):
+    result = run_swarm(tmp_path / "bad", "--agents", "4", "--map-agent", "4", "--in-process",
+                       timeout=60)
+    assert result.returncode == 2
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and "--map-agent 4 out of range 0..3" in lines[0], result.stderr
+
+
+def test_agent_colours_stay_distinct_and_readable_at_128_agents():
+    colours = agent_colors(128)
+    assert np.array_equal(colours[:len(PALETTE)], PALETTE)
+    assert len(np.unique(colours, axis=0)) == 128
+    linear = colours / 255.0
+    linear = np.where(linear <= 0.04045, linear / 12.92, ((linear + 0.055) / 1.055) ** 2.4)
+    luminance = linear @ [0.2126, 0.7152, 0.0722]
+    assert np.all(1.05 / (luminance[len(PALETTE):] + 0.05) >= 4.5)  # text on white
+    for colour, apart in KEEP_APART:  # the colours added beyond the palette
+        assert np.abs(colours[len(PALETTE):].astype(int) - colour).max(axis=1).min() > apart
+    assert np.array_equal(agent_colors(200)[:128], colours)  # an agent keeps its colour
