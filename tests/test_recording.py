@@ -396,7 +396,7 @@ def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_refere
     for tick in known_at:
         assert cells_of(known_at[tick]) | cells_of(unseen_at[tick]) == walls
         assert not cells_of(known_at[tick]) & cells_of(unseen_at[tick])
-    kept = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", 2), ())
+    kept = read_fields(checkpoint.checkpoint_path(out / "checkpoints", 2), ())
     learner_known = {(c % config.width, c // config.width) for c in kept["known_walls"].tolist()}
     assert cells_of(known_at[max(known_at)]) == learner_known
     # every planned path: from the agent's cell to its goal, step by step, off the known walls
@@ -421,7 +421,7 @@ def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_refere
             reached += 1
     assert reached > len(ticks) / 2
     # Q_DS: a table of its 16 progress states, the checkpointed table's at the run's end
-    q_ds = checkpoint.read_fields(checkpoint.checkpoint_path(out / "checkpoints", 0), ())["q_ds"]
+    q_ds = read_fields(checkpoint.checkpoint_path(out / "checkpoints", 0), ())["q_ds"]
     texts = dict(zip(recording.column("agents/0/q_ds/table", "episode"),
                      recording.column("agents/0/q_ds/table", "TextDocument:text")))
     table, learned = ds_table(q_ds, "progress", config.optimistic, learnable_bound("q_ds", config))
