@@ -236,7 +236,8 @@ def write_runs(out: Path, results: SwarmResults) -> None:
         path.unlink(missing_ok=True)
         with EpisodeWriter(path, sync=False) as writer:
             for episode in range(results.experiment.episodes):
-                writer.write(results.episodes.swarm_row(row, episode), 0.0, 0)
+                writer.write(results.episodes.swarm_row(row, episode, results.experiment.agents),
+                             0.0, 0)
 
 
 def curves(results: SwarmResults, smoothing: int = 10) -> dict[str, dict[str, np.ndarray]]:
