@@ -229,6 +229,12 @@ class Batch:
             self.q_ds[run, agent] = q_ds[agent % len(q_ds)]
             self.q_ca[run, agent, :q_ca.shape[1]] = q_ca[agent % len(q_ca)]
 
+    def forget_maps(self) -> None:
+        """Every agent of every run forgets the walls it has seen (``agent.known_map``)."""
+        for run_maps in self.wmap:
+            for agent_map in run_maps:
+                fresh_map(agent_map)
+
     def known_walls(self, run: int, agent: int) -> list[int]:
         """The cells of the walls an agent of a run has seen (``agent.known_map``)."""
         w = self.world
