@@ -65,17 +65,17 @@ METRICS = ("isr", "csr", "soc", "soc_vs_oracle", "makespan", "collisions", "coll
 class MapsBenchmark:
     """What the benchmark plays (see the module docstring)."""
 
-    seeds: int = 3
+    seeds: int = 5
     seed_base: int = 0
     learners: tuple[str, ...] = ("path-nnql", BASELINE)
-    train_maps: int = 4
+    train_maps: int = 8
     train_episodes: int = 50
     train_agents: int = 16
-    test_maps: int = 3
-    instances: int = 2
+    test_maps: int = 4
+    instances: int = 4
     agents: tuple[int, ...] = (8, 32, 64)
     families: tuple[str, ...] = FAMILIES
-    scratch_episodes: int = 100
+    scratch_episodes: int = 300
     scratch_agents: tuple[int, ...] = (8, 32)
     max_steps: int = MAX_STEPS
     presets: dict = field(default_factory=lambda: dict(PRESETS), compare=False)
@@ -119,7 +119,7 @@ def map_spec(family: str, map_seed: int) -> str:
 def run_config(bench: MapsBenchmark, variant: str, spec: str, map_seed: int, agents: int,
                episodes: int, frozen: bool) -> SwarmConfig:
     rows = generated(spec, map_seed)
-    return SwarmConfig(run_id=f"{variant}-m{map_seed}", n_agents=agents, episodes=episodes,
+    return SwarmConfig(run_id=f"m{map_seed}", n_agents=agents, episodes=episodes,
                        max_steps=bench.max_steps, width=len(rows[0]), height=len(rows), seed=map_seed,
                        map_name=spec, map_rows=rows,
                        frozen=frozen and variant != REFERENCE, **bench.presets[variant])
@@ -147,9 +147,11 @@ class Recorder:
             self._csv.writeheader()
             self._file.flush()
 
-    def add(self, keys: dict, episodes: Episodes, batch: Batch, episode: int) -> None:
+    def add(self, keys: dict, variants: tuple[str, ...], episodes: Episodes, batch: Batch,
+            episode: int) -> None:
+        """Episode ``episode`` of every run of ``batch`` (run ``i`` plays ``variants[i]``)."""
         for run, config in enumerate(batch.runs):
-            row = {**keys, "variant": variant_of(config),
+            row = {**keys, "variant": variants[run],
                    **episodes.swarm_row(run, episode, config.n_agents)}
             self.rows.append(row)
             if self._file is not None:
@@ -160,10 +162,6 @@ class Recorder:
     def close(self) -> None:
         if self._file is not None:
             self._file.close()
-
-
-def variant_of(config: SwarmConfig) -> str:
-    return config.run_id.rsplit("-m", 1)[0]
 
 
 def train(bench: MapsBenchmark, seed: int, recorder: Recorder, on_episode=None) -> Tables:
@@ -182,7 +180,8 @@ def train(bench: MapsBenchmark, seed: int, recorder: Recorder, on_episode=None) 
                 "agents": bench.train_agents}
 
         def played(e, b, keys=keys, results=results, k=k):
-            recorder.add({**keys, "instance": k * bench.train_episodes + e}, results, b, e)
+            recorder.add({**keys, "instance": k * bench.train_episodes + e}, bench.learners,
+                         results, b, e)
             if on_episode is not None:
                 on_episode(len(b.runs))
 
@@ -204,7 +203,7 @@ def play_frozen(bench: MapsBenchmark, tables: Tables, spec: str, map_seed: int, 
     for instance in range(bench.instances):
         batch.forget_maps()
         batch.play(1, results)
-        recorder.add({**keys, "instance": instance}, results, batch, instance)
+        recorder.add({**keys, "instance": instance}, bench.variants, results, batch, instance)
         if on_episode is not None:
             on_episode(len(configs))
     return batch
@@ -222,7 +221,7 @@ def scratch(bench: MapsBenchmark, seed: int, agents: int, recorder: Recorder,
     keys = {"phase": "scratch", "seed": seed, "family": "random", "map": spec, "agents": agents}
 
     def played(e, b):
-        recorder.add({**keys, "instance": e}, results, b, e)
+        recorder.add({**keys, "instance": e}, bench.variants, results, b, e)
         if on_episode is not None:
             on_episode(len(b.runs))
 

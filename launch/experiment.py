@@ -37,13 +37,13 @@ from nnql_swarm.experiment.swarm import (
     walls_presets, write_runs, write_tables,
 )
 from nnql_swarm.experiment.maps import (
-    FAMILIES, MapsBenchmark, Recorder, episodes_total, learning_curves, run_benchmark,
-    table_rows as maps_table_rows, write_curves, write_tables as write_maps_tables,
+    FAMILIES, MapsBenchmark, Recorder, episodes_total, learning_curves, map_spec, run_benchmark,
+    run_config, table_rows as maps_table_rows, write_curves, write_tables as write_maps_tables,
 )
 from nnql_swarm.experiment.maps import TABLE_FILES as MAPS_TABLE_FILES
-from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS
+from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS
 from nnql_swarm.protocol.maps import run_map
-from nnql_swarm.sim.runs import swarm_world
+from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.terminal.cli import (
     EXIT_INTERRUPTED, OneLineParser, make_directory, prepare_simulator, program_name, progress,
 )
@@ -398,6 +398,26 @@ def parse_families(text: str) -> tuple[str, ...]:
     return tuple(v for v in FAMILIES if v in names)
 
 
+def parse_override(text: str) -> tuple[str, object]:
+    """``OPTION=VALUE`` -> a learning option (``LEARNING_FIELDS``) and its value, of the
+    option's type."""
+    name, _, value = text.partition("=")
+    name = name.strip().replace("-", "_")
+    if name not in LEARNING_FIELDS or name == "algo" or not value:
+        raise argparse.ArgumentTypeError(
+            f"expected OPTION=VALUE with OPTION one of "
+            f"{', '.join(f for f in LEARNING_FIELDS if f != 'algo')}, got {text!r}")
+    kind = type(PRESETS[DEFAULT_PRESET][name])
+    try:
+        if kind is bool:
+            if value.lower() not in ("true", "false", "1", "0"):
+                raise ValueError
+            return name, value.lower() in ("true", "1")
+        return name, kind(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{name} takes a {kind.__name__}, got {value!r}") from None
+
+
 def build_maps_parser() -> OneLineParser:
     d = MapsBenchmark()
     parser = OneLineParser(
@@ -432,6 +452,10 @@ def build_maps_parser() -> OneLineParser:
     add("--scratch-agents", type=parse_counts, default=d.scratch_agents, metavar="LIST|none",
         help="agent counts of learning from scratch")
     add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
+    add("--set", dest="overrides", action="append", type=parse_override, default=[],
+        metavar="OPTION=VALUE",
+        help="a learning option of the preset changed (repeatable; e.g. beta=0.7, "
+             "wait_rule=reach, interaction_radius=3)")
     add("--out", type=Path, default=None, metavar="DIR",
         help="output directory (default runs/maps-<time>)")
     add("--force", action="store_true", help="overwrite results already in --out")
@@ -443,13 +467,15 @@ def build_maps_parser() -> OneLineParser:
 def run_maps(argv: list[str]) -> Path:
     """The maps benchmark's command line: every episode written as it is played, then the table
     and the learning curves."""
-    from nnql_swarm.experiment.maps import map_spec, run_config
-    from nnql_swarm.sim.runs import threads
-
     parser = build_maps_parser()
     args = parser.parse_args(argv)
-    learners = (args.preset,) if args.preset == "ql" else (args.preset, "ql")
-    bench = MapsBenchmark(seeds=args.seeds, seed_base=args.seed_base, learners=learners,
+    presets = dict(PRESETS)
+    learner = args.preset
+    if args.overrides:
+        learner = args.preset + "[" + ",".join(f"{k}={v}" for k, v in args.overrides) + "]"
+        presets[learner] = {**PRESETS[args.preset], **dict(args.overrides)}
+    learners = (learner,) if learner == "ql" else (learner, "ql")
+    bench = MapsBenchmark(presets=presets, seeds=args.seeds, seed_base=args.seed_base, learners=learners,
                           train_maps=args.train_maps, train_episodes=args.train_episodes,
                           train_agents=args.train_agents, test_maps=args.test_maps,
                           instances=args.instances, agents=args.agents, families=args.families,
@@ -477,7 +503,7 @@ def run_maps(argv: list[str]) -> Path:
     if unusable:
         parser.error(unusable)
     config = {"benchmark": {k: v for k, v in asdict(bench).items() if k != "presets"},
-              "presets": {v: PRESETS[v] for v in bench.variants}, "workers": args.workers,
+              "presets": {v: presets[v] for v in bench.variants}, "workers": args.workers,
               "command": [Path(sys.argv[0]).name, *sys.argv[1:]]}
     (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
     for name in MAPS_TABLE_FILES:
