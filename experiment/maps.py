@@ -397,11 +397,6 @@ def write_curves(path: Path, curves: dict[str, dict[str, np.ndarray]]) -> None:
                     writer.writerow([metric, name, episode, f"{value:.4f}"])
 
 
-def read_rows(path: Path) -> list[dict]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
 def _cell(value):
     if isinstance(value, float):
         return "" if math.isnan(value) else f"{value:.4f}"
