@@ -15,7 +15,9 @@ distributed swarm; the table reads those rows:
 - ``collisions``: a run's total (every agent in a collision counts one per step), mean over
   seeds, with its 95 % t interval;
 - ``decrease_vs_ql_pct``: the decrease against the QL row with the same options (``vs``), with the
-  paired difference's 95 % interval over the seeds.
+  paired difference's 95 % interval over the seeds;
+- ``csr_A_B``, ``isr_A_B``, ``soc_A_B``, ``makespan_A_B``: the field's metrics (POGEMA's,
+  ``world.rules.field_columns``) late in the run, mean over episodes and seeds.
 """
 
 import csv
@@ -29,6 +31,7 @@ from nnql_swarm.experiment.stats import mean_interval
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world, threads
 from nnql_swarm.world.metrics import EpisodeWriter
+from nnql_swarm.world.rules import FIELD_COLUMNS, field_columns
 
 VARIANTS = ("ql", "nnql", "best-ql", "best-nnql", "shield-ql", "shield-nnql", "path-nnql",
             "nnql-n2", "daql", "oracle")
@@ -180,6 +183,11 @@ def table_rows(results: SwarmResults) -> list[dict]:
         else:
             row.update(vs="", decrease_vs_ql_pct=math.nan, difference=math.nan,
                        difference_ci_low=math.nan, difference_ci_high=math.nan)
+        late = [field_columns(int(episodes.on_goal[r, k]), int(episodes.soc[r, k]),
+                              int(episodes.makespan[r, k]), e.agents)
+                for r in at for k in range(b0, b1)]
+        for metric in FIELD_COLUMNS:
+            row[f"{metric}_{b0}_{b1}"] = float(np.mean([values[metric] for values in late]))
         rows.append(row)
     return rows
 
@@ -199,19 +207,22 @@ def markdown(results: SwarmResults, rows: list[dict]) -> str:
     e = results.experiment
     (a0, a1), (b0, b1) = e.windows()
     head = (f"| variant | arrival {a0}-{a1} | arrival {b0}-{b1} | steps ratio {b0}-{b1} | "
-            f"collisions [95 % CI] | vs | decrease % | difference [95 % CI] |")
+            f"collisions [95 % CI] | vs | decrease % | difference [95 % CI] | CSR {b0}-{b1} | "
+            f"SoC {b0}-{b1} | makespan {b0}-{b1} |")
     walls = f", obstacle density {e.obstacle_density}" if e.obstacle_density else ""
     walls += f", map {e.map_name}" if e.map_name else ""
     lines = [f"# The swarm experiment: {e.agents} agents, {e.width} x {e.height}{walls}, swaps "
              f"counted, {e.episodes} episodes, seeds {e.seed_base}-{e.seed_base + e.seeds - 1}", "",
-             head, "|---|---:|---:|---:|---:|---|---:|---:|"]
+             head, "|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
     for row in rows:
         lines.append(
             f"| {row['variant']} | {row[f'arrival_{a0}_{a1}']:.3f} | {row[f'arrival_{b0}_{b1}']:.3f} "
             f"| {row[f'steps_ratio_{b0}_{b1}']:.2f} | {row['collisions']:.1f} "
             f"{_interval(row['collisions_ci_low'], row['collisions_ci_high'])} | {row['vs']} "
             f"| {_number(row['decrease_vs_ql_pct'], 1)} | {_number(row['difference'], 1)} "
-            f"{_interval(row['difference_ci_low'], row['difference_ci_high'])} |")
+            f"{_interval(row['difference_ci_low'], row['difference_ci_high'])} "
+            f"| {row[f'csr_{b0}_{b1}']:.2f} | {row[f'soc_{b0}_{b1}']:.1f} "
+            f"| {row[f'makespan_{b0}_{b1}']:.1f} |")
     lines += ["", "Each variant is a set of learning options (a preset of `protocol/config.py` where "
               "it has the name of one); one run of a preset is `python launch/swarm.py --preset "
               f"<variant> --agents {e.agents} --episodes {e.episodes} --seed <seed> "
@@ -236,7 +247,8 @@ def write_runs(out: Path, results: SwarmResults) -> None:
         path.unlink(missing_ok=True)
         with EpisodeWriter(path, sync=False) as writer:
             for episode in range(results.experiment.episodes):
-                writer.write(results.episodes.swarm_row(row, episode), 0.0, 0)
+                writer.write(results.episodes.swarm_row(row, episode, results.experiment.agents),
+                             0.0, 0)
 
 
 def curves(results: SwarmResults, smoothing: int = 10) -> dict[str, dict[str, np.ndarray]]:

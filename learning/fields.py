@@ -72,7 +72,7 @@ def learner_params(config) -> tuple[list[int], list[float]]:
     params[LP_KNOWN_STATE] = int(config.known_state)
     params[LP_RADIUS] = config.interaction_radius
     params[LP_SHIELD] = int(config.shield)
-    params[LP_RANDOM_STEP] = config.random_step
+    params[LP_RANDOM_STEP] = 0 if config.frozen else config.random_step
     params[LP_STILL_TERMINAL] = int(config.still_terminal)
     params[LP_MEET_ONLY] = int(config.meet_only)
     params[LP_DS_STATE] = DS_STATES[config.ds_state]

@@ -9,7 +9,8 @@ new observation as ``s'``), then chooses (Eq. 6, 7, 8)::
     Q_final(a) = beta Q_DS[s_goal, a] + (1 - beta) Q_CA(a)
     a_t        = argmax_a Q_final(a), ties broken by the agent's seeded tie-breakers,
 
-and every ``k``-th action of its life (the paper's "random step") is its seeded random action.
+and every ``k``-th action of its life (the paper's "random step") is its seeded random action
+(``k`` 0: never, in frozen play).
 
 The readings of a neighbour's state ``s_i`` (``READ_*``; docs/paper.md has the evidence):
 
@@ -127,7 +128,8 @@ def choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, wid
             greedy = a
     state[LS_TAKEN] += 1
     action = greedy
-    if state[LS_TAKEN] % params[LP_RANDOM_STEP] == 0 and (mask >> random_action) & 1 == 0:
+    if params[LP_RANDOM_STEP] > 0 and state[LS_TAKEN] % params[LP_RANDOM_STEP] == 0 \
+            and (mask >> random_action) & 1 == 0:
         action = random_action
     state[LS_PENDING] = 1
     state[LS_GOAL] = goal

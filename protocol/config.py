@@ -159,6 +159,9 @@ class SwarmConfig:
     scenario: tuple[tuple[int, int, int, int], ...] = ()
     """Every episode's ``(start_x, start_y, goal_x, goal_y)`` per agent (``--scen``); empty:
     drawn per episode from the seed."""
+    frozen: bool = False
+    """Play learned tables as they are: no learning, no random step (the simulator only; the
+    maps benchmark, ``experiment.maps``, loads the tables: ``sim.runs.Batch.load_tables``)."""
 
     def __post_init__(self) -> None:
         validate_run_id(self.run_id)

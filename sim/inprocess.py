@@ -91,7 +91,7 @@ def run_in_process(
             for episode in range(config.episodes):
                 started, first_tick = time.perf_counter(), int(batch.tick[0])
                 batch.play(1, results)
-                row = results.swarm_row(0, episode)
+                row = results.swarm_row(0, episode, config.n_agents)
                 writer.write(row, time.perf_counter() - started, int(batch.tick[0]) - first_tick)
                 if on_tick is not None:
                     _replay(config, batch, row, on_tick)

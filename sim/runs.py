@@ -27,12 +27,13 @@ from nnql_swarm.kernel.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
-    OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_WALLS, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
-    OUT_SHORTEST, OUT_VIOLATIONS, TR_FIELDS, run_episode,
+    OPT_FIELDS, OPT_FROZEN, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_WALLS, ORACLE_SCRATCH,
+    OUT_END_TICK, OUT_FIELDS, OUT_MAKESPAN, OUT_ON_GOAL, OUT_SHORTEST, OUT_SOC, OUT_VIOLATIONS,
+    TR_FIELDS, run_episode,
 )
 from nnql_swarm.world.rules import (
     GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
-    ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS,
+    ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS, field_columns,
 )
 from nnql_swarm.world.scenario import paper_episode, swarm_episode
 
@@ -93,9 +94,15 @@ class Episodes:
     end_tick = property(lambda self: self.out[..., OUT_END_TICK])
     shortest = property(lambda self: self.out[..., OUT_SHORTEST])
     violations = property(lambda self: self.out[..., OUT_VIOLATIONS])
+    on_goal = property(lambda self: self.out[..., OUT_ON_GOAL])
+    soc = property(lambda self: self.out[..., OUT_SOC])
+    makespan = property(lambda self: self.out[..., OUT_MAKESPAN])
 
-    def swarm_row(self, run: int, episode: int) -> dict:
-        """One episode as a row of the swarm's ``episodes.csv`` (its deterministic columns)."""
+    def swarm_row(self, run: int, episode: int, learners: int) -> dict:
+        """One episode of a run of ``learners`` agents as a row of the swarm's ``episodes.csv``
+        (its deterministic columns)."""
+        costs = (int(self.on_goal[run, episode]), int(self.soc[run, episode]),
+                 int(self.makespan[run, episode]))
         return {
             "episode": episode,
             "steps": int(self.steps[run, episode]),
@@ -106,6 +113,7 @@ class Episodes:
             "shortest_sum": int(self.shortest[run, episode]),
             "agent_steps": int(self.agent_steps[run, episode]),
             "end_tick": int(self.end_tick[run, episode]),
+            **field_columns(*costs, learners),
         }
 
 
@@ -132,6 +140,7 @@ class Batch:
         self.options[:, OPT_LOOKAHEAD] = [run.lookahead for run in runs]
         self.options[:, OPT_ORACLE] = [run.algo == "oracle" for run in runs]
         self.options[:, OPT_WALLS] = int(w.scripted > 0 and not w.paper)
+        self.options[:, OPT_FROZEN] = [run.frozen for run in runs]
         init = np.array([run.optimistic for run in runs])[:, None, None, None]
         self.q_ds = np.broadcast_to(init, (r, learners, N_STATES, N_ACTIONS)).copy()
         self.q_ca = np.broadcast_to(init, (r, learners, rows, N_ACTIONS)).copy()
@@ -152,6 +161,7 @@ class Batch:
         self._scratch = dict(
             x=_ints(r, n), y=_ints(r, n), prev_x=_ints(r, n), prev_y=_ints(r, n),
             goal_x=_ints(r, n), goal_y=_ints(r, n), arrived=np.zeros((r, n), dtype=bool),
+            arrival=_ints(r, n),
             actions=_ints(r, n), decided=np.zeros((r, n), dtype=bool),
             collided=np.zeros((r, n), dtype=bool), r_ds=np.zeros((r, n)), r_ca=np.zeros((r, n)),
             before_x=_ints(r, n), before_y=_ints(r, n), occupancy=_ints(r, cells),
@@ -204,6 +214,27 @@ class Batch:
         t = 0 if self.runs[run].shared else agent
         rows = ca_rows(READINGS.get(self.runs[run].algo, 0), self.runs[run].known_state)
         return self.q_ds[run, t], self.q_ca[run, t, :rows]
+
+    def load_tables(self, run: int, q_ds: np.ndarray, q_ca: np.ndarray) -> None:
+        """Give every agent of a run learned tables: ``q_ds`` and ``q_ca`` hold one table (the
+        swarm's, or every agent's alike) or one per agent; agent ``i`` of the run takes table
+        ``i`` modulo their number (a policy learned by fewer agents than play it)."""
+        q_ds, q_ca = np.asarray(q_ds), np.asarray(q_ca)
+        if q_ds.ndim == 2:
+            q_ds, q_ca = q_ds[None], q_ca[None]
+        rows = self.q_ca.shape[2]
+        if q_ds.shape[1:] != self.q_ds.shape[2:] or q_ca.shape[0] != q_ds.shape[0] \
+                or q_ca.shape[1] > rows or q_ca.shape[2] != self.q_ca.shape[3]:
+            raise ValueError("the tables do not fit the run's learners")
+        for agent in range(self.world.learners):
+            self.q_ds[run, agent] = q_ds[agent % len(q_ds)]
+            self.q_ca[run, agent, :q_ca.shape[1]] = q_ca[agent % len(q_ca)]
+
+    def forget_maps(self) -> None:
+        """Every agent of every run forgets the walls it has seen (``agent.known_map``)."""
+        for run_maps in self.wmap:
+            for agent_map in run_maps:
+                fresh_map(agent_map)
 
     def known_walls(self, run: int, agent: int) -> list[int]:
         """The cells of the walls an agent of a run has seen (``learning.known_map``)."""

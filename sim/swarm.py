@@ -30,23 +30,25 @@ from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
 from nnql_swarm.kernel.jit import batch_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
-from nnql_swarm.world.rules import shared_cells, swaps_through, world_step
+from nnql_swarm.world.rules import field_costs, shared_cells, swaps_through, world_step
 
 ORACLE_SCRATCH = 10
 """Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
 queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal), a
 slot per grid cell each."""
 
-OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS = 0, 1, 2, 3
-OPT_FIELDS = 4
+OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS, OPT_FROZEN = 0, 1, 2, 3, 4
+OPT_FIELDS = 5
 """Per-run options of the swarm: one table for all agents; the steps an announcement covers
 (n of nnQL); the oracle instead of learners; whether the scripted bodies are walls (which a
-learner's known map, ``learning.known_map``, learns as it sees them)."""
+learner's known map, ``learning.known_map``, learns as it sees them); frozen play (the tables are
+read, never written; the learner's random step is off through its parameters)."""
 
-OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS = 0, 1, 2
-OUT_FIELDS = 3
+OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS, OUT_ON_GOAL, OUT_SOC, OUT_MAKESPAN = 0, 1, 2, 3, 4, 5
+OUT_FIELDS = 6
 """Per-run results of an episode beside its score: the end tick, the sum of the learners' shortest
-paths, broken invariants (shared cells, swap-throughs where swaps count)."""
+paths, broken invariants (shared cells, swap-throughs where swaps count), and the field's costs
+(``world.rules.field_costs``: learners on their goal at the end, SoC, makespan)."""
 
 TR_X, TR_Y, TR_ACTION, TR_COLLIDED, TR_ARRIVED = 0, 1, 2, 3, 4
 TR_FIELDS = 5
@@ -121,7 +123,7 @@ def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward,
                 params, params_f, options, q_ds, q_ca, state, state_f, wmap, seed_of_run,
                 starts, goals, scripts, paths, random_actions, ties, tick,
                 record, trace,
-                x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
+                x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, arrival, actions, decided,
                 collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
                 rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
     """Play one episode of every run (see the module docstring); ``tick`` (one per run) is each
@@ -136,7 +138,7 @@ def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward,
                  wmap[r], starts[s], goals[s], scripts[s], paths[s], random_actions[s], ties[s], tick,
                  record, trace[r],
                  x[r], y[r], prev_x[r], prev_y[r], goal_x[r], goal_y[r], learns, arrived[r],
-                 actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
+                 arrival[r], actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
                  before_y[r], occupancy[r], blocked[r], nb[r], values[r], rec[r], rec_f[r],
                  pending_rec[r], oracle_scratch[r], oracle_cells[r], row[r], row_f[r], out[r])
 
@@ -146,10 +148,11 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
              params, params_f, options, q_ds, q_ca, state, state_f, wmap,
              starts, goals, scripts, paths, random_actions, ties, ticks,
              record, trace,
-             x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
+             x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, arrival, actions, decided,
              collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
              rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
     shared = options[OPT_SHARED] != 0
+    learning = options[OPT_FROZEN] == 0
     tables = 1 if shared else learners
     lookahead = options[OPT_LOOKAHEAD]
     oracle = options[OPT_ORACLE] != 0
@@ -162,6 +165,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
         prev_x[i] = -1
         prev_y[i] = -1
         arrived[i] = False
+        arrival[i] = 0
         collided[i] = False
         r_ds[i] = 0.0
         r_ca[i] = 0.0
@@ -217,15 +221,15 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
                 written = finish(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
                                  wmap[i], x, y, learners, last_wall, step == 0, x[i], y[i],
                                  goal_x[i], goal_y[i], nb, m, width, height, rec[i], rec_f[i],
-                                 not shared)
+                                 learning and not shared)
                 actions[i] = STAY
             else:
                 actions[i], written = decide(
                     q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], wmap[i], x, y,
                     learners, last_wall, step == 0, x[i], y[i], goal_x[i], goal_y[i], nb, m,
                     width, height, random_actions[i, step],
-                    ties[i, step], values, rec[i], rec_f[i], not shared)
-            pending_rec[i] = shared and written
+                    ties[i, step], values, rec[i], rec_f[i], learning and not shared)
+            pending_rec[i] = learning and shared and written
             decided[i] = True
         if record:
             for i in range(n):
@@ -238,14 +242,16 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
                     trace[step, i, TR_ACTION] = STAY
                     trace[step, i, TR_COLLIDED] = 0
             out[OUT_END_TICK] = tick
+            out[OUT_ON_GOAL], out[OUT_SOC], out[OUT_MAKESPAN] = field_costs(
+                x, y, goal_x, goal_y, arrival, learners, step)
             ticks[r] = tick + 1
             return
         for i in range(n):
             prev_x[i] = x[i]
             prev_y[i] = y[i]
-        everyone = world_step(x, y, goal_x, goal_y, learns, arrived, actions, n, width, height,
-                              count_swaps, goal_reward, stay_reward, before_x, before_y, collided, r_ds,
-                              r_ca, occupancy, blocked, row, row_f)
+        everyone = world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width,
+                              height, count_swaps, goal_reward, stay_reward, before_x, before_y,
+                              collided, r_ds, r_ca, occupancy, blocked, row, row_f)
         out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, occupancy)
         if count_swaps:
             out[OUT_VIOLATIONS] += swaps_through(before_x, before_y, x, y, n, width, occupancy)

@@ -224,6 +224,7 @@ class Step:
         self.gx, self.gy = ints([g[0] for g in goals]), ints([g[1] for g in goals])
         self.learns = np.array(learns or [True] * n)
         self.arrived = np.zeros(n, bool)
+        self.arrival = np.zeros(n, np.int64)
         self.row, self.row_f = np.zeros(ROW_INTS, np.int64), np.zeros(ROW_FLOATS)
 
     def __call__(self, actions):
@@ -232,7 +233,7 @@ class Step:
         self.actions = ints(actions)
         self.before_x, self.before_y = np.zeros(n, np.int64), np.zeros(n, np.int64)
         return world_step(self.x, self.y, self.gx, self.gy, self.learns, self.arrived,
-                          self.actions, n, self.width, self.height, self.count_swaps,
+                          self.arrival, self.actions, n, self.width, self.height, self.count_swaps,
                           GOAL_REWARD, STAY_REWARD, self.before_x, self.before_y, self.collided, self.r_ds,
                           self.r_ca, np.zeros(self.width * self.height, np.int64),
                           np.zeros(n, bool), self.row, self.row_f)

@@ -37,8 +37,8 @@ from nnql_swarm.kernel.jit import flags, floats, ints, python_values
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
-    ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD, ROW_STEPS,
-    Cell, shared_cells, swaps_through, world_step,
+    FIELD_COLUMNS, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD,
+    ROW_STEPS, Cell, field_columns, field_costs, shared_cells, swaps_through, world_step,
 )
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
@@ -55,8 +55,9 @@ come at once, and through a router one link carries them all)."""
 EPISODE_FIELDS = (
     "episode", "steps", "collisions", "missed_intents", "reward_sum", "arrived", "shortest_sum",
     "agent_steps", "end_tick",
-)
-"""The deterministic columns of ``episodes.csv``, one row per episode."""
+) + FIELD_COLUMNS
+"""The deterministic columns of ``episodes.csv``, one row per episode (the last, the field's
+metrics: ``world.rules.field_columns``)."""
 
 
 @dataclass(frozen=True)
@@ -148,6 +149,7 @@ class SwarmWorld:
         self._goal_x[:n], self._goal_y[:n] = scenario.goals[:, 0].tolist(), scenario.goals[:, 1].tolist()
         self._goal_cells = [tuple(cell) for cell in scenario.goals.tolist()]
         self._arrived = flags([False] * bodies)
+        self._arrival = ints([0] * bodies)
         self._r_ds = floats([0.0] * bodies)
         self._r_ca = floats([0.0] * bodies)
         self._collided = flags([False] * bodies)
@@ -264,11 +266,14 @@ class SwarmWorld:
     def episode_row(self) -> dict:
         """The running episode's row of ``episodes.csv`` (its deterministic columns)."""
         row, reward = python_values(self._row), python_values(self._row_f)[ROW_REWARD]
+        n = self.config.n_agents
+        on_goal, soc, makespan = field_costs(self._x, self._y, self._goal_x, self._goal_y, self._arrival, n,
+                            row[ROW_STEPS])
         return {"episode": self.episode, "steps": row[ROW_STEPS],
                 "collisions": row[ROW_COLLISIONS], "missed_intents": self._missed,
                 "reward_sum": reward, "arrived": row[ROW_ARRIVED],
                 "shortest_sum": self._shortest, "agent_steps": row[ROW_AGENT_STEPS],
-                "end_tick": self.tick}
+                "end_tick": self.tick, **field_columns(on_goal, soc, makespan, n)}
 
     def _end_tick(self, missed: tuple[int, ...], learned: dict) -> TickReport:
         """The episode's end tick: nothing moves; the row is final; the next episode starts."""
@@ -290,7 +295,7 @@ class SwarmWorld:
         arrived_before = self._outcome[3]  # as this tick's observations showed it
         chosen = ints([STAY if a is None else a for a in actions] + self._stays)
         everyone = world_step(self._x, self._y, self._goal_x, self._goal_y, self._learns,
-                              self._arrived, chosen, c.n_bodies, c.width, c.height, c.count_swaps,
+                              self._arrived, self._arrival, chosen, c.n_bodies, c.width, c.height, c.count_swaps,
                               c.goal_reward, c.stay_reward, self._before_x, self._before_y, self._collided,
                               self._r_ds, self._r_ca, self._occupancy, self._blocked, self._row,
                               self._row_f)

@@ -27,6 +27,9 @@ Bodies are learners, each with its own goal, or scripted obstacles (the paper's 
 have no goal, earn nothing and are not counted. A learner that reaches its goal has *arrived*:
 it stays on its goal for the rest of the episode, and is still an obstacle. The episode is
 over when every learner has arrived (or, the caller's business, after its last step).
+
+The field's metrics (POGEMA's, :func:`field_costs`) read each learner's *arrival step*: the step
+(counted from 1) at which it last stepped onto its goal, 0 if it never did.
 """
 
 import math
@@ -130,14 +133,44 @@ def shortest_steps(start_x, start_y, goal_x, goal_y):
     return abs(goal_x - start_x) + abs(goal_y - start_y)
 
 
+FIELD_COLUMNS = ("csr", "isr", "soc", "makespan")
+"""The field's metrics of an episode (POGEMA's, :func:`field_columns`)."""
+
+
+def field_columns(on_goal: int, soc: int, makespan: int, learners: int) -> dict:
+    """The field's metrics of an episode from :func:`field_costs`: CSR (1 if every learner ends on
+    its goal, else 0), ISR (the share that does), SoC and makespan."""
+    return {"csr": int(on_goal == learners), "isr": on_goal / learners, "soc": soc,
+            "makespan": makespan}
+
+
 @kernel
-def world_step(x, y, goal_x, goal_y, learns, arrived, actions, n, width, height, count_swaps,
-               goal_reward, stay_reward, before_x, before_y, collided, r_ds, r_ca, occupancy,
-               blocked, row, row_f):
+def field_costs(x, y, goal_x, goal_y, arrival, learners, steps):
+    """The field's costs of an episode that ended after ``steps`` steps (POGEMA's): how many of
+    the first ``learners`` bodies stand on their goal, the sum of their costs (SoC) and the largest
+    (makespan). A learner's cost is its arrival step if it ends on its goal, else ``steps``."""
+    on_goal = 0
+    soc = 0
+    makespan = 0
+    for i in range(learners):
+        cost = steps
+        if x[i] == goal_x[i] and y[i] == goal_y[i]:
+            on_goal += 1
+            cost = arrival[i]
+        soc += cost
+        makespan = max(makespan, cost)
+    return on_goal, soc, makespan
+
+
+@kernel
+def world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width, height,
+               count_swaps, goal_reward, stay_reward, before_x, before_y, collided, r_ds, r_ca,
+               occupancy, blocked, row, row_f):
     """One step of an episode: everyone moves at once; rewards, arrivals and the running score.
 
     ``actions`` are the bodies' intents, overwritten with the actions applied (a learner that
-    has arrived stays whatever it says). ``x``, ``y`` and ``arrived`` are updated in place; ``before_x``, ``before_y`` receive the
+    has arrived stays whatever it says). ``x``, ``y``, ``arrived`` and ``arrival`` (the arrival
+    step of each learner, :func:`field_costs`) are updated in place; ``before_x``, ``before_y`` receive the
     cells the step started from, ``collided``, ``r_ds``, ``r_ca`` its outcome per body. Returns
     whether every learner has now arrived.
     """
@@ -168,6 +201,7 @@ def world_step(x, y, goal_x, goal_y, learns, arrived, actions, n, width, height,
             row[ROW_AGENT_STEPS] += 1
             if x[i] == goal_x[i] and y[i] == goal_y[i]:
                 arrived[i] = True
+                arrival[i] = row[ROW_STEPS] + 1
                 row[ROW_ARRIVED] += 1
         ds_sum += r_ds[i]
         ca_sum += r_ca[i]
