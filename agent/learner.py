@@ -521,6 +521,47 @@ def finish(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, f
 
 
 @kernel
+def make_way(ox, oy, nb, m, learners, width, height, ties):
+    """Under the ``step-aside`` on-target rule, what an agent standing on its goal does: it
+    stays, unless a neighbour whose intent it knows announced moving into its cell; then it
+    steps to a neighbouring cell, a free one if it can (nobody there, nobody announced heading
+    there), else one where a learner whose intent it does not know stands, which the
+    announcement pushes on in turn (priority inheritance, in announcement order); among equals
+    the largest tie-breaker. With nowhere to go it stays. It learns nothing from the step."""
+    pushed = False
+    for j in range(m):
+        if nb[j][NB_KNOWN] != 0 and nb[j][NB_NEXT_X] == ox and nb[j][NB_NEXT_Y] == oy:
+            pushed = True
+    if not pushed:
+        return STAY
+    best, best_score = STAY, 0
+    for a in range(N_ACTIONS):
+        tx = target_x(ox, a, width)
+        ty = target_y(oy, a, height)
+        if tx == ox and ty == oy:
+            continue
+        score = 2
+        for j in range(m):
+            known = nb[j][NB_KNOWN] != 0
+            nx, ny = nb[j][NB_NEXT_X], nb[j][NB_NEXT_Y]
+            if known and nx == tx and ny == ty:
+                score = 0  # announced: taken
+            elif nb[j][NB_X] == tx and nb[j][NB_Y] == ty:
+                if known:  # it leaves, but into this cell it would be a swap
+                    if nx == ox and ny == oy:
+                        score = 0
+                elif nb[j][NB_ID] < learners:
+                    score = min(score, 1)
+                else:
+                    score = 0
+            if score == 0:
+                break
+        if score > best_score or (score == best_score and score > 0 and ties[a] > ties[best]):
+            best, best_score = a, score
+    return best
+
+
+@kernel
 def record_outcome(state, state_f, r_ds, r_ca, arrived):
     """Store the rewards of the last action, and whether it reached the goal (terminal)."""
     state_f[LF_R_DS] = r_ds

@@ -33,6 +33,7 @@ from nnql_swarm.experiment.swarm import (
     walls_presets, write_runs, write_tables,
 )
 from nnql_swarm.protocol.config import PRESETS
+from nnql_swarm.world.rules import ON_TARGET
 from nnql_swarm.protocol.maps import run_map
 from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.terminal.cli import (
@@ -274,6 +275,9 @@ def build_swarm_parser() -> OneLineParser:
     add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH")
     add("--obstacle-density", type=float, default=d.obstacle_density, metavar="P",
         help="fraction of the grid's cells that are walls (each seed its own map)")
+    add("--on-target", choices=ON_TARGET, default=d.on_target,
+        help="what an agent that reached its goal does: park there for good (the paper's "
+             "reading) or step aside to make way and come back (the field's)")
     add("--map", default=None, metavar="FILE|SPEC",
         help="every seed on this map: a MovingAI .map file, or random:WxH:P[:SEED], "
              "maze:WxH[:SEED], warehouse[:WxH] (SEED defaults to --seed-base); instead of --grid")
@@ -320,7 +324,7 @@ def run_swarm(argv: list[str]) -> Path:
     experiment = SwarmExperiment(agents=args.agents, seeds=args.seeds, seed_base=args.seed_base,
                                  episodes=args.episodes, max_steps=args.max_steps,
                                  obstacle_density=args.obstacle_density,
-                                 variants=variants, presets=presets, **grid)
+                                 on_target=args.on_target, variants=variants, presets=presets, **grid)
     try:
         experiment.config(experiment.variants[0], experiment.seed_base)
     except ValueError as error:

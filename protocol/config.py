@@ -15,6 +15,7 @@ from nnql_swarm.protocol.keys import validate_run_id
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_GRID
 from nnql_swarm.protocol.ranks import WAIT_RULES
 from nnql_swarm.protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
+from nnql_swarm.world.rules import ON_TARGET
 from nnql_swarm.protocol.walls import MAX_DENSITY, layout, wall_count
 
 ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
@@ -145,6 +146,11 @@ class SwarmConfig:
     detour: bool = option(_DEFAULT["detour"], "the path on the known map (--ds-state, "
                           "--ds-reward) goes around the agents parked within reach, where "
                           "another way is known")
+    on_target: str = option("park", "what an agent that reached its goal does: stays there for "
+                            "good, an obstacle (park, the paper's reading), or stays unless it "
+                            "has to make way, and may leave and come back, counted arrived "
+                            "only while there, its last arrival its arrival (step-aside, the "
+                            "field's; in-process only)", choices=ON_TARGET)
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
                                      "largest free region)", metavar="P")
@@ -192,6 +198,8 @@ class SwarmConfig:
              f"the destination-seeking reward must be one of {', '.join(DS_REWARD_NAMES)}"),
             (self.lookahead == 1 or self.ds_state == "goal",
              "a lookahead n > 1 plans on the goal's offset: it needs --ds-state goal"),
+            (self.on_target in ON_TARGET,
+             f"the on-target rule must be one of {', '.join(ON_TARGET)}"),
             (self.tick_deadline_s > 0, "the tick deadline must be positive"),
             (0 <= self.obstacle_density <= MAX_DENSITY,
              f"the obstacle density must be 0..{MAX_DENSITY}"),
@@ -241,6 +249,11 @@ class SwarmConfig:
         if self.map_rows:
             return sum(row.count("@") for row in self.map_rows)
         return wall_count(self.width, self.height, self.obstacle_density)
+
+    @property
+    def step_aside(self) -> bool:
+        """Whether an arrived agent may leave its goal to make way (``world.rules``)."""
+        return self.on_target == "step-aside"
 
     @property
     def meet_only(self) -> bool:

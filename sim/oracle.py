@@ -9,13 +9,20 @@ neighbouring cell nearest their goal (breadth-first distances on the grid's free
 walls and the parked agents); an agent that wants a cell someone still occupies makes that one
 move first (it inherits the priority) and tries its next cell if it cannot. No two agents are
 planned into one cell and no two swap, so the world's arbitration never finds a collision.
-Arrived agents are parked obstacles, as in the swarm, and walls obstacles that never move: an
-agent next to its goal does not take it while parking there would leave another agent no way to
-its own.
+Walls are obstacles that never move. Arrived agents follow the world's on-target rule
+(``world.rules``):
 
-It learns nothing. It is a reference, not a lower bound: PIBT's paths are not optimal, and where
-walls make corridors it does not always bring every agent home. The lower bound is
-``shortest_sum``, each agent's shortest path alone.
+- ``park``: they are parked obstacles, and an agent next to its goal does not take it while
+  parking there would leave another agent no way to its own. Where walls make corridors this
+  does not always bring every agent home (two agents in a corridor one cell wide, the way out
+  for one to back out, which PIBT one step at a time does not plan).
+- ``step-aside``: PIBT as published. An agent on its goal is pushed like any other (it then
+  inherits the pusher's priority and takes another cell, and comes back); an agent's priority
+  grows by a grid's worth of cells at every step it ends off its goal, and falls back to 0 on
+  it, so whoever has waited longest goes first.
+
+It learns nothing. It is a reference planner, not a lower bound: PIBT's paths are not optimal.
+The lower bound is ``shortest_sum``, each agent's shortest path alone.
 """
 
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
@@ -131,14 +138,17 @@ def _closes(goal, i, x, y, goal_x, goal_y, arrived, n, width, height, distances,
 
 
 @kernel
-def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, closest, actions,
-         distances, occupant, reserved, decided, order, blocked, queue, stack, tried, probe):
+def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, priority, closest,
+         actions, distances, occupant, reserved, decided, order, blocked, queue, stack, tried,
+         probe):
     """Every agent's collision-free action for this step, the agents of higher ``priority``
     first: bodies ``0 .. n - 1`` are the agents, ``n .. bodies - 1`` walls (they stay). An agent
     gains a unit of ``priority`` at every step that finds it no nearer its goal than it has been
     (``closest``, its nearest so far), so that one held back in a corridor comes to outrank those
     in its way. An agent next to its goal whose parking there would leave another agent no way
-    to its own does not take it this step, and plans after the others. Scratch: ``distances``
+    to its own does not take it this step, and plans after the others. Under ``step_aside``
+    arrived agents are planned (and pushed) like the others, and priorities are published
+    PIBT's (the module docstring). Scratch: ``distances``
     (n cells each), ``occupant``, ``reserved``, ``blocked``, ``queue``, ``probe`` (a slot per
     cell), ``decided``, ``order``, ``stack``, ``tried`` (a slot per agent)."""
     cells = width * height
@@ -150,10 +160,26 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, clos
         occupant[y[i] * width + x[i]] = i
         decided[i] = False
         actions[i] = STAY
-        if i >= n or arrived[i]:
+        if i >= n or (arrived[i] and not step_aside):
             blocked[y[i] * width + x[i]] = 1
             reserved[y[i] * width + x[i]] = i
             decided[i] = True
+    if step_aside:
+        for i in range(n):
+            goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances, i * cells,
+                           queue)
+            if x[i] == goal_x[i] and y[i] == goal_y[i]:
+                priority[i] = 0
+            else:
+                priority[i] += cells
+            order[i] = i
+        _by_priority(order, n, priority)
+        for a in range(n):
+            i = order[a]
+            if not decided[i]:
+                _push(i, x, y, width, height, distances, occupant, reserved, decided, actions,
+                      stack, tried)
+        return
     for i in range(n):
         if not arrived[i]:
             goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances, i * cells,
@@ -191,3 +217,15 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, clos
         if not decided[i]:
             _push(i, x, y, width, height, distances, occupant, reserved, decided, actions, stack,
                   tried)
+
+
+@kernel
+def _by_priority(order, count, priority):
+    """Sort ``order[:count]`` by priority, the highest first (stable: among equals, by id)."""
+    for a in range(count):
+        for b in range(a, 0, -1):
+            i, j = order[b], order[b - 1]
+            if priority[i] > priority[j]:
+                order[b], order[b - 1] = j, i
+            else:
+                break

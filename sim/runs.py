@@ -26,7 +26,7 @@ from nnql_swarm.protocol.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
-    OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_WALLS, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
+    OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
     OUT_SHORTEST, OUT_VIOLATIONS, TR_FIELDS, run_episode,
 )
 from nnql_swarm.world.rules import (
@@ -131,6 +131,7 @@ class Batch:
         self.options[:, OPT_LOOKAHEAD] = [run.lookahead for run in runs]
         self.options[:, OPT_ORACLE] = [run.algo == "oracle" for run in runs]
         self.options[:, OPT_WALLS] = int(w.scripted > 0 and not w.paper)
+        self.options[:, OPT_STEP_ASIDE] = [run.step_aside for run in runs]
         init = np.array([run.optimistic for run in runs])[:, None, None, None]
         self.q_ds = np.broadcast_to(init, (r, learners, N_STATES, N_ACTIONS)).copy()
         self.q_ca = np.broadcast_to(init, (r, learners, rows, N_ACTIONS)).copy()
@@ -151,6 +152,7 @@ class Batch:
         self._scratch = dict(
             x=_ints(r, n), y=_ints(r, n), prev_x=_ints(r, n), prev_y=_ints(r, n),
             goal_x=_ints(r, n), goal_y=_ints(r, n), arrived=np.zeros((r, n), dtype=bool),
+            arrival=_ints(r, n),
             actions=_ints(r, n), decided=np.zeros((r, n), dtype=bool),
             collided=np.zeros((r, n), dtype=bool), r_ds=np.zeros((r, n)), r_ca=np.zeros((r, n)),
             before_x=_ints(r, n), before_y=_ints(r, n), occupancy=_ints(r, cells),

@@ -23,7 +23,7 @@ Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``agen
 from nnql_swarm.agent.learner import (
     FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
     NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
-    apply_record, decide, finish, planned_cell, record_outcome,
+    apply_record, decide, finish, make_way, planned_cell, record_outcome,
 )
 from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
 from nnql_swarm.protocol.jit import batch_kernel, kernel, prange
@@ -36,11 +36,13 @@ ORACLE_SCRATCH = 10
 queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal), a
 slot per grid cell each."""
 
-OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS = 0, 1, 2, 3
-OPT_FIELDS = 4
+OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS, OPT_STEP_ASIDE = 0, 1, 2, 3, 4
+OPT_FIELDS = 5
 """Per-run options of the swarm: one table for all agents; the steps an announcement covers
 (n of nnQL); the oracle instead of learners; whether the scripted bodies are walls (which a
-learner's known map, ``agent.known_map``, learns as it sees them)."""
+learner's known map, ``agent.known_map``, learns as it sees them); the ``step-aside`` on-target
+rule (``world.rules``: an arrived agent makes way, ``agent.learner.make_way``, and is nobody's
+parked obstacle)."""
 
 OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS = 0, 1, 2
 OUT_FIELDS = 3
@@ -67,10 +69,11 @@ def rank_of(i, tick, learners):
 @kernel
 def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, actions,
                    decided, lookahead, announcing, params, q_ds, tables, goal_x, goal_y,
-                   width, height, nb):
+                   width, height, step_aside, nb):
     """Fill ``nb`` with what agent ``i`` observes and has been told: its visible neighbours in
     id order. ``decided``: bodies whose action of this tick is fixed; ``announcing``: whether
-    anyone announces (not at an end tick). Returns the number of rows."""
+    anyone announces (not at an end tick); ``step_aside``: arrived agents are not parked.
+    Returns the number of rows."""
     m = 0
     negotiates = announcing and reads_intents(params)
     rank = rank_of(i, tick, learners)
@@ -104,7 +107,7 @@ def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, 
             row[NB_NEXT_Y] = y[j]
             row[NB_STATE_X] = x[j]
             row[NB_STATE_Y] = y[j]
-        row[NB_PARKED] = 1 if learns[j] and arrived[j] else 0
+        row[NB_PARKED] = 1 if learns[j] and arrived[j] and not step_aside else 0
         if prev_x[i] >= 0 and sees(prev_x[i], prev_y[i], prev_x[j], prev_y[j]):
             row[NB_PREV_X] = prev_x[j]
             row[NB_PREV_Y] = prev_y[j]
@@ -120,7 +123,7 @@ def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward,
                 params, params_f, options, q_ds, q_ca, state, state_f, wmap, seed_of_run,
                 starts, goals, scripts, paths, random_actions, ties, tick,
                 record, trace,
-                x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
+                x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, arrival, actions, decided,
                 collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
                 rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
     """Play one episode of every run (see the module docstring); ``tick`` (one per run) is each
@@ -135,7 +138,7 @@ def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward,
                  wmap[r], starts[s], goals[s], scripts[s], paths[s], random_actions[s], ties[s], tick,
                  record, trace[r],
                  x[r], y[r], prev_x[r], prev_y[r], goal_x[r], goal_y[r], learns, arrived[r],
-                 actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
+                 arrival[r], actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
                  before_y[r], occupancy[r], blocked[r], nb[r], values[r], rec[r], rec_f[r],
                  pending_rec[r], oracle_scratch[r], oracle_cells[r], row[r], row_f[r], out[r])
 
@@ -145,7 +148,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
              params, params_f, options, q_ds, q_ca, state, state_f, wmap,
              starts, goals, scripts, paths, random_actions, ties, ticks,
              record, trace,
-             x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, actions, decided,
+             x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, arrival, actions, decided,
              collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
              rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
     shared = options[OPT_SHARED] != 0
@@ -153,6 +156,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
     lookahead = options[OPT_LOOKAHEAD]
     oracle = options[OPT_ORACLE] != 0
     last_wall = n if options[OPT_WALLS] != 0 else learners  # walls: bodies learners .. n - 1
+    step_aside = options[OPT_STEP_ASIDE] != 0
     alpha, gamma = params_f[FP_ALPHA], params_f[FP_GAMMA]
     shortest = 0
     for i in range(n):
@@ -161,6 +165,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
         prev_x[i] = -1
         prev_y[i] = -1
         arrived[i] = False
+        arrival[i] = 0
         collided[i] = False
         r_ds[i] = 0.0
         r_ca[i] = 0.0
@@ -195,14 +200,15 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             actions[i] = STAY if ending else scripts[step, i - learners]
             decided[i] = True
         if oracle and not ending:
-            plan(x, y, goal_x, goal_y, arrived, n, learners, width, height, oracle_scratch[7],
+            plan(x, y, goal_x, goal_y, arrived, n, learners, width, height, step_aside,
+                 oracle_scratch[7],
                  oracle_scratch[9], actions, oracle_cells, oracle_scratch[0], oracle_scratch[1],
                  decided, oracle_scratch[2], oracle_scratch[3], oracle_scratch[4],
                  oracle_scratch[5], oracle_scratch[6], oracle_scratch[8])
         for rank in range(learners):
             i = (rank + tick) % learners  # the agent of this rank (inverse of priority_rank)
             if oracle:
-                if ending or arrived[i]:
+                if ending or (arrived[i] and not step_aside):
                     actions[i] = STAY
                 decided[i] = True
                 continue
@@ -211,13 +217,19 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             stops = ending or arrived[i]
             m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived,
                                actions, decided, lookahead, not stops, params, q_ds, tables,
-                               goal_x, goal_y, width, height, nb)
+                               goal_x, goal_y, width, height, step_aside, nb)
             if stops:
                 written = finish(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
                                  wmap[i], x, y, learners, last_wall, step == 0, x[i], y[i],
                                  goal_x[i], goal_y[i], nb, m, width, height, rec[i], rec_f[i],
                                  not shared)
                 actions[i] = STAY
+                if step_aside and not ending:  # on its goal: it makes way if told to
+                    m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns,
+                                       arrived, actions, decided, lookahead, True, params, q_ds,
+                                       tables, goal_x, goal_y, width, height, step_aside, nb)
+                    actions[i] = make_way(x[i], y[i], nb, m, learners, width, height,
+                                          ties[i, step])
             else:
                 actions[i], written = decide(
                     q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], wmap[i], x, y,
@@ -242,8 +254,8 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
         for i in range(n):
             prev_x[i] = x[i]
             prev_y[i] = y[i]
-        everyone = world_step(x, y, goal_x, goal_y, learns, arrived, actions, n, width, height,
-                              count_swaps, goal_reward, stay_reward, before_x, before_y, collided, r_ds,
+        everyone = world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width,
+                              height, count_swaps, step_aside, goal_reward, stay_reward, before_x, before_y, collided, r_ds,
                               r_ca, occupancy, blocked, row, row_f)
         out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, occupancy)
         if count_swaps:
