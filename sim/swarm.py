@@ -31,10 +31,10 @@ from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
 from nnql_swarm.world.rules import shared_cells, swaps_through, world_step
 
-ORACLE_SCRATCH = 10
+ORACLE_SCRATCH = 12
 """Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
-queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal), a
-slot per grid cell each."""
+queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal, and
+the swap's partner and first-choice flag per chain level), a slot per grid cell each."""
 
 OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS, OPT_STEP_ASIDE = 0, 1, 2, 3, 4
 OPT_FIELDS = 5
@@ -204,7 +204,8 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
                  oracle_scratch[7],
                  oracle_scratch[9], actions, oracle_cells, oracle_scratch[0], oracle_scratch[1],
                  decided, oracle_scratch[2], oracle_scratch[3], oracle_scratch[4],
-                 oracle_scratch[5], oracle_scratch[6], oracle_scratch[8])
+                 oracle_scratch[5], oracle_scratch[6], oracle_scratch[8], oracle_scratch[10],
+                 oracle_scratch[11], step)
         for rank in range(learners):
             i = (rank + tick) % learners  # the agent of this rank (inverse of priority_rank)
             if oracle:
