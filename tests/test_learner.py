@@ -10,8 +10,8 @@ from nnql_swarm.agent.learner import (
     FP_FIELDS, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS, LP_RANDOM_STEP, LP_READING,
     LP_SHIELD, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READ_DIR, READ_NNQL, READ_QL,
     REC_COUNT, REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, apply_record, ca_row, ca_rows, choose,
-    NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_X, NB_Y, decide, finish, make_way, planned_cell,
-    record_outcome, record_size, shield_mask, state_size,
+    decide, finish, make_way, planned_cell, record_outcome, record_size, shield_mask,
+    state_size,
 )
 from nnql_swarm.agent.known_map import fresh_map, map_size
 from nnql_swarm.experiment.paper import PaperSettings, RunSpec, run_batch
@@ -304,25 +304,18 @@ def test_a_learning_record_from_elsewhere_is_checked_against_the_tables():
         assert not record_is_valid(bad_ints, bad_floats, N_STATES), bad_ints
 
 
-def neighbour(j, x, y, known=False, next_cell=None):
-    """A neighbour row (``NB_*``) at ``(x, y)``, its announced cell if ``known``."""
-    row = np.zeros(NB_FIELDS, dtype=np.int64)
-    nx, ny = next_cell if known else (x, y)
-    row[[NB_ID, NB_X, NB_Y, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y]] = j, x, y, int(known), nx, ny
-    return row
-
 
 def test_an_arrived_agent_makes_way_only_for_an_announced_move_into_its_cell():
     ties = np.arange(N_ACTIONS, dtype=float)
-    passing = neighbour(0, 2, 1, known=True, next_cell=(3, 1))
+    passing = neighbour(0, 2, 1, next_cell=(3, 1))
     assert make_way(2, 2, np.array([passing]), 1, 8, 5, 5, ties) == STAY
-    pusher = neighbour(0, 2, 1, known=True, next_cell=(2, 2))  # from above, into its cell
-    wall = neighbour(9, 3, 2, known=True, next_cell=(3, 2))
+    pusher = neighbour(0, 2, 1, next_cell=(2, 2))  # from above, into its cell
+    wall = neighbour(9, 3, 2, next_cell=(3, 2))
     stranger = neighbour(1, 1, 2)  # a learner whose intent it does not know yet
     # Free cells first (down, the only one), never back into the pusher's cell (a swap)
     assert make_way(2, 2, np.array([pusher, wall, stranger]), 3, 8, 5, 5, ties) == DOWN
-    below = neighbour(2, 2, 3, known=True, next_cell=(2, 3))
+    below = neighbour(2, 2, 3, next_cell=(2, 3))
     # With no free cell, the unknown learner's cell: its announcement pushes that one on
     assert make_way(2, 2, np.array([pusher, wall, stranger, below]), 4, 8, 5, 5, ties) == LEFT
-    other_wall = neighbour(10, 1, 2, known=True, next_cell=(1, 2))
+    other_wall = neighbour(10, 1, 2, next_cell=(1, 2))
     assert make_way(2, 2, np.array([pusher, wall, other_wall, below]), 4, 8, 5, 5, ties) == STAY
