@@ -18,9 +18,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from nnql_swarm.protocol import maps  # noqa: E402
-from nnql_swarm.protocol.config import PRESETS, SwarmConfig  # noqa: E402
+from nnql_swarm.protocol.config import ON_TARGET, PRESETS, SwarmConfig  # noqa: E402
 from nnql_swarm.sim.runs import Batch, swarm_world  # noqa: E402
-from nnql_swarm.world.rules import ON_TARGET  # noqa: E402
 
 
 def main() -> None:
@@ -34,7 +33,8 @@ def main() -> None:
     parser.add_argument("--on-target", choices=ON_TARGET, default="step-aside")
     args = parser.parse_args()
     sizes = [int(s) for s in args.sizes.split(",")]
-    per_size = {s: [0, 0, 0.0, 0, 0, 0] for s in sizes}  # instances, solved, home, steps, shortest, collisions
+    # per size: instances, all home, share of agents home, steps, shortest, collisions
+    per_size = {s: [0, 0, 0.0, 0, 0, 0] for s in sizes}
     for k in range(args.instances):
         seed = args.seed_base + k
         side = sizes[k % len(sizes)]

@@ -32,8 +32,7 @@ from nnql_swarm.experiment.swarm import (
     TABLE_FILES, VARIANTS, SwarmExperiment, ablation_presets, curves, run_experiment, table_rows,
     walls_presets, write_runs, write_tables,
 )
-from nnql_swarm.protocol.config import PRESETS
-from nnql_swarm.world.rules import ON_TARGET
+from nnql_swarm.protocol.config import ON_TARGET, PRESETS
 from nnql_swarm.protocol.maps import run_map
 from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.terminal.cli import (
@@ -324,7 +323,8 @@ def run_swarm(argv: list[str]) -> Path:
     experiment = SwarmExperiment(agents=args.agents, seeds=args.seeds, seed_base=args.seed_base,
                                  episodes=args.episodes, max_steps=args.max_steps,
                                  obstacle_density=args.obstacle_density,
-                                 on_target=args.on_target, variants=variants, presets=presets, **grid)
+                                 on_target=args.on_target, variants=variants, presets=presets,
+                                 **grid)
     try:
         experiment.config(experiment.variants[0], experiment.seed_base)
     except ValueError as error:

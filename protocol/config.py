@@ -15,7 +15,6 @@ from nnql_swarm.protocol.keys import validate_run_id
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_GRID
 from nnql_swarm.protocol.ranks import WAIT_RULES
 from nnql_swarm.protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
-from nnql_swarm.world.rules import ON_TARGET
 from nnql_swarm.protocol.walls import MAX_DENSITY, layout, wall_count
 
 ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
@@ -27,6 +26,9 @@ DS_STATE_NAMES = ("goal", "waypoint", "progress")
 DS_REWARD_NAMES = ("euclid", "path", "flat")
 """Destination seeking's state and reward (``agent.learner``: ``DS_STATES``, ``DS_REWARDS``)."""
 MAX_LOOKAHEAD = 3
+ON_TARGET = ("park", "step-aside")
+"""What an agent on its goal does (``world.rules``): parks there for good (the paper's reading)
+or stays unless it has to make way (the field's)."""
 
 START_S_PER_AGENT = 1.0
 """The start-up a swarm is given per agent, where that is longer than a fixed wait: the world

@@ -72,8 +72,8 @@ def _push(root, x, y, width, height, distances, occupant, reserved, decided, act
     cell; the first agent that finds a free cell settles the whole chain.
 
     With ``swap`` (the ``step-aside`` rule's planner), cells at one distance are tried in the
-    order of :func:`_tie` at ``step``, and (walls ``blocked``, goals, ``n`` agents; scratch ``swapper``, ``first``, a
-    slot per chain level), the swap of LaCAM's PIBT (Okumura, 2023): where an agent and the one
+    order of :func:`_tie` at ``step``, and (walls ``blocked``, goals, ``n`` agents; scratch
+    ``swapper``, ``first``, a slot per chain level) the swap of LaCAM's PIBT (Okumura, 2023): where an agent and the one
     in its way must trade places and cannot on the spot (a corridor, a dead end), it tries its
     cells farthest from its goal first and, when it takes the first, pulls that one into the cell
     it leaves, until they reach room to pass."""

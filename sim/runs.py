@@ -26,7 +26,8 @@ from nnql_swarm.protocol.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
-    OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS,
+    OPT_FIELDS, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS, ORACLE_SCRATCH,
+    OUT_END_TICK, OUT_FIELDS,
     OUT_SHORTEST, OUT_VIOLATIONS, TR_FIELDS, run_episode,
 )
 from nnql_swarm.world.rules import (

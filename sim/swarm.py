@@ -256,8 +256,8 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             prev_x[i] = x[i]
             prev_y[i] = y[i]
         everyone = world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width,
-                              height, count_swaps, step_aside, goal_reward, stay_reward, before_x, before_y, collided, r_ds,
-                              r_ca, occupancy, blocked, row, row_f)
+                              height, count_swaps, step_aside, goal_reward, stay_reward, before_x,
+                              before_y, collided, r_ds, r_ca, occupancy, blocked, row, row_f)
         out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, occupancy)
         if count_swaps:
             out[OUT_VIOLATIONS] += swaps_through(before_x, before_y, x, y, n, width, occupancy)

@@ -25,7 +25,8 @@ stayed, was blocked or bumped the edge): ``stay_reward`` (the paper's 0.5) is wh
 
 Bodies are learners, each with its own goal, or scripted obstacles (the paper's experiment), which
 have no goal, earn nothing and are not counted. A learner that reaches its goal has *arrived*.
-What it does then is the on-target rule (``ON_TARGET``):
+What it does then is the on-target rule (``protocol.config.ON_TARGET``; ``step_aside`` below
+says whether the second holds):
 
 - ``park`` (the paper's reading): parked on its goal for the rest of the episode, it stays
   whatever it says and is still an obstacle.
@@ -59,12 +60,9 @@ CA_REWARD = 10.0
 
 ROW_STEPS, ROW_COLLISIONS, ROW_ARRIVED, ROW_AGENT_STEPS = 0, 1, 2, 3
 """Integer fields of an episode's running score (``row``): ticks moved, learners in a collision
-(summed over steps), learners arrived, and learner-steps spent before arriving."""
+(summed over steps), learners arrived, and learner-steps spent before arriving (each learner's
+last arrival step)."""
 ROW_INTS = 4
-
-ON_TARGET = ("park", "step-aside")
-"""The on-target rules, by name (``SwarmConfig.on_target``); ``step_aside`` below is whether the
-second holds."""
 
 ROW_REWARD, ROW_REWARD_DS, ROW_REWARD_CA = 0, 1, 2
 """Float fields of an episode's running score (``row_f``): the sum of both rewards, and each."""
