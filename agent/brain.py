@@ -43,6 +43,9 @@ class AgentBrain:
             raise ValueError(f"--algo {config.algo} plans centrally; run it with --in-process")
         if config.lookahead > 1:
             raise ValueError("a lookahead n > 1 is played by the simulator only (--in-process)")
+        if config.step_aside:
+            raise ValueError("--on-target step-aside is played by the simulator only "
+                             "(--in-process)")
         self.agent = agent
         self.config = config
         self.learner = Learner(config)

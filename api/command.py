@@ -251,6 +251,9 @@ def check_distributable(config: SwarmConfig) -> None:
         raise UsageError("--algo oracle plans every agent's move centrally; run it with --in-process")
     if config.lookahead > 1:
         raise UsageError("--lookahead > 1 is played by the simulator only (add --in-process)")
+    if config.step_aside:
+        raise UsageError("--on-target step-aside is played by the simulator only "
+                         "(add --in-process)")
 
 
 RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR)

@@ -178,7 +178,8 @@ class SwarmGridEnv(ParallelEnv):
         x, y, arrived = ints(self._x), ints(self._y), flags(self._arrived)
         collided, r_ds, r_ca = flags([False] * n), floats([0.0] * n), floats([0.0] * n)
         world_step(x, y, ints(self._goal_x), ints(self._goal_y), flags([True] * n), arrived,
-                   ints([0] * n), ints(chosen), n, self.width, self.height, self.count_swaps, self.goal_reward,
+                   ints([0] * n), ints(chosen), n, self.width, self.height, self.count_swaps,
+                   False, self.goal_reward,
                    STAY_REWARD, ints([0] * n), ints([0] * n), collided, r_ds, r_ca,
                    ints([0] * (self.width * self.height)), flags([False] * n),
                    ints([0] * ROW_INTS), floats([0.0] * ROW_FLOATS))

@@ -97,6 +97,7 @@ class SwarmExperiment:
     width: int = 11
     height: int = 11
     obstacle_density: float = 0.0
+    on_target: str = "park"
     map_name: str = ""
     map_rows: tuple[str, ...] = ()
     scenario: tuple = ()
@@ -109,6 +110,7 @@ class SwarmExperiment:
         return SwarmConfig(run_id=run_name(variant, seed), n_agents=self.agents,
                            episodes=self.episodes, max_steps=self.max_steps, width=self.width,
                            height=self.height, seed=seed, obstacle_density=self.obstacle_density,
+                           on_target=self.on_target,
                            map_name=self.map_name, map_rows=self.map_rows, scenario=self.scenario,
                            **self.presets[variant])
 
@@ -123,7 +125,7 @@ class SwarmExperiment:
 
     def __hash__(self) -> int:
         return hash((self.agents, self.seeds, self.seed_base, self.episodes, self.variants,
-                     self.obstacle_density, self.map_rows, self.scenario))
+                     self.obstacle_density, self.on_target, self.map_rows, self.scenario))
 
 
 def run_name(variant: str, seed: int) -> str:
@@ -211,6 +213,7 @@ def markdown(results: SwarmResults, rows: list[dict]) -> str:
             f"SoC {b0}-{b1} | makespan {b0}-{b1} |")
     walls = f", obstacle density {e.obstacle_density}" if e.obstacle_density else ""
     walls += f", map {e.map_name}" if e.map_name else ""
+    walls += f", on target {e.on_target}" if e.on_target != "park" else ""
     lines = [f"# The swarm experiment: {e.agents} agents, {e.width} x {e.height}{walls}, swaps "
              f"counted, {e.episodes} episodes, seeds {e.seed_base}-{e.seed_base + e.seeds - 1}", "",
              head, "|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
@@ -228,6 +231,7 @@ def markdown(results: SwarmResults, rows: list[dict]) -> str:
               f"<variant> --agents {e.agents} --episodes {e.episodes} --seed <seed> "
               + (f"--map {e.map_name}" if e.map_name else f"--grid {e.width}x{e.height}")
               + (f" --obstacle-density {e.obstacle_density}" if e.obstacle_density else "")
+              + (f" --on-target {e.on_target}" if e.on_target != "park" else "")
               + " --in-process`, whose `episodes.csv` equals "
               "`runs/<variant>-s<seed>/episodes.csv` here.", ""]
     for variant in e.variants:

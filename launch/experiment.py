@@ -41,7 +41,7 @@ from nnql_swarm.experiment.maps import (
     run_config, table_rows as maps_table_rows, write_curves, write_tables as write_maps_tables,
 )
 from nnql_swarm.experiment.maps import TABLE_FILES as MAPS_TABLE_FILES
-from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS
+from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGET, PRESETS
 from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.terminal.cli import (
@@ -283,6 +283,9 @@ def build_swarm_parser() -> OneLineParser:
     add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH")
     add("--obstacle-density", type=float, default=d.obstacle_density, metavar="P",
         help="fraction of the grid's cells that are walls (each seed its own map)")
+    add("--on-target", choices=ON_TARGET, default=d.on_target,
+        help="what an agent that reached its goal does: park there for good (the paper's "
+             "reading) or step aside to make way and come back (the field's)")
     add("--map", default=None, metavar="FILE|SPEC",
         help="every seed on this map: a MovingAI .map file, or random:WxH:P[:SEED], "
              "maze:WxH[:SEED], warehouse[:WxH] (SEED defaults to --seed-base); instead of --grid")
@@ -329,7 +332,8 @@ def run_swarm(argv: list[str]) -> Path:
     experiment = SwarmExperiment(agents=args.agents, seeds=args.seeds, seed_base=args.seed_base,
                                  episodes=args.episodes, max_steps=args.max_steps,
                                  obstacle_density=args.obstacle_density,
-                                 variants=variants, presets=presets, **grid)
+                                 on_target=args.on_target, variants=variants, presets=presets,
+                                 **grid)
     try:
         experiment.config(experiment.variants[0], experiment.seed_base)
     except ValueError as error:

@@ -67,12 +67,12 @@ import numpy as np
 from nnql_swarm.learning.fields import (
     FP_ALPHA, FP_BETA, FP_GAMMA, LP_DETOUR, LP_RADIUS, LP_RANDOM_STEP, LP_READING, LP_SHIELD,
     LS_ACTION, LS_COUNT, LS_GOAL, LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_TAKEN, LS_X,
-    LS_Y, NB_ID, NB_ROW, NB_X, NB_Y,
+    LS_Y, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_ROW, NB_X, NB_Y,
 )
 from nnql_swarm.learning.known_map import track
 from nnql_swarm.learning.readings import ds_state, read_rows, shield_mask, uses_map
 from nnql_swarm.learning.record import apply_record, complete
-from nnql_swarm.protocol.actions import N_ACTIONS, offset_state, target_x, target_y
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY, offset_state, target_x, target_y
 from nnql_swarm.kernel.jit import kernel
 
 def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.ndarray) -> None:
@@ -207,3 +207,44 @@ def planned_cell(q_ds, x, y, gx, gy, steps, width, height):
         y = target_y(y, action, height)
         x = nx
     return x, y
+
+
+@kernel
+def make_way(ox, oy, nb, m, learners, width, height, ties):
+    """Under the ``step-aside`` on-target rule, what an agent standing on its goal does: it
+    stays, unless a neighbour whose intent it knows announced moving into its cell; then it
+    steps to a neighbouring cell, a free one if it can (nobody there, nobody announced heading
+    there), else one where a learner whose intent it does not know stands, which the
+    announcement pushes on in turn (priority inheritance, in announcement order); among equals
+    the largest tie-breaker. With nowhere to go it stays. It learns nothing from the step."""
+    pushed = False
+    for j in range(m):
+        if nb[j][NB_KNOWN] != 0 and nb[j][NB_NEXT_X] == ox and nb[j][NB_NEXT_Y] == oy:
+            pushed = True
+    if not pushed:
+        return STAY
+    best, best_score = STAY, 0
+    for a in range(N_ACTIONS):
+        tx = target_x(ox, a, width)
+        ty = target_y(oy, a, height)
+        if tx == ox and ty == oy:
+            continue
+        score = 2
+        for j in range(m):
+            known = nb[j][NB_KNOWN] != 0
+            nx, ny = nb[j][NB_NEXT_X], nb[j][NB_NEXT_Y]
+            if known and nx == tx and ny == ty:
+                score = 0  # announced: taken
+            elif nb[j][NB_X] == tx and nb[j][NB_Y] == ty:
+                if known:  # it leaves, but into this cell it would be a swap
+                    if nx == ox and ny == oy:
+                        score = 0
+                elif nb[j][NB_ID] < learners:
+                    score = min(score, 1)
+                else:
+                    score = 0
+            if score == 0:
+                break
+        if score > best_score or (score == best_score and score > 0 and ties[a] > ties[best]):
+            best, best_score = a, score
+    return best

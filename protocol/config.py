@@ -27,6 +27,9 @@ DS_STATE_NAMES = ("goal", "waypoint", "progress")
 DS_REWARD_NAMES = ("euclid", "path", "flat")
 """Destination seeking's state and reward (``learning.learner``: ``DS_STATES``, ``DS_REWARDS``)."""
 MAX_LOOKAHEAD = 3
+ON_TARGET = ("park", "step-aside")
+"""What an agent on its goal does (``world.rules``): parks there for good (the paper's reading)
+or stays unless it has to make way (the field's)."""
 
 START_S_PER_AGENT = 1.0
 """The start-up a swarm is given per agent, where that is longer than a fixed wait: the world
@@ -146,6 +149,11 @@ class SwarmConfig:
     detour: bool = option(_DEFAULT["detour"], "the path on the known map (--ds-state, "
                           "--ds-reward) goes around the arrived agents within reach, where "
                           "another way is known")
+    on_target: str = option("park", "what an agent that reached its goal does: stays there for "
+                            "good, an obstacle (park, the paper's reading), or stays unless it "
+                            "has to make way, and may leave and come back, counted arrived "
+                            "only while there, its last arrival its arrival (step-aside, the "
+                            "field's; in-process only)", choices=ON_TARGET)
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
                                      "largest free region)", metavar="P")
@@ -196,6 +204,8 @@ class SwarmConfig:
              f"the destination-seeking reward must be one of {', '.join(DS_REWARD_NAMES)}"),
             (self.lookahead == 1 or self.ds_state == "goal",
              "a lookahead n > 1 plans on the goal's offset: it needs --ds-state goal"),
+            (self.on_target in ON_TARGET,
+             f"the on-target rule must be one of {', '.join(ON_TARGET)}"),
             (self.tick_deadline_s > 0, "the tick deadline must be positive"),
             (0 <= self.obstacle_density <= MAX_DENSITY,
              f"the obstacle density must be 0..{MAX_DENSITY}"),
@@ -245,6 +255,11 @@ class SwarmConfig:
         if self.map_rows:
             return sum(row.count("@") for row in self.map_rows)
         return wall_count(self.width, self.height, self.obstacle_density)
+
+    @property
+    def step_aside(self) -> bool:
+        """Whether an arrived agent may leave its goal to make way (``world.rules``)."""
+        return self.on_target == "step-aside"
 
     @property
     def meet_only(self) -> bool:

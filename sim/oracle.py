@@ -9,17 +9,30 @@ neighbouring cell nearest their goal (breadth-first distances on the grid's free
 walls and the arrived agents); an agent that wants a cell someone still occupies makes that one
 move first (it inherits the priority) and tries its next cell if it cannot. No two agents are
 planned into one cell and no two swap, so the world's arbitration never finds a collision.
-Arrived agents are obstacles on their goals, as in the swarm, and walls obstacles that never move: an
-agent next to its goal does not take it while parking there would leave another agent no way to
-its own.
+Walls are obstacles that never move. Arrived agents follow the world's on-target rule
+(``world.rules``):
 
-It learns nothing. It is a reference, not a lower bound: PIBT's paths are not optimal, and where
-walls make corridors it does not always bring every agent home. The lower bound is
-``shortest_sum``, each agent's shortest path alone.
+- ``park``: they are parked obstacles, and an agent next to its goal does not take it while
+  parking there would leave another agent no way to its own. Where walls make corridors this
+  does not always bring every agent home (two agents in a corridor one cell wide, the way out
+  for one to back out, which PIBT one step at a time does not plan).
+- ``step-aside``: PIBT as published. An agent on its goal is pushed like any other (it then
+  inherits the pusher's priority and takes another cell, and comes back); an agent's priority
+  grows by a grid's worth of cells at every step it ends off its goal, and falls back to 0 on
+  it, so whoever has waited longest goes first; ties between cells at one distance break by a
+  tie-breaker that changes every step (the published one is random). And LaCAM's swap
+  (Okumura, 2023): two agents that must trade places in a corridor or a dead end walk out of it,
+  one pulling the other, until there is room to pass.
+
+It learns nothing. It is a reference planner, not a lower bound: PIBT's paths are not optimal.
+The lower bound is ``shortest_sum``, each agent's shortest path alone.
 """
 
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
 from nnql_swarm.kernel.jit import kernel
+
+TIES = 1024
+"""Tie-breakers per distance under ``step-aside`` (:func:`_tie`)."""
 
 FAR = 1 << 30
 """The distance of a cell its agent cannot reach."""
@@ -51,12 +64,19 @@ def goal_distances(goal_x, goal_y, blocked, width, height, distance, base, queue
 
 @kernel
 def _push(root, x, y, width, height, distances, occupant, reserved, decided, actions, stack,
-          tried):
+          tried, swap, blocked, goal_x, goal_y, n, swapper, first, step):
     """PIBT from agent ``root``, without recursion: ``stack`` holds the chain of agents pushed so
     far (each pushed by the one below it), ``tried`` each one's candidate moves tried (bits). An
     agent takes the untried free cell nearest its goal; if someone undecided stands there, that
     one is pushed next; if a pushed agent finds nothing, it stays and the one below tries its next
-    cell; the first agent that finds a free cell settles the whole chain."""
+    cell; the first agent that finds a free cell settles the whole chain.
+
+    With ``swap`` (the ``step-aside`` rule's planner), cells at one distance are tried in the
+    order of :func:`_tie` at ``step``, and (walls ``blocked``, goals, ``n`` agents; scratch
+    ``swapper``, ``first``, a slot per chain level) the swap of LaCAM's PIBT (Okumura, 2023): where an agent and the one
+    in its way must trade places and cannot on the spot (a corridor, a dead end), it tries its
+    cells farthest from its goal first and, when it takes the first, pulls that one into the cell
+    it leaves, until they reach room to pass."""
     cells = width * height
     decided[root] = True
     stack[0] = root
@@ -66,22 +86,37 @@ def _push(root, x, y, width, height, distances, occupant, reserved, decided, act
         i = stack[top]
         parent = stack[top - 1] if top > 0 else -1
         here = y[i] * width + x[i]
+        if swap and tried[top] == 0:
+            swapper[top] = _swap_partner(i, x, y, width, height, distances, occupant, decided,
+                                         blocked, goal_x, goal_y, n)
+        far = swap and swapper[top] >= 0
         pushed = False
         settled = False
         while True:
             best_a, best_d = -1, FAR + 1
+            if swap:
+                best_d = (FAR + 1) * TIES
+            if far:
+                best_d = -1
             for a in range(N_ACTIONS):
                 if (tried[top] >> a) & 1:
                     continue
                 c = target_y(y[i], a, height) * width + target_x(x[i], a, width)
                 if a != STAY and c == here:
                     continue
-                if distances[i * cells + c] < best_d:
-                    best_a, best_d = a, distances[i * cells + c]
+                if swap and blocked[c] != 0:
+                    continue
+                d = distances[i * cells + c]
+                if swap:
+                    d = d * TIES + _tie(i, c, step)
+                if (d > best_d) if far else (d < best_d):
+                    best_a, best_d = a, d
             if best_a < 0:  # no cell left: it stays, and the agent below tries its next one
                 reserved[here] = i
                 actions[i] = STAY
                 break
+            if swap:
+                first[top] = 1 if tried[top] == 0 else 0
             tried[top] |= 1 << best_a
             c = target_y(y[i], best_a, height) * width + target_x(x[i], best_a, width)
             if reserved[c] >= 0 or (parent >= 0 and c == y[parent] * width + x[parent]):
@@ -100,9 +135,139 @@ def _push(root, x, y, width, height, distances, occupant, reserved, decided, act
         if pushed:
             top += 1
         elif settled:
+            if swap:  # each agent of the chain that took its first cell pulls its partner
+                for level in range(top, -1, -1):
+                    _pull(stack[level], swapper[level], first[level], x, y, width, height,
+                          reserved, decided, actions)
             return
         else:
             top -= 1
+
+
+@kernel
+def _tie(i, c, step):
+    """A tie-breaker among cells at one distance, which changes with the step (published PIBT
+    breaks ties at random; a fixed order lets two agents trade a cell back and forth)."""
+    return ((i + 1) * 73856093 ^ (c + 1) * 19349663 ^ (step + 1) * 83492791) % TIES
+
+
+@kernel
+def _pull(i, j, took_first, x, y, width, height, reserved, decided, actions):
+    """The swap's pull: ``j``, undecided, into the cell ``i`` leaves, if nobody takes it."""
+    if j < 0 or took_first == 0 or decided[j] or actions[i] == STAY:
+        return
+    here = y[i] * width + x[i]
+    if reserved[here] >= 0:
+        return
+    for a in range(N_ACTIONS - 1):
+        if target_y(y[j], a, height) * width + target_x(x[j], a, width) == here:
+            reserved[here] = j
+            actions[j] = a
+            decided[j] = True
+            return
+
+
+@kernel
+def _way_out(c, avoid, width, height, blocked, occupant, goal_x, goal_y, n):
+    """The cells an agent at ``c`` could be pulled on to, ``avoid`` aside and a dead end its
+    occupant's goal (who needs not move): how many, and the last of them."""
+    count, last = 0, -1
+    x, y = c % width, c // width
+    for a in range(N_ACTIONS - 1):
+        u = target_y(y, a, height) * width + target_x(x, a, width)
+        if u == c or blocked[u] != 0 or u == avoid:
+            continue
+        k = occupant[u]
+        if k >= 0 and k < n and goal_y[k] * width + goal_x[k] == u \
+                and _degree(u, width, height, blocked) == 1:
+            continue
+        count += 1
+        last = u
+    return count, last
+
+
+@kernel
+def _degree(c, width, height, blocked):
+    x, y = c % width, c // width
+    count = 0
+    for a in range(N_ACTIONS - 1):
+        u = target_y(y, a, height) * width + target_x(x, a, width)
+        if u != c and blocked[u] == 0:
+            count += 1
+    return count
+
+
+@kernel
+def _swap_required(pusher, puller, v_pusher, v_puller, width, height, distances, blocked,
+                   occupant, goal_x, goal_y, n):
+    """Whether ``pusher`` (at ``v_pusher``) and ``puller`` must trade places: the way ahead of
+    the pusher gives no room to pass, and each is nearer its goal in the other's place."""
+    cells = width * height
+    d = pusher * cells
+    e = puller * cells
+    for _ in range(cells):
+        if distances[d + v_puller] >= distances[d + v_pusher]:
+            break
+        count, last = _way_out(v_puller, v_pusher, width, height, blocked, occupant, goal_x,
+                               goal_y, n)
+        if count >= 2:
+            return False
+        if count <= 0:
+            break
+        v_pusher, v_puller = v_puller, last
+    return distances[e + v_pusher] < distances[e + v_puller] and (
+        distances[d + v_pusher] == 0 or distances[d + v_puller] < distances[d + v_pusher])
+
+
+@kernel
+def _swap_possible(v_pusher, v_puller, width, height, blocked, occupant, goal_x, goal_y, n):
+    """Whether pulling from ``v_puller`` away from ``v_pusher`` reaches a cell with room to
+    pass."""
+    origin = v_pusher
+    for _ in range(width * height):
+        if v_puller == origin:
+            return False
+        count, last = _way_out(v_puller, v_pusher, width, height, blocked, occupant, goal_x,
+                               goal_y, n)
+        if count >= 2:
+            return True
+        if count <= 0:
+            return False
+        v_pusher, v_puller = v_puller, last
+    return False
+
+
+@kernel
+def _swap_partner(i, x, y, width, height, distances, occupant, decided, blocked, goal_x, goal_y,
+                  n):
+    """The agent ``i`` must swap with (LaCAM's ``is_swap_required_and_possible``), or -1: the
+    one in the cell nearest its goal, or, to clear the way, a neighbour behind it."""
+    cells = width * height
+    here = y[i] * width + x[i]
+    best, best_d = here, distances[i * cells + here]
+    for a in range(N_ACTIONS - 1):
+        c = target_y(y[i], a, height) * width + target_x(x[i], a, width)
+        if c != here and blocked[c] == 0 and distances[i * cells + c] < best_d:
+            best, best_d = c, distances[i * cells + c]
+    j = occupant[best]
+    if j >= 0 and j < n and j != i and not decided[j] \
+            and _swap_required(i, j, here, best, width, height, distances, blocked, occupant,
+                               goal_x, goal_y, n) \
+            and _swap_possible(best, here, width, height, blocked, occupant, goal_x, goal_y, n):
+        return j
+    if best != here:
+        for a in range(N_ACTIONS - 1):
+            u = target_y(y[i], a, height) * width + target_x(x[i], a, width)
+            if u == here or blocked[u] != 0:
+                continue
+            k = occupant[u]
+            if k >= 0 and k < n and u != best \
+                    and _swap_required(k, i, here, best, width, height, distances, blocked,
+                                       occupant, goal_x, goal_y, n) \
+                    and _swap_possible(best, here, width, height, blocked, occupant, goal_x,
+                                       goal_y, n):
+                return k
+    return -1
 
 
 @kernel
@@ -131,16 +296,20 @@ def _closes(goal, i, x, y, goal_x, goal_y, arrived, n, width, height, distances,
 
 
 @kernel
-def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, closest, actions,
-         distances, occupant, reserved, decided, order, blocked, queue, stack, tried, probe):
+def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, priority, closest,
+         actions, distances, occupant, reserved, decided, order, blocked, queue, stack, tried,
+         probe, swapper, first, step):
     """Every agent's collision-free action for this step, the agents of higher ``priority``
     first: bodies ``0 .. n - 1`` are the agents, ``n .. bodies - 1`` walls (they stay). An agent
     gains a unit of ``priority`` at every step that finds it no nearer its goal than it has been
     (``closest``, its nearest so far), so that one held back in a corridor comes to outrank those
     in its way. An agent next to its goal whose parking there would leave another agent no way
-    to its own does not take it this step, and plans after the others. Scratch: ``distances``
+    to its own does not take it this step, and plans after the others. Under ``step_aside``
+    arrived agents are planned (and pushed) like the others, and priorities are published
+    PIBT's (the module docstring), with LaCAM's swap (:func:`_push`). Scratch: ``distances``
     (n cells each), ``occupant``, ``reserved``, ``blocked``, ``queue``, ``probe`` (a slot per
-    cell), ``decided``, ``order``, ``stack``, ``tried`` (a slot per agent)."""
+    cell), ``decided``, ``order``, ``stack``, ``tried``, ``swapper``, ``first`` (a slot per
+    agent)."""
     cells = width * height
     for c in range(cells):
         occupant[c] = -1
@@ -150,10 +319,26 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, clos
         occupant[y[i] * width + x[i]] = i
         decided[i] = False
         actions[i] = STAY
-        if i >= n or arrived[i]:
+        if i >= n or (arrived[i] and not step_aside):
             blocked[y[i] * width + x[i]] = 1
             reserved[y[i] * width + x[i]] = i
             decided[i] = True
+    if step_aside:
+        for i in range(n):
+            goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances, i * cells,
+                           queue)
+            if x[i] == goal_x[i] and y[i] == goal_y[i]:
+                priority[i] = 0
+            else:
+                priority[i] += cells
+            order[i] = i
+        _by_priority(order, n, priority)
+        for a in range(n):
+            i = order[a]
+            if not decided[i]:
+                _push(i, x, y, width, height, distances, occupant, reserved, decided, actions,
+                      stack, tried, True, blocked, goal_x, goal_y, n, swapper, first, step)
+        return
     for i in range(n):
         if not arrived[i]:
             goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances, i * cells,
@@ -190,4 +375,16 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, priority, clos
         i = order[a]
         if not decided[i]:
             _push(i, x, y, width, height, distances, occupant, reserved, decided, actions, stack,
-                  tried)
+                  tried, False, blocked, goal_x, goal_y, n, swapper, first, step)
+
+
+@kernel
+def _by_priority(order, count, priority):
+    """Sort ``order[:count]`` by priority, the highest first (stable: among equals, by id)."""
+    for a in range(count):
+        for b in range(a, 0, -1):
+            i, j = order[b], order[b - 1]
+            if priority[i] > priority[j]:
+                order[b], order[b - 1] = j, i
+            else:
+                break

@@ -27,9 +27,9 @@ from nnql_swarm.kernel.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
-    OPT_FIELDS, OPT_FROZEN, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_WALLS, ORACLE_SCRATCH,
-    OUT_END_TICK, OUT_FIELDS, OUT_MAKESPAN, OUT_ON_GOAL, OUT_SHORTEST, OUT_SOC, OUT_VIOLATIONS,
-    TR_FIELDS, run_episode,
+    OPT_FIELDS, OPT_FROZEN, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS,
+    ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS, OUT_MAKESPAN, OUT_ON_GOAL, OUT_SHORTEST, OUT_SOC,
+    OUT_VIOLATIONS, TR_FIELDS, run_episode,
 )
 from nnql_swarm.world.rules import (
     GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
@@ -141,6 +141,7 @@ class Batch:
         self.options[:, OPT_ORACLE] = [run.algo == "oracle" for run in runs]
         self.options[:, OPT_WALLS] = int(w.scripted > 0 and not w.paper)
         self.options[:, OPT_FROZEN] = [run.frozen for run in runs]
+        self.options[:, OPT_STEP_ASIDE] = [run.step_aside for run in runs]
         init = np.array([run.optimistic for run in runs])[:, None, None, None]
         self.q_ds = np.broadcast_to(init, (r, learners, N_STATES, N_ACTIONS)).copy()
         self.q_ca = np.broadcast_to(init, (r, learners, rows, N_ACTIONS)).copy()
@@ -231,7 +232,7 @@ class Batch:
             self.q_ca[run, agent, :q_ca.shape[1]] = q_ca[agent % len(q_ca)]
 
     def forget_maps(self) -> None:
-        """Every agent of every run forgets the walls it has seen (``agent.known_map``)."""
+        """Every agent of every run forgets the walls it has seen (``learning.known_map``)."""
         for run_maps in self.wmap:
             for agent_map in run_maps:
                 fresh_map(agent_map)

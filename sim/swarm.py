@@ -24,7 +24,7 @@ from nnql_swarm.learning.fields import (
     FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
     NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
 )
-from nnql_swarm.learning.learner import decide, finish, planned_cell
+from nnql_swarm.learning.learner import decide, finish, make_way, planned_cell
 from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
 from nnql_swarm.kernel.jit import batch_kernel, kernel, prange
@@ -32,17 +32,19 @@ from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
 from nnql_swarm.world.rules import field_costs, shared_cells, swaps_through, world_step
 
-ORACLE_SCRATCH = 10
+ORACLE_SCRATCH = 12
 """Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
-queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal), a
-slot per grid cell each."""
+queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal, and
+the swap's partner and first-choice flag per chain level), a slot per grid cell each."""
 
-OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS, OPT_FROZEN = 0, 1, 2, 3, 4
-OPT_FIELDS = 5
+OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS, OPT_FROZEN, OPT_STEP_ASIDE = 0, 1, 2, 3, 4, 5
+OPT_FIELDS = 6
 """Per-run options of the swarm: one table for all agents; the steps an announcement covers
 (n of nnQL); the oracle instead of learners; whether the scripted bodies are walls (which a
 learner's known map, ``learning.known_map``, learns as it sees them); frozen play (the tables are
-read, never written; the learner's random step is off through its parameters)."""
+read, never written; the learner's random step is off through its parameters); the
+``step-aside`` on-target rule (``world.rules``: an arrived agent makes way,
+``learning.learner.make_way``, and is nobody's arrived obstacle)."""
 
 OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS, OUT_ON_GOAL, OUT_SOC, OUT_MAKESPAN = 0, 1, 2, 3, 4, 5
 OUT_FIELDS = 6
@@ -70,10 +72,11 @@ def rank_of(i, tick, learners):
 @kernel
 def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, actions,
                    decided, lookahead, announcing, params, q_ds, tables, goal_x, goal_y,
-                   width, height, nb):
+                   width, height, step_aside, nb):
     """Fill ``nb`` with what agent ``i`` observes and has been told: its visible neighbours in
     id order. ``decided``: bodies whose action of this tick is fixed; ``announcing``: whether
-    anyone announces (not at an end tick). Returns the number of rows."""
+    anyone announces (not at an end tick); ``step_aside``: arrived agents are not parked.
+    Returns the number of rows."""
     m = 0
     negotiates = announcing and reads_intents(params)
     rank = rank_of(i, tick, learners)
@@ -107,7 +110,7 @@ def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, 
             row[NB_NEXT_Y] = y[j]
             row[NB_STATE_X] = x[j]
             row[NB_STATE_Y] = y[j]
-        row[NB_PARKED] = 1 if learns[j] and arrived[j] else 0
+        row[NB_PARKED] = 1 if learns[j] and arrived[j] and not step_aside else 0
         if prev_x[i] >= 0 and sees(prev_x[i], prev_y[i], prev_x[j], prev_y[j]):
             row[NB_PREV_X] = prev_x[j]
             row[NB_PREV_Y] = prev_y[j]
@@ -157,6 +160,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
     lookahead = options[OPT_LOOKAHEAD]
     oracle = options[OPT_ORACLE] != 0
     last_wall = n if options[OPT_WALLS] != 0 else learners  # walls: bodies learners .. n - 1
+    step_aside = options[OPT_STEP_ASIDE] != 0
     alpha, gamma = params_f[FP_ALPHA], params_f[FP_GAMMA]
     shortest = 0
     for i in range(n):
@@ -200,14 +204,16 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             actions[i] = STAY if ending else scripts[step, i - learners]
             decided[i] = True
         if oracle and not ending:
-            plan(x, y, goal_x, goal_y, arrived, n, learners, width, height, oracle_scratch[7],
+            plan(x, y, goal_x, goal_y, arrived, n, learners, width, height, step_aside,
+                 oracle_scratch[7],
                  oracle_scratch[9], actions, oracle_cells, oracle_scratch[0], oracle_scratch[1],
                  decided, oracle_scratch[2], oracle_scratch[3], oracle_scratch[4],
-                 oracle_scratch[5], oracle_scratch[6], oracle_scratch[8])
+                 oracle_scratch[5], oracle_scratch[6], oracle_scratch[8], oracle_scratch[10],
+                 oracle_scratch[11], step)
         for rank in range(learners):
             i = (rank + tick) % learners  # the agent of this rank (inverse of priority_rank)
             if oracle:
-                if ending or arrived[i]:
+                if ending or (arrived[i] and not step_aside):
                     actions[i] = STAY
                 decided[i] = True
                 continue
@@ -216,13 +222,19 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             stops = ending or arrived[i]
             m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived,
                                actions, decided, lookahead, not stops, params, q_ds, tables,
-                               goal_x, goal_y, width, height, nb)
+                               goal_x, goal_y, width, height, step_aside, nb)
             if stops:
                 written = finish(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
                                  wmap[i], x, y, learners, last_wall, step == 0, x[i], y[i],
                                  goal_x[i], goal_y[i], nb, m, width, height, rec[i], rec_f[i],
                                  learning and not shared)
                 actions[i] = STAY
+                if step_aside and not ending:  # on its goal: it makes way if told to
+                    m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns,
+                                       arrived, actions, decided, lookahead, True, params, q_ds,
+                                       tables, goal_x, goal_y, width, height, step_aside, nb)
+                    actions[i] = make_way(x[i], y[i], nb, m, learners, width, height,
+                                          ties[i, step])
             else:
                 actions[i], written = decide(
                     q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], wmap[i], x, y,
@@ -250,8 +262,8 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             prev_x[i] = x[i]
             prev_y[i] = y[i]
         everyone = world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width,
-                              height, count_swaps, goal_reward, stay_reward, before_x, before_y,
-                              collided, r_ds, r_ca, occupancy, blocked, row, row_f)
+                              height, count_swaps, step_aside, goal_reward, stay_reward, before_x,
+                              before_y, collided, r_ds, r_ca, occupancy, blocked, row, row_f)
         out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, occupancy)
         if count_swaps:
             out[OUT_VIOLATIONS] += swaps_through(before_x, before_y, x, y, n, width, occupancy)

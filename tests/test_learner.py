@@ -12,7 +12,7 @@ from nnql_swarm.learning.fields import (
     REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, ca_rows, record_size, state_size,
 )
 from nnql_swarm.learning.known_map import fresh_map, map_size
-from nnql_swarm.learning.learner import choose, decide, finish, planned_cell
+from nnql_swarm.learning.learner import choose, decide, finish, make_way, planned_cell
 from nnql_swarm.learning.readings import ca_row, shield_mask
 from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.experiment.paper import PaperSettings, RunSpec, run_batch
@@ -303,3 +303,20 @@ def test_a_learning_record_from_elsewhere_is_checked_against_the_tables():
         ((7, RIGHT, 0, 9, N_ACTIONS, 1, 3, N_STATES), (1.0, 10.0)),  # DAQL's blocks overrun
     ]:
         assert not record_is_valid(bad_ints, bad_floats, N_STATES), bad_ints
+
+
+
+def test_an_arrived_agent_makes_way_only_for_an_announced_move_into_its_cell():
+    ties = np.arange(N_ACTIONS, dtype=float)
+    passing = neighbour(0, 2, 1, next_cell=(3, 1))
+    assert make_way(2, 2, np.array([passing]), 1, 8, 5, 5, ties) == STAY
+    pusher = neighbour(0, 2, 1, next_cell=(2, 2))  # from above, into its cell
+    wall = neighbour(9, 3, 2, next_cell=(3, 2))
+    stranger = neighbour(1, 1, 2)  # a learner whose intent it does not know yet
+    # Free cells first (down, the only one), never back into the pusher's cell (a swap)
+    assert make_way(2, 2, np.array([pusher, wall, stranger]), 3, 8, 5, 5, ties) == DOWN
+    below = neighbour(2, 2, 3, next_cell=(2, 3))
+    # With no free cell, the unknown learner's cell: its announcement pushes that one on
+    assert make_way(2, 2, np.array([pusher, wall, stranger, below]), 4, 8, 5, 5, ties) == LEFT
+    other_wall = neighbour(10, 1, 2, next_cell=(1, 2))
+    assert make_way(2, 2, np.array([pusher, wall, other_wall, below]), 4, 8, 5, 5, ties) == STAY

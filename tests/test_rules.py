@@ -217,8 +217,11 @@ def test_move_table_matches_action_names():
 class Step:
     """One world of :func:`world_step` over its buffers."""
 
-    def __init__(self, cells, goals, learns=None, width=WIDTH, height=HEIGHT, count_swaps=True):
+    def __init__(self, cells, goals, learns=None, width=WIDTH, height=HEIGHT, count_swaps=True,
+                 step_aside=False):
         n = len(cells)
+        self.step_aside = step_aside
+        self.arrival = np.zeros(n, np.int64)
         self.n, self.width, self.height, self.count_swaps = n, width, height, count_swaps
         self.x, self.y = ints([c[0] for c in cells]), ints([c[1] for c in cells])
         self.gx, self.gy = ints([g[0] for g in goals]), ints([g[1] for g in goals])
@@ -233,7 +236,8 @@ class Step:
         self.actions = ints(actions)
         self.before_x, self.before_y = np.zeros(n, np.int64), np.zeros(n, np.int64)
         return world_step(self.x, self.y, self.gx, self.gy, self.learns, self.arrived,
-                          self.arrival, self.actions, n, self.width, self.height, self.count_swaps,
+                          self.arrival, self.actions, n, self.width, self.height,
+                          self.count_swaps, self.step_aside,
                           GOAL_REWARD, STAY_REWARD, self.before_x, self.before_y, self.collided, self.r_ds,
                           self.r_ca, np.zeros(self.width * self.height, np.int64),
                           np.zeros(n, bool), self.row, self.row_f)
@@ -289,3 +293,27 @@ def test_invariant_checks_count_shared_cells_and_swaps():
     assert swaps_through(ints([0, 1, 5]), ints([0, 0, 5]), ints([1, 2, 5]), ints([0, 0, 4]), 3, 6,
                          occupancy) == 0
     assert not occupancy.any()
+
+
+def test_under_step_aside_an_arrived_agent_may_leave_and_its_last_arrival_counts():
+    step = Step([(0, 0), (3, 3)], goals=[(1, 0), (0, 3)], step_aside=True)
+    step([RIGHT, LEFT])
+    assert step.arrived.tolist() == [True, False] and step.arrival[0] == 1
+    step([STAY, LEFT])  # it stays by choice: still arrived, its steps no longer count
+    assert step.row[ROW_AGENT_STEPS] == 3 and step.row[ROW_ARRIVED] == 1
+    step([DOWN, STAY])  # it makes way: no longer arrived, its parked steps count again
+    assert step.actions[0] == DOWN and (step.x[0], step.y[0]) == (1, 1)
+    assert not step.arrived[0] and step.row[ROW_ARRIVED] == 0
+    assert step.r_ds[0] == 0.0 and step.r_ca[0] == 0.0  # a step taken arrived earns nothing
+    assert step.row[ROW_AGENT_STEPS] == 3 + 1 + 2
+    # Back on its goal at step 4, the other on its own: every agent on its goal at once
+    assert step([UP, LEFT])
+    assert step.arrived.tolist() == [True, True] and step.arrival.tolist() == [4, 4]
+    assert step.row[ROW_AGENT_STEPS] == 4 + 4  # each agent's last arrival step
+
+
+def test_under_park_an_arrived_agent_stays_whatever_it_says():
+    step = Step([(0, 0)], goals=[(1, 0)])
+    step([RIGHT])
+    step([DOWN])
+    assert step.actions[0] == STAY and step.arrived[0] and step.arrival[0] == 1

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
-from nnql_swarm.sim.runs import Batch, swarm_world
+from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -90,3 +90,33 @@ def test_the_kernel_uncompiled_plays_exactly_what_it_plays_compiled():
         assert done.returncode == 0, done.stderr
         results.append(json.loads(done.stdout))
     assert results[0] == results[1]
+
+
+@pytest.mark.parametrize("preset", ["path-nnql", "oracle"])
+def test_under_step_aside_agents_make_way_and_the_score_counts_each_last_arrival(preset):
+    """Arrived agents leave their goals to make way and come back; the row's arrivals are the
+    agents on their goals at the end, and its learner-steps each one's last arrival step (the
+    steps played for one not home), as the recorded ticks show."""
+    from nnql_swarm.sim.swarm import TR_ARRIVED
+
+    config = SwarmConfig(n_agents=16, episodes=40, obstacle_density=0.2, seed=3,
+                         on_target="step-aside", **PRESETS[preset])
+    left = 0
+
+    def check(e, batch):
+        nonlocal left
+        steps = int(episodes.steps[0, e])
+        on_goal = batch.trace[0, :steps + 1, :config.n_agents, TR_ARRIVED]
+        assert episodes.arrived[0, e] == on_goal[steps].sum()
+        expected = 0
+        for i in range(config.n_agents):
+            arrivals = [t for t in range(1, steps + 1) if on_goal[t, i] and not on_goal[t - 1, i]]
+            left += sum(1 for t in range(1, steps + 1) if on_goal[t - 1, i] and not on_goal[t, i])
+            expected += arrivals[-1] if on_goal[steps, i] else steps
+        assert episodes.agent_steps[0, e] == expected
+
+    episodes = Episodes(1, config.episodes)
+    Batch(swarm_world(config), [config], record=True).play(config.episodes, results=episodes,
+                                                           on_episode=check)
+    assert not episodes.violations.any()
+    assert left > 0, "no agent ever made way"

@@ -295,8 +295,9 @@ class SwarmWorld:
         arrived_before = self._outcome[3]  # as this tick's observations showed it
         chosen = ints([STAY if a is None else a for a in actions] + self._stays)
         everyone = world_step(self._x, self._y, self._goal_x, self._goal_y, self._learns,
-                              self._arrived, self._arrival, chosen, c.n_bodies, c.width, c.height, c.count_swaps,
-                              c.goal_reward, c.stay_reward, self._before_x, self._before_y, self._collided,
+                              self._arrived, self._arrival, chosen, c.n_bodies, c.width,
+                              c.height, c.count_swaps, c.step_aside, c.goal_reward,
+                              c.stay_reward, self._before_x, self._before_y, self._collided,
                               self._r_ds, self._r_ca, self._occupancy, self._blocked, self._row,
                               self._row_f)
         violations = self._check()

@@ -24,9 +24,22 @@ grid every move changes the distance, so "the same distance" means the body did 
 stayed, was blocked or bumped the edge): ``stay_reward`` (the paper's 0.5) is what waiting earns.
 
 Bodies are learners, each with its own goal, or scripted obstacles (the paper's experiment), which
-have no goal, earn nothing and are not counted. A learner that reaches its goal has *arrived*:
-it stays on its goal for the rest of the episode, and is still an obstacle. The episode is
-over when every learner has arrived (or, the caller's business, after its last step).
+have no goal, earn nothing and are not counted. A learner that reaches its goal has *arrived*.
+What it does then is the on-target rule (``protocol.config.ON_TARGET``; ``step_aside`` below
+says whether the second holds):
+
+- ``park`` (the paper's reading): it stays on its goal for the rest of the episode whatever it
+  says, and is still an obstacle.
+- ``step-aside`` (the field's, POGEMA's ``on_target`` "nothing"): it stays on its goal by
+  choice, and may leave it to make way; it counts as arrived only while it stands there, and
+  its arrival step is its last. A step taken while arrived earns no reward (it is no learned
+  move), whether it stays or steps aside.
+
+Either way ``arrival[i]`` holds the step (1-based, of the episode) on which learner ``i`` last
+reached its goal, valid while it has arrived, and the running score's learner-steps add up, over
+the learners that have arrived, their arrival steps (over the others, the steps played). The
+episode is over when every learner has arrived at once (or, the caller's business, after its
+last step).
 
 The field's metrics (POGEMA's, :func:`field_costs`) read each learner's *arrival step*: the step
 (counted from 1) at which it last stepped onto its goal, 0 if it never did.
@@ -50,7 +63,8 @@ CA_REWARD = 10.0
 
 ROW_STEPS, ROW_COLLISIONS, ROW_ARRIVED, ROW_AGENT_STEPS = 0, 1, 2, 3
 """Integer fields of an episode's running score (``row``): ticks moved, learners in a collision
-(summed over steps), learners arrived, and learner-steps spent before arriving."""
+(summed over steps), learners arrived, and learner-steps spent before arriving (each learner's
+last arrival step)."""
 ROW_INTS = 4
 
 ROW_REWARD, ROW_REWARD_DS, ROW_REWARD_CA = 0, 1, 2
@@ -164,23 +178,24 @@ def field_costs(x, y, goal_x, goal_y, arrival, learners, steps):
 
 @kernel
 def world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width, height,
-               count_swaps, goal_reward, stay_reward, before_x, before_y, collided, r_ds, r_ca,
-               occupancy, blocked, row, row_f):
+               count_swaps, step_aside, goal_reward, stay_reward, before_x, before_y, collided,
+               r_ds, r_ca, occupancy, blocked, row, row_f):
     """One step of an episode: everyone moves at once; rewards, arrivals and the running score.
 
-    ``actions`` are the bodies' intents, overwritten with the actions applied (a learner that
-    has arrived stays whatever it says). ``x``, ``y``, ``arrived`` and ``arrival`` (the arrival
-    step of each learner, :func:`field_costs`) are updated in place; ``before_x``, ``before_y`` receive the
-    cells the step started from, ``collided``, ``r_ds``, ``r_ca`` its outcome per body. Returns
-    whether every learner has now arrived.
+    ``actions`` are the bodies' intents, overwritten with the actions applied (under ``park``, a
+    learner that has arrived stays whatever it says). ``x``, ``y``, ``arrived`` and ``arrival``
+    are updated in place; ``before_x``, ``before_y`` receive the cells the step started from,
+    ``collided``, ``r_ds``, ``r_ca`` its outcome per body. Returns whether every learner is now
+    on its goal.
     """
     for i in range(n):
         before_x[i] = x[i]
         before_y[i] = y[i]
-        if learns[i] and arrived[i]:
+        if learns[i] and arrived[i] and not step_aside:
             actions[i] = STAY
     arbitrate(before_x, before_y, actions, n, width, height, count_swaps, x, y, collided,
               occupancy, blocked)
+    step = row[ROW_STEPS] + 1
     ds_sum = 0.0
     ca_sum = 0.0
     everyone_arrived = True
@@ -191,17 +206,22 @@ def world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width
             continue
         if collided[i]:
             row[ROW_COLLISIONS] += 1
+        on_goal = x[i] == goal_x[i] and y[i] == goal_y[i]
         if arrived[i]:
             r_ds[i] = 0.0
             r_ca[i] = 0.0
+            if not on_goal:  # it made way: the steps since its arrival count again
+                arrived[i] = False
+                row[ROW_ARRIVED] -= 1
+                row[ROW_AGENT_STEPS] += step - arrival[i]
         else:
             r_ds[i] = destination_reward(before_x[i], before_y[i], x[i], y[i],
                                          goal_x[i], goal_y[i], goal_reward, stay_reward)
             r_ca[i] = collision_reward(collided[i])
             row[ROW_AGENT_STEPS] += 1
-            if x[i] == goal_x[i] and y[i] == goal_y[i]:
+            if on_goal:
                 arrived[i] = True
-                arrival[i] = row[ROW_STEPS] + 1
+                arrival[i] = step
                 row[ROW_ARRIVED] += 1
         ds_sum += r_ds[i]
         ca_sum += r_ca[i]
