@@ -44,6 +44,7 @@ def play(cells, goals, moves, steps):
     for t in range(steps):
         actions = ints(moves[t] if t < len(moves) else [STAY] * n)
         done = world_step(x, y, gx, gy, np.ones(n, bool), arrived, arrival, actions, n, 5, 5, True,
+                          False,
                           GOAL_REWARD, STAY_REWARD, np.zeros(n, np.int64), np.zeros(n, np.int64),
                           np.zeros(n, bool), np.zeros(n), np.zeros(n), np.zeros(25, np.int64),
                           np.zeros(n, bool), row, row_f)
