@@ -97,7 +97,7 @@ class Event(enum.Enum):
 
 
 _WAITING = (Phase.NEGOTIATING, Phase.ASKING_MISSING)
-TRANSITIONS = {
+TRANSITIONS: dict[tuple[enum.Enum, enum.Enum], enum.Enum] = {
     (Phase.PEERS, Event.READY): Phase.IDLE,
     (Phase.PEERS, Event.WORLD_LEFT): Phase.PEERS,
     **{(phase, Event.AWAITS): Phase.NEGOTIATING for phase in (Phase.IDLE, *_WAITING)},
@@ -168,11 +168,11 @@ class AgentMachine(QueryAnswering, Machine):
         self.pending: Pending | None = None  # while NEGOTIATING or ASKING_MISSING
         self.decided_tick = -1
         self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
-        self.decided_waiters: list[int] = []  # whom the decided tick's answer goes to by stream
-        self.decided_answer: Answer | None = None
+        self.decided_waiters = []  # whom the decided tick's answer goes to by stream
+        self.decided_answer = None
         self.decided_payload = b""
-        self.held: list[tuple[int, int, int]] = []  # (tick, asker's rank, query)
-        self.standing: dict[int, int] = {}  # asker -> its standing query on this agent
+        self.held = []
+        self.standing = {}
         self.intents: dict[int, negotiation.TickIntents] = {}  # tick -> what was learned of it
         self.asks: dict[int, OpenAsk] = {}
         self.next_ask = 0

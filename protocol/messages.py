@@ -160,13 +160,13 @@ class Message(msgspec.Struct, array_like=True, frozen=True, forbid_unknown_field
     agent_lists: ClassVar[tuple[str, ...]] = ()
 
 
-class AgentMessage(Message):
+class AgentMessage(Message, frozen=True):
     """A message of one agent: it names it right after the header."""
 
     agent: AgentId
 
 
-class Observation(AgentMessage, tag=tag("obs")):
+class Observation(AgentMessage, tag=tag("obs"), frozen=True):
     """World -> one agent, each tick: where it is, what it sees, how its previous action went."""
 
     episode: Count
@@ -187,7 +187,7 @@ class Observation(AgentMessage, tag=tag("obs")):
     agent_lists = ("neighbours",)
 
 
-class Intent(AgentMessage, tag=tag("intent")):
+class Intent(AgentMessage, tag=tag("intent"), frozen=True):
     """Agent -> world and neighbours: its action at this tick (never changed once sent)."""
 
     episode: Count
@@ -197,7 +197,7 @@ class Intent(AgentMessage, tag=tag("intent")):
     from_agent = True
 
 
-class Answer(AgentMessage, tag=tag("answer")):
+class Answer(AgentMessage, tag=tag("answer"), frozen=True):
     """Agent -> a neighbour that asked for its intent: its action at this tick, and the actions
     of the higher-ranked agents it learned while negotiating (relayed: ``(agent, action)``).
 
@@ -213,7 +213,7 @@ class Answer(AgentMessage, tag=tag("answer")):
     agent_lists = ("relayed",)
 
 
-class Control(Message, tag=tag("control")):
+class Control(Message, tag=tag("control"), frozen=True):
     """World -> everyone: a command from CONTROL_COMMANDS."""
 
     command: Command

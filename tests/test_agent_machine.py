@@ -6,7 +6,7 @@ import msgpack
 import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.learner import LS_PENDING
+from nnql_swarm.learning.fields import LS_PENDING
 from nnql_swarm.agent.machine import (
     PEER_WAIT_S, RESYNC_AFTER, TRANSITIONS, AgentMachine, Event, Phase,
 )

@@ -88,7 +88,7 @@ class Event(enum.Enum):
     FINISH = "the end: the agents left, time ran out, or the process is stopping"
 
 
-TRANSITIONS = {
+TRANSITIONS: dict[tuple[enum.Enum, enum.Enum], enum.Enum] = {
     (Phase.STARTING, Event.STARTED): Phase.TICK_OPEN,
     (Phase.STARTING, Event.COMPLETE): Phase.CLOSING,
     (Phase.TICK_OPEN, Event.TICK_CLOSED): Phase.TICK_OPEN,
