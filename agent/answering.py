@@ -6,8 +6,9 @@ A query for a decided tick is answered at once; one for a coming tick (at most
 answered the next in rank first; one for an older tick, or too far ahead, or one too many, is
 refused with a reason and counted. A standing query (``?since=T;from=<id>``, one per asker: a
 newer one replaces it) stays open and is answered at every decided tick whose plan asks this
-agent. The state lives on the machine: ``held``, ``standing``, and the decided tick's
-``decided_tick``, ``decided_answer``, its ``decided_payload`` and ``decided_waiters``.
+agent. The state lives on the machine, which sets it; :class:`QueryAnswering` declares what it
+reads and writes: ``held``, ``standing``, and the decided tick's ``decided_tick``,
+``decided_answer``, its ``decided_payload`` and ``decided_waiters``.
 """
 
 from nnql_swarm.protocol import keys
@@ -25,8 +26,7 @@ decided this tick may ask for, or answer, the next one before this agent decides
 
 
 class QueryAnswering(Machine):
-    """The inputs and steps of an agent's machine that answer the queries it receives; the
-    machine's state they read and write is declared here, and set by ``AgentMachine``."""
+    """The inputs and steps of an agent's machine that answer the queries it receives."""
 
     agent: int
     n: int

@@ -67,6 +67,7 @@ WORLD_SENDER = "world"
 Command = Literal["shutdown"]
 CONTROL_SHUTDOWN: Command = "shutdown"
 CONTROL_COMMANDS = frozenset(get_args(Command))
+"""The commands of a :class:`Control`: every value its ``command`` field may take."""
 
 
 def agent_sender(agent: int) -> str:
@@ -96,6 +97,7 @@ Reward = Annotated[float, Meta(ge=-MAX_REWARD, le=MAX_REWARD)]
 def agent_list(*rest) -> object:
     """The type of a tuple of ``(agent id, *rest)`` entries, at most one per agent (name the field
     in its class's ``agent_lists``)."""
+    # tuple[...] of types known at run time, in a form a type checker reads as a value
     entry = types.GenericAlias(tuple, (AgentId, *rest))
     return Annotated[types.GenericAlias(tuple, (entry, ...)), Meta(max_length=MAX_AGENTS)]
 
