@@ -6,14 +6,16 @@ A query for a decided tick is answered at once; one for a coming tick (at most
 answered the next in rank first; one for an older tick, or too far ahead, or one too many, is
 refused with a reason and counted. A standing query (``?since=T;from=<id>``, one per asker: a
 newer one replaces it) stays open and is answered at every decided tick whose plan asks this
-agent. The state lives on the machine: ``held``, ``standing``, and the decided tick's
-``decided_tick``, ``decided_answer``, its ``decided_payload`` and ``decided_waiters``.
+agent. The state lives on the machine, which sets it; :class:`QueryAnswering` declares what it
+reads and writes: ``held``, ``standing``, and the decided tick's ``decided_tick``,
+``decided_answer``, its ``decided_payload`` and ``decided_waiters``.
 """
 
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import priority_rank
+from nnql_swarm.protocol.messages import Answer, Inbox
 from nnql_swarm.machines.effects import EndQuery, Reply, ReplyError
-from nnql_swarm.machines.phases import any_phase_input
+from nnql_swarm.machines.phases import Machine, any_phase_input
 
 MAX_HELD_QUERIES = 4 * 1024
 """Queries for the coming tick held at once; legitimately at most one per other agent."""
@@ -23,8 +25,18 @@ AHEAD_TICKS = 2
 decided this tick may ask for, or answer, the next one before this agent decides this one."""
 
 
-class QueryAnswering:
+class QueryAnswering(Machine):
     """The inputs and steps of an agent's machine that answer the queries it receives."""
+
+    agent: int
+    n: int
+    inbox: Inbox
+    decided_tick: int  # -1 until a tick is decided
+    decided_answer: Answer | None  # set with decided_tick
+    decided_payload: bytes
+    decided_waiters: list[int]  # whom the decided tick's answer goes to by stream
+    held: list[tuple[int, int, int]]  # (tick, asker's rank, query)
+    standing: dict[int, int]  # asker -> its standing query on this agent
 
     @any_phase_input
     def on_query(self, query: int, parameters, now: float) -> None:
@@ -81,7 +93,7 @@ class QueryAnswering:
             out.append(EndQuery(old))
         self.standing[asker] = query
         if since <= self.decided_tick and asker in self.decided_waiters:
-            self._out.append(Reply(query, self.decided_payload, self.decided_answer))
+            self._out.append(self._decided_reply(query))
 
     def _answer_standing_queries(self) -> None:
         """Answer the standing queries owed at the decided tick, the next in rank first."""
@@ -89,7 +101,7 @@ class QueryAnswering:
         for asker in self.decided_waiters:
             query = standing.get(asker)
             if query is not None:
-                out.append(Reply(query, self.decided_payload, self.decided_answer))
+                out.append(self._decided_reply(query))
 
     def _answer_held(self) -> None:
         """Answer what was asked for the decided tick, the next in rank first: its decision
@@ -103,11 +115,17 @@ class QueryAnswering:
     def _answer(self, tick: int, query: int) -> None:
         out = self._out
         if tick == self.decided_tick:
-            out.append(Reply(query, self.decided_payload, self.decided_answer))
+            out.append(self._decided_reply(query))
         else:
             self.inbox.reject("stale-query", f"tick {tick}, decided {self.decided_tick}")
             out.append(ReplyError(query, b"stale tick"))
         out.append(EndQuery(query))
+
+    def _decided_reply(self, query: int) -> Reply:
+        """The decided tick's answer to ``query``: only asked for once a tick is decided (the
+        ticks queried are never negative)."""
+        assert self.decided_answer is not None
+        return Reply(query, self.decided_payload, self.decided_answer)
 
     def _drop_held(self) -> None:
         for _, _, query in self.held:

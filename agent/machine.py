@@ -97,7 +97,7 @@ class Event(enum.Enum):
 
 
 _WAITING = (Phase.NEGOTIATING, Phase.ASKING_MISSING)
-TRANSITIONS = {
+TRANSITIONS: dict[tuple[enum.Enum, enum.Enum], enum.Enum] = {
     (Phase.PEERS, Event.READY): Phase.IDLE,
     (Phase.PEERS, Event.WORLD_LEFT): Phase.PEERS,
     **{(phase, Event.AWAITS): Phase.NEGOTIATING for phase in (Phase.IDLE, *_WAITING)},
@@ -168,11 +168,11 @@ class AgentMachine(QueryAnswering, Machine):
         self.pending: Pending | None = None  # while NEGOTIATING or ASKING_MISSING
         self.decided_tick = -1
         self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
-        self.decided_waiters: list[int] = []  # whom the decided tick's answer goes to by stream
-        self.decided_answer: Answer | None = None
+        self.decided_waiters = []  # whom the decided tick's answer goes to by stream
+        self.decided_answer = None
         self.decided_payload = b""
-        self.held: list[tuple[int, int, int]] = []  # (tick, asker's rank, query)
-        self.standing: dict[int, int] = {}  # asker -> its standing query on this agent
+        self.held = []
+        self.standing = {}
         self.intents: dict[int, negotiation.TickIntents] = {}  # tick -> what was learned of it
         self.asks: dict[int, OpenAsk] = {}
         self.next_ask = 0
@@ -208,13 +208,13 @@ class AgentMachine(QueryAnswering, Machine):
         open_ask = self.asks.pop(ask, None)
         if open_ask is None:
             return
-        p = self.pending
+        p = self._negotiation()
         if open_ask.generation is not None:
             j = open_ask.agent
             if self.streams.get(j) == open_ask.generation:
                 del self.streams[j]
-                if (self.phase is Phase.NEGOTIATING and p.deadline > now and j in p.asks
-                        and j not in self._intents_of(p.obs.tick).answered):
+                if (p is not None and self.phase is Phase.NEGOTIATING and p.deadline > now
+                        and j in p.asks and j not in self._intents_of(p.obs.tick).answered):
                     self._ask(j, p.obs.tick, p.deadline - now)  # not by the stream
         elif open_ask.agent not in self.peers_seen:  # gone: no answer is coming
             self._refused(open_ask, now)
@@ -280,7 +280,8 @@ class AgentMachine(QueryAnswering, Machine):
             self._out.append(Log(logging.WARNING, "only saw agents %s; negotiating with whoever "
                                                   "answers", (sorted(self.peers_seen),)))
             self._become_ready(now)
-        if self.phase in _WAITING and now >= self.pending.deadline:
+        p = self._negotiation()
+        if p is not None and now >= p.deadline:
             self._advance(now)
 
     @an_input
@@ -293,7 +294,8 @@ class AgentMachine(QueryAnswering, Machine):
         phase = self.phase
         if phase is Phase.PEERS:
             return self.ready_by
-        return self.pending.deadline if phase in _WAITING else None
+        p = self._negotiation()
+        return None if p is None else p.deadline
 
     def stats(self) -> dict:
         return {"agent": self.agent, "decided_tick": self.decided_tick,
@@ -322,7 +324,8 @@ class AgentMachine(QueryAnswering, Machine):
         if obs.agent != self.agent:
             self.inbox.reject("wrong-agent", f"observation for agent {obs.agent}")
             return
-        if self.phase in _WAITING and obs.tick == self.pending.obs.tick + 1:
+        p = self._negotiation()
+        if p is not None and obs.tick == p.obs.tick + 1:
             self._decide_pending()  # the world has moved on (this agent stalled): decide now
         if obs.tick <= self.decided_tick:
             self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
@@ -347,10 +350,18 @@ class AgentMachine(QueryAnswering, Machine):
         self.brain.prepare(obs)  # while the answers are on their way
         self._advance(now)
 
+    def _negotiation(self) -> Pending | None:
+        """The observation whose decision waits for intents, while the agent waits for them
+        (``NEGOTIATING``, ``ASKING_MISSING``); else None."""
+        if self.phase not in _WAITING:
+            return None
+        assert self.pending is not None
+        return self.pending
+
     def _refused(self, open_ask: OpenAsk, now: float) -> None:
         """No answer is coming for this ask: the pending negotiation waits for it no more."""
-        p = self.pending
-        if (self.phase in _WAITING and open_ask.tick == p.obs.tick
+        p = self._negotiation()
+        if (p is not None and open_ask.tick == p.obs.tick
                 and open_ask.agent not in self._intents_of(p.obs.tick).answered):
             p.refused.add(open_ask.agent)
             self._advance(now)
@@ -366,7 +377,8 @@ class AgentMachine(QueryAnswering, Machine):
         """Move the pending negotiation on: once every asked neighbour answered (or time ran
         out), ask directly for any awaited intent that no answer brought; once those are in
         too (or time ran out), decide. Unanswered neighbours are left out."""
-        p = self.pending
+        p = self._negotiation()
+        assert p is not None
         got = self._intents_of(p.obs.tick)
         remaining = p.deadline - now
         refused = p.refused
@@ -389,6 +401,7 @@ class AgentMachine(QueryAnswering, Machine):
     def _decide_pending(self) -> None:
         self._go(Event.DECIDED)
         p, self.pending = self.pending, None
+        assert p is not None
         known = self.intents.get(p.obs.tick, _NOTHING).actions
         self._decide(p.obs, {**p.staying, **{j: known[j] for j in p.needed if j in known}})
 
@@ -488,7 +501,8 @@ class AgentMachine(QueryAnswering, Machine):
             self.inbox.reject("conflicting-relay", f"agent {sender} at tick {answer.tick}")
         while len(self.intents) > AHEAD_TICKS + 1:  # a flood of forged ticks stays bounded
             del self.intents[min(self.intents)]
-        if self.phase in _WAITING and self.pending.obs.tick == answer.tick:
+        p = self._negotiation()
+        if p is not None and p.obs.tick == answer.tick:
             self._advance(now)
 
     def _stop(self, by_world: bool) -> None:

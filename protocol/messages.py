@@ -41,8 +41,11 @@ wire as an int, which parses to the same float.
 
 import functools
 import logging
+import types
 from collections import Counter
-from typing import TYPE_CHECKING, Annotated, ClassVar, Literal, Protocol, Union, get_type_hints
+from typing import (
+    TYPE_CHECKING, Annotated, ClassVar, Literal, Protocol, Union, get_args, get_type_hints,
+)
 
 import msgspec
 import numpy as np
@@ -61,8 +64,10 @@ MAX_REWARD = 1e6
 MAX_STR_LEN = 256
 
 WORLD_SENDER = "world"
-CONTROL_SHUTDOWN = "shutdown"
-CONTROL_COMMANDS = frozenset({CONTROL_SHUTDOWN})
+Command = Literal["shutdown"]
+CONTROL_SHUTDOWN: Command = "shutdown"
+CONTROL_COMMANDS = frozenset(get_args(Command))
+"""The commands of a :class:`Control`: every value its ``command`` field may take."""
 
 
 def agent_sender(agent: int) -> str:
@@ -87,13 +92,14 @@ Coord = Annotated[int, Meta(ge=0, lt=MAX_GRID)]
 Cell = tuple[Coord, Coord]
 Reward = Annotated[float, Meta(ge=-MAX_REWARD, le=MAX_REWARD)]
 """Finite: NaN fails both bounds, an infinity one."""
-Command = Literal[tuple(sorted(CONTROL_COMMANDS))]
 
 
 def agent_list(*rest) -> object:
     """The type of a tuple of ``(agent id, *rest)`` entries, at most one per agent (name the field
     in its class's ``agent_lists``)."""
-    return Annotated[tuple[tuple[(AgentId, *rest)], ...], Meta(max_length=MAX_AGENTS)]
+    # tuple[...] of types known at run time, in a form a type checker reads as a value
+    entry = types.GenericAlias(tuple, (AgentId, *rest))
+    return Annotated[types.GenericAlias(tuple, (entry, ...)), Meta(max_length=MAX_AGENTS)]
 
 
 if TYPE_CHECKING:  # what a type checker reads: agent_list's tuples, without msgspec's limits
@@ -160,13 +166,13 @@ class Message(msgspec.Struct, array_like=True, frozen=True, forbid_unknown_field
     agent_lists: ClassVar[tuple[str, ...]] = ()
 
 
-class AgentMessage(Message):
+class AgentMessage(Message, frozen=True):
     """A message of one agent: it names it right after the header."""
 
     agent: AgentId
 
 
-class Observation(AgentMessage, tag=tag("obs")):
+class Observation(AgentMessage, tag=tag("obs"), frozen=True):
     """World -> one agent, each tick: where it is, what it sees, how its previous action went."""
 
     episode: Count
@@ -187,7 +193,7 @@ class Observation(AgentMessage, tag=tag("obs")):
     agent_lists = ("neighbours",)
 
 
-class Intent(AgentMessage, tag=tag("intent")):
+class Intent(AgentMessage, tag=tag("intent"), frozen=True):
     """Agent -> world and neighbours: its action at this tick (never changed once sent)."""
 
     episode: Count
@@ -197,7 +203,7 @@ class Intent(AgentMessage, tag=tag("intent")):
     from_agent = True
 
 
-class Answer(AgentMessage, tag=tag("answer")):
+class Answer(AgentMessage, tag=tag("answer"), frozen=True):
     """Agent -> a neighbour that asked for its intent: its action at this tick, and the actions
     of the higher-ranked agents it learned while negotiating (relayed: ``(agent, action)``).
 
@@ -213,7 +219,7 @@ class Answer(AgentMessage, tag=tag("answer")):
     agent_lists = ("relayed",)
 
 
-class Control(Message, tag=tag("control")):
+class Control(Message, tag=tag("control"), frozen=True):
     """World -> everyone: a command from CONTROL_COMMANDS."""
 
     command: Command
@@ -222,14 +228,14 @@ class Control(Message, tag=tag("control")):
 MESSAGES = (Observation, Intent, Answer, Control)
 
 
-def _head(cls: type) -> bytes:
+def _head(cls: type[Message]) -> bytes:
     """The bytes every message of ``cls`` starts with: its array's header, then its tag."""
     items = 1 + len(cls.__struct_fields__)
     header = bytes([0x90 + items]) if items < 16 else b"\xdc" + items.to_bytes(2, "big")
     return header + msgspec.msgpack.encode(cls.__struct_config__.tag)
 
 
-def reading(kinds: tuple[type, ...]):
+def reading(kinds: tuple[type[Message], ...]):
     """How the codec reads ``kinds``: one decoder of them all (the tag, the first item, says
     which), how each kind's payloads start as :func:`encode` writes them (its length and tag at
     once), and each tag's kind."""
@@ -249,6 +255,7 @@ def _check_rules(msg: Message, key_agent: int | None) -> None:
     """The rules between the fields of a message whose every field is valid; ``key_agent`` is
     the agent of the key it came on (or None). Raises Rejected."""
     cls = type(msg)
+    agent = msg.agent if isinstance(msg, AgentMessage) else None
     lists = cls.agent_lists
     if lists:
         ids_of = []
@@ -259,7 +266,7 @@ def _check_rules(msg: Message, key_agent: int | None) -> None:
                 raise Rejected(f"bad-field:{name}", "the same agent twice")
             ids_of.append((name, ids))
     if cls.from_agent:
-        agent = msg.agent
+        assert agent is not None  # the kinds agents send are AgentMessage's
         if msg.sender != _AGENT_SENDERS[agent]:
             raise Rejected("forged-sender", f"agent {agent}'s {cls.__name__} sent by "
                                             f"{msg.sender!r}")
@@ -269,8 +276,8 @@ def _check_rules(msg: Message, key_agent: int | None) -> None:
     elif msg.sender != WORLD_SENDER:
         raise Rejected("forged-sender", f"{cls.__name__} sent by {msg.sender!r}")
     for name, ids in ids_of if lists else ():
-        if msg.agent in ids:
-            raise Rejected(f"bad-field:{name}", f"agent {msg.agent} lists itself")
+        if agent in ids:
+            raise Rejected(f"bad-field:{name}", f"agent {agent} lists itself")
 
 
 # ---------------------------------------------------------------- parsing
@@ -304,13 +311,13 @@ def _foreign(value) -> str | None:
 
 
 @functools.cache
-def _field_decoders(cls: type) -> tuple[tuple[str, msgspec.msgpack.Decoder], ...]:
+def _field_decoders(cls: type[Message]) -> tuple[tuple[str, msgspec.msgpack.Decoder], ...]:
     """A decoder of each field of ``cls`` alone, in wire order: what names a bad item."""
     hints = get_type_hints(cls, include_extras=True)
     return tuple((name, msgspec.msgpack.Decoder(hints[name])) for name in cls.__struct_fields__)
 
 
-def _rejection(data: bytes, kind: type, run_id: str) -> Rejected | None:
+def _rejection(data: bytes, kind: type[Message], run_id: str) -> Rejected | None:
     """The first rule ``data`` breaks as a message of ``kind``, in the order of the module
     docstring, read untyped and item by item; None if its items break none."""
     if data and data[0] in _MAP_HEADS:
@@ -372,7 +379,7 @@ def _as_bytes(payload) -> bytes:
     return data
 
 
-def parse(payload: bytes, kind: type, run_id: str, key_agent: int | None = None):
+def parse(payload: bytes, kind: type[Message], run_id: str, key_agent: int | None = None):
     """Decode and validate one message of class ``kind`` for run ``run_id``; raises Rejected.
 
     ``payload`` is bytes (or bytearray, memoryview, or zenoh ZBytes). ``key_agent`` is the agent id

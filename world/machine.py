@@ -88,7 +88,7 @@ class Event(enum.Enum):
     FINISH = "the end: the agents left, time ran out, or the process is stopping"
 
 
-TRANSITIONS = {
+TRANSITIONS: dict[tuple[enum.Enum, enum.Enum], enum.Enum] = {
     (Phase.STARTING, Event.STARTED): Phase.TICK_OPEN,
     (Phase.STARTING, Event.COMPLETE): Phase.CLOSING,
     (Phase.TICK_OPEN, Event.TICK_CLOSED): Phase.TICK_OPEN,
@@ -343,6 +343,7 @@ class WorldMachine(Machine):
         the tick closes: ``final``); a record that is not its own transition's is dropped and
         counted (a forged one bars the agent's later records until it restarts)."""
         record, check = self.learned[agent], self.records
+        assert check is not None  # records are checked only where the swarm shares one table
         decision, obs = self.decisions.get(agent), self.sent.get(agent)
         if agent in self.barred:
             reason = BARRED
