@@ -13,7 +13,8 @@ reads and writes: ``held``, ``standing``, and the decided tick's ``decided_tick`
 
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import priority_rank
-from nnql_swarm.protocol.messages import Answer, Inbox
+from nnql_swarm.protocol.inbox import Inbox
+from nnql_swarm.protocol.messages import Answer
 from nnql_swarm.machines.effects import EndQuery, Reply, ReplyError
 from nnql_swarm.machines.phases import Machine, any_phase_input
 

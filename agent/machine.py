@@ -5,8 +5,8 @@ happens at and returns the effects it causes, in order; :meth:`AgentMachine.time
 next wants :meth:`AgentMachine.on_timer`. ``agent.node`` runs it over Zenoh, ``sim`` over a
 simulated network in virtual time.
 
-Theory of operation. The machine is in one :class:`Phase` at a time, moved only by
-:data:`TRANSITIONS` (``machines.phases``):
+Theory of operation. The machine is in one ``Phase`` at a time, moved only by ``TRANSITIONS``
+(``agent.phases``; ``machines.phases`` runs an input):
 
 - ``PEERS``: until it has seen every other agent's liveliness token (or given up waiting, at
   ``ready_by``), observations are kept in order, and handled once it is ``IDLE``.
@@ -40,12 +40,11 @@ counted by reason, never raised). ``launch/faultsim.py`` runs it through thousan
 fault schedules (``sim``).
 """
 
-import enum
 import logging
-from dataclasses import dataclass, field
 
 from nnql_swarm.agent import negotiation
 from nnql_swarm.agent.answering import AHEAD_TICKS, QueryAnswering
+from nnql_swarm.agent.phases import TRANSITIONS, WAITING, Event, OpenAsk, Pending, Phase
 from nnql_swarm.learning import neighbours
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
@@ -53,8 +52,9 @@ from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, START_S_PER_AGENT, Swa
 from nnql_swarm.machines.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, SendIntent, Stopped,
 )
+from nnql_swarm.protocol.inbox import Inbox
 from nnql_swarm.protocol.messages import (
-    CONTROL_SHUTDOWN, Answer, Control, Inbox, Intent, Observation, agent_sender, encode,
+    CONTROL_SHUTDOWN, Answer, Control, Intent, Observation, agent_sender, encode,
 )
 from nnql_swarm.machines.phases import EffectLog, Machine, an_input, any_phase_input
 from nnql_swarm.machines.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
@@ -73,71 +73,6 @@ _NOTHING = negotiation.TickIntents()
 """What an agent knows of a tick nobody answered for (never written to)."""
 
 _NO_TRACE = TickTrace("agent", None)
-
-
-class Phase(enum.Enum):
-    """Where an agent is in its run (see the module docstring)."""
-
-    PEERS = "waiting to see every other agent"
-    IDLE = "waiting for an observation"
-    NEGOTIATING = "waiting for the answers of the neighbours asked"
-    ASKING_MISSING = "waiting for the awaited intents no answer brought, asked directly"
-    STOPPED = "stopped"
-
-
-class Event(enum.Enum):
-    """What moves an agent from one phase to another."""
-
-    READY = "every other agent seen, or the wait for them over"
-    AWAITS = "an observation whose decision waits for intents"
-    ANSWERS_IN = "every asked neighbour answered, refused, or time ran out"
-    DECIDED = "the awaited tick decided"
-    WORLD_LEFT = "the world left: a new one starts afresh"
-    STOP = "the world's shutdown, or the process stopping"
-
-
-_WAITING = (Phase.NEGOTIATING, Phase.ASKING_MISSING)
-TRANSITIONS: dict[tuple[enum.Enum, enum.Enum], enum.Enum] = {
-    (Phase.PEERS, Event.READY): Phase.IDLE,
-    (Phase.PEERS, Event.WORLD_LEFT): Phase.PEERS,
-    **{(phase, Event.AWAITS): Phase.NEGOTIATING for phase in (Phase.IDLE, *_WAITING)},
-    (Phase.NEGOTIATING, Event.ANSWERS_IN): Phase.ASKING_MISSING,
-    **{(phase, Event.DECIDED): Phase.IDLE for phase in _WAITING},
-    **{(phase, Event.WORLD_LEFT): Phase.IDLE for phase in (Phase.IDLE, *_WAITING)},
-    **{(phase, Event.STOP): Phase.STOPPED for phase in Phase if phase is not Phase.STOPPED},
-}
-"""Every move an agent's machine makes: ``(phase, event) -> next phase``. A new observation
-while waiting for intents (the world moved on, or the clock was followed again after a gap)
-starts a new negotiation."""
-
-
-@dataclass
-class Pending:
-    """An observation whose decision waits for intents: whose (``awaited``), which of them the
-    brain decides with (``needed``), whom this agent asked (``asks``), until when, the intents
-    it knows without asking (``staying``: parked neighbours, ``neighbours.staying``), and, once
-    the answers are in, the ones it then asked for directly because no answer brought them
-    (``missing``); neighbours that cannot answer (gone, or refusing the tick) are waited for no
-    more (``refused``)."""
-
-    obs: Observation
-    awaited: list[int]
-    needed: list[int]
-    asks: list[int]
-    deadline: float
-    staying: dict[int, int]
-    missing: list[int] = field(default_factory=list)
-    refused: set[int] = field(default_factory=set)  # asked, and no answer is coming
-
-
-@dataclass(slots=True)
-class OpenAsk:
-    """One of this agent's asks, until it ends: whom it asked, for which tick, and for a
-    standing query its generation (only the newest one's end closes the stream)."""
-
-    agent: int
-    tick: int
-    generation: int | None = None
 
 
 class AgentMachine(QueryAnswering, Machine):
@@ -353,7 +288,7 @@ class AgentMachine(QueryAnswering, Machine):
     def _negotiation(self) -> Pending | None:
         """The observation whose decision waits for intents, while the agent waits for them
         (``NEGOTIATING``, ``ASKING_MISSING``); else None."""
-        if self.phase not in _WAITING:
+        if self.phase not in WAITING:
             return None
         assert self.pending is not None
         return self.pending

@@ -7,9 +7,8 @@ import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.fields import LS_PENDING
-from nnql_swarm.agent.machine import (
-    PEER_WAIT_S, RESYNC_AFTER, TRANSITIONS, AgentMachine, Event, Phase,
-)
+from nnql_swarm.agent.machine import PEER_WAIT_S, RESYNC_AFTER, AgentMachine
+from nnql_swarm.agent.phases import TRANSITIONS, Event, Phase
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.machines.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped

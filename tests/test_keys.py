@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK
-from nnql_swarm.protocol.messages import Inbox, Intent, agent_sender, encode
+from nnql_swarm.protocol.inbox import Inbox
+from nnql_swarm.protocol.messages import Intent, agent_sender, encode
 
 RUN = "run-1"
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])

@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 from nnql_swarm.protocol import keys, messages
 from nnql_swarm.protocol.actions import N_ACTIONS
 from nnql_swarm.protocol.keys import MAX_TICK
+from nnql_swarm.protocol.inbox import Inbox
 from nnql_swarm.protocol.messages import (
     Answer,
     CONTROL_SHUTDOWN,
@@ -26,7 +27,6 @@ from nnql_swarm.protocol.messages import (
     PROTOCOL_VERSION,
     WORLD_SENDER,
     Control,
-    Inbox,
     Intent,
     Observation,
     Rejected,

@@ -42,7 +42,8 @@ from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import START_S_PER_AGENT, SwarmConfig
 from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
-from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Inbox, Intent, encode
+from nnql_swarm.protocol.inbox import Inbox
+from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Intent, encode
 from nnql_swarm.machines.phases import EffectLog, Machine, an_input
 from nnql_swarm.machines.trace import CLOSE, TickTrace
 from nnql_swarm.world.engine import SwarmWorld
