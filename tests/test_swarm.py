@@ -168,7 +168,8 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
     ("nnql", "auto", ()), ("best-nnql", "auto", ()), ("shield-nnql", "hub-peer", ()),
     ("shield-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25")),
     ("path-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25")),
-    ("path-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25", "--still-shield")),
+    ("path-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25", "--still-shield",
+                            "--agents", "10")),
     ("best-nnql", "auto", ("--wait-rule", "meet"))])
 def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, grid,
                                                                    tmp_path):
