@@ -15,7 +15,9 @@ read as one whose intent is unknown, from its current cell. A QL agent asks nobo
 
 import numpy as np
 
-from nnql_swarm.learning.fields import LP_READING, NB_FIELDS, READ_DAQL, READINGS
+from nnql_swarm.learning.fields import (
+    LP_READING, LP_SHIELD, LP_STILL_SHIELD, NB_FIELDS, READ_DAQL, READINGS,
+)
 from nnql_swarm.learning.learner import decide, draw_noise, finish
 from nnql_swarm.learning.neighbours import NeighbourRows
 from nnql_swarm.learning.record import record_outcome, write_updates
@@ -120,9 +122,11 @@ class AgentBrain:
         return self._rows(obs, answers, announcing, previous, self._was_at)
 
     def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:
-        """DAQL's memory: the neighbours' cells at the previous tick of this episode, where they
-        were in view, and the agent's own then (:attr:`_was_at`); and this tick's, for the next."""
-        if self.learner.params[LP_READING] != READ_DAQL:
+        """DAQL's (and the still shield's) memory: the neighbours' cells at the previous tick of
+        this episode, where they were in view, and the agent's own then (:attr:`_was_at`); and
+        this tick's, for the next."""
+        params = self.learner.params
+        if params[LP_READING] != READ_DAQL and not (params[LP_SHIELD] and params[LP_STILL_SHIELD]):
             return {}
         tick, cells, was_at = self._seen
         recent = tick == obs.tick - 1 and obs.step > 0

@@ -18,7 +18,8 @@ UNKNOWN_MOVE = N_ACTIONS
 
 LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP = 0, 1, 2, 3, 4
 LP_STILL_TERMINAL, LP_MEET_ONLY, LP_DS_STATE, LP_DS_REWARD, LP_DETOUR = 5, 6, 7, 8, 9
-LP_FIELDS = 10
+LP_STILL_SHIELD = 10
+LP_FIELDS = 11
 FP_ALPHA, FP_GAMMA, FP_BETA, FP_STAY_REWARD = 0, 1, 2, 3
 FP_FIELDS = 4
 
@@ -78,6 +79,7 @@ def learner_params(config) -> tuple[list[int], list[float]]:
     params[LP_DS_STATE] = DS_STATES[config.ds_state]
     params[LP_DS_REWARD] = DS_REWARDS[config.ds_reward]
     params[LP_DETOUR] = reach(config.interaction_radius) if config.detour else -1
+    params[LP_STILL_SHIELD] = int(config.still_shield)
     params_f = [0.0] * FP_FIELDS
     params_f[FP_ALPHA], params_f[FP_GAMMA] = config.alpha, config.gamma
     params_f[FP_BETA] = config.beta

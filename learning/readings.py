@@ -93,8 +93,10 @@ def ds_reward(params, params_f, wmap, fx, fy, ox, oy, width, height, world_rewar
 
 
 @kernel
-def shield_mask(reading, ox, oy, nb, m, width, height):
-    """The actions the announcement shield forbids, as bits (bit ``a`` set: ``a`` forbidden)."""
+def shield_mask(reading, still, ox, oy, nb, m, width, height):
+    """The actions the announcement shield forbids, as bits (bit ``a`` set: ``a`` forbidden);
+    ``still`` (``LP_STILL_SHIELD``): a neighbour whose intent is unknown and that was seen in the
+    same cell last step counts as staying, its cell forbidden like a parked agent's."""
     mask = 0
     for a in range(N_ACTIONS):
         tx = target_x(ox, a, width)
@@ -109,7 +111,9 @@ def shield_mask(reading, ox, oy, nb, m, width, height):
                 ny = nb[j][NB_NEXT_Y]
                 hit = (tx == nx and ty == ny) or (nx == ox and ny == oy and tx == cx and ty == cy)
             else:
-                hit = nb[j][NB_PARKED] != 0 and tx == cx and ty == cy
+                stays = nb[j][NB_PARKED] != 0 or (still != 0 and nb[j][NB_PREV_X] == cx
+                                                   and nb[j][NB_PREV_Y] == cy)
+                hit = stays and tx == cx and ty == cy
             if hit:
                 mask |= 1 << a
                 break

@@ -216,10 +216,10 @@ def test_every_kth_action_of_the_learners_lifetime_is_random():
     assert agent.state[LS_TAKEN] == 8
 
 
-def mask_of(reading, own, neighbours):
+def mask_of(reading, own, neighbours, still=0):
     agent = Agent(reading)
     nb, m = agent.rows(neighbours)
-    mask = shield_mask(reading, *own, nb, m, SIZE, SIZE)
+    mask = shield_mask(reading, still, *own, nb, m, SIZE, SIZE)
     return {a for a in range(N_ACTIONS) if mask >> a & 1}
 
 
@@ -235,6 +235,20 @@ def test_the_shield_forbids_announced_cells_swaps_and_parked_agents():
     boxed = [neighbour(1, 5, 4, next_cell=(5, 5)), neighbour(2, 4, 5, parked=True),
              neighbour(3, 6, 5, parked=True), neighbour(4, 5, 6, parked=True)]
     assert mask_of(READ_NNQL, own, boxed) == set()
+
+
+def test_the_still_shield_takes_a_neighbour_seen_standing_still_as_staying():
+    own = (5, 5)
+    stood = [neighbour(1, 4, 5, previous=(4, 5))]
+    moved = [neighbour(1, 4, 5, previous=(3, 5))]
+    unseen = [neighbour(1, 4, 5)]
+    assert mask_of(READ_NNQL, own, stood, still=1) == {LEFT}
+    assert mask_of(READ_NNQL, own, stood, still=0) == set()
+    assert mask_of(READ_NNQL, own, moved, still=1) == set()
+    assert mask_of(READ_NNQL, own, unseen, still=1) == set()
+    # A known intent outranks the memory: the announced move is what the shield reads.
+    leaving = [neighbour(1, 4, 5, next_cell=(3, 5), previous=(4, 5))]
+    assert mask_of(READ_NNQL, own, leaving, still=1) == set()
 
 
 def test_the_shield_filters_greedy_and_random_choices():
