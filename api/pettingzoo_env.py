@@ -240,7 +240,7 @@ class SwarmGridEnv(ParallelEnv):
         return "\n".join("".join(row) for row in rows)
 
     def _picture(self) -> np.ndarray:
-        from nnql_swarm.recording.world import agent_colors
+        from nnql_swarm.recording.palette import agent_colors
 
         c = self.cell_pixels
         image = np.full((self.height * c, self.width * c, 3), 255, dtype=np.uint8)
@@ -278,7 +278,7 @@ class SwarmGridEnv(ParallelEnv):
             return self._stream
         import rerun as rr
 
-        from nnql_swarm.recording.world import agent_colors
+        from nnql_swarm.recording.palette import agent_colors
 
         stream = rr.RecordingStream("nnql-swarm-env")
         target = self.rerun_target

@@ -18,7 +18,6 @@ seed's learned tables) and ``config.json``.
 
 import argparse
 import json
-import math
 import os
 import signal
 import sys
@@ -36,16 +35,13 @@ from nnql_swarm.experiment.swarm import (
     TABLE_FILES, VARIANTS, SwarmExperiment, ablation_presets, curves, run_experiment, table_rows,
     walls_presets, write_runs, write_tables,
 )
-from nnql_swarm.experiment.maps import (
-    FAMILIES, MapsBenchmark, Recorder, episodes_total, learning_curves, map_spec, run_benchmark,
-    run_config, table_rows as maps_table_rows, write_curves, write_tables as write_maps_tables,
-)
-from nnql_swarm.experiment.maps import TABLE_FILES as MAPS_TABLE_FILES
-from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGET, PRESETS
+from nnql_swarm.protocol.config import ON_TARGET, PRESETS
 from nnql_swarm.terrain.maps import run_map
-from nnql_swarm.sim.runs import swarm_world, threads
+from nnql_swarm.sim.runs import swarm_world
+from nnql_swarm.launch.experiment_maps import run_maps
 from nnql_swarm.terminal.cli import (
-    EXIT_INTERRUPTED, OneLineParser, make_directory, prepare_simulator, program_name, progress,
+    EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, make_directory, parse_workers,
+    prepare_simulator, program_name, progress, raise_terminated,
 )
 from nnql_swarm.recording.curves import log_swarm_curves
 
@@ -91,30 +87,6 @@ def parse_grid(text: str) -> tuple[int, int]:
     if width < 1 or height < 1:
         raise argparse.ArgumentTypeError(f"grid sides must be at least 1, got {text!r}")
     return width, height
-
-
-def bounded(kind: type, low: float | None = None, high: float | None = None):
-    """An argparse type: ``kind`` within ``[low, high]``."""
-
-    def parse(text: str):
-        try:
-            value = kind(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"not a valid {kind.__name__}: {text!r}") from None
-        if isinstance(value, float) and not math.isfinite(value):
-            raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
-        if (low is not None and value < low) or (high is not None and value > high):
-            bounds = f"at least {low}" if high is None else f"between {low} and {high}"
-            raise argparse.ArgumentTypeError(f"must be {bounds}, got {text}")
-        return value
-
-    parse.__name__ = kind.__name__
-    return parse
-
-
-def parse_workers(text: str) -> int | None:
-    """``auto`` (None) or a positive number of worker processes."""
-    return None if text == "auto" else bounded(int, 1)(text)
 
 
 def build_parser() -> OneLineParser:
@@ -249,14 +221,6 @@ def run(args: argparse.Namespace) -> Path:
     return args.out
 
 
-class Terminated(Exception):
-    """SIGTERM arrived: stop like Ctrl-C, workers included."""
-
-
-def _raise_terminated(signum, frame):
-    raise Terminated
-
-
 def parse_variants(text: str) -> tuple[str, ...]:
     names = [v.strip() for v in text.split(",") if v.strip()]
     unknown = [v for v in names if v not in VARIANTS]
@@ -381,169 +345,9 @@ def run_swarm(argv: list[str]) -> Path:
     return out
 
 
-def parse_counts(text: str) -> tuple[int, ...]:
-    """``"8,32,64"`` -> agent counts, each 1..1024 (``none``: no count)."""
-    if text.strip() == "none":
-        return ()
-    try:
-        counts = tuple(sorted({int(v) for v in text.split(",") if v.strip()}))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a list of whole numbers: {text!r}") from None
-    if not counts or min(counts) < 1:
-        raise argparse.ArgumentTypeError(f"agent counts must be at least 1: {text!r}")
-    return counts
-
-
-def parse_families(text: str) -> tuple[str, ...]:
-    names = [v.strip() for v in text.split(",") if v.strip()]
-    unknown = [v for v in names if v not in FAMILIES]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"choose families from {','.join(FAMILIES)}, got {text!r}")
-    return tuple(v for v in FAMILIES if v in names)
-
-
-def parse_override(text: str) -> tuple[str, object]:
-    """``OPTION=VALUE`` -> a learning option (``LEARNING_FIELDS``) and its value, of the
-    option's type."""
-    name, _, value = text.partition("=")
-    name = name.strip().replace("-", "_")
-    if name not in LEARNING_FIELDS or name == "algo" or not value:
-        raise argparse.ArgumentTypeError(
-            f"expected OPTION=VALUE with OPTION one of "
-            f"{', '.join(f for f in LEARNING_FIELDS if f != 'algo')}, got {text!r}")
-    kind = type(PRESETS[DEFAULT_PRESET][name])
-    try:
-        if kind is bool:
-            if value.lower() not in ("true", "false", "1", "0"):
-                raise ValueError
-            return name, value.lower() in ("true", "1")
-        return name, kind(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{name} takes a {kind.__name__}, got {value!r}") from None
-
-
-def build_maps_parser() -> OneLineParser:
-    d = MapsBenchmark()
-    parser = OneLineParser(
-        prog=f"{program_name()} maps",
-        description="The field's benchmark (POGEMA's protocol): learn on random training maps, "
-        "play the learned tables frozen (no learning, no random step) on held-out random maps, "
-        "mazes and the warehouse at each agent count, beside the oracle and the paper's QL; and "
-        "learn from scratch on an unseen random map.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
-    )
-    add = parser.add_argument
-    add("--preset", default=DEFAULT_PRESET, choices=[p for p in PRESETS if p != "oracle"],
-        help="the learner benchmarked (beside ql and the oracle)")
-    add("--seeds", type=bounded(int, 1), default=d.seeds, metavar="N",
-        help="policies, each trained and tested on maps of its own")
-    add("--seed-base", type=bounded(int, 0), default=d.seed_base, metavar="S")
-    add("--train-maps", type=bounded(int, 1), default=d.train_maps, metavar="N",
-        help="random training maps per seed")
-    add("--train-episodes", type=bounded(int, 1), default=d.train_episodes, metavar="N",
-        help="episodes on each training map")
-    add("--train-agents", type=bounded(int, 1, 1024), default=d.train_agents, metavar="N")
-    add("--test-maps", type=bounded(int, 1), default=d.test_maps, metavar="N",
-        help="held-out maps per family and seed")
-    add("--instances", type=bounded(int, 1), default=d.instances, metavar="N",
-        help="episodes on each held-out map (new starts and goals; the map forgotten before each)")
-    add("--agents", type=parse_counts, default=d.agents, metavar="LIST",
-        help="agent counts of frozen play, e.g. 8,32,64")
-    add("--families", type=parse_families, default=d.families, metavar="LIST",
-        help=f"held-out map families, from {','.join(FAMILIES)}")
-    add("--scratch-episodes", type=bounded(int, 5), default=d.scratch_episodes, metavar="N",
-        help="episodes of learning from scratch on an unseen random map")
-    add("--scratch-agents", type=parse_counts, default=d.scratch_agents, metavar="LIST|none",
-        help="agent counts of learning from scratch")
-    add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
-    add("--set", dest="overrides", action="append", type=parse_override, default=[],
-        metavar="OPTION=VALUE",
-        help="a learning option of the preset changed (repeatable; e.g. beta=0.7, "
-             "wait_rule=reach, interaction_radius=3)")
-    add("--out", type=Path, default=None, metavar="DIR",
-        help="output directory (default runs/maps-<time>)")
-    add("--force", action="store_true", help="overwrite results already in --out")
-    add("--workers", type=parse_workers, default=None, metavar="N|auto",
-        help="threads the runs are spread over (auto: one per core)")
-    return parser
-
-
-def run_maps(argv: list[str]) -> Path:
-    """The maps benchmark's command line: every episode written as it is played, then the table
-    and the learning curves."""
-    parser = build_maps_parser()
-    args = parser.parse_args(argv)
-    presets = dict(PRESETS)
-    learner = args.preset
-    if args.overrides:
-        learner = args.preset + "[" + ",".join(f"{k}={v}" for k, v in args.overrides) + "]"
-        presets[learner] = {**PRESETS[args.preset], **dict(args.overrides)}
-    learners = (learner,) if learner == "ql" else (learner, "ql")
-    bench = MapsBenchmark(presets=presets, seeds=args.seeds, seed_base=args.seed_base, learners=learners,
-                          train_maps=args.train_maps, train_episodes=args.train_episodes,
-                          train_agents=args.train_agents, test_maps=args.test_maps,
-                          instances=args.instances, agents=args.agents, families=args.families,
-                          scratch_episodes=args.scratch_episodes,
-                          scratch_agents=args.scratch_agents, max_steps=args.max_steps)
-    try:
-        bench.check()
-        first = bench.test_map_seeds(bench.seed_base)[0]
-        for family in bench.families:
-            for agents in (*bench.agents, *bench.scratch_agents):
-                run_config(bench, learners[0], map_spec(family, first), first, agents, 1, True)
-        train_seed = bench.train_map_seeds(bench.seed_base)[0]
-        run_config(bench, learners[0], map_spec("random", train_seed), train_seed,
-                   bench.train_agents, 1, False)
-    except ValueError as error:
-        parser.error(str(error))
-    out = args.out or Path("runs") / time.strftime("maps-%Y%m%d-%H%M%S")
-    if out.exists() and not out.is_dir():
-        parser.error(f"--out {out} exists and is not a directory")
-    held = [name for name in (*MAPS_TABLE_FILES, "maps_episodes.csv", "config.json")
-            if (out / name).exists()]
-    if held and not args.force:
-        parser.error(f"{out} already holds results ({', '.join(held)}); pass --force to overwrite")
-    unusable = make_directory(out)
-    if unusable:
-        parser.error(unusable)
-    config = {"benchmark": {k: v for k, v in asdict(bench).items() if k != "presets"},
-              "presets": {v: presets[v] for v in bench.variants}, "workers": args.workers,
-              "command": [Path(sys.argv[0]).name, *sys.argv[1:]]}
-    (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
-    for name in MAPS_TABLE_FILES:
-        (out / name).unlink(missing_ok=True)
-    train_seed = bench.train_map_seeds(bench.seed_base)[0]
-    warm = run_config(bench, learners[0], map_spec("random", train_seed), train_seed,
-                      bench.train_agents, 1, False)
-    prepare_simulator(swarm_world(warm), warm)
-    started = time.monotonic()
-    recorder = Recorder(out / "maps_episodes.csv")
-    try:
-        with threads(args.workers), progress(episodes_total(bench), "run-episode",
-                                              f"{bench.seeds} seeds") as bar:
-            run_benchmark(bench, recorder, on_episode=bar.update, policies=out / "policies")
-    except (KeyboardInterrupt, Terminated):
-        recorder.close()
-        print(f"\ninterrupted: the episodes played so far are in {out}/maps_episodes.csv",
-              file=sys.stderr)
-        raise
-    recorder.close()
-    elapsed = time.monotonic() - started
-    rows = maps_table_rows(bench, recorder.rows)
-    write_maps_tables(out, bench, rows, elapsed)
-    curves = learning_curves(bench, recorder.rows)
-    write_curves(out / "maps_curves.csv", curves)
-    log_swarm_curves(curves, out / "maps_curves.rrd", recording_id="maps-benchmark")
-    config["elapsed_seconds"] = round(elapsed, 3)
-    (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
-    print((out / "maps_table.md").read_text())
-    print(f"wrote {out}/ in {elapsed:.1f} s of simulation")
-    return out
-
-
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
-    signal.signal(signal.SIGTERM, _raise_terminated)
+    signal.signal(signal.SIGTERM, raise_terminated)
     try:
         if argv[:1] == ["swarm"]:
             run_swarm(argv[1:])

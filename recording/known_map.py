@@ -31,7 +31,8 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import ints, rows
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
 from nnql_swarm.recording.columns import time_columns
-from nnql_swarm.recording.world import WALL_COLOUR, WALL_HALF, WALL_LINE
+from nnql_swarm.recording.palette import WALL_COLOUR
+from nnql_swarm.recording.world import WALL_HALF, WALL_LINE
 
 ROOT = "known_map"
 GRID, KNOWN, UNSEEN, PARKED = (f"{ROOT}/grid", f"{ROOT}/walls/known", f"{ROOT}/walls/unseen",

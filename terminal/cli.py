@@ -3,6 +3,7 @@ the command's name as it was called, the output folder made or refused in one li
 bar of long work, and a word while the simulator compiles before that bar starts."""
 
 import argparse
+import math
 import os
 import shutil
 import sys
@@ -134,3 +135,35 @@ def prepare_simulator(world, run) -> None:
         print(f"compiled in {time.monotonic() - started:.0f} s; later runs load it from "
               f"{os.environ.get('NUMBA_CACHE_DIR', cache_directory())}", file=sys.stderr,
               flush=True)
+
+
+def bounded(kind: type, low: float | None = None, high: float | None = None):
+    """An argparse type: ``kind`` within ``[low, high]``."""
+
+    def parse(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a valid {kind.__name__}: {text!r}") from None
+        if isinstance(value, float) and not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+        if (low is not None and value < low) or (high is not None and value > high):
+            bounds = f"at least {low}" if high is None else f"between {low} and {high}"
+            raise argparse.ArgumentTypeError(f"must be {bounds}, got {text}")
+        return value
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
+def parse_workers(text: str) -> int | None:
+    """``auto`` (None) or a positive number of worker processes."""
+    return None if text == "auto" else bounded(int, 1)(text)
+
+
+class Terminated(Exception):
+    """SIGTERM arrived: stop like Ctrl-C, workers included."""
+
+
+def raise_terminated(signum, frame):
+    raise Terminated

@@ -393,7 +393,7 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     on (``config``: the run's ``SwarmConfig``): the grid, every wall, a label under each agent
     and goal, each agent in its own colour, the moves announced and the waits. Raises
     AssertionError saying what is missing."""
-    from nnql_swarm.recording.world import WAIT_COLOUR, WALL_COLOUR, agent_colors
+    from nnql_swarm.recording.palette import WAIT_COLOUR, WALL_COLOUR, agent_colors
 
     grid = find_grid(image, config.width, config.height)
     episode = last_episode(run_dir / "run.rrd")

@@ -285,7 +285,7 @@ def test_the_inline_viewer_shows_the_run_in_a_browser(tmp_path):
     import rerun_notebook
 
     from tests.browser import check_run, chromium, screenshot, wait_for
-    from nnql_swarm.recording.world import agent_colors
+    from nnql_swarm.recording.palette import agent_colors
 
     run = Swarm(agents=4, episodes=1, max_steps=20, seed=3, run_id="inline").run(
         tmp_path / "run")

@@ -24,7 +24,7 @@ from PIL import Image
 
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.ports import free_port
-from nnql_swarm.recording.world import PALETTE, WALL_COLOUR, agent_colors
+from nnql_swarm.recording.palette import PALETTE, WALL_COLOUR, agent_colors
 from tests.browser import (
     BACKGROUND, check_labels, check_run, check_walls, check_world, chromium, find_grid,
     last_episode, near, screenshot, wait_for, web_viewer,

@@ -10,7 +10,7 @@ from pettingzoo.utils.conversions import parallel_to_aec
 from nnql_swarm.protocol.actions import LEFT, N_STATES, RIGHT, STAY, UP, offset_state
 from nnql_swarm.api.pettingzoo_env import NOT_IN_VIEW, SwarmGridEnv
 from nnql_swarm.world.rules import CA_REWARD, GOAL_REWARD
-from nnql_swarm.recording.world import agent_colors
+from nnql_swarm.recording.palette import agent_colors
 
 
 @pytest.mark.filterwarnings("error::UserWarning")  # the API test reports problems as warnings

@@ -27,7 +27,8 @@ from nnql_swarm.transport.ports import free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm
 from nnql_swarm.world.metrics import read_episodes
 from nnql_swarm.world.scenario import swarm_episode
-from nnql_swarm.recording.world import KEEP_APART, METRICS, PALETTE, agent_colors, negotiation_mask
+from nnql_swarm.recording.palette import KEEP_APART, PALETTE, agent_colors
+from nnql_swarm.recording.world import METRICS, negotiation_mask
 
 AGENTS, EPISODES = 8, 3
 RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5",
