@@ -163,14 +163,10 @@ def decide(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, f
            apply_now):
     """Learn the walls in view (:func:`observe_map`; ``starts``: the episode's first
     observation), complete the pending transition (its record applied at once if
-    ``apply_now``), then choose. Returns the action and whether a record was written."""
-    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
-                starts)
-    read_rows(params, ox, oy, nb, m)
-    written = complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width,
-                       height, rec, rec_f)
-    if written and apply_now:
-        apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
+    ``apply_now``), then choose: :func:`finish`, then :func:`choose`. Returns the action and
+    whether a record was written."""
+    written = finish(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first,
+                     last, starts, ox, oy, gx, gy, nb, m, width, height, rec, rec_f, apply_now)
     action = choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, width,
                     height, random_action, ties, values)
     return action, written
