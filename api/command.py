@@ -24,7 +24,8 @@ from typing import Any, Callable
 
 from nnql_swarm.transport import zenoh_files
 from nnql_swarm.terminal.cli import (
-    EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator, progress as progress_bar,
+    EXIT_INTERRUPTED, OneLineParser, invocation, parse_grid, prepare_simulator,
+    progress as progress_bar,
 )
 from nnql_swarm.recording.session import RecordingSession
 from nnql_swarm.recording.viewers import check_viewer_url
@@ -54,14 +55,6 @@ log = logging.getLogger("nnql.launch")
 
 class UsageError(Exception):
     """A bad option or value from the user: one line on stderr, exit code 2."""
-
-
-def parse_grid(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(v) for v in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 11x11, not {text!r}") from None
-    return width, height
 
 
 def parse_ids(text: str) -> list[int]:

@@ -40,8 +40,8 @@ from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.launch.experiment_maps import run_maps
 from nnql_swarm.terminal.cli import (
-    EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, make_directory, parse_workers,
-    prepare_simulator, program_name, progress, raise_terminated,
+    EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, make_directory, parse_grid,
+    parse_workers, prepare_simulator, program_name, progress, raise_terminated,
 )
 from nnql_swarm.recording.curves import log_swarm_curves
 
@@ -77,16 +77,6 @@ def parse_algos(text: str) -> list[str]:
     if unknown or not algos:
         raise argparse.ArgumentTypeError(f"choose algorithms from {','.join(ALGOS)}, got {text!r}")
     return [a for a in ALGOS if a in algos]
-
-
-def parse_grid(text: str) -> tuple[int, int]:
-    try:
-        width, height = (int(p) for p in text.lower().split("x"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"grid must look like 11x11, got {text!r}") from None
-    if width < 1 or height < 1:
-        raise argparse.ArgumentTypeError(f"grid sides must be at least 1, got {text!r}")
-    return width, height
 
 
 def build_parser() -> OneLineParser:

@@ -27,7 +27,7 @@ from nnql_swarm.learning.saved import CheckpointError
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.world import checkpoint as world_checkpoint
-from nnql_swarm.world.metrics import drop_partial_line, keep_rows, read_episodes
+from nnql_swarm.world.metrics import COLUMNS, drop_partial_line, keep_rows, read_episodes
 from nnql_swarm.world.shared_table import SharedState
 
 
@@ -76,6 +76,10 @@ def _rows(out: Path) -> list[dict]:
     episodes_file = Path(out) / EPISODES_FILE
     drop_partial_line(episodes_file)
     rows = read_episodes(episodes_file) if episodes_file.exists() else []
+    header = episodes_file.read_text().partition("\n")[0] if episodes_file.exists() else ""
+    if header and tuple(header.strip().split(",")) != COLUMNS:
+        raise ResumeError(f"{episodes_file}: its columns are not this version's (written by "
+                          "another version of nnql-swarm); start a new run in another folder")
     try:
         numbers = [int(row["episode"]) for row in rows]
         [int(row["end_tick"]) for row in rows]

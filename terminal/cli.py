@@ -156,6 +156,17 @@ def bounded(kind: type, low: float | None = None, high: float | None = None):
     return parse
 
 
+def parse_grid(text: str) -> tuple[int, int]:
+    """``"11x11"`` -> ``(11, 11)``: a grid's width and height, each at least 1."""
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 11x11, not {text!r}") from None
+    if width < 1 or height < 1:
+        raise argparse.ArgumentTypeError(f"grid sides must be at least 1, got {text!r}")
+    return width, height
+
+
 def parse_workers(text: str) -> int | None:
     """``auto`` (None) or a positive number of worker processes."""
     return None if text == "auto" else bounded(int, 1)(text)

@@ -91,6 +91,16 @@ def test_a_corrupt_checkpoint_is_refused_naming_the_file(tmp_path):
         resume_point(tmp_path, list(range(N)), world=True)
 
 
+def test_a_run_written_by_another_version_is_refused_in_one_line(tmp_path):
+    """Rows with other columns than this version's would be appended under the wrong header."""
+    lay_out_run(tmp_path, 3, [[2]] * N, [2])
+    episodes = tmp_path / "episodes.csv"
+    header, _, rows = episodes.read_text().partition("\n")
+    episodes.write_text(header.replace(",csr,isr,soc,makespan", "") + "\n" + rows)
+    with pytest.raises(ResumeError, match="episodes.csv: its columns are not this version's"):
+        resume_point(tmp_path, list(range(N)), world=True)
+
+
 def test_resume_with_options_other_than_the_runs_says_so_in_one_line(tmp_path):
     out = tmp_path / "run"
     done = run_swarm(out, "--agents", "3", "--episodes", "2", "--max-steps", "10",
