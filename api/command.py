@@ -247,6 +247,9 @@ def check_distributable(config: SwarmConfig) -> None:
     if config.step_aside:
         raise UsageError("--on-target step-aside is played by the simulator only "
                          "(add --in-process)")
+    if config.frozen:
+        raise UsageError("frozen play (learned tables played as they are) is the simulator's "
+                         "only; play it in-process")
 
 
 RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR)
