@@ -4,7 +4,13 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.recording.loggers import heat_map_agents
 
 
-def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | None = 0):
+REFERENCE_STEPS_SPAN = (0.9, 4.0)
+"""The steps plot's vertical span when the paper's QL's curves are in the recording: QL's ratio
+runs far above the run's own, which would flatten it."""
+
+
+def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | None = 0,
+              reference: bool = False):
     """The first view: the world and its key | the learning curves | the heat maps.
 
     The viewer opens on the ``episode`` timeline, following the newest episode: the curves run
@@ -43,7 +49,8 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     metrics = rrb.Grid(
         plot((0.0, 1.05), origin="metrics/arrived_share",
              name="Share of agents on their goal at the episode's end"),
-        plot(origin="metrics/steps", name="Steps taken / shortest path (1: perfect)",
+        plot(REFERENCE_STEPS_SPAN if reference else None, origin="metrics/steps",
+             name="Steps taken / shortest path (1: perfect)",
              contents=["metrics/steps/over_shortest", "metrics/steps/shortest_path",
                        "metrics/steps/paper_ql"]),
         plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",

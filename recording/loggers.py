@@ -39,7 +39,8 @@ def open_world_viz(record, config: SwarmConfig, out: Path, distributed: bool = T
     episodes = Path(out) / "episodes.csv"  # a resumed run's complete episodes so far
     before = sum(int(row["collisions"]) for row in read_episodes(episodes)) \
         if episodes.exists() else 0
-    return WorldViz(config, plan.open("world", blueprint(config, distributed, plan.map_agent)),
+    return WorldViz(config, plan.open("world", blueprint(config, distributed, plan.map_agent,
+                                                       plan.reference)),
                     collisions_before=before, map_agent=plan.map_agent)
 
 

@@ -53,7 +53,8 @@ class RecordingSession:
                                                  args.rerun_web_port)
             except RecordingError as error:
                 print(f"rerun: {error}; not serving the web viewer", file=sys.stderr)
-        plan = RecordingPlan(config.run_id, parts, url, getattr(args, "map_agent", 0))
+        plan = RecordingPlan(config.run_id, parts, url, getattr(args, "map_agent", 0),
+                             getattr(args, "reference", False))
         return RecordingSession(plan if plan.enabled else None, out, server, web_url)
 
     @staticmethod

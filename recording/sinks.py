@@ -25,6 +25,7 @@ class RecordingPlan:
     parts_dir: Path | None = None  # save a part here (None: no file)
     url: str | None = None  # also stream to this viewer
     map_agent: int | None = 0  # whose known map the recording shows (recording.known_map)
+    reference: bool = False  # the paper's QL's curves are in it (recording.reference)
 
     @staticmethod
     def to_files(config: SwarmConfig, out: Path) -> "RecordingPlan":

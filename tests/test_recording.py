@@ -458,3 +458,26 @@ def test_agent_colours_stay_distinct_and_readable_at_128_agents():
     for colour, apart in KEEP_APART:  # the colours added beyond the palette
         assert np.abs(colours[len(PALETTE):].astype(int) - colour).max(axis=1).min() > apart
     assert np.array_equal(agent_colors(200)[:128], colours)  # an agent keeps its colour
+
+
+def steps_view(reference: bool):
+    """The learning curves' steps plot of the default run's blueprint."""
+    from nnql_swarm.recording.blueprint import blueprint
+
+    def views(container):
+        for item in getattr(container, "contents", None) or []:
+            yield item
+            yield from views(item)
+
+    [view] = [v for v in views(blueprint(SwarmConfig(), reference=reference).root_container)
+              if getattr(v, "origin", None) == "metrics/steps"]
+    return view
+
+
+def test_with_the_reference_the_steps_plot_keeps_the_runs_own_ratios_readable():
+    """The paper's QL's ratio runs far above the run's own: with it, the plot's span is fixed."""
+    from nnql_swarm.recording.blueprint import REFERENCE_STEPS_SPAN
+
+    assert "ScalarAxis" not in steps_view(False).properties
+    axis = steps_view(True).properties["ScalarAxis"]
+    assert tuple(axis.range.as_arrow_array().to_pylist()[0]) == REFERENCE_STEPS_SPAN
