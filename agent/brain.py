@@ -18,7 +18,7 @@ import numpy as np
 from nnql_swarm.learning.fields import (
     LP_READING, LP_SHIELD, LP_STILL_SHIELD, NB_FIELDS, READ_DAQL, READINGS,
 )
-from nnql_swarm.learning.learner import decide, draw_noise, finish
+from nnql_swarm.learning.learner import decide, draw_noise, finish, make_way
 from nnql_swarm.learning.neighbours import NeighbourRows
 from nnql_swarm.learning.record import record_outcome, write_updates
 from nnql_swarm.learning.tables import Learner
@@ -45,9 +45,6 @@ class AgentBrain:
             raise ValueError(f"--algo {config.algo} plans centrally; run it with --in-process")
         if config.lookahead > 1:
             raise ValueError("a lookahead n > 1 is played by the simulator only (--in-process)")
-        if config.step_aside:
-            raise ValueError("--on-target step-aside is played by the simulator only "
-                             "(--in-process)")
         self.agent = agent
         self.config = config
         self.learner = Learner(config)
@@ -66,9 +63,10 @@ class AgentBrain:
 
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         """The neighbours whose intents this agent decides with, of those it waits for
-        (``awaited``, ``learning.neighbours.awaited``): none once it has arrived or at an
-        episode's end, where it stays (it still waits, to relay them down the chain)."""
-        if obs.arrived or obs.episode_end or not self.reads_intents:
+        (``awaited``, ``learning.neighbours.awaited``): none at an episode's end, nor once it
+        has parked on its goal (``SwarmConfig.parks``), where it stays (it still waits, to relay
+        them down the chain); an arrived agent that may step aside needs them to make way."""
+        if (obs.arrived and self.config.parks) or obs.episode_end or not self.reads_intents:
             return []
         return awaited
 
@@ -80,14 +78,17 @@ class AgentBrain:
         self._prepared = (obs.episode, obs.tick)
         if self.config.shared and obs.updates:
             self.rejected_updates += write_updates(self.learner.entries, obs.updates)
-        if obs.arrived or obs.episode_end or self._noise_episode == obs.episode:
+        if ((obs.arrived and self.config.parks) or obs.episode_end
+                or self._noise_episode == obs.episode):
             return
         draw_noise(self.rng, self._random_actions, self._ties)
         self._noise = (self._random_actions.tolist(), self._ties.tolist())
         self._noise_episode = obs.episode
 
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
-        """Learn from the last action's rewards and choose this tick's action (STAY if done)."""
+        """Learn from the last action's rewards and choose this tick's action: STAY at an
+        episode's end or once arrived, unless it must make way (``learning.learner.make_way``,
+        the ``step-aside`` on-target rule)."""
         learner, shared = self.learner, self.config.shared
         self.prepare(obs)
         record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
@@ -102,6 +103,8 @@ class AgentBrain:
                              obs.step == 0, x, y, gx, gy, nb, m, c.width, c.height, learner.rec,
                              learner.rec_f, not shared)
             action = STAY
+            if not obs.episode_end and not c.parks:
+                action = self._make_way(obs, answers)
         else:
             noise = self._noise
             assert noise is not None, "prepare draws the episode's noise before a decision"
@@ -113,6 +116,16 @@ class AgentBrain:
                 learner.values, learner.rec, learner.rec_f, not shared)
         self.learned = (learner.record(),) if shared and written else ()
         return int(action)
+
+    def _make_way(self, obs: Observation, answers: dict[int, int]) -> int:
+        """An arrived agent's move under ``step-aside``: it stays unless a neighbour it waited
+        for announced moving into its cell."""
+        noise = self._noise
+        assert noise is not None, "prepare draws the episode's noise before a decision"
+        near = self._neighbour_rows(obs, answers, True)
+        c, (x, y) = self.config, obs.position
+        return make_way(x, y, rows(near, NB_FIELDS), len(near), c.n_agents, c.width, c.height,
+                        floats(noise[1][obs.step]))
 
     def _neighbour_rows(self, obs: Observation, answers: dict[int, int],
                         announcing: bool) -> list[list[int]]:

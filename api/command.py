@@ -244,9 +244,6 @@ def check_distributable(config: SwarmConfig) -> None:
         raise UsageError("--algo oracle plans every agent's move centrally; run it with --in-process")
     if config.lookahead > 1:
         raise UsageError("--lookahead > 1 is played by the simulator only (add --in-process)")
-    if config.step_aside:
-        raise UsageError("--on-target step-aside is played by the simulator only "
-                         "(add --in-process)")
     if config.frozen:
         raise UsageError("frozen play (learned tables played as they are) is the simulator's "
                          "only; play it in-process")

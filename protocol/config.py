@@ -265,6 +265,14 @@ class SwarmConfig:
         return self.on_target == "step-aside"
 
     @property
+    def parks(self) -> bool:
+        """Whether an arrived agent is *parked*: it stays on its goal for the rest of the
+        episode, so every observation that shows it says so and its intent, STAY, is known
+        without asking (the ``park`` on-target rule). Under ``step-aside`` it negotiates and
+        may make way."""
+        return not self.step_aside
+
+    @property
     def meet_only(self) -> bool:
         """Whether agents wait only for the neighbours they could meet next step (the ``meet``
         wait rule, ``protocol.ranks``)."""
@@ -275,10 +283,11 @@ class SwarmConfig:
         """Whether an arrived agent takes no part in the ticks that follow, until the episode's
         end tick (``world.engine``: it is *settled*, the world waits for no intent from it, and
         *quiet*, the world sends it no observation): under ``meet``, where nobody waits for an
-        arrived agent and it waits for nobody, and where the agents do not negotiate. Under
+        arrived agent and it waits for nobody (when arrived agents park), and where the agents do
+        not negotiate (an arrived one never learns an intent that would make it move). Under
         ``reach`` an arrived nnQL agent still relays the intents it learns down the chain, in
-        lockstep."""
-        return self.meet_only or self.algo not in NEGOTIATING_ALGOS
+        lockstep; under ``step-aside`` it may have to make way."""
+        return (self.meet_only and self.parks) or self.algo not in NEGOTIATING_ALGOS
 
     @cached_property
     def n_bodies(self) -> int:

@@ -129,7 +129,6 @@ def test_a_malformed_map_or_scenario_is_one_line_naming_file_and_line_exit_2(
     (("--map", "maps/maze-19x19-s0.map", "--obstacle-density", "0.1"), "brings its own grid"),
     (("--map", "random:19x19"), "expected random:WxH:P[:SEED]"),
     (("--map", "maps/none.map"), "maps/none.map: cannot be read"),
-    (("--on-target", "step-aside"), "--on-target step-aside is played by the simulator only"),
 ])
 def test_map_options_that_do_not_go_together_are_one_line_exit_2(tmp_path, options, message):
     result = subprocess.run([sys.executable, str(ROOT / "launch" / "swarm.py"), *options,

@@ -10,22 +10,23 @@ import pytest
 from nnql_swarm.agent import negotiation
 from nnql_swarm.learning import neighbours
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.protocol.actions import N_ACTIONS, sees, target_x, target_y
+from nnql_swarm.protocol.actions import N_ACTIONS, RIGHT, STAY, sees, target_x, target_y
 from nnql_swarm.protocol.config import ALGOS, SwarmConfig
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
 from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank, waits_for
 from nnql_swarm.recording.world import negotiation_mask
 
 
-def config(n: int, algo: str = "nnql", radius: int = 10, wait_rule: str = "reach") -> SwarmConfig:
+def config(n: int, algo: str = "nnql", radius: int = 10, wait_rule: str = "reach",
+           on_target: str = "park") -> SwarmConfig:
     return SwarmConfig(n_agents=n, algo=algo, interaction_radius=radius, wait_rule=wait_rule,
-                       width=40, height=40)
+                       on_target=on_target, width=40, height=40)
 
 
 def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
-            episode_end: bool = False, arrived=()) -> Observation:
+            episode_end: bool = False, arrived=(), parks: bool = True) -> Observation:
     """Agent ``agent``'s observation when the agents stand on ``cells`` (view radius 10), those
-    of ``arrived`` on their goals."""
+    of ``arrived`` on their goals (parked there, as the world says, if ``parks``)."""
     me = cells[agent]
     seen = tuple((j, x, y) for j, (x, y) in sorted(cells.items())
                  if j != agent and sees(*me, x, y))
@@ -33,7 +34,7 @@ def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
                        position=me, goal=(0, 0), neighbours=seen,
                        rank=priority_rank(agent, tick, n), reward_ds=0.0, reward_ca=0.0,
                        collided=False, arrived=agent in arrived, episode_end=episode_end,
-                       parked=tuple(j for j, _, _ in seen if j in arrived))
+                       parked=tuple(j for j, _, _ in seen if j in arrived and parks))
 
 
 def learned(agent: int, tick: int, n: int, cells, asked_by: dict[int, list[int]]) -> set[int]:
@@ -102,16 +103,18 @@ def test_standing_answers_go_to_exactly_the_plans_that_ask_them(seed, radius, si
         assert answered == sorted(answered, key=lambda a: priority_rank(a, tick, n))
 
 
+@pytest.mark.parametrize("on_target", ["park", "step-aside"])
 @pytest.mark.parametrize("wait_rule", WAIT_RULES)
 @pytest.mark.parametrize("algo", [a for a in ALGOS if a != "oracle"])
 @pytest.mark.parametrize("radius", [2, 10])
 def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(algo, radius,
-                                                                               wait_rule):
+                                                                               wait_rule,
+                                                                               on_target):
     """One rule: the brain's neighbours to ask, the plan's awaited intents and the arrows the
-    world records are the same pairs, for every algorithm (the recording once drew none for
-    nnql-dir while its agents waited)."""
+    world records are the same pairs, for every algorithm and both on-target rules (the
+    recording once drew none for nnql-dir while its agents waited)."""
     rng = random.Random(radius)
-    n, c = 7, config(7, algo, radius, wait_rule)
+    n, c = 7, config(7, algo, radius, wait_rule, on_target)
     brains = [AgentBrain(i, c) for i in range(n)]
     waited = 0
     for tick in range(12):
@@ -120,7 +123,8 @@ def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(a
         mask = negotiation_mask(c, np.array([[cells[i] for i in range(n)]]),
                                 np.array([arrived]), np.array([tick]))[0]
         for i in range(n):
-            obs = observe(i, tick, n, cells, arrived={j for j in range(n) if arrived[j]})
+            obs = observe(i, tick, n, cells, arrived={j for j in range(n) if arrived[j]},
+                          parks=c.parks)
             asked = brains[i].neighbours_to_ask(obs, neighbours.awaited(obs, c))
             assert set(asked) == set(np.flatnonzero(mask[i]).tolist())
         waited += int(mask.sum())
@@ -191,3 +195,22 @@ def test_under_the_meet_rule_nobody_waits_for_an_arrived_agent_and_it_waits_for_
     assert negotiation.plan_for(obs[2], reach) == ([0, 1], [1])
     assert neighbours.staying(obs[2], reach) == []
     assert negotiation.plan_for(obs[1], reach) == ([0], [0])  # to relay 0's intent to 2
+
+
+@pytest.mark.parametrize("on_target", ["park", "step-aside"])
+def test_an_arrived_agent_makes_way_only_when_it_may_step_aside(on_target):
+    """Agent 1 stands on its goal; agent 0, ranked above it, announced moving right, into its
+    cell. Parked, it stays (nobody may move into its cell); under step-aside it waits for 0's
+    intent and steps off to a free cell, which is not 0's."""
+    n, tick = 2, 0
+    c = config(n, "nnql", 2, "reach", on_target)
+    cells = {0: (5, 5), 1: (6, 5)}
+    obs = observe(1, tick, n, cells, arrived={1}, parks=c.parks)
+    brain = AgentBrain(1, c)
+    asked = brain.neighbours_to_ask(obs, neighbours.awaited(obs, c))
+    action = brain.act(obs, {0: RIGHT} if asked else {})
+    if c.parks:
+        assert (asked, action) == ([], STAY)
+    else:
+        assert asked == [0] and action != STAY
+        assert (target_x(6, action, 40), target_y(5, action, 40)) not in {(5, 5), (6, 5)}
