@@ -9,7 +9,8 @@ For every seed (a policy of its own, on maps of its own):
    random step) on ``test_maps`` held-out maps of each family (random; mazes 17 to 21 a side; the
    46 x 33 warehouse, whose held-out instances are new starts and goals), at each agent count, each
    map for ``instances`` episodes, the agent forgetting the map's walls before each. The oracle
-   (a reference planner, PIBT) plays the same instances.
+   (a reference planner, PIBT) plays the same instances. Every variant plays one on-target rule
+   (``on_target``: the paper's ``park``, or ``step-aside``, the field's).
 3. **From scratch.** The paper's setting: each variant and the oracle learn on an unseen random
    map (the seed's first test map) for ``scratch_episodes`` episodes.
 
@@ -78,6 +79,7 @@ class MapsBenchmark:
     scratch_episodes: int = 300
     scratch_agents: tuple[int, ...] = (8, 32)
     max_steps: int = MAX_STEPS
+    on_target: str = "park"
     presets: dict = field(default_factory=lambda: dict(PRESETS), compare=False)
 
     @property
@@ -122,7 +124,7 @@ def run_config(bench: MapsBenchmark, variant: str, spec: str, map_seed: int, age
     assert rows is not None  # a generator's spec always gives rows
     return SwarmConfig(run_id=f"m{map_seed}", n_agents=agents, episodes=episodes,
                        max_steps=bench.max_steps, width=len(rows[0]), height=len(rows), seed=map_seed,
-                       map_name=spec, map_rows=rows,
+                       map_name=spec, map_rows=rows, on_target=bench.on_target,
                        frozen=frozen and variant != REFERENCE, **bench.presets[variant])
 
 

@@ -12,7 +12,7 @@ from nnql_swarm.experiment.maps import (
     FAMILIES, TABLE_FILES, MapsBenchmark, Recorder, episodes_total, learning_curves, map_spec,
     run_benchmark, run_config, table_rows, write_curves, write_tables,
 )
-from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS
+from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGET, PRESETS
 from nnql_swarm.recording.curves import log_swarm_curves
 from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.terminal.cli import (
@@ -95,6 +95,9 @@ def build_maps_parser() -> OneLineParser:
     add("--scratch-agents", type=parse_counts, default=d.scratch_agents, metavar="LIST|none",
         help="agent counts of learning from scratch")
     add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
+    add("--on-target", choices=ON_TARGET, default=d.on_target,
+        help="what an arrived agent does, for every variant: stays for good (park) or may make "
+             "way and come back (step-aside, the field's rule)")
     add("--set", dest="overrides", action="append", type=parse_override, default=[],
         metavar="OPTION=VALUE",
         help="a learning option of the preset changed (repeatable; e.g. beta=0.7, "
@@ -123,7 +126,8 @@ def run_maps(argv: list[str]) -> Path:
                           train_agents=args.train_agents, test_maps=args.test_maps,
                           instances=args.instances, agents=args.agents, families=args.families,
                           scratch_episodes=args.scratch_episodes,
-                          scratch_agents=args.scratch_agents, max_steps=args.max_steps)
+                          scratch_agents=args.scratch_agents, max_steps=args.max_steps,
+                          on_target=args.on_target)
     try:
         bench.check()
         first = bench.test_map_seeds(bench.seed_base)[0]

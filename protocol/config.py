@@ -156,7 +156,7 @@ class SwarmConfig:
                             "good, an obstacle (park, the paper's reading), or stays unless it "
                             "has to make way, and may leave and come back, counted arrived "
                             "only while there, its last arrival its arrival (step-aside, the "
-                            "field's; in-process only)", choices=ON_TARGET)
+                            "field's)", choices=ON_TARGET)
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
                                      "largest free region)", metavar="P")

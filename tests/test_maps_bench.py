@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from nnql_swarm.experiment.maps import (
-    EPISODE_COLUMNS, MapsBenchmark, Recorder, map_spec, play_frozen, table_rows, train,
+    EPISODE_COLUMNS, MapsBenchmark, Recorder, map_spec, play_frozen, run_config, table_rows,
+    train,
 )
 from nnql_swarm.protocol.actions import DOWN, RIGHT, STAY
 from nnql_swarm.terrain.maps import generated
@@ -123,6 +124,14 @@ def test_map_specs_come_from_the_generators_and_the_seeds_stay_apart():
         MapsBenchmark(seeds=10 ** 6, train_maps=8).check()
 
 
+@pytest.mark.parametrize("on_target", ["park", "step-aside"])
+def test_every_variant_plays_the_benchmarks_on_target_rule(on_target):
+    bench = MapsBenchmark(on_target=on_target)
+    for variant in bench.variants:
+        config = run_config(bench, variant, map_spec("random", 5), 5, 8, 1, True)
+        assert config.on_target == on_target
+
+
 def test_the_table_reads_seeds_and_ratios_by_hand():
     bench = small_bench(seeds=2, learners=("path-nnql", "ql"))
 
@@ -188,6 +197,7 @@ def test_a_tiny_benchmark_writes_its_table_episodes_and_curves(tmp_path):
     (["--agents", "0"], "at least 1"), (["--families", "city"], "families"),
     (["--set", "speed=3"], "OPTION=VALUE"), (["--set", "beta=2"], "beta"),
     (["--preset", "oracle"], "invalid choice"), (["--train-agents", "5000"], "between"),
+    (["--on-target", "stay"], "invalid choice"),
 ])
 def test_bad_values_exit_2_with_one_line(args, message, tmp_path):
     done = experiment("maps", *args, "--out", str(tmp_path / "x"))
