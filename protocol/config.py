@@ -45,14 +45,16 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
 
 LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
                    "known_state", "shared", "shield", "lookahead", "still_terminal",
-                   "stay_reward", "ds_state", "ds_reward", "detour", "still_shield")
+                   "stay_reward", "ds_state", "ds_reward", "detour", "still_shield",
+                   "escape_shield")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
 PAPER: dict[str, Any] = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
          "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
-         "ds_state": "goal", "ds_reward": "euclid", "detour": False, "still_shield": False}
+         "ds_state": "goal", "ds_reward": "euclid", "detour": False, "still_shield": False,
+         "escape_shield": False}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -136,6 +138,10 @@ class SwarmConfig:
     still_shield: bool = option(_DEFAULT["still_shield"], "the shield (--shield) also forbids "
                                 "the cell of a neighbour whose intent is unknown and that did "
                                 "not move last step (taken as staying)")
+    escape_shield: bool = option(_DEFAULT["escape_shield"], "the shield (--shield) also forbids "
+                                 "the cell of a neighbour whose intent is unknown when no cell "
+                                 "next to it is free to move on to (priority inheritance, one "
+                                 "level deep)")
     lookahead: int = option(_DEFAULT["lookahead"], "n of nnQL: the neighbour's state is its announced cell n "
                             "steps ahead (in-process only for n > 1)", metavar="N")
     still_terminal: bool = option(_DEFAULT["still_terminal"], "a step that went nowhere ends its destination-seeking "
@@ -308,6 +314,7 @@ class SwarmConfig:
         data.setdefault("ds_reward", "euclid")
         data.setdefault("detour", False)
         data.setdefault("still_shield", False)
+        data.setdefault("escape_shield", False)
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:
