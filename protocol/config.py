@@ -79,7 +79,7 @@ PRESETS: dict[str, dict] = {
     "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
                     "wait_rule": "meet"},
     "path-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
-                  "wait_rule": "meet", **PATH},
+                  "wait_rule": "meet", **PATH, "escape_shield": True},
     "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
     "daql": {**PAPER, **BEST, "algo": "daql"},
     "oracle": {**PAPER, "algo": "oracle"},
@@ -89,8 +89,8 @@ assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())
 
 DEFAULT_PRESET = "path-nnql"
 """The learning options of a swarm run unless told otherwise: the best of the swarm experiment
-(docs/swarm.md: the paper's nnQL with the shield, destination seeking on the walls each agent
-has seen)."""
+(docs/swarm.md: the paper's nnQL with the shield and its escape rule, destination seeking on the
+walls each agent has seen)."""
 _DEFAULT = PRESETS[DEFAULT_PRESET]
 
 
