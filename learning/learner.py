@@ -31,7 +31,8 @@ whole view, 10), a distinct state block for a neighbour known to stay or whose i
 announcement shield (``LP_SHIELD``: never move into a cell a known neighbour announced, into a known
 neighbour's cell when it announced moving into this one, or into a parked agent; QL's fair
 counterpart masks the neighbours' current cells; the random step is filtered too; with
-``LP_STILL_SHIELD`` also the cell of a neighbour of unknown intent seen there last step), and
+``LP_STILL_SHIELD`` also the cell of a neighbour of unknown intent seen there last step, with
+``LP_ESCAPE_SHIELD`` that of one with no cell it could surely move on to), and
 ``LP_STILL_TERMINAL``: a step that left the agent where it was (it stayed, was blocked, bumped the
 edge) does not bootstrap destination seeking from the state it stayed in, so waiting is not
 valued like the move it waits for (docs/swarm.md has the evidence of each).

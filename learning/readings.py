@@ -129,9 +129,11 @@ def cornered(ox, oy, cx, cy, nb, m, width, height):
     """Whether the neighbour at ``(cx, cy)``, whose intent the agent at ``(ox, oy)`` does not
     know, has no cell it could surely move on to if pushed: a cell next to it is sure when it is
     on the grid, not the agent's own (that would be a swap), held by no body in the rows, announced
-    by no neighbour whose intent is known, and next to no other body whose intent is unknown (which
-    might step into it first). Pushing a neighbour only where it has such a cell is priority
-    inheritance one level deep; the neighbour, pushed, reads its own neighbours the same way."""
+    by no neighbour whose intent is known, and next to no other body whose intent is unknown
+    (which might step into it first; a parked agent never moves, and a wall beyond the
+    negotiation's reach counts as such a body: the rows do not tell it from an agent). Pushing a
+    neighbour only where it has such a cell is priority inheritance one level deep; the
+    neighbour, pushed, reads its own neighbours the same way."""
     for a in range(N_ACTIONS):
         if a == STAY:
             continue
@@ -144,7 +146,8 @@ def cornered(ox, oy, cx, cy, nb, m, width, height):
             kx = nb[k][NB_X]
             ky = nb[k][NB_Y]
             if nb[k][NB_KNOWN] != 0:
-                taken = (kx == fx and ky == fy) or (nb[k][NB_NEXT_X] == fx and nb[k][NB_NEXT_Y] == fy)
+                taken = (kx == fx and ky == fy) or (nb[k][NB_NEXT_X] == fx
+                                                    and nb[k][NB_NEXT_Y] == fy)
             else:
                 taken = (kx == fx and ky == fy) or (
                     nb[k][NB_PARKED] == 0 and (kx != cx or ky != cy)
