@@ -139,9 +139,10 @@ class SwarmConfig:
                                 "the cell of a neighbour whose intent is unknown and that did "
                                 "not move last step (taken as staying)")
     escape_shield: bool = option(_DEFAULT["escape_shield"], "the shield (--shield) also forbids "
-                                 "the cell of a neighbour whose intent is unknown when no cell "
-                                 "next to it is free to move on to (priority inheritance, one "
-                                 "level deep)")
+                                 "the cell of a neighbour whose intent is unknown unless a cell "
+                                 "next to it is surely free to move on to: empty, announced by "
+                                 "nobody, next to no other agent of unknown intent (priority "
+                                 "inheritance, one level deep)")
     lookahead: int = option(_DEFAULT["lookahead"], "n of nnQL: the neighbour's state is its announced cell n "
                             "steps ahead (in-process only for n > 1)", metavar="N")
     still_terminal: bool = option(_DEFAULT["still_terminal"], "a step that went nowhere ends its destination-seeking "
