@@ -16,8 +16,9 @@ did and what stood where it went:
 - ``two into one free cell`` (``, other's intent known`` when this agent knew the other was
   heading there), ``two into a cell being left``: someone else moved into the same cell.
 
-Each moving collider is also marked ``shield gave up`` when its move was one the shield forbids
-(:func:`forbidden`): frozen play takes no random step, so the shield forbade every action.
+Each moving collider is also marked ``shield gave up`` when its move was one the shield's rules
+forbid (``learning.readings.forbids``): frozen play takes no random step, so the shield forbade
+every action and gave up.
 
     python -m bench.collisions --agents 32 --seeds 1 --set still_shield=true
 """
@@ -29,32 +30,14 @@ import numpy as np
 
 from nnql_swarm.experiment.maps import MapsBenchmark, Recorder, map_spec, run_config, train
 from nnql_swarm.learning.fields import (
-    LP_ESCAPE_SHIELD, LP_STILL_SHIELD, NB_FIELDS, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED,
-    NB_PREV_X, NB_PREV_Y, NB_X, NB_Y, learner_params,
+    LP_ESCAPE_SHIELD, LP_READING, LP_STILL_SHIELD, NB_FIELDS, NB_KNOWN, NB_PREV_X, NB_PREV_Y,
+    learner_params,
 )
-from nnql_swarm.learning.readings import cornered
+from nnql_swarm.learning.readings import forbids
 from nnql_swarm.protocol.actions import STAY, target_x, target_y
 from nnql_swarm.protocol.config import PRESETS
 from nnql_swarm.sim.runs import Batch, swarm_world
 from nnql_swarm.sim.swarm import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y, neighbour_rows
-
-
-def forbidden(params, ox, oy, a, nb, m, width, height) -> bool:
-    """Whether the shield's rules (``learning.readings.shield_mask``, the nnQL reading) forbid
-    action ``a``, read as if the shield never gave up."""
-    tx, ty = target_x(ox, a, width), target_y(oy, a, height)
-    for j in range(m):
-        cx, cy = nb[j][NB_X], nb[j][NB_Y]
-        if nb[j][NB_KNOWN]:
-            nx, ny = nb[j][NB_NEXT_X], nb[j][NB_NEXT_Y]
-            if (tx, ty) == (nx, ny) or ((nx, ny) == (ox, oy) and (tx, ty) == (cx, cy)):
-                return True
-        elif (tx, ty) == (cx, cy) and (
-                nb[j][NB_PARKED]
-                or (params[LP_STILL_SHIELD] and (nb[j][NB_PREV_X], nb[j][NB_PREV_Y]) == (cx, cy))
-                or (params[LP_ESCAPE_SHIELD] and cornered(ox, oy, cx, cy, nb, m, width, height))):
-            return True
-    return False
 
 
 def classify(batch: Batch, run: int, first_tick: int, steps: int, tally: Counter) -> None:
@@ -92,7 +75,9 @@ def classify(batch: Batch, run: int, first_tick: int, steps: int, tally: Counter
                                actions, decided, config.lookahead, True, params, batch.q_ds[run],
                                1, goal_x, goal_y, w.width, w.height, False, nb)
             rows = {int(nb[k][0]): nb[k] for k in range(m)}
-            gave_up = forbidden(params, x[i], y[i], actions[i], nb, m, w.width, w.height)
+            gave_up = forbids(params[LP_READING], params[LP_STILL_SHIELD],
+                              params[LP_ESCAPE_SHIELD], x[i], y[i], actions[i], nb, m, w.width,
+                              w.height)
             j = occupant.get((tx[i], ty[i]))
             if j is not None and j >= learners:
                 kind = "into a wall"

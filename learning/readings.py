@@ -94,34 +94,44 @@ def ds_reward(params, params_f, wmap, fx, fy, ox, oy, width, height, world_rewar
 
 @kernel
 def shield_mask(reading, still, escape, ox, oy, nb, m, width, height):
-    """The actions the announcement shield forbids, as bits (bit ``a`` set: ``a`` forbidden);
-    ``still`` (``LP_STILL_SHIELD``): a neighbour whose intent is unknown and that was seen in the
-    same cell last step counts as staying, its cell forbidden like a parked agent's; ``escape``
-    (``LP_ESCAPE_SHIELD``): the cell of a neighbour whose intent is unknown is forbidden when that
-    neighbour has no cell it could surely move on to (:func:`cornered`)."""
+    """The actions the announcement shield forbids (:func:`forbids`), as bits (bit ``a`` set:
+    ``a`` forbidden); where it would forbid every action, it forbids none."""
     mask = 0
     for a in range(N_ACTIONS):
-        tx = target_x(ox, a, width)
-        ty = target_y(oy, a, height)
-        for j in range(m):
-            cx = nb[j][NB_X]
-            cy = nb[j][NB_Y]
-            if reading == READ_QL or reading == READ_DAQL:
-                hit = tx == cx and ty == cy
-            elif nb[j][NB_KNOWN] != 0:
-                nx = nb[j][NB_NEXT_X]
-                ny = nb[j][NB_NEXT_Y]
-                hit = (tx == nx and ty == ny) or (nx == ox and ny == oy and tx == cx and ty == cy)
-            elif tx != cx or ty != cy:
-                hit = False
-            else:
-                hit = (nb[j][NB_PARKED] != 0
-                       or (still != 0 and nb[j][NB_PREV_X] == cx and nb[j][NB_PREV_Y] == cy)
-                       or (escape != 0 and cornered(ox, oy, cx, cy, nb, m, width, height)))
-            if hit:
-                mask |= 1 << a
-                break
+        if forbids(reading, still, escape, ox, oy, a, nb, m, width, height):
+            mask |= 1 << a
     return 0 if mask == (1 << N_ACTIONS) - 1 else mask
+
+
+@kernel
+def forbids(reading, still, escape, ox, oy, a, nb, m, width, height):
+    """Whether the announcement shield's rules forbid action ``a`` to the agent at ``(ox, oy)``:
+    a move into a cell a known neighbour announced, into a known neighbour's cell when it
+    announced moving into this one, or into a parked agent (QL's and DAQL's reading: into any
+    neighbour's cell). ``still`` (``LP_STILL_SHIELD``): a neighbour whose intent is unknown and
+    that was seen in the same cell last step counts as staying, its cell forbidden like a parked
+    agent's; ``escape`` (``LP_ESCAPE_SHIELD``): the cell of a neighbour whose intent is unknown
+    is forbidden when that neighbour has no cell it could surely move on to (:func:`cornered`)."""
+    tx = target_x(ox, a, width)
+    ty = target_y(oy, a, height)
+    for j in range(m):
+        cx = nb[j][NB_X]
+        cy = nb[j][NB_Y]
+        if reading == READ_QL or reading == READ_DAQL:
+            hit = tx == cx and ty == cy
+        elif nb[j][NB_KNOWN] != 0:
+            nx = nb[j][NB_NEXT_X]
+            ny = nb[j][NB_NEXT_Y]
+            hit = (tx == nx and ty == ny) or (nx == ox and ny == oy and tx == cx and ty == cy)
+        elif tx != cx or ty != cy:
+            hit = False
+        else:
+            hit = (nb[j][NB_PARKED] != 0
+                   or (still != 0 and nb[j][NB_PREV_X] == cx and nb[j][NB_PREV_Y] == cy)
+                   or (escape != 0 and cornered(ox, oy, cx, cy, nb, m, width, height)))
+        if hit:
+            return True
+    return False
 
 
 @kernel
