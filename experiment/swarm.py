@@ -82,6 +82,7 @@ def walls_presets() -> dict[str, dict]:
         "path-nnql-no-detour": {**path, "detour": False},
         "path-nnql-beta-05": {**path, "beta": shield["beta"]},
         "path-nnql-beta-07": {**path, "beta": 0.7},
+        "path-nnql-no-escape-shield": {**path, "escape_shield": False},
     }
 
 

@@ -18,8 +18,8 @@ UNKNOWN_MOVE = N_ACTIONS
 
 LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP = 0, 1, 2, 3, 4
 LP_STILL_TERMINAL, LP_MEET_ONLY, LP_DS_STATE, LP_DS_REWARD, LP_DETOUR = 5, 6, 7, 8, 9
-LP_STILL_SHIELD = 10
-LP_FIELDS = 11
+LP_STILL_SHIELD, LP_ESCAPE_SHIELD = 10, 11
+LP_FIELDS = 12
 FP_ALPHA, FP_GAMMA, FP_BETA, FP_STAY_REWARD = 0, 1, 2, 3
 FP_FIELDS = 4
 
@@ -80,6 +80,7 @@ def learner_params(config) -> tuple[list[int], list[float]]:
     params[LP_DS_REWARD] = DS_REWARDS[config.ds_reward]
     params[LP_DETOUR] = reach(config.interaction_radius) if config.detour else -1
     params[LP_STILL_SHIELD] = int(config.still_shield)
+    params[LP_ESCAPE_SHIELD] = int(config.escape_shield)
     params_f = [0.0] * FP_FIELDS
     params_f[FP_ALPHA], params_f[FP_GAMMA] = config.alpha, config.gamma
     params_f[FP_BETA] = config.beta

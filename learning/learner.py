@@ -31,7 +31,8 @@ whole view, 10), a distinct state block for a neighbour known to stay or whose i
 announcement shield (``LP_SHIELD``: never move into a cell a known neighbour announced, into a known
 neighbour's cell when it announced moving into this one, or into a parked agent; QL's fair
 counterpart masks the neighbours' current cells; the random step is filtered too; with
-``LP_STILL_SHIELD`` also the cell of a neighbour of unknown intent seen there last step), and
+``LP_STILL_SHIELD`` also the cell of a neighbour of unknown intent seen there last step, with
+``LP_ESCAPE_SHIELD`` that of one with no cell it could surely move on to), and
 ``LP_STILL_TERMINAL``: a step that left the agent where it was (it stayed, was blocked, bumped the
 edge) does not bootstrap destination seeking from the state it stayed in, so waiting is not
 valued like the move it waits for (docs/swarm.md has the evidence of each).
@@ -66,9 +67,10 @@ import math
 import numpy as np
 
 from nnql_swarm.learning.fields import (
-    FP_ALPHA, FP_BETA, FP_GAMMA, LP_DETOUR, LP_RADIUS, LP_RANDOM_STEP, LP_READING, LP_SHIELD,
-    LP_STILL_SHIELD, LS_ACTION, LS_COUNT, LS_GOAL, LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR,
-    LS_TAKEN, LS_X, LS_Y, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_ROW, NB_X, NB_Y,
+    FP_ALPHA, FP_BETA, FP_GAMMA, LP_DETOUR, LP_ESCAPE_SHIELD, LP_RADIUS,
+    LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_SHIELD, LS_ACTION, LS_COUNT, LS_GOAL,
+    LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_TAKEN, LS_X, LS_Y, NB_ID, NB_KNOWN, NB_NEXT_X,
+    NB_NEXT_Y, NB_ROW, NB_X, NB_Y,
 )
 from nnql_swarm.learning.known_map import track
 from nnql_swarm.learning.readings import ds_state, read_rows, shield_mask, uses_map
@@ -120,7 +122,8 @@ def choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, wid
     values[2] = beta * ds[2] + rest * ca2
     values[3] = beta * ds[3] + rest * ca3
     values[4] = beta * ds[4] + rest * ca4
-    mask = shield_mask(params[LP_READING], params[LP_STILL_SHIELD], ox, oy, nb, m, width, height) \
+    mask = shield_mask(params[LP_READING], params[LP_STILL_SHIELD], params[LP_ESCAPE_SHIELD], ox,
+                       oy, nb, m, width, height) \
         if params[LP_SHIELD] != 0 else 0
     greedy = -1  # the best allowed value; among equals, the largest tie-breaker
     for a in range(N_ACTIONS):

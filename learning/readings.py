@@ -93,28 +93,78 @@ def ds_reward(params, params_f, wmap, fx, fy, ox, oy, width, height, world_rewar
 
 
 @kernel
-def shield_mask(reading, still, ox, oy, nb, m, width, height):
-    """The actions the announcement shield forbids, as bits (bit ``a`` set: ``a`` forbidden);
-    ``still`` (``LP_STILL_SHIELD``): a neighbour whose intent is unknown and that was seen in the
-    same cell last step counts as staying, its cell forbidden like a parked agent's."""
+def shield_mask(reading, still, escape, ox, oy, nb, m, width, height):
+    """The actions the announcement shield forbids (:func:`forbids`), as bits (bit ``a`` set:
+    ``a`` forbidden); where it would forbid every action, it forbids none."""
     mask = 0
     for a in range(N_ACTIONS):
-        tx = target_x(ox, a, width)
-        ty = target_y(oy, a, height)
-        for j in range(m):
-            cx = nb[j][NB_X]
-            cy = nb[j][NB_Y]
-            if reading == READ_QL or reading == READ_DAQL:
-                hit = tx == cx and ty == cy
-            elif nb[j][NB_KNOWN] != 0:
-                nx = nb[j][NB_NEXT_X]
-                ny = nb[j][NB_NEXT_Y]
-                hit = (tx == nx and ty == ny) or (nx == ox and ny == oy and tx == cx and ty == cy)
-            else:
-                stays = nb[j][NB_PARKED] != 0 or (still != 0 and nb[j][NB_PREV_X] == cx
-                                                   and nb[j][NB_PREV_Y] == cy)
-                hit = stays and tx == cx and ty == cy
-            if hit:
-                mask |= 1 << a
-                break
+        if forbids(reading, still, escape, ox, oy, a, nb, m, width, height):
+            mask |= 1 << a
     return 0 if mask == (1 << N_ACTIONS) - 1 else mask
+
+
+@kernel
+def forbids(reading, still, escape, ox, oy, a, nb, m, width, height):
+    """Whether the announcement shield's rules forbid action ``a`` to the agent at ``(ox, oy)``:
+    a move into a cell a known neighbour announced, into a known neighbour's cell when it
+    announced moving into this one, or into a parked agent (QL's and DAQL's reading: into any
+    neighbour's cell). ``still`` (``LP_STILL_SHIELD``): a neighbour whose intent is unknown and
+    that was seen in the same cell last step counts as staying, its cell forbidden like a parked
+    agent's; ``escape`` (``LP_ESCAPE_SHIELD``): the cell of a neighbour whose intent is unknown
+    is forbidden when that neighbour has no cell it could surely move on to (:func:`cornered`)."""
+    tx = target_x(ox, a, width)
+    ty = target_y(oy, a, height)
+    for j in range(m):
+        cx = nb[j][NB_X]
+        cy = nb[j][NB_Y]
+        if reading == READ_QL or reading == READ_DAQL:
+            hit = tx == cx and ty == cy
+        elif nb[j][NB_KNOWN] != 0:
+            nx = nb[j][NB_NEXT_X]
+            ny = nb[j][NB_NEXT_Y]
+            hit = (tx == nx and ty == ny) or (nx == ox and ny == oy and tx == cx and ty == cy)
+        elif tx != cx or ty != cy:
+            hit = False
+        else:
+            hit = (nb[j][NB_PARKED] != 0
+                   or (still != 0 and nb[j][NB_PREV_X] == cx and nb[j][NB_PREV_Y] == cy)
+                   or (escape != 0 and cornered(ox, oy, cx, cy, nb, m, width, height)))
+        if hit:
+            return True
+    return False
+
+
+@kernel
+def cornered(ox, oy, cx, cy, nb, m, width, height):
+    """Whether the neighbour at ``(cx, cy)``, whose intent the agent at ``(ox, oy)`` does not
+    know, has no cell it could surely move on to if pushed: a cell next to it is sure when it is
+    on the grid, not the agent's own (that would be a swap), held by no body in the rows, announced
+    by no neighbour whose intent is known, and next to no other body whose intent is unknown
+    (which might step into it first; a parked agent never moves, and a wall beyond the
+    negotiation's reach counts as such a body: the rows do not tell it from an agent). Pushing a
+    neighbour only where it has such a cell is priority inheritance one level deep; the
+    neighbour, pushed, reads its own neighbours the same way."""
+    for a in range(N_ACTIONS):
+        if a == STAY:
+            continue
+        fx = target_x(cx, a, width)
+        fy = target_y(cy, a, height)
+        if (fx == cx and fy == cy) or (fx == ox and fy == oy):
+            continue
+        sure = True
+        for k in range(m):
+            kx = nb[k][NB_X]
+            ky = nb[k][NB_Y]
+            if nb[k][NB_KNOWN] != 0:
+                taken = (kx == fx and ky == fy) or (nb[k][NB_NEXT_X] == fx
+                                                    and nb[k][NB_NEXT_Y] == fy)
+            else:
+                taken = (kx == fx and ky == fy) or (
+                    nb[k][NB_PARKED] == 0 and (kx != cx or ky != cy)
+                    and abs(kx - fx) + abs(ky - fy) == 1)
+            if taken:
+                sure = False
+                break
+        if sure:
+            return False
+    return True

@@ -45,14 +45,16 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
 
 LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
                    "known_state", "shared", "shield", "lookahead", "still_terminal",
-                   "stay_reward", "ds_state", "ds_reward", "detour", "still_shield")
+                   "stay_reward", "ds_state", "ds_reward", "detour", "still_shield",
+                   "escape_shield")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
 PAPER: dict[str, Any] = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction_radius": VIEW_RADIUS,
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
          "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
-         "ds_state": "goal", "ds_reward": "euclid", "detour": False, "still_shield": False}
+         "ds_state": "goal", "ds_reward": "euclid", "detour": False, "still_shield": False,
+         "escape_shield": False}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -77,7 +79,7 @@ PRESETS: dict[str, dict] = {
     "shield-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
                     "wait_rule": "meet"},
     "path-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
-                  "wait_rule": "meet", **PATH},
+                  "wait_rule": "meet", **PATH, "escape_shield": True},
     "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
     "daql": {**PAPER, **BEST, "algo": "daql"},
     "oracle": {**PAPER, "algo": "oracle"},
@@ -87,8 +89,8 @@ assert all(set(preset) == set(LEARNING_FIELDS) for preset in PRESETS.values())
 
 DEFAULT_PRESET = "path-nnql"
 """The learning options of a swarm run unless told otherwise: the best of the swarm experiment
-(docs/swarm.md: the paper's nnQL with the shield, destination seeking on the walls each agent
-has seen)."""
+(docs/swarm.md: the paper's nnQL with the shield and its escape rule, destination seeking on the
+walls each agent has seen)."""
 _DEFAULT = PRESETS[DEFAULT_PRESET]
 
 
@@ -136,6 +138,11 @@ class SwarmConfig:
     still_shield: bool = option(_DEFAULT["still_shield"], "the shield (--shield) also forbids "
                                 "the cell of a neighbour whose intent is unknown and that did "
                                 "not move last step (taken as staying)")
+    escape_shield: bool = option(_DEFAULT["escape_shield"], "the shield (--shield) also forbids "
+                                 "the cell of a neighbour whose intent is unknown unless a cell "
+                                 "next to it is surely free to move on to: empty, announced by "
+                                 "nobody, next to no other agent of unknown intent (priority "
+                                 "inheritance, one level deep)")
     lookahead: int = option(_DEFAULT["lookahead"], "n of nnQL: the neighbour's state is its announced cell n "
                             "steps ahead (in-process only for n > 1)", metavar="N")
     still_terminal: bool = option(_DEFAULT["still_terminal"], "a step that went nowhere ends its destination-seeking "
@@ -317,6 +324,7 @@ class SwarmConfig:
         data.setdefault("ds_reward", "euclid")
         data.setdefault("detour", False)
         data.setdefault("still_shield", False)
+        data.setdefault("escape_shield", False)
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:

@@ -216,10 +216,10 @@ def test_every_kth_action_of_the_learners_lifetime_is_random():
     assert agent.state[LS_TAKEN] == 8
 
 
-def mask_of(reading, own, neighbours, still=0):
+def mask_of(reading, own, neighbours, still=0, escape=0):
     agent = Agent(reading)
     nb, m = agent.rows(neighbours)
-    mask = shield_mask(reading, still, *own, nb, m, SIZE, SIZE)
+    mask = shield_mask(reading, still, escape, *own, nb, m, SIZE, SIZE)
     return {a for a in range(N_ACTIONS) if mask >> a & 1}
 
 
@@ -249,6 +249,31 @@ def test_the_still_shield_takes_a_neighbour_seen_standing_still_as_staying():
     # A known intent outranks the memory: the announced move is what the shield reads.
     leaving = [neighbour(1, 4, 5, next_cell=(3, 5), previous=(4, 5))]
     assert mask_of(READ_NNQL, own, leaving, still=1) == set()
+
+
+def test_the_escape_shield_pushes_a_neighbour_only_where_it_surely_has_a_way_on():
+    own = (5, 5)
+    pushed = neighbour(1, 6, 5)  # intent unknown, right of the agent
+    # Free cells beyond it, above and below it: it may move on, the push is allowed.
+    assert mask_of(READ_NNQL, own, [pushed], escape=1) == set()
+    walled = [pushed, neighbour(20, 7, 5), neighbour(21, 6, 4), neighbour(22, 6, 6)]
+    assert mask_of(READ_NNQL, own, walled, escape=1) == {RIGHT}
+    assert mask_of(READ_NNQL, own, walled, escape=0) == set()
+    # Its one empty cell is not sure if a known neighbour announced it...
+    announced = [*walled[:3], neighbour(2, 7, 6, next_cell=(6, 6))]
+    assert mask_of(READ_NNQL, own, announced, escape=1) == {RIGHT}
+    # ... or if another body whose intent is unknown stands next to it, and might step in first;
+    contested = [*walled[:3], neighbour(3, 6, 7)]
+    assert mask_of(READ_NNQL, own, contested, escape=1) == {RIGHT}
+    # a parked agent next to it never moves, and a known one went elsewhere: it is sure.
+    parked_by = [*walled[:3], neighbour(3, 6, 7, parked=True), neighbour(4, 5, 6, next_cell=(4, 6))]
+    assert mask_of(READ_NNQL, own, parked_by, escape=1) == set()
+    # The agent's own cell is no way on (that would be a swap), nor the grid's edge.
+    corner = [neighbour(1, 10, 9), neighbour(20, 9, 9), neighbour(21, 10, 8)]
+    assert mask_of(READ_NNQL, (10, 10), corner, escape=1) == {UP}
+    # A neighbour whose intent is known is read by its announcement, not by its room.
+    leaving = [neighbour(1, 6, 5, next_cell=(6, 4)), neighbour(20, 7, 5), neighbour(22, 6, 6)]
+    assert mask_of(READ_NNQL, own, leaving, escape=1) == set()
 
 
 def test_the_shield_filters_greedy_and_random_choices():

@@ -179,7 +179,7 @@ def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topol
     """The paper's reading (each agent its own tables) and the best options (one table shared
     over Zenoh, the direction-aware reading), the default with every agent a client of the
     world (the layout of 32 agents and more), a grid with walls, the default (``path-nnql``:
-    destination seeking on the walls each agent has seen) there, and the direction-aware
+    destination seeking on the walls each agent has seen, the escape shield) there, and the direction-aware
     reading under the ``meet`` rule (a parked neighbour known to stay without an answer), the
     default with the still shield (neighbours' cells a tick ago), and the ``step-aside``
     on-target rule under both wait rules (arrived agents negotiate and make way): the same
