@@ -153,7 +153,7 @@ def run(config: SwarmConfig, out: Path, bare: bool) -> tuple[int, Wire]:
         wire.queryables[intent_key] = node._on_query
         agents.append(node)
     for i in range(n):  # the last one opens the first tick
-        world.feed(world.machine.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, i), True)
+        world.feed(world.protocol.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, i), True)
     while not world.world.finished:
         if not wire.queue:
             raise RuntimeError(f"nothing to deliver at tick {world.world.tick}")
