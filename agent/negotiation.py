@@ -94,8 +94,9 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     cells = {j: (jx, jy) for j, jx, jy in near}
     ranks = {j: priority_rank(j, tick, n) for j in cells}
     waiters = sorted((ranks[j], j) for j, (jx, jy) in cells.items()
-                     if awaits_answer(ranks[j], rank, jx, jy, x, y, radius, meet, j in parked,
-                                      False))
+                     if ranks[j] > rank  # a cheap cut: only the lower-ranked wait for it
+                     and awaits_answer(ranks[j], rank, jx, jy, x, y, radius, meet, j in parked,
+                                       False))
     if not waiters or not plans_are_known(config):
         return [j for _, j in waiters]
     cells[me], ranks[me] = (x, y), rank
@@ -103,8 +104,9 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     for w_rank, w in waiters:
         wx, wy = cells[w]
         waiting_for = [j for j, (jx, jy) in cells.items()
-                       if awaits_answer(w_rank, ranks[j], wx, wy, jx, jy, radius, meet, False,
-                                        j in parked)]
+                       if ranks[j] < w_rank
+                       and awaits_answer(w_rank, ranks[j], wx, wy, jx, jy, radius, meet, False,
+                                         j in parked)]
         if me in plan_asks(waiting_for, cells, ranks.__getitem__, radius, meet):
             answered.append(w)
     return answered

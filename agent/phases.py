@@ -4,10 +4,11 @@
 import enum
 from dataclasses import dataclass, field
 
+from nnql_swarm.machines.phases import Named
 from nnql_swarm.protocol.messages import Observation
 
 
-class Phase(enum.Enum):
+class Phase(Named):
     """Where an agent is in its run (see the module docstring)."""
 
     PEERS = "waiting to see every other agent"
@@ -17,7 +18,7 @@ class Phase(enum.Enum):
     STOPPED = "stopped"
 
 
-class Event(enum.Enum):
+class Event(Named):
     """What moves an agent from one phase to another."""
 
     READY = "every other agent seen, or the wait for them over"

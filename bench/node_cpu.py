@@ -13,9 +13,12 @@ N-1 -> world) can be added up from them.
 On a small shared machine the swarm's speed drifts within minutes; this figure drifts much
 less, but it is still best compared between runs made one after the other. It counts what runs
 hot in one process: in the swarm, each process wakes from cold caches and the same code takes
-several times as long (docs/performance.md).
+several times as long (docs/performance.md). With ``--cpu-time`` each handler is timed by its
+thread's CPU time: the time other processes take the cores, and the checkpoints' waits for the
+disk, drop out (what those processes do to the caches does not).
 
     python -m bench.node_cpu --agents 8 --episodes 20 --repeats 5
+    python -m bench.node_cpu --agents 8 --episodes 20 --repeats 7 --cpu-time
 """
 
 import argparse
@@ -64,9 +67,11 @@ class _Sample:
 
 
 class Wire:
-    """Every message sent, delivered in order; each delivery timed by the handler's kind."""
+    """Every message sent, delivered in order; each delivery timed by the handler's kind, on
+    ``clock``."""
 
-    def __init__(self) -> None:
+    def __init__(self, clock=time.perf_counter) -> None:
+        self.clock = clock
         self.queue: collections.deque = collections.deque()
         self.subscribers: dict[str, list] = collections.defaultdict(list)
         self.queryables: dict[str, object] = {}
@@ -77,7 +82,7 @@ class Wire:
         self.queue.append((kind, handler, item))
 
     def drain(self) -> None:
-        clock = time.perf_counter
+        clock = self.clock
         while self.queue:
             kind, handler, item = self.queue.popleft()
             start = clock()
@@ -130,10 +135,12 @@ class _LearnNothing(AgentBrain):
         return STAY
 
 
-def run(config: SwarmConfig, out: Path, bare: bool) -> tuple[int, Wire]:
-    """Run ``config`` through the real handlers over a :class:`Wire`; (ticks, the wire)."""
+def run(config: SwarmConfig, out: Path, bare: bool,
+        clock=time.perf_counter) -> tuple[int, Wire]:
+    """Run ``config`` through the real handlers over a :class:`Wire` timed on ``clock``;
+    (ticks, the wire)."""
     zenoh.handlers.Callback = _Callback  # the nodes build their handlers at call time
-    wire = Wire()
+    wire = Wire(clock)
     transport = TransportSettings()
     run_id, n = config.run_id, config.n_agents
     world = WorldNode(WorldOptions(config, transport, out), _Session(wire))
@@ -153,7 +160,7 @@ def run(config: SwarmConfig, out: Path, bare: bool) -> tuple[int, Wire]:
         wire.queryables[intent_key] = node._on_query
         agents.append(node)
     for i in range(n):  # the last one opens the first tick
-        world.feed(world.machine.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, i), True)
+        world.feed(world.protocol.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, i), True)
     while not world.world.finished:
         if not wire.queue:
             raise RuntimeError(f"nothing to deliver at tick {world.world.tick}")
@@ -172,6 +179,9 @@ def main() -> int:
     p.add_argument("--repeats", type=int, default=5)
     add_preset_option(p)
     p.add_argument("--bare", action="store_true", help="agents learn nothing and stay")
+    p.add_argument("--cpu-time", action="store_true",
+                   help="time by the thread's CPU time rather than the wall clock: steadier on "
+                        "a shared machine, and without the checkpoints' waits for the disk")
     args = p.parse_args()
     n = args.agents
     config = swarm_config(args.preset, run_id="cpu", n_agents=n, episodes=args.episodes,
@@ -179,7 +189,8 @@ def main() -> int:
     per_tick: dict[str, list[float]] = collections.defaultdict(list)
     for r in range(args.repeats):
         with tempfile.TemporaryDirectory() as tmp:
-            ticks, wire = run(config, Path(tmp), args.bare)
+            ticks, wire = run(config, Path(tmp), args.bare,
+                              time.thread_time if args.cpu_time else time.perf_counter)
         for kind in wire.seconds:
             per_tick[kind].append(1e6 * wire.seconds[kind] / ticks)
         per_tick["whole tick"].append(1e6 * sum(wire.seconds.values()) / ticks)

@@ -26,10 +26,10 @@ def awaited_cells(obs: Observation, config: SwarmConfig) -> list[tuple[int, int,
     if meet and arrived:
         return []  # what awaits_answer says of every neighbour, without asking it
     (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
-    parked = set(obs.parked)
+    tick, parked = obs.tick, obs.parked
     return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
-            if awaits_answer(rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, meet,
-                             arrived, j in parked)]
+            if (other := priority_rank(j, tick, n)) < rank  # a cheap cut: higher-ranked only
+            and awaits_answer(rank, other, x, y, jx, jy, radius, meet, arrived, j in parked)]
 
 
 def staying(obs: Observation, config: SwarmConfig) -> list[int]:

@@ -1,8 +1,9 @@
 """What the two protocol machines (``agent.machine``, ``world.machine``) share: a phase named by
 an enum, moved only by the machine's one transition table, and the way every input runs.
 
-A machine lists its transitions as ``{(phase, event): next phase}`` (h11's manner): an event
-that its table does not allow in the current phase is a bug, and raises :class:`PhaseError`.
+A machine lists its transitions as ``{(phase, event): next phase}`` (h11's manner), its phases
+and events as :class:`Named` enums: an event that its table does not allow in the current phase
+is a bug, and raises :class:`PhaseError`.
 Each input is a method decorated :func:`an_input` (nothing happens once the machine is in its
 final phase) or :func:`any_phase_input` (it runs in every phase, and says itself what it does in
 the final one); either way it returns the effects (``machines.effects``) it caused, in order.
@@ -14,6 +15,14 @@ import logging
 from typing import ClassVar
 
 from nnql_swarm.machines.effects import Log
+
+
+class Named(enum.Enum):
+    """The base of a machine's phases and events. A member is the one object of its name, and
+    hashes as that object: the transition table is looked up at every input, and
+    ``enum.Enum`` hashes a member by its name, in Python."""
+
+    __hash__ = object.__hash__
 
 
 class PhaseError(RuntimeError):
@@ -39,22 +48,24 @@ class Machine:
 
 
 def an_input(handler):
-    """An input of a :class:`Machine`: its effects, in order; none in its final phase."""
+    """An input of a :class:`Machine` (its arguments positional): its effects, in order; none in
+    its final phase."""
     @functools.wraps(handler)
-    def run(self, *args, **kwargs):
+    def run(self, *args):
         out = self._out = []
         if self.phase is not self.FINAL:
-            handler(self, *args, **kwargs)
+            handler(self, *args)
         return out
     return run
 
 
 def any_phase_input(handler):
-    """An input of a :class:`Machine` that runs in every phase: its effects, in order."""
+    """An input of a :class:`Machine` (its arguments positional) that runs in every phase: its
+    effects, in order."""
     @functools.wraps(handler)
-    def run(self, *args, **kwargs):
+    def run(self, *args):
         out = self._out = []
-        handler(self, *args, **kwargs)
+        handler(self, *args)
         return out
     return run
 

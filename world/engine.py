@@ -27,7 +27,7 @@ simulator runs compiled. The buffers hold every body: the agents, then the run's
 """
 
 from collections.abc import Iterator
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -247,11 +247,11 @@ class SwarmWorld:
         checkpointed, with those records: what the next episode starts from)."""
         missed = tuple(i for i, a in enumerate(actions) if a is None)
         self._missed += len(missed)
-        report = self._end_tick(missed, learned or {}) if self.ending else \
-            self._move(actions, missed)
+        records = None if self.table is None else learned or {}
+        report = self._end_tick(missed, learned or {}, records) if self.ending else \
+            self._move(actions, missed, records)
         if self.table is not None:
-            records = learned or {}
-            report = replace(report, records=records)
+            assert records is not None
             self._updates = self.table.apply(records)
             for agent, start in list(self._syncing.items()):
                 if agent in self._sync_from_next:  # its first slice goes with the next tick
@@ -275,13 +275,14 @@ class SwarmWorld:
                 "shortest_sum": self._shortest, "agent_steps": row[ROW_AGENT_STEPS],
                 "end_tick": self.tick, **field_columns(on_goal, soc, makespan, n)}
 
-    def _end_tick(self, missed: tuple[int, ...], learned: dict) -> TickReport:
+    def _end_tick(self, missed: tuple[int, ...], learned: dict,
+                  records: dict | None) -> TickReport:
         """The episode's end tick: nothing moves; the row is final; the next episode starts."""
         c = self.config
         stays = (STAY,) * c.n_agents
         report = TickReport(self.tick, self.episode, False, stays, (), missed, (),
                             self.episode_row(),
-                            None if self.table is None else self.table.state(learned))
+                            None if self.table is None else self.table.state(learned), records)
         self.tick += 1
         if self.episode + 1 >= c.episodes:
             self.finished = True
@@ -289,7 +290,8 @@ class SwarmWorld:
             self._start_episode(self.episode + 1)
         return report
 
-    def _move(self, actions: list[int | None], missed: tuple[int, ...]) -> TickReport:
+    def _move(self, actions: list[int | None], missed: tuple[int, ...],
+              records: dict | None) -> TickReport:
         """A step of the episode: everyone moves at once; rewards, arrivals and the row."""
         c = self.config
         arrived_before = self._outcome[3]  # as this tick's observations showed it
@@ -310,7 +312,7 @@ class SwarmWorld:
                         else frozenset(i for i in range(n) if arrived_before[i]))
         report = TickReport(self.tick, self.episode, True, tuple(python_values(chosen)[:n]),
                             tuple(i for i, hit in enumerate(collided[:n]) if hit), missed,
-                            violations, None)
+                            violations, None, None, records)
         self.tick += 1
         return report
 

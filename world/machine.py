@@ -44,7 +44,7 @@ from nnql_swarm.protocol.config import START_S_PER_AGENT, SwarmConfig
 from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.inbox import Inbox
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Intent, encode
-from nnql_swarm.machines.phases import EffectLog, Machine, an_input
+from nnql_swarm.machines.phases import EffectLog, Machine, Named, an_input
 from nnql_swarm.machines.trace import CLOSE, TickTrace
 from nnql_swarm.world.engine import SwarmWorld
 from nnql_swarm.world.records import BARRED, FORGED, UNCHECKED, Decision, RecordCheck, decides
@@ -71,7 +71,7 @@ agent that came up in the meantime is told too."""
 _NO_TRACE = TickTrace("world", None)
 
 
-class Phase(enum.Enum):
+class Phase(Named):
     """Where the world is in its run (see the module docstring)."""
 
     STARTING = "waiting for every agent to come alive"
@@ -80,7 +80,7 @@ class Phase(enum.Enum):
     DONE = "done"
 
 
-class Event(enum.Enum):
+class Event(Named):
     """What moves the world from one phase to another."""
 
     STARTED = "every agent alive: the first tick opens"
