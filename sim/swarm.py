@@ -30,7 +30,9 @@ from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
 from nnql_swarm.kernel.jit import batch_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
-from nnql_swarm.world.rules import field_costs, shared_cells, swaps_through, world_step
+from nnql_swarm.world.rules import (
+    Bodies, Outcome, Rules, Scratch, Score, field_costs, shared_cells, swaps_through, world_step,
+)
 
 ORACLE_SCRATCH = 12
 """Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
@@ -162,6 +164,11 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
     last_wall = n if options[OPT_WALLS] != 0 else learners  # walls: bodies learners .. n - 1
     step_aside = options[OPT_STEP_ASIDE] != 0
     alpha, gamma = params_f[FP_ALPHA], params_f[FP_GAMMA]
+    rules = Rules(n, width, height, count_swaps, step_aside, goal_reward, stay_reward)
+    bodies = Bodies(x, y, goal_x, goal_y, learns, arrived, arrival)
+    outcome = Outcome(before_x, before_y, collided, r_ds, r_ca)
+    scratch = Scratch(occupancy, blocked)
+    score = Score(row, row_f)
     shortest = 0
     for i in range(n):
         x[i] = starts[i, 0]
@@ -261,9 +268,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
         for i in range(n):
             prev_x[i] = x[i]
             prev_y[i] = y[i]
-        everyone = world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width,
-                              height, count_swaps, step_aside, goal_reward, stay_reward, before_x,
-                              before_y, collided, r_ds, r_ca, occupancy, blocked, row, row_f)
+        everyone = world_step(rules, bodies, actions, outcome, scratch, score)
         out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, occupancy)
         if count_swaps:
             out[OUT_VIOLATIONS] += swaps_through(before_x, before_y, x, y, n, width, occupancy)
