@@ -22,7 +22,8 @@ Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``lear
 
 from nnql_swarm.learning.fields import (
     FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
-    NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
+    NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL, Grid,
+    LearnerBuffers, Sight,
 )
 from nnql_swarm.learning.learner import decide, finish, make_way, planned_cell
 from nnql_swarm.learning.record import apply_record, record_outcome
@@ -169,6 +170,7 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
     outcome = Outcome(before_x, before_y, collided, r_ds, r_ca)
     scratch = Scratch(occupancy, blocked)
     score = Score(row, row_f)
+    grid = Grid(width, height, x, y, learners, last_wall)
     shortest = 0
     for i in range(n):
         x[i] = starts[i, 0]
@@ -230,24 +232,21 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived,
                                actions, decided, lookahead, not stops, params, q_ds, tables,
                                goal_x, goal_y, width, height, step_aside, nb)
+            learner = LearnerBuffers(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
+                                     wmap[i], rec[i], rec_f[i], values)
+            sight = Sight(x[i], y[i], goal_x[i], goal_y[i], nb, m, step == 0)
             if stops:
-                written = finish(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
-                                 wmap[i], x, y, learners, last_wall, step == 0, x[i], y[i],
-                                 goal_x[i], goal_y[i], nb, m, width, height, rec[i], rec_f[i],
-                                 learning and not shared)
+                written = finish(learner, grid, sight, learning and not shared)
                 actions[i] = STAY
                 if step_aside and not ending:  # on its goal: it makes way if told to
                     m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns,
                                        arrived, actions, decided, lookahead, True, params, q_ds,
                                        tables, goal_x, goal_y, width, height, step_aside, nb)
-                    actions[i] = make_way(x[i], y[i], nb, m, learners, width, height,
-                                          ties[i, step])
+                    sight = Sight(x[i], y[i], goal_x[i], goal_y[i], nb, m, False)
+                    actions[i] = make_way(sight, learners, grid, ties[i, step])
             else:
-                actions[i], written = decide(
-                    q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], wmap[i], x, y,
-                    learners, last_wall, step == 0, x[i], y[i], goal_x[i], goal_y[i], nb, m,
-                    width, height, random_actions[i, step],
-                    ties[i, step], values, rec[i], rec_f[i], learning and not shared)
+                actions[i], written = decide(learner, grid, sight, random_actions[i, step],
+                                             ties[i, step], learning and not shared)
             pending_rec[i] = learning and shared and written
             decided[i] = True
         if record:

@@ -38,8 +38,8 @@ from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SEND
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
     FIELD_COLUMNS, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD,
-    ROW_STEPS, Bodies, Cell, Outcome, Rules, Scratch, Score, field_columns, field_costs, shared_cells,
-    swaps_through, world_step,
+    ROW_STEPS, Bodies, Cell, Outcome, Rules, Scratch, Score, field_columns, field_costs,
+    shared_cells, swaps_through, world_step,
 )
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
