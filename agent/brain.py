@@ -16,7 +16,7 @@ read as one whose intent is unknown, from its current cell. A QL agent asks nobo
 import numpy as np
 
 from nnql_swarm.learning.fields import (
-    LP_READING, LP_SHIELD, LP_STILL_SHIELD, NB_FIELDS, READ_DAQL, READINGS,
+    LP_READING, LP_SHIELD, LP_STILL_SHIELD, NB_FIELDS, READ_DAQL, READINGS, Grid, Sight,
 )
 from nnql_swarm.learning.learner import decide, draw_noise, finish, make_way
 from nnql_swarm.learning.neighbours import NeighbourRows
@@ -60,6 +60,8 @@ class AgentBrain:
         self._seen: tuple = (-1, {}, None)  # DAQL: last tick's cells, and the agent's own
         self._was_at: tuple[int, int] | None = None  # DAQL: the agent's cell a tick ago
         self._rows = NeighbourRows(config)
+        self._grid = Grid(config.width, config.height, self._rows.wall_x, self._rows.wall_y, 0,
+                          len(self._rows.wall_x))
 
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         """The neighbours whose intents this agent decides with, of those it waits for
@@ -96,12 +98,9 @@ class AgentBrain:
         stops = obs.arrived or obs.episode_end
         near = self._neighbour_rows(obs, {} if stops else answers, not stops)
         nb, m = rows(near, NB_FIELDS), len(near)
-        c, wx, wy = self.config, self._rows.wall_x, self._rows.wall_y
+        sight = Sight(x, y, gx, gy, nb, m, obs.step == 0)
         if stops:
-            written = finish(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
-                             learner.state, learner.state_f, learner.wmap, wx, wy, 0, len(wx),
-                             obs.step == 0, x, y, gx, gy, nb, m, c.width, c.height, learner.rec,
-                             learner.rec_f, not shared)
+            written = finish(learner.buffers, self._grid, sight, not shared)
             action = STAY
             if not obs.episode_end and not c.parks:
                 action = self._make_way(obs, answers)
@@ -109,11 +108,8 @@ class AgentBrain:
             noise = self._noise
             assert noise is not None, "prepare draws the episode's noise before a decision"
             random_actions, ties = noise
-            action, written = decide(
-                learner.q_ds, learner.q_ca, learner.params, learner.params_f, learner.state,
-                learner.state_f, learner.wmap, wx, wy, 0, len(wx), obs.step == 0, x, y, gx, gy,
-                nb, m, c.width, c.height, random_actions[obs.step], floats(ties[obs.step]),
-                learner.values, learner.rec, learner.rec_f, not shared)
+            action, written = decide(learner.buffers, self._grid, sight, random_actions[obs.step],
+                                     floats(ties[obs.step]), not shared)
         self.learned = (learner.record(),) if shared and written else ()
         return int(action)
 

@@ -83,7 +83,9 @@ from pettingzoo import ParallelEnv
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
 from nnql_swarm.kernel.jit import flags, floats, ints, python_values
 from nnql_swarm.protocol.ranks import WAIT_RULES, awaits_answer, priority_rank
-from nnql_swarm.world.rules import GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, world_step
+from nnql_swarm.world.rules import (
+    GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, Bodies, Outcome, Rules, Scratch, Score, world_step,
+)
 from nnql_swarm.world.scenario import swarm_episode
 
 NOT_IN_VIEW = N_STATES
@@ -177,12 +179,14 @@ class SwarmGridEnv(ParallelEnv):
             chosen[self._index[agent]] = int(actions.get(agent, STAY))
         x, y, arrived = ints(self._x), ints(self._y), flags(self._arrived)
         collided, r_ds, r_ca = flags([False] * n), floats([0.0] * n), floats([0.0] * n)
-        world_step(x, y, ints(self._goal_x), ints(self._goal_y), flags([True] * n), arrived,
-                   ints([0] * n), ints(chosen), n, self.width, self.height, self.count_swaps,
-                   False, self.goal_reward,
-                   STAY_REWARD, ints([0] * n), ints([0] * n), collided, r_ds, r_ca,
-                   ints([0] * (self.width * self.height)), flags([False] * n),
-                   ints([0] * ROW_INTS), floats([0.0] * ROW_FLOATS))
+        rules = Rules(n, self.width, self.height, self.count_swaps, False, self.goal_reward,
+                      STAY_REWARD)
+        bodies = Bodies(x, y, ints(self._goal_x), ints(self._goal_y), flags([True] * n), arrived,
+                        ints([0] * n))
+        outcome = Outcome(ints([0] * n), ints([0] * n), collided, r_ds, r_ca)
+        world_step(rules, bodies, ints(chosen), outcome,
+                   Scratch(ints([0] * (self.width * self.height)), flags([False] * n)),
+                   Score(ints([0] * ROW_INTS), floats([0.0] * ROW_FLOATS)))
         self._x, self._y, self._arrived = python_values(x), python_values(y), python_values(arrived)
         collided, reward_ds, reward_ca = map(python_values, (collided, r_ds, r_ca))
         self._steps += 1

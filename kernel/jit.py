@@ -26,6 +26,7 @@ says otherwise.
 import hashlib
 import os
 from pathlib import Path
+from typing import Union
 
 import numpy as np
 
@@ -37,6 +38,11 @@ COMPILED = os.environ.get(MODE_VARIABLE, "compiled") != PLAIN
 
 KERNEL_ROOMS = ("kernel", "learning", "protocol", "sim", "world")
 """The packages whose modules may define kernel functions."""
+
+
+Buffer = Union[np.ndarray, list]
+"""A kernel buffer, as the fields of the named tuples that group a kernel's arguments: an array
+when compiled, a list when not."""
 
 
 def cache_directory() -> Path:

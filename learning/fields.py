@@ -1,12 +1,16 @@
 """The learner's buffers, field by field, and its parameters for a run's options.
 
 Every buffer of the learner's kernel (``learning.learner``) is a flat array or list whose fields
-are named here: ``params`` (``LP_*``) and ``params_f`` (``FP_*``), the learner's state ``state``
-(``LS_*``) and ``state_f`` (``LF_*``), a neighbour row ``nb[j]`` (``NB_*``), and a learning
+are named here, as are the named tuples its arguments come in (:class:`LearnerBuffers`,
+:class:`Grid`, :class:`Sight`): ``params`` (``LP_*``) and ``params_f`` (``FP_*``), the learner's
+state ``state`` (``LS_*``) and ``state_f`` (``LF_*``), a neighbour row ``nb[j]`` (``NB_*``), and a learning
 record ``rec`` (``REC_*``) and ``rec_f`` (``RF_*``); with the readings (``READ_*``), destination
 seeking's states (``DS_*``) and rewards (``REWARD_*``) by name, and the sizes of the buffers.
 """
 
+from typing import NamedTuple
+
+from nnql_swarm.kernel.jit import Buffer
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 
 READ_QL, READ_NNQL, READ_DIR, READ_DAQL = 0, 1, 2, 3
@@ -63,6 +67,46 @@ RF_FIELDS = 2
 rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no bootstrap); its floats are the two rewards
 (destination seeking's as ``LP_DS_REWARD`` reads it: the world's, or the learner's own from its
 known map)."""
+
+
+class LearnerBuffers(NamedTuple):
+    """One learner's buffers, as its kernel reads them: the tables ``q_ds`` and ``q_ca``,
+    ``params`` and ``params_f``, its state ``state`` and ``state_f``, its known map ``wmap``
+    (``learning.known_map``), its learning record ``rec`` and ``rec_f``, and ``values``, scratch
+    for the five actions' values."""
+    q_ds: Buffer
+    q_ca: Buffer
+    params: Buffer
+    params_f: Buffer
+    state: Buffer
+    state_f: Buffer
+    wmap: Buffer
+    rec: Buffer
+    rec_f: Buffer
+    values: Buffer
+
+
+class Grid(NamedTuple):
+    """The grid as a learner meets it: its size and the run's walls, ``first .. last - 1`` of
+    ``wall_x``, ``wall_y``, in cell order."""
+    width: int
+    height: int
+    wall_x: Buffer
+    wall_y: Buffer
+    first: int
+    last: int
+
+
+class Sight(NamedTuple):
+    """What a learner observes at a tick: its cell, its goal, its neighbour rows (the first
+    ``m`` of ``nb``), and whether this is the episode's first observation (``starts``)."""
+    x: int
+    y: int
+    goal_x: int
+    goal_y: int
+    nb: Buffer
+    m: int
+    starts: bool
 
 
 def learner_params(config) -> tuple[list[int], list[float]]:

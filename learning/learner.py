@@ -43,8 +43,8 @@ the next cell of a shortest path on the known map; or the moves that bring the a
 it), its reward (``LP_DS_REWARD``: the world's Euclidean ``1/d``, the paper's; ``1/d`` with ``d``
 the path length; or a flat 1, 0.5, 0 for a path that got shorter, stayed, grew), and a detour
 around the agents it saw parked within reach (``LP_DETOUR``). The caller passes the run's walls
-(``wall_x``, ``wall_y``, ``first .. last - 1``, in cell order) and whether the observation is
-an episode's first (``starts``).
+with the grid (``learning.fields.Grid``) and whether the observation is an episode's first with
+what the agent sees (``learning.fields.Sight``).
 
 Completing a transition writes a *learning record* (``rec``, ``rec_f``; ``learning.record``),
 applied by ``apply_record``: at once for an independent learner, or, where a swarm shares one
@@ -55,10 +55,11 @@ the sender's own transition wrote (``world.records``, with ``learning.readings.r
 (``learning.record.write_updates``).
 
 Buffers (numpy arrays when compiled, Python lists in an agent process; their fields in
-``learning.fields``): ``params`` (``LP_*``), ``params_f`` (``FP_*``), the learner's state
-``state`` (``LS_*``) and ``state_f`` (``LF_*``), and the neighbour rows ``nb`` (``NB_*``), one per
-visible neighbour, in agent-id order (as the world lists them). The tables ``q_ds`` and ``q_ca``
-are numpy arrays either way. This module holds the choice and a tick's learning; the readings
+``learning.fields``), one learner's grouped as ``learning.fields.LearnerBuffers``: ``params``
+(``LP_*``), ``params_f`` (``FP_*``), the learner's state ``state`` (``LS_*``) and ``state_f``
+(``LF_*``); and the neighbour rows ``nb`` (``NB_*``) of a ``Sight``, one per visible neighbour,
+in agent-id order (as the world lists them). The tables ``q_ds`` and ``q_ca`` are numpy arrays
+either way. This module holds the choice and a tick's learning; the readings
 are in ``learning.readings``.
 """
 
@@ -87,10 +88,12 @@ def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.nd
 
 
 @kernel
-def choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, width, height,
-           random_action, ties, values):
+def choose(learner, grid, sight, random_action, ties):
     """Eq. 6-8 (and the random step): the action, with the transition it starts left pending.
     The five actions' sums are spelled out: it is the agent's hot path in plain Python."""
+    q_ca, params, params_f, state = learner.q_ca, learner.params, learner.params_f, learner.state
+    values, width, height = learner.values, grid.width, grid.height
+    ox, oy, nb, m = sight.x, sight.y, sight.nb, sight.m
     radius = params[LP_RADIUS]
     ca0 = ca1 = ca2 = ca3 = ca4 = 0.0
     count = 0
@@ -113,10 +116,11 @@ def choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, wid
         state[at + 2] = nb[j][NB_X]
         state[at + 3] = nb[j][NB_Y]
         count += 1
-    goal = ds_state(params, wmap, ox, oy, gx, gy, width, height)
+    goal = ds_state(params, learner.wmap, ox, oy, sight.goal_x, sight.goal_y, width,
+                    height)
     beta = params_f[FP_BETA]
     rest = 1.0 - beta
-    ds = q_ds[goal]
+    ds = learner.q_ds[goal]
     values[0] = beta * ds[0] + rest * ca0
     values[1] = beta * ds[1] + rest * ca1
     values[2] = beta * ds[2] + rest * ca2
@@ -148,45 +152,41 @@ assert N_ACTIONS == 5, "choose spells out five actions"
 
 
 @kernel
-def observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb,
-                m, starts):
-    """Where destination seeking reads the known map: the walls ``first .. last - 1`` of
-    ``wall_x``, ``wall_y`` in view of ``(ox, oy)`` learned, the parked neighbours within reach
-    taken as obstacles for the rest of the episode (``LP_DETOUR``; ``starts``: this observation
-    is an episode's first), the distance field to the goal made current
-    (``learning.known_map.track``)."""
+def observe_map(params, wmap, grid, sight):
+    """Where destination seeking reads the known map: the run's walls in view of the agent's
+    cell learned, the parked neighbours within reach taken as obstacles for the rest of the
+    episode (``LP_DETOUR``; ``sight.starts``: this observation is an episode's first), the
+    distance field to the goal made current (``learning.known_map.track``)."""
     if uses_map(params):
-        track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
-              params[LP_DETOUR], starts)
+        track(wmap, grid.wall_x, grid.wall_y, grid.first, grid.last, sight.x, sight.y,
+              sight.goal_x, sight.goal_y, grid.width, grid.height, sight.nb, sight.m,
+              params[LP_DETOUR], sight.starts)
 
 
 @kernel
-def decide(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first, last,
-           starts, ox, oy, gx, gy, nb, m, width, height, random_action, ties, values, rec, rec_f,
-           apply_now):
-    """Learn the walls in view (:func:`observe_map`; ``starts``: the episode's first
-    observation), complete the pending transition (its record applied at once if
-    ``apply_now``), then choose: :func:`finish`, then :func:`choose`. Returns the action and
-    whether a record was written."""
-    written = finish(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first,
-                     last, starts, ox, oy, gx, gy, nb, m, width, height, rec, rec_f, apply_now)
-    action = choose(q_ds, q_ca, params, params_f, state, wmap, ox, oy, gx, gy, nb, m, width,
-                    height, random_action, ties, values)
+def decide(learner, grid, sight, random_action, ties, apply_now):
+    """Learn the walls in view (:func:`observe_map`), complete the pending transition (its
+    record applied at once if ``apply_now``), then choose: :func:`finish`, then :func:`choose`
+    (``random_action`` and the five ``ties``: this step's noise). Returns the action and whether
+    a record was written."""
+    written = finish(learner, grid, sight, apply_now)
+    action = choose(learner, grid, sight, random_action, ties)
     return action, written
 
 
 @kernel
-def finish(q_ds, q_ca, params, params_f, state, state_f, wmap, wall_x, wall_y, first, last,
-           starts, ox, oy, gx, gy, nb, m, width, height, rec, rec_f, apply_now):
+def finish(learner, grid, sight, apply_now):
     """Complete the pending transition of a learner that stops (arrived, or the episode ended);
     its neighbours' rows carry no intent then. Returns whether a record was written."""
-    observe_map(params, wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m,
-                starts)
-    read_rows(params, ox, oy, nb, m)
-    written = complete(params, params_f, state, state_f, wmap, ox, oy, gx, gy, nb, m, width,
-                       height, rec, rec_f)
+    params, params_f, rec, rec_f = learner.params, learner.params_f, learner.rec, learner.rec_f
+    observe_map(params, learner.wmap, grid, sight)
+    read_rows(params, sight.x, sight.y, sight.nb, sight.m)
+    written = complete(params, params_f, learner.state, learner.state_f, learner.wmap, sight.x,
+                       sight.y, sight.goal_x, sight.goal_y, sight.nb, sight.m, grid.width,
+                       grid.height, rec, rec_f)
     if written and apply_now:
-        apply_record(q_ds, q_ca, rec, rec_f, params_f[FP_ALPHA], params_f[FP_GAMMA])
+        apply_record(learner.q_ds, learner.q_ca, rec, rec_f, params_f[FP_ALPHA],
+                     params_f[FP_GAMMA])
     return written
 
 
@@ -210,13 +210,14 @@ def planned_cell(q_ds, x, y, gx, gy, steps, width, height):
 
 
 @kernel
-def make_way(ox, oy, nb, m, learners, width, height, ties):
+def make_way(sight, learners, grid, ties):
     """Under the ``step-aside`` on-target rule, what an agent standing on its goal does: it
     stays, unless a neighbour whose intent it knows announced moving into its cell; then it
     steps to a neighbouring cell, a free one if it can (nobody there, nobody announced heading
     there), else one where a learner whose intent it does not know stands, which the
     announcement pushes on in turn (priority inheritance, in announcement order); among equals
     the largest tie-breaker. With nowhere to go it stays. It learns nothing from the step."""
+    ox, oy, nb, m, width, height = sight.x, sight.y, sight.nb, sight.m, grid.width, grid.height
     pushed = False
     for j in range(m):
         if nb[j][NB_KNOWN] != 0 and nb[j][NB_NEXT_X] == ox and nb[j][NB_NEXT_Y] == oy:

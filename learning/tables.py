@@ -5,8 +5,8 @@ an agent learns with, and what the world keeps the swarm's shared table in
 import numpy as np
 
 from nnql_swarm.learning.fields import (
-    LF_FIELDS, LS_PENDING, LS_TAKEN, READINGS, REC_COUNT, REC_PAIRS, RF_FIELDS, ca_rows,
-    learner_params, record_size, state_size,
+    LF_FIELDS, LS_PENDING, LS_TAKEN, READINGS, REC_COUNT, REC_PAIRS, RF_FIELDS, LearnerBuffers,
+    ca_rows, learner_params, record_size, state_size,
 )
 from nnql_swarm.learning.known_map import fresh_map, known_cells, map_size, restore_known
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
@@ -40,6 +40,10 @@ class Learner:
         self.width, self.height = config.width, config.height
         self.wmap = ints([0] * map_size(config.width, config.height))
         fresh_map(self.wmap)
+        self.buffers = LearnerBuffers(self.q_ds, self.q_ca, self.params, self.params_f,
+                                      self.state, self.state_f, self.wmap, self.rec, self.rec_f,
+                                      self.values)
+        """The same buffers as the learner's kernel takes them (``learning.learner``)."""
 
     @property
     def actions_taken(self) -> int:

@@ -23,7 +23,7 @@ from nnql_swarm.learning.neighbours import NeighbourRows
 from nnql_swarm.learning.known_map import (
     MAP_HEADER, MAP_KNOWN, MAP_PARKED, SECTIONS, fresh_map, map_size, path_length, waypoint_move,
 )
-from nnql_swarm.learning.fields import NB_FIELDS, learner_params
+from nnql_swarm.learning.fields import NB_FIELDS, Grid, Sight, learner_params
 from nnql_swarm.learning.learner import observe_map
 from nnql_swarm.learning.readings import uses_map
 from nnql_swarm.protocol.actions import VIEW_RADIUS, target_x, target_y, within
@@ -97,9 +97,10 @@ class KnownMapViz:
         obs = Observation(c.run_id, tick, WORLD_SENDER, i, episode, 0, (x, y), (gx, gy),
                           neighbours, 0, 0.0, 0.0, False, bool(arrived[i]), False, parked)
         near = self.rows(obs, {}, False, {}, None)
-        observe_map(self.params, self.wmap, self.rows.wall_x, self.rows.wall_y, 0,
-                    len(self.rows.wall_x), x, y, gx, gy, c.width, c.height,
-                    rows(near, NB_FIELDS), len(near), starts)
+        grid = Grid(c.width, c.height, self.rows.wall_x, self.rows.wall_y, 0,
+                    len(self.rows.wall_x))
+        sight = Sight(x, y, gx, gy, rows(near, NB_FIELDS), len(near), starts)
+        observe_map(self.params, self.wmap, grid, sight)
         known = int(self.wmap[MAP_KNOWN])
         walls = None
         if known != self._known:

@@ -29,11 +29,12 @@ from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.swarm import (
     OPT_FIELDS, OPT_FROZEN, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS,
     ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS, OUT_MAKESPAN, OUT_ON_GOAL, OUT_SHORTEST, OUT_SOC,
-    OUT_VIOLATIONS, TR_FIELDS, run_episode,
+    OUT_VIOLATIONS, TR_FIELDS, EpisodeRules, Learners, Moves, Noise, OracleScratch, Results, Runs,
+    Scenario, run_episode,
 )
 from nnql_swarm.world.rules import (
     GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
-    ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS, field_columns,
+    ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS, Bodies, Outcome, Scratch, field_columns,
 )
 from nnql_swarm.world.scenario import paper_episode, swarm_episode
 
@@ -159,20 +160,17 @@ class Batch:
         self.learns = np.arange(n) < learners
         self._seeds = list(self.generators)
         self._seed_of_run = np.array([self._seeds.index(run.seed) for run in runs])
-        self._scratch = dict(
-            x=_ints(r, n), y=_ints(r, n), prev_x=_ints(r, n), prev_y=_ints(r, n),
-            goal_x=_ints(r, n), goal_y=_ints(r, n), arrived=np.zeros((r, n), dtype=bool),
-            arrival=_ints(r, n),
-            actions=_ints(r, n), decided=np.zeros((r, n), dtype=bool),
-            collided=np.zeros((r, n), dtype=bool), r_ds=np.zeros((r, n)), r_ca=np.zeros((r, n)),
-            before_x=_ints(r, n), before_y=_ints(r, n), occupancy=_ints(r, cells),
-            blocked=np.zeros((r, n), dtype=bool), nb=_ints(r, n, NB_FIELDS),
-            values=np.zeros((r, N_ACTIONS)), rec=_ints(r, learners, record_size(n)),
-            rec_f=np.zeros((r, learners, RF_FIELDS)),
-            pending_rec=np.zeros((r, learners), dtype=bool),
-            oracle_scratch=_ints(r, ORACLE_SCRATCH, cells),
-            oracle_cells=_ints(r, n * cells),
-        )
+        self._bodies = Bodies(_ints(r, n), _ints(r, n), _ints(r, n), _ints(r, n), self.learns,
+                              np.zeros((r, n), dtype=bool), _ints(r, n))
+        self._moves = Moves(_ints(r, n), np.zeros((r, n), dtype=bool), _ints(r, n), _ints(r, n))
+        self._outcome = Outcome(_ints(r, n), _ints(r, n), np.zeros((r, n), dtype=bool),
+                                np.zeros((r, n)), np.zeros((r, n)))
+        self._scratch = Scratch(_ints(r, cells), np.zeros((r, n), dtype=bool))
+        self._oracle = OracleScratch(_ints(r, ORACLE_SCRATCH, cells), _ints(r, n * cells))
+        self._rec = _ints(r, learners, record_size(n))
+        self._rec_f = np.zeros((r, learners, RF_FIELDS))
+        self._pending_rec = np.zeros((r, learners), dtype=bool)
+        self._values, self._nb = np.zeros((r, N_ACTIONS)), _ints(r, n, NB_FIELDS)
 
     def play(self, episodes: int, results: Episodes | None = None, on_episode=None) -> Episodes:
         """Play the next ``episodes`` episodes of every run; ``on_episode(e, batch)`` after each
@@ -186,20 +184,20 @@ class Batch:
         seeds = len(self.generators)
         seed_actions = np.zeros((seeds, w.learners, w.max_steps), dtype=np.int64)
         seed_ties = np.zeros((seeds, w.learners, w.max_steps, N_ACTIONS))
+        rules = EpisodeRules(w.bodies, w.learners, w.width, w.height, w.max_steps, w.count_swaps,
+                             w.goal_reward, w.stay_reward, self.record)
+        per_run = Runs(self.params, self.params_f, self.options, self._seed_of_run, self.tick)
+        agents = Learners(self.q_ds, self.q_ca, self.state, self.state_f, self.wmap, self._rec,
+                          self._rec_f, self._pending_rec, self._values, self._nb)
         for _ in range(episodes):
             e = self.episode
-            starts, goals, scripts, paths = self._scenarios(e)
+            scenario = Scenario(*self._scenarios(e))
             for s, generators in enumerate(self.generators.values()):
                 for i, rng in enumerate(generators):
                     draw_noise(rng, seed_actions[s, i], seed_ties[s, i])
-            run_episode(w.bodies, w.learners, w.width, w.height, w.max_steps, w.count_swaps,
-                        w.goal_reward, w.stay_reward, self.params, self.params_f, self.options,
-                        self.q_ds, self.q_ca, self.state, self.state_f, self.wmap,
-                        self._seed_of_run,
-                        starts, goals, scripts, paths, seed_actions, seed_ties, self.tick,
-                        self.record,
-                        self.trace,
-                        row=row, row_f=row_f, out=out, learns=self.learns, **self._scratch)
+            run_episode(rules, per_run, agents, scenario, Noise(seed_actions, seed_ties),
+                        self._bodies, self._moves, self._outcome, self._scratch, self._oracle,
+                        Results(row, row_f, out, self.trace))
             results.row[:, e], results.row_f[:, e], results.out[:, e] = row, row_f, out
             self.episode += 1
             if on_episode is not None:

@@ -16,21 +16,28 @@ every action is to stay), outrank every learner and announce their scripted next
 oracle run plans every learner's move with PIBT (``sim.oracle``, a reference planner) around the
 walls, and learns nothing.
 
-Per-run options are the rows of ``params`` / ``params_f`` (the learner's, ``learning.learner``) and
-``options`` (``OPT_*``); the world's options are the same for the whole batch.
+The arguments come grouped in named tuples (defined here, and ``world.rules``' for the world's
+state): per-run options are the rows of :class:`Runs` (``params`` / ``params_f``, the learner's,
+``learning.learner``, and ``options``, ``OPT_*``); the world's options (:class:`EpisodeRules`) are
+the same for the whole batch.
 """
+
+from typing import NamedTuple
 
 from nnql_swarm.learning.fields import (
     FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
-    NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL,
+    NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL, Grid,
+    LearnerBuffers, Sight,
 )
 from nnql_swarm.learning.learner import decide, finish, make_way, planned_cell
 from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
-from nnql_swarm.kernel.jit import batch_kernel, kernel, prange
+from nnql_swarm.kernel.jit import Buffer, batch_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
-from nnql_swarm.world.rules import field_costs, shared_cells, swaps_through, world_step
+from nnql_swarm.world.rules import (
+    Bodies, Outcome, Rules, Scratch, Score, field_costs, shared_cells, swaps_through, world_step,
+)
 
 ORACLE_SCRATCH = 12
 """Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
@@ -58,6 +65,90 @@ TR_FIELDS = 5
 whether it had arrived when the tick started."""
 
 
+class EpisodeRules(NamedTuple):
+    """What every run of a batch plays by: bodies (the first ``learners`` learn), grid, the
+    episode's longest, whether swaps count, the destination-seeking rewards, and whether the
+    ticks are recorded (``Results.trace``)."""
+    n: int
+    learners: int
+    width: int
+    height: int
+    max_steps: int
+    count_swaps: bool
+    goal_reward: float
+    stay_reward: float
+    record: bool
+
+
+class Runs(NamedTuple):
+    """Each run's options, a row each: the learner's ``params`` and ``params_f``, the swarm's
+    ``options`` (``OPT_*``), which seed's scenario and noise it plays, and its global tick
+    (advanced in place)."""
+    params: Buffer
+    params_f: Buffer
+    options: Buffer
+    seed_of_run: Buffer
+    tick: Buffer
+
+
+class Learners(NamedTuple):
+    """The learners' buffers, per run (``learning.fields.LearnerBuffers``, per agent): tables
+    (one per agent, or the first the swarm's one), states, known maps, learning records and
+    whether each waits to be applied (shared tables), the actions' values and the neighbour
+    rows (scratch)."""
+    q_ds: Buffer
+    q_ca: Buffer
+    state: Buffer
+    state_f: Buffer
+    wmap: Buffer
+    rec: Buffer
+    rec_f: Buffer
+    pending_rec: Buffer
+    values: Buffer
+    nb: Buffer
+
+
+class Scenario(NamedTuple):
+    """An episode's scenario, per seed: every body's start, the learners' goals, the scripted
+    bodies' actions per step, and the learners' shortest paths."""
+    starts: Buffer
+    goals: Buffer
+    scripts: Buffer
+    paths: Buffer
+
+
+class Noise(NamedTuple):
+    """An episode's noise, per seed: each learner's exploring action and five tie-breakers per
+    step (``learning.learner.draw_noise``)."""
+    random_actions: Buffer
+    ties: Buffer
+
+
+class Moves(NamedTuple):
+    """A tick's negotiation, per body: its action, whether it is fixed yet, and its cell a tick
+    ago (-1 at an episode's first)."""
+    actions: Buffer
+    decided: Buffer
+    prev_x: Buffer
+    prev_y: Buffer
+
+
+class OracleScratch(NamedTuple):
+    """The oracle's working space (``sim.oracle.plan``): ``ORACLE_SCRATCH`` rows of a slot per
+    grid cell, and a slot per body and cell."""
+    rows: Buffer
+    cells: Buffer
+
+
+class Results(NamedTuple):
+    """An episode's results, per run: its running score (``world.rules.Score``), ``out``
+    (``OUT_*``), and its recorded ticks (``TR_*`` per step and body, if recording)."""
+    row: Buffer
+    row_f: Buffer
+    out: Buffer
+    trace: Buffer
+
+
 @kernel
 def reads_intents(params):
     return params[LP_READING] == READ_NNQL or params[LP_READING] == READ_DIR
@@ -70,13 +161,18 @@ def rank_of(i, tick, learners):
 
 
 @kernel
-def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, actions,
-                   decided, lookahead, announcing, params, q_ds, tables, goal_x, goal_y,
-                   width, height, step_aside, nb):
+def neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options, announcing):
     """Fill ``nb`` with what agent ``i`` observes and has been told: its visible neighbours in
-    id order. ``decided``: bodies whose action of this tick is fixed; ``announcing``: whether
-    anyone announces (not at an end tick); ``step_aside``: arrived agents are not parked.
-    Returns the number of rows."""
+    id order. ``moves.decided``: bodies whose action of this tick is fixed; ``announcing``:
+    whether anyone announces (not at an end tick). Under ``step-aside`` arrived agents are not
+    parked. Returns the number of rows."""
+    n, learners, width, height = rules.n, rules.learners, rules.width, rules.height
+    x, y, goal_x, goal_y = bodies.x, bodies.y, bodies.goal_x, bodies.goal_y
+    learns, arrived = bodies.learns, bodies.arrived
+    actions, decided, prev_x, prev_y = moves.actions, moves.decided, moves.prev_x, moves.prev_y
+    lookahead = options[OPT_LOOKAHEAD]
+    shared = options[OPT_SHARED] != 0
+    step_aside = options[OPT_STEP_ASIDE] != 0
     m = 0
     negotiates = announcing and reads_intents(params)
     rank = rank_of(i, tick, learners)
@@ -97,7 +193,7 @@ def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, 
             row[NB_NEXT_X] = nx
             row[NB_NEXT_Y] = ny
             if lookahead > 1 and learns[j]:
-                t = 0 if tables == 1 else j
+                t = 0 if shared else j
                 sx, sy = planned_cell(q_ds[t], nx, ny, goal_x[j], goal_y[j], lookahead - 1,
                                       width, height)
                 row[NB_STATE_X] = sx
@@ -122,46 +218,64 @@ def neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived, 
 
 
 @batch_kernel
-def run_episode(n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
-                params, params_f, options, q_ds, q_ca, state, state_f, wmap, seed_of_run,
-                starts, goals, scripts, paths, random_actions, ties, tick,
-                record, trace,
-                x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, arrival, actions, decided,
-                collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
-                rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
-    """Play one episode of every run (see the module docstring); ``tick`` (one per run) is each
-    run's global tick, advanced in place, as are the tables and learner states. The scenario
-    (``starts``, ``goals``, ``scripts``, the learners' shortest ``paths``) and the noise (``random_actions``, ``ties``) are given per
-    seed, and ``seed_of_run`` says which seed's each run plays."""
-    runs = params.shape[0]
-    for r in prange(runs):
-        s = seed_of_run[r]
-        _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
-                 params[r], params_f[r], options[r], q_ds[r], q_ca[r], state[r], state_f[r],
-                 wmap[r], starts[s], goals[s], scripts[s], paths[s], random_actions[s], ties[s], tick,
-                 record, trace[r],
-                 x[r], y[r], prev_x[r], prev_y[r], goal_x[r], goal_y[r], learns, arrived[r],
-                 arrival[r], actions[r], decided[r], collided[r], r_ds[r], r_ca[r], before_x[r],
-                 before_y[r], occupancy[r], blocked[r], nb[r], values[r], rec[r], rec_f[r],
-                 pending_rec[r], oracle_scratch[r], oracle_cells[r], row[r], row_f[r], out[r])
+def run_episode(rules, runs, agents, scenario, noise, bodies, moves, outcome, scratch,
+                oracle_buffers, results):
+    """Play one episode of every run (see the module docstring): every argument but ``rules``
+    holds a row per run (``agents``: the learners' buffers; ``bodies.learns``, the same for every
+    run, excepted), ``scenario`` and ``noise`` one per seed, and ``runs.seed_of_run`` says which
+    seed's each run plays. Each run's global tick, tables and learner states are advanced in
+    place."""
+    for r in prange(runs.params.shape[0]):
+        s = runs.seed_of_run[r]
+        _episode(
+            r, rules, runs,
+            Learners(agents.q_ds[r], agents.q_ca[r], agents.state[r], agents.state_f[r],
+                     agents.wmap[r], agents.rec[r], agents.rec_f[r], agents.pending_rec[r],
+                     agents.values[r], agents.nb[r]),
+            Scenario(scenario.starts[s], scenario.goals[s], scenario.scripts[s],
+                     scenario.paths[s]),
+            Noise(noise.random_actions[s], noise.ties[s]),
+            Bodies(bodies.x[r], bodies.y[r], bodies.goal_x[r], bodies.goal_y[r], bodies.learns,
+                   bodies.arrived[r], bodies.arrival[r]),
+            Moves(moves.actions[r], moves.decided[r], moves.prev_x[r], moves.prev_y[r]),
+            Outcome(outcome.before_x[r], outcome.before_y[r], outcome.collided[r],
+                    outcome.r_ds[r], outcome.r_ca[r]),
+            Scratch(scratch.occupancy[r], scratch.blocked[r]),
+            OracleScratch(oracle_buffers.rows[r], oracle_buffers.cells[r]),
+            Results(results.row[r], results.row_f[r], results.out[r], results.trace[r]))
 
 
 @kernel
-def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward, stay_reward,
-             params, params_f, options, q_ds, q_ca, state, state_f, wmap,
-             starts, goals, scripts, paths, random_actions, ties, ticks,
-             record, trace,
-             x, y, prev_x, prev_y, goal_x, goal_y, learns, arrived, arrival, actions, decided,
-             collided, r_ds, r_ca, before_x, before_y, occupancy, blocked, nb, values,
-             rec, rec_f, pending_rec, oracle_scratch, oracle_cells, row, row_f, out):
+def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, scratch,
+             oracle_buffers, results):
+    """One run's episode: ``runs`` the batch's, every other argument but ``rules`` this run's
+    (``agents``: its learners' buffers)."""
+    n, learners, width, height = rules.n, rules.learners, rules.width, rules.height
+    max_steps, count_swaps, record = rules.max_steps, rules.count_swaps, rules.record
+    params, params_f, options = runs.params[r], runs.params_f[r], runs.options[r]
+    ticks = runs.tick
+    q_ds, q_ca, state, state_f = agents.q_ds, agents.q_ca, agents.state, agents.state_f
+    wmap, rec, rec_f, pending_rec = agents.wmap, agents.rec, agents.rec_f, agents.pending_rec
+    values, nb = agents.values, agents.nb
+    starts, goals, scripts, paths = (scenario.starts, scenario.goals, scenario.scripts,
+                                     scenario.paths)
+    random_actions, ties = noise.random_actions, noise.ties
+    x, y, goal_x, goal_y = bodies.x, bodies.y, bodies.goal_x, bodies.goal_y
+    arrived, arrival = bodies.arrived, bodies.arrival
+    actions, decided, prev_x, prev_y = moves.actions, moves.decided, moves.prev_x, moves.prev_y
+    collided, r_ds, r_ca = outcome.collided, outcome.r_ds, outcome.r_ca
+    oracle_scratch, oracle_cells = oracle_buffers.rows, oracle_buffers.cells
+    row, row_f, out, trace = results.row, results.row_f, results.out, results.trace
     shared = options[OPT_SHARED] != 0
     learning = options[OPT_FROZEN] == 0
-    tables = 1 if shared else learners
-    lookahead = options[OPT_LOOKAHEAD]
     oracle = options[OPT_ORACLE] != 0
     last_wall = n if options[OPT_WALLS] != 0 else learners  # walls: bodies learners .. n - 1
     step_aside = options[OPT_STEP_ASIDE] != 0
     alpha, gamma = params_f[FP_ALPHA], params_f[FP_GAMMA]
+    world = Rules(n, width, height, count_swaps, step_aside, rules.goal_reward,
+                  rules.stay_reward)
+    score = Score(row, row_f)
+    grid = Grid(width, height, x, y, learners, last_wall)
     shortest = 0
     for i in range(n):
         x[i] = starts[i, 0]
@@ -220,27 +334,22 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
             t = 0 if shared else i
             record_outcome(state[i], state_f[i], r_ds[i], r_ca[i], arrived[i])
             stops = ending or arrived[i]
-            m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived,
-                               actions, decided, lookahead, not stops, params, q_ds, tables,
-                               goal_x, goal_y, width, height, step_aside, nb)
+            m = neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options,
+                               not stops)
+            learner = LearnerBuffers(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
+                                     wmap[i], rec[i], rec_f[i], values)
+            sight = Sight(x[i], y[i], goal_x[i], goal_y[i], nb, m, step == 0)
             if stops:
-                written = finish(q_ds[t], q_ca[t], params, params_f, state[i], state_f[i],
-                                 wmap[i], x, y, learners, last_wall, step == 0, x[i], y[i],
-                                 goal_x[i], goal_y[i], nb, m, width, height, rec[i], rec_f[i],
-                                 learning and not shared)
+                written = finish(learner, grid, sight, learning and not shared)
                 actions[i] = STAY
                 if step_aside and not ending:  # on its goal: it makes way if told to
-                    m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns,
-                                       arrived, actions, decided, lookahead, True, params, q_ds,
-                                       tables, goal_x, goal_y, width, height, step_aside, nb)
-                    actions[i] = make_way(x[i], y[i], nb, m, learners, width, height,
-                                          ties[i, step])
+                    m = neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options,
+                                       True)
+                    sight = Sight(x[i], y[i], goal_x[i], goal_y[i], nb, m, False)
+                    actions[i] = make_way(sight, learners, grid, ties[i, step])
             else:
-                actions[i], written = decide(
-                    q_ds[t], q_ca[t], params, params_f, state[i], state_f[i], wmap[i], x, y,
-                    learners, last_wall, step == 0, x[i], y[i], goal_x[i], goal_y[i], nb, m,
-                    width, height, random_actions[i, step],
-                    ties[i, step], values, rec[i], rec_f[i], learning and not shared)
+                actions[i], written = decide(learner, grid, sight, random_actions[i, step],
+                                             ties[i, step], learning and not shared)
             pending_rec[i] = learning and shared and written
             decided[i] = True
         if record:
@@ -261,12 +370,11 @@ def _episode(r, n, learners, width, height, max_steps, count_swaps, goal_reward,
         for i in range(n):
             prev_x[i] = x[i]
             prev_y[i] = y[i]
-        everyone = world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width,
-                              height, count_swaps, step_aside, goal_reward, stay_reward, before_x,
-                              before_y, collided, r_ds, r_ca, occupancy, blocked, row, row_f)
-        out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, occupancy)
+        everyone = world_step(world, bodies, actions, outcome, scratch, score)
+        out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, scratch.occupancy)
         if count_swaps:
-            out[OUT_VIOLATIONS] += swaps_through(before_x, before_y, x, y, n, width, occupancy)
+            out[OUT_VIOLATIONS] += swaps_through(outcome.before_x, outcome.before_y, x, y, n, width,
+                                                 scratch.occupancy)
         if record:
             for i in range(n):
                 trace[step, i, TR_ACTION] = actions[i]

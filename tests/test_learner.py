@@ -9,7 +9,8 @@ import pytest
 from nnql_swarm.learning.fields import (
     FP_FIELDS, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS, LP_RANDOM_STEP, LP_READING,
     LP_SHIELD, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READ_DIR, READ_NNQL, READ_QL, REC_COUNT,
-    REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, ca_rows, record_size, state_size,
+    REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, Grid, LearnerBuffers, Sight, ca_rows, record_size,
+    state_size,
 )
 from nnql_swarm.learning.known_map import fresh_map, map_size
 from nnql_swarm.learning.learner import choose, decide, finish, make_way, planned_cell
@@ -61,13 +62,17 @@ class Agent:
             nb[:len(neighbours)] = neighbours
         return nb, len(neighbours)
 
+    def buffers(self):
+        return LearnerBuffers(self.q_ds, self.q_ca, self.params, self.params_f, self.state,
+                              self.state_f, self.wmap, self.rec, self.rec_f, self.values)
+
+    def grid(self):
+        return Grid(SIZE, SIZE, *self.walls, 0, self.walls.shape[1])
+
     def decide(self, own, goal, neighbours=(), random_action=UP, ties=PREFER_STAY):
         nb, m = self.rows(neighbours)
-        action, _ = decide(self.q_ds, self.q_ca, self.params, self.params_f, self.state,
-                           self.state_f, self.wmap, *self.walls, 0, self.walls.shape[1], False,
-                           *own,
-                           *goal, nb, m, SIZE, SIZE, random_action,
-                           np.asarray(ties, float), self.values, self.rec, self.rec_f, True)
+        action, _ = decide(self.buffers(), self.grid(), Sight(*own, *goal, nb, m, False),
+                           random_action, np.asarray(ties, float), True)
         return action
 
     def record(self, r_ds, r_ca, arrived=False):
@@ -75,10 +80,7 @@ class Agent:
 
     def finish(self, own, goal, neighbours=()):
         nb, m = self.rows(neighbours)
-        return finish(self.q_ds, self.q_ca, self.params, self.params_f, self.state, self.state_f,
-                      self.wmap, *self.walls, 0, self.walls.shape[1], False, *own, *goal, nb, m,
-                      SIZE,
-                      SIZE, self.rec, self.rec_f, True)
+        return finish(self.buffers(), self.grid(), Sight(*own, *goal, nb, m, False), True)
 
     def row(self, own, nb_row):
         nb, _ = self.rows([nb_row])
@@ -318,9 +320,7 @@ def test_a_random_step_below_one_is_refused():
 def test_choose_leaves_the_transition_pending_for_the_next_observation():
     agent = Agent()
     nb, m = agent.rows([neighbour(1, 3, 3)])
-    choose(agent.q_ds, agent.q_ca, agent.params, agent.params_f, agent.state, agent.wmap, 1, 1, 5,
-           5, nb, m,
-           SIZE, SIZE, UP, PREFER_STAY, agent.values)
+    choose(agent.buffers(), agent.grid(), Sight(1, 1, 5, 5, nb, m, False), UP, PREFER_STAY)
     assert agent.state[LS_PENDING] == 1
     assert not agent.q_ds.any() and not agent.q_ca.any(), "nothing is learned before s' is seen"
 
@@ -345,17 +345,24 @@ def test_a_learning_record_from_elsewhere_is_checked_against_the_tables():
 
 
 
+def way(nb, m, ties):
+    """What an agent of 8 learners standing on its goal at (2, 2) of a 5 x 5 grid does."""
+    no_walls = np.zeros(0, np.int64)
+    return make_way(Sight(2, 2, 2, 2, nb, m, False), 8, Grid(5, 5, no_walls, no_walls, 0, 0),
+                    ties)
+
+
 def test_an_arrived_agent_makes_way_only_for_an_announced_move_into_its_cell():
     ties = np.arange(N_ACTIONS, dtype=float)
     passing = neighbour(0, 2, 1, next_cell=(3, 1))
-    assert make_way(2, 2, np.array([passing]), 1, 8, 5, 5, ties) == STAY
+    assert way(np.array([passing]), 1, ties) == STAY
     pusher = neighbour(0, 2, 1, next_cell=(2, 2))  # from above, into its cell
     wall = neighbour(9, 3, 2, next_cell=(3, 2))
     stranger = neighbour(1, 1, 2)  # a learner whose intent it does not know yet
     # Free cells first (down, the only one), never back into the pusher's cell (a swap)
-    assert make_way(2, 2, np.array([pusher, wall, stranger]), 3, 8, 5, 5, ties) == DOWN
+    assert way(np.array([pusher, wall, stranger]), 3, ties) == DOWN
     below = neighbour(2, 2, 3, next_cell=(2, 3))
     # With no free cell, the unknown learner's cell: its announcement pushes that one on
-    assert make_way(2, 2, np.array([pusher, wall, stranger, below]), 4, 8, 5, 5, ties) == LEFT
+    assert way(np.array([pusher, wall, stranger, below]), 4, ties) == LEFT
     other_wall = neighbour(10, 1, 2, next_cell=(1, 2))
-    assert make_way(2, 2, np.array([pusher, wall, other_wall, below]), 4, 8, 5, 5, ties) == STAY
+    assert way(np.array([pusher, wall, other_wall, below]), 4, ties) == STAY

@@ -20,8 +20,8 @@ from nnql_swarm.experiment.maps import (
 from nnql_swarm.protocol.actions import DOWN, RIGHT, STAY
 from nnql_swarm.terrain.maps import generated
 from nnql_swarm.world.rules import (
-    FIELD_COLUMNS, GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, field_columns, field_costs,
-    world_step,
+    FIELD_COLUMNS, GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, Bodies, Outcome, Rules, Scratch,
+    Score, field_columns, field_costs, world_step,
 )
 
 REPO = Path(__file__).resolve().parent.parent
@@ -44,11 +44,12 @@ def play(cells, goals, moves, steps):
     row, row_f = np.zeros(ROW_INTS, np.int64), np.zeros(ROW_FLOATS)
     for t in range(steps):
         actions = ints(moves[t] if t < len(moves) else [STAY] * n)
-        done = world_step(x, y, gx, gy, np.ones(n, bool), arrived, arrival, actions, n, 5, 5, True,
-                          False,
-                          GOAL_REWARD, STAY_REWARD, np.zeros(n, np.int64), np.zeros(n, np.int64),
-                          np.zeros(n, bool), np.zeros(n), np.zeros(n), np.zeros(25, np.int64),
-                          np.zeros(n, bool), row, row_f)
+        rules = Rules(n, 5, 5, True, False, GOAL_REWARD, STAY_REWARD)
+        bodies = Bodies(x, y, gx, gy, np.ones(n, bool), arrived, arrival)
+        outcome = Outcome(np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, bool),
+                          np.zeros(n), np.zeros(n))
+        scratch = Scratch(np.zeros(25, np.int64), np.zeros(n, bool))
+        done = world_step(rules, bodies, actions, outcome, scratch, Score(row, row_f))
         if done:
             break
     return field_columns(*field_costs(x, y, gx, gy, arrival, n, int(row[0])), n), arrival

@@ -10,7 +10,8 @@ from nnql_swarm.protocol.actions import DOWN, LEFT, MOVES, N_ACTIONS, RIGHT, STA
 from nnql_swarm.world.rules import (
     CA_REWARD, GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
     ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS, arbitrate, collision_reward,
-    destination_reward, shared_cells, shortest_steps, swaps_through, world_step,
+    Bodies, Outcome, Rules, Scratch, Score, destination_reward, shared_cells, shortest_steps,
+    swaps_through, world_step,
 )
 
 WIDTH, HEIGHT = 5, 4
@@ -235,12 +236,13 @@ class Step:
         self.collided, self.r_ds, self.r_ca = np.zeros(n, bool), np.zeros(n), np.zeros(n)
         self.actions = ints(actions)
         self.before_x, self.before_y = np.zeros(n, np.int64), np.zeros(n, np.int64)
-        return world_step(self.x, self.y, self.gx, self.gy, self.learns, self.arrived,
-                          self.arrival, self.actions, n, self.width, self.height,
-                          self.count_swaps, self.step_aside,
-                          GOAL_REWARD, STAY_REWARD, self.before_x, self.before_y, self.collided, self.r_ds,
-                          self.r_ca, np.zeros(self.width * self.height, np.int64),
-                          np.zeros(n, bool), self.row, self.row_f)
+        rules = Rules(n, self.width, self.height, self.count_swaps, self.step_aside, GOAL_REWARD,
+                      STAY_REWARD)
+        bodies = Bodies(self.x, self.y, self.gx, self.gy, self.learns, self.arrived, self.arrival)
+        outcome = Outcome(self.before_x, self.before_y, self.collided, self.r_ds, self.r_ca)
+        scratch = Scratch(np.zeros(self.width * self.height, np.int64), np.zeros(n, bool))
+        return world_step(rules, bodies, self.actions, outcome, scratch,
+                          Score(self.row, self.row_f))
 
 
 def ints(values):

@@ -38,7 +38,8 @@ from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SEND
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
     FIELD_COLUMNS, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD,
-    ROW_STEPS, Cell, field_columns, field_costs, shared_cells, swaps_through, world_step,
+    ROW_STEPS, Bodies, Cell, Outcome, Rules, Scratch, Score, field_columns, field_costs,
+    shared_cells, swaps_through, world_step,
 )
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
@@ -296,12 +297,14 @@ class SwarmWorld:
         c = self.config
         arrived_before = self._outcome[3]  # as this tick's observations showed it
         chosen = ints([STAY if a is None else a for a in actions] + self._stays)
-        everyone = world_step(self._x, self._y, self._goal_x, self._goal_y, self._learns,
-                              self._arrived, self._arrival, chosen, c.n_bodies, c.width,
-                              c.height, c.count_swaps, c.step_aside, c.goal_reward,
-                              c.stay_reward, self._before_x, self._before_y, self._collided,
-                              self._r_ds, self._r_ca, self._occupancy, self._blocked, self._row,
-                              self._row_f)
+        rules = Rules(c.n_bodies, c.width, c.height, c.count_swaps, c.step_aside, c.goal_reward,
+                      c.stay_reward)
+        bodies = Bodies(self._x, self._y, self._goal_x, self._goal_y, self._learns,
+                        self._arrived, self._arrival)
+        outcome = Outcome(self._before_x, self._before_y, self._collided, self._r_ds, self._r_ca)
+        everyone = world_step(rules, bodies, chosen, outcome,
+                              Scratch(self._occupancy, self._blocked),
+                              Score(self._row, self._row_f))
         violations = self._check()
         self._plain()
         self.step += 1

@@ -46,9 +46,10 @@ The field's metrics (POGEMA's, :func:`field_costs`) read each learner's *arrival
 """
 
 import math
+from typing import NamedTuple
 
 from nnql_swarm.protocol.actions import STAY, target_x, target_y
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.kernel.jit import Buffer, kernel
 
 Cell = tuple[int, int]
 
@@ -70,6 +71,53 @@ ROW_INTS = 4
 ROW_REWARD, ROW_REWARD_DS, ROW_REWARD_CA = 0, 1, 2
 """Float fields of an episode's running score (``row_f``): the sum of both rewards, and each."""
 ROW_FLOATS = 3
+
+
+class Rules(NamedTuple):
+    """The world's options for a run: how many bodies, the grid, whether swaps count, the
+    on-target rule (``step-aside`` or not) and the destination-seeking rewards."""
+    n: int
+    width: int
+    height: int
+    count_swaps: bool
+    step_aside: bool
+    goal_reward: float
+    stay_reward: float
+
+
+class Bodies(NamedTuple):
+    """The bodies' state, one entry per body: cell, goal (-1 for a scripted body), whether it
+    learns, whether it has arrived, and its arrival step."""
+    x: Buffer
+    y: Buffer
+    goal_x: Buffer
+    goal_y: Buffer
+    learns: Buffer
+    arrived: Buffer
+    arrival: Buffer
+
+
+class Outcome(NamedTuple):
+    """What a step did to each body: the cell it started from, whether it collided, and its
+    two rewards (destination seeking, collision avoidance)."""
+    before_x: Buffer
+    before_y: Buffer
+    collided: Buffer
+    r_ds: Buffer
+    r_ca: Buffer
+
+
+class Scratch(NamedTuple):
+    """The step's working space: a zero per grid cell (``y * width + x``, left all zeros), and
+    a flag per body."""
+    occupancy: Buffer
+    blocked: Buffer
+
+
+class Score(NamedTuple):
+    """An episode's running score: ``row`` (``ROW_*`` integers) and ``row_f`` (``ROW_*`` floats)."""
+    row: Buffer
+    row_f: Buffer
 
 
 @kernel
@@ -177,23 +225,28 @@ def field_costs(x, y, goal_x, goal_y, arrival, learners, steps):
 
 
 @kernel
-def world_step(x, y, goal_x, goal_y, learns, arrived, arrival, actions, n, width, height,
-               count_swaps, step_aside, goal_reward, stay_reward, before_x, before_y, collided,
-               r_ds, r_ca, occupancy, blocked, row, row_f):
+def world_step(rules, bodies, actions, outcome, scratch, score):
     """One step of an episode: everyone moves at once; rewards, arrivals and the running score.
 
     ``actions`` are the bodies' intents, overwritten with the actions applied (under ``park``, a
-    learner that has arrived stays whatever it says). ``x``, ``y``, ``arrived`` and ``arrival``
-    are updated in place; ``before_x``, ``before_y`` receive the cells the step started from,
-    ``collided``, ``r_ds``, ``r_ca`` its outcome per body. Returns whether every learner is now
-    on its goal.
+    learner that has arrived stays whatever it says). The ``bodies``' cells, ``arrived`` and
+    ``arrival`` are updated in place, the ``outcome`` written, the ``score`` advanced. Returns
+    whether every learner is now on its goal.
     """
+    n, width, height = rules.n, rules.width, rules.height
+    step_aside, goal_reward, stay_reward = rules.step_aside, rules.goal_reward, rules.stay_reward
+    x, y, goal_x, goal_y = bodies.x, bodies.y, bodies.goal_x, bodies.goal_y
+    learns, arrived, arrival = bodies.learns, bodies.arrived, bodies.arrival
+    before_x, before_y, collided = outcome.before_x, outcome.before_y, outcome.collided
+    r_ds, r_ca = outcome.r_ds, outcome.r_ca
+    occupancy, blocked = scratch.occupancy, scratch.blocked
+    row, row_f = score.row, score.row_f
     for i in range(n):
         before_x[i] = x[i]
         before_y[i] = y[i]
         if learns[i] and arrived[i] and not step_aside:
             actions[i] = STAY
-    arbitrate(before_x, before_y, actions, n, width, height, count_swaps, x, y, collided,
+    arbitrate(before_x, before_y, actions, n, width, height, rules.count_swaps, x, y, collided,
               occupancy, blocked)
     step = row[ROW_STEPS] + 1
     ds_sum = 0.0
