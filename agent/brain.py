@@ -102,7 +102,7 @@ class AgentBrain:
         if stops:
             written = finish(learner.buffers, self._grid, sight, not shared)
             action = STAY
-            if not obs.episode_end and not c.parks:
+            if not obs.episode_end and not self.config.parks:
                 action = self._make_way(obs, answers)
         else:
             noise = self._noise
@@ -119,9 +119,9 @@ class AgentBrain:
         noise = self._noise
         assert noise is not None, "prepare draws the episode's noise before a decision"
         near = self._neighbour_rows(obs, answers, True)
-        c, (x, y) = self.config, obs.position
-        return make_way(x, y, rows(near, NB_FIELDS), len(near), c.n_agents, c.width, c.height,
-                        floats(noise[1][obs.step]))
+        (x, y), (gx, gy) = obs.position, obs.goal
+        sight = Sight(x, y, gx, gy, rows(near, NB_FIELDS), len(near), False)
+        return make_way(sight, self.config.n_agents, self._grid, floats(noise[1][obs.step]))
 
     def _neighbour_rows(self, obs: Observation, answers: dict[int, int],
                         announcing: bool) -> list[list[int]]:
