@@ -11,6 +11,10 @@ A process that sets ``NNQL_KERNEL=python`` before its first import runs the func
 and never imports numba: the swarm's agent and world processes do (the launcher sets it for its
 children), since loading numba's LLVM would make each agent process several times larger and
 slower to start.
+Kernels group their buffers in named tuples (``learning.fields.LearnerBuffers``, ``Sight``,
+``world.rules.Bodies``...). A compiled call that takes such tuples costs more than the body of a
+small kernel, so the learner's per-decision kernels are :func:`inline_kernel`: numba compiles them
+into each caller, and the tuples into plain values.
 Kernel functions therefore only index and assign into their buffers, which may be numpy arrays
 (compiled) or Python lists (plain: :func:`ints`, :func:`floats`, :func:`rows`, where reading a list
 is several times faster), and never allocate on the hot path. The Q-tables are numpy arrays
@@ -59,12 +63,19 @@ def cache_directory() -> Path:
 
 
 if COMPILED:
-    os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_directory()))
+    import numba
     from numba import njit, prange
+
+    # numba reads its environment once, at its own import, which may have come first
+    numba.config.CACHE_DIR = os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_directory()))
 
     def kernel(function):
         """Compile a kernel function (cached on disk beside its source)."""
         return njit(cache=True)(function)
+
+    def inline_kernel(function):
+        """Compile a kernel function into each caller (numba's ``inline="always"``)."""
+        return njit(cache=True, inline="always")(function)
 
     def batch_kernel(function):
         """Compile a kernel function whose ``prange`` loops spread over the cores."""
@@ -77,7 +88,7 @@ else:
         """Plain Python: the function as written."""
         return function
 
-    batch_kernel = kernel
+    batch_kernel = inline_kernel = kernel
 
 
 def cached(function) -> bool:

@@ -77,7 +77,7 @@ from nnql_swarm.learning.known_map import track
 from nnql_swarm.learning.readings import ds_state, read_rows, shield_mask, uses_map
 from nnql_swarm.learning.record import apply_record, complete
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, offset_state, target_x, target_y
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.kernel.jit import inline_kernel, kernel
 
 def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.ndarray) -> None:
     """Draw an agent's noise for one episode into its buffers: an exploring action per step
@@ -87,7 +87,7 @@ def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.nd
     rng.random(out=ties)
 
 
-@kernel
+@inline_kernel
 def choose(learner, grid, sight, random_action, ties):
     """Eq. 6-8 (and the random step): the action, with the transition it starts left pending.
     The five actions' sums are spelled out: it is the agent's hot path in plain Python."""
@@ -151,7 +151,7 @@ def choose(learner, grid, sight, random_action, ties):
 assert N_ACTIONS == 5, "choose spells out five actions"
 
 
-@kernel
+@inline_kernel
 def observe_map(params, wmap, grid, sight):
     """Where destination seeking reads the known map: the run's walls in view of the agent's
     cell learned, the parked neighbours within reach taken as obstacles for the rest of the
@@ -163,7 +163,7 @@ def observe_map(params, wmap, grid, sight):
               params[LP_DETOUR], sight.starts)
 
 
-@kernel
+@inline_kernel
 def decide(learner, grid, sight, random_action, ties, apply_now):
     """Learn the walls in view (:func:`observe_map`), complete the pending transition (its
     record applied at once if ``apply_now``), then choose: :func:`finish`, then :func:`choose`
@@ -174,7 +174,7 @@ def decide(learner, grid, sight, random_action, ties, apply_now):
     return action, written
 
 
-@kernel
+@inline_kernel
 def finish(learner, grid, sight, apply_now):
     """Complete the pending transition of a learner that stops (arrived, or the episode ended);
     its neighbours' rows carry no intent then. Returns whether a record was written."""
@@ -209,7 +209,7 @@ def planned_cell(q_ds, x, y, gx, gy, steps, width, height):
     return x, y
 
 
-@kernel
+@inline_kernel
 def make_way(sight, learners, grid, ties):
     """Under the ``step-aside`` on-target rule, what an agent standing on its goal does: it
     stays, unless a neighbour whose intent it knows announced moving into its cell; then it

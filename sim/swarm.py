@@ -32,7 +32,7 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.learner import decide, finish, make_way, planned_cell
 from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
-from nnql_swarm.kernel.jit import Buffer, batch_kernel, kernel, prange
+from nnql_swarm.kernel.jit import Buffer, batch_kernel, inline_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.sim.oracle import plan
 from nnql_swarm.world.rules import (
@@ -160,7 +160,7 @@ def rank_of(i, tick, learners):
     return SCRIPTED_RANK if i >= learners else priority_rank(i, tick, learners)
 
 
-@kernel
+@inline_kernel
 def neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options, announcing):
     """Fill ``nb`` with what agent ``i`` observes and has been told: its visible neighbours in
     id order. ``moves.decided``: bodies whose action of this tick is fixed; ``announcing``:
