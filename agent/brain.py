@@ -2,7 +2,7 @@
 
 The agent process (``agent.node``) runs it; it calls the learner's kernel functions
 (``learning.learner``) on Python lists and its tables' array, the very functions the swarm
-simulator (``sim.swarm``) runs compiled, so that for the same seed the distributed swarm and the
+simulator (``sim.episode``) runs compiled, so that for the same seed the distributed swarm and the
 simulator play the same run.
 
 Negotiation: at every tick an agent that reads intents waits for the intents of its higher-ranked

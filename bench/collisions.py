@@ -37,7 +37,7 @@ from nnql_swarm.learning.readings import forbids
 from nnql_swarm.protocol.actions import STAY, target_x, target_y
 from nnql_swarm.protocol.config import PRESETS
 from nnql_swarm.sim.runs import Batch, swarm_world
-from nnql_swarm.sim.swarm import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y, neighbour_rows
+from nnql_swarm.sim.episode import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y, neighbour_rows
 
 
 def classify(batch: Batch, run: int, first_tick: int, steps: int, tally: Counter) -> None:

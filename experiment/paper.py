@@ -2,7 +2,7 @@
 
 Every run is one learner (QL or nnQL, random step k, seed) among ``n_obstacles`` scripted obstacles
 whose starts and every action come from :mod:`world.scenario`; the obstacles announce their
-pre-generated next action, which only nnQL reads. The runs are played by ``sim.swarm`` (the same
+pre-generated next action, which only nnQL reads. The runs are played by ``sim.episode`` (the same
 learner and rules as the swarm), all at once, episode by episode, spread over the cores
 (``workers`` threads); each run gives exactly what it would give alone.
 """

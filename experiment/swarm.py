@@ -1,7 +1,7 @@
 """The swarm experiment: every learning preset over seeds, on the swarm simulator, and its table.
 
 Each variant is a preset of ``protocol.config.PRESETS`` (the paper's QL and nnQL, the best options
-found, the shield, n = 2, DAQL, the oracle) played by ``sim.swarm`` for every seed: 8 learning
+found, the shield, n = 2, DAQL, the oracle) played by ``sim.episode`` for every seed: 8 learning
 agents by default, on the swarm's world (11 x 11, swaps counted), exactly the run
 ``launch/swarm.py --preset <variant> --seed <seed>`` plays. What each run leaves is the swarm's
 own ``episodes.csv`` (``runs/<variant>-s<seed>/``), so any run can be checked against the

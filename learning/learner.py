@@ -48,7 +48,7 @@ what the agent sees (``learning.fields.Sight``).
 
 Completing a transition writes a *learning record* (``rec``, ``rec_f``; ``learning.record``),
 applied by ``apply_record``: at once for an independent learner, or, where a swarm shares one
-table, in agent-id order before the next tick: by the simulator to its one table (``sim.swarm``),
+table, in agent-id order before the next tick: by the simulator to its one table (``sim.episode``),
 by the world to its copy (``world.shared_table``), once it has checked that the record is the one
 the sender's own transition wrote (``world.records``, with ``learning.readings.read_rows`` and
 ``learning.record.complete``), and which hands the entries written to every agent's copy

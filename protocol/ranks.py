@@ -12,7 +12,7 @@ cross each other only when at most :data:`MEET_DISTANCE` moves apart (Manhattan)
 two cells away along both axes is within a radius of 2 but can reach none of the cells this agent
 can, so its intent cannot make the two collide; the learner then reads it as one whose intent is
 unknown. The agent process (``agent.brain``), the world's recording of the negotiation
-(``recording.world``), the PettingZoo adapter and the swarm simulator (``sim.swarm``) all ask
+(``recording.world``), the PettingZoo adapter and the swarm simulator (``sim.episode``) all ask
 :func:`waits_for` whose intents an agent knows; whose answers it waits for on the wire,
 :func:`awaits_answer` (the simulator has no wire).
 """

@@ -1,4 +1,4 @@
-"""The swarm in one process: the swarm simulator (``sim.swarm``) playing one run, with its files.
+"""The swarm in one process: the swarm simulator (``sim.episode``) playing one run, with its files.
 
 The simulator plays every agent and the world inside the compiled kernel, in rank order, exactly
 as the distributed negotiation orders them when nobody misses a deadline; this runner adds what a
@@ -20,7 +20,7 @@ from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, EPISODES_FILE
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
-from nnql_swarm.sim.swarm import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y
+from nnql_swarm.sim.episode import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y
 from nnql_swarm.world.engine import TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.scenario import swarm_episode

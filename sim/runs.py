@@ -3,7 +3,7 @@
 A run is one ``protocol.config.SwarmConfig``: its seed and learning options (the batch reads those;
 the world's shape is the batch's :class:`World`); a :class:`Batch` holds many runs of one world
 shape (bodies, grid, episode length) and plays them episode by episode through
-``sim.swarm.run_episode``. Every random draw comes from the run's seed: each episode's scenario
+``sim.episode.run_episode``. Every random draw comes from the run's seed: each episode's scenario
 (starts, goals, scripts) from ``world.scenario``, each learner's exploring actions and tie-breakers
 from its own stream (``protocol.seeding``), drawn per episode in the same order as an agent process
 draws them. A run therefore gives exactly what it gives alone, in any batch, and what the
@@ -26,7 +26,7 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
-from nnql_swarm.sim.swarm import (
+from nnql_swarm.sim.episode import (
     OPT_FIELDS, OPT_FROZEN, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS,
     ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS, OUT_MAKESPAN, OUT_ON_GOAL, OUT_SHORTEST, OUT_SOC,
     OUT_VIOLATIONS, TR_FIELDS, EpisodeRules, Learners, Moves, Noise, OracleScratch, Results, Runs,

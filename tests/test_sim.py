@@ -110,7 +110,7 @@ def test_under_step_aside_agents_make_way_and_the_score_counts_each_last_arrival
     """Arrived agents leave their goals to make way and come back; the row's arrivals are the
     agents on their goals at the end, and its learner-steps each one's last arrival step (the
     steps played for one not home), as the recorded ticks show."""
-    from nnql_swarm.sim.swarm import TR_ARRIVED
+    from nnql_swarm.sim.episode import TR_ARRIVED
 
     config = SwarmConfig(n_agents=16, episodes=40, obstacle_density=0.2, seed=3,
                          on_target="step-aside", **PRESETS[preset])

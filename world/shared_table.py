@@ -4,7 +4,7 @@ Each agent's intent carries its learning record of the tick. The world checks th
 fits the tables (:meth:`SharedTable.accepts`, as it takes the intent) and is the one the agent's
 own transition wrote (``world.records``) and, when the tick closes, applies those it believes
 in agent-id order with the learner's own ``apply_record``, the very step the simulator applies
-to its one table (``sim.swarm``). The next observations then tell every agent which entries
+to its one table (``sim.episode``). The next observations then tell every agent which entries
 changed and their new values (:meth:`SharedTable.apply` returns them, in the order the records
 wrote them), and each agent writes them into its copy (``learning.record.write_updates``). All
 copies stay equal to this one and to the simulator's, and a tick costs every agent one write per
