@@ -130,6 +130,17 @@ def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
     assert compiled_simulator()
 
 
+def test_the_kernel_cache_is_the_sources_own_even_when_numba_was_imported_first():
+    """numba reads its environment at its own import: a script that imports it before the
+    project must still get the cache of this version of the kernel sources, not a stale one."""
+    probe = ("import numba; from nnql_swarm.kernel.jit import cache_directory; "
+             "print(numba.config.CACHE_DIR == str(cache_directory()))")
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NNQL_KERNEL")}
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
+                          timeout=120)
+    assert done.stdout.strip() == "True", done.stderr
+
+
 def test_compiling_is_announced_before_the_progress_bar(monkeypatch, capsys):
     monkeypatch.setattr(runs, "compiled_simulator", lambda: False)
     config = SwarmConfig(n_agents=2, width=5, height=5, episodes=1, max_steps=10)
