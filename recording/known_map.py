@@ -46,7 +46,7 @@ PARKED_COLOUR = (140, 140, 140)
 
 def shows_known_map(config: SwarmConfig) -> bool:
     """Whether the run's learners read a known map (else there is none to show)."""
-    return bool(uses_map(learner_params(config)[0]))
+    return bool(uses_map(ints(learner_params(config)[0])))
 
 
 class KnownMapViz:

@@ -94,7 +94,7 @@ class RecordCheck:
         self.config = config
         self.rows = NeighbourRows(config)
         params, params_f = learner_params(config)
-        self.map_fields = bool(uses_map(params))
+        self.map_fields = bool(uses_map(ints(params)))
         if self.map_fields:  # destination seeking read on the agent's known map: see could_write
             params[LP_DS_STATE], params[LP_DS_REWARD] = DS_GOAL, REWARD_WORLD
         self.params, self.params_f = ints(params), floats(params_f)
