@@ -40,8 +40,8 @@ from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.launch.experiment_maps import run_maps
 from nnql_swarm.terminal.cli import (
-    EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, make_directory, parse_grid,
-    parse_workers, prepare_simulator, program_name, progress, raise_terminated,
+    EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, comma_choices, make_directory,
+    parse_grid, parse_workers, prepare_simulator, program_name, progress, raise_terminated,
 )
 from nnql_swarm.recording.curves import log_swarm_curves
 
@@ -71,14 +71,6 @@ def parse_ks(text: str) -> list[int]:
     return sorted(ks)
 
 
-def parse_algos(text: str) -> list[str]:
-    algos = [a.strip().lower() for a in text.split(",") if a.strip()]
-    unknown = [a for a in algos if a not in ALGOS]
-    if unknown or not algos:
-        raise argparse.ArgumentTypeError(f"choose algorithms from {','.join(ALGOS)}, got {text!r}")
-    return [a for a in ALGOS if a in algos]
-
-
 def build_parser() -> OneLineParser:
     parser = OneLineParser(
         description="QL vs nnQL, the paper's experiment: one learner among scripted obstacles "
@@ -96,7 +88,8 @@ def build_parser() -> OneLineParser:
         help=f"steps per episode at most (default {DEFAULTS.max_steps})")
     add("--ks", type=parse_ks, default=list(range(1, 11)), metavar="KS",
         help="random steps k: every k-th action is random; a range or list (default 1-10)")
-    add("--algos", type=parse_algos, default=list(ALGOS), help="algorithms to compare (default ql,nnql)")
+    add("--algos", type=comma_choices(ALGOS, "algorithms", fold_case=True), default=ALGOS,
+        help="algorithms to compare (default ql,nnql)")
     add("--alpha", type=bounded(float, 0.0, 1.0), default=DEFAULTS.alpha,
         help=f"learning rate (default {DEFAULTS.alpha})")
     add("--gamma", type=bounded(float, 0.0, 1.0), default=DEFAULTS.gamma,
@@ -211,14 +204,6 @@ def run(args: argparse.Namespace) -> Path:
     return args.out
 
 
-def parse_variants(text: str) -> tuple[str, ...]:
-    names = [v.strip() for v in text.split(",") if v.strip()]
-    unknown = [v for v in names if v not in VARIANTS]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"choose variants from {','.join(VARIANTS)}, got {text!r}")
-    return tuple(v for v in VARIANTS if v in names)
-
-
 def build_swarm_parser() -> OneLineParser:
     d = SwarmExperiment()
     parser = OneLineParser(
@@ -246,7 +231,7 @@ def build_swarm_parser() -> OneLineParser:
     add("--scen", default=None, metavar="FILE",
         help="with --map: a MovingAI .scen file whose first N lines (N = --agents) are every "
              "episode's starts and goals")
-    add("--variants", type=parse_variants, default=d.variants, metavar="LIST",
+    add("--variants", type=comma_choices(VARIANTS, "variants"), default=d.variants, metavar="LIST",
         help=f"comma-separated, from {','.join(VARIANTS)}")
     add("--ablation", action="store_true",
         help="instead of the variants: best-nnql with each of its options beyond the paper "

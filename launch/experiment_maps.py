@@ -16,8 +16,8 @@ from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGE
 from nnql_swarm.recording.curves import log_swarm_curves
 from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.terminal.cli import (
-    OneLineParser, Terminated, bounded, make_directory, parse_workers, prepare_simulator,
-    program_name, progress,
+    OneLineParser, Terminated, bounded, comma_choices, make_directory, parse_workers,
+    prepare_simulator, program_name, progress,
 )
 
 def parse_counts(text: str) -> tuple[int, ...]:
@@ -31,14 +31,6 @@ def parse_counts(text: str) -> tuple[int, ...]:
     if not counts or min(counts) < 1:
         raise argparse.ArgumentTypeError(f"agent counts must be at least 1: {text!r}")
     return counts
-
-
-def parse_families(text: str) -> tuple[str, ...]:
-    names = [v.strip() for v in text.split(",") if v.strip()]
-    unknown = [v for v in names if v not in FAMILIES]
-    if unknown or not names:
-        raise argparse.ArgumentTypeError(f"choose families from {','.join(FAMILIES)}, got {text!r}")
-    return tuple(v for v in FAMILIES if v in names)
 
 
 def parse_override(text: str) -> tuple[str, object]:
@@ -88,7 +80,7 @@ def build_maps_parser() -> OneLineParser:
         help="episodes on each held-out map (new starts and goals; the map forgotten before each)")
     add("--agents", type=parse_counts, default=d.agents, metavar="LIST",
         help="agent counts of frozen play, e.g. 8,32,64")
-    add("--families", type=parse_families, default=d.families, metavar="LIST",
+    add("--families", type=comma_choices(FAMILIES, "families"), default=d.families, metavar="LIST",
         help=f"held-out map families, from {','.join(FAMILIES)}")
     add("--scratch-episodes", type=bounded(int, 5), default=d.scratch_episodes, metavar="N",
         help="episodes of learning from scratch on an unseen random map")

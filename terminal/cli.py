@@ -156,6 +156,21 @@ def bounded(kind: type, low: float | None = None, high: float | None = None):
     return parse
 
 
+def comma_choices(choices: tuple[str, ...], noun: str, fold_case: bool = False):
+    """An argparse type: a comma-separated list of ``choices`` (``fold_case``: in any case), given
+    back in the order of ``choices``."""
+
+    def parse(text: str) -> tuple[str, ...]:
+        names = [v.strip().lower() if fold_case else v.strip() for v in text.split(",")
+                 if v.strip()]
+        if not names or any(v not in choices for v in names):
+            raise argparse.ArgumentTypeError(f"choose {noun} from {','.join(choices)}, got {text!r}")
+        return tuple(v for v in choices if v in names)
+
+    parse.__name__ = noun
+    return parse
+
+
 def parse_grid(text: str) -> tuple[int, int]:
     """``"11x11"`` -> ``(11, 11)``: a grid's width and height, each at least 1."""
     try:

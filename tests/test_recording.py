@@ -62,6 +62,10 @@ class Recording:
     def column(self, entity: str, name: str) -> list:
         return [v for batch in self.temporal[entity] for v in batch.column(name).to_pylist()]
 
+    def by_time(self, entity: str, name: str, timeline: str = "tick") -> dict:
+        """A column's values by the timeline's value of their rows."""
+        return dict(zip(self.column(entity, timeline), self.column(entity, name)))
+
     def scalars(self, entity: str) -> dict[int, tuple[int, float]]:
         """episode -> (tick, value) of a per-episode series."""
         episodes = self.column(entity, "episode")
@@ -137,8 +141,7 @@ def test_positions_and_trails_are_the_worlds(run):
     config = SwarmConfig.from_json((out / "config.json").read_text())
     ticks = recording.column("world/agents", "tick")
     cells = dict(zip(ticks, recording.column("world/agents", "Points2D:positions")))
-    trails = dict(zip(recording.column("world/trails", "tick"),
-                      recording.column("world/trails", "LineStrips2D:strips")))
+    trails = recording.by_time("world/trails", "LineStrips2D:strips")
     first_tick = 0
     for row in read_episodes(out / "episodes.csv"):
         starts = swarm_episode(config.seed, int(row["episode"]), config.width, config.height,
@@ -222,12 +225,9 @@ def test_the_negotiation_is_logged_as_the_agents_ask(run):
     config = SwarmConfig.from_json((out / "config.json").read_text())
     rows = read_episodes(out / "episodes.csv")
     end_ticks = {int(r["end_tick"]) for r in rows}
-    cells = dict(zip(recording.column("world/agents", "tick"),
-                     recording.column("world/agents", "Points2D:positions")))
-    episode_of = dict(zip(recording.column("world/agents", "tick"),
-                          recording.column("world/agents", "episode")))
-    arrows = dict(zip(recording.column("world/negotiation", "tick"),
-                      recording.column("world/negotiation", "Arrows2D:origins")))
+    cells = recording.by_time("world/agents", "Points2D:positions")
+    episode_of = recording.by_time("world/agents", "episode")
+    arrows = recording.by_time("world/negotiation", "Arrows2D:origins")
     total = 0
     for tick, logged in arrows.items():
         positions = np.array(cells[tick], dtype=np.int64)
@@ -386,10 +386,8 @@ def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_refere
     assert config.ds_state == "progress" and config.shared  # the default preset
     recording = Recording(out / "run.rrd")
     walls = {tuple(cell) for cell in config.walls().tolist()}
-    known_at = dict(zip(recording.column("known_map/walls/known", "tick"),
-                        recording.column("known_map/walls/known", "Boxes2D:centers")))
-    unseen_at = dict(zip(recording.column("known_map/walls/unseen", "tick"),
-                         recording.column("known_map/walls/unseen", "Boxes2D:centers")))
+    known_at = recording.by_time("known_map/walls/known", "Boxes2D:centers")
+    unseen_at = recording.by_time("known_map/walls/unseen", "Boxes2D:centers")
     assert len(known_at) > 1 and known_at.keys() == unseen_at.keys()  # it learned as it went
     cells_of = lambda boxes: {tuple(map(round, c)) for c in boxes or []}  # noqa: E731
     sizes = [len(cells_of(known_at[t])) for t in sorted(known_at)]
@@ -403,12 +401,9 @@ def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_refere
     # every planned path: from the agent's cell to its goal, step by step, off the known walls
     ticks = recording.column("known_map/path", "tick")
     paths = recording.column("known_map/path", "LineStrips2D:strips")
-    here = dict(zip(recording.column("known_map/agent", "tick"),
-                    recording.column("known_map/agent", "Points2D:positions")))
-    goals = dict(zip(recording.column("known_map/goal", "tick"),
-                     recording.column("known_map/goal", "Boxes2D:centers")))
-    world = dict(zip(recording.column("world/agents", "tick"),
-                     recording.column("world/agents", "Points2D:positions")))
+    here = recording.by_time("known_map/agent", "Points2D:positions")
+    goals = recording.by_time("known_map/goal", "Boxes2D:centers")
+    world = recording.by_time("world/agents", "Points2D:positions")
     changes = sorted(known_at)
     reached = 0
     for tick, strips in zip(ticks, paths):
@@ -423,8 +418,7 @@ def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_refere
     assert reached > len(ticks) / 2
     # Q_DS: a table of its 16 progress states, the checkpointed table's at the run's end
     q_ds = read_fields(checkpoint.checkpoint_path(out / "checkpoints", 0), ())["q_ds"]
-    texts = dict(zip(recording.column("agents/0/q_ds/table", "episode"),
-                     recording.column("agents/0/q_ds/table", "TextDocument:text")))
+    texts = recording.by_time("agents/0/q_ds/table", "TextDocument:text", "episode")
     table, learned = ds_table(q_ds, "progress", config.optimistic, learnable_bound("q_ds", config))
     assert learned and table in texts[config.episodes - 1][0]
     assert table.count("\n| ") == 17  # a heading row and one row per state
