@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""How often the oracle (``sim.oracle``, PIBT) brings every agent home on random maps.
+"""How often the oracle (``world.pibt``, PIBT) brings every agent home on random maps.
 
 Each instance is its own random map (``terrain.maps``: ``random:SxS:P`` with the instance's
 seed, sizes cycling over ``--sizes``) and its own starts and goals (the first episode drawn from

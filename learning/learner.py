@@ -249,3 +249,25 @@ def make_way(sight, learners, grid, ties):
         if score > best_score or (score == best_score and score > 0 and ties[a] > ties[best]):
             best, best_score = a, score
     return best
+
+
+@kernel
+def preference_ranks(values, ties, first, by_value, ranks, base):
+    """An agent's order over its moves, announced for priority inheritance (``--arbitration
+    pibt``; ``world.pibt.plan`` reads it): the rank of each action into ``ranks[base + a]``,
+    ``first`` (the action it chose: its greedy one, or its random step) 0, the others after it by
+    their ``values`` (Q_final, Eq. 7) where ``by_value``, and among equals the larger tie-breaker
+    (``ties``, this step's) first."""
+    for a in range(N_ACTIONS):
+        rank = 0
+        if a != first:
+            rank = 1
+            for b in range(N_ACTIONS):
+                if b == a or b == first:
+                    continue
+                if by_value and values[b] != values[a]:
+                    if values[b] > values[a]:
+                        rank += 1
+                elif ties[b] > ties[a] or (ties[b] == ties[a] and b < a):
+                    rank += 1
+        ranks[base + a] = rank

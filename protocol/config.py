@@ -20,7 +20,7 @@ from nnql_swarm.protocol.walls import MAX_DENSITY, layout, wall_count
 
 ALGOS = ("nnql", "ql", "nnql-dir", "daql", "oracle")
 """nnQL (the paper), plain QL, nnQL whose neighbour state also holds the announced move, Double
-Action Q-learning (a baseline), and the oracle: a reference planner (PIBT, ``sim.oracle``; not a
+Action Q-learning (a baseline), and the oracle: a reference planner (PIBT, ``world.pibt``; not a
 lower bound, which ``shortest_sum`` is; in-process only)."""
 NEGOTIATING_ALGOS = ("nnql", "nnql-dir")
 DS_STATE_NAMES = ("goal", "waypoint", "progress")
@@ -30,6 +30,11 @@ MAX_LOOKAHEAD = 3
 ON_TARGET = ("park", "step-aside")
 """What an agent on its goal does (``world.rules``): parks there for good (the paper's reading)
 or stays unless it has to make way (the field's)."""
+ARBITRATIONS = ("paper", "pibt")
+"""How the world settles a tick's moves (``world.rules``): everyone's one intent applied at once,
+colliding moves blocked and counted (the paper's), or priority inheritance (PIBT, with LaCAM's
+swap; ``world.pibt.plan``) over each agent's announced order of its moves, so that nobody
+collides and an agent whose first choice is refused earns no collision-avoidance reward."""
 
 START_S_PER_AGENT = 1.0
 """The start-up a swarm is given per agent, where that is longer than a fixed wait: the world
@@ -46,7 +51,7 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
 LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
                    "known_state", "shared", "shield", "lookahead", "still_terminal",
                    "stay_reward", "ds_state", "ds_reward", "detour", "still_shield",
-                   "escape_shield")
+                   "escape_shield", "arbitration")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
@@ -54,7 +59,7 @@ PAPER: dict[str, Any] = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
          "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
          "ds_state": "goal", "ds_reward": "euclid", "detour": False, "still_shield": False,
-         "escape_shield": False}
+         "escape_shield": False, "arbitration": "paper"}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -80,6 +85,8 @@ PRESETS: dict[str, dict] = {
                     "wait_rule": "meet"},
     "path-nnql": {**PAPER, **BEST, "algo": "nnql", "shield": True, "known_state": True,
                   "wait_rule": "meet", **PATH, "escape_shield": True},
+    "pibt-nnql": {**PAPER, **BEST, "algo": "nnql", "known_state": True, "wait_rule": "meet",
+                  **PATH, "arbitration": "pibt"},
     "nnql-n2": {**PAPER, **BEST, "algo": "nnql", "lookahead": 2, "interaction_radius": 4},
     "daql": {**PAPER, **BEST, "algo": "daql"},
     "oracle": {**PAPER, "algo": "oracle"},
@@ -159,11 +166,18 @@ class SwarmConfig:
     detour: bool = option(_DEFAULT["detour"], "the path on the known map (--ds-state, "
                           "--ds-reward) goes around the arrived agents within reach, where "
                           "another way is known")
-    on_target: str = option("park", "what an agent that reached its goal does: stays there for "
+    on_target: str = option("", "what an agent that reached its goal does: stays there for "
                             "good, an obstacle (park, the paper's reading), or stays unless it "
                             "has to make way, and may leave and come back, counted arrived "
                             "only while there, its last arrival its arrival (step-aside, the "
-                            "field's)", choices=ON_TARGET)
+                            "field's); by default step-aside under --arbitration pibt, else park",
+                            choices=ON_TARGET)
+    arbitration: str = option(_DEFAULT["arbitration"], "how the world settles a tick's moves: "
+                              "every agent's intent applied at once, colliding moves blocked "
+                              "and counted (paper), or priority inheritance over each agent's "
+                              "announced order of its moves (pibt: nobody collides; a refused "
+                              "first choice earns no collision-avoidance reward; needs "
+                              "--on-target step-aside)", choices=ARBITRATIONS)
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
                                      "largest free region)", metavar="P")
@@ -185,6 +199,9 @@ class SwarmConfig:
         validate_run_id(self.run_id)
         # JSON gives lists: the config is frozen and hashable, so they become tuples
         object.__setattr__(self, "map_rows", tuple(self.map_rows))
+        if not self.on_target:  # the on-target rule of the arbitration
+            object.__setattr__(self, "on_target",
+                               "step-aside" if self.arbitration == "pibt" else "park")
         object.__setattr__(self, "scenario", tuple(tuple(int(v) for v in task)
                                                    for task in self.scenario))
         checks = [
@@ -216,6 +233,15 @@ class SwarmConfig:
              "a lookahead n > 1 plans on the goal's offset: it needs --ds-state goal"),
             (self.on_target in ON_TARGET,
              f"the on-target rule must be one of {', '.join(ON_TARGET)}"),
+            (self.arbitration in ARBITRATIONS,
+             f"the arbitration must be one of {', '.join(ARBITRATIONS)}"),
+            (self.arbitration != "pibt" or self.on_target == "step-aside",
+             "priority inheritance (--arbitration pibt) moves agents off their goals: it needs "
+             "--on-target step-aside"),
+            (self.arbitration != "pibt" or not self.shield,
+             "under --arbitration pibt nobody collides: the shield (--shield) has nothing to do"),
+            (self.arbitration != "pibt" or self.algo in NEGOTIATING_ALGOS + ("ql",),
+             "--arbitration pibt needs a learner that announces its moves (nnql, nnql-dir, ql)"),
             (self.tick_deadline_s > 0, "the tick deadline must be positive"),
             (0 <= self.obstacle_density <= MAX_DENSITY,
              f"the obstacle density must be 0..{MAX_DENSITY}"),
@@ -325,6 +351,7 @@ class SwarmConfig:
         data.setdefault("detour", False)
         data.setdefault("still_shield", False)
         data.setdefault("escape_shield", False)
+        data.setdefault("arbitration", "paper")
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:

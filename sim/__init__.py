@@ -1,6 +1,6 @@
 """Simulators: the whole swarm inside one process.
 
-Two of them, for two questions. ``sim.episode`` (with ``sim.runs`` and ``sim.oracle``) steps the
+Two of them, for two questions. ``sim.episode`` (with ``sim.runs`` and ``world.pibt``) steps the
 world and every agent's learner inside the compiled kernel, many seeds and options at once: the
 sweeps and the experiments run on it. ``sim.distributed`` runs the very protocol machines that run
 over Zenoh (``agent.machine``, ``world.machine``) over a simulated network (``sim.network``) in

@@ -13,7 +13,7 @@ record of a tick is applied in agent-id order before the next tick.
 Bodies ``0 .. learners - 1`` learn; the rest are scripted obstacles whose every action is given
 (the paper's experiment: one learner, three obstacles; a swarm's walls, ``protocol.walls``, whose
 every action is to stay), outrank every learner and announce their scripted next action. An
-oracle run plans every learner's move with PIBT (``sim.oracle``, a reference planner) around the
+oracle run plans every learner's move with PIBT (``world.pibt``, a reference planner) around the
 walls, and learns nothing.
 
 The arguments come grouped in named tuples (defined here, and ``world.rules``' for the world's
@@ -29,29 +29,32 @@ from nnql_swarm.learning.fields import (
     NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL, Grid,
     LearnerBuffers, Sight,
 )
-from nnql_swarm.learning.learner import decide, finish, make_way, planned_cell
+from nnql_swarm.learning.learner import decide, finish, make_way, planned_cell, preference_ranks
 from nnql_swarm.learning.record import apply_record, record_outcome
-from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY, sees, target_x, target_y
 from nnql_swarm.kernel.jit import Buffer, batch_kernel, inline_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
-from nnql_swarm.sim.oracle import plan
+from nnql_swarm.world.pibt import plan
 from nnql_swarm.world.rules import (
-    Bodies, Outcome, Rules, Scratch, Score, field_costs, shared_cells, swaps_through, world_step,
+    Bodies, Outcome, Rules, Scratch, Score, field_costs, refusal_rewards, shared_cells,
+    swaps_through, world_step,
 )
 
 ORACLE_SCRATCH = 12
-"""Rows of a run's oracle scratch (``sim.oracle.plan``: occupant, reserved, order, blocked,
+"""Rows of a run's oracle scratch (``world.pibt.plan``: occupant, reserved, order, blocked,
 queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal, and
 the swap's partner and first-choice flag per chain level), a slot per grid cell each."""
 
 OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS, OPT_FROZEN, OPT_STEP_ASIDE = 0, 1, 2, 3, 4, 5
-OPT_FIELDS = 6
+OPT_PIBT = 6
+OPT_FIELDS = 7
 """Per-run options of the swarm: one table for all agents; the steps an announcement covers
 (n of nnQL); the oracle instead of learners; whether the scripted bodies are walls (which a
 learner's known map, ``learning.known_map``, learns as it sees them); frozen play (the tables are
 read, never written; the learner's random step is off through its parameters); the
 ``step-aside`` on-target rule (``world.rules``: an arrived agent makes way,
-``learning.learner.make_way``, and is nobody's arrived obstacle)."""
+``learning.learner.make_way``, and is nobody's arrived obstacle); priority inheritance over the
+learners' announced orders (``--arbitration pibt``, ``world.pibt.plan``)."""
 
 OUT_END_TICK, OUT_SHORTEST, OUT_VIOLATIONS, OUT_ON_GOAL, OUT_SOC, OUT_MAKESPAN = 0, 1, 2, 3, 4, 5
 OUT_FIELDS = 6
@@ -134,10 +137,12 @@ class Moves(NamedTuple):
 
 
 class OracleScratch(NamedTuple):
-    """The oracle's working space (``sim.oracle.plan``): ``ORACLE_SCRATCH`` rows of a slot per
-    grid cell, and a slot per body and cell."""
+    """The arbitration's working space (``world.pibt.plan``): ``ORACLE_SCRATCH`` rows of a slot
+    per grid cell, a slot per body and cell, and the learners' announced orders (``ranks``, a
+    slot per body and action)."""
     rows: Buffer
     cells: Buffer
+    ranks: Buffer
 
 
 class Results(NamedTuple):
@@ -241,7 +246,8 @@ def run_episode(rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
             Outcome(outcome.before_x[r], outcome.before_y[r], outcome.collided[r],
                     outcome.r_ds[r], outcome.r_ca[r]),
             Scratch(scratch.occupancy[r], scratch.blocked[r]),
-            OracleScratch(oracle_buffers.rows[r], oracle_buffers.cells[r]),
+            OracleScratch(oracle_buffers.rows[r], oracle_buffers.cells[r],
+                          oracle_buffers.ranks[r]),
             Results(results.row[r], results.row_f[r], results.out[r], results.trace[r]))
 
 
@@ -265,10 +271,12 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
     actions, decided, prev_x, prev_y = moves.actions, moves.decided, moves.prev_x, moves.prev_y
     collided, r_ds, r_ca = outcome.collided, outcome.r_ds, outcome.r_ca
     oracle_scratch, oracle_cells = oracle_buffers.rows, oracle_buffers.cells
+    ranks = oracle_buffers.ranks
     row, row_f, out, trace = results.row, results.row_f, results.out, results.trace
     shared = options[OPT_SHARED] != 0
     learning = options[OPT_FROZEN] == 0
     oracle = options[OPT_ORACLE] != 0
+    pibt = options[OPT_PIBT] != 0
     last_wall = n if options[OPT_WALLS] != 0 else learners  # walls: bodies learners .. n - 1
     step_aside = options[OPT_STEP_ASIDE] != 0
     alpha, gamma = params_f[FP_ALPHA], params_f[FP_GAMMA]
@@ -291,7 +299,7 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
             goal_x[i] = goals[i, 0]
             goal_y[i] = goals[i, 1]
             shortest += paths[i]
-            if oracle:  # PIBT's first order: the farthest from its goal first
+            if oracle or pibt:  # PIBT's first order: the farthest from its goal first
                 oracle_scratch[7, i] = paths[i]
                 oracle_scratch[9, i] = paths[i] + 1  # nearer than ever, at first
         else:
@@ -323,7 +331,7 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                  oracle_scratch[9], actions, oracle_cells, oracle_scratch[0], oracle_scratch[1],
                  decided, oracle_scratch[2], oracle_scratch[3], oracle_scratch[4],
                  oracle_scratch[5], oracle_scratch[6], oracle_scratch[8], oracle_scratch[10],
-                 oracle_scratch[11], step)
+                 oracle_scratch[11], step, step == 0, False, ranks)
         for rank in range(learners):
             i = (rank + tick) % learners  # the agent of this rank (inverse of priority_rank)
             if oracle:
@@ -342,7 +350,9 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
             if stops:
                 written = finish(learner, grid, sight, learning and not shared)
                 actions[i] = STAY
-                if step_aside and not ending:  # on its goal: it makes way if told to
+                if pibt:  # on its goal, it offers to stay; the arbitration may push it
+                    preference_ranks(values, ties[i, step], STAY, False, ranks, i * N_ACTIONS)
+                elif step_aside and not ending:  # on its goal: it makes way if told to
                     m = neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options,
                                        True)
                     sight = Sight(x[i], y[i], goal_x[i], goal_y[i], nb, m, False)
@@ -350,8 +360,17 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
             else:
                 actions[i], written = decide(learner, grid, sight, random_actions[i, step],
                                              ties[i, step], learning and not shared)
+                if pibt:
+                    preference_ranks(values, ties[i, step], actions[i], True, ranks,
+                                     i * N_ACTIONS)
             pending_rec[i] = learning and shared and written
             decided[i] = True
+        if pibt and not ending:  # the world settles the announced orders
+            plan(x, y, goal_x, goal_y, arrived, n, learners, width, height, step_aside,
+                 oracle_scratch[7], oracle_scratch[9], actions, oracle_cells, oracle_scratch[0],
+                 oracle_scratch[1], decided, oracle_scratch[2], oracle_scratch[3],
+                 oracle_scratch[4], oracle_scratch[5], oracle_scratch[6], oracle_scratch[8],
+                 oracle_scratch[10], oracle_scratch[11], step, step == 0, True, ranks)
         if record:
             for i in range(n):
                 trace[step, i, TR_X] = x[i]
@@ -371,6 +390,8 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
             prev_x[i] = x[i]
             prev_y[i] = y[i]
         everyone = world_step(world, bodies, actions, outcome, scratch, score)
+        if pibt:
+            refusal_rewards(ranks, actions, bodies.learns, learners, r_ca, row_f)
         out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, scratch.occupancy)
         if count_swaps:
             out[OUT_VIOLATIONS] += swaps_through(outcome.before_x, outcome.before_y, x, y, n, width,

@@ -27,7 +27,7 @@ from nnql_swarm.kernel.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.episode import (
-    OPT_FIELDS, OPT_FROZEN, OPT_LOOKAHEAD, OPT_ORACLE, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS,
+    OPT_FIELDS, OPT_FROZEN, OPT_LOOKAHEAD, OPT_ORACLE, OPT_PIBT, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS,
     ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS, OUT_MAKESPAN, OUT_ON_GOAL, OUT_SHORTEST, OUT_SOC,
     OUT_VIOLATIONS, TR_FIELDS, EpisodeRules, Learners, Moves, Noise, OracleScratch, Results, Runs,
     Scenario, run_episode,
@@ -143,6 +143,7 @@ class Batch:
         self.options[:, OPT_WALLS] = int(w.scripted > 0 and not w.paper)
         self.options[:, OPT_FROZEN] = [run.frozen for run in runs]
         self.options[:, OPT_STEP_ASIDE] = [run.step_aside for run in runs]
+        self.options[:, OPT_PIBT] = [run.arbitration == "pibt" for run in runs]
         init = np.array([run.optimistic for run in runs])[:, None, None, None]
         self.q_ds = np.broadcast_to(init, (r, learners, N_STATES, N_ACTIONS)).copy()
         self.q_ca = np.broadcast_to(init, (r, learners, rows, N_ACTIONS)).copy()
@@ -166,7 +167,8 @@ class Batch:
         self._outcome = Outcome(_ints(r, n), _ints(r, n), np.zeros((r, n), dtype=bool),
                                 np.zeros((r, n)), np.zeros((r, n)))
         self._scratch = Scratch(_ints(r, cells), np.zeros((r, n), dtype=bool))
-        self._oracle = OracleScratch(_ints(r, ORACLE_SCRATCH, cells), _ints(r, n * cells))
+        self._oracle = OracleScratch(_ints(r, ORACLE_SCRATCH, cells), _ints(r, n * cells),
+                                     _ints(r, n * N_ACTIONS))
         self._rec = _ints(r, learners, record_size(n))
         self._rec_f = np.zeros((r, learners, RF_FIELDS))
         self._pending_rec = np.zeros((r, learners), dtype=bool)

@@ -48,7 +48,7 @@ The field's metrics (POGEMA's, :func:`field_costs`) read each learner's *arrival
 import math
 from typing import NamedTuple
 
-from nnql_swarm.protocol.actions import STAY, target_x, target_y
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
 from nnql_swarm.kernel.jit import Buffer, kernel
 
 Cell = tuple[int, int]
@@ -284,6 +284,20 @@ def world_step(rules, bodies, actions, outcome, scratch, score):
     row_f[ROW_REWARD_DS] += ds_sum
     row_f[ROW_REWARD_CA] += ca_sum
     return everyone_arrived
+
+
+@kernel
+def refusal_rewards(ranks, actions, learns, n, r_ca, row_f):
+    """Under priority inheritance (``--arbitration pibt``) nobody collides, and the
+    collision-avoidance reward reads the conflict the arbitration settled: a learner whose first
+    choice (``ranks[i * N_ACTIONS + a]`` 0, ``world.pibt.plan``'s) was refused earns 0 for it,
+    as for a collision, instead of ``CA_REWARD``. Runs after :func:`world_step` (``actions``
+    applied, ``r_ca`` and the score's ``row_f`` written), over the first ``n`` bodies."""
+    for i in range(n):
+        if learns[i] and r_ca[i] == CA_REWARD and ranks[i * N_ACTIONS + actions[i]] != 0:
+            r_ca[i] = 0.0
+            row_f[ROW_REWARD] -= CA_REWARD
+            row_f[ROW_REWARD_CA] -= CA_REWARD
 
 
 @kernel

@@ -37,6 +37,10 @@ TIES = 1024
 FAR = 1 << 30
 """The distance of a cell its agent cannot reach."""
 
+UNWANTED = N_ACTIONS
+"""The rank of a move an agent does not offer (``plan``'s ``ranks``): a missed intent offers only
+STAY."""
+
 
 @kernel
 def goal_distances(goal_x, goal_y, blocked, width, height, distance, base, queue):
@@ -64,12 +68,16 @@ def goal_distances(goal_x, goal_y, blocked, width, height, distance, base, queue
 
 @kernel
 def _push(root, x, y, width, height, distances, occupant, reserved, decided, actions, stack,
-          tried, swap, blocked, goal_x, goal_y, n, swapper, first, step):
+          tried, swap, blocked, goal_x, goal_y, n, swapper, first, step, learned, ranks):
     """PIBT from agent ``root``, without recursion: ``stack`` holds the chain of agents pushed so
     far (each pushed by the one below it), ``tried`` each one's candidate moves tried (bits). An
     agent takes the untried free cell nearest its goal; if someone undecided stands there, that
     one is pushed next; if a pushed agent finds nothing, it stays and the one below tries its next
     cell; the first agent that finds a free cell settles the whole chain.
+
+    With ``learned``, an agent's order over its cells is its own (``ranks[i * N_ACTIONS + a]``:
+    0 for its first choice; :data:`UNWANTED` for a move it does not offer, which is never tried)
+    instead of the distance to its goal.
 
     With ``swap`` (the ``step-aside`` rule's planner), cells at one distance are tried in the
     order of :func:`_tie` at ``step``, and (walls ``blocked``, goals, ``n`` agents; scratch
@@ -106,9 +114,14 @@ def _push(root, x, y, width, height, distances, occupant, reserved, decided, act
                     continue
                 if swap and blocked[c] != 0:
                     continue
-                d = distances[i * cells + c]
-                if swap:
-                    d = d * TIES + _tie(i, c, step)
+                if learned:
+                    d = ranks[i * N_ACTIONS + a]
+                    if d >= UNWANTED:
+                        continue
+                else:
+                    d = distances[i * cells + c]
+                    if swap:
+                        d = d * TIES + _tie(i, c, step)
                 if (d > best_d) if far else (d < best_d):
                     best_a, best_d = a, d
             if best_a < 0:  # no cell left: it stays, and the agent below tries its next one
@@ -298,7 +311,7 @@ def _closes(goal, i, x, y, goal_x, goal_y, arrived, n, width, height, distances,
 @kernel
 def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, priority, closest,
          actions, distances, occupant, reserved, decided, order, blocked, queue, stack, tried,
-         probe, swapper, first, step):
+         probe, swapper, first, step, fresh, learned, ranks):
     """Every agent's collision-free action for this step, the agents of higher ``priority``
     first: bodies ``0 .. n - 1`` are the agents, ``n .. bodies - 1`` walls (they stay). An agent
     gains a unit of ``priority`` at every step that finds it no nearer its goal than it has been
@@ -306,10 +319,13 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, pr
     in its way. An agent next to its goal whose parking there would leave another agent no way
     to its own does not take it this step, and plans after the others. Under ``step_aside``
     arrived agents are planned (and pushed) like the others, and priorities are published
-    PIBT's (the module docstring), with LaCAM's swap (:func:`_push`). Scratch: ``distances``
-    (n cells each), ``occupant``, ``reserved``, ``blocked``, ``queue``, ``probe`` (a slot per
-    cell), ``decided``, ``order``, ``stack``, ``tried``, ``swapper``, ``first`` (a slot per
-    agent)."""
+    PIBT's (the module docstring), with LaCAM's swap (:func:`_push`); there the distances depend
+    on the goals and walls alone, and are worked out only when ``fresh`` (a new episode).
+    With ``learned``, each agent's order over its moves is its own (``ranks``, :func:`_push`),
+    not the distance to its goal: the arbitration of ``--arbitration pibt``, the same machinery
+    with the agents' preferences. Scratch: ``distances`` (n cells each), ``occupant``,
+    ``reserved``, ``blocked``, ``queue``, ``probe`` (a slot per cell), ``decided``, ``order``,
+    ``stack``, ``tried``, ``swapper``, ``first`` (a slot per agent)."""
     cells = width * height
     for c in range(cells):
         occupant[c] = -1
@@ -325,8 +341,9 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, pr
             decided[i] = True
     if step_aside:
         for i in range(n):
-            goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances, i * cells,
-                           queue)
+            if fresh:
+                goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances,
+                               i * cells, queue)
             if x[i] == goal_x[i] and y[i] == goal_y[i]:
                 priority[i] = 0
             else:
@@ -337,7 +354,8 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, pr
             i = order[a]
             if not decided[i]:
                 _push(i, x, y, width, height, distances, occupant, reserved, decided, actions,
-                      stack, tried, True, blocked, goal_x, goal_y, n, swapper, first, step)
+                      stack, tried, True, blocked, goal_x, goal_y, n, swapper, first, step,
+                      learned, ranks)
         return
     for i in range(n):
         if not arrived[i]:
@@ -375,7 +393,7 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, pr
         i = order[a]
         if not decided[i]:
             _push(i, x, y, width, height, distances, occupant, reserved, decided, actions, stack,
-                  tried, False, blocked, goal_x, goal_y, n, swapper, first, step)
+                  tried, False, blocked, goal_x, goal_y, n, swapper, first, step, learned, ranks)
 
 
 @kernel
