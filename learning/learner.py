@@ -73,7 +73,7 @@ from nnql_swarm.learning.fields import (
     LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_TAKEN, LS_X, LS_Y, NB_ID, NB_KNOWN, NB_NEXT_X,
     NB_NEXT_Y, NB_ROW, NB_X, NB_Y,
 )
-from nnql_swarm.learning.known_map import track
+from nnql_swarm.learning.known_map import path_length, track
 from nnql_swarm.learning.readings import ds_state, read_rows, shield_mask, uses_map
 from nnql_swarm.learning.record import apply_record, complete
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, offset_state, target_x, target_y
@@ -251,23 +251,73 @@ def make_way(sight, learners, grid, ties):
     return best
 
 
+UNREACHED = 1 << 30
+"""The known-map length of a move off the grid, into a known wall or away from any way to the
+goal (:func:`move_length`)."""
+
+
 @kernel
-def preference_ranks(values, ties, first, by_value, ranks, base):
+def move_length(wmap, x, y, a, width, height):
+    """The length of the way to the goal, on the known map, from the cell move ``a`` leads to."""
+    tx, ty = target_x(x, a, width), target_y(y, a, height)
+    if a != STAY and tx == x and ty == y:
+        return UNREACHED
+    d = path_length(wmap, tx, ty, width, height)
+    return UNREACHED if d < 0 else d
+
+
+@kernel
+def preference_ranks(values, ties, wmap, x, y, width, height, first, by_value, ranks, base):
     """An agent's order over its moves, announced for priority inheritance (``--arbitration
-    pibt``; ``world.pibt.plan`` reads it): the rank of each action into ``ranks[base + a]``,
-    ``first`` (the action it chose: its greedy one, or its random step) 0, the others after it by
-    their ``values`` (Q_final, Eq. 7) where ``by_value``, and among equals the larger tie-breaker
-    (``ties``, this step's) first."""
+    pibt``; ``world.pibt.plan`` reads it): the rank of each action into ``ranks[base + a]``.
+    Moves come by the length of the way to the goal they leave on the agent's known map
+    (:func:`move_length`), then, among moves as short, by their learned ``values`` (Q_final,
+    Eq. 7) where ``by_value``, then by this step's tie-breakers (``ties``, the larger first). The
+    first choice is ``first`` if it is not -1 (the random step, or staying on the goal)."""
     for a in range(N_ACTIONS):
         rank = 0
         if a != first:
-            rank = 1
+            rank = 0 if first < 0 else 1
+            la = move_length(wmap, x, y, a, width, height)
             for b in range(N_ACTIONS):
                 if b == a or b == first:
                     continue
-                if by_value and values[b] != values[a]:
-                    if values[b] > values[a]:
-                        rank += 1
-                elif ties[b] > ties[a] or (ties[b] == ties[a] and b < a):
+                lb = move_length(wmap, x, y, b, width, height)
+                if lb != la:
+                    better = lb < la
+                elif by_value and values[b] != values[a]:
+                    better = values[b] > values[a]
+                else:
+                    better = ties[b] > ties[a] or (ties[b] == ties[a] and b < a)
+                if better:
                     rank += 1
         ranks[base + a] = rank
+
+
+@kernel
+def first_choice(ranks, base):
+    """The action ranked 0 (:func:`preference_ranks`)."""
+    for a in range(N_ACTIONS):
+        if ranks[base + a] == 0:
+            return a
+    return STAY
+
+
+@kernel
+def random_step_taken(params, state):
+    """Whether the action just chosen (:func:`choose`) was the random step."""
+    return params[LP_RANDOM_STEP] > 0 and state[LS_TAKEN] % params[LP_RANDOM_STEP] == 0
+
+
+@inline_kernel
+def announce_order(learner, grid, sight, action, ties, ranks, base):
+    """After :func:`decide`, the order this learner announces under ``--arbitration pibt``
+    (:func:`preference_ranks`): its random step first where it took one, else the best by the
+    known map and its values; the first choice becomes the pending transition's action (the
+    one it learns from). Returns it."""
+    first = action if random_step_taken(learner.params, learner.state) else -1
+    preference_ranks(learner.values, ties, learner.wmap, sight.x, sight.y, grid.width,
+                     grid.height, first, True, ranks, base)
+    first = first_choice(ranks, base)
+    learner.state[LS_ACTION] = first
+    return first

@@ -238,6 +238,9 @@ class SwarmConfig:
             (self.arbitration != "pibt" or self.on_target == "step-aside",
              "priority inheritance (--arbitration pibt) moves agents off their goals: it needs "
              "--on-target step-aside"),
+            (self.arbitration != "pibt" or self.ds_state != "goal",
+             "--arbitration pibt orders an agent's moves on the map it knows: it needs "
+             "--ds-state waypoint or progress"),
             (self.arbitration != "pibt" or not self.shield,
              "under --arbitration pibt nobody collides: the shield (--shield) has nothing to do"),
             (self.arbitration != "pibt" or self.algo in NEGOTIATING_ALGOS + ("ql",),

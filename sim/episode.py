@@ -29,7 +29,9 @@ from nnql_swarm.learning.fields import (
     NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL, Grid,
     LearnerBuffers, Sight,
 )
-from nnql_swarm.learning.learner import decide, finish, make_way, planned_cell, preference_ranks
+from nnql_swarm.learning.learner import (
+    announce_order, decide, finish, make_way, planned_cell, preference_ranks,
+)
 from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, sees, target_x, target_y
 from nnql_swarm.kernel.jit import Buffer, batch_kernel, inline_kernel, kernel, prange
@@ -351,7 +353,8 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                 written = finish(learner, grid, sight, learning and not shared)
                 actions[i] = STAY
                 if pibt:  # on its goal, it offers to stay; the arbitration may push it
-                    preference_ranks(values, ties[i, step], STAY, False, ranks, i * N_ACTIONS)
+                    preference_ranks(values, ties[i, step], wmap[i], x[i], y[i], width, height,
+                                     STAY, False, ranks, i * N_ACTIONS)
                 elif step_aside and not ending:  # on its goal: it makes way if told to
                     m = neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options,
                                        True)
@@ -361,8 +364,8 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                 actions[i], written = decide(learner, grid, sight, random_actions[i, step],
                                              ties[i, step], learning and not shared)
                 if pibt:
-                    preference_ranks(values, ties[i, step], actions[i], True, ranks,
-                                     i * N_ACTIONS)
+                    actions[i] = announce_order(learner, grid, sight, actions[i], ties[i, step],
+                                                ranks, i * N_ACTIONS)
             pending_rec[i] = learning and shared and written
             decided[i] = True
         if pibt and not ending:  # the world settles the announced orders
