@@ -18,7 +18,9 @@ import numpy as np
 from nnql_swarm.learning.fields import (
     LP_READING, LP_SHIELD, LP_STILL_SHIELD, NB_FIELDS, READ_DAQL, READINGS, Grid, Sight,
 )
-from nnql_swarm.learning.learner import decide, draw_noise, finish, make_way
+from nnql_swarm.learning.learner import (
+    announce_order, decide, draw_noise, finish, make_way, preference_ranks,
+)
 from nnql_swarm.learning.neighbours import NeighbourRows
 from nnql_swarm.learning.record import record_outcome, write_updates
 from nnql_swarm.learning.tables import Learner
@@ -49,6 +51,9 @@ class AgentBrain:
         self.config = config
         self.learner = Learner(config)
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
+        self.order: tuple[int, ...] = ()  # this tick's moves by preference (--arbitration pibt)
+        self._pibt = config.arbitration == "pibt"
+        self._ranks = [0] * N_ACTIONS
         self.rejected_updates = 0  # shared-table entries refused (outside, or uneven groups)
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
@@ -99,10 +104,17 @@ class AgentBrain:
         near = self._neighbour_rows(obs, {} if stops else answers, not stops)
         nb, m = rows(near, NB_FIELDS), len(near)
         sight = Sight(x, y, gx, gy, nb, m, obs.step == 0)
+        self.order = ()
         if stops:
             written = finish(learner.buffers, self._grid, sight, not shared)
             action = STAY
-            if not obs.episode_end and not self.config.parks:
+            if not obs.episode_end and self._pibt:  # it offers to stay; the world may push it
+                assert self._noise is not None, "prepare draws the episode's noise"
+                preference_ranks(learner.values, floats(self._noise[1][obs.step]), learner.wmap,
+                                 x, y, self.config.width, self.config.height, STAY, False,
+                                 self._ranks, 0)
+                self.order = self._ordered()
+            elif not obs.episode_end and not self.config.parks:
                 action = self._make_way(obs, answers)
         else:
             noise = self._noise
@@ -110,8 +122,16 @@ class AgentBrain:
             random_actions, ties = noise
             action, written = decide(learner.buffers, self._grid, sight, random_actions[obs.step],
                                      floats(ties[obs.step]), not shared)
+            if self._pibt:
+                action = announce_order(learner.buffers, self._grid, sight, action,
+                                        floats(ties[obs.step]), self._ranks, 0)
+                self.order = self._ordered()
         self.learned = (learner.record(),) if shared and written else ()
         return int(action)
+
+    def _ordered(self) -> tuple[int, ...]:
+        """The moves in the order of this tick's ranks (``learning.learner.preference_ranks``)."""
+        return tuple(sorted(range(N_ACTIONS), key=self._ranks.__getitem__))
 
     def _make_way(self, obs: Observation, answers: dict[int, int]) -> int:
         """An arrived agent's move under ``step-aside``: it stays unless a neighbour it waited

@@ -242,9 +242,6 @@ def check_distributable(config: SwarmConfig) -> None:
     """Refuse options that only the in-process simulator plays; raises UsageError."""
     if config.algo == "oracle":
         raise UsageError("--algo oracle plans every agent's move centrally; run it with --in-process")
-    if config.arbitration == "pibt":
-        raise UsageError("--arbitration pibt is played by the simulator only so far (add "
-                         "--in-process)")
     if config.lookahead > 1:
         raise UsageError("--lookahead > 1 is played by the simulator only (add --in-process)")
     if config.frozen:

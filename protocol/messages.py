@@ -52,7 +52,7 @@ from msgspec import Meta
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 7
+PROTOCOL_VERSION = 8
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -85,6 +85,8 @@ Count = Annotated[int, Meta(ge=0, lt=MAX_TICK)]
 """Ticks, episodes, steps."""
 AgentId = Annotated[int, Meta(ge=0, lt=MAX_AGENTS)]
 Action = Annotated[int, Meta(ge=0, lt=N_ACTIONS)]
+Order = Annotated[tuple[Action, ...], Meta(max_length=N_ACTIONS)]
+"""Moves in an order of preference, each at most once (:func:`_check_rules`)."""
 """0 .. N_ACTIONS - 1, see protocol.actions."""
 Coord = Annotated[int, Meta(ge=0, lt=MAX_GRID)]
 Cell = tuple[Coord, Coord]
@@ -192,11 +194,14 @@ class Observation(AgentMessage, tag=tag("obs"), frozen=True):
 
 
 class Intent(AgentMessage, tag=tag("intent"), frozen=True):
-    """Agent -> world and neighbours: its action at this tick (never changed once sent)."""
+    """Agent -> world and neighbours: its action at this tick (never changed once sent) and,
+    under ``--arbitration pibt``, its moves in its order of preference (``order``: the action
+    first, each move once; ``world.pibt``)."""
 
     episode: Count
     action: Action
     record: Learned = ()  # where the swarm shares one table: this tick's learning record
+    order: Order = ()
 
     from_agent = True
 
@@ -273,6 +278,9 @@ def _check_rules(msg: Message, key_agent: int | None) -> None:
                                             "key")
     elif msg.sender != WORLD_SENDER:
         raise Rejected("forged-sender", f"{cls.__name__} sent by {msg.sender!r}")
+    if isinstance(msg, Intent) and msg.order and (
+            msg.order[0] != msg.action or len(set(msg.order)) != len(msg.order)):
+        raise Rejected("bad-field:order", "not the action first, each move once")
     for name, ids in ids_of if lists else ():
         if agent in ids:
             raise Rejected(f"bad-field:{name}", f"agent {agent} lists itself")

@@ -39,8 +39,9 @@ from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
     FIELD_COLUMNS, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD,
     ROW_STEPS, Bodies, Cell, Outcome, Rules, Scratch, Score, field_columns, field_costs,
-    shared_cells, swaps_through, world_step,
+    refusal_rewards, shared_cells, swaps_through, world_step,
 )
+from nnql_swarm.world.arbiter import Arbiter
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
 
@@ -101,6 +102,7 @@ class SwarmWorld:
         self._blocked = flags([False] * bodies)
         self._stays = [STAY] * (bodies - n)
         self.table = SharedTable(config) if config.shared else None
+        self.arbiter = Arbiter(config) if config.arbitration == "pibt" else None
         self._updates: Updates = ()
         if table is not None and self.table is not None:
             self.table.restore(table.q_ds, table.q_ca)
@@ -158,6 +160,8 @@ class SwarmWorld:
         self._row_f = floats([0.0] * ROW_FLOATS)
         self._missed = 0
         self._shortest = int(scenario.shortest.sum())
+        if self.arbiter is not None:
+            self.arbiter.start_episode(scenario.shortest.tolist())
         self._plain()
 
     def _plain(self) -> None:
@@ -241,8 +245,10 @@ class SwarmWorld:
                     seen[j].append(everyone[i])
         return [tuple(others) for others in seen]
 
-    def apply(self, actions: list[int | None], learned: dict | None = None) -> TickReport:
-        """Apply every agent's action for this tick (``None``: missed, counted, stays);
+    def apply(self, actions: list[int | None], learned: dict | None = None,
+              orders: list[tuple[int, ...] | None] | None = None) -> TickReport:
+        """Apply every agent's action for this tick (``None``: missed, counted, stays; under
+        ``--arbitration pibt`` the agents' ``orders``, settled by ``world.arbiter``);
         ``learned``: the accepted learning records that came with the intents, by agent (the
         end tick's report holds the shared table from before they are applied, what the agents
         checkpointed, with those records: what the next episode starts from)."""
@@ -250,7 +256,7 @@ class SwarmWorld:
         self._missed += len(missed)
         records = None if self.table is None else learned or {}
         report = self._end_tick(missed, learned or {}, records) if self.ending else \
-            self._move(actions, missed, records)
+            self._move(actions, missed, records, orders)
         if self.table is not None:
             assert records is not None
             self._updates = self.table.apply(records)
@@ -291,8 +297,8 @@ class SwarmWorld:
             self._start_episode(self.episode + 1)
         return report
 
-    def _move(self, actions: list[int | None], missed: tuple[int, ...],
-              records: dict | None) -> TickReport:
+    def _move(self, actions: list[int | None], missed: tuple[int, ...], records: dict | None,
+              orders: list[tuple[int, ...] | None] | None) -> TickReport:
         """A step of the episode: everyone moves at once; rewards, arrivals and the row."""
         c = self.config
         arrived_before = self._outcome[3]  # as this tick's observations showed it
@@ -302,9 +308,18 @@ class SwarmWorld:
         bodies = Bodies(self._x, self._y, self._goal_x, self._goal_y, self._learns,
                         self._arrived, self._arrival)
         outcome = Outcome(self._before_x, self._before_y, self._collided, self._r_ds, self._r_ca)
+        arbiter = self.arbiter
+        if arbiter is not None:
+            told = orders or [()] * len(actions)
+            arbiter.settle(self._x, self._y, self._goal_x, self._goal_y, self._arrived,
+                           [None if a is None else o or (a,) for a, o in zip(actions, told)],
+                           chosen, self.step)
         everyone = world_step(rules, bodies, chosen, outcome,
                               Scratch(self._occupancy, self._blocked),
                               Score(self._row, self._row_f))
+        if arbiter is not None:
+            refusal_rewards(arbiter.ranks, chosen, self._learns, c.n_agents, self._r_ca,
+                            self._row_f)
         violations = self._check()
         self._plain()
         self.step += 1

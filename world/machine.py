@@ -134,6 +134,7 @@ class WorldMachine(Machine):
             self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
             self.next_shutdown = now
         self.actions: list[int | None] = []  # the open tick's intents, by agent
+        self.orders: list[tuple[int, ...]] = []  # and their orders (--arbitration pibt)
         self.heard: set[int] = set()  # the agents whose intent for the open tick came
         self.learned: dict[int, tuple] = {}  # the accepted learning records that came with them
         self.tick_start = 0.0
@@ -206,6 +207,7 @@ class WorldMachine(Machine):
             self.heard.add(intent.agent)
             if actions[intent.agent] is None:  # a settled agent's action is STAY already
                 actions[intent.agent] = intent.action
+                self.orders[intent.agent] = intent.order
             self.awaited.discard(intent.agent)
             if intent.record:
                 self._keep_record(intent.agent, intent.record[0])
@@ -289,6 +291,7 @@ class WorldMachine(Machine):
         """Send every agent its observation of the current tick; start waiting for intents."""
         out = self._out
         actions = self.actions = [None] * self.n
+        self.orders = [()] * self.n
         self.awaited = set(self.alive)
         if self.to_resync:
             self.world.unsettle(self.to_resync)
@@ -321,7 +324,7 @@ class WorldMachine(Machine):
         out, world = self._out, self.world
         self.trace.mark(CLOSE, world.tick)
         learned = self._checked_records() if self.records is not None else self.learned
-        report = world.apply(self.actions, learned)
+        report = world.apply(self.actions, learned, self.orders)
         self.slowest = max(self.slowest, now - self.tick_start)
         if not world.finished:
             self._go(Event.TICK_CLOSED)

@@ -1,0 +1,60 @@
+"""The world's arbitration by priority inheritance (``--arbitration pibt``), pure: the agents'
+announced orders in, every agent's move out, by ``world.pibt.plan``, the very function the swarm
+simulator (``sim.episode``) runs compiled.
+
+An agent's order (``protocol.messages.Intent.order``) lists its moves by preference; a missed
+intent offers only STAY (the agent stays unless pushed, and cannot be pushed: it is not there to
+be told). The arbitration's priorities carry over from step to step within an episode (PIBT's:
+:meth:`Arbiter.start_episode` sets them from the agents' shortest paths, as the simulator does).
+"""
+
+from nnql_swarm.kernel.jit import Buffer, flags, ints
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.world.pibt import UNWANTED, plan
+
+
+class Arbiter:
+    """One run's arbitration state: ``plan``'s scratch, the priorities, the orders' ranks."""
+
+    def __init__(self, config: SwarmConfig) -> None:
+        self.config = config
+        n, bodies = config.n_agents, config.n_bodies
+        cells = config.width * config.height
+        size = max(cells, bodies)
+
+        def slots() -> Buffer:
+            return ints([0] * size)
+
+        self.priority, self.closest = slots(), slots()
+        self._distances = ints([0] * (n * cells))
+        self._occupant, self._reserved, self._order, self._blocked = (slots(), slots(), slots(),
+                                                                      slots())
+        self._queue, self._stack, self._tried, self._probe = slots(), slots(), slots(), slots()
+        self._swapper, self._first = slots(), slots()
+        self._decided = flags([False] * bodies)
+        self.ranks = ints([UNWANTED] * (bodies * N_ACTIONS))
+        """Each body's rank of each move this step (0: its first choice)."""
+
+    def start_episode(self, shortest: list[int]) -> None:
+        """PIBT's first order: the agent farthest from its goal first; none has been nearer."""
+        for i, length in enumerate(shortest):
+            self.priority[i] = length
+            self.closest[i] = length + 1
+
+    def settle(self, x: Buffer, y: Buffer, goal_x: Buffer, goal_y: Buffer, arrived: Buffer,
+               orders: list[tuple[int, ...] | None], actions: Buffer, step: int) -> None:
+        """Every agent's move this step into ``actions`` (the bodies' buffer; walls stay), from
+        the agents' ``orders`` (None: missed)."""
+        c, ranks = self.config, self.ranks
+        for i, order in enumerate(orders):
+            base = i * N_ACTIONS
+            for a in range(N_ACTIONS):
+                ranks[base + a] = UNWANTED
+            for rank, a in enumerate(order or (STAY,)):
+                ranks[base + a] = rank
+        plan(x, y, goal_x, goal_y, arrived, c.n_bodies, c.n_agents, c.width, c.height,
+             c.step_aside, self.priority, self.closest, actions, self._distances,
+             self._occupant, self._reserved, self._decided, self._order, self._blocked,
+             self._queue, self._stack, self._tried, self._probe, self._swapper, self._first,
+             step, step == 0, True, ranks)
