@@ -156,7 +156,7 @@ def add_config_options(group, only=None, exclude=()) -> None:
         text = meta.pop("help")
         shown = "on" if f.default is True else "off" if f.default is False else f.default
         kwargs: dict[str, Any] = dict(dest=f.name, default=argparse.SUPPRESS,
-                                      help=f"{text} (default: {shown})")
+                                      help=f"{text} (default: {shown})" if shown != "" else text)
         if f.type is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         else:

@@ -134,7 +134,7 @@ class WorldMachine(Machine):
             self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
             self.next_shutdown = now
         self.actions: list[int | None] = []  # the open tick's intents, by agent
-        self.orders: list[tuple[int, ...]] = []  # and their orders (--arbitration pibt)
+        self.orders: list[tuple[int, ...] | None] = []  # and their orders (--arbitration pibt)
         self.heard: set[int] = set()  # the agents whose intent for the open tick came
         self.learned: dict[int, tuple] = {}  # the accepted learning records that came with them
         self.tick_start = 0.0
