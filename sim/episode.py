@@ -352,7 +352,7 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
             if stops:
                 written = finish(learner, grid, sight, learning and not shared)
                 actions[i] = STAY
-                if pibt:  # on its goal, it offers to stay; the arbitration may push it
+                if pibt and not ending:  # on its goal, it offers to stay; it may be pushed
                     preference_ranks(values, ties[i, step], wmap[i], x[i], y[i], width, height,
                                      STAY, False, ranks, i * N_ACTIONS)
                 elif step_aside and not ending:  # on its goal: it makes way if told to

@@ -43,11 +43,13 @@ DEADLINE_S = 0.5
 """The tick deadline of a simulated run (virtual seconds; an agent's negotiation times out at
 half of it)."""
 
-SCHEDULED_PRESETS = ("path-nnql", "shield-nnql", "nnql", "best-nnql", "ql", "shield-ql", "daql")
-PRESET_WEIGHTS = (12, 8, 16, 6, 3, 3, 2)
+SCHEDULED_PRESETS = ("path-nnql", "shield-nnql", "nnql", "best-nnql", "ql", "shield-ql", "daql",
+                     "pibt-nnql")
+PRESET_WEIGHTS = (12, 8, 16, 6, 3, 3, 2, 8)
 """The learning presets schedules run, and how often: the default (shared tables, the shield,
 destination seeking on the known map) and the one before it (the same but the goal's offset),
-and the paper's the most; the oracle and n > 1 are the in-process simulator's only."""
+the paper's the most, and priority inheritance over the agents' orders (a lost order is a stay:
+nobody may collide for it); the oracle and n > 1 are the in-process simulator's only."""
 GRIDS = ((11, 11), (11, 11), (11, 11), (16, 16), (24, 24), (30, 14))
 """Drawn uniformly: mostly the default grid, where everyone sees everyone and the negotiation is
 one chain; sometimes larger ones, where agents see only some others and plan several asks."""

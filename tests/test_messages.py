@@ -14,7 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from nnql_swarm.protocol import keys, messages
-from nnql_swarm.protocol.actions import N_ACTIONS
+from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP
 from nnql_swarm.protocol.keys import MAX_TICK
 from nnql_swarm.protocol.inbox import Inbox
 from nnql_swarm.protocol.messages import (
@@ -104,7 +104,8 @@ def mutated(msg, name: str, value) -> bytes:
 # ---------------------------------------------------------------- round trips and wire format
 
 
-@pytest.mark.parametrize("msg", [obs(), obs(neighbours=()), intent(), control()])
+@pytest.mark.parametrize("msg", [obs(), obs(neighbours=()), intent(), intent(order=(3, 0, 4)),
+                                 control()])
 def test_round_trip(msg):
     payload = encode(msg)
     assert isinstance(payload, bytes)
@@ -115,12 +116,36 @@ def test_round_trip(msg):
     assert parse(memoryview(payload), type(msg), RUN) == msg
 
 
+def test_an_intent_with_its_order_of_moves_round_trips():
+    """Protocol 8: under ``--arbitration pibt`` an intent also carries ``order``, the agent's moves
+    in its order of preference, its announced action first and each move at most once. The world
+    (``world.arbiter``) settles every agent's move from these orders by priority inheritance
+    (``world.pibt.plan``): an agent gets the first move of its order that the arbitration allows,
+    else a later one, and a move left out of its order is one it does not want; a missed intent
+    offers only STAY. An empty order (the default) is an intent of the other arbitrations."""
+    for order in ((3,), (3, 0), (3, 0, 4), (3, 4, 2, 1, 0), (RIGHT, STAY, UP, DOWN, LEFT)):
+        msg = intent(order=order)
+        payload = encode(msg)
+        assert msgpack.unpackb(payload) == ["intent/8", RUN, 7, "agent/2", 2, 1, 3, [], list(order)]
+        for form in (bytes, bytearray, memoryview, zenoh.ZBytes):
+            back = parse(form(payload), Intent, RUN, key_agent=2)
+            assert back == msg and back.order == order and type(back.order) is tuple
+        assert Inbox(RUN).decode(payload, Intent, key_agent=2) == msg
+    stay = intent(action=STAY, order=(STAY, LEFT))  # parked: it offers to stay, may be pushed
+    assert parse(encode(stay), Intent, RUN).order == (STAY, LEFT)
+    assert intent(order=()) == intent() and intent().order == ()
+    assert parse(encode(intent(order=[3, 1])), Intent, RUN).order == (3, 1)  # a list: a tuple
+    assert parse(encode(intent(order=np.array([3, 1]))), Intent, RUN).order == (3, 1)
+    with_record = intent(record=(((0, 1, -1), (0.5, -1.0)),), order=(3, 1))
+    assert parse(encode(with_record), Intent, RUN) == with_record
+
+
 def test_wire_format_is_an_array_of_the_tag_and_fields_in_order():
-    assert PROTOCOL_VERSION == 7
+    assert PROTOCOL_VERSION == 8
     wire = msgpack.unpackb(encode(intent()))
-    assert wire == ["intent/7", RUN, 7, "agent/2", 2, 1, 3, []]
-    assert msgpack.unpackb(encode(control())) == ["control/7", RUN, 7, WORLD_SENDER, "shutdown"]
-    assert msgpack.unpackb(encode(obs()))[0] == "obs/7"
+    assert wire == ["intent/8", RUN, 7, "agent/2", 2, 1, 3, [], []]
+    assert msgpack.unpackb(encode(control())) == ["control/8", RUN, 7, WORLD_SENDER, "shutdown"]
+    assert msgpack.unpackb(encode(obs()))[0] == "obs/8"
     assert msgpack.unpackb(encode(answer()))[-1] == [[0, 4], [5, 0]]
     assert MESSAGES == KINDS
     for cls in MESSAGES:
@@ -135,11 +160,13 @@ def test_messages_are_immutable_structs():
     msg = intent()
     assert isinstance(msg, msgspec.Struct) and msg == Intent(RUN, 7, "agent/2", 2, 1, 3)
     assert (msg.run, msg.tick, msg.sender, msg.agent, msg.episode, msg.action,
-            msg.record) == values(msg)
+            msg.record, msg.order) == values(msg)
     with pytest.raises(AttributeError):
         msg.action = 4
     assert replaced(msg, action=4).action == 4 and msg.action == 3
     assert hash(msg) == hash(intent()) and Intent.__doc__.startswith("Agent -> world")
+    assert fields_of(Intent)[-1] == "order" and msg.order == () and intent(order=()) == msg
+    assert intent(order=(3, 1)) != msg
     assert obs() == Observation(*values(obs())) == Observation(**msgspec.structs.asdict(obs()))
     assert msg != answer(relayed=()) and intent(record=()) == msg
 
@@ -161,6 +188,14 @@ def test_encode_normalises_numpy_and_ints():
     (obs(sender="agent/2"), "forged-sender"),
     (intent(action=N_ACTIONS), "bad-field:action"), (intent(sender="agent/3"), "forged-sender"),
     (intent(action=1.0), "bad-field:action"), (control(command="reboot"), "bad-field:command"),
+    (intent(order=(2, 3)), "bad-field:order"), (intent(order=(3, 1, 3)), "bad-field:order"),
+    (intent(order=(3, 0, 1, 2, 4, 3)), "bad-field:order"),  # too long
+    (intent(order=(3, 5)), "bad-field:order"),
+    (intent(order=(3, -1)), "bad-field:order"), (intent(order=(3, True)), "bad-field:order"),
+    (intent(order=(3.0,)), "bad-field:order"), (intent(order=(4, 3)), "bad-field:order"),
+    (intent(order=(3, 3)), "bad-field:order"), (intent(order="ab"), "bad-field:order"),
+    (intent(order=((3,),)), "bad-field:order"), (intent(order=None), "bad-field:order"),
+    (intent(order=(3, 0), sender="agent/3"), "forged-sender"),
     (control(run="a/b"), "bad-field:run"), (control(tick=-1), "bad-field:tick"),
 ])
 def test_an_invalid_message_is_refused_where_it_arrives(msg, reason):
@@ -212,18 +247,24 @@ def test_rejection_reasons():
     assert reason_of(pack({1: 2}), Intent) == "not-array"  # a map, whatever its keys
     wire = to_wire(intent())
     for other in (f"intent/{PROTOCOL_VERSION - 1}", f"intent/{PROTOCOL_VERSION + 1}", "intent",
-                  PROTOCOL_VERSION, True, 2.0, None, [TAG[Intent]], "Intent/7", b"intent/7"):
+                  PROTOCOL_VERSION, True, 2.0, None, [TAG[Intent]], "Intent/8", b"intent/8",
+                  "intent/7", "obs/7"):
         assert reason_of(pack([other, *wire[1:]]), Intent) == "bad-version", other
     assert reason_of(pack([6, "intent", *wire[1:]]), Intent) == "bad-version"  # version 6
     assert reason_of(pack(wire[1:]), Intent) == "bad-version"  # no tag: the run in its place
     assert reason_of(pack([1, 2]), Intent) == "bad-version"
     assert reason_of(encode(control()), Intent) == "wrong-kind"
     assert reason_of(pack([TAG[Answer], *wire[1:]]), Intent) == "wrong-kind"  # as long
-    assert reason_of(pack(wire[:-1]), Intent) == "wrong-length"  # no record
+    assert reason_of(pack(wire[:-1]), Intent) == "wrong-length"  # no order
     assert reason_of(pack([*wire, 1]), Intent) == "wrong-length"  # an item too many
     assert reason_of(good, Intent, run="run-2") == "wrong-run"
     assert reason_of(pack([*wire[:1], 1, *wire[2:]]), Intent) == "wrong-run"
     assert reason_of(mutated(intent(), "action", 5), Intent) == "bad-field:action"
+    assert reason_of(mutated(intent(), "order", [3, 5]), Intent) == "bad-field:order"
+    assert reason_of(mutated(intent(), "order", [3, 1, 3]), Intent) == "bad-field:order"
+    assert reason_of(mutated(intent(), "order", [1, 3]), Intent) == "bad-field:order"
+    assert reason_of(mutated(intent(), "order", None), Intent) == "bad-field:order"
+    assert parse(mutated(intent(), "order", [3, 1]), Intent, RUN) == intent(order=(3, 1))
     assert reason_of(mutated(intent(), "sender", "agent/3"), Intent) == "forged-sender"
     assert reason_of(mutated(intent(), "sender", "world"), Intent) == "forged-sender"
     assert reason_of(mutated(intent(), "sender", 2), Intent) == "bad-field:sender"
@@ -242,11 +283,11 @@ def detail_of(payload, kind, run=RUN, key_agent=None) -> str:
 
 def test_wrong_length_says_how_many_items():
     wire = to_wire(intent())
-    assert detail_of(pack(wire[:-1]), Intent) == "wrong-length: expected 8 items, got 7"
-    assert detail_of(pack([*wire, 0, 0]), Intent) == "wrong-length: expected 8 items, got 10"
-    assert detail_of(pack([]), Intent) == "wrong-length: expected 8 items, got 0"
-    assert detail_of(pack([TAG[Intent]]), Intent) == "wrong-length: expected 8 items, got 1"
-    assert detail_of(pack([TAG[Intent], RUN]), Intent) == "wrong-length: expected 8 items, got 2"
+    assert detail_of(pack(wire[:-1]), Intent) == "wrong-length: expected 9 items, got 8"
+    assert detail_of(pack([*wire, 0, 0]), Intent) == "wrong-length: expected 9 items, got 11"
+    assert detail_of(pack([]), Intent) == "wrong-length: expected 9 items, got 0"
+    assert detail_of(pack([TAG[Intent]]), Intent) == "wrong-length: expected 9 items, got 1"
+    assert detail_of(pack([TAG[Intent], RUN]), Intent) == "wrong-length: expected 9 items, got 2"
     full = to_wire(obs())
     assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 19 items, got 5"
     short = pack(to_wire(answer())[:-1])
@@ -263,6 +304,8 @@ def test_checks_come_in_order_version_kind_length_run_fields_rules():
     assert reason_of(pack([1]), Intent) == "bad-version"
     assert reason_of(pack(["obs/6"]), Intent) == "bad-version"
     assert reason_of(pack(["obs/6", *wire[1:], 0, 0]), Intent) == "bad-version"
+    assert reason_of(pack(["intent/7", *wire[1:-1]]), Intent) == "bad-version"  # a version-7 intent
+    assert reason_of(pack(["obs/7"]), Intent) == "bad-version"
     assert reason_of(pack(["intent"]), Intent) == "bad-version"
     assert reason_of(pack([TAG[Observation]]), Intent) == "wrong-kind"
     assert reason_of(pack([TAG[Control], *wire[1:], 0]), Intent) == "wrong-kind"
@@ -270,11 +313,16 @@ def test_checks_come_in_order_version_kind_length_run_fields_rules():
     assert reason_of(encode(control()), Answer) == "wrong-kind"  # shorter
     assert reason_of(pack([TAG[Intent], "other-run"]), Intent) == "wrong-length"
     assert reason_of(pack([TAG[Intent], None, None, None, None, None]), Intent) == "wrong-length"
-    changed = [*wire[:1], "other-run", -1, None, MAX_AGENTS, -1, 99, None]
+    changed = [*wire[:1], "other-run", -1, None, MAX_AGENTS, -1, 99, None, None]
     assert reason_of(pack(changed), Intent) == "wrong-run"
-    changed = [*wire[:2], -1, "agent/3", MAX_AGENTS, -1, 99, None]
+    changed = [*wire[:2], -1, "agent/3", MAX_AGENTS, -1, 99, None, None]
     assert reason_of(pack(changed), Intent) == "bad-field:tick"  # the first bad field
-    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 99, []]), Intent) == "bad-field:action"
+    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 99, [], [9]]), Intent) == "bad-field:action"
+    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 3, [], [9]]), Intent) == "bad-field:order"
+    # the order's rule (the action first, each move once) is a rule: after the sender
+    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 3, [], [1, 3]]), Intent) == "forged-sender"
+    assert reason_of(pack([*wire[:-1], [1, 3]]), Intent, key_agent=3) == "forged-sender"
+    assert reason_of(pack([*wire[:-1], [1, 3]]), Intent, key_agent=2) == "bad-field:order"
     itself = mutated(obs(), "neighbours", ((2, 0, 0),))
     assert reason_of(itself, Observation) == "bad-field:neighbours"
     forged = to_wire(obs())
@@ -405,10 +453,19 @@ def observations(draw, run=None):
 
 
 @st.composite
+def orders(draw, action):
+    """A valid order for ``action``: none, or the action first, then other moves, each once."""
+    others = draw(st.permutations([a for a in range(N_ACTIONS) if a != action]))
+    size = draw(st.integers(0, N_ACTIONS))
+    return (action, *others[:size - 1]) if size else ()
+
+
+@st.composite
 def intents(draw, run=None):
     agent = draw(agents)
+    action = draw(st.integers(0, N_ACTIONS - 1))
     return Intent(run=run or draw(run_ids), tick=draw(counts), sender=agent_sender(agent),
-                  agent=agent, episode=draw(counts), action=draw(st.integers(0, N_ACTIONS - 1)))
+                  agent=agent, episode=draw(counts), action=action, order=draw(orders(action)))
 
 
 def controls(run=None):
@@ -533,6 +590,32 @@ _bad_record = (
     | st.tuples(_record_ints, _rewards).map(lambda t: [list(t), list(t)])  # two: at most one
 )
 _bad_command = st.text(max_size=10).filter(lambda c: c not in messages.CONTROL_COMMANDS)
+_moves = st.integers(0, N_ACTIONS - 1)
+_bad_order = (
+    _wrong_types.filter(lambda v: not isinstance(v, list))  # [] is valid, and [action]
+    | st.lists(_wrong_types | st.booleans() | st.floats(), min_size=1, max_size=3).map(
+        lambda v: [0, *v])  # a move of another type
+    | st.lists(_moves, min_size=1, max_size=3).flatmap(  # a move out of range, anywhere
+        lambda v: st.tuples(st.just(v), st.integers(0, len(v)), _out_of(0, N_ACTIONS)))
+    .map(lambda t: [*t[0][:t[1]], t[2], *t[0][t[1]:]])
+    | st.lists(_moves, min_size=N_ACTIONS + 1, max_size=N_ACTIONS + 3)  # too long
+    | st.permutations(range(N_ACTIONS)).map(lambda p: [*p, p[0]])  # too long, by a repeat
+    | st.lists(_moves, min_size=1, max_size=3).map(lambda v: [v[0], *v])  # a move twice, first
+    | st.lists(_moves, min_size=2, max_size=3).map(lambda v: [*v, v[-1]])  # a move twice
+)
+
+
+def _bad_order_for(action: int):
+    """Orders each move valid but against the rule for an intent of ``action``: not the action
+    first, or the action twice (each move once)."""
+    others = [a for a in range(N_ACTIONS) if a != action]
+    return (st.permutations(others).flatmap(lambda p: st.integers(1, len(p)).map(
+        lambda k: list(p[:k])))  # without the action, or the action not first
+            | st.permutations(others).flatmap(lambda p: st.integers(0, len(p)).map(
+                lambda k: [*p[:k], action, *p[k:]][:N_ACTIONS]))
+            .filter(lambda v: v[0] != action)
+            | st.permutations(others).flatmap(lambda p: st.integers(0, len(p) - 1).map(
+                lambda k: [action, *p[:k], action])))
 
 BAD = {
     "run": _wrong_types | run_ids, "sender": _wrong_types | st.text(max_size=12),
@@ -543,8 +626,10 @@ BAD = {
     "reward_ds": _bad_reward, "reward_ca": _bad_reward,
     "collided": _bad_bool, "arrived": _bad_bool, "episode_end": _bad_bool, "settled": _bad_bool,
     "command": _wrong_types | _bad_command, "relayed": _bad_relayed,
-    "parked": _bad_parked, "updates": _bad_updates, "record": _bad_record,
+    "parked": _bad_parked, "updates": _bad_updates, "record": _bad_record, "order": _bad_order,
 }
+BAD_FOR = {"order": lambda msg: _bad_order_for(msg.action)}
+"""Bad values that depend on the message's other fields (the rules between fields)."""
 
 
 def _has_map(value) -> bool:
@@ -557,7 +642,8 @@ def test_fuzz_single_field_mutations_are_rejected_naming_the_field(msg, data):
     """A value that is wrong for the field names the field (a map, anywhere, is not-msgpack)."""
     cls = type(msg)
     name = data.draw(st.sampled_from(fields_of(cls)))
-    value = data.draw(BAD[name])
+    bad = BAD[name] | BAD_FOR[name](msg) if name in BAD_FOR else BAD[name]
+    value = data.draw(bad)
     if _has_map(value):
         expected = {"not-msgpack"}
     elif name == "run":
@@ -622,11 +708,12 @@ def _is_agent_list(v, *rest):
 REFERENCE_KINDS = {  # the kind, then the fields in wire order
     Observation: ("obs run tick sender agent episode step position goal neighbours rank reward_ds "
                   "reward_ca collided arrived episode_end parked updates settled"),
-    Intent: "intent run tick sender agent episode action record",
+    Intent: "intent run tick sender agent episode action record order",
     Answer: "answer run tick sender agent episode action relayed",
     Control: "control run tick sender command",
 }
-REFERENCE_TAGS = {"obs/7", "intent/7", "answer/7", "control/7"}  # protocol version 7
+REFERENCE_VERSION = "8"
+REFERENCE_TAGS = {"obs/8", "intent/8", "answer/8", "control/8"}  # protocol version 8
 FROM_AGENTS = (Intent, Answer)
 AGENT_LISTS = ("neighbours", "relayed")
 REFERENCE_FIELDS = {
@@ -648,6 +735,7 @@ REFERENCE_FIELDS = {
         and len(g[0]) <= MAX_AGENTS and len(g[1]) <= MAX_AGENTS
         and all(_is_int(e, 0, (441 + 441 * 6) * 5) for e in g[0])
         and all(_is_reward(x) for x in g[1]) for g in v),
+    "order": lambda v: type(v) is list and len(v) <= 5 and all(_is_int(a, 0, 5) for a in v),
     "record": lambda v: type(v) is list and len(v) <= 1 and all(
         type(e) is list and len(e) == 2 and _is_record_ints(e[0]) and _is_reward_pair(e[1])
         for e in v),
@@ -690,7 +778,7 @@ def reference_reason(payload: bytes, cls, run, key_agent=None) -> str | None:
         return "not-array"
     if d and not (type(d[0]) is str and d[0] in REFERENCE_TAGS):
         return "bad-version"
-    if d and d[0] != kind + "/7":
+    if d and d[0] != kind + "/" + REFERENCE_VERSION:
         return "wrong-kind"
     if len(d) != 1 + len(names):
         return "wrong-length"
@@ -708,6 +796,9 @@ def reference_reason(payload: bytes, cls, run, key_agent=None) -> str | None:
         return "forged-sender"
     if cls in FROM_AGENTS and key_agent is not None and key_agent != m["agent"]:
         return "forged-sender"
+    order = m.get("order")
+    if order and (order[0] != m["action"] or sorted(set(order)) != sorted(order)):
+        return "bad-field:order"  # an order: the action first, then each move at most once
     for name in lists:
         if m["agent"] in {e[0] for e in m[name]}:
             return f"bad-field:{name}"
@@ -738,13 +829,35 @@ def _as_lists(value):
     return list(map(_as_lists, value)) if isinstance(value, (tuple, list)) else value
 
 
+_any_order = st.lists(st.integers(0, N_ACTIONS - 1), max_size=N_ACTIONS + 1)
+"""Moves in any order, maybe the action not first, maybe one twice, maybe too many."""
+
+
+def _redrawn(draw, msg) -> dict:
+    """For an intent, at random, its order or its action redrawn, against the order rule as often
+    as not: ``{name: value}`` (none for the other kinds)."""
+    if type(msg) is not Intent or not draw(st.booleans()):
+        return {}
+    name = draw(st.sampled_from(["order", "order", "action"]))
+    if name == "order":
+        return {name: tuple(draw(_any_order))}
+    return {name: draw(st.integers(0, N_ACTIONS - 1))}
+
+
+def _reordered(draw, msg, wire: list) -> list:
+    """``wire``, the wire array of ``msg``, with :func:`_redrawn`'s change."""
+    for name, value in _redrawn(draw, msg).items():
+        wire[wire_index(type(msg), name)] = list(value) if name == "order" else value
+    return wire
+
+
 @st.composite
 def near_valid_arrays(draw):
-    """A valid message's wire array with each item, at random, kept, replaced by junk, or dropped,
-    and maybe one more inserted."""
+    """A valid message's wire array (an intent's maybe with its order or action redrawn) with each
+    item, at random, kept, replaced by junk, or dropped, and maybe one more inserted."""
     msg = draw(any_message)
     out = []
-    for v in _as_lists(to_wire(msg)):
+    for v in _as_lists(_reordered(draw, msg, to_wire(msg))):
         choice = draw(st.sampled_from(["keep"] * 12 + ["junk", "drop"]))
         if choice == "keep":
             out.append(v)
@@ -832,28 +945,33 @@ def encoding_of(msg):
 
 
 def test_wire_bytes_are_pinned():
-    """The exact bytes of protocol version 7 (item order, int / float / bool types)."""
+    """The exact bytes of protocol version 8 (item order, int / float / bool types)."""
     pinned = {
         obs():  # 19 items: an array 16 header
-            "dc0013a56f62732f37a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
+            "dc0013a56f62732f38a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
             "cb3fd0000000000000cb4024000000000000c2c2c29090c2",
         obs(parked=(5,), updates=(((7, 2210), (0.5, 10)), ((), ()))):
-            "dc0013a56f62732f37a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
+            "dc0013a56f62732f38a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
             "cb3fd0000000000000cb4024000000000000c2c2c2910592929207cd08a292cb3fe00000000000000a"
             "929090c2",
         answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
-            "98a8616e737765722f37a572756e2d3103a76167656e742f3202000192920004920100",
-        intent():
-            "98a8696e74656e742f37a572756e2d3107a76167656e742f3202010390",
+            "98a8616e737765722f38a572756e2d3103a76167656e742f3202000192920004920100",
+        intent():  # 9 items: the record, then the order, both empty
+            "99a8696e74656e742f38a572756e2d3107a76167656e742f320201039090",
+        intent(order=(3, 0, 4)):  # the order: the action (3) first, then 0, then 4
+            "99a8696e74656e742f38a572756e2d3107a76167656e742f320201039093030004",
         control():
-            "95a9636f6e74726f6c2f37a572756e2d3107a5776f726c64a873687574646f776e",
+            "95a9636f6e74726f6c2f38a572756e2d3107a5776f726c64a873687574646f776e",
         control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
-            "95a9636f6e74726f6c2f37d940" + "72" * 64
+            "95a9636f6e74726f6c2f38d940" + "72" * 64
             + "cf0000010000000000a5776f726c64a873687574646f776e",
     }
     for msg, hexed in pinned.items():
         assert encode(msg).hex() == hexed
         assert parse(bytes.fromhex(hexed), type(msg), msg.run) == msg
+        assert msgpack.unpackb(bytes.fromhex(hexed)) == [TAG[type(msg)], *_as_lists(values(msg))]
+    assert msgpack.unpackb(bytes.fromhex(pinned[intent(order=(3, 0, 4))])) == [
+        "intent/8", RUN, 7, "agent/2", 2, 1, 3, [], [3, 0, 4]]
 
 
 @given(any_message, st.sampled_from([bytes, bytearray, memoryview, zenoh.ZBytes]))
@@ -886,7 +1004,8 @@ def test_numpy_values_lists_str_subclasses_and_ints_for_floats_go_on_the_wire_pl
 
 # Values a field may be given, valid or not, each tried in every field of every kind, both ways.
 _EDGES = [
-    None, "", "x", "world", "agent/2", "shutdown", "obs/7", "intent/7", "intent/6", "control/7",
+    None, "", "x", "world", "agent/2", "shutdown", "obs/8", "intent/8", "control/8", "answer/8",
+    "obs/7", "intent/7", "intent/6", "control/7", "intent/9",
     "x" * messages.MAX_STR_LEN,
     "x" * (messages.MAX_STR_LEN + 1), b"x",
     0, 1, 2, 4, 5, -1, MAX_GRID - 1, MAX_GRID, MAX_AGENTS - 1, MAX_AGENTS, MAX_TICK - 1, MAX_TICK,
@@ -895,6 +1014,8 @@ _EDGES = [
     (), [], (1, 2), [1, 2], (1.0, 2), (True, 0), (MAX_GRID, 0), (1, 2, 3), ((1, 2),), ((1, 2, 3),),
     ((2, 0, 0),), ((1, 0, 0), (1, 2, 2)), ((1, 0, 0), (3, 2, 2)), ((1, 4), (3, 4)), ((1, 5),),
     ((1, 4), (1, 0)), ((True, 4),), ([1, 4],), [[1, 4]], ((1, 4, 0),), {"a": 1},
+    (3,), (4,), (3, 0), (3, 3), (0, 3), (3, 0, 4), (3, 5), (3, -1), (3, 0, 1, 2, 4),
+    (4, 3, 2, 1, 0), (3, 0, 1, 2, 4, 3), (3, 0, 1, 2, 2), (0, 1, 2, 3, 4, 0), [3, 1], (3, 1.0),
 ]
 
 
@@ -916,7 +1037,7 @@ def _numpy_twin(value):
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 @pytest.mark.parametrize("msg", [obs(), obs(neighbours=()), answer(), answer(relayed=()), intent(),
-                                 control(), control(run="r" * 64)])
+                                 intent(order=(3, 0, 4)), control(), control(run="r" * 64)])
 def test_every_edge_value_in_every_field_is_judged_as_the_reference_judges(msg):
     cls, key_agent = type(msg), getattr(msg, "agent", None)
     for name in fields_of(cls):
@@ -974,11 +1095,13 @@ def _reshaped(draw, value):
 @st.composite
 def odd_messages(draw):
     """A valid message with up to three fields (or items of them) in another form, maybe invalid,
-    and maybe the agent listed among its neighbours or relayed intents."""
+    maybe the agent listed among its neighbours or relayed intents, and maybe (an intent) its order
+    or action redrawn (:func:`_redrawn`)."""
     msg = draw(any_message)
     names = list(fields_of(type(msg)))
     changes = {name: draw(_reshaped(getattr(msg, name)))
                for name in draw(st.lists(st.sampled_from(names), max_size=3))}
+    changes.update(_redrawn(draw, msg))
     listed = getattr(msg, "neighbours", ()) or getattr(msg, "relayed", ())
     if listed and draw(st.booleans()):
         changes["agent"] = listed[0][0]
@@ -1003,9 +1126,9 @@ def _packable(value) -> bool:
 def odd_payloads(draw):
     """A valid message's wire array with up to three items (or items of them) in another form or
     dropped, maybe an extra item, maybe made a map, maybe the bytes cut or flipped; and a run and
-    key to parse with."""
+    key to parse with. An intent's order or action maybe redrawn first (:func:`_redrawn`)."""
     msg = draw(any_message)
-    wire = to_wire(msg)
+    wire = _reordered(draw, msg, to_wire(msg))
     for i in draw(st.lists(st.integers(0, len(wire) - 1), max_size=3)):
         if i >= len(wire):
             continue
@@ -1062,6 +1185,8 @@ def test_the_schema_is_the_annotations_of_the_classes():
     assert "le=1000000.0" in hints["reward_ds"] and hints["collided"] == "<class 'bool'>"
     assert Observation.agent_lists == ("neighbours",) and Answer.agent_lists == ("relayed",)
     assert [cls.from_agent for cls in KINDS] == [False, True, True, False]
+    order = repr(get_type_hints(Intent, include_extras=True)["order"])
+    assert "max_length=5" in order and "Meta(ge=0, lt=5)" in order
 
 
 def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
@@ -1087,7 +1212,7 @@ def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
     assert msgpack.unpackb(encode(Plan(RUN, 7, "agent/2", 2, ())))[-1] == []
     good = Plan(RUN, 7, "agent/2", 2, ((0, 1, 1, True), (5, 2, 2, False)), (1, 4))
     payload = encode(good)
-    assert msgpack.unpackb(payload) == ["plan/7", RUN, 7, "agent/2", 2,
+    assert msgpack.unpackb(payload) == ["plan/8", RUN, 7, "agent/2", 2,
                                         [[0, 1, 1, True], [5, 2, 2, False]], [1, 4]]
     assert parse(payload, Plan, RUN, key_agent=2) == good
     for change, reason in [
@@ -1113,9 +1238,9 @@ def test_a_bad_item_is_named_by_its_fields_own_decoder():
         rejected = messages._rejection(mutated(obs(), name, value), Observation, RUN)
         assert rejected.reason == f"bad-field:{name}"
     assert messages._rejection(encode(obs()), Observation, RUN) is None
-    array16 = b"\xdc\x00\x08" + encode(intent())[1:]  # 8 items, in a longer header than needed
+    array16 = b"\xdc\x00\x09" + encode(intent())[1:]  # 9 items, in a longer header than needed
     assert parse(array16, Intent, RUN) == intent()
-    assert reason_of(b"\xdc\x00\x09" + encode(intent())[1:], Intent) == "not-msgpack"
+    assert reason_of(b"\xdc\x00\x0a" + encode(intent())[1:], Intent) == "not-msgpack"
 
 
 def test_oversize_rejected_before_unpacking(monkeypatch):

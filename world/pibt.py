@@ -1,5 +1,11 @@
-"""The oracle: a reference planner (PIBT) that knows every goal and plans all agents' moves at
-once, collision-free.
+"""Priority inheritance (PIBT), once: the oracle's planner and the world's ``--arbitration pibt``.
+
+Two sources of preference, one planner (:func:`plan`). The oracle, a reference planner that knows
+every goal, orders each agent's cells by their distance to its goal; under ``--arbitration pibt``
+each agent announces its own order (``learning.learner.preference_ranks``: the length of the way
+on the map it knows, then its learned values) and the world (``world.arbiter``; the simulator,
+``sim.episode``) settles the tick by the same machinery. Either way no two agents are planned into
+one cell and no two swap, so nobody collides.
 
 Priority Inheritance with Backtracking (Okumura et al., 2022), one step at a time, on the world's
 rules: agents in priority order (at the start, the longest shortest path to its goal first, then
@@ -24,8 +30,10 @@ Walls are obstacles that never move. Arrived agents follow the world's on-target
   (Okumura, 2023): two agents that must trade places in a corridor or a dead end walk out of it,
   one pulling the other, until there is room to pass.
 
-It learns nothing. It is a reference planner, not a lower bound: PIBT's paths are not optimal.
-The lower bound is ``shortest_sum``, each agent's shortest path alone.
+The oracle learns nothing. It is a reference planner, not a lower bound: PIBT's paths are not
+optimal. The lower bound is ``shortest_sum``, each agent's shortest path alone. Under
+``--arbitration pibt`` it is also the baseline the field asks of a learned method, "PIBT with
+greedy actions" (PIBT-greedy): the same arbitration, preferences by distance alone.
 """
 
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
