@@ -100,7 +100,7 @@ class AgentBrain:
         self.prepare(obs)
         record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
         (x, y), (gx, gy) = obs.position, obs.goal
-        stops = obs.arrived or obs.episode_end
+        stops = (obs.arrived and not self.config.lifelong) or obs.episode_end
         near = self._neighbour_rows(obs, {} if stops else answers, not stops)
         nb, m = rows(near, NB_FIELDS), len(near)
         sight = Sight(x, y, gx, gy, nb, m, obs.step == 0)

@@ -30,6 +30,13 @@ MAX_LOOKAHEAD = 3
 ON_TARGET = ("park", "step-aside")
 """What an agent on its goal does (``world.rules``): parks there for good (the paper's reading)
 or stays unless it has to make way (the field's)."""
+TASKS = ("one-shot", "lifelong")
+"""What an agent does on reaching its goal (``world.tasks``): nothing more this episode (one goal
+each, the episode over when all are home), or it is given a new one at once, and the episode runs
+its ``max_steps`` (the field's lifelong setting, POGEMA's ``on_target: restart``)."""
+MAX_LIFELONG_STEPS = 4096
+"""The longest lifelong episode: every agent's goals are drawn for it ahead (one per step at
+most, ``world.tasks``)."""
 ARBITRATIONS = ("paper", "pibt")
 """How the world settles a tick's moves (``world.rules``): everyone's one intent applied at once,
 colliding moves blocked and counted (the paper's), or priority inheritance (PIBT, with LaCAM's
@@ -170,8 +177,14 @@ class SwarmConfig:
                             "good, an obstacle (park, the paper's reading), or stays unless it "
                             "has to make way, and may leave and come back, counted arrived "
                             "only while there, its last arrival its arrival (step-aside, the "
-                            "field's); by default step-aside under --arbitration pibt, else park",
+                            "field's); by default step-aside under --arbitration pibt or --tasks "
+                            "lifelong, else park",
                             choices=ON_TARGET)
+    tasks: str = option("one-shot", "what an agent that reached its goal does next: nothing "
+                        "more this episode (one-shot), or it is given a new goal at once, drawn "
+                        "from the free cells it can reach, and the episode runs --max-steps "
+                        "steps, scored by goals reached a step (lifelong, the field's "
+                        "throughput)", choices=TASKS)
     arbitration: str = option(_DEFAULT["arbitration"], "how the world settles a tick's moves: "
                               "every agent's intent applied at once, colliding moves blocked "
                               "and counted (paper), or priority inheritance over each agent's "
@@ -201,7 +214,8 @@ class SwarmConfig:
         object.__setattr__(self, "map_rows", tuple(self.map_rows))
         if not self.on_target:  # the on-target rule of the arbitration
             object.__setattr__(self, "on_target",
-                               "step-aside" if self.arbitration == "pibt" else "park")
+                               "step-aside" if self.arbitration == "pibt" or self.lifelong
+                               else "park")
         object.__setattr__(self, "scenario", tuple(tuple(int(v) for v in task)
                                                    for task in self.scenario))
         checks = [
@@ -233,6 +247,13 @@ class SwarmConfig:
              "a lookahead n > 1 plans on the goal's offset: it needs --ds-state goal"),
             (self.on_target in ON_TARGET,
              f"the on-target rule must be one of {', '.join(ON_TARGET)}"),
+            (self.tasks in TASKS, f"the tasks must be one of {', '.join(TASKS)}"),
+            (self.tasks != "lifelong" or self.max_steps <= MAX_LIFELONG_STEPS,
+             f"a lifelong episode is at most {MAX_LIFELONG_STEPS} steps"),
+            (self.tasks != "lifelong" or self.on_target == "step-aside",
+             "in a lifelong run nobody stays on a goal: it needs --on-target step-aside"),
+            (self.tasks != "lifelong" or self.lookahead == 1,
+             "a lifelong run plays a lookahead n of 1"),
             (self.arbitration in ARBITRATIONS,
              f"the arbitration must be one of {', '.join(ARBITRATIONS)}"),
             (self.arbitration != "pibt" or self.on_target == "step-aside",
@@ -296,6 +317,11 @@ class SwarmConfig:
         return wall_count(self.width, self.height, self.obstacle_density)
 
     @property
+    def lifelong(self) -> bool:
+        """Whether an agent is given a new goal on reaching its goal (``world.tasks``)."""
+        return self.tasks == "lifelong"
+
+    @property
     def step_aside(self) -> bool:
         """Whether an arrived agent may leave its goal to make way (``world.rules``)."""
         return self.on_target == "step-aside"
@@ -323,7 +349,8 @@ class SwarmConfig:
         not negotiate (an arrived one never learns an intent that would make it move). Under
         ``reach`` an arrived nnQL agent still relays the intents it learns down the chain, in
         lockstep; under ``step-aside`` it may have to make way."""
-        return (self.meet_only and self.parks) or self.algo not in NEGOTIATING_ALGOS
+        return not self.lifelong and ((self.meet_only and self.parks)
+                                      or self.algo not in NEGOTIATING_ALGOS)
 
     @cached_property
     def n_bodies(self) -> int:
@@ -355,6 +382,7 @@ class SwarmConfig:
         data.setdefault("still_shield", False)
         data.setdefault("escape_shield", False)
         data.setdefault("arbitration", "paper")
+        data.setdefault("tasks", "one-shot")
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:

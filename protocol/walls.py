@@ -62,14 +62,24 @@ def layout(seed: int, width: int, height: int, density: float,
 def open_cells(width: int, height: int, walls: np.ndarray) -> np.ndarray:
     """The cells (``y * W + x``, ascending) of the largest 4-connected region without walls; of
     regions equally large, the one holding the lowest cell."""
+    region = regions(width, height, walls)
+    if not (region >= 0).any():
+        return np.zeros(0, dtype=np.int64)
+    sizes = np.bincount(region[region >= 0])
+    return np.flatnonzero(region == int(np.argmax(sizes)))
+
+
+def regions(width: int, height: int, walls: np.ndarray) -> np.ndarray:
+    """Each cell's 4-connected region without walls (``y * W + x``; -1 on a wall), numbered in
+    the order of their lowest cells."""
     free = np.ones(width * height, dtype=bool)
     free[walls[:, 1] * width + walls[:, 0]] = False
     region = np.full(width * height, -1, dtype=np.int64)
-    best, best_size, label = -1, 0, 0
+    label = 0
     for start in np.flatnonzero(free).tolist():
         if region[start] >= 0:
             continue
-        region[start], size, todo = label, 1, deque([start])
+        region[start], todo = label, deque([start])
         while todo:
             cell = todo.popleft()
             x, y = cell % width, cell // width
@@ -77,12 +87,9 @@ def open_cells(width: int, height: int, walls: np.ndarray) -> np.ndarray:
                             (cell - width, y > 0), (cell + width, y < height - 1)):
                 if ok and free[nxt] and region[nxt] < 0:
                     region[nxt] = label
-                    size += 1
                     todo.append(nxt)
-        if size > best_size:
-            best, best_size = label, size
         label += 1
-    return np.flatnonzero(region == best) if best >= 0 else np.zeros(0, dtype=np.int64)
+    return region
 
 
 def path_lengths(width: int, height: int, walls: np.ndarray, starts: np.ndarray,

@@ -37,15 +37,18 @@ from nnql_swarm.protocol.actions import N_ACTIONS, STAY, sees, target_x, target_
 from nnql_swarm.kernel.jit import Buffer, batch_kernel, inline_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.world.pibt import plan
+from nnql_swarm.world.tasks import renew_goals
 from nnql_swarm.world.rules import (
     Bodies, Outcome, Rules, Scratch, Score, field_costs, refusal_rewards, shared_cells,
     swaps_through, world_step,
 )
 
-ORACLE_SCRATCH = 12
+ORACLE_SCRATCH = 13
 """Rows of a run's oracle scratch (``world.pibt.plan``: occupant, reserved, order, blocked,
-queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal, and
-the swap's partner and first-choice flag per chain level), a slot per grid cell each."""
+queue, stack, tried, the agents' priorities, probe, the nearest each has been to its goal, the
+swap's partner and first-choice flag per chain level, and the goal each agent's distances are
+for), a slot per grid cell each."""
+ORACLE_GOAL_OF = 12
 
 OPT_SHARED, OPT_LOOKAHEAD, OPT_ORACLE, OPT_WALLS, OPT_FROZEN, OPT_STEP_ASIDE = 0, 1, 2, 3, 4, 5
 OPT_PIBT = 6
@@ -72,8 +75,9 @@ whether it had arrived when the tick started."""
 
 class EpisodeRules(NamedTuple):
     """What every run of a batch plays by: bodies (the first ``learners`` learn), grid, the
-    episode's longest, whether swaps count, the destination-seeking rewards, and whether the
-    ticks are recorded (``Results.trace``)."""
+    episode's longest, whether swaps count, the destination-seeking rewards, whether the
+    ticks are recorded (``Results.trace``), and whether an agent is given a new goal on reaching
+    one (lifelong, ``world.tasks``: ``task_count`` goals each, ``Scenario.tasks``)."""
     n: int
     learners: int
     width: int
@@ -83,6 +87,8 @@ class EpisodeRules(NamedTuple):
     goal_reward: float
     stay_reward: float
     record: bool
+    lifelong: bool
+    task_count: int
 
 
 class Runs(NamedTuple):
@@ -115,11 +121,13 @@ class Learners(NamedTuple):
 
 class Scenario(NamedTuple):
     """An episode's scenario, per seed: every body's start, the learners' goals, the scripted
-    bodies' actions per step, and the learners' shortest paths."""
+    bodies' actions per step, the learners' shortest paths, and in a lifelong run their next
+    goals (``world.tasks.goal_sequences``, flat)."""
     starts: Buffer
     goals: Buffer
     scripts: Buffer
     paths: Buffer
+    tasks: Buffer
 
 
 class Noise(NamedTuple):
@@ -130,12 +138,13 @@ class Noise(NamedTuple):
 
 
 class Moves(NamedTuple):
-    """A tick's negotiation, per body: its action, whether it is fixed yet, and its cell a tick
-    ago (-1 at an episode's first)."""
+    """A tick's negotiation, per body: its action, whether it is fixed yet, its cell a tick
+    ago (-1 at an episode's first), and in a lifelong run which of its goals comes next."""
     actions: Buffer
     decided: Buffer
     prev_x: Buffer
     prev_y: Buffer
+    next_goal: Buffer
 
 
 class OracleScratch(NamedTuple):
@@ -240,11 +249,12 @@ def run_episode(rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                      agents.wmap[r], agents.rec[r], agents.rec_f[r], agents.pending_rec[r],
                      agents.values[r], agents.nb[r]),
             Scenario(scenario.starts[s], scenario.goals[s], scenario.scripts[s],
-                     scenario.paths[s]),
+                     scenario.paths[s], scenario.tasks[s]),
             Noise(noise.random_actions[s], noise.ties[s]),
             Bodies(bodies.x[r], bodies.y[r], bodies.goal_x[r], bodies.goal_y[r], bodies.learns,
                    bodies.arrived[r], bodies.arrival[r]),
-            Moves(moves.actions[r], moves.decided[r], moves.prev_x[r], moves.prev_y[r]),
+            Moves(moves.actions[r], moves.decided[r], moves.prev_x[r], moves.prev_y[r],
+                  moves.next_goal[r]),
             Outcome(outcome.before_x[r], outcome.before_y[r], outcome.collided[r],
                     outcome.r_ds[r], outcome.r_ca[r]),
             Scratch(scratch.occupancy[r], scratch.blocked[r]),
@@ -281,6 +291,8 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
     pibt = options[OPT_PIBT] != 0
     last_wall = n if options[OPT_WALLS] != 0 else learners  # walls: bodies learners .. n - 1
     step_aside = options[OPT_STEP_ASIDE] != 0
+    lifelong = rules.lifelong
+    next_goal = moves.next_goal
     alpha, gamma = params_f[FP_ALPHA], params_f[FP_GAMMA]
     world = Rules(n, width, height, count_swaps, step_aside, rules.goal_reward,
                   rules.stay_reward)
@@ -292,6 +304,7 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
         y[i] = starts[i, 1]
         prev_x[i] = -1
         prev_y[i] = -1
+        next_goal[i] = 0
         arrived[i] = False
         arrival[i] = 0
         collided[i] = False
@@ -333,7 +346,7 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                  oracle_scratch[9], actions, oracle_cells, oracle_scratch[0], oracle_scratch[1],
                  decided, oracle_scratch[2], oracle_scratch[3], oracle_scratch[4],
                  oracle_scratch[5], oracle_scratch[6], oracle_scratch[8], oracle_scratch[10],
-                 oracle_scratch[11], step, step == 0, False, ranks)
+                 oracle_scratch[11], step, oracle_scratch[ORACLE_GOAL_OF], False, ranks)
         for rank in range(learners):
             i = (rank + tick) % learners  # the agent of this rank (inverse of priority_rank)
             if oracle:
@@ -342,7 +355,8 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                 decided[i] = True
                 continue
             t = 0 if shared else i
-            record_outcome(state[i], state_f[i], r_ds[i], r_ca[i], arrived[i])
+            reached = arrived[i] or (lifelong and step > 0 and arrival[i] == step)
+            record_outcome(state[i], state_f[i], r_ds[i], r_ca[i], reached)
             stops = ending or arrived[i]
             m = neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options,
                                not stops)
@@ -373,7 +387,8 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                  oracle_scratch[7], oracle_scratch[9], actions, oracle_cells, oracle_scratch[0],
                  oracle_scratch[1], decided, oracle_scratch[2], oracle_scratch[3],
                  oracle_scratch[4], oracle_scratch[5], oracle_scratch[6], oracle_scratch[8],
-                 oracle_scratch[10], oracle_scratch[11], step, step == 0, True, ranks)
+                 oracle_scratch[10], oracle_scratch[11], step, oracle_scratch[ORACLE_GOAL_OF],
+                 True, ranks)
         if record:
             for i in range(n):
                 trace[step, i, TR_X] = x[i]
@@ -395,6 +410,9 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
         everyone = world_step(world, bodies, actions, outcome, scratch, score)
         if pibt:
             refusal_rewards(ranks, actions, bodies.learns, learners, r_ca, row_f)
+        if lifelong:
+            renew_goals(goal_x, goal_y, arrived, learners, scenario.tasks, rules.task_count,
+                        next_goal, row)
         out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, scratch.occupancy)
         if count_swaps:
             out[OUT_VIOLATIONS] += swaps_through(outcome.before_x, outcome.before_y, x, y, n, width,
@@ -404,5 +422,5 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                 trace[step, i, TR_ACTION] = actions[i]
                 trace[step, i, TR_COLLIDED] = 1 if collided[i] else 0
         step += 1
-        ending = everyone or step >= max_steps
+        ending = (everyone and not lifelong) or step >= max_steps
         ticks[r] = tick + 1

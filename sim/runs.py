@@ -28,15 +28,17 @@ from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.episode import (
     OPT_FIELDS, OPT_FROZEN, OPT_LOOKAHEAD, OPT_ORACLE, OPT_PIBT, OPT_SHARED, OPT_STEP_ASIDE, OPT_WALLS,
-    ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS, OUT_MAKESPAN, OUT_ON_GOAL, OUT_SHORTEST, OUT_SOC,
+    ORACLE_GOAL_OF, ORACLE_SCRATCH, OUT_END_TICK, OUT_FIELDS, OUT_MAKESPAN, OUT_ON_GOAL, OUT_SHORTEST, OUT_SOC,
     OUT_VIOLATIONS, TR_FIELDS, EpisodeRules, Learners, Moves, Noise, OracleScratch, Results, Runs,
     Scenario, run_episode,
 )
 from nnql_swarm.world.rules import (
-    GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS,
+    GOAL_REWARD, STAY_REWARD, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_GOALS, ROW_INTS,
     ROW_REWARD, ROW_REWARD_CA, ROW_REWARD_DS, ROW_STEPS, Bodies, Outcome, Scratch, field_columns,
+    task_columns,
 )
 from nnql_swarm.world.scenario import paper_episode, swarm_episode
+from nnql_swarm.world.tasks import goal_sequences
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,7 @@ class World:
     obstacle_density: float = 0.0
     map_rows: tuple[str, ...] = ()
     scenario: tuple = ()
+    lifelong: bool = False
 
     @property
     def scripted(self) -> int:
@@ -74,7 +77,7 @@ def swarm_world(config: SwarmConfig) -> World:
                  height=config.height, max_steps=config.max_steps,
                  count_swaps=config.count_swaps, goal_reward=config.goal_reward,
                  stay_reward=config.stay_reward, obstacle_density=config.obstacle_density,
-                 map_rows=config.map_rows, scenario=config.scenario)
+                 map_rows=config.map_rows, scenario=config.scenario, lifelong=config.lifelong)
 
 
 class Episodes:
@@ -88,6 +91,7 @@ class Episodes:
     steps = property(lambda self: self.row[..., ROW_STEPS])
     collisions = property(lambda self: self.row[..., ROW_COLLISIONS])
     arrived = property(lambda self: self.row[..., ROW_ARRIVED])
+    goals = property(lambda self: self.row[..., ROW_GOALS])
     agent_steps = property(lambda self: self.row[..., ROW_AGENT_STEPS])
     reward_sum = property(lambda self: self.row_f[..., ROW_REWARD])
     reward_ds = property(lambda self: self.row_f[..., ROW_REWARD_DS])
@@ -115,6 +119,7 @@ class Episodes:
             "agent_steps": int(self.agent_steps[run, episode]),
             "end_tick": int(self.end_tick[run, episode]),
             **field_columns(*costs, learners),
+            **task_columns(int(self.goals[run, episode]), int(self.steps[run, episode])),
         }
 
 
@@ -163,12 +168,14 @@ class Batch:
         self._seed_of_run = np.array([self._seeds.index(run.seed) for run in runs])
         self._bodies = Bodies(_ints(r, n), _ints(r, n), _ints(r, n), _ints(r, n), self.learns,
                               np.zeros((r, n), dtype=bool), _ints(r, n))
-        self._moves = Moves(_ints(r, n), np.zeros((r, n), dtype=bool), _ints(r, n), _ints(r, n))
+        self._moves = Moves(_ints(r, n), np.zeros((r, n), dtype=bool), _ints(r, n), _ints(r, n),
+                            _ints(r, n))
         self._outcome = Outcome(_ints(r, n), _ints(r, n), np.zeros((r, n), dtype=bool),
                                 np.zeros((r, n)), np.zeros((r, n)))
         self._scratch = Scratch(_ints(r, cells), np.zeros((r, n), dtype=bool))
         self._oracle = OracleScratch(_ints(r, ORACLE_SCRATCH, cells), _ints(r, n * cells),
                                      _ints(r, n * N_ACTIONS))
+        self._oracle.rows[:, ORACLE_GOAL_OF] = -1  # no agent's distances worked out yet
         self._rec = _ints(r, learners, record_size(n))
         self._rec_f = np.zeros((r, learners, RF_FIELDS))
         self._pending_rec = np.zeros((r, learners), dtype=bool)
@@ -187,7 +194,7 @@ class Batch:
         seed_actions = np.zeros((seeds, w.learners, w.max_steps), dtype=np.int64)
         seed_ties = np.zeros((seeds, w.learners, w.max_steps, N_ACTIONS))
         rules = EpisodeRules(w.bodies, w.learners, w.width, w.height, w.max_steps, w.count_swaps,
-                             w.goal_reward, w.stay_reward, self.record)
+                             w.goal_reward, w.stay_reward, self.record, w.lifelong, w.max_steps)
         per_run = Runs(self.params, self.params_f, self.options, self._seed_of_run, self.tick)
         agents = Learners(self.q_ds, self.q_ca, self.state, self.state_f, self.wmap, self._rec,
                           self._rec_f, self._pending_rec, self._values, self._nb)
@@ -248,7 +255,7 @@ class Batch:
     def _scenarios(self, episode: int):
         """Every seed's starts, goals, scripts and the learners' shortest paths of an episode."""
         w = self.world
-        starts, goals, scripts, paths = [], [], [], []
+        starts, goals, scripts, paths, tasks = [], [], [], [], []
         for seed in self._seeds:
             if w.paper:
                 paper = paper_episode(seed, episode, w.width, w.height, w.scripted, w.max_steps)
@@ -256,6 +263,7 @@ class Batch:
                 goals.append(paper.goal[None, :])
                 scripts.append(paper.obstacle_actions)
                 paths.append(np.abs(paper.starts[:1] - paper.goal).sum(axis=1))
+                tasks.append(np.zeros(2, dtype=np.int64))
             else:
                 swarm = swarm_episode(seed, episode, w.width, w.height, w.learners,
                                       w.obstacle_density, w.map_rows, w.scenario)
@@ -265,7 +273,11 @@ class Batch:
                 goals.append(swarm.goals)
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))
                 paths.append(swarm.shortest)
-        return np.stack(starts), np.stack(goals), np.stack(scripts), np.stack(paths)
+                tasks.append(goal_sequences(seed, episode, w.width, w.height, walls, swarm.goals,
+                                            w.max_steps).reshape(-1) if w.lifelong
+                             else np.zeros(2, dtype=np.int64))
+        return (np.stack(starts), np.stack(goals), np.stack(scripts), np.stack(paths),
+                np.stack(tasks))
 
 
 def compiled_simulator() -> bool:
@@ -303,6 +315,8 @@ def check_run(world: World, run: SwarmConfig) -> None:
         raise ValueError("the oracle plans swarms of learners, not scripted obstacles")
     if run.obstacle_density != world.obstacle_density:
         raise ValueError("every run of a batch needs the world's obstacle density")
+    if run.lifelong != world.lifelong:
+        raise ValueError("every run of a batch needs the world's tasks (one-shot or lifelong)")
     if (run.map_rows, run.scenario) != (world.map_rows, world.scenario):
         raise ValueError("every run of a batch needs the world's map and scenario")
 

@@ -33,6 +33,7 @@ class Arbiter:
         self._queue, self._stack, self._tried, self._probe = slots(), slots(), slots(), slots()
         self._swapper, self._first = slots(), slots()
         self._decided = flags([False] * bodies)
+        self._goal_of = ints([-1] * n)  # the goal each agent's distances are for
         self.ranks = ints([UNWANTED] * (bodies * N_ACTIONS))
         """Each body's rank of each move this step (0: its first choice)."""
 
@@ -57,4 +58,4 @@ class Arbiter:
              c.step_aside, self.priority, self.closest, actions, self._distances,
              self._occupant, self._reserved, self._decided, self._order, self._blocked,
              self._queue, self._stack, self._tried, self._probe, self._swapper, self._first,
-             step, step == 0, True, ranks)
+             step, self._goal_of, True, ranks)

@@ -37,11 +37,12 @@ from nnql_swarm.kernel.jit import flags, floats, ints, python_values
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
-    FIELD_COLUMNS, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD,
+    FIELD_COLUMNS, ROW_GOALS, TASK_COLUMNS, task_columns, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD,
     ROW_STEPS, Bodies, Cell, Outcome, Rules, Scratch, Score, field_columns, field_costs,
     refusal_rewards, shared_cells, swaps_through, world_step,
 )
 from nnql_swarm.world.arbiter import Arbiter
+from nnql_swarm.world.tasks import goal_sequences, renew_goals
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
 
@@ -57,7 +58,7 @@ come at once, and through a router one link carries them all)."""
 EPISODE_FIELDS = (
     "episode", "steps", "collisions", "missed_intents", "reward_sum", "arrived", "shortest_sum",
     "agent_steps", "end_tick",
-) + FIELD_COLUMNS
+) + FIELD_COLUMNS + TASK_COLUMNS
 """The deterministic columns of ``episodes.csv``, one row per episode (the last, the field's
 metrics: ``world.rules.field_columns``)."""
 
@@ -162,6 +163,11 @@ class SwarmWorld:
         self._shortest = int(scenario.shortest.sum())
         if self.arbiter is not None:
             self.arbiter.start_episode(scenario.shortest.tolist())
+        if c.lifelong:
+            walls = c.walls()
+            self._tasks = ints(goal_sequences(c.seed, episode, c.width, c.height, walls,
+                                              scenario.goals, c.max_steps).reshape(-1).tolist())
+            self._next_goal = ints([0] * n)
         self._plain()
 
     def _plain(self) -> None:
@@ -280,7 +286,8 @@ class SwarmWorld:
                 "collisions": row[ROW_COLLISIONS], "missed_intents": self._missed,
                 "reward_sum": reward, "arrived": row[ROW_ARRIVED],
                 "shortest_sum": self._shortest, "agent_steps": row[ROW_AGENT_STEPS],
-                "end_tick": self.tick, **field_columns(on_goal, soc, makespan, n)}
+                "end_tick": self.tick, **field_columns(on_goal, soc, makespan, n),
+                **task_columns(row[ROW_GOALS], row[ROW_STEPS])}
 
     def _end_tick(self, missed: tuple[int, ...], learned: dict,
                   records: dict | None) -> TickReport:
@@ -320,10 +327,18 @@ class SwarmWorld:
         if arbiter is not None:
             refusal_rewards(arbiter.ranks, chosen, self._learns, c.n_agents, self._r_ca,
                             self._row_f)
+        reached = python_values(self._arrived)
+        if c.lifelong:  # each agent that reached its goal has the next one at once
+            renew_goals(self._goal_x, self._goal_y, self._arrived, c.n_agents, self._tasks,
+                        c.max_steps, self._next_goal, self._row)
+            self._goal_cells = list(zip(python_values(self._goal_x)[:c.n_agents],
+                                        python_values(self._goal_y)[:c.n_agents]))
         violations = self._check()
         self._plain()
+        if c.lifelong:  # the observations say who reached a goal: its last step was terminal
+            self._outcome = (*self._outcome[:3], reached)
         self.step += 1
-        self.ending = bool(everyone) or self.step >= c.max_steps
+        self.ending = (bool(everyone) and not c.lifelong) or self.step >= c.max_steps
         collided = self._outcome[2]
         n = c.n_agents
         self.settled = (frozenset() if self.ending or not c.quiet_settled

@@ -376,7 +376,7 @@ class WorldMachine(Machine):
         intents, heard = tuple(self.actions), self.heard
         self.decisions = {agent: Decision(obs, intents, self.sent_before.get(agent))
                           for agent, obs in self.sent.items()
-                          if agent in heard and decides(obs)}
+                          if agent in heard and decides(obs, self.config.lifelong)}
         return self.learned
 
     def _close_run(self, now: float) -> None:

@@ -319,7 +319,7 @@ def _closes(goal, i, x, y, goal_x, goal_y, arrived, n, width, height, distances,
 @kernel
 def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, priority, closest,
          actions, distances, occupant, reserved, decided, order, blocked, queue, stack, tried,
-         probe, swapper, first, step, fresh, learned, ranks):
+         probe, swapper, first, step, goal_of, learned, ranks):
     """Every agent's collision-free action for this step, the agents of higher ``priority``
     first: bodies ``0 .. n - 1`` are the agents, ``n .. bodies - 1`` walls (they stay). An agent
     gains a unit of ``priority`` at every step that finds it no nearer its goal than it has been
@@ -328,7 +328,10 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, pr
     to its own does not take it this step, and plans after the others. Under ``step_aside``
     arrived agents are planned (and pushed) like the others, and priorities are published
     PIBT's (the module docstring), with LaCAM's swap (:func:`_push`); there the distances depend
-    on the goals and walls alone, and are worked out only when ``fresh`` (a new episode).
+    on the goals and walls alone, and are worked out again only for an agent whose goal is not
+    the one they were worked out for (``goal_of``, a cell per agent, -1 at first): a new episode,
+    or a new goal of a lifelong run (``world.tasks``), after which, as in lifelong PIBT, its
+    priority starts again from 0.
     With ``learned``, each agent's order over its moves is its own (``ranks``, :func:`_push`),
     not the distance to its goal: the arbitration of ``--arbitration pibt``, the same machinery
     with the agents' preferences. Scratch: ``distances`` (n cells each), ``occupant``,
@@ -349,9 +352,13 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, pr
             decided[i] = True
     if step_aside:
         for i in range(n):
-            if fresh:
+            goal = goal_y[i] * width + goal_x[i]
+            if goal_of[i] != goal:
                 goal_distances(goal_x[i], goal_y[i], blocked, width, height, distances,
                                i * cells, queue)
+                goal_of[i] = goal
+                if step > 0:
+                    priority[i] = 0
             if x[i] == goal_x[i] and y[i] == goal_y[i]:
                 priority[i] = 0
             else:

@@ -76,15 +76,16 @@ def _only(obs: Observation, neighbours) -> Observation:
     return msgspec.structs.replace(obs, neighbours=tuple(neighbours))
 
 
-def _stops(obs: Observation) -> bool:
-    """An agent that has arrived, or at an episode's end, decides nothing (``AgentBrain.act``)."""
-    return obs.arrived or obs.episode_end
+def _stops(obs: Observation, lifelong: bool) -> bool:
+    """An agent that has arrived, or at an episode's end, decides nothing (``AgentBrain.act``);
+    in a lifelong run an agent that reached its goal has its next one, and goes on."""
+    return (obs.arrived and not lifelong) or obs.episode_end
 
 
-def decides(obs: Observation) -> bool:
+def decides(obs: Observation, lifelong: bool) -> bool:
     """Whether an agent that was sent ``obs`` and announced an intent decided on it (and so left
     a transition for its next record)."""
-    return not _stops(obs)
+    return not _stops(obs, lifelong)
 
 
 class RecordCheck:
@@ -99,6 +100,7 @@ class RecordCheck:
             params[LP_DS_STATE], params[LP_DS_REWARD] = DS_GOAL, REWARD_WORLD
         self.params, self.params_f = ints(params), floats(params_f)
         self.still_terminal = config.still_terminal
+        self.lifelong = config.lifelong
         self._no_map = ints([0])
         self.daql = params[LP_READING] == READ_DAQL
         self.radius = config.interaction_radius
@@ -135,7 +137,7 @@ class RecordCheck:
     def ready(self, obs: Observation, intents) -> bool:
         """Whether ``intents`` (the tick's so far) hold every intent the agent that was sent
         ``obs`` may have decided with: then its record can be checked before the tick closes."""
-        return _stops(obs) or all(intents[j] is not None for j in self._negotiated(obs)[0])
+        return _stops(obs, self.lifelong) or all(intents[j] is not None for j in self._negotiated(obs)[0])
 
     def _memories(self, obs: Observation, before: Observation | None, sure: bool) -> list:
         """DAQL's memories of the tick before, ``(previous cells, own cell then)``: those of
@@ -176,7 +178,7 @@ class RecordCheck:
         pending = [(row[NB_ID], row[NB_ROW], row[NB_X], row[NB_Y]) for row in decided
                    if chebyshev(x, y, row[NB_X], row[NB_Y]) <= radius]
         ids = {entry[0] for entry in pending}
-        stops = _stops(obs)
+        stops = _stops(obs, self.lifelong)
         answers, _ = self._answers(obs, intents, stops)
         (x, y) = obs.position
         near = [n for n in within(obs.neighbours, x, y, radius + 2)  # s' is at most 2 further
@@ -260,7 +262,7 @@ class RecordCheck:
     def _pairs(self, decision: Decision, obs: Observation, intents, neighbour: int) -> set:
         """Every ``(s_i, s'_i)`` pair the agent could have written for ``neighbour``."""
         before = decision.obs
-        stops = _stops(obs)
+        stops = _stops(obs, self.lifelong)
         pairs = set()
         for row in self._readings(before, decision.intents, False, decision.before, False,
                                   neighbour):

@@ -62,11 +62,11 @@ STAY_REWARD = 0.5
 CA_REWARD = 10.0
 """The collision-avoidance reward for a step without collision (0 with one), as in the paper."""
 
-ROW_STEPS, ROW_COLLISIONS, ROW_ARRIVED, ROW_AGENT_STEPS = 0, 1, 2, 3
+ROW_STEPS, ROW_COLLISIONS, ROW_ARRIVED, ROW_AGENT_STEPS, ROW_GOALS = 0, 1, 2, 3, 4
 """Integer fields of an episode's running score (``row``): ticks moved, learners in a collision
-(summed over steps), learners arrived, and learner-steps spent before arriving (each learner's
-last arrival step)."""
-ROW_INTS = 4
+(summed over steps), learners arrived, learner-steps spent before arriving (each learner's
+last arrival step), and goals reached (lifelong runs, ``world.tasks``)."""
+ROW_INTS = 5
 
 ROW_REWARD, ROW_REWARD_DS, ROW_REWARD_CA = 0, 1, 2
 """Float fields of an episode's running score (``row_f``): the sum of both rewards, and each."""
@@ -204,6 +204,16 @@ def field_columns(on_goal: int, soc: int, makespan: int, learners: int) -> dict:
     its goal, else 0), ISR (the share that does), SoC and makespan."""
     return {"csr": int(on_goal == learners), "isr": on_goal / learners, "soc": soc,
             "makespan": makespan}
+
+
+TASK_COLUMNS = ("goals", "throughput")
+"""A lifelong run's measures of an episode (``world.tasks``; 0 in a one-shot run): goals reached,
+and goals reached a step (the field's throughput)."""
+
+
+def task_columns(goals: int, steps: int) -> dict:
+    """The lifelong measures of an episode of ``steps`` steps that reached ``goals`` goals."""
+    return {"goals": goals, "throughput": goals / steps if steps else 0.0}
 
 
 @kernel
