@@ -25,7 +25,7 @@ from typing import Any, Callable
 from nnql_swarm.transport import zenoh_files
 from nnql_swarm.terminal.cli import (
     EXIT_INTERRUPTED, OneLineParser, invocation, parse_grid, prepare_simulator,
-    progress as progress_bar,
+    episode_summary, progress as progress_bar,
 )
 from nnql_swarm.recording.session import RecordingSession
 from nnql_swarm.recording.viewers import check_viewer_url
@@ -384,8 +384,8 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool,
         nonlocal collisions
         collisions += row["collisions"]
         if bar is not None:
-            bar.set_postfix(arrived=f"{row['arrived']}/{config.n_agents}", collisions=collisions,
-                            refresh=False)
+            bar.set_postfix(**episode_summary(row, config.n_agents, config.lifelong),
+                            collisions=collisions, refresh=False)
             bar.update(1)
         if on_row is not None:
             on_row(row)

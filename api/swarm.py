@@ -37,7 +37,7 @@ DETERMINISTIC_COLUMNS = EPISODE_FIELDS
 """The columns of :attr:`Run.episodes` that the options alone decide: equal, bit for bit, between
 runs of the same options, in-process or distributed. The others are wall-clock measures."""
 
-_FLOAT_COLUMNS = ("reward_sum", "isr", "duration_s", "ticks_per_s", "max_tick_ms")
+_FLOAT_COLUMNS = ("reward_sum", "isr", "throughput", "duration_s", "ticks_per_s", "max_tick_ms")
 EPISODE_DTYPE = np.dtype([(name, np.float64 if name in _FLOAT_COLUMNS else np.int64)
                           for name in COLUMNS])
 """The dtype of :attr:`Run.episodes`: ``episodes.csv``'s columns, in its order."""

@@ -22,7 +22,7 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
                progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> None:
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
     from nnql_swarm.recording.loggers import open_world_viz
-    from nnql_swarm.terminal.cli import progress as progress_bar
+    from nnql_swarm.terminal.cli import episode_summary, progress as progress_bar
     from nnql_swarm.world.node import WorldOptions, run_world
 
     name_process("nnql-world", config)
@@ -37,7 +37,8 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
             viz.log_tick(world, report)
         if bar is not None and report.episode_row is not None:
             row = report.episode_row
-            bar.set_postfix(arrived=f"{row['arrived']}/{config.n_agents}", collisions=collisions,
+            bar.set_postfix(**episode_summary(row, config.n_agents, config.lifelong),
+                            collisions=collisions,
                             missed=row["missed_intents"],
                             ticks_per_s=f"{world.tick / max(time.monotonic() - started, 1e-9):.0f}",
                             refresh=False)

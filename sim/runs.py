@@ -173,9 +173,9 @@ class Batch:
         self._outcome = Outcome(_ints(r, n), _ints(r, n), np.zeros((r, n), dtype=bool),
                                 np.zeros((r, n)), np.zeros((r, n)))
         self._scratch = Scratch(_ints(r, cells), np.zeros((r, n), dtype=bool))
-        self._oracle = OracleScratch(_ints(r, ORACLE_SCRATCH, cells), _ints(r, n * cells),
-                                     _ints(r, n * N_ACTIONS))
-        self._oracle.rows[:, ORACLE_GOAL_OF] = -1  # no agent's distances worked out yet
+        oracle_rows = _ints(r, ORACLE_SCRATCH, cells)
+        oracle_rows[:, ORACLE_GOAL_OF] = -1  # no agent's distances worked out yet
+        self._oracle = OracleScratch(oracle_rows, _ints(r, n * cells), _ints(r, n * N_ACTIONS))
         self._rec = _ints(r, learners, record_size(n))
         self._rec_f = np.zeros((r, learners, RF_FIELDS))
         self._pending_rec = np.zeros((r, learners), dtype=bool)

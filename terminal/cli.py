@@ -87,6 +87,14 @@ def progress(total: int, unit: str, desc: str = "") -> tqdm:
                 ascii=True, ncols=100)
 
 
+def episode_summary(row: dict, agents: int, lifelong: bool) -> dict[str, str]:
+    """What a swarm's progress bar shows of an episode that ended (its ``episodes.csv`` row):
+    the agents home, or in a lifelong run the goals reached a step."""
+    if lifelong:
+        return {"goals": str(row["goals"]), "throughput": f"{row['throughput']:.2f}"}
+    return {"arrived": f"{row['arrived']}/{agents}"}
+
+
 class _Lines:
     """stderr as a bar's stream where it is not a terminal: each redraw becomes a line."""
 

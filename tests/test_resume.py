@@ -124,11 +124,14 @@ def test_the_moments_are_spread_over_the_run_and_every_way_of_stopping_is_drawn(
 
 @pytest.mark.parametrize("preset, grid", [
     ("shield-nnql", ()), ("best-nnql", ()),
-    ("path-nnql", ("--grid", "24x12", "--obstacle-density", "0.2"))])
+    ("path-nnql", ("--grid", "24x12", "--obstacle-density", "0.2")),
+    ("pibt-nnql", ("--grid", "16x16", "--obstacle-density", "0.2", "--tasks", "lifelong",
+                   "--max-steps", "40"))])
 def test_a_run_stopped_in_every_way_and_resumed_is_the_run_left_alone(tmp_path, preset, grid):
     """Five seeded moments over a short run, each stopped another way (``STOPS``) and resumed:
     the same rows and the same Q-tables, generators and shared table as the run left alone (the
-    default among walls: the walls each agent has seen come back from its checkpoint)."""
+    default among walls: the walls each agent has seen come back from its checkpoint; priority
+    inheritance in a lifelong run: every agent's goals of an episode drawn again as they were)."""
     options = ["--preset", preset, "--episodes", "20", "--no-record", *grid]
     expected = tmp_path / "left-alone"
     episodes = run_left_alone(expected, [*options, "--run-id", "left-alone", "--no-progress"])

@@ -175,7 +175,9 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
                             "step-aside", "--agents", "10")),
     ("best-nnql", "auto", ("--wait-rule", "meet", "--on-target", "step-aside")),
     ("pibt-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25", "--agents", "12")),
-    ("pibt-nnql", "hub-peer", ("--map", "maze:15x15:4", "--agents", "10"))])
+    ("pibt-nnql", "hub-peer", ("--map", "maze:15x15:4", "--agents", "10")),
+    ("pibt-nnql", "auto", ("--map", "random:16x16:0.2:3", "--tasks", "lifelong", "--agents", "8")),
+    ("path-nnql", "auto", ("--grid", "12x12", "--tasks", "lifelong"))])
 def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, grid,
                                                                    tmp_path):
     """The paper's reading (each agent its own tables) and the best options (one table shared
@@ -185,8 +187,9 @@ def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topol
     reading under the ``meet`` rule (a parked neighbour known to stay without an answer), the
     default with the still shield (neighbours' cells a tick ago), and the ``step-aside``
     on-target rule under both wait rules (arrived agents negotiate and make way), and priority
-    inheritance over the agents' announced orders (``pibt-nnql``) among walls and in a maze: the
-    same episodes, tables and known walls either way."""
+    inheritance over the agents' announced orders (``pibt-nnql``) among walls and in a maze, and
+    lifelong runs (a new goal on every arrival) under both arbitrations: the same episodes,
+    tables and known walls either way."""
     options = ("--agents", "6", "--episodes", "4", "--max-steps", "30", "--seed", "2",
                "--preset", preset, "--no-record", "--run-id", preset, *grid)
     distributed = run_swarm(tmp_path / "dist", *options, "--topology", topology)
