@@ -8,7 +8,11 @@ Sources: POGEMA's benchmark (Skrynnik et al., "POGEMA: A Benchmark Platform for 
 Multi-Agent Pathfinding", ICLR 2025, and its published evaluation data) for LaCAM, SCRIMP and DCC;
 the MAPF-GPT-DDG paper (Andreychuk et al., "Advancing Learnable Multi-Agent Pathfinding Solvers
 with Active Fine-Tuning", 2025) for MAPF-GPT-DDG and MAPF-GPT-85M and its own runs of the others.
-Each figure is the mean over the same 128 instances, as issue 43 gathered them.
+Each figure is the mean over the same 128 instances, as issue 43 gathered them. POGEMA's own
+evaluation data (``raw_data_MAPF/<family>/<method>.json`` of CognitiveAISystems/pogema-benchmark at
+commit 3303133) agrees for LaCAM, and for DCC on the warehouse and MovingAI, but gives SCRIMP
+lower figures and DCC on random maps and mazes slightly different ones (docs/swarm.md, "POGEMA's
+own instances").
 """
 
 SOURCES = {

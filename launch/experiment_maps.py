@@ -150,7 +150,7 @@ def run_maps(argv: list[str]) -> Path:
     if args.overrides:
         learner = args.preset + "[" + ",".join(f"{k}={v}" for k, v in args.overrides) + "]"
         presets[learner] = {**PRESETS[args.preset], **dict(args.overrides)}
-    if learner == REFERENCE:
+    if args.preset == REFERENCE:
         if args.overrides:
             parser.error("--set changes a learner's options; --preset oracle has none")
         learners: tuple[str, ...] = ()
