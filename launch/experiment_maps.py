@@ -104,25 +104,25 @@ def build_maps_parser() -> OneLineParser:
     add("--train-agents", type=bounded(int, 1, 1024), default=d.train_agents, metavar="N")
     add("--test-maps", type=bounded(int, 1), default=d.test_maps, metavar="N",
         help="held-out maps per family and seed")
-    add("--instances", type=bounded(int, 1), default=None, metavar="N",
+    add("--instances", type=bounded(int, 1), default=argparse.SUPPRESS, metavar="N",
         help=f"episodes on each held-out map (new starts and goals; the map forgotten before "
              f"each; default {d.instances}); --suite pogema: the first N instances of each "
              f"family (default 128)")
-    add("--agents", type=parse_counts, default=None, metavar="LIST",
+    add("--agents", type=parse_counts, default=argparse.SUPPRESS, metavar="LIST",
         help=f"agent counts of frozen play, e.g. 8,32,64 (default {','.join(map(str, d.agents))}; "
              f"--suite pogema: each family's published counts)")
-    add("--families", type=comma_choices(ALL_FAMILIES, "families"), default=None, metavar="LIST",
+    add("--families", type=comma_choices(ALL_FAMILIES, "families"), default=argparse.SUPPRESS, metavar="LIST",
         help=f"held-out map families, from {','.join(FAMILIES)} (default all); --suite pogema: "
              f"from {','.join(POGEMA_FAMILIES)} (default all)")
     add("--scratch-episodes", type=bounded(int, 5), default=d.scratch_episodes, metavar="N",
         help="episodes of learning from scratch on an unseen random map")
-    add("--scratch-agents", type=parse_counts, default=None, metavar="LIST|none",
+    add("--scratch-agents", type=parse_counts, default=argparse.SUPPRESS, metavar="LIST|none",
         help=f"agent counts of learning from scratch (default "
              f"{','.join(map(str, d.scratch_agents))}; --suite pogema: none)")
-    add("--max-steps", type=bounded(int, 1), default=None, metavar="N",
+    add("--max-steps", type=bounded(int, 1), default=argparse.SUPPRESS, metavar="N",
         help=f"an episode's steps at most (default {d.max_steps}; --suite pogema: the family's, "
              f"128, 256 on MovingAI)")
-    add("--on-target", choices=ON_TARGET, default=None,
+    add("--on-target", choices=ON_TARGET, default=argparse.SUPPRESS,
         help=f"what an arrived agent does, for every variant: stays for good (park) or may make "
              f"way and come back (step-aside, the field's rule; default {d.on_target}, "
              f"--suite pogema: step-aside)")
@@ -156,8 +156,7 @@ def run_maps(argv: list[str]) -> Path:
         learners: tuple[str, ...] = ()
     else:
         learners = (learner,) if learner == "ql" else (learner, "ql")
-    chosen = {k: default if getattr(args, k) is None else getattr(args, k)
-              for k, default in SUITE_DEFAULTS[args.suite].items()}
+    chosen = {k: getattr(args, k, default) for k, default in SUITE_DEFAULTS[args.suite].items()}
     bench = MapsBenchmark(presets=presets, seeds=args.seeds, seed_base=args.seed_base, learners=learners,
                           train_maps=args.train_maps, train_episodes=args.train_episodes,
                           train_agents=args.train_agents, test_maps=args.test_maps,
