@@ -14,6 +14,9 @@ For every seed (a policy of its own, on maps of its own):
 3. **From scratch.** The paper's setting: each variant and the oracle learn on an unseen random
    map (the seed's first test map) for ``scratch_episodes`` episodes.
 
+The suite ``pogema`` plays, in step 2, POGEMA's own instances instead (``experiment.pogema``).
+Without learners (``learners=()``) the oracle plays alone and nothing is trained.
+
 Map seeds: training map ``k`` of seed ``s`` is ``TRAIN_MAP_BASE + s * train_maps + k``, held-out
 map ``j`` is ``TEST_MAP_BASE + s * test_maps + j``: disjoint while ``s * train_maps + k`` stays
 below ``TEST_MAP_BASE``. A map is the generator spec of ``terrain.maps`` (``random:19x19:0.2:SEED``,
@@ -36,6 +39,7 @@ import numpy as np
 from nnql_swarm.experiment.stats import mean_interval
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.terrain.maps import WAREHOUSE_SIZE, generated
+from nnql_swarm.terrain.pogema import FAMILIES as POGEMA_FAMILIES
 from nnql_swarm.protocol.seeding import MAP_STREAM, stream_rng
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
 from nnql_swarm.world.engine import EPISODE_FIELDS
@@ -58,8 +62,13 @@ EPISODE_COLUMNS = ROW_KEYS + EPISODE_FIELDS
 """The columns of ``maps_episodes.csv``: where the episode was played, then the swarm's row."""
 
 TABLE_FILES = ("maps_table.csv", "maps_table.md")
-METRICS = ("isr", "csr", "soc", "soc_vs_oracle", "makespan", "collisions", "collisions_vs_ql_pct",
-           "steps_ratio")
+METRICS = ("isr", "csr", "soc", "soc_vs_oracle", "soc_vs_lb", "makespan", "collisions",
+           "collisions_vs_ql_pct", "steps_ratio")
+"""``soc_vs_lb``: the sum of costs over its lower bound (the sum of the shortest paths), the mean
+over the instances where every agent arrived (the field's figure)."""
+SUITES = ("project", "pogema")
+"""Where frozen play happens: held-out maps of our generators, or POGEMA's published
+instances."""
 
 
 @dataclass(frozen=True)
@@ -80,6 +89,7 @@ class MapsBenchmark:
     scratch_agents: tuple[int, ...] = (8, 32)
     max_steps: int = MAX_STEPS
     on_target: str = "park"
+    suite: str = "project"
     presets: dict = field(default_factory=lambda: dict(PRESETS), compare=False)
 
     @property
@@ -89,6 +99,19 @@ class MapsBenchmark:
     @property
     def variants(self) -> tuple[str, ...]:
         return (*self.learners, REFERENCE)
+
+    def agent_counts(self, family: str) -> tuple[int, ...]:
+        """The agent counts of frozen play on a family: ``agents``, or, left empty on POGEMA's
+        instances, the counts of the family's published tables."""
+        if self.suite == "pogema" and not self.agents:
+            return POGEMA_FAMILIES[family].agents
+        return self.agents
+
+    def frozen_episodes(self) -> int:
+        """Episodes a variant plays frozen, each seed."""
+        if self.suite == "pogema":
+            return sum(len(self.agent_counts(f)) * self.instances for f in self.families)
+        return len(self.families) * self.test_maps * len(self.agents) * self.instances
 
     def train_map_seeds(self, seed: int) -> list[int]:
         return [TRAIN_MAP_BASE + seed * self.train_maps + k for k in range(self.train_maps)]
@@ -106,6 +129,23 @@ class MapsBenchmark:
         for variant in self.learners:
             if variant not in self.presets or variant == REFERENCE:
                 raise ValueError(f"--learners: {variant!r} is not a learning preset")
+        if self.suite == "project":
+            for family in self.families:
+                if family not in FAMILIES:
+                    raise ValueError(f"--families: {family!r} is POGEMA's (--suite pogema); "
+                                     f"ours are {', '.join(FAMILIES)}")
+
+
+def swarm_config(bench: MapsBenchmark, variant: str, name: str, rows: tuple[str, ...], seed: int,
+                 agents: int, episodes: int, frozen: bool, scenario: tuple = (),
+                 max_steps: int | None = None) -> SwarmConfig:
+    """A run of ``variant`` on the map ``rows`` (the starts and goals of ``scenario`` if given,
+    else drawn from ``seed``); the oracle never frozen."""
+    return SwarmConfig(run_id=f"m{seed}", n_agents=agents, episodes=episodes,
+                       max_steps=max_steps or bench.max_steps or MAX_STEPS, width=len(rows[0]),
+                       height=len(rows), seed=seed, map_name=name, map_rows=rows,
+                       scenario=scenario, on_target=bench.on_target,
+                       frozen=frozen and variant != REFERENCE, **bench.presets[variant])
 
 
 def map_spec(family: str, map_seed: int) -> str:
@@ -122,10 +162,7 @@ def run_config(bench: MapsBenchmark, variant: str, spec: str, map_seed: int, age
                episodes: int, frozen: bool) -> SwarmConfig:
     rows = generated(spec, map_seed)
     assert rows is not None  # a generator's spec always gives rows
-    return SwarmConfig(run_id=f"m{map_seed}", n_agents=agents, episodes=episodes,
-                       max_steps=bench.max_steps, width=len(rows[0]), height=len(rows), seed=map_seed,
-                       map_name=spec, map_rows=rows, on_target=bench.on_target,
-                       frozen=frozen and variant != REFERENCE, **bench.presets[variant])
+    return swarm_config(bench, variant, spec, rows, map_seed, agents, episodes, frozen)
 
 
 Tables = dict[str, tuple[np.ndarray, np.ndarray]]
@@ -170,7 +207,7 @@ class Recorder:
 def train(bench: MapsBenchmark, seed: int, recorder: Recorder, on_episode=None) -> Tables:
     """Every learner's policy after the seed's training maps."""
     tables: Tables = {}
-    for k, map_seed in enumerate(bench.train_map_seeds(seed)):
+    for k, map_seed in enumerate(bench.train_map_seeds(seed) if bench.learners else []):
         spec = map_spec("random", map_seed)
         configs = [run_config(bench, v, spec, map_seed, bench.train_agents, bench.train_episodes,
                               frozen=False) for v in bench.learners]
@@ -199,14 +236,23 @@ def play_frozen(bench: MapsBenchmark, tables: Tables, spec: str, map_seed: int, 
     episodes, every agent forgetting the map's walls before each."""
     configs = [run_config(bench, v, spec, map_seed, agents, bench.instances, frozen=True)
                for v in bench.variants]
+    return play_configs(bench, tables, configs, bench.instances, recorder, keys, on_episode)
+
+
+def play_configs(bench: MapsBenchmark, tables: Tables, configs: list[SwarmConfig], episodes: int,
+                 recorder: Recorder, keys: dict, on_episode=None, first: int = 0) -> Batch:
+    """``configs`` (one per variant, on one map) played frozen for ``episodes`` episodes, every
+    agent forgetting the map's walls before each; episode ``e`` recorded as instance
+    ``first + e``."""
     batch = Batch(swarm_world(configs[0]), configs)
     for run, variant in enumerate(bench.learners):
         batch.load_tables(run, *tables[variant])
-    results = Episodes(len(configs), bench.instances)
-    for instance in range(bench.instances):
+    results = Episodes(len(configs), episodes)
+    for episode in range(episodes):
         batch.forget_maps()
         batch.play(1, results)
-        recorder.add({**keys, "instance": instance}, bench.variants, results, batch, instance)
+        recorder.add({**keys, "instance": first + episode}, bench.variants, results, batch,
+                     episode)
         if on_episode is not None:
             on_episode(len(configs))
     return batch
@@ -234,29 +280,35 @@ def scratch(bench: MapsBenchmark, seed: int, agents: int, recorder: Recorder,
 def episodes_total(bench: MapsBenchmark) -> int:
     """Run-episodes the benchmark plays (the progress bar's total)."""
     per_seed = (len(bench.learners) * bench.train_maps * bench.train_episodes
-                + len(bench.variants) * (len(bench.families) * bench.test_maps
-                                         * len(bench.agents) * bench.instances
+                + len(bench.variants) * (bench.frozen_episodes()
                                          + len(bench.scratch_agents) * bench.scratch_episodes))
     return bench.seeds * per_seed
 
 
+def play_held_out(bench: MapsBenchmark, tables: Tables, seed: int, recorder: Recorder,
+                  on_episode=None) -> None:
+    """Frozen play of a seed's policies on its held-out maps of every family."""
+    for family in bench.families:
+        for map_seed in bench.test_map_seeds(seed):
+            spec = map_spec(family, map_seed)
+            for agents in bench.agents:
+                keys = {"phase": "frozen", "seed": seed, "family": family, "map": spec,
+                        "agents": agents}
+                play_frozen(bench, tables, spec, map_seed, agents, recorder, keys, on_episode)
+
+
 def run_benchmark(bench: MapsBenchmark, recorder: Recorder, on_episode=None,
-                  policies: Path | None = None) -> None:
+                  policies: Path | None = None, frozen_play=play_held_out) -> None:
     """Play the whole benchmark, seed by seed, every episode into ``recorder`` (and each seed's
-    learned tables into ``policies``, ``<variant>-s<seed>.npz``, if given)."""
+    learned tables into ``policies``, ``<variant>-s<seed>.npz``, if given); ``frozen_play(bench,
+    tables, seed, recorder, on_episode)`` plays step 2 (the suite's)."""
     for seed in bench.seed_list:
         tables = train(bench, seed, recorder, on_episode)
-        if policies is not None:
+        if policies is not None and tables:
             policies.mkdir(parents=True, exist_ok=True)
             for variant, (q_ds, q_ca) in tables.items():
                 np.savez_compressed(policies / f"{variant}-s{seed}.npz", q_ds=q_ds, q_ca=q_ca)
-        for family in bench.families:
-            for map_seed in bench.test_map_seeds(seed):
-                spec = map_spec(family, map_seed)
-                for agents in bench.agents:
-                    keys = {"phase": "frozen", "seed": seed, "family": family, "map": spec,
-                            "agents": agents}
-                    play_frozen(bench, tables, spec, map_seed, agents, recorder, keys, on_episode)
+        frozen_play(bench, tables, seed, recorder, on_episode)
         for agents in bench.scratch_agents:
             scratch(bench, seed, agents, recorder, on_episode)
 
@@ -296,7 +348,8 @@ def table_rows(bench: MapsBenchmark, rows: list[dict]) -> list[dict]:
                 interval.mean, interval.low, interval.high)
         out.append(row)
     order = {"frozen": 0, "scratch": 1}
-    out.sort(key=lambda r: (order[r["phase"]], FAMILIES.index(r["family"]), r["agents"],
+    families = (*bench.families, *FAMILIES)
+    out.sort(key=lambda r: (order[r["phase"]], families.index(r["family"]), r["agents"],
                             bench.variants.index(r["variant"])))
     return out
 
@@ -315,14 +368,19 @@ def seed_values(episodes: list[dict], reference: list[dict] | None,
               "steps_ratio": total(episodes, "agent_steps") / max(total(episodes, "shortest_sum"), 1)}
     values["soc_vs_oracle"] = (total(episodes, "soc") / total(reference, "soc")
                                if reference and total(reference, "soc") > 0 else math.nan)
+    solved = [float(r["soc"]) / max(float(r["shortest_sum"]), 1.0) for r in episodes
+              if int(r["csr"]) == 1]
+    values["soc_vs_lb"] = sum(solved) / len(solved) if solved else math.nan
     base = total(baseline, "collisions") if baseline else 0.0
     values["collisions_vs_ql_pct"] = (100.0 * total(episodes, "collisions") / base
                                       if base > 0 else math.nan)
     return values
 
 
-def write_tables(out: Path, bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> None:
-    """``maps_table.csv`` and ``maps_table.md``, each written whole or not at all."""
+def write_tables(out: Path, bench: MapsBenchmark, rows: list[dict], elapsed_s: float,
+                 text: str | None = None) -> None:
+    """``maps_table.csv`` and ``maps_table.md`` (``text``, else :func:`markdown`'s), each
+    written whole or not at all."""
     columns = list(rows[0]) if rows else ["phase"]
     csv_path, md_path = out / "maps_table.csv", out / "maps_table.md"
     partial = csv_path.with_suffix(".csv.partial")
@@ -333,7 +391,7 @@ def write_tables(out: Path, bench: MapsBenchmark, rows: list[dict], elapsed_s: f
             writer.writerow({k: _cell(v) for k, v in row.items()})
     partial.replace(csv_path)
     partial = md_path.with_suffix(".md.partial")
-    partial.write_text(markdown(bench, rows, elapsed_s))
+    partial.write_text(markdown(bench, rows, elapsed_s) if text is None else text)
     partial.replace(md_path)
 
 
@@ -351,7 +409,7 @@ def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
              "collisions / episode | collisions % of QL | steps ratio |",
              "|---|---|---:|---|---:|---:|---:|---:|---:|---:|---:|"]
     for row in rows:
-        cells = [_with_interval(row, m, digits)
+        cells = [with_interval(row, m, digits)
                  for m, digits in (("isr", 3), ("csr", 2), ("soc_vs_oracle", 2), ("makespan", 1),
                                    ("collisions", 2), ("collisions_vs_ql_pct", 2),
                                    ("steps_ratio", 2))]
@@ -405,7 +463,9 @@ def _cell(value):
     return value
 
 
-def _with_interval(row: dict, metric: str, digits: int) -> str:
+def with_interval(row: dict, metric: str, digits: int) -> str:
+    """A table row's metric as ``mean [low, high]`` (the mean alone where one seed, blank where
+    none)."""
     mean, low, high = row[metric], row[f"{metric}_low"], row[f"{metric}_high"]
     if math.isnan(mean):
         return ""

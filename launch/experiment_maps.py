@@ -1,16 +1,22 @@
 """``launch/experiment.py maps``: the field's benchmark (``experiment.maps``, POGEMA's
-protocol) from the command line: its options, and a run written to its output directory."""
+protocol) from the command line: its options, and a run written to its output directory. With
+``--suite pogema`` frozen play is on POGEMA's published instances (``experiment.pogema``), and the
+options left unset take that suite's defaults (``SUITE_DEFAULTS``)."""
 
 import argparse
+import functools
 import json
 import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
+from nnql_swarm.experiment import pogema
 from nnql_swarm.experiment.maps import (
-    FAMILIES, TABLE_FILES, MapsBenchmark, Recorder, episodes_total, learning_curves, map_spec,
-    run_benchmark, run_config, table_rows, write_curves, write_tables,
+    FAMILIES, REFERENCE, SUITES, TABLE_FILES, MapsBenchmark, Recorder, episodes_total,
+    learning_curves, map_spec, play_held_out, run_benchmark, run_config, table_rows,
+    write_curves, write_tables,
 )
 from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGET, PRESETS
 from nnql_swarm.recording.curves import log_swarm_curves
@@ -19,6 +25,22 @@ from nnql_swarm.terminal.cli import (
     OneLineParser, Terminated, bounded, comma_choices, make_directory, parse_workers,
     prepare_simulator, program_name, progress,
 )
+from nnql_swarm.terrain.maps import MapError
+from nnql_swarm.terrain.pogema import FAMILIES as POGEMA_FAMILIES
+from nnql_swarm.terrain.pogema import INSTANCES
+
+ALL_FAMILIES = (*FAMILIES, *(f for f in POGEMA_FAMILIES if f not in FAMILIES))
+_D = MapsBenchmark()
+SUITE_DEFAULTS: dict[str, dict[str, Any]] = {
+    "project": {"families": _D.families, "agents": _D.agents, "instances": _D.instances,
+                "max_steps": _D.max_steps, "on_target": _D.on_target,
+                "scratch_agents": _D.scratch_agents},
+    "pogema": {"families": tuple(POGEMA_FAMILIES), "agents": (), "instances": 128,
+               "max_steps": 0, "on_target": "step-aside", "scratch_agents": ()},
+}
+"""Each suite's value of the options left unset: on POGEMA's instances every family, at its
+published agent counts (``agents`` empty) and step limit (``max_steps`` 0), all 128 instances,
+the field's on-target rule, no learning from scratch."""
 
 def parse_counts(text: str) -> tuple[int, ...]:
     """``"8,32,64"`` -> agent counts, each 1..1024 (``none``: no count)."""
@@ -64,8 +86,14 @@ def build_maps_parser() -> OneLineParser:
         formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
     add = parser.add_argument
-    add("--preset", default=DEFAULT_PRESET, choices=[p for p in PRESETS if p != "oracle"],
-        help="the learner benchmarked (beside ql and the oracle)")
+    add("--suite", choices=SUITES, default="project",
+        help="frozen play on held-out maps of our generators (project) or on POGEMA's published "
+             "instances, maps/pogema (pogema: its families random,mazes,warehouse,movingai, the "
+             "published agent counts and steps, step-aside, the table beside the published "
+             "figures)")
+    add("--preset", default=DEFAULT_PRESET, choices=list(PRESETS),
+        help="the learner benchmarked (beside ql and the oracle); oracle: the oracle alone, "
+             "nothing trained")
     add("--seeds", type=bounded(int, 1), default=d.seeds, metavar="N",
         help="policies, each trained and tested on maps of its own")
     add("--seed-base", type=bounded(int, 0), default=d.seed_base, metavar="S")
@@ -76,20 +104,30 @@ def build_maps_parser() -> OneLineParser:
     add("--train-agents", type=bounded(int, 1, 1024), default=d.train_agents, metavar="N")
     add("--test-maps", type=bounded(int, 1), default=d.test_maps, metavar="N",
         help="held-out maps per family and seed")
-    add("--instances", type=bounded(int, 1), default=d.instances, metavar="N",
-        help="episodes on each held-out map (new starts and goals; the map forgotten before each)")
-    add("--agents", type=parse_counts, default=d.agents, metavar="LIST",
-        help="agent counts of frozen play, e.g. 8,32,64")
-    add("--families", type=comma_choices(FAMILIES, "families"), default=d.families, metavar="LIST",
-        help=f"held-out map families, from {','.join(FAMILIES)}")
+    add("--instances", type=bounded(int, 1), default=argparse.SUPPRESS, metavar="N",
+        help=f"episodes on each held-out map (new starts and goals; the map forgotten before "
+             f"each; default {d.instances}); --suite pogema: the first N instances of each "
+             f"family (default 128)")
+    add("--agents", type=parse_counts, default=argparse.SUPPRESS, metavar="LIST",
+        help=f"agent counts of frozen play, e.g. 8,32,64 (default {','.join(map(str, d.agents))}; "
+             f"--suite pogema: each family's published counts)")
+    add("--families", type=comma_choices(ALL_FAMILIES, "families"), default=argparse.SUPPRESS, metavar="LIST",
+        help=f"held-out map families, from {','.join(FAMILIES)} (default all); --suite pogema: "
+             f"from {','.join(POGEMA_FAMILIES)} (default all)")
     add("--scratch-episodes", type=bounded(int, 5), default=d.scratch_episodes, metavar="N",
         help="episodes of learning from scratch on an unseen random map")
-    add("--scratch-agents", type=parse_counts, default=d.scratch_agents, metavar="LIST|none",
-        help="agent counts of learning from scratch")
-    add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
-    add("--on-target", choices=ON_TARGET, default=d.on_target,
-        help="what an arrived agent does, for every variant: stays for good (park) or may make "
-             "way and come back (step-aside, the field's rule)")
+    add("--scratch-agents", type=parse_counts, default=argparse.SUPPRESS, metavar="LIST|none",
+        help=f"agent counts of learning from scratch (default "
+             f"{','.join(map(str, d.scratch_agents))}; --suite pogema: none)")
+    add("--max-steps", type=bounded(int, 1), default=argparse.SUPPRESS, metavar="N",
+        help=f"an episode's steps at most (default {d.max_steps}; --suite pogema: the family's, "
+             f"128, 256 on MovingAI)")
+    add("--on-target", choices=ON_TARGET, default=argparse.SUPPRESS,
+        help=f"what an arrived agent does, for every variant: stays for good (park) or may make "
+             f"way and come back (step-aside, the field's rule; default {d.on_target}, "
+             f"--suite pogema: step-aside)")
+    add("--pogema-dir", type=Path, default=INSTANCES, metavar="DIR",
+        help="--suite pogema: the converted instances (maps/pogema/README.md)")
     add("--set", dest="overrides", action="append", type=parse_override, default=[],
         metavar="OPTION=VALUE",
         help="a learning option of the preset changed (repeatable; e.g. beta=0.7, "
@@ -112,24 +150,33 @@ def run_maps(argv: list[str]) -> Path:
     if args.overrides:
         learner = args.preset + "[" + ",".join(f"{k}={v}" for k, v in args.overrides) + "]"
         presets[learner] = {**PRESETS[args.preset], **dict(args.overrides)}
-    learners = (learner,) if learner == "ql" else (learner, "ql")
+    if args.preset == REFERENCE:
+        if args.overrides:
+            parser.error("--set changes a learner's options; --preset oracle has none")
+        learners: tuple[str, ...] = ()
+    else:
+        learners = (learner,) if learner == "ql" else (learner, "ql")
+    chosen = {k: getattr(args, k, default) for k, default in SUITE_DEFAULTS[args.suite].items()}
     bench = MapsBenchmark(presets=presets, seeds=args.seeds, seed_base=args.seed_base, learners=learners,
                           train_maps=args.train_maps, train_episodes=args.train_episodes,
                           train_agents=args.train_agents, test_maps=args.test_maps,
-                          instances=args.instances, agents=args.agents, families=args.families,
-                          scratch_episodes=args.scratch_episodes,
-                          scratch_agents=args.scratch_agents, max_steps=args.max_steps,
-                          on_target=args.on_target)
+                          scratch_episodes=args.scratch_episodes, suite=args.suite,
+                          **chosen)
+    frozen_play = (functools.partial(pogema.play_pogema, directory=args.pogema_dir)
+                   if bench.suite == "pogema" else play_held_out)
     try:
         bench.check()
         first = bench.test_map_seeds(bench.seed_base)[0]
-        for family in bench.families:
+        if bench.suite == "pogema":
+            pogema.check(bench, args.pogema_dir)
+        for family in bench.families if bench.suite == "project" else ("random",):
             for agents in (*bench.agents, *bench.scratch_agents):
-                run_config(bench, learners[0], map_spec(family, first), first, agents, 1, True)
+                run_config(bench, bench.variants[0], map_spec(family, first), first, agents, 1,
+                           True)
         train_seed = bench.train_map_seeds(bench.seed_base)[0]
-        run_config(bench, learners[0], map_spec("random", train_seed), train_seed,
+        run_config(bench, bench.variants[0], map_spec("random", train_seed), train_seed,
                    bench.train_agents, 1, False)
-    except ValueError as error:
+    except (ValueError, MapError) as error:
         parser.error(str(error))
     out = args.out or Path("runs") / time.strftime("maps-%Y%m%d-%H%M%S")
     if out.exists() and not out.is_dir():
@@ -143,12 +190,13 @@ def run_maps(argv: list[str]) -> Path:
         parser.error(unusable)
     config = {"benchmark": {k: v for k, v in asdict(bench).items() if k != "presets"},
               "presets": {v: presets[v] for v in bench.variants}, "workers": args.workers,
+              **({"pogema_dir": str(args.pogema_dir)} if bench.suite == "pogema" else {}),
               "command": [Path(sys.argv[0]).name, *sys.argv[1:]]}
     (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
     for name in TABLE_FILES:
         (out / name).unlink(missing_ok=True)
     train_seed = bench.train_map_seeds(bench.seed_base)[0]
-    warm = run_config(bench, learners[0], map_spec("random", train_seed), train_seed,
+    warm = run_config(bench, bench.variants[0], map_spec("random", train_seed), train_seed,
                       bench.train_agents, 1, False)
     prepare_simulator(swarm_world(warm), warm)
     started = time.monotonic()
@@ -156,7 +204,8 @@ def run_maps(argv: list[str]) -> Path:
     try:
         with threads(args.workers), progress(episodes_total(bench), "run-episode",
                                               f"{bench.seeds} seeds") as bar:
-            run_benchmark(bench, recorder, on_episode=bar.update, policies=out / "policies")
+            run_benchmark(bench, recorder, on_episode=bar.update, policies=out / "policies",
+                          frozen_play=frozen_play)
     except (KeyboardInterrupt, Terminated):
         recorder.close()
         print(f"\ninterrupted: the episodes played so far are in {out}/maps_episodes.csv",
@@ -165,7 +214,8 @@ def run_maps(argv: list[str]) -> Path:
     recorder.close()
     elapsed = time.monotonic() - started
     rows = table_rows(bench, recorder.rows)
-    write_tables(out, bench, rows, elapsed)
+    write_tables(out, bench, rows, elapsed,
+                 pogema.markdown(bench, rows, elapsed) if bench.suite == "pogema" else None)
     curves = learning_curves(bench, recorder.rows)
     write_curves(out / "maps_curves.csv", curves)
     log_swarm_curves(curves, out / "maps_curves.rrd", recording_id="maps-benchmark")

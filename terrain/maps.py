@@ -122,6 +122,7 @@ def parse_scen(text: str, rows: tuple[str, ...], agents: int,
         raise MapError(name, 1, f"expected 'version 1', found {found!r}")
     tasks: list[Task] = []
     seen: dict[tuple[str, int, int], int] = {}  # (start or goal, x, y) -> its line
+    region = regions(rows)
     number = 1
     for number, line in enumerate(lines[1:], start=2):
         if len(tasks) == agents:
@@ -154,7 +155,7 @@ def parse_scen(text: str, rows: tuple[str, ...], agents: int,
                                              f"line {seen[what, cx, cy]}: no two agents start, "
                                              f"or end, on one cell")
             seen[what, cx, cy] = number
-        if distances(rows, gx, gy)[sy, sx] < 0:
+        if region[sy, sx] != region[gy, gx]:
             raise MapError(name, number, f"the goal ({gx}, {gy}) cannot be reached from the "
                                          f"start ({sx}, {sy})")
         tasks.append((sx, sy, gx, gy))
@@ -173,12 +174,13 @@ def read_scen(path: str | Path, rows: tuple[str, ...], agents: int) -> tuple[Tas
     return parse_scen(text, rows, agents, str(path))
 
 
-def format_scen(rows: tuple[str, ...], tasks, map_name: str) -> str:
-    """A ``.scen`` text of ``tasks``, bucket ``i // 10``, the optimal length 4-connected."""
+def format_scen(rows: tuple[str, ...], tasks, map_name: str, lengths=None) -> str:
+    """A ``.scen`` text of ``tasks``, bucket ``i // 10``, the optimal length 4-connected (each
+    task's from ``lengths`` if given, else found here)."""
     height, width = len(rows), len(rows[0])
     lines = ["version 1"]
     for i, (sx, sy, gx, gy) in enumerate(tasks):
-        length = distances(rows, gx, gy)[sy, sx]
+        length = distances(rows, gx, gy)[sy, sx] if lengths is None else lengths[i]
         lines.append("\t".join(str(v) for v in (i // 10, map_name, width, height, sx, sy, gx, gy,
                                                  f"{length:.8f}")))
     return "\n".join(lines) + "\n"
@@ -196,6 +198,29 @@ def distances(rows: tuple[str, ...], x: int, y: int) -> np.ndarray:
             if 0 <= nx < width and 0 <= ny < height and out[ny, nx] < 0 and rows[ny][nx] == FREE:
                 out[ny, nx] = out[cy, cx] + 1
                 todo.append((nx, ny))
+    return out
+
+
+def regions(rows: tuple[str, ...]) -> np.ndarray:
+    """Each cell's 4-connected free region, ``(H, W)``: a label from 0 for a free cell, -1 for a
+    wall; two cells reach each other when their labels are equal."""
+    height, width = len(rows), len(rows[0])
+    out = np.full((height, width), -1, dtype=np.int64)
+    label = 0
+    for y in range(height):
+        for x in range(width):
+            if rows[y][x] != FREE or out[y, x] >= 0:
+                continue
+            out[y, x] = label
+            todo = [(x, y)]
+            while todo:
+                cx, cy = todo.pop()
+                for nx, ny in ((cx - 1, cy), (cx + 1, cy), (cx, cy - 1), (cx, cy + 1)):
+                    if 0 <= nx < width and 0 <= ny < height and out[ny, nx] < 0 \
+                            and rows[ny][nx] == FREE:
+                        out[ny, nx] = label
+                        todo.append((nx, ny))
+            label += 1
     return out
 
 

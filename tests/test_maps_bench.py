@@ -197,7 +197,9 @@ def test_a_tiny_benchmark_writes_its_table_episodes_and_curves(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["--agents", "0"], "at least 1"), (["--families", "city"], "families"),
     (["--set", "speed=3"], "OPTION=VALUE"), (["--set", "beta=2"], "beta"),
-    (["--preset", "oracle"], "invalid choice"), (["--train-agents", "5000"], "between"),
+    (["--preset", "nobody"], "invalid choice"),
+    (["--families", "mazes"], "POGEMA's (--suite pogema)"),
+    (["--preset", "oracle", "--set", "beta=0.5"], "has none"), (["--train-agents", "5000"], "between"),
     (["--on-target", "stay"], "invalid choice"),
 ])
 def test_bad_values_exit_2_with_one_line(args, message, tmp_path):
