@@ -38,6 +38,7 @@ from nnql_swarm.protocol.config import (
 )
 from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.terrain.maps import run_map
+from nnql_swarm.terrain.pogema import lifelong_instance
 from nnql_swarm.storage.runfiles import (
     CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, PARTS_DIR, RECORDING_FILE, STATS_DIR,
     write_text_atomic,
@@ -90,6 +91,11 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
     run.add_argument("--scen", default=None, metavar="FILE",
                      help="with --map: a MovingAI .scen file whose first N lines (N = --agents) "
                           "are every episode's starts and goals")
+    run.add_argument("--goals", default=None, metavar="FILE",
+                     help="with --map and --tasks lifelong: a lifelong instance (.goals: each "
+                          "agent's start and its goals in order, maps/pogema/*/lifelong); its "
+                          "first N agents (N = --agents) start there every episode and are "
+                          "given those goals in turn, then drawn ones")
     learning = p.add_argument_group("learning (each defaults to the preset's)")
     add_config_options(learning, only=LEARNING_FIELDS)
     run.add_argument("--run-id", default=None, help="default: <preset>-<agents>a-s<seed>-<time>")
@@ -224,16 +230,23 @@ def map_values(args: argparse.Namespace, values: dict) -> dict:
     """The config fields of ``--map`` and ``--scen`` (none without them); raises UsageError,
     naming the file and line of a malformed map or scenario."""
     if args.map is None:
-        if args.scen is not None:
-            raise UsageError("--scen needs --map, the map its scenarios are for")
+        if args.scen is not None or getattr(args, "goals", None) is not None:
+            raise UsageError(f"--{'scen' if args.scen else 'goals'} needs --map, the map it is "
+                             "for")
         return {}
+    if getattr(args, "goals", None) is not None and args.scen is not None:
+        raise UsageError("--goals brings its own starts and goals: give no --scen with it")
     if hasattr(args, "grid") or values.get("obstacle_density"):
         raise UsageError("--map brings its own grid and walls: give no --grid or "
                          "--obstacle-density with it")
     d = SwarmConfig()
     try:
-        return run_map(args.map, args.scen, values.get("seed", d.seed),
-                       values.get("n_agents", d.n_agents))
+        fields = run_map(args.map, args.scen, values.get("seed", d.seed),
+                         values.get("n_agents", d.n_agents))
+        if getattr(args, "goals", None) is not None:
+            fields.update(lifelong_instance(args.goals, fields["map_rows"],
+                                            values.get("n_agents", d.n_agents)))
+        return fields
     except ValueError as error:
         raise UsageError(str(error)) from None
 

@@ -204,6 +204,9 @@ class SwarmConfig:
     scenario: tuple[tuple[int, int, int, int], ...] = ()
     """Every episode's ``(start_x, start_y, goal_x, goal_y)`` per agent (``--scen``); empty:
     drawn per episode from the seed."""
+    goal_lists: tuple[tuple[int, ...], ...] = ()
+    """A lifelong run's given goals after each agent's first (``--goals``: ``x, y`` pairs in
+    order, flat, per agent; ``world.tasks``); empty: all drawn."""
     frozen: bool = False
     """Play learned tables as they are: no learning, no random step (the simulator only; the
     maps benchmark, ``experiment.maps``, loads the tables: ``sim.runs.Batch.load_tables``)."""
@@ -218,6 +221,8 @@ class SwarmConfig:
                                else "park")
         object.__setattr__(self, "scenario", tuple(tuple(int(v) for v in task)
                                                    for task in self.scenario))
+        object.__setattr__(self, "goal_lists", tuple(tuple(int(v) for v in goals)
+                                                     for goals in self.goal_lists))
         checks = [
             (1 <= self.n_agents <= MAX_AGENTS, f"agents must be 1..{MAX_AGENTS}"),
             (self.episodes >= 1, "episodes must be at least 1"),
@@ -270,6 +275,8 @@ class SwarmConfig:
             (0 <= self.obstacle_density <= MAX_DENSITY,
              f"the obstacle density must be 0..{MAX_DENSITY}"),
             (self.map_rows or not self.scenario, "a scenario (--scen) needs its map (--map)"),
+            (not self.goal_lists or (self.lifelong and self.scenario),
+             "given goals (--goals) are a lifelong run's (--tasks lifelong), with its starts"),
             (not self.map_rows or self.obstacle_density == 0,
              "a map brings its own walls: give --map or --obstacle-density, not both"),
         ]
@@ -303,11 +310,20 @@ class SwarmConfig:
                                  f"{self.n_agents} agents")
             starts = [(sx, sy) for sx, sy, _, _ in self.scenario]
             goals = [(gx, gy) for _, _, gx, gy in self.scenario]
-            if len(set(starts)) != len(starts) or len(set(goals)) != len(goals) or not all(
+            distinct_goals = self.lifelong or len(set(goals)) == len(goals)
+            if len(set(starts)) != len(starts) or not distinct_goals or not all(
                     0 <= x < self.width and 0 <= y < self.height and rows[y][x] == "."
                     for x, y in starts + goals):
                 raise ValueError("the scenario's starts, and its goals, must be distinct free "
                                  "cells of the map")
+        if self.goal_lists:
+            if len(self.goal_lists) != self.n_agents:
+                raise ValueError(f"the given goals are {len(self.goal_lists)} agents' for "
+                                 f"{self.n_agents} agents")
+            if not all(len(goals) % 2 == 0 and all(
+                    0 <= x < self.width and 0 <= y < self.height and rows[y][x] == "."
+                    for x, y in zip(goals[::2], goals[1::2])) for goals in self.goal_lists):
+                raise ValueError("the given goals must be free cells of the map, x y each")
 
     @cached_property  # the world reads it every tick: worked out once (the config is frozen)
     def n_walls(self) -> int:

@@ -61,6 +61,7 @@ class World:
     map_rows: tuple[str, ...] = ()
     scenario: tuple = ()
     lifelong: bool = False
+    goal_lists: tuple = ()
 
     @property
     def scripted(self) -> int:
@@ -77,7 +78,8 @@ def swarm_world(config: SwarmConfig) -> World:
                  height=config.height, max_steps=config.max_steps,
                  count_swaps=config.count_swaps, goal_reward=config.goal_reward,
                  stay_reward=config.stay_reward, obstacle_density=config.obstacle_density,
-                 map_rows=config.map_rows, scenario=config.scenario, lifelong=config.lifelong)
+                 map_rows=config.map_rows, scenario=config.scenario, lifelong=config.lifelong,
+                 goal_lists=config.goal_lists)
 
 
 class Episodes:
@@ -274,7 +276,7 @@ class Batch:
                 scripts.append(np.full((w.max_steps, len(walls)), STAY, dtype=np.int64))
                 paths.append(swarm.shortest)
                 tasks.append(goal_sequences(seed, episode, w.width, w.height, walls, swarm.goals,
-                                            w.max_steps).reshape(-1) if w.lifelong
+                                            w.max_steps, w.goal_lists).reshape(-1) if w.lifelong
                              else np.zeros(2, dtype=np.int64))
         return (np.stack(starts), np.stack(goals), np.stack(scripts), np.stack(paths),
                 np.stack(tasks))
@@ -315,7 +317,7 @@ def check_run(world: World, run: SwarmConfig) -> None:
         raise ValueError("the oracle plans swarms of learners, not scripted obstacles")
     if run.obstacle_density != world.obstacle_density:
         raise ValueError("every run of a batch needs the world's obstacle density")
-    if run.lifelong != world.lifelong:
+    if (run.lifelong, run.goal_lists) != (world.lifelong, world.goal_lists):
         raise ValueError("every run of a batch needs the world's tasks (one-shot or lifelong)")
     if (run.map_rows, run.scenario) != (world.map_rows, world.scenario):
         raise ValueError("every run of a batch needs the world's map and scenario")

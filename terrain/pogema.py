@@ -148,3 +148,21 @@ def parse_goals(text: str, rows: tuple[str, ...], name: str = "<goals>") -> Life
         starts.append(cells[0])
         goals.append(cells[1:])
     return lines[1][4:], tuple(starts), tuple(goals)
+
+
+def lifelong_instance(path: str | Path, rows: tuple[str, ...], agents: int) -> dict:
+    """The config fields of ``--goals FILE`` for a run of ``agents`` agents on the map ``rows``:
+    the file's first ``agents`` agents' starts and first goals (``scenario``, every episode's),
+    and the goals listed after those (``goal_lists``). Raises MapError."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except (OSError, UnicodeDecodeError) as error:
+        raise MapError(str(path), 0, f"cannot be read ({error.__class__.__name__})") from None
+    _, starts, goals = parse_goals(text, rows, str(path))
+    if len(starts) < agents:
+        raise MapError(str(path), 0, f"lists {len(starts)} agents, not {agents}")
+    return {"scenario": tuple((*start, *sequence[0]) for start, sequence
+                              in zip(starts[:agents], goals[:agents])),
+            "goal_lists": tuple(tuple(v for cell in sequence[1:] for v in cell)
+                                for sequence in goals[:agents])}

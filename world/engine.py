@@ -166,7 +166,8 @@ class SwarmWorld:
         if c.lifelong:
             walls = c.walls()
             self._tasks = ints(goal_sequences(c.seed, episode, c.width, c.height, walls,
-                                              scenario.goals, c.max_steps).reshape(-1).tolist())
+                                              scenario.goals, c.max_steps,
+                                              c.goal_lists).reshape(-1).tolist())
             self._next_goal = ints([0] * n)
         self._plain()
 

@@ -8,7 +8,8 @@ has just reached. (POGEMA draws each goal when the agent arrives, from one gener
 for the whole run; ours are drawn per episode, so that an episode's goals depend on nothing
 before it and a resumed run draws them again as they were.) An agent reaches at most one goal a
 step, so ``max_steps`` goals each are enough. With a scenario (``--scen``) the first goals are
-the scenario's.
+the scenario's; with a lifelong instance (``--goals``, POGEMA's published ones in
+``maps/pogema/*/lifelong``) the goals it lists come first, and the rest are drawn.
 
 :func:`renew_goals` is the world's rule, written once: the world process (``world.engine``) and
 the simulator (``sim.episode``) call it after every step (``world.rules.world_step``), which
@@ -25,19 +26,25 @@ from nnql_swarm.world.rules import ROW_ARRIVED, ROW_GOALS
 
 
 def goal_sequences(seed: int, episode: int, width: int, height: int, walls: np.ndarray,
-                   goals: np.ndarray, count: int) -> np.ndarray:
+                   goals: np.ndarray, count: int, given: tuple = ()) -> np.ndarray:
     """Every agent's next ``count`` goals after ``goals`` (its first, ``(N, 2)``): ``(N, count,
-    2)`` cells ``(x, y)``, each drawn uniformly from the free cells of the agent's region, never
-    the one before it (see the module docstring)."""
+    2)`` cells ``(x, y)``: those ``given`` for it (``SwarmConfig.goal_lists``), then each drawn
+    uniformly from the free cells of the agent's region, never the one before it (see the
+    module docstring)."""
     region = regions(width, height, walls)
     sequences = np.zeros((len(goals), count, 2), dtype=np.int64)
     for agent, (gx, gy) in enumerate(goals.tolist()):
+        listed = np.array(given[agent] if given else (), dtype=np.int64).reshape(-1, 2)[:count]
+        sequences[agent, :len(listed)] = listed
+        if len(listed):
+            gx, gy = listed[-1].tolist()
         cells = np.flatnonzero(region == region[gy * width + gx])
         rng = task_rng(seed, episode, agent)
-        draws = rng.integers(0, len(cells) - 1, size=count) if len(cells) > 1 else \
-            np.zeros(count, dtype=np.int64)
+        drawn = count - len(listed)
+        draws = rng.integers(0, len(cells) - 1, size=drawn) if len(cells) > 1 else \
+            np.zeros(drawn, dtype=np.int64)
         at = int(np.searchsorted(cells, gy * width + gx))
-        for k, draw in enumerate(draws.tolist()):
+        for k, draw in enumerate(draws.tolist(), start=len(listed)):
             if len(cells) > 1:
                 at = draw + (draw >= at)  # uniform over the region without the goal just reached
             sequences[agent, k] = cells[at] % width, cells[at] // width
