@@ -11,7 +11,8 @@ seeking's states (``DS_*``) and rewards (``REWARD_*``) by name, and the sizes of
 from typing import NamedTuple
 
 from nnql_swarm.kernel.jit import Buffer
-from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
+from nnql_swarm.learning.known_map import WHOLE_MAP
+from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, VIEW_RADIUS
 
 READ_QL, READ_NNQL, READ_DIR, READ_DAQL = 0, 1, 2, 3
 READINGS = {"ql": READ_QL, "nnql": READ_NNQL, "nnql-dir": READ_DIR, "daql": READ_DAQL}
@@ -22,8 +23,8 @@ UNKNOWN_MOVE = N_ACTIONS
 
 LP_READING, LP_KNOWN_STATE, LP_RADIUS, LP_SHIELD, LP_RANDOM_STEP = 0, 1, 2, 3, 4
 LP_STILL_TERMINAL, LP_MEET_ONLY, LP_DS_STATE, LP_DS_REWARD, LP_DETOUR = 5, 6, 7, 8, 9
-LP_STILL_SHIELD, LP_ESCAPE_SHIELD = 10, 11
-LP_FIELDS = 12
+LP_STILL_SHIELD, LP_ESCAPE_SHIELD, LP_WALL_SIGHT = 10, 11, 12
+LP_FIELDS = 13
 FP_ALPHA, FP_GAMMA, FP_BETA, FP_STAY_REWARD = 0, 1, 2, 3
 FP_FIELDS = 4
 
@@ -125,6 +126,7 @@ def learner_params(config) -> tuple[list[int], list[float]]:
     params[LP_DETOUR] = reach(config.interaction_radius) if config.detour else -1
     params[LP_STILL_SHIELD] = int(config.still_shield)
     params[LP_ESCAPE_SHIELD] = int(config.escape_shield)
+    params[LP_WALL_SIGHT] = WHOLE_MAP if config.map_known else VIEW_RADIUS
     params_f = [0.0] * FP_FIELDS
     params_f[FP_ALPHA], params_f[FP_GAMMA] = config.alpha, config.gamma
     params_f[FP_BETA] = config.beta

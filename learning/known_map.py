@@ -21,9 +21,13 @@ the search uses, whether an arrived agent taken stands there, and the list of th
 """
 
 from nnql_swarm.protocol.actions import (
-    DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, VIEW_RADIUS, target_x, target_y,
+    DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, target_x, target_y,
 )
 from nnql_swarm.kernel.jit import kernel
+
+WHOLE_MAP = 1 << 20
+"""The sight of an agent that knows every wall of the map (``--map-known``): farther than any
+grid is wide."""
 
 MAP_GOAL, MAP_KNOWN, MAP_PARKED, MAP_CUT, MAP_PENDING = 0, 1, 2, 3, 4
 MAP_HEADER = 5
@@ -71,25 +75,27 @@ def check_cell_order(walls) -> None:
 
 
 @kernel
-def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width):
+def see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width, sight):
     """Mark the walls ``first .. last - 1`` (cells ``wall_x[k], wall_y[k]``, in cell order)
-    within view of ``(ox, oy)`` known; a wall newly known makes the distance field stale."""
+    within ``sight`` of ``(ox, oy)`` (Chebyshev: ``VIEW_RADIUS``, or :data:`WHOLE_MAP` where the
+    agent knows the map, ``--map-known``) known; a wall newly known makes the distance field
+    stale."""
     if wmap[MAP_KNOWN] == last - first:
         return
     low = first  # the first wall in a row in view: rows are in order
     high = last
     while low < high:
         mid = (low + high) // 2
-        if wall_y[mid] < oy - VIEW_RADIUS:
+        if wall_y[mid] < oy - sight:
             low = mid + 1
         else:
             high = mid
     for k in range(low, last):
         wy = wall_y[k]
-        if wy > oy + VIEW_RADIUS:
+        if wy > oy + sight:
             break
         wx = wall_x[k]
-        if ox - VIEW_RADIUS <= wx <= ox + VIEW_RADIUS:
+        if ox - sight <= wx <= ox + sight:
             at = MAP_HEADER + wy * width + wx
             if wmap[at] == 0:
                 wmap[at] = 1
@@ -201,11 +207,11 @@ def breadth_first(wmap, goal, width, height, parked):
 
 @kernel
 def track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, m, around,
-          starts):
+          starts, sight):
     """An observation at ``(ox, oy)`` with goal ``(gx, gy)`` (``starts``: the first of an
-    episode): the walls in view learned, the arrived neighbours within ``around`` taken (-1:
-    none), the distance field made current."""
-    see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width)
+    episode): the walls within ``sight`` learned (:func:`see_walls`), the arrived neighbours
+    within ``around`` taken (-1: none), the distance field made current."""
+    see_walls(wmap, wall_x, wall_y, first, last, ox, oy, width, sight)
     see_parked(wmap, nb, m, ox, oy, around, starts, width, height)
     plan_field(wmap, ox, oy, gx, gy, width, height)
 

@@ -68,7 +68,7 @@ import math
 import numpy as np
 
 from nnql_swarm.learning.fields import (
-    FP_ALPHA, FP_BETA, FP_GAMMA, LP_DETOUR, LP_ESCAPE_SHIELD, LP_RADIUS,
+    FP_ALPHA, FP_BETA, FP_GAMMA, LP_DETOUR, LP_WALL_SIGHT, LP_ESCAPE_SHIELD, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_SHIELD, LS_ACTION, LS_COUNT, LS_GOAL,
     LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_TAKEN, LS_X, LS_Y, NB_ID, NB_KNOWN, NB_NEXT_X,
     NB_NEXT_Y, NB_ROW, NB_X, NB_Y,
@@ -160,7 +160,7 @@ def observe_map(params, wmap, grid, sight):
     if uses_map(params):
         track(wmap, grid.wall_x, grid.wall_y, grid.first, grid.last, sight.x, sight.y,
               sight.goal_x, sight.goal_y, grid.width, grid.height, sight.nb, sight.m,
-              params[LP_DETOUR], sight.starts)
+              params[LP_DETOUR], sight.starts, params[LP_WALL_SIGHT])
 
 
 @inline_kernel

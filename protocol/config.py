@@ -58,7 +58,7 @@ def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argp
 LEARNING_FIELDS = ("algo", "alpha", "beta", "interaction_radius", "wait_rule", "optimistic",
                    "known_state", "shared", "shield", "lookahead", "still_terminal",
                    "stay_reward", "ds_state", "ds_reward", "detour", "still_shield",
-                   "escape_shield", "arbitration")
+                   "escape_shield", "arbitration", "map_known")
 """The fields a learning preset sets; everything else (agents, grid, seed, episodes...) is the
 run's."""
 
@@ -66,7 +66,7 @@ PAPER: dict[str, Any] = {"algo": "nnql", "alpha": 0.9, "beta": 0.5, "interaction
          "wait_rule": "reach", "optimistic": 0.0, "known_state": False, "shared": False,
          "shield": False, "lookahead": 1, "still_terminal": False, "stay_reward": 0.5,
          "ds_state": "goal", "ds_reward": "euclid", "detour": False, "still_shield": False,
-         "escape_shield": False, "arbitration": "paper"}
+         "escape_shield": False, "arbitration": "paper", "map_known": False}
 """The paper's reading: every neighbour in view enters Eq. 6 and is waited for if it outranks
 the agent, zero-initialised tables, each agent its own tables, no shield."""
 
@@ -180,6 +180,10 @@ class SwarmConfig:
                             "field's); by default step-aside under --arbitration pibt or --tasks "
                             "lifelong, else park",
                             choices=ON_TARGET)
+    map_known: bool = option(_DEFAULT["map_known"], "every agent knows every wall of the map "
+                             "from the start (as the field's planners, and its learned methods' "
+                             "shortest-path inputs, do); else it learns the walls it sees "
+                             "(within 10 cells) and keeps them for the run")
     tasks: str = option("one-shot", "what an agent that reached its goal does next: nothing "
                         "more this episode (one-shot), or it is given a new goal at once, drawn "
                         "from the free cells it can reach, and the episode runs --max-steps "
@@ -399,6 +403,7 @@ class SwarmConfig:
         data.setdefault("escape_shield", False)
         data.setdefault("arbitration", "paper")
         data.setdefault("tasks", "one-shot")
+        data.setdefault("map_known", False)
         known = {f.name for f in fields(SwarmConfig)}
         unknown = set(data) - known
         if unknown:

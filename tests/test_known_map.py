@@ -8,15 +8,17 @@ import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.known_map import (
+    WHOLE_MAP,
     MAP_KNOWN, check_cell_order, fresh_map, known_cells, map_size, path_length, progress_moves,
     restore_known, see_walls, track, waypoint_move,
 )
 from nnql_swarm.learning.fields import (
+    LP_WALL_SIGHT, learner_params,
     DS_PROGRESS, DS_WAYPOINT, LP_DS_REWARD, LP_DS_STATE, LP_STILL_TERMINAL, NB_FIELDS, REC_GOAL,
     REC_NEXT_GOAL, REC_TERMINAL, REWARD_FLAT, REWARD_PATH, RF_R_DS,
 )
 from nnql_swarm.learning.readings import ds_state
-from nnql_swarm.protocol.actions import DOWN, RIGHT, STAY, UP, offset_state
+from nnql_swarm.protocol.actions import DOWN, RIGHT, STAY, UP, VIEW_RADIUS, offset_state
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.sim.runs import Batch, swarm_world
 
@@ -44,17 +46,29 @@ def test_a_wall_is_known_once_it_was_in_view_and_stays_known():
     wmap = np.zeros(map_size(30, 3), np.int64)
     fresh_map(wmap)
     wx, wy = walls_of((12, 1), (25, 1))
-    see_walls(wmap, wx, wy, 0, 2, 1, 1, 30)
+    see_walls(wmap, wx, wy, 0, 2, 1, 1, 30, VIEW_RADIUS)
     assert known_cells(wmap, 30, 3) == [], "11 columns away: out of view"
-    see_walls(wmap, wx, wy, 0, 2, 2, 1, 30)
+    see_walls(wmap, wx, wy, 0, 2, 2, 1, 30, VIEW_RADIUS)
     assert known_cells(wmap, 30, 3) == [42]
-    see_walls(wmap, wx, wy, 0, 2, 15, 1, 30)
+    see_walls(wmap, wx, wy, 0, 2, 15, 1, 30, VIEW_RADIUS)
     assert known_cells(wmap, 30, 3) == [42, 55] and wmap[MAP_KNOWN] == 2
-    see_walls(wmap, wx, wy, 0, 2, 0, 0, 30)
+    see_walls(wmap, wx, wy, 0, 2, 0, 0, 30, VIEW_RADIUS)
     assert known_cells(wmap, 30, 3) == [42, 55], "what was seen is kept"
     again = np.zeros_like(wmap)
     restore_known(again, known_cells(wmap, 30, 3), 30, 3)
     assert known_cells(again, 30, 3) == [42, 55] and again[MAP_KNOWN] == 2
+
+
+def test_an_agent_that_knows_the_map_knows_every_wall_at_its_first_look():
+    """``--map-known``: the sight is the whole map, however far a wall is."""
+    wmap = np.zeros(map_size(30, 3), np.int64)
+    fresh_map(wmap)
+    wx, wy = walls_of((12, 1), (25, 1))
+    see_walls(wmap, wx, wy, 0, 2, 0, 0, 30, WHOLE_MAP)
+    assert known_cells(wmap, 30, 3) == [42, 55]
+    config = SwarmConfig(**{**PRESETS["pibt-nnql"], "map_known": True})
+    assert learner_params(config)[0][LP_WALL_SIGHT] == WHOLE_MAP
+    assert learner_params(SwarmConfig())[0][LP_WALL_SIGHT] == VIEW_RADIUS
 
 
 def test_walls_out_of_cell_order_are_refused():
@@ -68,7 +82,7 @@ def test_the_path_goes_around_the_known_walls_and_through_the_unknown():
     wall = [(3, y) for y in range(6)]
     wx, wy = walls_of(*wall)
     wmap = fresh()
-    track(wmap, wx, wy, 0, len(wall), 1, 1, 5, 1, W, H, NONE, 0, -1, False)
+    track(wmap, wx, wy, 0, len(wall), 1, 1, 5, 1, W, H, NONE, 0, -1, False, VIEW_RADIUS)
     assert path_length(wmap, 1, 1, W, H) == 14  # down 5, across 4, up 5
     assert progress_moves(wmap, 1, 1, W, H) == (1 << DOWN) | (1 << RIGHT)
     assert waypoint_move(wmap, 1, 1, 5, 1, W, H) == RIGHT, "the goal is farther across"
@@ -76,43 +90,43 @@ def test_the_path_goes_around_the_known_walls_and_through_the_unknown():
     assert waypoint_move(wmap, 5, 1, 5, 1, W, H) == STAY and progress_moves(wmap, 5, 1, W, H) == 0
     # the same wall unseen (none passed): straight across
     blind = fresh()
-    track(blind, wx, wy, 0, 0, 1, 1, 5, 1, W, H, NONE, 0, -1, False)
+    track(blind, wx, wy, 0, 0, 1, 1, 5, 1, W, H, NONE, 0, -1, False, VIEW_RADIUS)
     assert path_length(blind, 1, 1, W, H) == 4 and waypoint_move(blind, 1, 1, 5, 1, W, H) == RIGHT
 
 
 def test_the_waypoint_breaks_ties_along_the_axis_where_the_goal_is_farther():
     wmap = fresh()
-    track(wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False)
+    track(wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False, VIEW_RADIUS)
     assert progress_moves(wmap, 1, 1, W, H) == (1 << DOWN) | (1 << RIGHT)
     assert waypoint_move(wmap, 1, 1, 5, 3, W, H) == RIGHT
     assert waypoint_move(wmap, 1, 1, 3, 3, W, H) == DOWN, "a diagonal: the vertical move"
-    track(wmap, *walls_of(), 0, 0, 1, 1, 1, 5, W, H, NONE, 0, -1, False)  # a new goal, a new field
+    track(wmap, *walls_of(), 0, 0, 1, 1, 1, 5, W, H, NONE, 0, -1, False, VIEW_RADIUS)  # a new goal, a new field
     assert waypoint_move(wmap, 1, 1, 1, 5, W, H) == DOWN and path_length(wmap, 1, 1, W, H) == 4
 
 
 def test_the_detour_goes_around_parked_agents_within_reach_unless_they_close_the_way():
     wmap = fresh()
     rows = np.array([parked(1, 2, 1)], np.int64)
-    track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, 4, False)
+    track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, 4, False, VIEW_RADIUS)
     assert path_length(wmap, 1, 1, W, H) == 5 and waypoint_move(wmap, 1, 1, 4, 1, W, H) == UP
     for rows_again, starts in ((NONE, False), (NONE, True)):
-        track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows_again, 0, 4, starts)
+        track(wmap, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows_again, 0, 4, starts, VIEW_RADIUS)
         assert path_length(wmap, 1, 1, W, H) == (5 if not starts else 3), \
             "an arrived agent is planned around until the episode ends"
     far = fresh()
-    track(far, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, -1, False)
+    track(far, *walls_of(), 0, 0, 1, 1, 4, 1, W, H, rows, 1, -1, False, VIEW_RADIUS)
     assert path_length(far, 1, 1, W, H) == 3, "no detour asked: straight through"
     # a corridor one cell wide, closed by the arrived agent: the way through it is the only one
     corridor = [(x, y) for y in (0, 2) for x in range(W)]  # walls in cell order
     closed = fresh()
-    track(closed, *walls_of(*corridor), 0, len(corridor), 1, 1, 4, 1, W, H, rows, 1, 4, False)
+    track(closed, *walls_of(*corridor), 0, len(corridor), 1, 1, 4, 1, W, H, rows, 1, 4, False, VIEW_RADIUS)
     assert path_length(closed, 1, 1, W, H) == 3 and waypoint_move(closed, 1, 1, 4, 1, W, H) == RIGHT
 
 
 def test_destination_seeking_reads_the_waypoint_or_the_progress_moves():
     agent = Agent()
     agent.params[LP_DS_STATE] = DS_WAYPOINT
-    track(agent.wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False)
+    track(agent.wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False, VIEW_RADIUS)
     assert ds_state(agent.params, agent.wmap, 1, 1, 5, 3, W, H) == offset_state(1, 0)
     agent.params[LP_DS_STATE] = DS_PROGRESS
     assert ds_state(agent.params, agent.wmap, 1, 1, 5, 3, W, H) == (1 << DOWN) | (1 << RIGHT)
