@@ -16,8 +16,8 @@ from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGE
 from nnql_swarm.recording.curves import log_swarm_curves
 from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.terminal.cli import (
-    OneLineParser, Terminated, bounded, comma_choices, make_directory, parse_workers,
-    prepare_simulator, program_name, progress,
+    DefaultsHelpFormatter, OneLineParser, Terminated, bounded, comma_choices, make_directory,
+    parse_workers, prepare_simulator, program_name, progress,
 )
 
 def parse_counts(text: str) -> tuple[int, ...]:
@@ -61,19 +61,21 @@ def build_maps_parser() -> OneLineParser:
         "play the learned tables frozen (no learning, no random step) on held-out random maps, "
         "mazes and the warehouse at each agent count, beside the oracle and the paper's QL; and "
         "learn from scratch on an unseen random map.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsHelpFormatter,
     )
     add = parser.add_argument
     add("--preset", default=DEFAULT_PRESET, choices=[p for p in PRESETS if p != "oracle"],
         help="the learner benchmarked (beside ql and the oracle)")
     add("--seeds", type=bounded(int, 1), default=d.seeds, metavar="N",
         help="policies, each trained and tested on maps of its own")
-    add("--seed-base", type=bounded(int, 0), default=d.seed_base, metavar="S")
+    add("--seed-base", type=bounded(int, 0), default=d.seed_base, metavar="S",
+        help="first seed; seeds are S, S+1, ...")
     add("--train-maps", type=bounded(int, 1), default=d.train_maps, metavar="N",
         help="random training maps per seed")
     add("--train-episodes", type=bounded(int, 1), default=d.train_episodes, metavar="N",
         help="episodes on each training map")
-    add("--train-agents", type=bounded(int, 1, 1024), default=d.train_agents, metavar="N")
+    add("--train-agents", type=bounded(int, 1, 1024), default=d.train_agents, metavar="N",
+        help="agents on each training map")
     add("--test-maps", type=bounded(int, 1), default=d.test_maps, metavar="N",
         help="held-out maps per family and seed")
     add("--instances", type=bounded(int, 1), default=d.instances, metavar="N",
@@ -86,7 +88,8 @@ def build_maps_parser() -> OneLineParser:
         help="episodes of learning from scratch on an unseen random map")
     add("--scratch-agents", type=parse_counts, default=d.scratch_agents, metavar="LIST|none",
         help="agent counts of learning from scratch")
-    add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
+    add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N",
+        help="steps per episode at most")
     add("--on-target", choices=ON_TARGET, default=d.on_target,
         help="what an arrived agent does, for every variant: stays for good (park) or may make "
              "way and come back (step-aside, the field's rule)")
