@@ -104,3 +104,26 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
         rrb.TimePanel(timeline="episode", play_state="following", state="collapsed"),
         collapse_panels=False,
     )
+
+
+def recorded_blueprint(config: SwarmConfig, chunks):
+    """The blueprint of a saved run, from its recording's chunks: what the launcher told the
+    world (a distributed run, ``--reference``, ``--map-agent``) read back from what it logged,
+    so that a recording opened anywhere else (the notebook's ``show``) opens on the same view.
+
+    Distributed: agents logged their negotiation wait over time; reference: the paper's QL's
+    steps curve is there; map agent: the id in the known map's agent label (None: no map)."""
+    from nnql_swarm.recording import known_map
+    from nnql_swarm.recording.reference import CURVES
+
+    distributed, reference, map_agent = False, False, None
+    for chunk in chunks:
+        entity = chunk.entity_path.lstrip("/")
+        if entity.startswith("metrics/negotiation/latency_ms/") and not chunk.is_static:
+            distributed = True
+        elif entity in CURVES:
+            reference = True
+        elif entity == known_map.AGENT and chunk.is_static:
+            labels = chunk.to_record_batch().column("Points2D:labels").to_pylist()
+            map_agent = int(labels[0][0].split()[-1])
+    return blueprint(config, distributed, map_agent, reference)
