@@ -4,9 +4,9 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.recording.loggers import heat_map_agents
 
 
-REFERENCE_STEPS_SPAN = (0.9, 4.0)
-"""The steps plot's vertical span when the paper's QL's curves are in the recording: QL's ratio
-runs far above the run's own, which would flatten it."""
+REFERENCE_STEPS = "metrics/steps/paper_ql"
+"""The paper's QL's steps ratio (``recording.reference``): 10 to 20 where the run's own is 1 to
+4, it has a plot of its own beside the run's, which it would flatten."""
 
 
 def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | None = 0,
@@ -40,25 +40,28 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     whole_run = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
                                                       end=rrb.TimeRangeBoundary.infinite()))
 
-    def plot(span: tuple[float, float] | None = None, **view) -> rrb.TimeSeriesView:
+    def plot(span: tuple[float, float] | None = None, legend: bool = False,
+             **view) -> rrb.TimeSeriesView:
+        """A learning curve. No key over the curves where the title says what they are; the
+        negotiation wait's, one curve per agent, in the top right corner."""
         axis = None if span is None else rrb.ScalarAxis(range=span)
         return rrb.TimeSeriesView(axis_x=whole_run, axis_y=axis,
-                                  plot_legend=rrb.PlotLegend(corner="RightBottom"), **view)
+                                  plot_legend=rrb.PlotLegend(corner="RightTop", visible=legend),
+                                  **view)
 
     n = config.n_agents
+    steps = ["metrics/steps/over_shortest", "metrics/steps/shortest_path"]
     metrics = rrb.Grid(
-        plot((0.0, 1.05), origin="metrics/arrived_share",
-             name="Share of agents on their goal at the episode's end"),
-        plot(REFERENCE_STEPS_SPAN if reference else None, origin="metrics/steps",
-             name="Steps taken / shortest path (1: perfect)",
-             contents=["metrics/steps/over_shortest", "metrics/steps/shortest_path",
-                       "metrics/steps/paper_ql"]),
+        plot((0.0, 1.05), origin="metrics/arrived_share", name="Share of agents arrived"),
+        plot(origin="metrics/steps", contents=steps, name="Steps / shortest path (1: best)"),
         plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",
-             name="Agents in a collision, per episode"),
+             name="Agents in a collision"),
         plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),
-        plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)") if distributed
-        else plot(origin="metrics/steps/episode", name="Ticks per episode"),
-        plot(origin="metrics/ticks_per_s", name="Ticks per second"),
+        plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)", legend=True)
+        if distributed else plot(origin="metrics/steps/episode", name="Ticks per episode"),
+        plot(origin="metrics/steps", contents=[*steps, REFERENCE_STEPS],
+             name="Steps ratio: paper's QL in grey") if reference
+        else plot(origin="metrics/ticks_per_s", name="Ticks per second"),
         grid_columns=2, name="Learning curves (x: episode)",
     )
     from nnql_swarm.recording import known_map

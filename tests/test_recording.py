@@ -454,8 +454,8 @@ def test_agent_colours_stay_distinct_and_readable_at_128_agents():
     assert np.array_equal(agent_colors(200)[:128], colours)  # an agent keeps its colour
 
 
-def steps_view(reference: bool):
-    """The learning curves' steps plot of the default run's blueprint."""
+def steps_views(reference: bool) -> dict:
+    """The learning curves' steps plots of the default run's blueprint, by name."""
     from nnql_swarm.recording.blueprint import blueprint
 
     def views(container):
@@ -463,15 +463,19 @@ def steps_view(reference: bool):
             yield item
             yield from views(item)
 
-    [view] = [v for v in views(blueprint(SwarmConfig(), reference=reference).root_container)
-              if getattr(v, "origin", None) == "metrics/steps"]
-    return view
+    return {v.name: v for v in views(blueprint(SwarmConfig(), reference=reference).root_container)
+            if getattr(v, "origin", None) == "metrics/steps"}
 
 
-def test_with_the_reference_the_steps_plot_keeps_the_runs_own_ratios_readable():
-    """The paper's QL's ratio runs far above the run's own: with it, the plot's span is fixed."""
-    from nnql_swarm.recording.blueprint import REFERENCE_STEPS_SPAN
+def test_with_the_reference_both_steps_ratios_read_on_plots_of_their_own():
+    """The paper's QL's ratio (10 to 20) runs far above the run's own (1 to 4): the run's plot
+    leaves it out, and a plot of both beside it takes the span of both; no span is fixed, so
+    that neither is clipped."""
+    from nnql_swarm.recording.blueprint import REFERENCE_STEPS
 
-    assert "ScalarAxis" not in steps_view(False).properties
-    axis = steps_view(True).properties["ScalarAxis"]
-    assert tuple(axis.range.as_arrow_array().to_pylist()[0]) == REFERENCE_STEPS_SPAN
+    alone, both = steps_views(False), steps_views(True)
+    assert list(alone) == ["Steps / shortest path (1: best)"]
+    own, with_ql = both["Steps / shortest path (1: best)"], both["Steps ratio: paper's QL in grey"]
+    assert REFERENCE_STEPS not in own.contents and REFERENCE_STEPS in with_ql.contents
+    for view in (*alone.values(), *both.values()):
+        assert "ScalarAxis" not in view.properties
