@@ -56,6 +56,9 @@ TRAILS = "world/trails"
 INTENTS = "world/intents"
 NEGOTIATION = "world/negotiation"
 COLLISIONS = "world/collisions"
+STARTS = "world/starts"
+STUCK = "world/stuck"
+CAPTION = "world/caption"
 EVENTS = "events"
 LEGEND = "legend"
 
@@ -63,6 +66,14 @@ WALL_HALF = 0.2
 """Half the width of a wall's box outline; the outline is :data:`WALL_LINE` wide on each side
 of it, so that the box is a solid block 0.88 of a cell wide."""
 WALL_LINE = 0.24
+
+CAPTION_Y = -0.95
+"""Where the world view's caption (its tick's episode and step) stands: above the grid, in the
+room the blueprint's bounds leave there."""
+
+STUCK_HALF = 0.47
+"""Half the width of the ring around an agent an episode ended short of its goal: just inside
+the cell, outside the goal's box (0.42)."""
 
 METRICS = {
     "metrics/arrived_share": "share of the agents on their goal when the episode ended (0 to 1)",
@@ -154,8 +165,10 @@ Discs are agents, labelled with their id; the box with the same id and colour is
 goal. Every agent has a colour of its own.{walls}
 On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
 move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
-discs), and the agents where the episode left them. On the `tick` timeline it shows one tick:
-where each agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
+discs), and the agents where the episode left them; a small dot in an agent's colour is where
+it started, a red square ring an agent the episode left short of its goal. On the `tick`
+timeline it shows one tick (the caption above the grid names its episode and step): where each
+agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
 {waits}
 
 **Learning curves** run against episodes: the share of agents that arrived, the steps they took
@@ -232,7 +245,8 @@ class WorldViz:
         # agent's cell and whether it had arrived at the tick's start, the actions, who collided.
         self._buffer: list[tuple] = []
         self._starts: dict[int, np.ndarray] = {}  # the buffered episodes' start cells
-        self._goals: list[tuple[int, int, np.ndarray]] = []
+        self._goals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # goals, starts
+        self._stuck: list[tuple[int, int, np.ndarray]] = []  # at each episode's end
         self._metrics = SeriesColumns()
         self._events = TextColumns(EVENTS)
         self._goal_cells: list = []  # the current episode's goals
@@ -280,6 +294,12 @@ class WorldViz:
         rec.log(LEGEND, rr.TextDocument(legend(c), media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log(COLLISIONS, rr.Points2D.from_fields(colors=[COLLISION_RED], radii=0.5,
                                                     draw_order=20.0), static=True)
+        rec.log(STARTS, rr.Points2D.from_fields(colors=with_alpha(self.colors, 150), radii=0.12,
+                                                draw_order=12.0), static=True)
+        rec.log(STUCK, rr.Boxes2D.from_fields(colors=[COLLISION_RED], radii=0.05,
+                                              draw_order=25.0), static=True)
+        rec.log(CAPTION, rr.Points2D.from_fields(colors=[[90, 90, 90]], radii=0.01,
+                                                 show_labels=True, draw_order=50.0), static=True)
         for path in METRICS:
             colour = SERIES_COLOURS.get(path)
             rec.log(path, rr.SeriesLines(names=SERIES_NAMES[path], widths=2.0,
@@ -310,12 +330,17 @@ class WorldViz:
             self.known_map.observe(report.tick, report.episode, starts, before, self._arrived,
                                    self._goal_cells[agent])
         self._buffer.append((report.tick, report.episode, report.moved, before, self._arrived,
-                             report.actions, report.collided))
+                             report.actions, report.collided,
+                             report.tick - self._episode_first_tick))
         if report.collided:
             step = f"step {world.step}" if report.moved else "end"
             self._events.add(report.tick, report.episode,
                              f"{step}: collision of agents "
                              f"{', '.join(map(str, report.collided))}", "WARN")
+        if report.episode_row is not None:  # its end tick: nobody moves, as the episode left them
+            short = [cell for cell, home in zip(before, self._arrived) if not home]
+            self._stuck.append((report.tick, report.episode,
+                                np.array(short, np.float32).reshape(-1, 2)))
         self._before, self._arrived = world.cells, world.arrived_flags
         self.next_tick = report.tick + 1
         if report.episode_row is not None:
@@ -329,7 +354,9 @@ class WorldViz:
         episode = swarm_episode(c.seed, report.episode, c.width, c.height, c.n_agents,
                                 c.obstacle_density, c.map_rows, c.scenario)
         self._starts[report.episode] = episode.starts.astype(np.float32)
-        self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32)))
+        self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32),
+                            episode.starts.astype(np.float32)))
+        self._stuck.append((report.tick, report.episode, np.zeros((0, 2), np.float32)))
         self._goal_cells = episode.goals.tolist()
 
     def _end_episode(self, report: TickReport, row: dict) -> None:
@@ -366,12 +393,22 @@ class WorldViz:
         """Send everything buffered: the ticks' geometry computed at once, one call per entity."""
         self.clock.flushed()
         if self._goals:
-            g_ticks, g_episodes, goals = zip(*self._goals)
+            g_ticks, g_episodes, goals, starts = zip(*self._goals)
             self._goals = []
+            index = time_columns(g_ticks, g_episodes)
             centers = np.concatenate(goals)
-            self.rec.send_columns(GOALS, time_columns(g_ticks, g_episodes), rr.Boxes2D.columns(
+            self.rec.send_columns(GOALS, index, rr.Boxes2D.columns(
                 centers=centers, half_sizes=np.full(centers.shape, 0.42, np.float32)
             ).partition([len(g) for g in goals]))
+            self.rec.send_columns(STARTS, index, rr.Points2D.columns(
+                positions=np.concatenate(starts)).partition([len(g) for g in starts]))
+        if self._stuck:
+            s_ticks, s_episodes, cells = zip(*self._stuck)
+            self._stuck = []
+            centers = np.concatenate(cells)
+            self.rec.send_columns(STUCK, time_columns(s_ticks, s_episodes), rr.Boxes2D.columns(
+                centers=centers, half_sizes=np.full(centers.shape, STUCK_HALF, np.float32)
+            ).partition([len(c) for c in cells]))
         if self._buffer:
             self._send_ticks()
         for tick, episode, steps in self._ended:  # every tick of theirs is counted now
@@ -386,7 +423,7 @@ class WorldViz:
     def _send_ticks(self) -> None:
         k, n = len(self._buffer), self.config.n_agents
         rec = self.rec
-        tick_list, episode_list, moved, before, arrived_then, actions, collided = \
+        tick_list, episode_list, moved, before, arrived_then, actions, collided, steps = \
             zip(*self._buffer)
         self._buffer = []
         ticks, episodes = np.array(tick_list, dtype=np.int64), np.array(episode_list, np.int64)
@@ -396,6 +433,11 @@ class WorldViz:
         cells = positions.astype(np.float32)
         flat = cells.reshape(-1, 2)
         rec.send_columns(AGENTS, index, rr.Points2D.columns(positions=flat).partition(each))
+        rec.send_columns(CAPTION, index, rr.Points2D.columns(
+            positions=np.tile(np.array([[(self.config.width - 1) / 2, CAPTION_Y]], np.float32),
+                              (k, 1)),
+            labels=[f"episode {e}, {f'step {s}' if m else 'its end'} (tick {t})"
+                    for e, s, t, m in zip(episode_list, steps, tick_list, moved)]))
         moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32).reshape(-1, 2)
         rec.send_columns(INTENTS, index,
                          rr.Arrows2D.columns(origins=flat, vectors=moves).partition(each))

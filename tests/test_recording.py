@@ -152,6 +152,39 @@ def test_positions_and_trails_are_the_worlds(run):
         assert np.array_equal(np.array([strip[-1] for strip in strips]), np.array(cells[tick]))
 
 
+def test_starts_stuck_agents_and_the_caption_are_the_worlds(run):
+    """Each episode's starts; at its end a ring around every agent not on its goal (as many as
+    episodes.csv says did not arrive, each where one of them stands), none while it goes; and on
+    every tick a caption naming its episode."""
+    _, out, recording = run
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    cells = recording.by_time("world/agents", "Points2D:positions")
+    starts = recording.by_time("world/starts", "Points2D:positions", "episode")
+    stuck = defaultdict(list)
+    for tick, boxes in zip(recording.column("world/stuck", "tick"),
+                           recording.column("world/stuck", "Boxes2D:centers")):
+        stuck[tick].append(boxes or [])
+    first_tick, ended_short = 0, 0
+    for row in read_episodes(out / "episodes.csv"):
+        episode, end = int(row["episode"]), int(row["end_tick"])
+        expected = swarm_episode(config.seed, episode, config.width, config.height,
+                                 config.n_agents).starts
+        assert np.array_equal(np.array(starts[episode]), expected)
+        assert stuck[first_tick][0] == []  # cleared as the episode starts
+        ringed = stuck[end][-1]
+        assert len(ringed) == config.n_agents - int(row["arrived"]), episode
+        goals = swarm_episode(config.seed, episode, config.width, config.height,
+                              config.n_agents).goals.tolist()
+        short = {tuple(cell) for cell, goal in zip(cells[end], goals) if cell != goal}
+        assert {tuple(cell) for cell in ringed} == short, episode  # the end tick moves nobody
+        ended_short += len(ringed)
+        first_tick = end + 1
+    assert ended_short > 0, "no agent ended short: the rings were not tested"
+    episodes = recording.by_time("world/agents", "episode")
+    for tick, labels in recording.by_time("world/caption", "Points2D:labels").items():
+        assert labels[0].startswith(f"episode {episodes[tick]}, ") and f"(tick {tick})" in labels[0]
+
+
 def test_metrics_match_episodes_csv(run):
     _, out, recording = run
     rows = read_episodes(out / "episodes.csv")
