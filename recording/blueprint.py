@@ -51,10 +51,11 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
                                   **view)
 
     n = config.n_agents
-    steps = ["metrics/steps/over_shortest", "metrics/steps/shortest_path"]
+    steps = ["metrics/steps/over_shortest", "metrics/steps/smoothed", "metrics/steps/shortest_path"]
     metrics = rrb.Grid(
         plot((0.0, 1.05), origin="metrics/arrived_share", name="Share of agents arrived"),
-        plot(origin="metrics/steps", contents=steps, name="Steps / shortest path (1: best)"),
+        plot(origin="metrics/steps", contents=steps,
+             name="Steps / shortest path, smoothed dark"),
         plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",
              name="Agents in a collision"),
         plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),
@@ -91,11 +92,10 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     if map_agent is not None and 0 <= map_agent < n and known_map.shows_known_map(config):
         learned = rrb.Vertical(rrb.Spatial2DView(
             origin=known_map.ROOT, background=[255, 255, 255],
-            name=f"Agent {map_agent}'s known map and planned paths",
+            name=f"Agent {map_agent}'s known map and planned path",
             visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
-                                             y_range=[-0.6, config.height - 0.4]),
-            overrides={known_map.PATH: episode}),  # every path it planned in the episode
-            heat_maps, row_shares=[2, 3])
+                                             y_range=[-0.6, config.height - 0.4])),
+            heat_maps, row_shares=[2, 3])  # its newest path: all of an episode's are a comb
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(world_view, events, row_shares=[3, 1] if n < 64 else [4, 1]),

@@ -80,6 +80,8 @@ METRICS = {
     "metrics/steps/over_shortest": "steps the agents took over their shortest paths "
                                    "(agent_steps / shortest_sum; 1 is the best possible)",
     "metrics/steps/shortest_path": "the reference of over_shortest: 1, every agent on a shortest path",
+    "metrics/steps/smoothed": "over_shortest smoothed: an exponential moving average over "
+                              "episodes (SMOOTHING), from the run's (or the resume's) first",
     "metrics/collisions/per_episode": "collisions in the episode (each colliding agent counts one)",
     "metrics/collisions/cumulative": "collisions since the run started",
     "metrics/steps/per_agent": "mean steps an agent took until it arrived (agent_steps / agents)",
@@ -97,6 +99,7 @@ SERIES_NAMES = {
     "metrics/arrived_share": "arrived (share of agents)",
     "metrics/steps/over_shortest": "steps / shortest path",
     "metrics/steps/shortest_path": "shortest path (1)",
+    "metrics/steps/smoothed": "smoothed",
     "metrics/collisions/per_episode": "collisions in the episode",
     "metrics/collisions/cumulative": "collisions since the start",
     "metrics/steps/per_agent": "steps per agent",
@@ -112,11 +115,15 @@ SERIES_NAMES = {
 
 SERIES_COLOURS = {
     "metrics/arrived_share": (0, 130, 60),
-    "metrics/steps/over_shortest": (0, 90, 181),
+    "metrics/steps/over_shortest": (120, 170, 225),
+    "metrics/steps/smoothed": (0, 60, 140),
     "metrics/steps/shortest_path": (150, 150, 150),
     "metrics/collisions/per_episode": (230, 40, 40),
     "metrics/collisions/cumulative": (120, 20, 20),
 }
+
+SMOOTHING = 0.1
+"""The weight of each new episode in the smoothed steps ratio: a memory of about ten episodes."""
 
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
@@ -196,7 +203,7 @@ def tables(config: SwarmConfig) -> str:
     return (f"**Known map** (one agent's, `--map-agent`): the walls it has seen (dark blocks) "
             f"and those it has not (pale outlines), the parked agents it plans around (grey), "
             f"and its planned path to its goal on the map it knows (a line in its colour; on the "
-            f"`episode` timeline every path it planned in the episode), unknown cells taken as "
+            f"`episode` timeline the last it planned in the episode), unknown cells taken as "
             f"free.\n\n"
             f"**Q_DS** is read on that map: its state is {state}, so it is a table, one row per "
             f"state: the best move, its value (up to {config.goal_reward:g}, the goal reward), "
@@ -231,6 +238,7 @@ class WorldViz:
         n = config.n_agents
         self.colors = agent_colors(n)
         self.cumulative_collisions = collisions_before
+        self._smoothed: float | None = None  # the steps ratio's moving average
         self.next_tick = 0
         self._before: tuple | None = None  # cells at the start of the next tick
         self._arrived: tuple = (False,) * n
@@ -367,9 +375,13 @@ class WorldViz:
         rate = ticks / max(now - started, 1e-9)
         self._episode_clock, self._episode_first_tick = now, report.tick + 1
         self.cumulative_collisions += row["collisions"]
+        ratio = row["agent_steps"] / max(row["shortest_sum"], 1)
+        self._smoothed = ratio if self._smoothed is None else \
+            (1 - SMOOTHING) * self._smoothed + SMOOTHING * ratio
         values = {
             "metrics/arrived_share": row["arrived"] / n,
-            "metrics/steps/over_shortest": row["agent_steps"] / max(row["shortest_sum"], 1),
+            "metrics/steps/over_shortest": ratio,
+            "metrics/steps/smoothed": self._smoothed,
             "metrics/steps/shortest_path": 1.0,
             "metrics/collisions/per_episode": row["collisions"],
             "metrics/collisions/cumulative": self.cumulative_collisions,

@@ -195,7 +195,7 @@ def test_show_opens_on_the_layout_the_run_was_recorded_with(example, how):
     assert names == view_names(recorded, recorded.blueprints()[0])
     assert ("Negotiation wait (ms)" in names) == (how == "distributed")
     assert ("Ticks per episode" in names) == (how == "in-process")
-    assert "Agent 0's known map and planned paths" in names
+    assert "Agent 0's known map and planned path" in names
 
 
 def test_the_notebook_runs_in_a_kernel_and_shows_the_viewer_inline(tmp_path, monkeypatch):

@@ -185,6 +185,14 @@ def test_starts_stuck_agents_and_the_caption_are_the_worlds(run):
         assert labels[0].startswith(f"episode {episodes[tick]}, ") and f"(tick {tick})" in labels[0]
 
 
+def smoothed(values):
+    """The exponential moving average the steps plot draws over the ratios (weight 0.1)."""
+    average = None
+    for value in values:
+        average = value if average is None else 0.9 * average + 0.1 * value
+        yield average
+
+
 def test_metrics_match_episodes_csv(run):
     _, out, recording = run
     rows = read_episodes(out / "episodes.csv")
@@ -199,6 +207,8 @@ def test_metrics_match_episodes_csv(run):
         "metrics/arrived_share": [int(r["arrived"]) / AGENTS for r in rows],
         "metrics/steps/over_shortest": [int(r["agent_steps"]) / int(r["shortest_sum"])
                                         for r in rows],
+        "metrics/steps/smoothed": list(smoothed([int(r["agent_steps"]) / int(r["shortest_sum"])
+                                                 for r in rows])),
         "metrics/reward_sum": [float(r["reward_sum"]) for r in rows],
         "metrics/missed_intents": [float(r["missed_intents"]) for r in rows],
     }
@@ -507,8 +517,26 @@ def test_with_the_reference_both_steps_ratios_read_on_plots_of_their_own():
     from nnql_swarm.recording.blueprint import REFERENCE_STEPS
 
     alone, both = steps_views(False), steps_views(True)
-    assert list(alone) == ["Steps / shortest path (1: best)"]
-    own, with_ql = both["Steps / shortest path (1: best)"], both["Steps ratio: paper's QL in grey"]
+    assert list(alone) == ["Steps / shortest path, smoothed dark"]
+    own, with_ql = (both["Steps / shortest path, smoothed dark"],
+                    both["Steps ratio: paper's QL in grey"])
     assert REFERENCE_STEPS not in own.contents and REFERENCE_STEPS in with_ql.contents
     for view in (*alone.values(), *both.values()):
         assert "ScalarAxis" not in view.properties
+
+
+def test_the_known_map_shows_one_path_and_the_world_an_episodes_moves():
+    """On the episode timeline the known map shows the newest planned path, not every path of
+    the episode at once (a comb); the world view shows the episode's moves, waits, collisions."""
+    from nnql_swarm.recording.blueprint import blueprint
+
+    def views(container):
+        for item in getattr(container, "contents", None) or []:
+            yield item
+            yield from views(item)
+
+    by_origin = {getattr(v, "origin", None): v
+                 for v in views(blueprint(SwarmConfig()).root_container)}
+    assert not by_origin["known_map"].visualizer_overrides
+    assert set(by_origin["world"].visualizer_overrides) == {
+        "world/intents", "world/negotiation", "world/collisions"}
