@@ -27,7 +27,7 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     world_view = rrb.Spatial2DView(
         origin="world", name="World: the episode's moves, waits and collisions",
         visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
-                                         y_range=[world_viz.CAPTION_Y - 0.35,
+                                         y_range=[-0.5 - world_viz.caption_room(config),
                                                   config.height - 0.4]),
         overrides={path: episode for path in (world_viz.INTENTS, world_viz.NEGOTIATION,
                                               world_viz.COLLISIONS)},

@@ -67,13 +67,21 @@ WALL_HALF = 0.2
 of it, so that the box is a solid block 0.88 of a cell wide."""
 WALL_LINE = 0.24
 
-CAPTION_Y = -0.95
-"""Where the world view's caption (its tick's episode and step) stands: above the grid, in the
-room the blueprint's bounds leave there."""
+def caption_room(config: SwarmConfig) -> float:
+    """The room above the grid, in cells, that the world view leaves for its caption (the tick's
+    episode and step): about as many pixels at any grid size, so that the caption's label never
+    covers the grid's top line."""
+    return 0.04 * max(config.width, config.height) + 0.6
 
-STUCK_HALF = 0.47
-"""Half the width of the ring around an agent an episode ended short of its goal: just inside
-the cell, outside the goal's box (0.42)."""
+
+def caption_y(config: SwarmConfig) -> float:
+    """Where the caption stands: in the middle of the room above the grid."""
+    return -0.5 - caption_room(config) / 2
+
+STUCK_RING = 0.38 * np.stack([np.cos(np.linspace(0, 2 * np.pi, 17)),
+                              np.sin(np.linspace(0, 2 * np.pi, 17))], axis=1).astype(np.float32)
+"""The ring around an agent an episode ended short of its goal, about its cell's centre: round
+the agent's disc (0.3), inside the cell, clear of the grid's lines."""
 
 METRICS = {
     "metrics/arrived_share": "share of the agents on their goal when the episode ended (0 to 1)",
@@ -173,7 +181,7 @@ goal. Every agent has a colour of its own.{walls}
 On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
 move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
 discs), and the agents where the episode left them; a small dot in an agent's colour is where
-it started, a red square ring an agent the episode left short of its goal. On the `tick`
+it started, a red ring around an agent the episode left short of its goal. On the `tick`
 timeline it shows one tick (the caption above the grid names its episode and step): where each
 agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
 {waits}
@@ -304,8 +312,8 @@ class WorldViz:
                                                     draw_order=20.0), static=True)
         rec.log(STARTS, rr.Points2D.from_fields(colors=with_alpha(self.colors, 150), radii=0.12,
                                                 draw_order=12.0), static=True)
-        rec.log(STUCK, rr.Boxes2D.from_fields(colors=[COLLISION_RED], radii=0.05,
-                                              draw_order=25.0), static=True)
+        rec.log(STUCK, rr.LineStrips2D.from_fields(colors=[COLLISION_RED], radii=0.045,
+                                                   draw_order=25.0), static=True)
         rec.log(CAPTION, rr.Points2D.from_fields(colors=[[90, 90, 90]], radii=0.01,
                                                  show_labels=True, draw_order=50.0), static=True)
         for path in METRICS:
@@ -417,10 +425,9 @@ class WorldViz:
         if self._stuck:
             s_ticks, s_episodes, cells = zip(*self._stuck)
             self._stuck = []
-            centers = np.concatenate(cells)
-            self.rec.send_columns(STUCK, time_columns(s_ticks, s_episodes), rr.Boxes2D.columns(
-                centers=centers, half_sizes=np.full(centers.shape, STUCK_HALF, np.float32)
-            ).partition([len(c) for c in cells]))
+            rings = np.concatenate(cells)[:, None, :] + STUCK_RING[None]
+            self.rec.send_columns(STUCK, time_columns(s_ticks, s_episodes), rr.LineStrips2D.columns(
+                strips=rings).partition([len(c) for c in cells]))
         if self._buffer:
             self._send_ticks()
         for tick, episode, steps in self._ended:  # every tick of theirs is counted now
@@ -446,8 +453,8 @@ class WorldViz:
         flat = cells.reshape(-1, 2)
         rec.send_columns(AGENTS, index, rr.Points2D.columns(positions=flat).partition(each))
         rec.send_columns(CAPTION, index, rr.Points2D.columns(
-            positions=np.tile(np.array([[(self.config.width - 1) / 2, CAPTION_Y]], np.float32),
-                              (k, 1)),
+            positions=np.tile(np.array([[(self.config.width - 1) / 2, caption_y(self.config)]],
+                                       np.float32), (k, 1)),
             labels=[f"episode {e}, {f'step {s}' if m else 'its end'} (tick {t})"
                     for e, s, t, m in zip(episode_list, steps, tick_list, moved)]))
         moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32).reshape(-1, 2)

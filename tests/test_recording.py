@@ -161,9 +161,9 @@ def test_starts_stuck_agents_and_the_caption_are_the_worlds(run):
     cells = recording.by_time("world/agents", "Points2D:positions")
     starts = recording.by_time("world/starts", "Points2D:positions", "episode")
     stuck = defaultdict(list)
-    for tick, boxes in zip(recording.column("world/stuck", "tick"),
-                           recording.column("world/stuck", "Boxes2D:centers")):
-        stuck[tick].append(boxes or [])
+    for tick, rings in zip(recording.column("world/stuck", "tick"),
+                           recording.column("world/stuck", "LineStrips2D:strips")):
+        stuck[tick].append([np.mean(ring[:-1], axis=0).round(3).tolist() for ring in rings or []])
     first_tick, ended_short = 0, 0
     for row in read_episodes(out / "episodes.csv"):
         episode, end = int(row["episode"]), int(row["end_tick"])
