@@ -55,7 +55,7 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     metrics = rrb.Grid(
         plot((0.0, 1.05), origin="metrics/arrived_share", name="Share of agents arrived"),
         plot(origin="metrics/steps", contents=steps,
-             name="Steps / shortest path, smoothed dark"),
+             name="Steps / shortest, smoothed"),
         plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",
              name="Agents in a collision"),
         plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),

@@ -517,8 +517,8 @@ def test_with_the_reference_both_steps_ratios_read_on_plots_of_their_own():
     from nnql_swarm.recording.blueprint import REFERENCE_STEPS
 
     alone, both = steps_views(False), steps_views(True)
-    assert list(alone) == ["Steps / shortest path, smoothed dark"]
-    own, with_ql = (both["Steps / shortest path, smoothed dark"],
+    assert list(alone) == ["Steps / shortest, smoothed"]
+    own, with_ql = (both["Steps / shortest, smoothed"],
                     both["Steps ratio: paper's QL in grey"])
     assert REFERENCE_STEPS not in own.contents and REFERENCE_STEPS in with_ql.contents
     for view in (*alone.values(), *both.values()):
