@@ -147,7 +147,8 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
     v.add_argument("--rerun-port", type=int, default=9876,
                    help="gRPC port of the viewer that --rerun-spawn / --rerun-serve-web start")
     v.add_argument("--rerun-web-port", type=int, default=9090,
-                   help="HTTP port of the web viewer of --rerun-serve-web")
+                   help="HTTP port of the web viewer of --rerun-serve-web: the page and the "
+                        "run's data, on one origin")
     return p
 
 

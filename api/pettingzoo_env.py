@@ -270,9 +270,9 @@ class SwarmGridEnv(ParallelEnv):
         stream.set_time("step", sequence=self._frame)
         stream.set_time("episode", sequence=max(self._episode, 0))
         self._frame += 1
-        stream.log("world/goals", rr.Boxes2D(
-            centers=np.column_stack([self._goal_x, self._goal_y]).astype(np.float32),
-            half_sizes=[0.4, 0.4]))
+        goals = np.column_stack([self._goal_x, self._goal_y]).astype(np.float32)
+        stream.log("world/goals", rr.Boxes2D(  # one half-size per box: Rerun draws one box
+            centers=goals, half_sizes=np.full_like(goals, 0.4)))  # per half-size given
         stream.log("world/agents", rr.Points2D(
             np.column_stack([self._x, self._y]).astype(np.float32)))
 

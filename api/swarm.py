@@ -270,17 +270,18 @@ class Run:
         import rerun.notebook
         from rerun.chunk import RrdReader
 
-        from nnql_swarm.recording.blueprint import blueprint
+        from nnql_swarm.recording.blueprint import recorded_blueprint
         from nnql_swarm.recording.sinks import APP_ID
 
         path = self.recording
         if path is None:
             raise FileNotFoundError(f"{self.path / RECORDING_FILE}: no recording (the run was "
                                     f"made with record=False, or is still going)")
+        chunks = RrdReader(str(path)).store().stream().to_chunks()
         stream = rr.RecordingStream(APP_ID, recording_id=self.config.run_id)
         viewer = rerun.notebook.Viewer(width=width, height=height, recording=stream,
-                                       blueprint=blueprint(self.config))
-        stream.send_chunks(RrdReader(str(path)).store())
+                                       blueprint=recorded_blueprint(self.config, chunks))
+        stream.send_chunks(chunks)
         stream.flush()  # the viewer holds every chunk until its page is ready for them
         return viewer
 

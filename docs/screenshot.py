@@ -11,7 +11,9 @@ makes the four runs of the docs and their pictures: the default run (``launch/sw
 agents, distributed, with the paper's QL as the curves' reference) as ``docs/viewer.png``, the
 README's; 8 agents with walls (``--obstacle-density 0.2``, the reference too) as
 ``docs/viewer-walls.png``; 64 agents on 32 x 32 as ``docs/viewer-64.png``; 128 agents on
-40 x 40 as ``docs/viewer-128.png`` (``--in-process``, the same runs as distributed). The runs go to
+40 x 40 as ``docs/viewer-128.png``; 8 agents in a 15 x 15 maze (``--map maze:15x15``), where
+agents end short of their goals, as ``docs/viewer-maze.png`` (``--in-process``, the same runs
+as distributed). The runs go to
 ``runs/screenshots/``. Each picture is taken once the viewer shows what ``tests/browser.py``
 checks of the newest episode (the grid, walls, labels, moves and waits), or after ``--wait``.
 
@@ -37,6 +39,7 @@ DOCS_RUNS = {
                                    "--reference"]),
     "viewer-64.png": ("64-agents", ["--agents", "64", "--grid", "32x32", "--in-process"]),
     "viewer-128.png": ("128-agents", ["--agents", "128", "--grid", "40x40", "--in-process"]),
+    "viewer-maze.png": ("maze", ["--agents", "8", "--map", "maze:15x15", "--in-process"]),
 }
 """Each picture of the docs: its run's id under ``runs/screenshots/`` and options."""
 

@@ -40,8 +40,9 @@ from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.launch.experiment_maps import run_maps
 from nnql_swarm.terminal.cli import (
-    EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, comma_choices, make_directory,
-    parse_grid, parse_workers, prepare_simulator, program_name, progress, raise_terminated,
+    DefaultsHelpFormatter, EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, comma_choices,
+    make_directory, parse_grid, parse_workers, prepare_simulator, program_name, progress,
+    raise_terminated,
 )
 from nnql_swarm.recording.curves import log_swarm_curves
 
@@ -210,16 +211,19 @@ def build_swarm_parser() -> OneLineParser:
         prog=f"{program_name()} swarm",
         description="The swarm experiment: every learning preset (the paper's QL and nnQL, the "
         "best options, the shield, n = 2, DAQL, the oracle) over seeds, on the swarm simulator.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsHelpFormatter,
     )
     add = parser.add_argument
     add("--agents", type=bounded(int, 1), default=d.agents, metavar="N", help="agents per swarm")
     add("--seeds", type=bounded(int, 1), default=d.seeds, metavar="N", help="runs per variant")
     add("--seed-base", type=bounded(int, 0), default=d.seed_base, metavar="S",
         help="first seed; seeds are S, S+1, ...")
-    add("--episodes", type=bounded(int, 5), default=d.episodes, metavar="N")
-    add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N")
-    add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH")
+    add("--episodes", type=bounded(int, 5), default=d.episodes, metavar="N",
+        help="episodes of each run (at least 5)")
+    add("--max-steps", type=bounded(int, 1), default=d.max_steps, metavar="N",
+        help="steps per episode at most")
+    add("--grid", type=parse_grid, default=(d.width, d.height), metavar="WxH",
+        help=f"grid size, width x height (default: {d.width}x{d.height})")
     add("--obstacle-density", type=float, default=d.obstacle_density, metavar="P",
         help="fraction of the grid's cells that are walls (each seed its own map)")
     add("--on-target", choices=ON_TARGET, default=d.on_target,
@@ -232,7 +236,7 @@ def build_swarm_parser() -> OneLineParser:
         help="with --map: a MovingAI .scen file whose first N lines (N = --agents) are every "
              "episode's starts and goals")
     add("--variants", type=comma_choices(VARIANTS, "variants"), default=d.variants, metavar="LIST",
-        help=f"comma-separated, from {','.join(VARIANTS)}")
+        help=f"comma-separated, from {', '.join(VARIANTS)} (default: all of them)")
     add("--ablation", action="store_true",
         help="instead of the variants: best-nnql with each of its options beyond the paper "
              "taken back in turn, beside ql, nnql and best-ql")

@@ -22,8 +22,8 @@ from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGE
 from nnql_swarm.recording.curves import log_swarm_curves
 from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.terminal.cli import (
-    OneLineParser, Terminated, bounded, comma_choices, make_directory, parse_workers,
-    prepare_simulator, program_name, progress,
+    DefaultsHelpFormatter, OneLineParser, Terminated, bounded, comma_choices, make_directory,
+    parse_workers, prepare_simulator, program_name, progress,
 )
 from nnql_swarm.terrain.maps import MapError
 from nnql_swarm.terrain.pogema import FAMILIES as POGEMA_FAMILIES
@@ -83,7 +83,7 @@ def build_maps_parser() -> OneLineParser:
         "play the learned tables frozen (no learning, no random step) on held-out random maps, "
         "mazes and the warehouse at each agent count, beside the oracle and the paper's QL; and "
         "learn from scratch on an unseen random map.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
+        formatter_class=DefaultsHelpFormatter,
     )
     add = parser.add_argument
     add("--suite", choices=SUITES, default="project",
@@ -96,12 +96,14 @@ def build_maps_parser() -> OneLineParser:
              "nothing trained")
     add("--seeds", type=bounded(int, 1), default=d.seeds, metavar="N",
         help="policies, each trained and tested on maps of its own")
-    add("--seed-base", type=bounded(int, 0), default=d.seed_base, metavar="S")
+    add("--seed-base", type=bounded(int, 0), default=d.seed_base, metavar="S",
+        help="first seed; seeds are S, S+1, ...")
     add("--train-maps", type=bounded(int, 1), default=d.train_maps, metavar="N",
         help="random training maps per seed")
     add("--train-episodes", type=bounded(int, 1), default=d.train_episodes, metavar="N",
         help="episodes on each training map")
-    add("--train-agents", type=bounded(int, 1, 1024), default=d.train_agents, metavar="N")
+    add("--train-agents", type=bounded(int, 1, 1024), default=d.train_agents, metavar="N",
+        help="agents on each training map")
     add("--test-maps", type=bounded(int, 1), default=d.test_maps, metavar="N",
         help="held-out maps per family and seed")
     add("--instances", type=bounded(int, 1), default=argparse.SUPPRESS, metavar="N",

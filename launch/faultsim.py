@@ -28,7 +28,7 @@ import traceback
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from nnql_swarm.terminal.cli import OneLineParser, progress
+from nnql_swarm.terminal.cli import DefaultsHelpFormatter, OneLineParser, progress
 from nnql_swarm.kernel.jit import plain_python_environment
 
 CHUNK = 25
@@ -151,7 +151,7 @@ def run_schedules(count: int, seed_base: int, agents: int = 8, workers: int = 2,
 
 def build_parser() -> argparse.ArgumentParser:
     p = OneLineParser(description=__doc__.split("\n\n")[0],
-                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                      formatter_class=DefaultsHelpFormatter)
     p.add_argument("--schedules", type=int, default=1000, help="how many schedules to run")
     p.add_argument("--seed-base", type=int, default=0, help="the first schedule's seed")
     p.add_argument("--agents", type=int, default=8, help="agents per schedule")

@@ -22,7 +22,6 @@ import tempfile
 import time
 from pathlib import Path
 from typing import TYPE_CHECKING
-from urllib.parse import quote
 
 from nnql_swarm.recording.viewers import port_taken
 
@@ -67,35 +66,41 @@ def has_display() -> bool:
     return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
 
 
-def web_urls(host: str, web_port: int, grpc_port: int) -> str:
-    """The web viewer's URL at ``host``, pointed at the recording's gRPC server there."""
-    from nnql_swarm.recording.viewers import grpc_url
-
-    return f"http://{host}:{web_port}/?url={quote(grpc_url(grpc_port, host), safe='')}"
-
-
 def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> int:
-    """Serve ``files`` to the web viewer until Ctrl-C (or SIGTERM); returns the exit code."""
+    """Serve ``files`` to the web viewer until Ctrl-C (or SIGTERM); returns the exit code.
+
+    ``rerun --serve-web`` serves the page and the recording on this machine only; in front of
+    it, on ``bind:web_port``, one origin for both (``recording.one_origin``), which a browser
+    elsewhere can read."""
     from nnql_swarm.recording.binary import rerun_binary
-    from nnql_swarm.recording.viewers import public_host, stop_process
+    from nnql_swarm.recording.one_origin import OneOrigin
+    from nnql_swarm.recording.viewers import public_host, stop_process, web_url
+    from nnql_swarm.transport.ports import free_port
 
     for port in (web_port, grpc_port):
         if port_taken(bind, port):
             raise ViewError(f"port {port} is in use; choose others with --web-port and --grpc-port")
+    page_port = free_port()
     with tempfile.TemporaryFile("w+") as log:
         server = subprocess.Popen(
-            [*rerun_binary(), "--serve-web", "--bind", bind, "--web-viewer-port", str(web_port),
-             "--port", str(grpc_port), *map(str, files)],
+            [*rerun_binary(), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port",
+             str(page_port), "--port", str(grpc_port), *map(str, files)],
             stdout=log, stderr=log, start_new_session=True)
         previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        front = None
         try:
-            local = "127.0.0.1" if bind in ("0.0.0.0", "::") else bind
-            if not listening(server, local, (grpc_port, web_port)):
+            if not listening(server, "127.0.0.1", (grpc_port, page_port)):
                 raise ViewError(f"rerun --serve-web did not start: {last_line(log)}")
-            here = web_urls(local, web_port, grpc_port)
+            try:
+                front = OneOrigin(bind, web_port, page_port, grpc_port)
+            except OSError as error:
+                raise ViewError(f"cannot listen on {bind}:{web_port}: "
+                                f"{error.strerror or error}") from None
+            local = "127.0.0.1" if bind in ("0.0.0.0", "::") else bind
+            here = web_url(local, web_port)
             shown = ", ".join(str(f) for f in files)
             if bind in ("0.0.0.0", "::"):
-                there = web_urls(public_host(), web_port, grpc_port)
+                there = web_url(public_host(), web_port)
                 print(f"serving {shown} to the web viewer at {there} (on this machine: {here}); "
                       f"Ctrl-C to stop", flush=True)
             else:
@@ -109,6 +114,8 @@ def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> in
         finally:
             for s, handler in previous.items():
                 signal.signal(s, handler)
+            if front is not None:
+                front.close()
             stop_process(server)
 
 
@@ -170,7 +177,8 @@ def build_parser() -> "OneLineParser":
                    help="serve the web viewer even where there is a display")
     p.add_argument("--web-port", type=int, default=9090, help="HTTP port of the web viewer (9090)")
     p.add_argument("--grpc-port", type=int, default=9876,
-                   help="gRPC port the web viewer reads the recording from (9876)")
+                   help="port of the recording's gRPC server, on this machine only: the page "
+                        "reads it through --web-port (9876)")
     p.add_argument("--bind", default="0.0.0.0",
                    help="address the web viewer listens on (0.0.0.0: every interface; "
                         "127.0.0.1: this machine only)")

@@ -36,7 +36,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from nnql_swarm.terminal.cli import OneLineParser
+from nnql_swarm.terminal.cli import DefaultsHelpFormatter, OneLineParser
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.messages import MAX_AGENTS
 
@@ -338,7 +338,7 @@ def generate(out: Path, n_agents: int, router_hosts: list[str], port: int = DEFA
 
 def build_parser() -> OneLineParser:
     p = OneLineParser(description=__doc__.split("\n\n")[0],
-                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                      formatter_class=DefaultsHelpFormatter)
     p.add_argument("--out", type=Path, required=True, help="directory to write into")
     p.add_argument("--agents", type=int, required=True, help="number of agents")
     p.add_argument("--router-host", action="append", default=[], metavar="HOST",

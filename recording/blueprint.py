@@ -4,9 +4,9 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.recording.loggers import heat_map_agents
 
 
-REFERENCE_STEPS_SPAN = (0.9, 4.0)
-"""The steps plot's vertical span when the paper's QL's curves are in the recording: QL's ratio
-runs far above the run's own, which would flatten it."""
+REFERENCE_STEPS = "metrics/steps/paper_ql"
+"""The paper's QL's steps ratio (``recording.reference``): 10 to 20 where the run's own is 1 to
+4, it has a plot of its own beside the run's, which it would flatten."""
 
 
 def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | None = 0,
@@ -27,7 +27,8 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     world_view = rrb.Spatial2DView(
         origin="world", name="World: the episode's moves, waits and collisions",
         visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
-                                         y_range=[-0.6, config.height - 0.4]),
+                                         y_range=[-0.5 - world_viz.caption_room(config),
+                                                  config.height - 0.4]),
         overrides={path: episode for path in (world_viz.INTENTS, world_viz.NEGOTIATION,
                                               world_viz.COLLISIONS)},
     )
@@ -40,25 +41,29 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     whole_run = rrb.TimeAxis(view_range=rrb.TimeRange(start=rrb.TimeRangeBoundary.infinite(),
                                                       end=rrb.TimeRangeBoundary.infinite()))
 
-    def plot(span: tuple[float, float] | None = None, **view) -> rrb.TimeSeriesView:
+    def plot(span: tuple[float, float] | None = None, legend: bool = False,
+             **view) -> rrb.TimeSeriesView:
+        """A learning curve. No key over the curves where the title says what they are; the
+        negotiation wait's, one curve per agent, in the top right corner."""
         axis = None if span is None else rrb.ScalarAxis(range=span)
         return rrb.TimeSeriesView(axis_x=whole_run, axis_y=axis,
-                                  plot_legend=rrb.PlotLegend(corner="RightBottom"), **view)
+                                  plot_legend=rrb.PlotLegend(corner="RightTop", visible=legend),
+                                  **view)
 
     n = config.n_agents
+    steps = ["metrics/steps/over_shortest", "metrics/steps/smoothed", "metrics/steps/shortest_path"]
     metrics = rrb.Grid(
-        plot((0.0, 1.05), origin="metrics/arrived_share",
-             name="Share of agents on their goal at the episode's end"),
-        plot(REFERENCE_STEPS_SPAN if reference else None, origin="metrics/steps",
-             name="Steps taken / shortest path (1: perfect)",
-             contents=["metrics/steps/over_shortest", "metrics/steps/shortest_path",
-                       "metrics/steps/paper_ql"]),
+        plot((0.0, 1.05), origin="metrics/arrived_share", name="Share of agents arrived"),
+        plot(origin="metrics/steps", contents=steps,
+             name="Steps / shortest, smoothed"),
         plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",
-             name="Agents in a collision, per episode"),
+             name="Agents in a collision"),
         plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),
-        plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)") if distributed
-        else plot(origin="metrics/steps/episode", name="Ticks per episode"),
-        plot(origin="metrics/ticks_per_s", name="Ticks per second"),
+        plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)", legend=True)
+        if distributed else plot(origin="metrics/steps/episode", name="Ticks per episode"),
+        plot(origin="metrics/steps", contents=[*steps, REFERENCE_STEPS],
+             name="Steps ratio: paper's QL in grey") if reference
+        else plot(origin="metrics/ticks_per_s", name="Ticks per second"),
         grid_columns=2, name="Learning curves (x: episode)",
     )
     from nnql_swarm.recording import known_map
@@ -87,11 +92,10 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     if map_agent is not None and 0 <= map_agent < n and known_map.shows_known_map(config):
         learned = rrb.Vertical(rrb.Spatial2DView(
             origin=known_map.ROOT, background=[255, 255, 255],
-            name=f"Agent {map_agent}'s known map and planned paths",
+            name=f"Agent {map_agent}'s known map and planned path",
             visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
-                                             y_range=[-0.6, config.height - 0.4]),
-            overrides={known_map.PATH: episode}),  # every path it planned in the episode
-            heat_maps, row_shares=[2, 3])
+                                             y_range=[-0.6, config.height - 0.4])),
+            heat_maps, row_shares=[2, 3])  # its newest path: all of an episode's are a comb
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(world_view, events, row_shares=[3, 1] if n < 64 else [4, 1]),
@@ -104,3 +108,26 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
         rrb.TimePanel(timeline="episode", play_state="following", state="collapsed"),
         collapse_panels=False,
     )
+
+
+def recorded_blueprint(config: SwarmConfig, chunks):
+    """The blueprint of a saved run, from its recording's chunks: what the launcher told the
+    world (a distributed run, ``--reference``, ``--map-agent``) read back from what it logged,
+    so that a recording opened anywhere else (the notebook's ``show``) opens on the same view.
+
+    Distributed: agents logged their negotiation wait over time; reference: the paper's QL's
+    steps curve is there; map agent: the id in the known map's agent label (None: no map)."""
+    from nnql_swarm.recording import known_map
+    from nnql_swarm.recording.reference import CURVES
+
+    distributed, reference, map_agent = False, False, None
+    for chunk in chunks:
+        entity = chunk.entity_path.lstrip("/")
+        if entity.startswith("metrics/negotiation/latency_ms/") and not chunk.is_static:
+            distributed = True
+        elif entity in CURVES:
+            reference = True
+        elif entity == known_map.AGENT and chunk.is_static:
+            labels = chunk.to_record_batch().column("Points2D:labels").to_pylist()
+            map_agent = int(labels[0][0].split()[-1])
+    return blueprint(config, distributed, map_agent, reference)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.recording.merge import merge_parts
+from nnql_swarm.recording.one_origin import OneOrigin
 from nnql_swarm.recording.sinks import RecordingPlan
 from nnql_swarm.recording.viewers import RecordingError, reachable, serve_web, spawn_viewer
 from nnql_swarm.storage.runfiles import PARTS_DIR
@@ -25,18 +26,19 @@ class RecordingSession:
     ``server``: the stream whose gRPC server serves the web viewer, if the launcher serves it."""
 
     def __init__(self, plan: RecordingPlan | None, out: Path, server=None,
-                 web_url: str | None = None) -> None:
+                 web_url: str | None = None, front: "OneOrigin | None" = None) -> None:
         self.plan = plan
         self.out = Path(out)
         self.server = server
         self.web_url = web_url
+        self.front = front  # the web viewer's one origin, with the server
 
     @staticmethod
     def start(args, config: SwarmConfig, out: Path) -> "RecordingSession":
         """From the launcher's Rerun options. A viewer that cannot be reached or started costs a
         warning on stderr: the run goes on, recording to file (unless ``--no-record``)."""
         parts = None if args.no_record else Path(out) / PARTS_DIR
-        url, server, web_url = None, None, None
+        url, server, web_url, front = None, None, None, None
         if args.rerun_connect:
             url = args.rerun_connect
             if not reachable(url):
@@ -49,13 +51,13 @@ class RecordingSession:
                 print(f"rerun: {error}; not streaming to a viewer", file=sys.stderr)
         elif args.rerun_serve_web:
             try:
-                server, url, web_url = serve_web(config.run_id, args.rerun_port,
-                                                 args.rerun_web_port)
+                server, url, web_url, front = serve_web(config.run_id, args.rerun_port,
+                                                        args.rerun_web_port)
             except RecordingError as error:
                 print(f"rerun: {error}; not serving the web viewer", file=sys.stderr)
         plan = RecordingPlan(config.run_id, parts, url, getattr(args, "map_agent", 0),
                              getattr(args, "reference", False))
-        return RecordingSession(plan if plan.enabled else None, out, server, web_url)
+        return RecordingSession(plan if plan.enabled else None, out, server, web_url, front)
 
     @staticmethod
     def files_only(record: bool, config: SwarmConfig, out: Path) -> "RecordingSession":
@@ -79,6 +81,8 @@ class RecordingSession:
                 for s, handler in previous.items():
                     signal.signal(s, handler)
                 self.server.disconnect()
+                if self.front is not None:
+                    self.front.close()
         return merged
 
 

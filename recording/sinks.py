@@ -47,7 +47,11 @@ class RecordingPlan:
             sinks.append(rr.FileSink(str(Path(self.parts_dir) / f"{role}.{os.getpid()}.rrd")))
         if self.url is not None:
             sinks.append(rr.GrpcSink(self.url))
-        stream.set_sinks(*sinks, default_blueprint=default_blueprint)
+        stream.set_sinks(*sinks)
+        if default_blueprint is not None:
+            # Made active, not only the default: a live viewer that has already built its own
+            # layout from the agents' first data would keep that one.
+            stream.send_blueprint(default_blueprint, make_active=True, make_default=True)
         return stream
 
 

@@ -30,6 +30,12 @@ def grpc_url(port: int, host: str = "127.0.0.1") -> str:
     return f"rerun+http://{host}:{port}/proxy"
 
 
+def web_url(host: str, web_port: int) -> str:
+    """The web viewer's page at ``host``, reading the recording from the same origin
+    (``recording.one_origin``)."""
+    return f"http://{host}:{web_port}/?url={quote(grpc_url(web_port, host), safe='')}"
+
+
 def check_viewer_url(url: str) -> str:
     """A viewer URL as ``--rerun-connect`` takes it; raises ArgumentTypeError otherwise."""
     parsed = urlparse(url)
@@ -121,25 +127,31 @@ def _quiet_children():
 def serve_web(run_id: str, grpc_port: int, web_port: int):
     """Serve the run to the web viewer from this process: a gRPC server the run's processes
     stream into, which keeps what they sent for viewers that come later (``rr.serve_grpc``),
-    and the web viewer pointed at it (``rr.serve_web_viewer``), both on every interface.
-    Returns ``(stream, url, web_url)``; the server lives as long as ``stream``."""
+    the web viewer's page (``rr.serve_web_viewer``, on a port of its own), and in front of both,
+    on ``web_port`` of every interface, one origin for the page and its data
+    (``recording.one_origin``). Returns ``(stream, url, web_url, front)``; the gRPC server lives
+    as long as ``stream``, the front until its ``close``."""
     import rerun as rr
+
+    from nnql_swarm.recording.one_origin import OneOrigin
+    from nnql_swarm.transport.ports import free_port
 
     for port in (grpc_port, web_port):
         if port_taken("0.0.0.0", port):  # rr.serve_grpc would only log it
             raise RecordingError(f"port {port} is in use")
     stream = rr.RecordingStream(APP_ID, recording_id=run_id)
+    page_port = free_port()
     try:
         url = stream.serve_grpc(grpc_port=grpc_port)
-        rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=url)
+        rr.serve_web_viewer(web_port=page_port, open_browser=False, connect_to=url)
+        front = OneOrigin("0.0.0.0", web_port, page_port, grpc_port)
     except Exception as error:  # noqa: BLE001 - Rerun's own errors (a port in use)
         stream.disconnect()
         raise RecordingError(f"cannot serve the web viewer on ports {grpc_port}/{web_port}: "
                              f"{error}") from None
-    host = public_host()
-    web_url = f"http://{host}:{web_port}/?url={quote(grpc_url(grpc_port, host), safe='')}"
-    print(f"rerun: web viewer at {web_url}", file=sys.stderr)
-    return stream, url, web_url
+    address = web_url(public_host(), web_port)
+    print(f"rerun: web viewer at {address}", file=sys.stderr)
+    return stream, url, address, front
 
 
 def public_host() -> str:

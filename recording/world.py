@@ -56,6 +56,9 @@ TRAILS = "world/trails"
 INTENTS = "world/intents"
 NEGOTIATION = "world/negotiation"
 COLLISIONS = "world/collisions"
+STARTS = "world/starts"
+STUCK = "world/stuck"
+CAPTION = "world/caption"
 EVENTS = "events"
 LEGEND = "legend"
 
@@ -64,11 +67,29 @@ WALL_HALF = 0.2
 of it, so that the box is a solid block 0.88 of a cell wide."""
 WALL_LINE = 0.24
 
+def caption_room(config: SwarmConfig) -> float:
+    """The room above the grid, in cells, that the world view leaves for its caption (the tick's
+    episode and step): about as many pixels at any grid size, so that the caption's label never
+    covers the grid's top line."""
+    return 0.04 * max(config.width, config.height) + 0.6
+
+
+def caption_y(config: SwarmConfig) -> float:
+    """Where the caption stands: in the middle of the room above the grid."""
+    return -0.5 - caption_room(config) / 2
+
+STUCK_RING = 0.38 * np.stack([np.cos(np.linspace(0, 2 * np.pi, 17)),
+                              np.sin(np.linspace(0, 2 * np.pi, 17))], axis=1).astype(np.float32)
+"""The ring around an agent an episode ended short of its goal, about its cell's centre: round
+the agent's disc (0.3), inside the cell, clear of the grid's lines."""
+
 METRICS = {
     "metrics/arrived_share": "share of the agents on their goal when the episode ended (0 to 1)",
     "metrics/steps/over_shortest": "steps the agents took over their shortest paths "
                                    "(agent_steps / shortest_sum; 1 is the best possible)",
     "metrics/steps/shortest_path": "the reference of over_shortest: 1, every agent on a shortest path",
+    "metrics/steps/smoothed": "over_shortest smoothed: an exponential moving average over "
+                              "episodes (SMOOTHING), from the run's (or the resume's) first",
     "metrics/collisions/per_episode": "collisions in the episode (each colliding agent counts one)",
     "metrics/collisions/cumulative": "collisions since the run started",
     "metrics/steps/per_agent": "mean steps an agent took until it arrived (agent_steps / agents)",
@@ -86,6 +107,7 @@ SERIES_NAMES = {
     "metrics/arrived_share": "arrived (share of agents)",
     "metrics/steps/over_shortest": "steps / shortest path",
     "metrics/steps/shortest_path": "shortest path (1)",
+    "metrics/steps/smoothed": "smoothed",
     "metrics/collisions/per_episode": "collisions in the episode",
     "metrics/collisions/cumulative": "collisions since the start",
     "metrics/steps/per_agent": "steps per agent",
@@ -101,11 +123,15 @@ SERIES_NAMES = {
 
 SERIES_COLOURS = {
     "metrics/arrived_share": (0, 130, 60),
-    "metrics/steps/over_shortest": (0, 90, 181),
+    "metrics/steps/over_shortest": (120, 170, 225),
+    "metrics/steps/smoothed": (0, 60, 140),
     "metrics/steps/shortest_path": (150, 150, 150),
     "metrics/collisions/per_episode": (230, 40, 40),
     "metrics/collisions/cumulative": (120, 20, 20),
 }
+
+SMOOTHING = 0.1
+"""The weight of each new episode in the smoothed steps ratio: a memory of about ten episodes."""
 
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
@@ -154,8 +180,10 @@ Discs are agents, labelled with their id; the box with the same id and colour is
 goal. Every agent has a colour of its own.{walls}
 On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
 move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
-discs), and the agents where the episode left them. On the `tick` timeline it shows one tick:
-where each agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
+discs), and the agents where the episode left them; a small dot in an agent's colour is where
+it started, a red ring around an agent the episode left short of its goal. On the `tick`
+timeline it shows one tick (the caption above the grid names its episode and step): where each
+agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
 {waits}
 
 **Learning curves** run against episodes: the share of agents that arrived, the steps they took
@@ -183,7 +211,7 @@ def tables(config: SwarmConfig) -> str:
     return (f"**Known map** (one agent's, `--map-agent`): the walls it has seen (dark blocks) "
             f"and those it has not (pale outlines), the parked agents it plans around (grey), "
             f"and its planned path to its goal on the map it knows (a line in its colour; on the "
-            f"`episode` timeline every path it planned in the episode), unknown cells taken as "
+            f"`episode` timeline the last it planned in the episode), unknown cells taken as "
             f"free.\n\n"
             f"**Q_DS** is read on that map: its state is {state}, so it is a table, one row per "
             f"state: the best move, its value (up to {config.goal_reward:g}, the goal reward), "
@@ -218,6 +246,7 @@ class WorldViz:
         n = config.n_agents
         self.colors = agent_colors(n)
         self.cumulative_collisions = collisions_before
+        self._smoothed: float | None = None  # the steps ratio's moving average
         self.next_tick = 0
         self._before: tuple | None = None  # cells at the start of the next tick
         self._arrived: tuple = (False,) * n
@@ -232,7 +261,8 @@ class WorldViz:
         # agent's cell and whether it had arrived at the tick's start, the actions, who collided.
         self._buffer: list[tuple] = []
         self._starts: dict[int, np.ndarray] = {}  # the buffered episodes' start cells
-        self._goals: list[tuple[int, int, np.ndarray]] = []
+        self._goals: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # goals, starts
+        self._stuck: list[tuple[int, int, np.ndarray]] = []  # at each episode's end
         self._metrics = SeriesColumns()
         self._events = TextColumns(EVENTS)
         self._goal_cells: list = []  # the current episode's goals
@@ -280,6 +310,12 @@ class WorldViz:
         rec.log(LEGEND, rr.TextDocument(legend(c), media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log(COLLISIONS, rr.Points2D.from_fields(colors=[COLLISION_RED], radii=0.5,
                                                     draw_order=20.0), static=True)
+        rec.log(STARTS, rr.Points2D.from_fields(colors=with_alpha(self.colors, 150), radii=0.12,
+                                                draw_order=12.0), static=True)
+        rec.log(STUCK, rr.LineStrips2D.from_fields(colors=[COLLISION_RED], radii=0.045,
+                                                   draw_order=25.0), static=True)
+        rec.log(CAPTION, rr.Points2D.from_fields(colors=[[90, 90, 90]], radii=0.01,
+                                                 show_labels=True, draw_order=50.0), static=True)
         for path in METRICS:
             colour = SERIES_COLOURS.get(path)
             rec.log(path, rr.SeriesLines(names=SERIES_NAMES[path], widths=2.0,
@@ -310,12 +346,17 @@ class WorldViz:
             self.known_map.observe(report.tick, report.episode, starts, before, self._arrived,
                                    self._goal_cells[agent])
         self._buffer.append((report.tick, report.episode, report.moved, before, self._arrived,
-                             report.actions, report.collided))
+                             report.actions, report.collided,
+                             report.tick - self._episode_first_tick))
         if report.collided:
             step = f"step {world.step}" if report.moved else "end"
             self._events.add(report.tick, report.episode,
                              f"{step}: collision of agents "
                              f"{', '.join(map(str, report.collided))}", "WARN")
+        if report.episode_row is not None:  # its end tick: nobody moves, as the episode left them
+            short = [cell for cell, home in zip(before, self._arrived) if not home]
+            self._stuck.append((report.tick, report.episode,
+                                np.array(short, np.float32).reshape(-1, 2)))
         self._before, self._arrived = world.cells, world.arrived_flags
         self.next_tick = report.tick + 1
         if report.episode_row is not None:
@@ -329,7 +370,9 @@ class WorldViz:
         episode = swarm_episode(c.seed, report.episode, c.width, c.height, c.n_agents,
                                 c.obstacle_density, c.map_rows, c.scenario)
         self._starts[report.episode] = episode.starts.astype(np.float32)
-        self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32)))
+        self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32),
+                            episode.starts.astype(np.float32)))
+        self._stuck.append((report.tick, report.episode, np.zeros((0, 2), np.float32)))
         self._goal_cells = episode.goals.tolist()
 
     def _end_episode(self, report: TickReport, row: dict) -> None:
@@ -340,9 +383,13 @@ class WorldViz:
         rate = ticks / max(now - started, 1e-9)
         self._episode_clock, self._episode_first_tick = now, report.tick + 1
         self.cumulative_collisions += row["collisions"]
+        ratio = row["agent_steps"] / max(row["shortest_sum"], 1)
+        self._smoothed = ratio if self._smoothed is None else \
+            (1 - SMOOTHING) * self._smoothed + SMOOTHING * ratio
         values = {
             "metrics/arrived_share": row["arrived"] / n,
-            "metrics/steps/over_shortest": row["agent_steps"] / max(row["shortest_sum"], 1),
+            "metrics/steps/over_shortest": ratio,
+            "metrics/steps/smoothed": self._smoothed,
             "metrics/steps/shortest_path": 1.0,
             "metrics/collisions/per_episode": row["collisions"],
             "metrics/collisions/cumulative": self.cumulative_collisions,
@@ -366,12 +413,21 @@ class WorldViz:
         """Send everything buffered: the ticks' geometry computed at once, one call per entity."""
         self.clock.flushed()
         if self._goals:
-            g_ticks, g_episodes, goals = zip(*self._goals)
+            g_ticks, g_episodes, goals, starts = zip(*self._goals)
             self._goals = []
+            index = time_columns(g_ticks, g_episodes)
             centers = np.concatenate(goals)
-            self.rec.send_columns(GOALS, time_columns(g_ticks, g_episodes), rr.Boxes2D.columns(
+            self.rec.send_columns(GOALS, index, rr.Boxes2D.columns(
                 centers=centers, half_sizes=np.full(centers.shape, 0.42, np.float32)
             ).partition([len(g) for g in goals]))
+            self.rec.send_columns(STARTS, index, rr.Points2D.columns(
+                positions=np.concatenate(starts)).partition([len(g) for g in starts]))
+        if self._stuck:
+            s_ticks, s_episodes, cells = zip(*self._stuck)
+            self._stuck = []
+            rings = np.concatenate(cells)[:, None, :] + STUCK_RING[None]
+            self.rec.send_columns(STUCK, time_columns(s_ticks, s_episodes), rr.LineStrips2D.columns(
+                strips=rings).partition([len(c) for c in cells]))
         if self._buffer:
             self._send_ticks()
         for tick, episode, steps in self._ended:  # every tick of theirs is counted now
@@ -386,7 +442,7 @@ class WorldViz:
     def _send_ticks(self) -> None:
         k, n = len(self._buffer), self.config.n_agents
         rec = self.rec
-        tick_list, episode_list, moved, before, arrived_then, actions, collided = \
+        tick_list, episode_list, moved, before, arrived_then, actions, collided, steps = \
             zip(*self._buffer)
         self._buffer = []
         ticks, episodes = np.array(tick_list, dtype=np.int64), np.array(episode_list, np.int64)
@@ -396,6 +452,11 @@ class WorldViz:
         cells = positions.astype(np.float32)
         flat = cells.reshape(-1, 2)
         rec.send_columns(AGENTS, index, rr.Points2D.columns(positions=flat).partition(each))
+        rec.send_columns(CAPTION, index, rr.Points2D.columns(
+            positions=np.tile(np.array([[(self.config.width - 1) / 2, caption_y(self.config)]],
+                                       np.float32), (k, 1)),
+            labels=[f"episode {e}, {f'step {s}' if m else 'its end'} (tick {t})"
+                    for e, s, t, m in zip(episode_list, steps, tick_list, moved)]))
         moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32).reshape(-1, 2)
         rec.send_columns(INTENTS, index,
                          rr.Arrows2D.columns(origins=flat, vectors=moves).partition(each))

@@ -71,6 +71,23 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(EXIT_USAGE, f"{self.prog}: error: {message} (see --help)\n")
 
 
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Help that adds ``(default: X)`` to an option whose default is worth reading: not to a
+    required option, an on/off flag, an option without a default (None, empty), nor one whose
+    help already names its default; a tuple or list reads as its items, comma-separated."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (action.required or not action.option_strings or action.nargs == 0
+                or default is None or default is argparse.SUPPRESS
+                or isinstance(default, bool) or default in ((), [], "")
+                or "default" in text):
+            return text
+        shown = ",".join(map(str, default)) if isinstance(default, (tuple, list)) else str(default)
+        return f"{text} (default: {shown.replace('%', '%%')})".lstrip()
+
+
 PLAIN_INTERVAL_S = 5.0
 """Where stderr is not a terminal (CI logs, files), the bar is written at most this often."""
 

@@ -413,3 +413,18 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     if len(origins):  # an episode in which nobody waited has no such arrows
         found["waits"] = check_arrows(image, grid, origins, vectors, [WAIT_COLOUR] * len(origins))
     return found
+
+
+def check_layout(image: np.ndarray, config) -> Grid:
+    """The designed first view (``recording.blueprint``), by where the world view is: the run's
+    grid at the page's left edge, over a quarter of the page wide. Rerun's automatic layout,
+    which the viewer falls back on without the blueprint, puts a small world view among a grid
+    of equal panels. Raises AssertionError saying what it found."""
+    grid = find_grid(image, config.width, config.height)
+    x0, y0, x1, _ = grid.box
+    width = image.shape[1]
+    if x0 > 0.05 * width or x1 - x0 < 0.25 * width or y0 > 0.15 * image.shape[0]:
+        raise AssertionError(f"not the designed layout: the grid spans x {x0}..{x1}, y from "
+                             f"{y0}, of a page {width} wide (the world view is at the left, "
+                             f"over a quarter of the page)")
+    return grid

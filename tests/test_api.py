@@ -164,6 +164,40 @@ def test_show_hands_the_whole_recording_to_the_notebook_viewer(example):
         Run.open(ROOT / "nonexistent")
 
 
+def view_names(reader, store) -> list[str]:
+    """The names of the views and containers of a blueprint in a recording file."""
+    names = []
+    for chunk in reader.store(store=store).stream():
+        batch = chunk.to_record_batch()
+        for column in batch.schema.names:
+            if column.endswith(":display_name"):
+                names += [name for row in batch.column(column).to_pylist() for name in row or []]
+    return sorted(names)
+
+
+@pytest.mark.parametrize("how", ["in-process", "distributed"])
+def test_show_opens_on_the_layout_the_run_was_recorded_with(example, how):
+    """The notebook's viewer gets the blueprint the run's world sent: a distributed run's
+    negotiation wait, an in-process run's ticks per episode, the known map of its map agent."""
+    from rerun.chunk import RrdReader
+
+    out, _ = example
+    run = Run.open(out / how)
+    blueprints = []
+    for i, (_, (data,)) in enumerate(run.show()._viewer._event_queue):
+        part = out / f"shown-{how}-{i}.rrd"
+        part.write_bytes(data)
+        shown = RrdReader(str(part))
+        blueprints += [(shown, store) for store in shown.blueprints()]
+    recorded = RrdReader(str(run.recording))
+    assert len({store.recording_id for _, store in blueprints}) == 1, "one blueprint"
+    names = sorted(name for reader, store in blueprints for name in view_names(reader, store))
+    assert names == view_names(recorded, recorded.blueprints()[0])
+    assert ("Negotiation wait (ms)" in names) == (how == "distributed")
+    assert ("Ticks per episode" in names) == (how == "in-process")
+    assert "Agent 0's known map and planned path" in names
+
+
 def test_the_notebook_runs_in_a_kernel_and_shows_the_viewer_inline(tmp_path, monkeypatch):
     import nbformat
     from nbclient import NotebookClient

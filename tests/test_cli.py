@@ -188,3 +188,49 @@ def test_the_command_is_a_swarm_made_from_its_options(monkeypatch, tmp_path):
     (swarm,) = played
     assert swarm.config == Swarm(agents=3, seed=4, run_id="cmd").config
     assert swarm.out == out and (out / "config.json").is_file()
+
+
+
+HELPED = (("nnql-swarm",), ("nnql-experiment",), ("nnql-experiment", "swarm"),
+          ("nnql-experiment", "maps"), ("nnql-view",), ("nnql-faultsim",), ("nnql-router",),
+          ("nnql-secure",))
+
+
+@pytest.mark.parametrize("command", HELPED, ids=" ".join)
+def test_no_help_shows_a_default_in_python(command):
+    """No default that is Python's (None, False, [], a tuple), none on a required option."""
+    text = " ".join(help_of(str(BIN / command[0]), *command[1:]).split())
+    for python in ("(default: None)", "(default: False)", "(default: [])", "(default: (",
+                   "default: True)"):
+        assert python not in text, f"{python} in {' '.join(command)} --help"
+
+
+def test_every_option_of_every_command_says_what_it_is():
+    from nnql_swarm.api import command
+    from nnql_swarm.launch import experiment, experiment_maps, faultsim, view
+    from nnql_swarm.operations import router, secure
+
+    parsers = {"swarm": command.build_parser(), "experiment": experiment.build_parser(),
+               "experiment swarm": experiment.build_swarm_parser(),
+               "experiment maps": experiment_maps.build_maps_parser(),
+               "view": view.build_parser(), "faultsim": faultsim.build_parser(),
+               "router": router.build_parser(), "secure": secure.build_parser()}
+    unexplained = [f"{name} {action.option_strings[0]}" for name, parser in parsers.items()
+                   for action in parser._actions
+                   if action.option_strings and not (action.help or "").strip()]
+    assert not unexplained
+
+def test_the_help_formatter_leaves_out_defaults_not_worth_reading():
+    from nnql_swarm.terminal.cli import DefaultsHelpFormatter, OneLineParser
+
+    parser = OneLineParser(prog="p", formatter_class=DefaultsHelpFormatter)
+    parser.add_argument("--out", required=True, help="where")
+    parser.add_argument("--hosts", action="append", default=[], help="hosts")
+    parser.add_argument("--fast", action="store_true", help="fast")
+    parser.add_argument("--grid", default=(11, 11), help="grid")
+    parser.add_argument("--k", type=int, default=7, help="k")
+    parser.add_argument("--tag", default=None, help="tag")
+    text = " ".join(parser.format_help().split())
+    assert "--k K k (default: 7)" in text and "--grid GRID grid (default: 11,11)" in text
+    assert "--out OUT where --hosts" in text and "--fast fast --grid" in text
+    assert "--tag TAG tag" in text and "None" not in text

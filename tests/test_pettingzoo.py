@@ -194,6 +194,31 @@ def test_human_saves_its_frames_to_a_recording(tmp_path):
     assert steps == [0, 1, 2, 3]
 
 
+def test_human_draws_every_agents_goal(tmp_path):
+    """Rerun draws a box per half-size given: every goal needs its own."""
+    path = tmp_path / "frames.rrd"
+    env = SwarmGridEnv(n_agents=8, render_mode="human", rerun=path)
+    env.reset(seed=4)
+    env.render()
+    env.close()
+    [batch] = [chunk.to_record_batch() for chunk in rr.chunk.RrdReader(path).stream()
+               if chunk.entity_path.lstrip("/") == "world/goals" and not chunk.is_static]
+    [centres] = batch.column("Boxes2D:centers").to_pylist()
+    [half_sizes] = batch.column("Boxes2D:half_sizes").to_pylist()
+    goals = sorted(zip(env._goal_x, env._goal_y))
+    assert sorted(tuple(round(v) for v in centre) for centre in centres) == goals
+    assert len(half_sizes) == len(goals) == 8
+
+
+def test_rgb_array_draws_every_agents_goal():
+    env = SwarmGridEnv(n_agents=8, render_mode="rgb_array", cell_pixels=10)
+    env.reset(seed=4)
+    image = env.render()
+    colors = agent_colors(8)
+    for i, (x, y) in enumerate(zip(env._goal_x, env._goal_y)):
+        assert (image[y * 10 + 1, x * 10 + 5] == colors[i]).all(), f"agent {i}'s goal"
+
+
 def test_an_unknown_render_mode_is_refused():
     with pytest.raises(ValueError, match="render mode"):
         SwarmGridEnv(render_mode="rgb")

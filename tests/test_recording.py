@@ -152,6 +152,47 @@ def test_positions_and_trails_are_the_worlds(run):
         assert np.array_equal(np.array([strip[-1] for strip in strips]), np.array(cells[tick]))
 
 
+def test_starts_stuck_agents_and_the_caption_are_the_worlds(run):
+    """Each episode's starts; at its end a ring around every agent not on its goal (as many as
+    episodes.csv says did not arrive, each where one of them stands), none while it goes; and on
+    every tick a caption naming its episode."""
+    _, out, recording = run
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    cells = recording.by_time("world/agents", "Points2D:positions")
+    starts = recording.by_time("world/starts", "Points2D:positions", "episode")
+    stuck = defaultdict(list)
+    for tick, rings in zip(recording.column("world/stuck", "tick"),
+                           recording.column("world/stuck", "LineStrips2D:strips")):
+        stuck[tick].append([np.mean(ring[:-1], axis=0).round(3).tolist() for ring in rings or []])
+    first_tick, ended_short = 0, 0
+    for row in read_episodes(out / "episodes.csv"):
+        episode, end = int(row["episode"]), int(row["end_tick"])
+        expected = swarm_episode(config.seed, episode, config.width, config.height,
+                                 config.n_agents).starts
+        assert np.array_equal(np.array(starts[episode]), expected)
+        assert stuck[first_tick][0] == []  # cleared as the episode starts
+        ringed = stuck[end][-1]
+        assert len(ringed) == config.n_agents - int(row["arrived"]), episode
+        goals = swarm_episode(config.seed, episode, config.width, config.height,
+                              config.n_agents).goals.tolist()
+        short = {tuple(cell) for cell, goal in zip(cells[end], goals) if cell != goal}
+        assert {tuple(cell) for cell in ringed} == short, episode  # the end tick moves nobody
+        ended_short += len(ringed)
+        first_tick = end + 1
+    assert ended_short > 0, "no agent ended short: the rings were not tested"
+    episodes = recording.by_time("world/agents", "episode")
+    for tick, labels in recording.by_time("world/caption", "Points2D:labels").items():
+        assert labels[0].startswith(f"episode {episodes[tick]}, ") and f"(tick {tick})" in labels[0]
+
+
+def smoothed(values):
+    """The exponential moving average the steps plot draws over the ratios (weight 0.1)."""
+    average = None
+    for value in values:
+        average = value if average is None else 0.9 * average + 0.1 * value
+        yield average
+
+
 def test_metrics_match_episodes_csv(run):
     _, out, recording = run
     rows = read_episodes(out / "episodes.csv")
@@ -166,6 +207,8 @@ def test_metrics_match_episodes_csv(run):
         "metrics/arrived_share": [int(r["arrived"]) / AGENTS for r in rows],
         "metrics/steps/over_shortest": [int(r["agent_steps"]) / int(r["shortest_sum"])
                                         for r in rows],
+        "metrics/steps/smoothed": list(smoothed([int(r["agent_steps"]) / int(r["shortest_sum"])
+                                                 for r in rows])),
         "metrics/reward_sum": [float(r["reward_sum"]) for r in rows],
         "metrics/missed_intents": [float(r["missed_intents"]) for r in rows],
     }
@@ -454,8 +497,8 @@ def test_agent_colours_stay_distinct_and_readable_at_128_agents():
     assert np.array_equal(agent_colors(200)[:128], colours)  # an agent keeps its colour
 
 
-def steps_view(reference: bool):
-    """The learning curves' steps plot of the default run's blueprint."""
+def steps_views(reference: bool) -> dict:
+    """The learning curves' steps plots of the default run's blueprint, by name."""
     from nnql_swarm.recording.blueprint import blueprint
 
     def views(container):
@@ -463,15 +506,37 @@ def steps_view(reference: bool):
             yield item
             yield from views(item)
 
-    [view] = [v for v in views(blueprint(SwarmConfig(), reference=reference).root_container)
-              if getattr(v, "origin", None) == "metrics/steps"]
-    return view
+    return {v.name: v for v in views(blueprint(SwarmConfig(), reference=reference).root_container)
+            if getattr(v, "origin", None) == "metrics/steps"}
 
 
-def test_with_the_reference_the_steps_plot_keeps_the_runs_own_ratios_readable():
-    """The paper's QL's ratio runs far above the run's own: with it, the plot's span is fixed."""
-    from nnql_swarm.recording.blueprint import REFERENCE_STEPS_SPAN
+def test_with_the_reference_both_steps_ratios_read_on_plots_of_their_own():
+    """The paper's QL's ratio (10 to 20) runs far above the run's own (1 to 4): the run's plot
+    leaves it out, and a plot of both beside it takes the span of both; no span is fixed, so
+    that neither is clipped."""
+    from nnql_swarm.recording.blueprint import REFERENCE_STEPS
 
-    assert "ScalarAxis" not in steps_view(False).properties
-    axis = steps_view(True).properties["ScalarAxis"]
-    assert tuple(axis.range.as_arrow_array().to_pylist()[0]) == REFERENCE_STEPS_SPAN
+    alone, both = steps_views(False), steps_views(True)
+    assert list(alone) == ["Steps / shortest, smoothed"]
+    own, with_ql = (both["Steps / shortest, smoothed"],
+                    both["Steps ratio: paper's QL in grey"])
+    assert REFERENCE_STEPS not in own.contents and REFERENCE_STEPS in with_ql.contents
+    for view in (*alone.values(), *both.values()):
+        assert "ScalarAxis" not in view.properties
+
+
+def test_the_known_map_shows_one_path_and_the_world_an_episodes_moves():
+    """On the episode timeline the known map shows the newest planned path, not every path of
+    the episode at once (a comb); the world view shows the episode's moves, waits, collisions."""
+    from nnql_swarm.recording.blueprint import blueprint
+
+    def views(container):
+        for item in getattr(container, "contents", None) or []:
+            yield item
+            yield from views(item)
+
+    by_origin = {getattr(v, "origin", None): v
+                 for v in views(blueprint(SwarmConfig()).root_container)}
+    assert not by_origin["known_map"].visualizer_overrides
+    assert set(by_origin["world"].visualizer_overrides) == {
+        "world/intents", "world/negotiation", "world/collisions"}

@@ -51,12 +51,13 @@ def test_headless_it_serves_the_web_viewer_and_prints_a_url_that_answers(tiny_ru
         assert match, (line, log.read_text())
         assert str(tiny_run / "run.rrd") in line
         url = match.group(1)
-        assert url == (f"http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{grpc}"
+        # The page reads the recording from its own origin (recording.one_origin).
+        assert url == (f"http://127.0.0.1:{web}/?url=rerun%2Bhttp%3A%2F%2F127.0.0.1%3A{web}"
                        f"%2Fproxy")
         with urllib.request.urlopen(url, timeout=10) as page:
             assert page.status == 200 and b"<html" in page.read().lower()
         with socket.create_connection(("127.0.0.1", grpc), timeout=5):
-            pass  # the gRPC server the page reads the recording from
+            pass  # the gRPC server behind it
         os.killpg(server.pid, signal.SIGINT)  # Ctrl-C in its terminal
         assert server.wait(timeout=10) == 0
         assert "Traceback" not in log.read_text()
