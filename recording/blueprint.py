@@ -30,7 +30,8 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
                                          y_range=[-0.5 - world_viz.caption_room(config),
                                                   config.height - 0.4]),
         overrides={path: episode for path in (world_viz.INTENTS, world_viz.NEGOTIATION,
-                                              world_viz.COLLISIONS)},
+                                              world_viz.COLLISIONS, world_viz.REFUSED,
+                                              world_viz.PUSHES, world_viz.REACHED)},
     )
     events = rrb.TextLogView(origin=world_viz.EVENTS, name="Events", columns=rrb.TextLogColumns(
         timeline_columns=[rrb.encodings.TimelineColumn("episode"),
@@ -53,11 +54,14 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     n = config.n_agents
     steps = ["metrics/steps/over_shortest", "metrics/steps/smoothed", "metrics/steps/shortest_path"]
     metrics = rrb.Grid(
-        plot((0.0, 1.05), origin="metrics/arrived_share", name="Share of agents arrived"),
+        plot(origin="metrics/throughput", name="Throughput: goals a step") if config.lifelong
+        else plot((0.0, 1.05), origin="metrics/arrived_share", name="Share of agents arrived"),
         plot(origin="metrics/steps", contents=steps,
              name="Steps / shortest, smoothed"),
-        plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",
-             name="Agents in a collision"),
+        plot(origin="metrics/refused", name="First choices refused")
+        if config.arbitration == "pibt"  # nobody collides: the conflicts are refusals
+        else plot((0.0, float(max(2 * n, 8))), origin="metrics/collisions/per_episode",
+                  name="Agents in a collision"),
         plot(origin="metrics/negotiation/awaited_per_tick", name="Intents awaited per tick"),
         plot(origin="metrics/negotiation/latency_ms", name="Negotiation wait (ms)", legend=True)
         if distributed else plot(origin="metrics/steps/episode", name="Ticks per episode"),

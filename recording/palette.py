@@ -6,6 +6,10 @@ import numpy as np
 COLLISION_RED = (230, 40, 40)
 WAIT_COLOUR = (25, 25, 25)
 """The negotiation's arrows (who waited for whom): near-black, apart from the agents' colours."""
+PUSH_COLOUR = (70, 40, 130)
+"""Priority inheritance's pushes (``recording.world``: who made whom make way)."""
+REACHED_COLOUR = (250, 200, 40)
+"""A goal reached in a lifelong run, where it was."""
 WALL_COLOUR = (55, 60, 75)
 """Walls: dark slate blocks, none of the agents' colours, and off the grid's grey."""
 

@@ -4,7 +4,9 @@ At time ``tick = t`` the viewer shows the state in which the agents decided tick
 (``world/agents``), their goals (``world/goals``), the last cells they came through
 (``world/trails``), the move each announced (``world/intents``), whose intent each agent waited
 for (``world/negotiation``) and who collided as a result (``world/collisions``, plus a warning in
-``events``). The next tick shows where everybody ended up.
+``events``); under ``--arbitration pibt`` whose first choice was refused (``world/refused``) and
+who pushed whom (``world/pushes``), and in a lifelong run the goals reached (``world/reached``),
+the goals moving on to the next. The next tick shows where everybody ended up.
 
 The negotiation is derived by the world, not reported by the agents: at tick ``t`` an agent that
 reads intents and has not arrived waits for the answer of every neighbour that
@@ -42,7 +44,9 @@ from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
-from nnql_swarm.recording.palette import COLLISION_RED, WAIT_COLOUR, WALL_COLOUR, agent_colors
+from nnql_swarm.recording.palette import (
+    COLLISION_RED, PUSH_COLOUR, REACHED_COLOUR, WAIT_COLOUR, WALL_COLOUR, agent_colors,
+)
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.scenario import swarm_episode
 
@@ -59,6 +63,9 @@ COLLISIONS = "world/collisions"
 STARTS = "world/starts"
 STUCK = "world/stuck"
 CAPTION = "world/caption"
+REFUSED = "world/refused"
+PUSHES = "world/pushes"
+REACHED = "world/reached"
 EVENTS = "events"
 LEGEND = "legend"
 
@@ -100,6 +107,8 @@ METRICS = {
     "metrics/missed_intents": "intents that missed the tick deadline (counted as STAY)",
     "metrics/ticks_per_s": "wall-clock ticks per second of the world's clock in the episode",
     "metrics/negotiation/awaited_per_tick": "intents waited for per tick, all agents (world-derived)",
+    "metrics/refused": "first choices the arbitration refused in the episode (--arbitration pibt)",
+    "metrics/throughput": "goals reached a step in the episode (--tasks lifelong)",
 }
 """Every per-episode series the world logs, with what it means (docs/recording.md repeats this)."""
 
@@ -118,6 +127,8 @@ SERIES_NAMES = {
     "metrics/missed_intents": "missed intents",
     "metrics/ticks_per_s": "ticks per second",
     "metrics/negotiation/awaited_per_tick": "intents awaited per tick",
+    "metrics/refused": "first choices refused",
+    "metrics/throughput": "goals a step",
 }
 """What each series is called in the plots' legends."""
 
@@ -175,6 +186,14 @@ def legend(config: SwarmConfig) -> str:
     waits = ("Black arrows from an agent to a neighbour: it waited for that neighbour's "
              "announced move before deciding (negotiation)." if config.algo in NEGOTIATING_ALGOS
              else f"{config.algo} agents do not negotiate: they wait for nobody.")
+    arbitration = ("\nPriority inheritance settles the moves (`--arbitration pibt`): a thin red "
+                   "arrow is a first choice refused (towards the cell wanted), a thick purple one "
+                   "goes from an agent to the one it pushed on (that one left its cell against "
+                   "its first choice): follow them for the chains of inheritance."
+                   if config.arbitration == "pibt" else "")
+    lifelong = ("\nLifelong tasks: a yellow disc is a goal reached; the agent's box moves on to "
+                "its next goal at once. The first curve is the throughput, goals a step."
+                if config.lifelong else "")
     return f"""**World** ({config.width} x {config.height}, {config.n_agents} agents).
 Discs are agents, labelled with their id; the box with the same id and colour is that agent's
 goal. Every agent has a colour of its own.{walls}
@@ -184,7 +203,7 @@ discs), and the agents where the episode left them; a small dot in an agent's co
 it started, a red ring around an agent the episode left short of its goal. On the `tick`
 timeline it shows one tick (the caption above the grid names its episode and step): where each
 agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
-{waits}
+{waits}{arbitration}{lifelong}
 
 **Learning curves** run against episodes: the share of agents that arrived, the steps they took
 over their shortest paths (1 is perfect), and collisions (each agent in one counts one).
@@ -266,6 +285,9 @@ class WorldViz:
         self._metrics = SeriesColumns()
         self._events = TextColumns(EVENTS)
         self._goal_cells: list = []  # the current episode's goals
+        self._starts_of: dict[int, np.ndarray] = {}  # the current episode's starts
+        self._refused = 0  # first choices refused in the current episode (--arbitration pibt)
+        self._reached: list[tuple[int, int, np.ndarray]] = []  # lifelong: goals reached
         self._log_static()
         self.known_map = None
         if map_agent is not None and 0 <= map_agent < n:
@@ -314,6 +336,12 @@ class WorldViz:
                                                 draw_order=12.0), static=True)
         rec.log(STUCK, rr.LineStrips2D.from_fields(colors=[COLLISION_RED], radii=0.045,
                                                    draw_order=25.0), static=True)
+        rec.log(REFUSED, rr.Arrows2D.from_fields(colors=[COLLISION_RED], radii=0.05,
+                                                 draw_order=42.0), static=True)
+        rec.log(PUSHES, rr.Arrows2D.from_fields(colors=[PUSH_COLOUR], radii=0.07,
+                                                draw_order=43.0), static=True)
+        rec.log(REACHED, rr.Points2D.from_fields(colors=[REACHED_COLOUR], radii=0.22,
+                                                 draw_order=11.0), static=True)
         rec.log(CAPTION, rr.Points2D.from_fields(colors=[[90, 90, 90]], radii=0.01,
                                                  show_labels=True, draw_order=50.0), static=True)
         for path in METRICS:
@@ -347,14 +375,25 @@ class WorldViz:
                                    self._goal_cells[agent])
         self._buffer.append((report.tick, report.episode, report.moved, before, self._arrived,
                              report.actions, report.collided,
-                             report.tick - self._episode_first_tick))
+                             report.tick - self._episode_first_tick,
+                             report.wanted or report.actions))
+        self._refused += sum(w != a for w, a in zip(report.wanted, report.actions))
+        if report.reached:  # lifelong: goals reached, and the next ones from the next tick
+            self._reached.append((report.tick + 1, report.episode, np.array(
+                [self._goal_cells[i] for i in report.reached], np.float32).reshape(-1, 2)))
+            self._goal_cells = [list(cell) for cell in report.goals]
+            if report.episode_row is None:
+                self._goals.append((report.tick + 1, report.episode,
+                                    np.array(report.goals, np.float32),
+                                    self._starts_of[report.episode]))
         if report.collided:
             step = f"step {world.step}" if report.moved else "end"
             self._events.add(report.tick, report.episode,
                              f"{step}: collision of agents "
                              f"{', '.join(map(str, report.collided))}", "WARN")
         if report.episode_row is not None:  # its end tick: nobody moves, as the episode left them
-            short = [cell for cell, home in zip(before, self._arrived) if not home]
+            short = [cell for cell, home in zip(before, self._arrived)
+                     if not home and not c.lifelong]  # lifelong: everyone is on its way
             self._stuck.append((report.tick, report.episode,
                                 np.array(short, np.float32).reshape(-1, 2)))
         self._before, self._arrived = world.cells, world.arrived_flags
@@ -370,6 +409,7 @@ class WorldViz:
         episode = swarm_episode(c.seed, report.episode, c.width, c.height, c.n_agents,
                                 c.obstacle_density, c.map_rows, c.scenario)
         self._starts[report.episode] = episode.starts.astype(np.float32)
+        self._starts_of = {report.episode: self._starts[report.episode]}
         self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32),
                             episode.starts.astype(np.float32)))
         self._stuck.append((report.tick, report.episode, np.zeros((0, 2), np.float32)))
@@ -401,11 +441,18 @@ class WorldViz:
             "metrics/missed_intents": row["missed_intents"],
             "metrics/ticks_per_s": rate,
         }
+        if self.config.arbitration == "pibt":
+            values["metrics/refused"] = self._refused
+        if self.config.lifelong:
+            values["metrics/throughput"] = row["throughput"]
+        self._refused = 0
         for path, value in values.items():
             self._metrics.add(path, report.tick, report.episode, value)
         self._ended.append((report.tick, report.episode, max(row["steps"], 1)))
+        done = (f"{row['goals']} goals reached ({row['throughput']:.2f} a step)"
+                if self.config.lifelong else f"{row['arrived']}/{n} arrived")
         self._events.add(report.tick, report.episode,
-                         f"{row['steps']} steps, {row['arrived']}/{n} arrived, "
+                         f"{row['steps']} steps, {done}, "
                          f"{row['collisions']} collisions, {row['missed_intents']} missed, "
                          f"{rate:.0f} ticks/s, reward {row['reward_sum']:.0f}", "INFO")
 
@@ -428,6 +475,11 @@ class WorldViz:
             rings = np.concatenate(cells)[:, None, :] + STUCK_RING[None]
             self.rec.send_columns(STUCK, time_columns(s_ticks, s_episodes), rr.LineStrips2D.columns(
                 strips=rings).partition([len(c) for c in cells]))
+        if self._reached:
+            r_ticks, r_episodes, cells = zip(*self._reached)
+            self._reached = []
+            self.rec.send_columns(REACHED, time_columns(r_ticks, r_episodes), rr.Points2D.columns(
+                positions=np.concatenate(cells)).partition([len(c) for c in cells]))
         if self._buffer:
             self._send_ticks()
         for tick, episode, steps in self._ended:  # every tick of theirs is counted now
@@ -442,7 +494,7 @@ class WorldViz:
     def _send_ticks(self) -> None:
         k, n = len(self._buffer), self.config.n_agents
         rec = self.rec
-        tick_list, episode_list, moved, before, arrived_then, actions, collided, steps = \
+        tick_list, episode_list, moved, before, arrived_then, actions, collided, steps, wanted = \
             zip(*self._buffer)
         self._buffer = []
         ticks, episodes = np.array(tick_list, dtype=np.int64), np.array(episode_list, np.int64)
@@ -477,12 +529,42 @@ class WorldViz:
             origins=start + unit * 0.2, vectors=gap - unit * 0.4,
         ).partition(asks.sum(axis=(1, 2))))  # in WAIT_COLOUR, logged once (static)
 
+        if self.config.arbitration == "pibt":
+            self._send_arbitration(index, cells, np.array(actions, np.int64),
+                                   np.array(wanted, np.int64), np.array(moved, dtype=bool))
+
         hit = np.zeros((k, n), dtype=bool)
         for row, agents in enumerate(collided):
             hit[row, list(agents)] = True
         hit_t, hit_agent = np.nonzero(hit)
         rec.send_columns(COLLISIONS, index, rr.Points2D.columns(
             positions=cells[hit_t, hit_agent]).partition(hit.sum(axis=1)))
+
+    def _send_arbitration(self, index, cells: np.ndarray, actions: np.ndarray,
+                          wanted: np.ndarray, moved: np.ndarray) -> None:
+        """Priority inheritance seen (``--arbitration pibt``), ``(k, n)`` ticks and agents: a thin
+        red arrow where an agent's first choice was refused (towards the cell it wanted), and
+        a thick dark one from each agent that pushed another (it took the cell of one that left
+        it against its first choice) to the agent it pushed: the chains of inheritance."""
+        refused = (wanted != actions) & moved[:, None]
+        t, agent = np.nonzero(refused)
+        self.rec.send_columns(REFUSED, index, rr.Arrows2D.columns(
+            origins=cells[t, agent], vectors=(MOVES[wanted[t, agent]] * 0.45).astype(np.float32),
+        ).partition(refused.sum(axis=1)))
+        ends = cells + MOVES[actions].astype(np.float32)  # where each agent went
+        pushes: list[np.ndarray] = []
+        for row in range(len(cells)):
+            left = {tuple(cell): i for i, cell in enumerate(cells[row].tolist())
+                    if refused[row, i]}
+            found = [(i, left[tuple(cell)]) for i, cell in enumerate(ends[row].tolist())
+                     if tuple(cell) in left and left[tuple(cell)] != i]
+            pushes.append(np.array(found, np.int64).reshape(-1, 2))
+        counts = [len(p) for p in pushes]
+        rows = np.repeat(np.arange(len(cells)), counts)
+        pairs = np.concatenate(pushes) if pushes else np.zeros((0, 2), np.int64)
+        start, end = cells[rows, pairs[:, 0]], cells[rows, pairs[:, 1]]
+        self.rec.send_columns(PUSHES, index, rr.Arrows2D.columns(
+            origins=start, vectors=(end - start) * 0.8).partition(counts))
 
     def _trails(self, cells: np.ndarray, episode: int) -> np.ndarray:
         """``(k, n, TRAIL_LENGTH, 2)``: at each of an episode's ticks ``cells`` ``(k, n, 2)``, the

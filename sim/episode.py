@@ -30,7 +30,7 @@ from nnql_swarm.learning.fields import (
     LearnerBuffers, Sight,
 )
 from nnql_swarm.learning.learner import (
-    announce_order, decide, finish, make_way, planned_cell, preference_ranks,
+    announce_order, decide, finish, first_choice, make_way, planned_cell, preference_ranks,
 )
 from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, sees, target_x, target_y
@@ -67,10 +67,12 @@ OUT_FIELDS = 6
 paths, broken invariants (shared cells, swap-throughs where swaps count), and the field's costs
 (``world.rules.field_costs``: learners on their goal at the end, SoC, makespan)."""
 
-TR_X, TR_Y, TR_ACTION, TR_COLLIDED, TR_ARRIVED = 0, 1, 2, 3, 4
-TR_FIELDS = 5
+TR_X, TR_Y, TR_ACTION, TR_COLLIDED, TR_ARRIVED, TR_WANTED, TR_GOAL_X, TR_GOAL_Y = range(8)
+TR_FIELDS = 8
 """A recorded tick, per body: the cell it started from, the action applied, whether it collided,
-whether it had arrived when the tick started."""
+whether it had arrived when the tick started, its first choice (the action it announced; under
+``--arbitration pibt`` the arbitration may have applied another), and its goal when the tick
+started (a lifelong run's change)."""
 
 
 class EpisodeRules(NamedTuple):
@@ -394,6 +396,10 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                 trace[step, i, TR_X] = x[i]
                 trace[step, i, TR_Y] = y[i]
                 trace[step, i, TR_ARRIVED] = 1 if arrived[i] else 0
+                trace[step, i, TR_GOAL_X] = goal_x[i]
+                trace[step, i, TR_GOAL_Y] = goal_y[i]
+                trace[step, i, TR_WANTED] = first_choice(ranks, i * N_ACTIONS) \
+                    if pibt and i < learners and not ending else actions[i]
         if ending:
             if record:
                 for i in range(n):

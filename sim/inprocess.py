@@ -20,7 +20,9 @@ from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, EPISODES_FILE
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
-from nnql_swarm.sim.episode import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y
+from nnql_swarm.sim.episode import (
+    TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_GOAL_X, TR_GOAL_Y, TR_WANTED, TR_X, TR_Y,
+)
 from nnql_swarm.world.engine import TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.scenario import swarm_episode
@@ -132,5 +134,15 @@ def _replay(config: SwarmConfig, batch: Batch, row: dict,
         now = trace[step]
         actions = (STAY,) * config.n_agents if ending else tuple(now[:, TR_ACTION].tolist())
         collided = () if ending else tuple(np.flatnonzero(now[:, TR_COLLIDED]).tolist())
+        wanted = tuple(now[:, TR_WANTED].tolist()) \
+            if config.arbitration == "pibt" and not ending else ()
+        goals: tuple = ()
+        reached: tuple = ()
+        if config.lifelong and not ending:
+            later = trace[step + 1]
+            goals = tuple(zip(later[:, TR_GOAL_X].tolist(), later[:, TR_GOAL_Y].tolist()))
+            reached = tuple(np.flatnonzero((later[:, TR_GOAL_X] != now[:, TR_GOAL_X])
+                                           | (later[:, TR_GOAL_Y] != now[:, TR_GOAL_Y])).tolist())
         on_tick(after, TickReport(first + step, row["episode"], not ending, actions, collided,
-                                  (), (), row if ending else None))
+                                  (), (), row if ending else None, None, None, wanted, goals,
+                                  reached))

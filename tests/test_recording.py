@@ -540,3 +540,35 @@ def test_the_known_map_shows_one_path_and_the_world_an_episodes_moves():
     assert not by_origin["known_map"].visualizer_overrides
     assert set(by_origin["world"].visualizer_overrides) == {
         "world/intents", "world/negotiation", "world/collisions"}
+
+
+def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):
+    """``--arbitration pibt --tasks lifelong``: the refused first choices and the pushes, the
+    goals reached where they were and the goals moving on, the throughput and refusals curves
+    (each against ``episodes.csv``), the same distributed as in-process."""
+    options = ("--agents", "10", "--episodes", "3", "--max-steps", "40", "--preset", "pibt-nnql",
+               "--tasks", "lifelong", "--map", "random:12x12:0.2:3")
+    for where, extra in (("local", ("--in-process",)), ("dist", ())):
+        out = tmp_path / where
+        result = run_swarm(out, *options, *extra)
+        assert result.returncode == 0, result.stderr
+        verify(out / "run.rrd")
+        recording = Recording(out / "run.rrd")
+        rows = read_episodes(out / "episodes.csv")
+        assert {"world/refused", "world/pushes", "world/reached"} <= recording.entities
+        throughput = recording.scalars("metrics/throughput")
+        assert {e: v for e, (_, v) in throughput.items()} == {
+            int(r["episode"]): float(r["throughput"]) for r in rows}
+        reached = recording.column("world/reached", "Points2D:positions")
+        assert sum(len(cells) for cells in reached) == sum(int(r["goals"]) for r in rows) > 0
+        goals = recording.column("world/goals", "Boxes2D:centers")
+        assert len(goals) > len(rows), "the goals move on within an episode"
+        refused = recording.column("world/refused", "Arrows2D:origins")
+        refusals = recording.scalars("metrics/refused")
+        assert sum(len(r) for r in refused) == sum(v for _, v in refusals.values()) > 0
+        pushes = recording.column("world/pushes", "Arrows2D:vectors")
+        assert sum(len(p) for p in pushes) > 0
+        assert all(0.7 < abs(x) + abs(y) <= 0.8 + 1e-6 for p in pushes for x, y in p), \
+            "a push goes to a neighbouring cell"
+        assert not recording.column("world/collisions", "Points2D:positions") or all(
+            len(c) == 0 for c in recording.column("world/collisions", "Points2D:positions"))

@@ -37,6 +37,12 @@ class Arbiter:
         self.ranks = ints([UNWANTED] * (bodies * N_ACTIONS))
         """Each body's rank of each move this step (0: its first choice)."""
 
+    def first_choices(self) -> tuple[int, ...]:
+        """Each agent's first choice of the step settled last (STAY for a missed intent)."""
+        ranks = self.ranks
+        return tuple(next(a for a in range(N_ACTIONS) if ranks[i * N_ACTIONS + a] == 0)
+                     for i in range(self.config.n_agents))
+
     def start_episode(self, shortest: list[int]) -> None:
         """PIBT's first order: the agent farthest from its goal first; none has been nearer."""
         for i, length in enumerate(shortest):

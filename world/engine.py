@@ -65,7 +65,10 @@ metrics: ``world.rules.field_columns``)."""
 
 @dataclass(frozen=True)
 class TickReport:
-    """What one tick did: the actions applied, who collided, the finished episode's row, if any."""
+    """What one tick did: the actions applied, who collided, the finished episode's row, if any;
+    under ``--arbitration pibt`` each agent's first choice (``wanted``: where it differs from
+    the action applied, the arbitration refused it); in a lifelong run each agent's goal after
+    the tick (``goals``) and who reached one (``reached``)."""
 
     tick: int
     episode: int
@@ -77,6 +80,9 @@ class TickReport:
     episode_row: dict | None
     table: SharedState | None = None  # at an episode's end, if shared
     records: dict | None = None  # the learning records applied, by agent, if shared
+    wanted: tuple[int, ...] = ()
+    goals: tuple[Cell, ...] = ()
+    reached: tuple[int, ...] = ()
 
 
 class SwarmWorld:
@@ -344,9 +350,12 @@ class SwarmWorld:
         n = c.n_agents
         self.settled = (frozenset() if self.ending or not c.quiet_settled
                         else frozenset(i for i in range(n) if arrived_before[i]))
+        wanted = () if arbiter is None else arbiter.first_choices()
         report = TickReport(self.tick, self.episode, True, tuple(python_values(chosen)[:n]),
                             tuple(i for i, hit in enumerate(collided[:n]) if hit), missed,
-                            violations, None, None, records)
+                            violations, None, None, records, wanted,
+                            tuple(self._goal_cells) if c.lifelong else (),
+                            tuple(i for i in range(n) if reached[i]) if c.lifelong else ())
         self.tick += 1
         return report
 
