@@ -39,9 +39,10 @@ from nnql_swarm.protocol.config import (
 from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.storage.runfiles import (
-    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, PARTS_DIR, RECORDING_FILE, STATS_DIR,
+    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, LOCK_FILE, PARTS_DIR, RECORDING_FILE, STATS_DIR,
     write_text_atomic,
 )
+from nnql_swarm.storage.runlock import RunLock, RunLocked
 from nnql_swarm.transport.settings import MODES, TransportSettings
 from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
 from nnql_swarm.launch.processes import agent_main, world_main
@@ -249,43 +250,89 @@ def check_distributable(config: SwarmConfig) -> None:
                          "only; play it in-process")
 
 
-RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR)
+RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR,
+               LOCK_FILE)
 """What a run directory holds (``storage.runfiles``); a folder with anything else is not a run."""
 
 
-def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
-    """Create the run directory; never overwrite a run that is already there, nor write a run
+def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> RunLock | None:
+    """Create the run directory and own it (its lock, :mod:`storage.runlock`; the caller releases
+    it when the run ends; ``--role agents``, which shares the folder with the world's launcher
+    on one host, takes none); never overwrite a run that is already there, nor write a run
     into a folder that holds anything but a run's files (those of a run that never finished an
     episode, or of the agents started first on this host, may be there). An unusable path (a
-    file, or where no folder can be made) is a UsageError."""
+    file, or where no folder can be made) or a folder another run owns is a UsageError."""
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out} is a file, not a folder")
     if role != "agents" and out.is_dir():
-        if (out / EPISODES_FILE).exists():
-            raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
-                             f"or continue it with --resume --out {out}")
-        held = sorted(entry.name for entry in out.iterdir()
-                      if entry.name not in RUN_ENTRIES and not entry.name.endswith(".tmp"))
-        if held:
-            raise UsageError(f"--out {out} is a folder that holds other files ({held[0]}"
-                             f"{', ...' if len(held) > 1 else ''}), not a run; choose a new or "
-                             f"empty one")
+        if (out / LOCK_FILE).exists():
+            own(out).release()  # a run going on there is named as such
+        check_no_run(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        if role != "agents":
-            write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
     except OSError as error:
         raise UsageError(f"cannot make the run directory --out {out}: "
                          f"{error.strerror or error}") from None
+    if role == "agents":
+        return None
+    lock = own(out)
+    try:
+        check_no_run(out)  # a run that took and left the folder since the check above
+        write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
+    except BaseException as error:
+        lock.release()
+        if isinstance(error, OSError):
+            raise UsageError(f"cannot write the run's config in --out {out}: "
+                             f"{error.strerror or error}") from None
+        raise
+    return lock
 
 
-def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
+def check_no_run(out: Path) -> None:
+    """Refuse a folder that holds a run, or files that are not a run's; raises UsageError."""
+    if (out / EPISODES_FILE).exists():
+        raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
+                         f"or continue it with --resume --out {out}")
+    held = sorted(entry.name for entry in out.iterdir()
+                  if entry.name not in RUN_ENTRIES and not entry.name.endswith(".tmp"))
+    if held:
+        raise UsageError(f"--out {out} is a folder that holds other files ({held[0]}"
+                         f"{', ...' if len(held) > 1 else ''}), not a run; choose a new or "
+                         f"empty one")
+
+
+def own(out: Path) -> RunLock:
+    """The lock of the run folder ``out`` (:mod:`storage.runlock`); raises UsageError where
+    another run holds it."""
+    try:
+        return RunLock(out)
+    except RunLocked as error:
+        raise UsageError(str(error)) from None
+    except OSError as error:
+        raise UsageError(f"cannot lock the run directory --out {out}: "
+                         f"{error.strerror or error}") from None
+
+
+def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path, RunLock | None]:
     """The config, start point and directory of a run to continue (its rows past the cut
-    dropped: ``supervision.resume``); raises ResumeError or UsageError."""
+    dropped: ``supervision.resume``), and the folder's lock (none for ``--role agents``), which
+    the caller releases when the run ends; raises ResumeError or UsageError."""
     if args.out is None:
         raise UsageError("--resume needs --out DIR, the run directory to continue")
     if args.in_process:
         raise UsageError("--resume continues distributed runs only")
+    if args.role == "agents" or not (Path(args.out) / CONFIG_FILE).is_file():
+        return (*_resume(args), None)  # (no run there: refused, and no lock file left behind)
+    lock = own(args.out)
+    try:
+        return (*_resume(args), lock)
+    except BaseException:
+        lock.release()
+        raise
+
+
+def _resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
+    """:func:`resume`, once the folder is owned."""
     agents = agent_ids(args, read_config(args.out)) if args.role != "world" else []
     config, start = resume_point(args.out, agents, world=args.role != "agents")
     check_same_options(args, config)

@@ -41,7 +41,7 @@ def main(argv: list[str] | None = None) -> int:
 def resume_run(parser, args) -> int:
     """``--resume``: continue the run in ``--out`` from its last complete episode."""
     try:
-        config, start, out = resume(args)
+        config, start, out, lock = resume(args)
     except (UsageError, ResumeError) as error:
         parser.error(str(error))
     if start.episode >= config.episodes:
@@ -51,7 +51,7 @@ def resume_run(parser, args) -> int:
             return 0
         # Agents elsewhere may still wait for the world that completed the run: this one only
         # tells them to stop.
-    code = run_processes(args, config, out, start)
+    code = run_processes(args, config, out, start)  # the lock held until this process ends
     if code == 0 and args.role != "agents":
         print(f"run finished: {out}", file=sys.stderr)
     return code

@@ -7,6 +7,7 @@
     <out>/stats/world.json, <out>/stats/agent-<id>.json   closing statistics of each process
     <out>/run.rrd              the Rerun recording
     <out>/rerun-parts/<role>.<pid>.rrd  each process's part of it, until merged into run.rrd
+    <out>/run.lock             held by the run's launcher while it runs (storage.runlock)
 """
 
 import json
@@ -19,6 +20,7 @@ RECORDING_FILE = "run.rrd"
 PARTS_DIR = "rerun-parts"
 CHECKPOINT_DIR = "checkpoints"
 STATS_DIR = "stats"
+LOCK_FILE = "run.lock"
 
 
 def stats_path(out_dir: Path, name: str) -> Path:
