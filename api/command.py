@@ -32,6 +32,7 @@ from nnql_swarm.recording.viewers import check_viewer_url
 from nnql_swarm.supervision.resume import (
     ResumeError, ResumePoint, read_config, resume_point, rewind, shared_table,
 )
+from nnql_swarm.supervision.capacity import check_fits
 from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
 from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
@@ -217,8 +218,23 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
         raise UsageError(f"--role {args.role} needs --listen/--connect endpoints or --zenoh-config")
     if args.role != "all" and args.run_id is None:
         raise UsageError(f"--role {args.role} needs --run-id, the same on every host")
+    check_capacity(args, config)
     out = args.out or Path("runs") / run_id
     return config, out
+
+
+def check_capacity(args: argparse.Namespace, config: SwarmConfig) -> None:
+    """Refuse a run, or the part of one this host starts, that this machine cannot hold
+    (``supervision.capacity``); raises UsageError."""
+    if args.in_process:
+        processes, agents = 1, config.n_agents
+    else:
+        agents = 0 if args.role == "world" else len(agent_ids(args, config))
+        processes = agents + (args.role != "agents")
+    try:
+        check_fits(processes, agents, config.max_steps)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
 
 
 def map_values(args: argparse.Namespace, values: dict) -> dict:

@@ -13,6 +13,7 @@ import pytest
 from nnql_swarm.launch.swarm_cli import build_parser, resume_command
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.sim import runs
+from nnql_swarm.supervision.capacity import available_bytes, check_fits
 from nnql_swarm.sim.runs import compiled_simulator, swarm_world
 from nnql_swarm.terminal.cli import COMPILING, prepare_simulator
 from tests.swarm_helpers import ROOT
@@ -188,3 +189,46 @@ def test_the_command_is_a_swarm_made_from_its_options(monkeypatch, tmp_path):
     (swarm,) = played
     assert swarm.config == Swarm(agents=3, seed=4, run_id="cmd").config
     assert swarm.out == out and (out / "config.json").is_file()
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--goal-reward", "nan"], "the goal reward must be"),
+    (["--goal-reward", "1e300"], "the goal reward must be"),
+    (["--stay-reward", "inf"], "the stay reward must be"),
+    (["--optimistic", "1e300"], "the optimistic initial value must be"),
+    (["--max-steps", "100000000000000000"], "the messages' largest tick"),
+    (["--max-steps", "1e17"], "invalid int value"),
+    (["--max-steps", "10000000000"], "GiB of memory here"),
+    (["--deadline", "inf"], "positive and finite"),
+])
+def test_what_the_wire_refuses_the_command_line_refuses_in_one_line(tmp_path, options, message):
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, str(SWARM), "--out", str(out), "--no-progress",
+                           *options], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    one_line_exit_2(done, message)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("text", ["[]", "null", "42", "{}"])
+def test_resume_refuses_a_config_json_that_is_not_a_runs_and_appends_nothing(tmp_path, text):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "config.json").write_text(text + "\n")
+    rows = "episode,steps\n0,12\n"
+    (out / "episodes.csv").write_text(rows)
+    done = subprocess.run([sys.executable, str(SWARM), "--resume", "--out", str(out),
+                           "--no-progress"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=60)
+    one_line_exit_2(done, "not a valid run config")
+    assert (out / "episodes.csv").read_text() == rows
+
+
+def test_a_swarm_the_machine_cannot_hold_is_refused_with_what_it_needs_and_what_there_is():
+    """``--agents 1024`` where 21 GiB are available (the project's VMs; the command line reads
+    the machine's own figure: ``--max-steps 10000000000`` above needs more than any has)."""
+    with pytest.raises(ValueError, match=r"1024 agents of at most 100 steps need at least "
+                                         r"50.\d GiB of memory here \(1025 processes\), and "
+                                         r"this machine has 21 GiB available"):
+        check_fits(1025, 1024, 100, available=21 * 2**30)
+    check_fits(129, 128, 100, available=21 * 2**30)  # bench/scale.py's largest swarm fits
+    assert available_bytes() is None or available_bytes() > 0
