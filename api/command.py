@@ -13,6 +13,7 @@ directory (``--out``, default ``runs/<run-id>``) receives ``config.json``, ``epi
 
 import argparse
 import logging
+import math
 from dataclasses import fields, replace
 import multiprocessing as mp
 import os
@@ -44,7 +45,8 @@ from nnql_swarm.storage.runfiles import (
     write_text_atomic,
 )
 from nnql_swarm.storage.runlock import RunLock, RunLocked
-from nnql_swarm.transport.settings import MODES, TransportSettings
+from nnql_swarm.transport.settings import EXIT_NO_WORLD, MODES, TransportSettings
+from nnql_swarm.agent.machine import WORLD_WAIT_S
 from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
 from nnql_swarm.launch.processes import agent_main, world_main
 
@@ -107,6 +109,9 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
                    help="start everything, only the world, or only agents")
     z.add_argument("--agent-ids", type=parse_ids, default=None,
                    help="with --role agents: which agents to start, e.g. 0-3")
+    z.add_argument("--world-wait", type=float, default=WORLD_WAIT_S, metavar="SECONDS",
+                   help="how long the agents wait for a world that left to come back before "
+                        f"they stop (exit code {EXIT_NO_WORLD}; default: {WORLD_WAIT_S:.0f})")
     z.add_argument("--port", type=int, default=None,
                    help="one machine: the loopback port the world listens on (default: a free one)")
     z.add_argument("--topology", choices=("auto", *LAUNCHER_TOPOLOGIES), default="auto",
@@ -210,6 +215,8 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
                          "give endpoints instead")
     if not 0 <= args.map_agent < config.n_agents:
         raise UsageError(f"--map-agent {args.map_agent} out of range 0..{config.n_agents - 1}")
+    if not 0 < args.world_wait < math.inf:
+        raise UsageError(f"--world-wait must be positive and finite, not {args.world_wait}")
     if args.port is not None and not 1 <= args.port <= 65535:
         raise UsageError(f"--port must be 1..65535, not {args.port}")
     check_zenoh_files(args, config)
@@ -485,7 +492,7 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
         for i in agent_ids(args, config):
             def agent_args(restarted: bool, i: int = i) -> tuple:
                 return (i, config, agent_transport(i), out, restarted or resumes, recording.plan,
-                        hub, None if restarted else start.checkpoint_episode)
+                        hub, None if restarted else start.checkpoint_episode, args.world_wait)
 
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True, make_args=agent_args)
     code = supervisor.run(leader=world, on_poll=on_poll)
@@ -496,6 +503,9 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
     elif world is not None and code != 0:
         print(f"the world ended with {describe_exit(code)}; continue the run with "
               f"{resume_command(args, out)}", file=sys.stderr)
+    elif code == EXIT_NO_WORLD:
+        print(f"the agents stopped: no world for {args.world_wait:g} s (--world-wait); once "
+              f"it runs again, continue with {resume_command(args, out)}", file=sys.stderr)
     return code
 
 
@@ -519,6 +529,8 @@ def resume_command(args: argparse.Namespace, out: Path) -> str:
         words += ["--agent-ids", ",".join(map(str, args.agent_ids))]
     if args.topology != "auto":
         words += ["--topology", args.topology]
+    if args.world_wait != WORLD_WAIT_S:
+        words += ["--world-wait", f"{args.world_wait:g}"]
     for flag, value in (("--mode", args.mode), ("--zenoh-config", args.zenoh_config),
                         ("--zenoh-config-dir", args.zenoh_config_dir)):
         if value is not None:

@@ -64,10 +64,11 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
 
 def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
                resume: bool = False, recording=None, hub: tuple[str, int] | None = None,
-               resume_episode: int | None = None) -> None:
+               resume_episode: int | None = None, world_wait_s: float | None = None) -> None:
     """An agent process (spawned); ``resume`` reloads its checkpoint if there is one (the
     version of ``resume_episode``, or else the newest); ``hub``: the ``(host, port)`` of the
-    world to wait for, where the agent is its client."""
+    world to wait for, where the agent is its client; ``world_wait_s``: how long a world that
+    left may stay away (None: ``agent.machine.WORLD_WAIT_S``)."""
     from nnql_swarm.agent.node import AgentOptions, run_agent
     from nnql_swarm.recording.loggers import open_agent_viz
 
@@ -77,8 +78,9 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
         wait_listening(*hub, timeout_s=HUB_WAIT_S)  # if not, opening the session says so
     brain, on_episode_end, viz = open_agent_viz(recording, agent, config)
     try:
+        waits = {} if world_wait_s is None else {"world_wait_s": world_wait_s}
         code = run_agent(AgentOptions(agent, config, transport, out, resume=resume,
-                                             resume_episode=resume_episode), brain,
+                                      resume_episode=resume_episode, **waits), brain,
                          on_episode_end)
     finally:
         if viz is not None:

@@ -2,7 +2,8 @@
 
 An agent that exits while the world still runs (killed, crashed) is restarted after a backoff
 (0.5 s, doubling up to 8 s; reset once it has lived 30 s) with ``resume=True``, so it reloads its
-last checkpoint and rejoins at the next tick. The world is not restarted: it owns the run's
+last checkpoint and rejoins at the next tick; one that stopped because its world was gone for
+too long (``EXIT_NO_WORLD``) is not. The world is not restarted: it owns the run's
 files, so a dead world ends the run and ``--resume`` continues it. Stopping (Ctrl-C, SIGTERM)
 sends SIGTERM to every child, waits a grace period, then kills what is left.
 """
@@ -15,7 +16,7 @@ from multiprocessing.context import SpawnContext
 from multiprocessing.process import BaseProcess
 from typing import Callable
 
-from nnql_swarm.transport.settings import EXIT_TRANSPORT
+from nnql_swarm.transport.settings import EXIT_NO_WORLD, EXIT_TRANSPORT
 
 log = logging.getLogger("nnql.supervisor")
 
@@ -130,7 +131,8 @@ class Supervisor:
     def _leader_done(self, leader: Child | None) -> bool:
         if leader is not None:
             return not leader.started.is_alive()
-        return all(not c.started.is_alive() and c.started.exitcode == 0 for c in self.children)
+        return all(not c.started.is_alive() and c.started.exitcode in (0, EXIT_NO_WORLD)
+                   for c in self.children)
 
     def _start(self, child: Child, restarted: bool) -> None:
         process = self.context.Process(
@@ -147,8 +149,8 @@ class Supervisor:
             if not child.restartable or child.started.is_alive():
                 continue
             code = child.started.exitcode
-            if code == 0:
-                continue  # told by the world that the run is over
+            if code in (0, EXIT_NO_WORLD):
+                continue  # told by the world that the run is over, or the world is gone
             if child.restart_at is None:
                 assert code is not None, "a process that is not alive has exited"
                 child.exit_codes.append(code)

@@ -51,8 +51,9 @@ log = logging.getLogger("nnql.world")
 _PUT = zenoh.SampleKind.PUT
 
 
-class StartupTimeout(RuntimeError):
-    """Not every agent came alive in time."""
+class RunFailed(RuntimeError):
+    """The run cannot go on: not every agent came alive in time, or every agent left for good
+    (``world.machine``)."""
 
 
 @dataclass(frozen=True)
@@ -170,7 +171,7 @@ class WorldNode(ProtocolAdapter):
         if self.failure is not None:
             raise self.failure
         if finished is not None and finished.error is not None:
-            raise StartupTimeout(finished.error)
+            raise RunFailed(finished.error)
         return finished is not None and finished.completed
 
     def _write(self, row: WriteRow) -> None:
@@ -208,7 +209,7 @@ def run_world(options: WorldOptions,
             signal.signal(signum, lambda *_: node.stop())
         try:
             completed = node.run()
-        except StartupTimeout as error:
+        except RunFailed as error:
             log.error("%s", error)
             return 1
     node.trace.save()
