@@ -10,8 +10,8 @@ its usage errors into one line and exit code 2, and says how the run ended.
 import sys
 
 from nnql_swarm.api.command import (  # noqa: F401 (the command's parts, by their usual names)
-    UsageError, build_parser, prepare_out_dir, resolve, resume, resume_command, run_in_process,
-    run_processes, transports,
+    UsageError, build_parser, check_distributable, prepare_out_dir, resolve, resume,
+    resume_command, run_in_process, run_processes, transports,
 )
 from nnql_swarm.api.swarm import Swarm
 from nnql_swarm.supervision.resume import ResumeError
@@ -31,11 +31,21 @@ def main(argv: list[str] | None = None) -> int:
     try:
         code = swarm.play()
     except KeyboardInterrupt:  # in-process; the processes' launcher says it itself
-        print("\ninterrupted", file=sys.stderr)
+        print(f"\n{interrupted_in_process(args, swarm)}", file=sys.stderr)
         return EXIT_INTERRUPTED
     if code == 0 and args.role != "agents":
         print(f"run finished: {swarm.out}", file=sys.stderr)
     return code
+
+
+def interrupted_in_process(args, swarm: Swarm) -> str:
+    """What an interrupted ``--in-process`` run says: the command that continues it (its
+    checkpoints are saved as it stops, and a distributed ``--resume`` plays the same run)."""
+    try:
+        check_distributable(swarm.config)
+    except UsageError:
+        return "interrupted (a run the simulator only plays cannot be resumed)"
+    return f"interrupted: continue it with {resume_command(args, swarm.out)}"
 
 
 def resume_run(parser, args) -> int:

@@ -139,7 +139,18 @@ class Supervisor:
             target=child.target, name=child.name, args=child.make_args(restarted)
         )
         child.process = process
-        process.start()
+        # The child starts with SIGINT ignored (a disposition exec keeps), until its node takes
+        # the signal (``world.node``, ``agent.node``): a Ctrl-C while it still starts up would
+        # raise in the middle of an import and print a traceback; the launcher stops it then
+        # (SIGTERM). Here the signal is blocked meanwhile (Linux keeps a blocked signal pending,
+        # ignored or not), so a Ctrl-C that comes now reaches this process's handler after.
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            process.start()
+        finally:
+            signal.signal(signal.SIGINT, handler)
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
         child.started_at = time.monotonic()
         child.restart_at = None
 

@@ -3,9 +3,11 @@ commands that name themselves as they were called, the command that continues a 
 before the simulator compiles."""
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -232,3 +234,65 @@ def test_a_swarm_the_machine_cannot_hold_is_refused_with_what_it_needs_and_what_
         check_fits(1025, 1024, 100, available=21 * 2**30)
     check_fits(129, 128, 100, available=21 * 2**30)  # bench/scale.py's largest swarm fits
     assert available_bytes() is None or available_bytes() > 0
+
+
+@pytest.mark.parametrize("moment", [0.1, 0.4, 0.8, 1.2, 1.8])
+def test_ctrl_c_in_the_first_seconds_stops_the_swarm_in_a_line_without_a_traceback(tmp_path,
+                                                                                   moment):
+    """Ctrl-C reaches every process of the terminal's group, the world and agents among them
+    while they still import: the launcher stops them, and says so once."""
+    from tests.swarm_helpers import group_pids, stops_within
+
+    swarm = subprocess.Popen([sys.executable, str(SWARM), "--agents", "4", "--episodes", "50",
+                              "--out", str(tmp_path / "run"), "--no-progress"],
+                             cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+    try:
+        time.sleep(moment)
+        os.killpg(swarm.pid, signal.SIGINT)
+        stderr = swarm.communicate(timeout=60)[1]
+        assert stops_within(swarm, 10) < 10 and not group_pids(swarm.pid)
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode == 130, stderr
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("interrupted"), stderr
+
+
+def test_an_interrupted_in_process_run_says_how_to_resume_it_and_the_resumed_run_is_the_same(
+        tmp_path):
+    from tests.swarm_helpers import run_swarm
+    from nnql_swarm.world.engine import EPISODE_FIELDS
+    from nnql_swarm.world.metrics import read_episodes
+
+    options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--seed", "4",
+               "--episodes", "3000", "--no-record", "--in-process")
+    out = tmp_path / "stopped"
+    swarm = subprocess.Popen([sys.executable, str(SWARM), "--out", str(out), "--no-progress",
+                              *options], cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+    try:
+        while not ((out / "episodes.csv").exists()
+                   and len((out / "episodes.csv").read_text().splitlines()) > 20):
+            assert swarm.poll() is None, swarm.stderr.read() if swarm.stderr else ""
+            time.sleep(0.05)
+        os.killpg(swarm.pid, signal.SIGINT)
+        stderr = swarm.communicate(timeout=60)[1]
+    finally:
+        if swarm.poll() is None:
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode == 130 and "Traceback" not in stderr, stderr
+    [line] = [line for line in stderr.splitlines() if line.strip()]
+    command = line.partition("continue it with ")[2]
+    assert command.endswith(f"--resume --out {out} --no-record"), line
+    resumed = subprocess.run([*shlex.split(command), "--no-progress"], cwd=ROOT,
+                             capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    whole = run_swarm(tmp_path / "whole", *options)
+    assert whole.returncode == 0, whole.stderr
+
+    def rows(path):
+        return [tuple(r[f] for f in EPISODE_FIELDS) for r in read_episodes(path / "episodes.csv")]
+
+    assert rows(out) == rows(tmp_path / "whole")
