@@ -4,6 +4,7 @@ The launcher resolves it once, writes it to ``<out>/config.json``, and hands the
 every process, so that a distributed run and an in-process run of one config are the same run.
 """
 
+import hashlib
 import json
 import math
 from dataclasses import asdict, dataclass, field, fields
@@ -341,8 +342,17 @@ class SwarmConfig:
         """The options of :data:`LEARNING_FIELDS`, as a preset would give them."""
         return {name: getattr(self, name) for name in LEARNING_FIELDS}
 
+    @cached_property
+    def identity(self) -> str:
+        """The run's identity: a digest of the options that make it (:data:`IDENTITY_FIELDS`,
+        the run id and seed among them), in ``config.json`` and in every checkpoint, so that a
+        resumed run takes no file of another run, however alike in shape."""
+        values = {name: getattr(self, name) for name in IDENTITY_FIELDS}
+        text = json.dumps(values, sort_keys=True, default=list)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
     def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=2, sort_keys=True)
+        return json.dumps({**asdict(self), "identity": self.identity}, indent=2, sort_keys=True)
 
     @staticmethod
     def from_json(text: str) -> "SwarmConfig":
@@ -355,6 +365,7 @@ class SwarmConfig:
         missing = [name for name in REQUIRED_KEYS if name not in data]
         if missing:
             raise ValueError(f"no {', '.join(missing)}: not a run's config")
+        identity = data.pop("identity", None)  # written since runs carry their identity
         data.setdefault("wait_rule", "reach")  # a config without the field: all in reach waited for
         data.setdefault("ds_state", "goal")  # a config without these fields: the paper's
         data.setdefault("ds_reward", "euclid")
@@ -365,5 +376,22 @@ class SwarmConfig:
         unknown = set(data) - known
         if unknown:
             raise ValueError(f"unknown config keys: {', '.join(sorted(unknown))}")
-        return SwarmConfig(**data)
+        config = SwarmConfig(**data)
+        if identity is not None and identity != config.identity:
+            raise ValueError(f"its options are not the run's it names (identity {identity!r}, "
+                             f"the options' {config.identity!r}): edited after the run began")
+        return config
 
+
+IDENTITY_FIELDS = (
+    "run_id", "n_agents", "episodes", "max_steps", "width", "height", "seed", "algo",
+    "random_step", "alpha", "gamma", "beta", "goal_reward", "stay_reward", "count_swaps",
+    "interaction_radius", "wait_rule", "optimistic", "known_state", "shared", "shield",
+    "still_shield", "escape_shield", "lookahead", "still_terminal", "ds_state", "ds_reward",
+    "detour", "on_target", "obstacle_density", "tick_deadline_s", "map_name", "map_rows",
+    "scenario", "frozen",
+)
+"""The fields the run's identity digests (:attr:`SwarmConfig.identity`): every field there was
+when runs began to carry it, named here so that a field added later leaves the runs made before
+it their identity (add one only with a default that leaves those runs' digests alone)."""
+assert set(IDENTITY_FIELDS) <= {f.name for f in fields(SwarmConfig)}

@@ -17,7 +17,7 @@ def test_a_config_written_before_the_wait_rule_existed_keeps_waiting_for_all_in_
     came later, and until then every higher-ranked neighbour in reach was waited for."""
     data = json.loads(SwarmConfig().to_json())
     assert data["wait_rule"] == "meet" and SwarmConfig.from_json(json.dumps(data)).meet_only
-    del data["wait_rule"]
+    del data["wait_rule"], data["identity"]  # (written before runs carried an identity too)
     assert SwarmConfig.from_json(json.dumps(data)).wait_rule == "reach"
     assert PRESETS["nnql"]["wait_rule"] == "reach"  # the paper's hierarchy
     with pytest.raises(ValueError, match="wait rule"):
@@ -65,3 +65,12 @@ def test_the_bounds_are_the_codecs_own():
 def test_a_config_that_is_not_a_runs_is_refused(text):
     with pytest.raises(ValueError, match="JSON object|not a run's config"):
         SwarmConfig.from_json(text)
+
+
+def test_the_runs_identity_is_in_its_config_json_and_tells_runs_of_one_shape_apart():
+    config = SwarmConfig(run_id="a", seed=1)
+    assert json.loads(config.to_json())["identity"] == config.identity
+    assert SwarmConfig.from_json(config.to_json()).identity == config.identity
+    assert SwarmConfig(run_id="a", seed=1).identity == config.identity  # the options make it
+    assert len({config.identity, SwarmConfig(run_id="a", seed=2).identity,
+                SwarmConfig(run_id="b", seed=1).identity}) == 3
