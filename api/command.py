@@ -41,8 +41,8 @@ from nnql_swarm.protocol.config import (
 from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.storage.runfiles import (
-    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, LOCK_FILE, PARTS_DIR, RECORDING_FILE, STATS_DIR,
-    write_text_atomic,
+    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, EXIT_NO_SPACE, LOCK_FILE, PARTS_DIR,
+    RECORDING_FILE, STATS_DIR, write_text_atomic,
 )
 from nnql_swarm.storage.runlock import RunLock, RunLocked
 from nnql_swarm.transport.settings import EXIT_NO_WORLD, MODES, TransportSettings
@@ -496,8 +496,14 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
 
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True, make_args=agent_args)
     code = supervisor.run(leader=world, on_poll=on_poll)
-    recording.finish()
-    if code == EXIT_INTERRUPTED:
+    merged = recording.finish()
+    plan = recording.plan
+    if code == 0 and plan is not None and plan.parts_dir and merged is None and unmerged(out):
+        code = 1  # merge_parts said why; the parts stay, for the next --resume to merge
+    if code == EXIT_NO_SPACE:
+        print(f"no space left for the run's files in {out}: the run stopped; once there is "
+              f"space, continue it with {resume_command(args, out)}", file=sys.stderr)
+    elif code == EXIT_INTERRUPTED:
         print(f"\ninterrupted: the swarm stopped; continue it with {resume_command(args, out)}",
               file=sys.stderr)
     elif world is not None and code != 0:
@@ -507,6 +513,11 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
         print(f"the agents stopped: no world for {args.world_wait:g} s (--world-wait); once "
               f"it runs again, continue with {resume_command(args, out)}", file=sys.stderr)
     return code
+
+
+def unmerged(out: Path) -> bool:
+    """Whether recording parts wait in ``out`` to be merged into ``run.rrd``."""
+    return any((Path(out) / PARTS_DIR).glob("*.rrd"))
 
 
 def play_reference(config: SwarmConfig, plan) -> None:

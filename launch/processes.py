@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.settings import TransportSettings
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
@@ -54,6 +55,8 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
         else:
             code = run_world(WorldOptions(config, transport, out, first_episode=start.episode,
                                           first_tick=start.tick, table=table), on_tick)
+    except OSError as error:
+        code = no_space_left(error, "world")
     finally:
         if bar is not None:
             bar.close()
@@ -82,10 +85,22 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
         code = run_agent(AgentOptions(agent, config, transport, out, resume=resume,
                                       resume_episode=resume_episode, **waits), brain,
                          on_episode_end)
+    except OSError as error:
+        code = no_space_left(error, f"agent {agent}")
     finally:
         if viz is not None:
             viz.close()
     sys.exit(code)
+
+
+def no_space_left(error: OSError, name: str) -> int:
+    """The exit code of a process whose files could not be written for want of space, said in
+    one line; any other error is raised again."""
+    if not out_of_space(error):
+        raise error
+    logging.getLogger("nnql").error("no space left for the %s's files (%s); stopping", name,
+                                    error.strerror or error)
+    return EXIT_NO_SPACE
 
 
 HUB_WAIT_S = 60.0

@@ -11,9 +11,11 @@ import sys
 
 from nnql_swarm.api.command import (  # noqa: F401 (the command's parts, by their usual names)
     UsageError, build_parser, check_distributable, prepare_out_dir, resolve, resume,
-    resume_command, run_in_process, run_processes, transports,
+    resume_command, run_in_process, run_processes, transports, unmerged,
 )
 from nnql_swarm.api.swarm import Swarm
+from nnql_swarm.recording.merge import merge_parts
+from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
 from nnql_swarm.supervision.resume import ResumeError
 from nnql_swarm.terminal.cli import EXIT_INTERRUPTED
 
@@ -33,6 +35,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:  # in-process; the processes' launcher says it itself
         print(f"\n{interrupted_in_process(args, swarm)}", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except OSError as error:  # in-process: the processes' launcher says it itself
+        if not out_of_space(error):
+            raise
+        print(f"no space left for the run's files in {swarm.out} ({error.strerror}): the run "
+              f"stopped", file=sys.stderr)
+        return EXIT_NO_SPACE
     if code == 0 and args.role != "agents":
         print(f"run finished: {swarm.out}", file=sys.stderr)
     return code
@@ -57,6 +65,8 @@ def resume_run(parser, args) -> int:
     if start.episode >= config.episodes:
         print(f"{out}: the run is already complete ({config.episodes} episodes)",
               file=sys.stderr)
+        if unmerged(out) and merge_parts(out) is None:  # left by a run that could not merge
+            return 1
         if args.role != "world":
             return 0
         # Agents elsewhere may still wait for the world that completed the run: this one only

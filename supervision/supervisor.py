@@ -16,6 +16,7 @@ from multiprocessing.context import SpawnContext
 from multiprocessing.process import BaseProcess
 from typing import Callable
 
+from nnql_swarm.storage.runfiles import EXIT_NO_SPACE
 from nnql_swarm.transport.settings import EXIT_NO_WORLD, EXIT_TRANSPORT
 
 log = logging.getLogger("nnql.supervisor")
@@ -26,7 +27,8 @@ SHUTDOWN_GRACE_S = 2.0
 BACKOFF_FIRST_S = 0.5
 BACKOFF_MAX_S = 8.0
 HEALTHY_AFTER_S = 30.0
-FATAL_EXIT_CODES = (EXIT_TRANSPORT,)
+FATAL_EXIT_CODES = {EXIT_TRANSPORT: "could not start", EXIT_NO_SPACE: "had no space left"}
+"""The exit codes of a child that restarting would not help, and what each says."""
 FATAL_GRACE_S = 1.5
 """After one child could not start, the others get this long to fail the same way and say so
 (every process that cannot reach Zenoh prints its own line) before the run is stopped."""
@@ -99,8 +101,8 @@ class Supervisor:
             return 130
         if self.fatal is not None:
             code = self.fatal.started.exitcode
-            log.error("%s could not start (%s); stopping the run", self.fatal.name,
-                      describe_exit(code))
+            log.error("%s %s (%s); stopping the run", self.fatal.name,
+                      FATAL_EXIT_CODES.get(code or 0, "failed"), describe_exit(code))
             self.stop_all(signal_first=True)
             return code if code is not None else 1
         leader_code = leader.started.exitcode if leader is not None else None

@@ -343,3 +343,44 @@ def test_agents_whose_world_stays_away_stop_with_a_message(tmp_path):
     assert "restarting" not in stderr, stderr
     assert 3 <= took < 30, took
     assert all(stats(out, f"agent-{i}")["world_lost"] for i in range(2))
+
+
+def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_path):
+    """The run's folder on a 1 MiB tmpfs: the recording, the checkpoints and the rows fill it.
+    Every process says it has no space left (no traceback), the launcher stops the run with
+    the command that continues it and exit code 5; with space again, that command completes
+    the run, every episode once, as the run left alone."""
+    from nnql_swarm.storage.runfiles import EXIT_NO_SPACE
+
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)],
+                             capture_output=True, text=True)
+    if mounted.returncode != 0:
+        import pytest
+
+        pytest.skip(f"cannot mount a small tmpfs here (needs root): {mounted.stderr.strip()}")
+    options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes", "3000",
+               "--seed", "6")
+    try:
+        full = run_swarm(disk / "run", *options, timeout=240)
+        assert full.returncode == EXIT_NO_SPACE, full.stderr
+        assert "Traceback" not in full.stderr, full.stderr
+        last = full.stderr.strip().splitlines()[-1]
+        assert last.startswith(f"no space left for the run's files in {disk / 'run'}: the run "
+                               f"stopped; once there is space, continue it with "), last
+        assert "--resume" in last
+        subprocess.run(["mount", "-o", "remount,size=64m", str(disk)], check=True)
+        resumed = run_swarm(disk / "run", "--resume", timeout=240)
+        assert resumed.returncode == 0, resumed.stderr
+        rows = episodes_once(disk / "run", 3000)
+        assert (disk / "run" / "run.rrd").is_file()
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+    alone = run_swarm(tmp_path / "alone", *options, "--in-process", "--no-record")
+    assert alone.returncode == 0, alone.stderr
+    from nnql_swarm.world.engine import EPISODE_FIELDS
+
+    left_alone = read_episodes(tmp_path / "alone" / "episodes.csv")
+    assert [tuple(r[f] for f in EPISODE_FIELDS) for r in rows] == \
+        [tuple(r[f] for f in EPISODE_FIELDS) for r in left_alone]
