@@ -54,7 +54,8 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
             code = 1
         else:
             code = run_world(WorldOptions(config, transport, out, first_episode=start.episode,
-                                          first_tick=start.tick, table=table), on_tick)
+                                          first_tick=start.tick, table=table), on_tick,
+                             None if viz is None else viz.before_row)
     except OSError as error:
         code = no_space_left(error, "world")
     finally:

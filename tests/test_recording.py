@@ -304,6 +304,42 @@ def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     assert {"world/agents", "agents/0/q_ds/table", "agents/0/q_ca/value"} <= recording.entities
 
 
+@pytest.mark.parametrize("killed", ["world", "everything"])
+def test_a_run_killed_outright_and_resumed_records_every_episode(tmp_path, killed):
+    """``kill -9`` of the world, or of every process at once: the resumed run's ``run.rrd``
+    holds every episode and the ticks of each (the world sends an episode to its recording
+    before its row); only the episode played again, whose row the killed world had not yet
+    written, may be there twice."""
+    from collections import Counter
+
+    from tests.swarm_helpers import find_process, stops_within, wait_for_rows
+
+    out, episodes = tmp_path / "killed", 120
+    swarm = start_swarm(out, "--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes",
+                        str(episodes), "--seed", "2", "--run-id", f"killed-{killed}")
+    try:
+        wait_for_rows(out / "episodes.csv", 30, 120, swarm)
+        if killed == "world":
+            [world] = find_process(f"nnql-world killed-{killed}")
+            os.kill(world, signal.SIGKILL)
+        else:
+            os.killpg(swarm.pid, signal.SIGKILL)
+        stops_within(swarm, 10)
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    resumed = run_swarm(out, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    first = int(resumed.stderr.partition("at episode ")[2].split()[0])
+    recording = Recording(out / "run.rrd")
+    logged = Counter(recording.column("metrics/collisions/per_episode", "episode"))
+    assert sorted(logged) == list(range(episodes))
+    assert {e for e, times in logged.items() if times > 1} <= {first}
+    rows = read_episodes(out / "episodes.csv")
+    ticks = set(recording.column("world/agents", "tick"))
+    assert all(int(r["end_tick"]) in ticks for r in rows)
+
+
 def test_a_bad_viewer_url_is_a_one_line_usage_error(tmp_path):
     result = run_swarm(tmp_path / "bad", "--rerun-connect", "http://nowhere", timeout=60)
     assert result.returncode == 2
