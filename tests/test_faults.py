@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.learning.saved import read_fields
@@ -25,6 +26,8 @@ from tests.swarm_helpers import (
     swarm_command, wait_for_rows,
 )
 from nnql_swarm.world.metrics import read_episodes
+
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
 
 DEADLINE_S = 0.5
 
@@ -359,8 +362,6 @@ def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_pa
     mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)],
                              capture_output=True, text=True)
     if mounted.returncode != 0:
-        import pytest
-
         pytest.skip(f"cannot mount a small tmpfs here (needs root): {mounted.stderr.strip()}")
     options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes", "3000",
                "--seed", "6")

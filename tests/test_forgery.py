@@ -24,6 +24,8 @@ from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import ROOT, SWARM
 from tests.test_security import AGENTS, make_secured
 
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
+
 FORGER = AGENTS - 1
 FROM_TICK = 12
 EPISODES = 3

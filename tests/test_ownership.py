@@ -8,12 +8,16 @@ import signal
 import subprocess
 import sys
 
+import pytest
+
 from nnql_swarm.storage.runlock import RunLock, RunLocked
 from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import (
     ROOT, SwarmProcess, start_swarm, stops_within, swarm_command, wait_for_rows,
 )
 from tests.test_cli import one_line_exit_2
+
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
 
 RUN = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--seed", "3", "--no-record")
 
