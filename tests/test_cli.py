@@ -236,6 +236,7 @@ def test_a_swarm_the_machine_cannot_hold_is_refused_with_what_it_needs_and_what_
     assert available_bytes() is None or available_bytes() > 0
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("moment", [0.1, 0.4, 0.8, 1.2, 1.8])
 def test_ctrl_c_in_the_first_seconds_stops_the_swarm_in_a_line_without_a_traceback(tmp_path,
                                                                                    moment):
@@ -260,6 +261,7 @@ def test_ctrl_c_in_the_first_seconds_stops_the_swarm_in_a_line_without_a_traceba
     assert len(lines) == 1 and lines[0].startswith("interrupted"), stderr
 
 
+@pytest.mark.full
 def test_an_interrupted_in_process_run_says_how_to_resume_it_and_the_resumed_run_is_the_same(
         tmp_path):
     from tests.swarm_helpers import run_swarm

@@ -118,6 +118,7 @@ def run(request):
     return request.param, out, recording
 
 
+@pytest.mark.full
 def test_one_verified_recording_with_the_run_id_and_a_blueprint(run):
     mode, out, recording = run
     verify(out / "run.rrd")
@@ -127,6 +128,7 @@ def test_one_verified_recording_with_the_run_id_and_a_blueprint(run):
     assert not (out / PARTS_DIR).exists()  # merged, parts removed
 
 
+@pytest.mark.full
 def test_the_world_is_there_every_tick(run):
     _, out, recording = run
     assert set(WORLD_ENTITIES) <= recording.entities
@@ -136,6 +138,7 @@ def test_the_world_is_there_every_tick(run):
     assert recording.rows("world/goals") == EPISODES
 
 
+@pytest.mark.full
 def test_positions_and_trails_are_the_worlds(run):
     _, out, recording = run
     config = SwarmConfig.from_json((out / "config.json").read_text())
@@ -152,6 +155,7 @@ def test_positions_and_trails_are_the_worlds(run):
         assert np.array_equal(np.array([strip[-1] for strip in strips]), np.array(cells[tick]))
 
 
+@pytest.mark.full
 def test_metrics_match_episodes_csv(run):
     _, out, recording = run
     rows = read_episodes(out / "episodes.csv")
@@ -194,6 +198,7 @@ def test_a_timed_brain_counts_only_the_asked_neighbours_that_did_not_answer():
     assert len(latencies) == 1 and unanswered == 1
 
 
+@pytest.mark.full
 def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run):
     mode, out, recording = run
     logged = [e for e in range(EPISODES) if logs_heat_maps(e, EPISODES)]
@@ -219,6 +224,7 @@ def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run
     assert np.array_equal(buffer.reshape(21, 21, 3), picture["image"])
 
 
+@pytest.mark.full
 def test_the_negotiation_is_logged_as_the_agents_ask(run):
     """Each tick's arrows are the queries the brains make, from the logged cells and goals."""
     _, out, recording = run
@@ -241,6 +247,7 @@ def test_the_negotiation_is_logged_as_the_agents_ask(run):
     assert total > 0
 
 
+@pytest.mark.full
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server was stopped, not closed
 def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
     out = tmp_path / "walls"
@@ -271,6 +278,7 @@ def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
     assert not {e for e in recording.entities if e.startswith("agents/1/")}
 
 
+@pytest.mark.full
 def test_streaming_to_a_viewer_sends_the_same_recording(in_process):
     out, recording, received = in_process
     streamed = Recording(received)
@@ -280,6 +288,7 @@ def test_streaming_to_a_viewer_sends_the_same_recording(in_process):
     assert streamed.scalars("metrics/reward_sum") == recording.scalars("metrics/reward_sum")
 
 
+@pytest.mark.full
 def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     out = tmp_path / "stopped"
     swarm = start_swarm(out, "--agents", "4", "--episodes", "1000", "--max-steps", "20")
@@ -304,6 +313,7 @@ def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     assert {"world/agents", "agents/0/q_ds/table", "agents/0/q_ca/value"} <= recording.entities
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("killed", ["world", "everything"])
 def test_a_run_killed_outright_and_resumed_records_every_episode(tmp_path, killed):
     """``kill -9`` of the world, or of every process at once: the resumed run's ``run.rrd``
@@ -409,6 +419,7 @@ def test_processes_that_do_not_record_never_load_rerun():
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
 
 
+@pytest.mark.full
 def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_reference(tmp_path):
     """The chosen agent's known map, replayed by the recording, ends as the walls its learner
     kept (its checkpoint); each tick's planned path runs from its cell to its goal around the

@@ -153,6 +153,7 @@ def test_the_moments_are_spread_over_the_run_and_every_way_of_stopping_is_drawn(
 @pytest.mark.parametrize("preset, grid", [
     ("shield-nnql", ()), ("best-nnql", ()),
     ("path-nnql", ("--grid", "24x12", "--obstacle-density", "0.2"))])
+@pytest.mark.full
 def test_a_run_stopped_in_every_way_and_resumed_is_the_run_left_alone(tmp_path, preset, grid):
     """Five seeded moments over a short run, each stopped another way (``STOPS``) and resumed:
     the same rows and the same Q-tables, generators and shared table as the run left alone (the
