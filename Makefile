@@ -1,5 +1,6 @@
 # Two commands for a fresh machine: `make run` (the swarm) and `make test` (the type checker over
-# the package, then the test suite).
+# the package, then the test suite's fast tier: every room, in minutes). `make test-all` runs the
+# whole suite (the fast tier and the tests marked `full`), as CI does (.ci/run).
 # Both create a local virtualenv in .venv and install the project into it first.
 # `make browser-test` installs Debian's chromium (as root, with apt-get) and Playwright, and runs
 # the tests of the web viewer in headless Chromium (`make test` runs them too when both are there).
@@ -16,7 +17,7 @@ CHROMIUM := /usr/bin/chromium
 AGENTS ?= 8
 ARGS ?=
 
-.PHONY: run test chromium netfault-tools playwright browser-test experiment bench clean
+.PHONY: run test test-all chromium netfault-tools playwright browser-test experiment bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -31,6 +32,10 @@ run: $(STAMP)
 	$(PY) launch/swarm.py --agents $(AGENTS) $(ARGS)
 
 test: $(STAMP)
+	$(PY) -m mypy
+	$(PY) -m pytest -q -m "not full"
+
+test-all: $(STAMP)
 	$(PY) -m mypy
 	$(PY) -m pytest -q
 

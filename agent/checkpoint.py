@@ -2,8 +2,9 @@
 a reader sees the old checkpoint or the new, whatever is killed when).
 
 A checkpoint holds both tables, the exploration counter, the agent's generator state, the walls
-it has seen (``learning.known_map``) and the episode it completes, plus what it belongs to (agent id, agent count, algorithm), so a checkpoint
-from another run shape is refused with a clear error naming the file.
+it has seen (``learning.known_map``) and the episode it completes, plus what it belongs to (agent id, agent count, algorithm, and
+the run's identity, ``SwarmConfig.identity``), so a checkpoint from another run, of another shape
+or not, is refused with a clear error naming the file.
 """
 
 import hashlib
@@ -14,7 +15,7 @@ from typing import Protocol
 import numpy as np
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.learning.saved import CheckpointError, check_tables, read_versions
+from nnql_swarm.learning.saved import CheckpointError, check_run, check_tables, read_versions
 from nnql_swarm.storage import slotfile
 from nnql_swarm.protocol.config import SwarmConfig
 
@@ -66,7 +67,7 @@ def save(path: Path, brain: Saved, episode: int) -> None:
     slotfile.write(path, {"q_ds": q_ds, "q_ca": q_ca,
                           "actions_taken": int(brain.learner.actions_taken), "episode": episode,
                           "agent": brain.agent, "n_agents": brain.config.n_agents,
-                          "algo": brain.config.algo,
+                          "algo": brain.config.algo, "run": brain.config.identity,
                           "rng_state": json.dumps(brain.rng.bit_generator.state),
                           "known_walls": np.array(brain.learner.known_walls(), dtype=np.int64)})
 
@@ -98,6 +99,7 @@ def load(path: Path, brain: AgentBrain, episode: int | None = None) -> int:
             f"{path}: belongs to agent {owner[0]} of {owner[1]} ({owner[2]}), "
             f"not agent {mine[0]} of {mine[1]} ({mine[2]})"
         )
+    check_run(path, fields, brain.config)
     try:  # a checkpoint without ``known_walls`` knows no wall
         brain.learner.restore(fields["q_ds"], fields["q_ca"], int(fields["actions_taken"]),
                               np.asarray(fields.get("known_walls", ())).reshape(-1).tolist())

@@ -35,8 +35,9 @@ Faults it survives: an observation lost on the way (it follows the clock again a
 the standing query is replaced, at once if it ends mid-negotiation), a neighbour that dies or
 refuses the tick (its ask ends unanswered, or with an error: it is waited for no more), a world
 that dies and comes back with its own clock (``--resume``: the agent starts afresh, and ignores
-whatever is still on its way from the world before), forged or malformed input (rejected and
-counted by reason, never raised). ``launch/faultsim.py`` runs it through thousands of seeded
+whatever is still on its way from the world before; a world gone for longer than
+``world_wait_s`` is taken for gone for good: the agent stops, ``world_lost``), forged or
+malformed input (rejected and counted by reason, never raised). ``launch/faultsim.py`` runs it through thousands of seeded
 fault schedules (``sim``).
 """
 
@@ -69,6 +70,11 @@ PEER_WAIT_S = 30.0
 """How long an agent waits at least, at start-up, to see every other agent before it acts anyway
 (``protocol.config.START_S_PER_AGENT`` per agent, where that is longer)."""
 
+WORLD_WAIT_S = 300.0
+"""How long an agent waits at most for a world that left to come back (``--world-wait``): a
+world restarted with ``--resume`` comes back sooner; one that completed the run while this
+agent was cut off never does."""
+
 _NOTHING = negotiation.TickIntents()
 """What an agent knows of a tick nobody answered for (never written to)."""
 
@@ -82,9 +88,11 @@ class AgentMachine(QueryAnswering, Machine):
     FINAL = Phase.STOPPED
 
     def __init__(self, agent: int, config: SwarmConfig, brain, now: float,
-                 negotiation_timeout_s: float | None = None, trace: TickTrace = _NO_TRACE) -> None:
+                 negotiation_timeout_s: float | None = None, trace: TickTrace = _NO_TRACE,
+                 world_wait_s: float = WORLD_WAIT_S) -> None:
         """``brain`` is an ``agent.brain.AgentBrain`` (fresh, or restored from a checkpoint);
-        ``trace`` only records the time of each step (``machines.trace``), never decides."""
+        ``trace`` only records the time of each step (``machines.trace``), never decides;
+        ``world_wait_s``: how long a world that left may stay away."""
         self.agent = agent
         self.config = config
         self.brain = brain
@@ -115,6 +123,9 @@ class AgentMachine(QueryAnswering, Machine):
         self.stream_generation = 0
         self.gap_tick, self.gap_run = -1, 0
         self.shutdown = False  # stopped by the world
+        self.world_wait_s = world_wait_s
+        self.world_back_by: float | None = None  # the world left: it must be back by then
+        self.world_lost = False  # stopped because it was not
 
     @property
     def stopped(self) -> bool:
@@ -183,6 +194,7 @@ class AgentMachine(QueryAnswering, Machine):
     def on_world(self, alive: bool, now: float) -> None:
         """The world's liveliness token appeared or went. A world that leaves may come back
         (``--resume``) with its own clock: start afresh."""
+        self.world_back_by = None if alive else now + self.world_wait_s
         if not alive:
             self._out.append(Log(logging.INFO, "the world left; waiting for it to come back"))
             self.decided_tick = -1
@@ -210,7 +222,14 @@ class AgentMachine(QueryAnswering, Machine):
 
     @an_input
     def on_timer(self, now: float) -> None:
-        """Time has come to ``now``: start without the peers not seen, or end a negotiation."""
+        """Time has come to ``now``: start without the peers not seen, end a negotiation, or
+        stop waiting for a world that left."""
+        if self.world_back_by is not None and now >= self.world_back_by:
+            self._out.append(Log(logging.ERROR, "no world for %.0f s (--world-wait): taken for "
+                                                "gone for good; stopping", (self.world_wait_s,)))
+            self.world_lost = True
+            self._stop(by_world=False)
+            return
         if self.phase is Phase.PEERS and now >= self.ready_by:
             self._out.append(Log(logging.WARNING, "only saw agents %s; negotiating with whoever "
                                                   "answers", (sorted(self.peers_seen),)))
@@ -228,14 +247,19 @@ class AgentMachine(QueryAnswering, Machine):
         """When :meth:`on_timer` is next due (None: no timer)."""
         phase = self.phase
         if phase is Phase.PEERS:
-            return self.ready_by
-        p = self._negotiation()
-        return None if p is None else p.deadline
+            due: float | None = self.ready_by
+        else:
+            p = self._negotiation()
+            due = None if p is None else p.deadline
+        back_by = self.world_back_by
+        if back_by is None or phase is Phase.STOPPED:
+            return due
+        return back_by if due is None else min(due, back_by)
 
     def stats(self) -> dict:
         return {"agent": self.agent, "decided_tick": self.decided_tick,
                 "accepted": self.inbox.accepted, "rejected": dict(self.inbox.rejections),
-                "shutdown_by_world": self.shutdown}
+                "shutdown_by_world": self.shutdown, "world_lost": self.world_lost}
 
     # The negotiation.
 

@@ -30,7 +30,7 @@ import zenoh
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.machine import AgentMachine
+from nnql_swarm.agent.machine import WORLD_WAIT_S, AgentMachine
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.machines import trace
 from nnql_swarm.protocol import keys
@@ -43,7 +43,7 @@ from nnql_swarm.transport.adapter import ProtocolAdapter
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.settings import (
-    EXIT_TRANSPORT, TransportError, TransportSettings, open_session,
+    EXIT_NO_WORLD, EXIT_TRANSPORT, TransportError, TransportSettings, open_session,
 )
 
 log = logging.getLogger("nnql.agent")
@@ -67,6 +67,7 @@ class AgentOptions:
     out_dir: Path
     resume: bool = False
     resume_episode: int | None = None  # the checkpoint's version to load (None: the newest)
+    world_wait_s: float = WORLD_WAIT_S  # how long a world that left may stay away
 
     @property
     def negotiation_timeout_s(self) -> float:
@@ -96,7 +97,8 @@ class AgentNode(ProtocolAdapter):
         self.brain = brain
         self.trace = trace.TickTrace.from_env(f"agent-{self.agent}")
         self.protocol = AgentMachine(self.agent, self.config, brain, time.monotonic(),
-                                     options.negotiation_timeout_s, self.trace)
+                                     options.negotiation_timeout_s, self.trace,
+                                     options.world_wait_s)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False
@@ -260,4 +262,6 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
     inbox = node.protocol.inbox
     if inbox.total_rejected:
         log.warning("rejected %d messages: %s", inbox.total_rejected, dict(inbox.rejections))
+    if node.protocol.world_lost:
+        return EXIT_NO_WORLD
     return 0 if node.shutdown else EXIT_STOPPED

@@ -13,6 +13,7 @@ directory (``--out``, default ``runs/<run-id>``) receives ``config.json``, ``epi
 
 import argparse
 import logging
+import math
 from dataclasses import fields, replace
 import multiprocessing as mp
 import os
@@ -32,6 +33,7 @@ from nnql_swarm.recording.viewers import check_viewer_url
 from nnql_swarm.supervision.resume import (
     ResumeError, ResumePoint, read_config, resume_point, rewind, shared_table,
 )
+from nnql_swarm.supervision.capacity import check_fits
 from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
 from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
@@ -40,10 +42,12 @@ from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.terrain.pogema import lifelong_instance
 from nnql_swarm.storage.runfiles import (
-    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, PARTS_DIR, RECORDING_FILE, STATS_DIR,
-    write_text_atomic,
+    CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, EXIT_NO_SPACE, LOCK_FILE, PARTS_DIR,
+    RECORDING_FILE, STATS_DIR, write_text_atomic,
 )
-from nnql_swarm.transport.settings import MODES, TransportSettings
+from nnql_swarm.storage.runlock import RunLock, RunLocked
+from nnql_swarm.transport.settings import EXIT_NO_WORLD, MODES, TransportSettings
+from nnql_swarm.agent.machine import WORLD_WAIT_S
 from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
 from nnql_swarm.launch.processes import agent_main, world_main
 
@@ -111,6 +115,9 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
                    help="start everything, only the world, or only agents")
     z.add_argument("--agent-ids", type=parse_ids, default=None,
                    help="with --role agents: which agents to start, e.g. 0-3")
+    z.add_argument("--world-wait", type=float, default=WORLD_WAIT_S, metavar="SECONDS",
+                   help="how long the agents wait for a world that left to come back before "
+                        f"they stop (exit code {EXIT_NO_WORLD}; default: {WORLD_WAIT_S:.0f})")
     z.add_argument("--port", type=int, default=None,
                    help="one machine: the loopback port the world listens on (default: a free one)")
     z.add_argument("--topology", choices=("auto", *LAUNCHER_TOPOLOGIES), default="auto",
@@ -215,6 +222,8 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
                          "give endpoints instead")
     if not 0 <= args.map_agent < config.n_agents:
         raise UsageError(f"--map-agent {args.map_agent} out of range 0..{config.n_agents - 1}")
+    if not 0 < args.world_wait < math.inf:
+        raise UsageError(f"--world-wait must be positive and finite, not {args.world_wait}")
     if args.port is not None and not 1 <= args.port <= 65535:
         raise UsageError(f"--port must be 1..65535, not {args.port}")
     check_zenoh_files(args, config)
@@ -223,8 +232,23 @@ def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
         raise UsageError(f"--role {args.role} needs --listen/--connect endpoints or --zenoh-config")
     if args.role != "all" and args.run_id is None:
         raise UsageError(f"--role {args.role} needs --run-id, the same on every host")
+    check_capacity(args, config)
     out = args.out or Path("runs") / run_id
     return config, out
+
+
+def check_capacity(args: argparse.Namespace, config: SwarmConfig) -> None:
+    """Refuse a run, or the part of one this host starts, that this machine cannot hold
+    (``supervision.capacity``); raises UsageError."""
+    if args.in_process:
+        processes, agents = 1, config.n_agents
+    else:
+        agents = 0 if args.role == "world" else len(agent_ids(args, config))
+        processes = agents + (args.role != "agents")
+    try:
+        check_fits(processes, agents, config.max_steps)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
 
 
 def map_values(args: argparse.Namespace, values: dict) -> dict:
@@ -263,43 +287,89 @@ def check_distributable(config: SwarmConfig) -> None:
                          "only; play it in-process")
 
 
-RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR)
+RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR,
+               LOCK_FILE)
 """What a run directory holds (``storage.runfiles``); a folder with anything else is not a run."""
 
 
-def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> None:
-    """Create the run directory; never overwrite a run that is already there, nor write a run
+def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> RunLock | None:
+    """Create the run directory and own it (its lock, :mod:`storage.runlock`; the caller releases
+    it when the run ends; ``--role agents``, which shares the folder with the world's launcher
+    on one host, takes none); never overwrite a run that is already there, nor write a run
     into a folder that holds anything but a run's files (those of a run that never finished an
     episode, or of the agents started first on this host, may be there). An unusable path (a
-    file, or where no folder can be made) is a UsageError."""
+    file, or where no folder can be made) or a folder another run owns is a UsageError."""
     if out.exists() and not out.is_dir():
         raise UsageError(f"--out {out} is a file, not a folder")
     if role != "agents" and out.is_dir():
-        if (out / EPISODES_FILE).exists():
-            raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
-                             f"or continue it with --resume --out {out}")
-        held = sorted(entry.name for entry in out.iterdir()
-                      if entry.name not in RUN_ENTRIES and not entry.name.endswith(".tmp"))
-        if held:
-            raise UsageError(f"--out {out} is a folder that holds other files ({held[0]}"
-                             f"{', ...' if len(held) > 1 else ''}), not a run; choose a new or "
-                             f"empty one")
+        if (out / LOCK_FILE).exists():
+            own(out).release()  # a run going on there is named as such
+        check_no_run(out)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        if role != "agents":
-            write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
     except OSError as error:
         raise UsageError(f"cannot make the run directory --out {out}: "
                          f"{error.strerror or error}") from None
+    if role == "agents":
+        return None
+    lock = own(out)
+    try:
+        check_no_run(out)  # a run that took and left the folder since the check above
+        write_text_atomic(out / CONFIG_FILE, config.to_json() + "\n")
+    except BaseException as error:
+        lock.release()
+        if isinstance(error, OSError):
+            raise UsageError(f"cannot write the run's config in --out {out}: "
+                             f"{error.strerror or error}") from None
+        raise
+    return lock
 
 
-def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
+def check_no_run(out: Path) -> None:
+    """Refuse a folder that holds a run, or files that are not a run's; raises UsageError."""
+    if (out / EPISODES_FILE).exists():
+        raise UsageError(f"{out} already holds a run ({EPISODES_FILE}); choose another --out, "
+                         f"or continue it with --resume --out {out}")
+    held = sorted(entry.name for entry in out.iterdir()
+                  if entry.name not in RUN_ENTRIES and not entry.name.endswith(".tmp"))
+    if held:
+        raise UsageError(f"--out {out} is a folder that holds other files ({held[0]}"
+                         f"{', ...' if len(held) > 1 else ''}), not a run; choose a new or "
+                         f"empty one")
+
+
+def own(out: Path) -> RunLock:
+    """The lock of the run folder ``out`` (:mod:`storage.runlock`); raises UsageError where
+    another run holds it."""
+    try:
+        return RunLock(out)
+    except RunLocked as error:
+        raise UsageError(str(error)) from None
+    except OSError as error:
+        raise UsageError(f"cannot lock the run directory --out {out}: "
+                         f"{error.strerror or error}") from None
+
+
+def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path, RunLock | None]:
     """The config, start point and directory of a run to continue (its rows past the cut
-    dropped: ``supervision.resume``); raises ResumeError or UsageError."""
+    dropped: ``supervision.resume``), and the folder's lock (none for ``--role agents``), which
+    the caller releases when the run ends; raises ResumeError or UsageError."""
     if args.out is None:
         raise UsageError("--resume needs --out DIR, the run directory to continue")
     if args.in_process:
         raise UsageError("--resume continues distributed runs only")
+    if args.role == "agents" or not (Path(args.out) / CONFIG_FILE).is_file():
+        return (*_resume(args), None)  # (no run there: refused, and no lock file left behind)
+    lock = own(args.out)
+    try:
+        return (*_resume(args), lock)
+    except BaseException:
+        lock.release()
+        raise
+
+
+def _resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
+    """:func:`resume`, once the folder is owned."""
     agents = agent_ids(args, read_config(args.out)) if args.role != "world" else []
     config, start = resume_point(args.out, agents, world=args.role != "agents")
     check_same_options(args, config)
@@ -436,18 +506,32 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
         for i in agent_ids(args, config):
             def agent_args(restarted: bool, i: int = i) -> tuple:
                 return (i, config, agent_transport(i), out, restarted or resumes, recording.plan,
-                        hub, None if restarted else start.checkpoint_episode)
+                        hub, None if restarted else start.checkpoint_episode, args.world_wait)
 
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True, make_args=agent_args)
     code = supervisor.run(leader=world, on_poll=on_poll)
-    recording.finish()
-    if code == EXIT_INTERRUPTED:
+    merged = recording.finish()
+    plan = recording.plan
+    if code == 0 and plan is not None and plan.parts_dir and merged is None and unmerged(out):
+        code = 1  # merge_parts said why; the parts stay, for the next --resume to merge
+    if code == EXIT_NO_SPACE:
+        print(f"no space left for the run's files in {out}: the run stopped; once there is "
+              f"space, continue it with {resume_command(args, out)}", file=sys.stderr)
+    elif code == EXIT_INTERRUPTED:
         print(f"\ninterrupted: the swarm stopped; continue it with {resume_command(args, out)}",
               file=sys.stderr)
     elif world is not None and code != 0:
         print(f"the world ended with {describe_exit(code)}; continue the run with "
               f"{resume_command(args, out)}", file=sys.stderr)
+    elif code == EXIT_NO_WORLD:
+        print(f"the agents stopped: no world for {args.world_wait:g} s (--world-wait); once "
+              f"it runs again, continue with {resume_command(args, out)}", file=sys.stderr)
     return code
+
+
+def unmerged(out: Path) -> bool:
+    """Whether recording parts wait in ``out`` to be merged into ``run.rrd``."""
+    return any((Path(out) / PARTS_DIR).glob("*.rrd"))
 
 
 def play_reference(config: SwarmConfig, plan) -> None:
@@ -470,6 +554,8 @@ def resume_command(args: argparse.Namespace, out: Path) -> str:
         words += ["--agent-ids", ",".join(map(str, args.agent_ids))]
     if args.topology != "auto":
         words += ["--topology", args.topology]
+    if args.world_wait != WORLD_WAIT_S:
+        words += ["--world-wait", f"{args.world_wait:g}"]
     for flag, value in (("--mode", args.mode), ("--zenoh-config", args.zenoh_config),
                         ("--zenoh-config-dir", args.zenoh_config_dir)):
         if value is not None:

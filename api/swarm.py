@@ -26,6 +26,7 @@ from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import MODE_VARIABLE
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE
+from nnql_swarm.storage.runlock import RunLock
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint
 from nnql_swarm.supervision.supervisor import describe_exit
 from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser
@@ -75,6 +76,7 @@ class Swarm:
 
     _args: argparse.Namespace
     _argv: list[str] | None
+    _lock: RunLock | None = None
     config: SwarmConfig
     out: Path
 
@@ -104,21 +106,26 @@ class Swarm:
         return f"Swarm({' '.join(self._argv or [])})"
 
     def prepare(self) -> None:
-        """Make the run directory (:attr:`out`) and write its config; raises
-        ``api.command.UsageError`` for a directory that is not usable or holds a run."""
-        command.prepare_out_dir(self.out, self.config, self._args.role)
+        """Make the run directory (:attr:`out`), own it (``storage.runlock``, until :meth:`play`
+        ends) and write its config; raises ``api.command.UsageError`` for a directory that is
+        not usable, holds a run or is another run's."""
+        self._lock = command.prepare_out_dir(self.out, self.config, self._args.role)
 
     def play(self, on_row: "Progress | None" = None) -> int:
         """Play the prepared run as its options say (in this process, or as the world and the
         agent processes of ``--role``); returns the command's exit code. ``on_row(row)`` follows
         each episode's row."""
         args, config, path = self._args, self.config, self.out
-        if args.in_process:
-            return command.run_in_process(config, path,
-                                          command.RecordingSession.start(args, config, path),
-                                          not args.no_progress, on_row=on_row,
-                                          reference=args.reference)
-        return _play_processes(args, config, path, ResumePoint(0, 0), on_row)
+        try:
+            if args.in_process:
+                return command.run_in_process(config, path,
+                                              command.RecordingSession.start(args, config, path),
+                                              not args.no_progress, on_row=on_row,
+                                              reference=args.reference)
+            return _play_processes(args, config, path, ResumePoint(0, 0), on_row)
+        finally:
+            if self._lock is not None:
+                self._lock.release()
 
     def run(self, out: str | Path | None = None, *, distributed: bool = False,
             record: bool = True, progress: Progress | bool | None = None) -> "Run":
@@ -162,10 +169,15 @@ def resume(out: str | Path, *, progress: Progress | bool | None = None) -> "Run"
     Raises ValueError where the directory cannot be resumed (the line names the file)."""
     argv = ["--resume", "--out", str(out)] + ([] if progress is True else ["--no-progress"])
     args = parse(argv)
-    config, start, path = _usage(command.resume, args)
-    if start.episode >= config.episodes:
-        return Run.open(path)
-    code = _play_processes(args, config, path, start, progress if callable(progress) else None)
+    config, start, path, lock = _usage(command.resume, args)
+    try:
+        if start.episode >= config.episodes:
+            return Run.open(path)
+        code = _play_processes(args, config, path, start,
+                               progress if callable(progress) else None)
+    finally:
+        if lock is not None:
+            lock.release()
     return _finished(code, path, distributed=True)
 
 

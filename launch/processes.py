@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.settings import TransportSettings
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
@@ -54,7 +55,10 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
             code = 1
         else:
             code = run_world(WorldOptions(config, transport, out, first_episode=start.episode,
-                                          first_tick=start.tick, table=table), on_tick)
+                                          first_tick=start.tick, table=table), on_tick,
+                             None if viz is None else viz.before_row)
+    except OSError as error:
+        code = no_space_left(error, "world")
     finally:
         if bar is not None:
             bar.close()
@@ -65,10 +69,11 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
 
 def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
                resume: bool = False, recording=None, hub: tuple[str, int] | None = None,
-               resume_episode: int | None = None) -> None:
+               resume_episode: int | None = None, world_wait_s: float | None = None) -> None:
     """An agent process (spawned); ``resume`` reloads its checkpoint if there is one (the
     version of ``resume_episode``, or else the newest); ``hub``: the ``(host, port)`` of the
-    world to wait for, where the agent is its client."""
+    world to wait for, where the agent is its client; ``world_wait_s``: how long a world that
+    left may stay away (None: ``agent.machine.WORLD_WAIT_S``)."""
     from nnql_swarm.agent.node import AgentOptions, run_agent
     from nnql_swarm.recording.loggers import open_agent_viz
 
@@ -78,13 +83,26 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
         wait_listening(*hub, timeout_s=HUB_WAIT_S)  # if not, opening the session says so
     brain, on_episode_end, viz = open_agent_viz(recording, agent, config)
     try:
+        waits = {} if world_wait_s is None else {"world_wait_s": world_wait_s}
         code = run_agent(AgentOptions(agent, config, transport, out, resume=resume,
-                                             resume_episode=resume_episode), brain,
+                                      resume_episode=resume_episode, **waits), brain,
                          on_episode_end)
+    except OSError as error:
+        code = no_space_left(error, f"agent {agent}")
     finally:
         if viz is not None:
             viz.close()
     sys.exit(code)
+
+
+def no_space_left(error: OSError, name: str) -> int:
+    """The exit code of a process whose files could not be written for want of space, said in
+    one line; any other error is raised again."""
+    if not out_of_space(error):
+        raise error
+    logging.getLogger("nnql").error("no space left for the %s's files (%s); stopping", name,
+                                    error.strerror or error)
+    return EXIT_NO_SPACE
 
 
 HUB_WAIT_S = 60.0

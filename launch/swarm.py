@@ -12,9 +12,13 @@ import sys
 
 
 def main(argv: list[str] | None = None) -> int:
-    from nnql_swarm.launch.swarm_cli import main as command_line
+    try:
+        from nnql_swarm.launch.swarm_cli import main as command_line
 
-    return command_line(argv)
+        return command_line(argv)
+    except KeyboardInterrupt:  # before the run's own handlers: nothing was started yet
+        print("\ninterrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage import slotfile
 
 
@@ -41,6 +42,15 @@ def _read(path: Path, expected: tuple[str, ...], all_versions: bool) -> list[dic
             raise CheckpointError(f"{path}: corrupt checkpoint, missing {', '.join(missing)}")
     return versions
 
+
+
+def check_run(path: Path, fields: dict, config: SwarmConfig) -> None:
+    """That a checkpoint is the run's own (``run``: its identity, ``SwarmConfig.identity``);
+    raises CheckpointError naming the file. One written before checkpoints carried it passes."""
+    run = fields.get("run")
+    if run is not None and str(run) != config.identity:
+        raise CheckpointError(f"{path}: belongs to another run (identity {run}), not this one "
+                              f"({config.identity})")
 
 
 def check_tables(path: Path, fields: dict, tables: tuple[np.ndarray, np.ndarray]) -> None:

@@ -4,7 +4,9 @@ The launcher resolves it once, writes it to ``<out>/config.json``, and hands the
 every process, so that a distributed run and an in-process run of one config are the same run.
 """
 
+import hashlib
 import json
+import math
 from dataclasses import asdict, dataclass, field, fields
 from functools import cached_property
 from typing import Any
@@ -13,7 +15,8 @@ import numpy as np
 
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.keys import validate_run_id
-from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_GRID
+from nnql_swarm.protocol.keys import MAX_TICK
+from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_GRID, MAX_REWARD
 from nnql_swarm.protocol.ranks import WAIT_RULES
 from nnql_swarm.protocol.ranks import priority_rank  # noqa: F401 (the nodes import it from here)
 from nnql_swarm.protocol.walls import MAX_DENSITY, layout, wall_count
@@ -106,6 +109,10 @@ DEFAULT_PRESET = "path-nnql"
 (docs/swarm.md: the paper's nnQL with the shield and its escape rule, destination seeking on the
 walls each agent has seen)."""
 _DEFAULT = PRESETS[DEFAULT_PRESET]
+
+
+REQUIRED_KEYS = ("run_id", "n_agents", "episodes", "max_steps", "width", "height", "seed")
+"""What every ``config.json`` a run wrote holds (later fields are defaulted when missing)."""
 
 
 @dataclass(frozen=True)
@@ -231,6 +238,9 @@ class SwarmConfig:
             (1 <= self.n_agents <= MAX_AGENTS, f"agents must be 1..{MAX_AGENTS}"),
             (self.episodes >= 1, "episodes must be at least 1"),
             (self.max_steps >= 1, "max steps must be at least 1"),
+            (self.episodes * (self.max_steps + 1) < MAX_TICK,
+             f"episodes x (max steps + 1) ticks must stay below {MAX_TICK}, the messages' "
+             f"largest tick"),
             (2 <= self.width <= MAX_GRID and 2 <= self.height <= MAX_GRID,
              f"the grid must be 2..{MAX_GRID} cells per side"),
             (2 * self.n_agents <= self.width * self.height,
@@ -244,8 +254,14 @@ class SwarmConfig:
             (0 <= self.interaction_radius <= VIEW_RADIUS,
              f"the interaction radius must be 0..{VIEW_RADIUS}"),
             (self.wait_rule in WAIT_RULES, f"the wait rule must be one of {', '.join(WAIT_RULES)}"),
-            (self.optimistic >= 0, "the optimistic initial value must be non-negative"),
-            (self.stay_reward >= 0, "the stay reward must be non-negative"),
+            (0 <= self.optimistic <= MAX_REWARD,
+             f"the optimistic initial value must be 0..{MAX_REWARD:g} (a Q-value the messages "
+             f"carry)"),
+            (0 <= self.stay_reward <= MAX_REWARD,
+             f"the stay reward must be 0..{MAX_REWARD:g} (a reward the messages carry)"),
+            (-MAX_REWARD <= self.goal_reward <= MAX_REWARD,
+             f"the goal reward must be -{MAX_REWARD:g}..{MAX_REWARD:g} (a reward the messages "
+             f"carry)"),
             (1 <= self.lookahead <= MAX_LOOKAHEAD, f"the lookahead n must be 1..{MAX_LOOKAHEAD}"),
             (self.lookahead == 1 or self.algo in ("nnql",), "a lookahead n > 1 needs --algo nnql"),
             (self.ds_state in DS_STATE_NAMES,
@@ -275,7 +291,7 @@ class SwarmConfig:
              "under --arbitration pibt nobody collides: the shield (--shield) has nothing to do"),
             (self.arbitration != "pibt" or self.algo in NEGOTIATING_ALGOS,
              "--arbitration pibt needs a learner that negotiates (nnql, nnql-dir)"),
-            (self.tick_deadline_s > 0, "the tick deadline must be positive"),
+            (0 < self.tick_deadline_s < math.inf, "the tick deadline must be positive and finite"),
             (0 <= self.obstacle_density <= MAX_DENSITY,
              f"the obstacle density must be 0..{MAX_DENSITY}"),
             (self.map_rows or not self.scenario, "a scenario (--scen) needs its map (--map)"),
@@ -287,6 +303,11 @@ class SwarmConfig:
         for ok, message in checks:
             if not ok:
                 raise ValueError(message)
+        if self.q_bound() > MAX_REWARD:
+            raise ValueError(
+                f"Q-values may reach {self.q_bound():.3g} (the largest of the optimistic value "
+                f"and the largest reward / (1 - gamma)), above {MAX_REWARD:g}, the largest the "
+                f"messages carry: lower the rewards, --optimistic or --gamma")
         if self.map_rows:
             self._check_map()
         free = len(self.open_cells())
@@ -328,6 +349,14 @@ class SwarmConfig:
                     0 <= x < self.width and 0 <= y < self.height and rows[y][x] == "."
                     for x, y in zip(goals[::2], goals[1::2])) for goals in self.goal_lists):
                 raise ValueError("the given goals must be free cells of the map, x y each")
+
+    def q_bound(self) -> float:
+        """What no Q-value of the run exceeds in magnitude: the initial value, or a return
+        of the largest set reward for ever (a Q-learning update keeps every value within
+        ``max(|Q|, |r| / (1 - gamma))``). The world's fixed rewards (1/d, and collision avoidance's
+        10, ``world.rules``) are not counted: below ``MAX_REWARD`` for a gamma up to 0.99999."""
+        largest = max(abs(self.goal_reward), self.stay_reward)
+        return max(self.optimistic, largest / (1 - self.gamma))
 
     @cached_property  # the world reads it every tick: worked out once (the config is frozen)
     def n_walls(self) -> int:
@@ -389,12 +418,32 @@ class SwarmConfig:
         """The options of :data:`LEARNING_FIELDS`, as a preset would give them."""
         return {name: getattr(self, name) for name in LEARNING_FIELDS}
 
+    @cached_property
+    def identity(self) -> str:
+        """The run's identity: a digest of the options that make it (:data:`IDENTITY_FIELDS`,
+        the run id and seed among them), in ``config.json`` and in every checkpoint, so that a
+        resumed run takes no file of another run, however alike in shape."""
+        values = {name: getattr(self, name) for name in IDENTITY_FIELDS}
+        values.update({name: getattr(self, name) for name, default in LATER_FIELDS.items()
+                       if getattr(self, name) != default})
+        text = json.dumps(values, sort_keys=True, default=list)
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
     def to_json(self) -> str:
-        return json.dumps(asdict(self), indent=2, sort_keys=True)
+        return json.dumps({**asdict(self), "identity": self.identity}, indent=2, sort_keys=True)
 
     @staticmethod
     def from_json(text: str) -> "SwarmConfig":
+        """The config of :meth:`to_json`'s text; raises ValueError (or TypeError, for a value of
+        the wrong type) for anything else: not an object, or one without a run's own keys."""
         data = json.loads(text)
+        if not isinstance(data, dict):
+            kind = {list: "an array", str: "a string", type(None): "null", bool: "a boolean"}
+            raise ValueError(f"a config is a JSON object, not {kind.get(type(data), 'a number')}")
+        missing = [name for name in REQUIRED_KEYS if name not in data]
+        if missing:
+            raise ValueError(f"no {', '.join(missing)}: not a run's config")
+        identity = data.pop("identity", None)  # written since runs carry their identity
         data.setdefault("wait_rule", "reach")  # a config without the field: all in reach waited for
         data.setdefault("ds_state", "goal")  # a config without these fields: the paper's
         data.setdefault("ds_reward", "euclid")
@@ -408,5 +457,26 @@ class SwarmConfig:
         unknown = set(data) - known
         if unknown:
             raise ValueError(f"unknown config keys: {', '.join(sorted(unknown))}")
-        return SwarmConfig(**data)
+        config = SwarmConfig(**data)
+        if identity is not None and identity != config.identity:
+            raise ValueError(f"its options are not the run's it names (identity {identity!r}, "
+                             f"the options' {config.identity!r}): edited after the run began")
+        return config
 
+
+IDENTITY_FIELDS = (
+    "run_id", "n_agents", "episodes", "max_steps", "width", "height", "seed", "algo",
+    "random_step", "alpha", "gamma", "beta", "goal_reward", "stay_reward", "count_swaps",
+    "interaction_radius", "wait_rule", "optimistic", "known_state", "shared", "shield",
+    "still_shield", "escape_shield", "lookahead", "still_terminal", "ds_state", "ds_reward",
+    "detour", "on_target", "obstacle_density", "tick_deadline_s", "map_name", "map_rows",
+    "scenario", "frozen",
+)
+"""The fields the run's identity digests (:attr:`SwarmConfig.identity`): every field there was
+when runs began to carry it, named here so that a field added later leaves the runs made before
+it their identity (add one only with a default that leaves those runs' digests alone)."""
+LATER_FIELDS: dict[str, Any] = {"arbitration": "paper", "tasks": "one-shot", "map_known": False,
+                                "goal_lists": ()}
+"""Fields added since runs began to carry their identity, with the value every run made before
+them has: the identity digests one only where a run's value differs from it."""
+assert set(IDENTITY_FIELDS) | set(LATER_FIELDS) <= {f.name for f in fields(SwarmConfig)}

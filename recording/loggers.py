@@ -39,9 +39,12 @@ def open_world_viz(record, config: SwarmConfig, out: Path, distributed: bool = T
     episodes = Path(out) / "episodes.csv"  # a resumed run's complete episodes so far
     before = sum(int(row["collisions"]) for row in read_episodes(episodes)) \
         if episodes.exists() else 0
-    return WorldViz(config, plan.open("world", blueprint(config, distributed, plan.map_agent,
-                                                       plan.reference)),
-                    collisions_before=before, map_agent=plan.map_agent)
+    viz = WorldViz(config, plan.open("world", blueprint(config, distributed, plan.map_agent,
+                                                      plan.reference)),
+                   collisions_before=before, map_agent=plan.map_agent)
+    if plan.url is not None:
+        viz.row_flush_s = 0.0
+    return viz
 
 
 def open_agent_viz(plan: RecordingPlan | None, agent: int, config: SwarmConfig):

@@ -88,13 +88,17 @@ def run_in_process(
     agents = [SimulatedAgent(i, config, SimulatedLearner(batch, i), batch.generator(0, i))
               for i in range(config.n_agents)]
     results = Episodes(1, config.episodes)
+    rowed, playing = 0, False  # the episodes with a row; an episode half played
     try:
         with EpisodeWriter(out_dir / EPISODES_FILE, sync=False) as writer:
             for episode in range(config.episodes):
                 started, first_tick = time.perf_counter(), int(batch.tick[0])
+                playing = True
                 batch.play(1, results)
+                playing = False
                 row = results.swarm_row(0, episode, config.n_agents)
                 writer.write(row, time.perf_counter() - started, int(batch.tick[0]) - first_tick)
+                rowed = episode + 1
                 if on_tick is not None:
                     _replay(config, batch, row, on_tick)
                 if on_episode_end is not None:
@@ -103,7 +107,9 @@ def run_in_process(
                 if on_row is not None:
                     on_row(row)
     finally:
-        if checkpoints and batch.episode:
+        # Stopped (Ctrl-C) in the middle of an episode, or before its row: the tables are no
+        # episode's end with a row, so none is saved and a --resume plays the run afresh.
+        if checkpoints and batch.episode and not playing and batch.episode == rowed:
             for agent in agents:
                 checkpoint.save(checkpoint.checkpoint_path(out_dir / CHECKPOINT_DIR, agent.agent),
                                 agent, batch.episode - 1)

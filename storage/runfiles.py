@@ -7,8 +7,10 @@
     <out>/stats/world.json, <out>/stats/agent-<id>.json   closing statistics of each process
     <out>/run.rrd              the Rerun recording
     <out>/rerun-parts/<role>.<pid>.rrd  each process's part of it, until merged into run.rrd
+    <out>/run.lock             held by the run's launcher while it runs (storage.runlock)
 """
 
+import errno
 import json
 import os
 from pathlib import Path
@@ -19,6 +21,21 @@ RECORDING_FILE = "run.rrd"
 PARTS_DIR = "rerun-parts"
 CHECKPOINT_DIR = "checkpoints"
 STATS_DIR = "stats"
+LOCK_FILE = "run.lock"
+
+
+EXIT_NO_SPACE = 5
+"""Exit code of a process that could not write the run's files for want of disk space (the
+supervisor stops the run: what was written is resumable once there is space)."""
+
+
+def out_of_space(error: BaseException) -> bool:
+    """Whether ``error`` (or one it arose from) is a write refused for want of space."""
+    while error is not None:
+        if isinstance(error, OSError) and error.errno in (errno.ENOSPC, errno.EDQUOT):
+            return True
+        error = error.__cause__ or error.__context__  # type: ignore[assignment]
+    return False
 
 
 def stats_path(out_dir: Path, name: str) -> Path:

@@ -103,12 +103,17 @@ def _agent_versions(out: Path, config: SwarmConfig, agent: int) -> tuple[Path, l
         raise ResumeError(str(error)) from None
 
 
-def _world_versions(out: Path) -> tuple[Path, list[int]]:
+def _world_versions(out: Path, config: SwarmConfig) -> tuple[Path, list[int]]:
+    """The shared table's checkpoint file and the episodes it holds, the newest first; each
+    version is loaded, so a bad one (or another run's) is refused here."""
     path = world_checkpoint.table_path(out)
     if not path.exists():
         return path, []
     try:
-        return path, world_checkpoint.episodes(path)
+        versions = world_checkpoint.episodes(path)
+        for episode in versions:
+            world_checkpoint.load(path, config, episode)
+        return path, versions
     except CheckpointError as error:
         raise ResumeError(str(error)) from None
 
@@ -121,7 +126,7 @@ def resume_point(out: Path, agents: list[int], world: bool) -> tuple[SwarmConfig
     rows = _rows(out) if world else []
     files = [_agent_versions(out, config, agent) for agent in agents]
     if world and config.shared:
-        files.append(_world_versions(out))
+        files.append(_world_versions(out, config))
     newest = [max(episodes, default=-1) for _, episodes in files]
     last_row = len(rows) - 1 if world else min(newest, default=-1)
     cut = min([last_row, *newest])

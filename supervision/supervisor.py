@@ -2,7 +2,8 @@
 
 An agent that exits while the world still runs (killed, crashed) is restarted after a backoff
 (0.5 s, doubling up to 8 s; reset once it has lived 30 s) with ``resume=True``, so it reloads its
-last checkpoint and rejoins at the next tick. The world is not restarted: it owns the run's
+last checkpoint and rejoins at the next tick; one that stopped because its world was gone for
+too long (``EXIT_NO_WORLD``) is not. The world is not restarted: it owns the run's
 files, so a dead world ends the run and ``--resume`` continues it. Stopping (Ctrl-C, SIGTERM)
 sends SIGTERM to every child, waits a grace period, then kills what is left.
 """
@@ -15,7 +16,8 @@ from multiprocessing.context import SpawnContext
 from multiprocessing.process import BaseProcess
 from typing import Callable
 
-from nnql_swarm.transport.settings import EXIT_TRANSPORT
+from nnql_swarm.storage.runfiles import EXIT_NO_SPACE
+from nnql_swarm.transport.settings import EXIT_NO_WORLD, EXIT_TRANSPORT
 
 log = logging.getLogger("nnql.supervisor")
 
@@ -25,7 +27,8 @@ SHUTDOWN_GRACE_S = 2.0
 BACKOFF_FIRST_S = 0.5
 BACKOFF_MAX_S = 8.0
 HEALTHY_AFTER_S = 30.0
-FATAL_EXIT_CODES = (EXIT_TRANSPORT,)
+FATAL_EXIT_CODES = {EXIT_TRANSPORT: "could not start", EXIT_NO_SPACE: "had no space left"}
+"""The exit codes of a child that restarting would not help, and what each says."""
 FATAL_GRACE_S = 1.5
 """After one child could not start, the others get this long to fail the same way and say so
 (every process that cannot reach Zenoh prints its own line) before the run is stopped."""
@@ -98,8 +101,8 @@ class Supervisor:
             return 130
         if self.fatal is not None:
             code = self.fatal.started.exitcode
-            log.error("%s could not start (%s); stopping the run", self.fatal.name,
-                      describe_exit(code))
+            log.error("%s %s (%s); stopping the run", self.fatal.name,
+                      FATAL_EXIT_CODES.get(code or 0, "failed"), describe_exit(code))
             self.stop_all(signal_first=True)
             return code if code is not None else 1
         leader_code = leader.started.exitcode if leader is not None else None
@@ -130,14 +133,26 @@ class Supervisor:
     def _leader_done(self, leader: Child | None) -> bool:
         if leader is not None:
             return not leader.started.is_alive()
-        return all(not c.started.is_alive() and c.started.exitcode == 0 for c in self.children)
+        return all(not c.started.is_alive() and c.started.exitcode in (0, EXIT_NO_WORLD)
+                   for c in self.children)
 
     def _start(self, child: Child, restarted: bool) -> None:
         process = self.context.Process(
             target=child.target, name=child.name, args=child.make_args(restarted)
         )
         child.process = process
-        process.start()
+        # The child starts with SIGINT ignored (a disposition exec keeps), until its node takes
+        # the signal (``world.node``, ``agent.node``): a Ctrl-C while it still starts up would
+        # raise in the middle of an import and print a traceback; the launcher stops it then
+        # (SIGTERM). Here the signal is blocked meanwhile (Linux keeps a blocked signal pending,
+        # ignored or not), so a Ctrl-C that comes now reaches this process's handler after.
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            process.start()
+        finally:
+            signal.signal(signal.SIGINT, handler)
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
         child.started_at = time.monotonic()
         child.restart_at = None
 
@@ -147,8 +162,8 @@ class Supervisor:
             if not child.restartable or child.started.is_alive():
                 continue
             code = child.started.exitcode
-            if code == 0:
-                continue  # told by the world that the run is over
+            if code in (0, EXIT_NO_WORLD):
+                continue  # told by the world that the run is over, or the world is gone
             if child.restart_at is None:
                 assert code is not None, "a process that is not alive has exited"
                 child.exit_codes.append(code)

@@ -301,3 +301,17 @@ def test_the_phases_move_only_as_the_transition_table_says():
     protocol.stop(0.0)
     assert protocol.phase is Phase.STOPPED and protocol.timer() is None
     assert protocol.on_timer(PEER_WAIT_S) == [] and protocol.stop(1.0) == []
+
+
+def test_a_world_that_stays_away_longer_than_the_wait_stops_the_agent():
+    protocol = ready(agent=1)
+    protocol.world_wait_s = 5.0
+    protocol.on_world(False, 1.0)
+    protocol.on_world(True, 4.0)  # back in time (a resumed world): nothing to do
+    assert protocol.timer() is None
+    protocol.on_world(False, 10.0)
+    assert protocol.timer() == 15.0 and protocol.on_timer(14.9) == []
+    effects = protocol.on_timer(15.0)
+    assert any(isinstance(e, Stopped) and not e.by_world for e in effects)
+    assert protocol.world_lost and protocol.stopped and not protocol.shutdown
+    assert protocol.stats()["world_lost"]

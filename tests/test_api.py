@@ -88,6 +88,7 @@ def example(tmp_path_factory):
     return out, done
 
 
+@pytest.mark.full
 def test_the_example_runs_in_process_and_distributed(example):
     out, done = example
     assert done.returncode == 0, done.stderr
@@ -98,6 +99,7 @@ def test_the_example_runs_in_process_and_distributed(example):
     assert "Traceback" not in done.stderr
 
 
+@pytest.mark.full
 def test_a_run_gives_its_episodes_as_a_table_and_its_q_tables_as_arrays(example):
     out, _ = example
     run = Run.open(out / "in-process")
@@ -120,6 +122,7 @@ def test_a_run_gives_its_episodes_as_a_table_and_its_q_tables_as_arrays(example)
             run.q_tables(bad)
 
 
+@pytest.mark.full
 def test_the_apis_in_process_and_distributed_runs_and_the_commands_are_one_run(example,
                                                                                tmp_path):
     out, _ = example
@@ -136,6 +139,7 @@ def test_the_apis_in_process_and_distributed_runs_and_the_commands_are_one_run(e
         Run.open(tmp_path / "command").show()
 
 
+@pytest.mark.full
 def test_show_hands_the_whole_recording_to_the_notebook_viewer(example):
     """Outside a notebook the viewer widget has no page: what it would send to one waits in its
     queue (``rerun_notebook.Viewer``'s, a private detail of Rerun 0.41), each message a
@@ -198,6 +202,7 @@ def test_show_opens_on_the_layout_the_run_was_recorded_with(example, how):
     assert "Agent 0's known map and planned path" in names
 
 
+@pytest.mark.full
 def test_the_notebook_runs_in_a_kernel_and_shows_the_viewer_inline(tmp_path, monkeypatch):
     import nbformat
     from nbclient import NotebookClient
@@ -246,6 +251,7 @@ def test_the_notebook_runs_in_a_kernel_and_shows_the_viewer_inline(tmp_path, mon
     assert viewers[0]["state"]["_height"] == 720
 
 
+@pytest.mark.full
 def test_a_run_stopped_from_python_resumes_to_the_run_left_alone(tmp_path):
     """A progress function that raises stops a distributed run (at the supervisor's next poll,
     some episodes later: enough of them that the run cannot end first)."""
@@ -307,6 +313,7 @@ the widget's state and hands it the messages ``Run.show`` queued, once the viewe
 ready, as the kernel would."""
 
 
+@pytest.mark.full
 @pytest.mark.browser
 @pytest.mark.timeout(420)
 def test_the_inline_viewer_shows_the_run_in_a_browser(tmp_path):

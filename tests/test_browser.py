@@ -31,7 +31,7 @@ from tests.browser import (
 )
 from tests.swarm_helpers import run_swarm
 
-pytestmark = [pytest.mark.browser, pytest.mark.timeout(900)]
+pytestmark = [pytest.mark.browser, pytest.mark.full, pytest.mark.timeout(900)]
 
 COMMON = ("--episodes", "3", "--max-steps", "40", "--seed", "3", "--in-process")
 RUNS = {

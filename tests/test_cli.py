@@ -3,9 +3,11 @@ commands that name themselves as they were called, the command that continues a 
 before the simulator compiles."""
 
 import os
+import shlex
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -13,6 +15,7 @@ import pytest
 from nnql_swarm.launch.swarm_cli import build_parser, resume_command
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.sim import runs
+from nnql_swarm.supervision.capacity import available_bytes, check_fits
 from nnql_swarm.sim.runs import compiled_simulator, swarm_world
 from nnql_swarm.terminal.cli import COMPILING, prepare_simulator
 from tests.swarm_helpers import ROOT
@@ -234,3 +237,110 @@ def test_the_help_formatter_leaves_out_defaults_not_worth_reading():
     assert "--k K k (default: 7)" in text and "--grid GRID grid (default: 11,11)" in text
     assert "--out OUT where --hosts" in text and "--fast fast --grid" in text
     assert "--tag TAG tag" in text and "None" not in text
+
+
+@pytest.mark.parametrize("options, message", [
+    (["--goal-reward", "nan"], "the goal reward must be"),
+    (["--goal-reward", "1e300"], "the goal reward must be"),
+    (["--stay-reward", "inf"], "the stay reward must be"),
+    (["--optimistic", "1e300"], "the optimistic initial value must be"),
+    (["--max-steps", "100000000000000000"], "the messages' largest tick"),
+    (["--max-steps", "1e17"], "invalid int value"),
+    (["--max-steps", "10000000000"], "GiB of memory here"),
+    (["--deadline", "inf"], "positive and finite"),
+])
+def test_what_the_wire_refuses_the_command_line_refuses_in_one_line(tmp_path, options, message):
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, str(SWARM), "--out", str(out), "--no-progress",
+                           *options], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    one_line_exit_2(done, message)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("text", ["[]", "null", "42", "{}"])
+def test_resume_refuses_a_config_json_that_is_not_a_runs_and_appends_nothing(tmp_path, text):
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "config.json").write_text(text + "\n")
+    rows = "episode,steps\n0,12\n"
+    (out / "episodes.csv").write_text(rows)
+    done = subprocess.run([sys.executable, str(SWARM), "--resume", "--out", str(out),
+                           "--no-progress"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=60)
+    one_line_exit_2(done, "not a valid run config")
+    assert (out / "episodes.csv").read_text() == rows
+
+
+def test_a_swarm_the_machine_cannot_hold_is_refused_with_what_it_needs_and_what_there_is():
+    """``--agents 1024`` where 21 GiB are available (the project's VMs; the command line reads
+    the machine's own figure: ``--max-steps 10000000000`` above needs more than any has)."""
+    with pytest.raises(ValueError, match=r"1024 agents of at most 100 steps need at least "
+                                         r"50.\d GiB of memory here \(1025 processes\), and "
+                                         r"this machine has 21 GiB available"):
+        check_fits(1025, 1024, 100, available=21 * 2**30)
+    check_fits(129, 128, 100, available=21 * 2**30)  # bench/scale.py's largest swarm fits
+    assert available_bytes() is None or available_bytes() > 0
+
+
+@pytest.mark.full
+@pytest.mark.parametrize("moment", [0.1, 0.4, 0.8, 1.2, 1.8])
+def test_ctrl_c_in_the_first_seconds_stops_the_swarm_in_a_line_without_a_traceback(tmp_path,
+                                                                                   moment):
+    """Ctrl-C reaches every process of the terminal's group, the world and agents among them
+    while they still import: the launcher stops them, and says so once."""
+    from tests.swarm_helpers import group_pids, stops_within
+
+    swarm = subprocess.Popen([sys.executable, str(SWARM), "--agents", "4", "--episodes", "50",
+                              "--out", str(tmp_path / "run"), "--no-progress"],
+                             cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+    try:
+        time.sleep(moment)
+        os.killpg(swarm.pid, signal.SIGINT)
+        stderr = swarm.communicate(timeout=60)[1]
+        assert stops_within(swarm, 10) < 10 and not group_pids(swarm.pid)
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode == 130, stderr
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("interrupted"), stderr
+
+
+@pytest.mark.full
+def test_an_interrupted_in_process_run_says_how_to_resume_it_and_the_resumed_run_is_the_same(
+        tmp_path):
+    from tests.swarm_helpers import run_swarm
+    from nnql_swarm.world.engine import EPISODE_FIELDS
+    from nnql_swarm.world.metrics import read_episodes
+
+    options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--seed", "4",
+               "--episodes", "3000", "--no-record", "--in-process")
+    out = tmp_path / "stopped"
+    swarm = subprocess.Popen([sys.executable, str(SWARM), "--out", str(out), "--no-progress",
+                              *options], cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+    try:
+        while not ((out / "episodes.csv").exists()
+                   and len((out / "episodes.csv").read_text().splitlines()) > 20):
+            assert swarm.poll() is None, swarm.stderr.read() if swarm.stderr else ""
+            time.sleep(0.05)
+        os.killpg(swarm.pid, signal.SIGINT)
+        stderr = swarm.communicate(timeout=60)[1]
+    finally:
+        if swarm.poll() is None:
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode == 130 and "Traceback" not in stderr, stderr
+    [line] = [line for line in stderr.splitlines() if line.strip()]
+    command = line.partition("continue it with ")[2]
+    assert command.endswith(f"--resume --out {out} --no-record"), line
+    resumed = subprocess.run([*shlex.split(command), "--no-progress"], cwd=ROOT,
+                             capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    whole = run_swarm(tmp_path / "whole", *options)
+    assert whole.returncode == 0, whole.stderr
+
+    def rows(path):
+        return [tuple(r[f] for f in EPISODE_FIELDS) for r in read_episodes(path / "episodes.csv")]
+
+    assert rows(out) == rows(tmp_path / "whole")

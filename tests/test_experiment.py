@@ -76,6 +76,7 @@ def test_short_run_writes_every_file(tmp_path):
         assert (out / f"{name}.png").stat().st_size > 1000
 
 
+@pytest.mark.full
 def test_same_seed_gives_byte_identical_results(tmp_path):
     outputs = []
     for name in ("a", "b"):
@@ -125,6 +126,7 @@ def test_refuses_to_overwrite_results_unless_forced(tmp_path):
     assert (out / "table1.csv").read_text() != "old\n"
 
 
+@pytest.mark.full
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_ctrl_c_stops_cleanly_with_exit_130(tmp_path, workers):
     # 100 times the default seeds, minutes of work: the whole default run takes under 3 s, so a
@@ -197,6 +199,7 @@ SWARM_SHORT = ["swarm", "--agents", "6", "--seeds", "2", "--seed-base", "4", "--
                "--max-steps", "40"]
 
 
+@pytest.mark.full
 def test_swarm_experiment_writes_its_table_runs_curves_and_recording(tmp_path):
     out = tmp_path / "swarm"
     result = experiment(*SWARM_SHORT, "--out", str(out), timeout=300)
@@ -222,6 +225,7 @@ def test_swarm_experiment_writes_its_table_runs_curves_and_recording(tmp_path):
     assert verify.returncode == 0, verify.stderr
 
 
+@pytest.mark.full
 def test_the_distributed_swarm_plays_the_experiments_run_of_best_nnql(tmp_path):
     """One seed of best-nnql (one table shared over Zenoh): the distributed swarm writes the very
     episodes.csv the experiment's runner wrote, wall-clock columns aside."""

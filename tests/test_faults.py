@@ -13,6 +13,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.learning.saved import read_fields
@@ -25,6 +26,8 @@ from tests.swarm_helpers import (
     swarm_command, wait_for_rows,
 )
 from nnql_swarm.world.metrics import read_episodes
+
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
 
 DEADLINE_S = 0.5
 
@@ -266,3 +269,122 @@ def test_a_launcher_killed_outright_takes_its_processes_with_it(tmp_path):
     config = SwarmConfig.from_json((out / "config.json").read_text())
     for agent in range(4):  # they stopped as on Ctrl-C: checkpoints intact
         checkpoint.load(out / "checkpoints" / f"agent-{agent}.ckpt", AgentBrain(agent, config))
+
+
+def test_a_forged_shutdown_on_the_unsecured_layout_ends_the_run_with_a_reason(tmp_path):
+    """A peer that says the world's shutdown stops every agent (nothing tells it apart without
+    the secured layout); the world, left alone, ends the run with an error once none came back
+    in the time it waits for them at the start, instead of ticking alone."""
+    import zenoh
+
+    from nnql_swarm.protocol import keys
+    from nnql_swarm.protocol.messages import WORLD_SENDER, Control, encode
+    from nnql_swarm.transport.settings import TransportSettings
+    from nnql_swarm.world.machine import STARTUP_TIMEOUT_S
+
+    out, port = tmp_path / "forged", free_port()
+    swarm = start_swarm(out, "--agents", "2", "--episodes", "100000", "--max-steps", "20",
+                        "--run-id", "forged", "--no-record", "--port", str(port))
+    rogue = TransportSettings(mode="peer", listen=("tcp/127.0.0.1:0",),
+                              connect=(f"tcp/127.0.0.1:{port}",))
+    try:
+        wait_for_rows(out / "episodes.csv", 1, 120, swarm)
+        with zenoh.open(rogue.zenoh_config()) as session:
+            seen: set[str] = set()
+            with session.liveliness().declare_subscriber(
+                    keys.alive_key_all("forged", keys.ROLE_AGENT),
+                    lambda sample: seen.add(str(sample.key_expr)), history=True):
+                deadline = time.monotonic() + 30
+                while len(seen) < 2 and time.monotonic() < deadline:
+                    time.sleep(0.05)
+            shutdown = Control(run="forged", tick=1, sender=WORLD_SENDER, command="shutdown")
+            forged_at = time.monotonic()
+            for _ in range(3):
+                session.put(keys.control_key("forged"), encode(shutdown))
+                time.sleep(0.2)
+        stderr = swarm.finish(timeout=STARTUP_TIMEOUT_S + 60)
+        took = time.monotonic() - forged_at
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    assert swarm.returncode == 1, stderr
+    assert "none came back within 60 s: the world does not play alone" in stderr, stderr
+    assert "continue the run with" in stderr and "Traceback" not in stderr, stderr
+    assert STARTUP_TIMEOUT_S <= took < STARTUP_TIMEOUT_S + 30, took
+    assert all(stats(out, f"agent-{i}")["shutdown_by_world"] for i in range(2))
+    assert len(read_episodes(out / "episodes.csv")) < 100000
+
+
+def test_agents_whose_world_stays_away_stop_with_a_message(tmp_path):
+    """An agent host that cannot see its world for longer than ``--world-wait`` (the world
+    killed and not resumed; or one that completed while the host was cut off) stops, saying
+    so, instead of waiting for ever; the supervisor does not restart its agents."""
+    out = tmp_path / "away"
+    port = free_port()
+    common = ("--agents", "2", "--episodes", "100000", "--max-steps", "20", "--run-id", "away",
+              "--no-record")
+    agents = SwarmProcess(
+        swarm_command(out, *common, "--role", "agents", "--connect", f"tcp/127.0.0.1:{port}",
+                      "--listen", "tcp/127.0.0.1:0", "--world-wait", "3"),
+        tmp_path / "agents-logs")
+    world = SwarmProcess(swarm_command(out, *common, "--role", "world",
+                                       "--listen", f"tcp/127.0.0.1:{port}"),
+                         tmp_path / "world-logs")
+    try:
+        wait_for_rows(out / "episodes.csv", 2, 120, world)
+        os.killpg(world.pid, signal.SIGKILL)
+        killed_at = time.monotonic()
+        world.wait(timeout=30)
+        stderr = agents.finish(timeout=60)
+        took = time.monotonic() - killed_at
+    finally:
+        for process in (agents, world):
+            if group_pids(process.pid):
+                os.killpg(process.pid, signal.SIGKILL)
+    assert agents.returncode == 4, stderr
+    assert "no world for 3 s (--world-wait)" in stderr and "Traceback" not in stderr, stderr
+    assert "restarting" not in stderr, stderr
+    assert 3 <= took < 30, took
+    assert all(stats(out, f"agent-{i}")["world_lost"] for i in range(2))
+
+
+def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_path):
+    """The run's folder on a 1 MiB tmpfs: the recording, the checkpoints and the rows fill it.
+    Every process says it has no space left (no traceback), the launcher stops the run with
+    the command that continues it and exit code 5; with space again, that command completes
+    the run, every episode once. (Whether it is the run left alone depends on where the disk
+    filled: the agents' checkpoints, rewritten in place, may have gone two episodes past the
+    world's last row, which the resume then says.)"""
+    from nnql_swarm.storage.runfiles import EXIT_NO_SPACE
+
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)],
+                             capture_output=True, text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here (needs root): {mounted.stderr.strip()}")
+    options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes", "3000",
+               "--seed", "6")
+    try:
+        full = run_swarm(disk / "run", *options, timeout=240)
+        assert full.returncode == EXIT_NO_SPACE, full.stderr
+        assert "Traceback" not in full.stderr, full.stderr
+        last = full.stderr.strip().splitlines()[-1]
+        assert last.startswith(f"no space left for the run's files in {disk / 'run'}: the run "
+                               f"stopped; once there is space, continue it with "), last
+        assert "--resume" in last
+        subprocess.run(["mount", "-o", "remount,size=512m", str(disk)], check=True)
+        resumed = run_swarm(disk / "run", "--resume", timeout=240)
+        assert resumed.returncode == 0, resumed.stderr
+        rows = episodes_once(disk / "run", 3000)
+        assert (disk / "run" / "run.rrd").is_file()
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+    if "is not the one left alone" not in resumed.stderr:
+        alone = run_swarm(tmp_path / "alone", *options, "--in-process", "--no-record")
+        assert alone.returncode == 0, alone.stderr
+        from nnql_swarm.world.engine import EPISODE_FIELDS
+
+        left_alone = read_episodes(tmp_path / "alone" / "episodes.csv")
+        assert [tuple(r[f] for f in EPISODE_FIELDS) for r in rows] == \
+            [tuple(r[f] for f in EPISODE_FIELDS) for r in left_alone]

@@ -148,6 +148,7 @@ def test_a_workers_schedules_do_not_see_each_others_files(tmp_path):
     assert list((tmp_path / "shared").iterdir()) == [], "each schedule cleans up after itself"
 
 
+@pytest.mark.full
 def test_ten_thousand_schedules_pass(capsys):
     started = time.monotonic()
     results = faultsim.run_schedules(SCHEDULES, seed_base=0, agents=8, workers=2)

@@ -24,6 +24,8 @@ from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import ROOT, SWARM
 from tests.test_security import AGENTS, make_secured
 
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
+
 FORGER = AGENTS - 1
 FROM_TICK = 12
 EPISODES = 3
@@ -69,7 +71,9 @@ def run(out, secured, run_id: str, *forger_flags: str) -> dict[str, subprocess.P
     return processes
 
 
-def tables(out, config):
+def tables(out):
+    """The run's shared table at its end, read as its own run's (each run has its identity)."""
+    config = SwarmConfig.from_json((out / "config.json").read_text())
     return world_checkpoint.load(world_checkpoint.table_path(out), config, EPISODES - 1)
 
 
@@ -96,7 +100,7 @@ def test_a_forging_agents_records_are_refused_and_the_honest_agents_table_is_unc
     assert [int(r["episode"]) for r in read_episodes(forging / "episodes.csv")] == [0, 1, 2]
     assert all(int(r["missed_intents"]) == 0 for r in read_episodes(forging / "episodes.csv"))
     assert deterministic(forging) == deterministic(mute), "the forger's intents still count"
-    shared, reference = tables(forging, config), tables(mute, config)
+    shared, reference = tables(forging), tables(mute)
     assert np.array_equal(shared[0], reference[0]) and np.array_equal(shared[1], reference[1])
     for agent in range(FORGER):
         saved = checkpoint.checkpoint_path(forging / "checkpoints", agent)

@@ -14,6 +14,8 @@ import pytest
 from nnql_swarm.terminal.cli import package_version
 from tests.swarm_helpers import ROOT
 
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
+
 BIN = Path(sys.executable).parent
 COMMANDS = ("nnql-swarm", "nnql-experiment", "nnql-view", "nnql-faultsim", "nnql-router",
             "nnql-secure")

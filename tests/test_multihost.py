@@ -26,6 +26,8 @@ from tests.swarm_helpers import ROOT, SWARM, run_swarm
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes
 
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
+
 REASON = netns.unavailable_reason()
 
 PY = sys.executable

@@ -36,6 +36,8 @@ from tests import netfault_runs as runs
 from tests import netns
 from tests.swarm_helpers import run_swarm
 
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
+
 AGENTS, EPISODES, MAX_STEPS, SEED = 4, 10, 30, 3
 REASON = netns.unavailable_reason()
 

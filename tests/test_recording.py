@@ -118,6 +118,7 @@ def run(request):
     return request.param, out, recording
 
 
+@pytest.mark.full
 def test_one_verified_recording_with_the_run_id_and_a_blueprint(run):
     mode, out, recording = run
     verify(out / "run.rrd")
@@ -127,6 +128,7 @@ def test_one_verified_recording_with_the_run_id_and_a_blueprint(run):
     assert not (out / PARTS_DIR).exists()  # merged, parts removed
 
 
+@pytest.mark.full
 def test_the_world_is_there_every_tick(run):
     _, out, recording = run
     assert set(WORLD_ENTITIES) <= recording.entities
@@ -136,6 +138,7 @@ def test_the_world_is_there_every_tick(run):
     assert recording.rows("world/goals") == EPISODES
 
 
+@pytest.mark.full
 def test_positions_and_trails_are_the_worlds(run):
     _, out, recording = run
     config = SwarmConfig.from_json((out / "config.json").read_text())
@@ -193,6 +196,7 @@ def smoothed(values):
         yield average
 
 
+@pytest.mark.full
 def test_metrics_match_episodes_csv(run):
     _, out, recording = run
     rows = read_episodes(out / "episodes.csv")
@@ -237,6 +241,7 @@ def test_a_timed_brain_counts_only_the_asked_neighbours_that_did_not_answer():
     assert len(latencies) == 1 and unanswered == 1
 
 
+@pytest.mark.full
 def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run):
     mode, out, recording = run
     logged = [e for e in range(EPISODES) if logs_heat_maps(e, EPISODES)]
@@ -262,6 +267,7 @@ def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run
     assert np.array_equal(buffer.reshape(21, 21, 3), picture["image"])
 
 
+@pytest.mark.full
 def test_the_negotiation_is_logged_as_the_agents_ask(run):
     """Each tick's arrows are the queries the brains make, from the logged cells and goals."""
     _, out, recording = run
@@ -284,6 +290,7 @@ def test_the_negotiation_is_logged_as_the_agents_ask(run):
     assert total > 0
 
 
+@pytest.mark.full
 @pytest.mark.filterwarnings("ignore:RRD file has no footer")  # the server was stopped, not closed
 def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
     out = tmp_path / "walls"
@@ -314,6 +321,7 @@ def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
     assert not {e for e in recording.entities if e.startswith("agents/1/")}
 
 
+@pytest.mark.full
 def test_streaming_to_a_viewer_sends_the_same_recording(in_process):
     out, recording, received = in_process
     streamed = Recording(received)
@@ -323,6 +331,7 @@ def test_streaming_to_a_viewer_sends_the_same_recording(in_process):
     assert streamed.scalars("metrics/reward_sum") == recording.scalars("metrics/reward_sum")
 
 
+@pytest.mark.full
 def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     out = tmp_path / "stopped"
     swarm = start_swarm(out, "--agents", "4", "--episodes", "1000", "--max-steps", "20")
@@ -345,6 +354,45 @@ def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     assert [logged[e][1] for e in range(len(rows))] == [float(r["collisions"]) for r in rows]
     # the default preset's destination seeking reads the known map: its Q_DS is a table
     assert {"world/agents", "agents/0/q_ds/table", "agents/0/q_ca/value"} <= recording.entities
+
+
+@pytest.mark.full
+@pytest.mark.parametrize("killed", ["world", "everything"])
+def test_a_run_killed_outright_and_resumed_records_every_episode(tmp_path, killed):
+    """``kill -9`` of the world, or of every process at once: the resumed run's ``run.rrd``
+    holds every episode and the ticks of each (the world sends an episode to its recording
+    before its row); only the episodes the resume plays again (past the cut, or the one whose
+    row the killed world had not yet written) may be there twice, with the same values."""
+    from collections import Counter
+
+    from tests.swarm_helpers import find_process, stops_within, wait_for_rows
+
+    out, episodes = tmp_path / "killed", 120
+    swarm = start_swarm(out, "--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes",
+                        str(episodes), "--seed", "2", "--run-id", f"killed-{killed}")
+    try:
+        wait_for_rows(out / "episodes.csv", 30, 120, swarm)
+        if killed == "world":
+            [world] = find_process(f"nnql-world killed-{killed}")
+            os.kill(world, signal.SIGKILL)
+        else:
+            os.killpg(swarm.pid, signal.SIGKILL)
+        stops_within(swarm, 10)
+    finally:
+        if group_pids(swarm.pid):
+            os.killpg(swarm.pid, signal.SIGKILL)
+    resumed = run_swarm(out, "--resume")
+    assert resumed.returncode == 0, resumed.stderr
+    first = int(resumed.stderr.partition("at episode ")[2].split()[0])
+    again = resumed.stderr.partition(f"episodes {first}..")[2].split(" ")[0]
+    replayed = set(range(first, int(again) + 1 if again else first + 1))
+    recording = Recording(out / "run.rrd")
+    logged = Counter(recording.column("metrics/collisions/per_episode", "episode"))
+    assert sorted(logged) == list(range(episodes))
+    assert {e for e, times in logged.items() if times > 1} <= replayed, resumed.stderr
+    rows = read_episodes(out / "episodes.csv")
+    ticks = set(recording.column("world/agents", "tick"))
+    assert all(int(r["end_tick"]) in ticks for r in rows)
 
 
 def test_a_bad_viewer_url_is_a_one_line_usage_error(tmp_path):
@@ -414,6 +462,7 @@ def test_processes_that_do_not_record_never_load_rerun():
     assert done.returncode == 0 and done.stdout.strip() == "ok", done.stderr
 
 
+@pytest.mark.full
 def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_reference(tmp_path):
     """The chosen agent's known map, replayed by the recording, ends as the walls its learner
     kept (its checkpoint); each tick's planned path runs from its cell to its goal around the

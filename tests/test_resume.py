@@ -91,6 +91,34 @@ def test_a_corrupt_checkpoint_is_refused_naming_the_file(tmp_path):
         resume_point(tmp_path, list(range(N)), world=True)
 
 
+@pytest.mark.parametrize("file", ["agent-2.ckpt", "world.ckpt"])
+def test_a_checkpoint_of_another_run_of_the_same_shape_is_refused_naming_the_file(tmp_path,
+                                                                                  file):
+    """Another seed, the same agents and tables: only the run's identity tells them apart."""
+    ours, theirs = tmp_path / "ours", tmp_path / "theirs"
+    ours.mkdir(), theirs.mkdir()
+    config = lay_out_run(ours, 11, [[9, 10]] * N, [9, 10])
+    other = SwarmConfig(n_agents=N, run_id="cut", seed=7)
+    assert other.identity != config.identity
+    brain = AgentBrain(2, other)
+    checkpoint.save(checkpoint.checkpoint_path(theirs, 2), brain, 10)
+    q_ds, q_ca = SharedTable(other).tables()
+    world_checkpoint.save(theirs / "world.ckpt", SharedState(q_ds, q_ca), 10, other)
+    (ours / "checkpoints" / file).write_bytes((theirs / file).read_bytes())
+    with pytest.raises(ResumeError, match=re.escape(
+            f"{file}: belongs to another run (identity {other.identity}), not this one "
+            f"({config.identity})")):
+        resume_point(ours, list(range(N)), world=True)
+
+
+def test_a_config_json_edited_after_the_run_began_is_refused(tmp_path):
+    lay_out_run(tmp_path, 3, [[2]] * N, [2])
+    text = (tmp_path / "config.json").read_text()
+    (tmp_path / "config.json").write_text(text.replace('"seed": 0', '"seed": 3'))
+    with pytest.raises(ResumeError, match="edited after the run began"):
+        resume_point(tmp_path, list(range(N)), world=True)
+
+
 def test_a_run_written_by_another_version_is_refused_in_one_line(tmp_path):
     """Rows with other columns than this version's would be appended under the wrong header."""
     lay_out_run(tmp_path, 3, [[2]] * N, [2])
@@ -127,6 +155,7 @@ def test_the_moments_are_spread_over_the_run_and_every_way_of_stopping_is_drawn(
     ("path-nnql", ("--grid", "24x12", "--obstacle-density", "0.2")),
     ("pibt-nnql", ("--grid", "16x16", "--obstacle-density", "0.2", "--tasks", "lifelong",
                    "--max-steps", "40"))])
+@pytest.mark.full
 def test_a_run_stopped_in_every_way_and_resumed_is_the_run_left_alone(tmp_path, preset, grid):
     """Five seeded moments over a short run, each stopped another way (``STOPS``) and resumed:
     the same rows and the same Q-tables, generators and shared table as the run left alone (the
@@ -139,3 +168,21 @@ def test_a_run_stopped_in_every_way_and_resumed_is_the_run_left_alone(tmp_path, 
     outcomes = run_trials(tmp_path, options, draw_trials(11, 5, episodes), expected, lines.append)
     assert all(o.difference is None for o in outcomes), "\n".join(lines)
     assert sum(bool(o.resumed_at) for o in outcomes) >= 2, "runs were stopped after episodes"
+
+
+def test_the_command_refuses_a_foreign_checkpoint_of_the_same_shape_in_one_line(tmp_path):
+    options = ("--agents", "3", "--episodes", "4", "--max-steps", "10", "--in-process",
+               "--no-record", "--run-id", "same")
+    for name, seed in (("ours", "1"), ("theirs", "2")):
+        done = run_swarm(tmp_path / name, *options, "--seed", seed)
+        assert done.returncode == 0, done.stderr
+    ours = tmp_path / "ours"
+    rows = (ours / "episodes.csv").read_text()
+    (ours / "episodes.csv").write_text("".join(rows.splitlines(keepends=True)[:3]))
+    foreign = tmp_path / "theirs" / "checkpoints" / "agent-1.ckpt"
+    (ours / "checkpoints" / "agent-1.ckpt").write_bytes(foreign.read_bytes())
+    refused = run_swarm(ours, "--resume", timeout=60)
+    assert refused.returncode == 2, refused.stderr
+    [line] = refused.stderr.strip().splitlines()
+    assert "agent-1.ckpt: belongs to another run" in line
+    assert (ours / "episodes.csv").read_text() == "".join(rows.splitlines(keepends=True)[:3])

@@ -12,6 +12,8 @@ import os
 import signal
 import time
 
+import pytest
+
 import msgpack
 import zenoh
 
@@ -24,6 +26,8 @@ from nnql_swarm.transport.settings import TransportSettings
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm, wait_for_rows
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes
+
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
 
 RUN_ID = "rogue"
 AGENTS = 6

@@ -30,6 +30,8 @@ from tests.swarm_helpers import ROOT, run_swarm
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes
 
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
+
 RUN_ID = "sec"
 AGENTS = 8
 ROUTER = ROOT / "launch" / "router.py"

@@ -21,6 +21,8 @@ from tests.swarm_helpers import SWARM, group_pids, run_swarm, start_swarm, stops
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import COLUMNS, read_episodes
 
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
+
 RUN = ("--agents", "8", "--episodes", "4", "--max-steps", "40", "--seed", "3")
 
 

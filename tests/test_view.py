@@ -16,6 +16,8 @@ import pytest
 from nnql_swarm.launch import view
 from tests.swarm_helpers import ROOT, run_swarm
 
+pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
+
 VIEW = ROOT / "launch" / "view.py"
 
 

@@ -1,5 +1,7 @@
 """The world's protocol machine, pure: the lockstep clock as inputs in, effects out."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -85,6 +87,25 @@ def test_a_dead_agent_is_not_waited_for():
     intent(protocol, 0, 0.1)
     effects = alive(protocol, 1, 0.2, up=False)
     assert "TickClosed" in kinds(effects) and protocol.world.tick == 1
+
+
+def test_a_world_every_agent_left_ends_with_a_reason_unless_one_comes_back_in_time():
+    protocol = WorldMachine(replace(CONFIG, episodes=100), 0.0, startup_timeout_s=5.0)
+    alive(protocol, 0, 0.0), alive(protocol, 1, 0.0)
+    alive(protocol, 0, 1.0, up=False), alive(protocol, 1, 1.0, up=False)  # e.g. told to stop
+    assert protocol.timer() == 1.0 + CONFIG.tick_deadline_s  # ticks at its deadline meanwhile
+    alive(protocol, 1, 5.9)  # one came back: the world goes on with it
+    alive(protocol, 1, 6.0, up=False)
+    now = 6.0
+    while protocol.timer() < 11.0:
+        now = protocol.timer()
+        assert "Finished" not in kinds(protocol.on_timer(now))
+    assert protocol.timer() == 11.0 and protocol.world.tick > 5
+    effects = protocol.on_timer(11.0)
+    assert kinds(effects) == ["SendControl", "Finished"] and protocol.done
+    assert effects[-1] == Finished(False, f"every agent left by tick {protocol.world.tick} and "
+                                          f"none came back within 5 s: the world does not "
+                                          f"play alone")
 
 
 def test_an_episodes_row_follows_its_end_tick_with_the_time_it_took():

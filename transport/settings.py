@@ -20,6 +20,9 @@ MODES = ("peer", "client", "router")
 
 EXIT_TRANSPORT = 3
 """Exit code of a process that could not open its Zenoh session (the supervisor gives up)."""
+EXIT_NO_WORLD = 4
+"""Exit code of an agent whose world left and did not come back in time (``--world-wait``):
+the supervisor does not restart it."""
 
 _QUEUE_SIZES = "transport/link/tx/queue/size"
 

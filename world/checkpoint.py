@@ -9,7 +9,7 @@ their first observations carry are those of the run left alone.
 
 from pathlib import Path
 
-from nnql_swarm.learning.saved import CheckpointError, check_tables, read_versions
+from nnql_swarm.learning.saved import CheckpointError, check_run, check_tables, read_versions
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage import slotfile
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR
@@ -27,7 +27,8 @@ def save(path: Path, state: SharedState, episode: int, config: SwarmConfig) -> N
     """Write the shared table after ``episode``; readers see the old file or the new."""
     records = [[agent, list(integers), list(rewards)] for agent, integers, rewards in state.records]
     slotfile.write(path, {"q_ds": state.q_ds, "q_ca": state.q_ca, "records": records,
-                          "episode": episode, "n_agents": config.n_agents, "algo": config.algo})
+                          "episode": episode, "n_agents": config.n_agents, "algo": config.algo,
+                          "run": config.identity})
 
 
 def episodes(path: Path) -> list[int]:
@@ -49,6 +50,7 @@ def load(path: Path, config: SwarmConfig, episode: int) -> SharedState:
     if owner != (config.n_agents, config.algo):
         raise CheckpointError(f"{path}: belongs to a run of {owner[0]} agents ({owner[1]}), not "
                               f"{config.n_agents} ({config.algo})")
+    check_run(path, fields, config)
     if int(fields["episode"]) != episode:
         raise CheckpointError(f"{path}: holds the table after episode {int(fields['episode'])}, "
                               f"not after episode {episode}")

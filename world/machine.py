@@ -18,7 +18,10 @@ Theory of operation. The machine is in one :class:`Phase` at a time, moved only 
   learning record, is taken too). Then it applies the tick with ``world.engine``, sends the next
   observations at once, and reports the tick (:class:`~machines.effects.TickClosed`) and, at an
   episode's end, its row (:class:`~machines.effects.WriteRow`). A dead agent costs nothing, a
-  stalled one at most the deadline.
+  stalled one at most the deadline. A world that every agent has left (dead, told to stop by a
+  forged shutdown, cut off for longer than Zenoh's lease) plays on without them for at most
+  ``startup_timeout_s``, as long as it waits for them at the start; if none comes back by then
+  it is ``DONE``, the run failed, instead of ticking alone at a deadline a tick.
 - ``CLOSING``: the run is complete; it tells its agents to stop until every live one has left.
 - ``DONE``: inputs do nothing.
 
@@ -151,6 +154,7 @@ class WorldMachine(Machine):
         self.barred: set[int] = set()  # agents that sent a forged record since they started
         self.forged_at: list[tuple[int, int]] = []  # (agent, tick) of each forged record refused
         self.unchecked: set[int] = set()  # the open tick's records still to check
+        self.deserted_by: float | None = None  # every agent gone: the run fails then
 
     # Inputs. Each returns the effects it causes, in the order they must be carried out.
 
@@ -166,6 +170,7 @@ class WorldMachine(Machine):
             self.leave_by = max(self.leave_by, now + SHUTDOWN_QUIET_S)
         elif alive:
             self.alive.add(agent)
+            self.deserted_by = None
             if phase is Phase.TICK_OPEN and self.actions[agent] is None:
                 self.awaited.add(agent)
             out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
@@ -179,6 +184,8 @@ class WorldMachine(Machine):
             self.alive.discard(agent)
             self.awaited.discard(agent)
             out.append(Log(logging.WARNING, "agent %d left", (agent,)))
+            if not self.alive and phase is Phase.TICK_OPEN and self.deserted_by is None:
+                self.deserted_by = now + self.startup_timeout_s
             self._close_if_due(now)
 
     @an_input
@@ -246,6 +253,10 @@ class WorldMachine(Machine):
                 missing = sorted(set(range(self.n)) - self.alive)
                 self._finish(False, f"agents {missing} did not come alive within "
                                     f"{self.startup_timeout_s:.0f} s")
+        elif self.deserted_by is not None and now >= self.deserted_by:
+            self._finish(False, f"every agent left by tick {self.world.tick} and none came back "
+                                f"within {self.startup_timeout_s:.0f} s: the world does not "
+                                f"play alone")
         else:
             self._close_if_due(now)
 
@@ -265,7 +276,10 @@ class WorldMachine(Machine):
             return self.next_shutdown if self.alive else min(self.next_shutdown, self.leave_by)
         if phase is Phase.STARTING:
             return self.startup_by
-        return self.tick_deadline if phase is Phase.TICK_OPEN else None
+        if phase is not Phase.TICK_OPEN:
+            return None
+        deserted_by = self.deserted_by
+        return self.tick_deadline if deserted_by is None else min(self.tick_deadline, deserted_by)
 
     def stats(self) -> dict:
         return {"completed": self.completed, "ticks": self.world.tick,

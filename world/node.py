@@ -51,8 +51,9 @@ log = logging.getLogger("nnql.world")
 _PUT = zenoh.SampleKind.PUT
 
 
-class StartupTimeout(RuntimeError):
-    """Not every agent came alive in time."""
+class RunFailed(RuntimeError):
+    """The run cannot go on: not every agent came alive in time, or every agent left for good
+    (``world.machine``)."""
 
 
 @dataclass(frozen=True)
@@ -74,8 +75,10 @@ class WorldNode(ProtocolAdapter):
     protocol: WorldMachine
 
     def __init__(self, options: WorldOptions, session: zenoh.Session,
-                 on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> None:
+                 on_tick: Callable[[SwarmWorld, TickReport], None] | None = None,
+                 before_row: Callable[[], None] | None = None) -> None:
         self.options = options
+        self.before_row = before_row
         self.config = options.config
         self.session = session
         self.trace = trace.TickTrace.from_env("world")
@@ -170,12 +173,16 @@ class WorldNode(ProtocolAdapter):
         if self.failure is not None:
             raise self.failure
         if finished is not None and finished.error is not None:
-            raise StartupTimeout(finished.error)
+            raise RunFailed(finished.error)
         return finished is not None and finished.completed
 
     def _write(self, row: WriteRow) -> None:
         """Append an episode's row (the file is opened at the first: a world that never
-        started leaves no ``episodes.csv``), after the shared table's checkpoint, if any."""
+        started leaves no ``episodes.csv``), after the shared table's checkpoint, if any, and
+        after the episode is on its way to the recording (``before_row``)."""
+        if self.before_row is not None:
+            with self.lock:  # the recording's ticks are logged under it
+                self.before_row()
         if row.table is not None:
             assert isinstance(row.table, SharedState), row.table
             world_checkpoint.save(self.table_file, row.table, row.row["episode"], self.config)
@@ -195,20 +202,22 @@ class WorldNode(ProtocolAdapter):
 
 
 def run_world(options: WorldOptions,
-              on_tick: Callable[[SwarmWorld, TickReport], None] | None = None) -> int:
-    """Entry point of the world process; returns its exit code."""
+              on_tick: Callable[[SwarmWorld, TickReport], None] | None = None,
+              before_row: Callable[[], None] | None = None) -> int:
+    """Entry point of the world process; returns its exit code. ``before_row()`` is called
+    before each episode's row is written (the recording makes the episode durable)."""
     try:
         session = open_session(options.transport)
     except TransportError as error:
         log.error("%s", error)
         return EXIT_TRANSPORT
     with session:
-        node = WorldNode(options, session, on_tick)
+        node = WorldNode(options, session, on_tick, before_row)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
         try:
             completed = node.run()
-        except StartupTimeout as error:
+        except RunFailed as error:
             log.error("%s", error)
             return 1
     node.trace.save()
