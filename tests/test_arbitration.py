@@ -23,31 +23,34 @@ def known_field(width, height, goal):
 
 
 def test_an_order_goes_by_the_known_way_then_by_learned_value_then_by_tie():
-    """From (2, 2) to (4, 2) on an open map: right leaves 1 to go, staying 2, up, down and left
-    3 each. Lengths come first, the learned values order the moves of one length, the
-    tie-breakers those of one value; a random step (or staying on the goal) goes first."""
-    wmap = known_field(5, 5, (4, 2))
+    """From (2, 2) to (4, 4) on an open map: right and down leave 3 to go, staying 4, up and
+    left 5 each. Lengths come first; the learned values order the moves as short that bring the
+    agent nearer; the tie-breakers the rest (how it makes way), whatever their values; a random
+    step (or staying on the goal) goes first."""
+    wmap = known_field(5, 5, (4, 4))
     lengths = [move_length(wmap, 2, 2, a, 5, 5) for a in range(N_ACTIONS)]
-    right = min(range(N_ACTIONS), key=lengths.__getitem__)
-    assert target_x(2, right, 5) == 3 and lengths[STAY] == 2
+    nearer = [a for a in range(N_ACTIONS) if lengths[a] == 3]
+    away = [a for a in range(N_ACTIONS) if lengths[a] == 5]
+    assert len(nearer) == 2 and len(away) == 2 and lengths[STAY] == 4
     values = np.zeros(N_ACTIONS)
     ties = np.array([0.1, 0.2, 0.3, 0.4, 0.5])
     ranks = np.zeros(N_ACTIONS, dtype=np.int64)
     preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0)
-    assert ranks[right] == 0 and ranks[STAY] == 1
-    longer = [a for a in range(N_ACTIONS) if lengths[a] == 3]
-    assert sorted(ranks[longer]) == [2, 3, 4]
-    by_tie = sorted(longer, key=lambda a: -ties[a])
-    assert [ranks[a] for a in by_tie] == [2, 3, 4]
-    values[by_tie[-1]] = 1.0  # the learned value outranks the tie-breaker among equals
+    by_tie = sorted(nearer, key=lambda a: -ties[a])
+    assert [ranks[a] for a in by_tie] == [0, 1] and ranks[STAY] == 2
+    assert sorted(ranks[away]) == [3, 4]
+    values[by_tie[-1]] = 1.0  # a learned value outranks the tie-breaker among nearer moves
+    away_by_tie = sorted(away, key=lambda a: -ties[a])
+    values[away_by_tie[-1]] = 1.0  # but not among the moves that make way
     preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0)
-    assert ranks[by_tie[-1]] == 2
+    assert ranks[by_tie[-1]] == 0 and ranks[by_tie[0]] == 1
+    assert [ranks[a] for a in away_by_tie] == [3, 4]
     preference_ranks(values, ties, wmap, 2, 2, 5, 5, STAY, True, ranks, 0)  # a random step
-    assert ranks[STAY] == 0 and ranks[right] == 1
+    assert ranks[STAY] == 0 and ranks[by_tie[-1]] == 1
     assert sorted(ranks) == list(range(N_ACTIONS))
-    assert move_length(wmap, 0, 0, [a for a in range(N_ACTIONS)
-                                    if target_x(0, a, 5) == 0 and target_y(0, a, 5) == 0
-                                    and a != STAY][0], 5, 5) == UNREACHED  # off the grid
+    off_grid = [a for a in range(N_ACTIONS) if a != STAY
+                and (target_x(0, a, 5), target_y(0, a, 5)) == (0, 0)]
+    assert off_grid and move_length(wmap, 0, 0, off_grid[0], 5, 5) == UNREACHED
 
 
 def plan_once(x, y, gx, gy, width, height, step, learned, ranks, walls=()):
@@ -68,8 +71,8 @@ def plan_once(x, y, gx, gy, width, height, step, learned, ranks, walls=()):
     distances = np.zeros(n * cells, dtype=np.int64)
     plan(xs, ys, goal_x, goal_y, np.zeros(bodies, dtype=bool), bodies, n, width, height, True,
          priority, closest, actions, distances, rows[0], rows[1], np.zeros(bodies, dtype=bool),
-         rows[2], rows[3], rows[4], rows[5], rows[6], rows[8], rows[10], rows[11], step, True,
-         learned, ranks)
+         rows[2], rows[3], rows[4], rows[5], rows[6], rows[8], rows[10], rows[11], step,
+         np.full(n, -1, dtype=np.int64), learned, ranks)
     return actions[:n], distances
 
 
