@@ -322,10 +322,12 @@ def play_held_out(bench: MapsBenchmark, tables: Tables, seed: int, recorder: Rec
 
 
 def run_benchmark(bench: MapsBenchmark, recorder: Recorder, on_episode=None,
-                  policies: Path | None = None, frozen_play=play_held_out) -> None:
+                  policies: Path | None = None, frozen_play=play_held_out,
+                  from_scratch=scratch) -> None:
     """Play the whole benchmark, seed by seed, every episode into ``recorder`` (and each seed's
     learned tables into ``policies``, ``<variant>-s<seed>.npz``, if given); ``frozen_play(bench,
-    tables, seed, recorder, on_episode)`` plays step 2 (the suite's)."""
+    tables, seed, recorder, on_episode)`` plays step 2 (the suite's), ``from_scratch(bench, seed,
+    agents, recorder, on_episode)`` step 3."""
     for seed in bench.seed_list:
         tables = train(bench, seed, recorder, on_episode)
         if policies is not None and tables:
@@ -334,7 +336,7 @@ def run_benchmark(bench: MapsBenchmark, recorder: Recorder, on_episode=None,
                 np.savez_compressed(policies / f"{variant}-s{seed}.npz", q_ds=q_ds, q_ca=q_ca)
         frozen_play(bench, tables, seed, recorder, on_episode)
         for agents in bench.scratch_agents:
-            scratch(bench, seed, agents, recorder, on_episode)
+            from_scratch(bench, seed, agents, recorder, on_episode)
 
 
 def scratch_window(bench: MapsBenchmark) -> tuple[int, int]:
@@ -453,20 +455,24 @@ def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
 
 def learning_curves(bench: MapsBenchmark, rows: list[dict],
                     smoothing: int = 5) -> dict[str, dict[str, np.ndarray]]:
-    """Per metric (ISR, CSR, collisions) and per curve (``train-<variant>``,
-    ``scratch-<agents>-<variant>``), the mean over seeds of each episode, as a running mean."""
+    """Per metric (ISR, CSR, collisions; learning from scratch lifelong: throughput, collisions)
+    and per curve (``train-<variant>``, ``scratch-<agents>-<variant>``), the mean over seeds of
+    each episode, as a running mean."""
+    one_shot: tuple[str, ...] = ("isr", "csr", "collisions")
+    scratch_metrics = ("throughput", "collisions") if bench.lifelong else one_shot
     series: dict[tuple[str, str], dict[int, list[float]]] = {}
     for row in rows:
         if row["phase"] == "train":
-            name = f"train-{row['variant']}"
+            name, metrics = f"train-{row['variant']}", one_shot
         elif row["phase"] == "scratch":
-            name = f"scratch-{row['agents']}-{row['variant']}"
+            name, metrics = f"scratch-{row['agents']}-{row['variant']}", scratch_metrics
         else:
             continue
-        for metric in ("isr", "csr", "collisions"):
+        for metric in metrics:
             series.setdefault((metric, name), {}).setdefault(int(row["instance"]), []).append(
                 float(row[metric]))
-    curves: dict[str, dict[str, np.ndarray]] = {"isr": {}, "csr": {}, "collisions": {}}
+    curves: dict[str, dict[str, np.ndarray]] = {
+        metric: {} for metric in dict.fromkeys(one_shot + scratch_metrics)}
     for (metric, name), by_episode in series.items():
         values = np.array([np.mean(by_episode[e]) for e in sorted(by_episode)])
         cumulative = np.cumsum(np.insert(values, 0, 0.0))

@@ -8,7 +8,9 @@ no learning) play, frozen, the first ``instances`` of the 128 lifelong instances
 (``maps/pogema/<family>/lifelong/*.goals``, ``terrain.pogema``), each instance once: its map, the
 first k agents' starts and goals in turn, then goals drawn from the seed, at the agent counts of
 the published lifelong tables (or ``agents``), for the family's lifelong step limit (256; 128 on
-the mazes; or ``max_steps``). A run on one is ``launch/swarm.py --map
+the mazes; or ``max_steps``). Learning from scratch (``scratch_agents``): every variant learns
+on the first random instance, ``scratch_episodes`` episodes, each the instance again (its listed
+goals, then goals drawn from the seed and the episode). A run on one is ``launch/swarm.py --map
 maps/pogema/<family>/<map>.map --goals maps/pogema/<family>/lifelong/<instance>.goals --agents k
 --tasks lifelong --max-steps 256 --seed <seed> --episodes 1 --in-process``.
 """
@@ -17,8 +19,10 @@ import math
 from pathlib import Path
 
 from nnql_swarm.experiment.maps import (
-    REFERENCE, MapsBenchmark, Recorder, Tables, play_configs, swarm_config, with_interval,
+    REFERENCE, MapsBenchmark, Recorder, Tables, play_configs, scratch_window, swarm_config,
+    with_interval,
 )
+from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
 from nnql_swarm.experiment.published import (
     THROUGHPUT, THROUGHPUT_METHODS, THROUGHPUT_SOURCES, figure,
 )
@@ -48,6 +52,27 @@ def play_lifelong(bench: MapsBenchmark, tables: Tables, seed: int, recorder: Rec
                              {**keys, "map": instance.name}, on_episode, first=index)
 
 
+def scratch_lifelong(bench: MapsBenchmark, seed: int, agents: int, recorder: Recorder,
+                     on_episode=None, directory: Path = INSTANCES) -> None:
+    """Every variant learning from scratch on the first random lifelong instance."""
+    instance = read_lifelong(goals_files("random", directory)[0], agents)
+    configs = [swarm_config(bench, variant, instance.map_name, instance.rows, seed, agents,
+                            bench.scratch_episodes, False, instance.scenario,
+                            steps(bench, "random"), "lifelong", instance.goal_lists)
+               for variant in bench.variants]
+    batch = Batch(swarm_world(configs[0]), configs)
+    results = Episodes(len(configs), bench.scratch_episodes)
+    keys = {"phase": "scratch", "seed": seed, "family": "random", "map": instance.name,
+            "agents": agents}
+
+    def played(e, b):
+        recorder.add({**keys, "instance": e}, bench.variants, results, b, e)
+        if on_episode is not None:
+            on_episode(len(b.runs))
+
+    batch.play(bench.scratch_episodes, results, on_episode=played)
+
+
 def check(bench: MapsBenchmark, directory: Path = INSTANCES) -> None:
     """Refuse what cannot be played: a family that is not POGEMA's, an agent count above an
     instance's, more instances than a family has (ValueError; a missing file: MapError)."""
@@ -58,6 +83,8 @@ def check(bench: MapsBenchmark, directory: Path = INSTANCES) -> None:
         if bench.instances > FAMILIES[family].instances:
             raise ValueError(f"--instances: {family} has {FAMILIES[family].instances}")
         read_lifelong(goals_files(family, directory)[0], max(bench.agent_counts(family)))
+    if bench.scratch_agents:
+        read_lifelong(goals_files("random", directory)[0], max(bench.scratch_agents))
 
 
 def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
@@ -69,7 +96,7 @@ def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
              f"{bench.seed_base + bench.seeds - 1}, on target: {bench.on_target}", "",
              _trained(bench) + f"frozen on the first {bench.instances} of POGEMA's 128 lifelong "
              f"instances a family (maps/pogema/*/lifelong): {counts}. Each cell: the mean over "
-             f"seeds [95 % t interval]. {elapsed_s:.0f} s.", "",
+             f"seeds [95 % t interval]." + _scratch(bench) + f" {elapsed_s:.0f} s.", "",
              "| phase | family | agents | variant | throughput | throughput - oracle's | goals "
              "| collisions / episode |",
              "|---|---|---:|---|---:|---:|---:|---:|"]
@@ -116,6 +143,14 @@ def _trained(bench: MapsBenchmark) -> str:
         return f"The {REFERENCE} alone, nothing trained; "
     return (f"Trained one-shot on {bench.train_maps} of our random maps x "
             f"{bench.train_episodes} episodes, {bench.train_agents} agents; ")
+
+
+def _scratch(bench: MapsBenchmark) -> str:
+    if not bench.scratch_agents:
+        return ""
+    w0, w1 = scratch_window(bench)
+    return (f" From scratch: {bench.scratch_episodes} episodes learning on the first random "
+            f"instance, episodes {w0}-{w1 - 1} read.")
 
 
 def _published(value: float | None) -> str:

@@ -16,7 +16,7 @@ from typing import Any
 from nnql_swarm.experiment import pogema, pogema_lifelong
 from nnql_swarm.experiment.maps import (
     FAMILIES, REFERENCE, SUITES, TABLE_FILES, MapsBenchmark, Recorder, episodes_total,
-    learning_curves, map_spec, play_held_out, run_benchmark, run_config, table_rows,
+    learning_curves, map_spec, play_held_out, run_benchmark, run_config, scratch, table_rows,
     write_curves, write_tables,
 )
 from nnql_swarm.protocol.config import (
@@ -123,7 +123,8 @@ def build_maps_parser() -> OneLineParser:
         help=f"held-out map families, from {','.join(FAMILIES)} (default all); --suite pogema: "
              f"from {','.join(POGEMA_FAMILIES)} (default all)")
     add("--scratch-episodes", type=bounded(int, 5), default=d.scratch_episodes, metavar="N",
-        help="episodes of learning from scratch on an unseen random map")
+        help="episodes of learning from scratch on an unseen random map (--tasks lifelong: on "
+             "POGEMA's first random lifelong instance)")
     add("--scratch-agents", type=parse_counts, default=argparse.SUPPRESS, metavar="LIST|none",
         help=f"agent counts of learning from scratch (default "
              f"{','.join(map(str, d.scratch_agents))}; --suite pogema: none)")
@@ -174,6 +175,8 @@ def run_maps(argv: list[str]) -> Path:
     play = pogema_lifelong.play_lifelong if bench.lifelong else pogema.play_pogema
     frozen_play = (functools.partial(play, directory=args.pogema_dir)
                    if bench.suite == "pogema" else play_held_out)
+    from_scratch = (functools.partial(pogema_lifelong.scratch_lifelong, directory=args.pogema_dir)
+                    if bench.lifelong else scratch)
     try:
         bench.check()
         first = bench.test_map_seeds(bench.seed_base)[0]
@@ -215,7 +218,7 @@ def run_maps(argv: list[str]) -> Path:
         with threads(args.workers), progress(episodes_total(bench), "run-episode",
                                               f"{bench.seeds} seeds") as bar:
             run_benchmark(bench, recorder, on_episode=bar.update, policies=out / "policies",
-                          frozen_play=frozen_play)
+                          frozen_play=frozen_play, from_scratch=from_scratch)
     except (KeyboardInterrupt, Terminated):
         recorder.close()
         print(f"\ninterrupted: the episodes played so far are in {out}/maps_episodes.csv",

@@ -20,7 +20,7 @@ from tests.swarm_helpers import ROOT, run_swarm
 VARIANTS = ("pibt-nnql", "ql", "oracle")
 TINY = ["maps", "--suite", "pogema", "--tasks", "lifelong", "--preset", "pibt-nnql", "--seeds",
         "1", "--train-maps", "1", "--train-episodes", "3", "--instances", "2", "--agents", "8",
-        "--families", "random,mazes"]
+        "--families", "random,mazes", "--scratch-agents", "8", "--scratch-episodes", "5"]
 
 
 def experiment(*args: str) -> subprocess.CompletedProcess:
@@ -82,6 +82,18 @@ def test_the_lifelong_suite_plays_pogema_s_instances_beside_the_published(tmp_pa
     assert all(THROUGHPUT_SOURCES[m] in text for m in THROUGHPUT_METHODS)
     assert "## Learning against the oracle (PIBT-greedy), same instances" in text
     assert (out / "policies" / "pibt-nnql-s0.npz").exists()
+
+    # learning from scratch: every variant on the first random instance, episode after episode
+    scratch = [r for r in read_csv(out / "maps_episodes.csv") if r["phase"] == "scratch"]
+    first = goals_files("random")[0].stem
+    assert {(r["map"], r["agents"]) for r in scratch} == {(first, "8")}
+    assert sorted((r["variant"], r["instance"]) for r in scratch) == sorted(
+        (v, str(e)) for v in VARIANTS for e in range(5))
+    oracle_scratch = [r for r in scratch if r["variant"] == "oracle"]
+    assert all(float(r["throughput"]) > 0 for r in oracle_scratch)
+    curves = read_csv(out / "maps_curves.csv")
+    assert {r["curve"] for r in curves if r["metric"] == "throughput"} == {
+        f"scratch-8-{v}" for v in VARIANTS}
 
     # the oracle's episode on each random instance is the swarm's on its .map and .goals
     for index in (0, 1):
