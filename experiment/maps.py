@@ -393,11 +393,12 @@ def seed_values(episodes: list[dict], reference: list[dict] | None,
               "soc": total(episodes, "soc") / count, "makespan": total(episodes, "makespan") / count,
               "collisions": total(episodes, "collisions") / count,
               "steps_ratio": total(episodes, "agent_steps") / max(total(episodes, "shortest_sum"), 1)}
-    values["goals"] = total(episodes, "goals") / count
-    values["throughput"] = total(episodes, "throughput") / count
-    values["throughput_vs_oracle"] = (values["throughput"]
-                                      - total(reference, "throughput") / len(reference)
-                                      if reference else math.nan)
+    if "throughput" in episodes[0]:  # rows of a run before lifelong tasks have none
+        values["goals"] = total(episodes, "goals") / count
+        values["throughput"] = total(episodes, "throughput") / count
+        values["throughput_vs_oracle"] = (values["throughput"]
+                                          - total(reference, "throughput") / len(reference)
+                                          if reference else math.nan)
     values["soc_vs_oracle"] = (total(episodes, "soc") / total(reference, "soc")
                                if reference and total(reference, "soc") > 0 else math.nan)
     solved = [float(r["soc"]) / max(float(r["shortest_sum"]), 1.0) for r in episodes
