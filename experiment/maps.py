@@ -14,7 +14,9 @@ For every seed (a policy of its own, on maps of its own):
 3. **From scratch.** The paper's setting: each variant and the oracle learn on an unseen random
    map (the seed's first test map) for ``scratch_episodes`` episodes.
 
-The suite ``pogema`` plays, in step 2, POGEMA's own instances instead (``experiment.pogema``).
+The suite ``pogema`` plays, in step 2, POGEMA's own instances instead (``experiment.pogema``);
+with ``tasks`` lifelong, its lifelong instances (``experiment.pogema_lifelong``), scored by
+throughput (training stays one-shot, on our maps).
 Without learners (``learners=()``) the oracle plays alone and nothing is trained.
 
 Map seeds: training map ``k`` of seed ``s`` is ``TRAIN_MAP_BASE + s * train_maps + k``, held-out
@@ -37,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.experiment.stats import mean_interval
-from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.protocol.config import PRESETS, TASKS, SwarmConfig
 from nnql_swarm.terrain.maps import WAREHOUSE_SIZE, generated
 from nnql_swarm.terrain.pogema import FAMILIES as POGEMA_FAMILIES
 from nnql_swarm.protocol.seeding import MAP_STREAM, stream_rng
@@ -66,6 +68,9 @@ METRICS = ("isr", "csr", "soc", "soc_vs_oracle", "soc_vs_lb", "makespan", "colli
            "collisions_vs_ql_pct", "steps_ratio")
 """``soc_vs_lb``: the sum of costs over its lower bound (the sum of the shortest paths), the mean
 over the instances where every agent arrived (the field's figure)."""
+LIFELONG_METRICS = ("throughput", "throughput_vs_oracle", "goals", "collisions")
+"""A lifelong suite's metrics: goals reached a step, its paired difference against the oracle's
+on the same instances (ours minus the oracle's), goals reached, collisions."""
 SUITES = ("project", "pogema")
 """Where frozen play happens: held-out maps of our generators, or POGEMA's published
 instances."""
@@ -90,6 +95,7 @@ class MapsBenchmark:
     max_steps: int = MAX_STEPS
     on_target: str = "park"
     suite: str = "project"
+    tasks: str = "one-shot"
     presets: dict = field(default_factory=lambda: dict(PRESETS), compare=False)
 
     @property
@@ -104,8 +110,18 @@ class MapsBenchmark:
         """The agent counts of frozen play on a family: ``agents``, or, left empty on POGEMA's
         instances, the counts of the family's published tables."""
         if self.suite == "pogema" and not self.agents:
-            return POGEMA_FAMILIES[family].agents
+            family_ = POGEMA_FAMILIES[family]
+            return family_.lifelong_agents if self.lifelong else family_.agents
         return self.agents
+
+    @property
+    def lifelong(self) -> bool:
+        return self.tasks == "lifelong"
+
+    @property
+    def metrics(self) -> tuple[str, ...]:
+        """The table's metrics: the field's one-shot ones, or a lifelong run's."""
+        return LIFELONG_METRICS if self.lifelong else METRICS
 
     def frozen_episodes(self) -> int:
         """Episodes a variant plays frozen, each seed."""
@@ -129,6 +145,11 @@ class MapsBenchmark:
         for variant in self.learners:
             if variant not in self.presets or variant == REFERENCE:
                 raise ValueError(f"--learners: {variant!r} is not a learning preset")
+        if self.tasks not in TASKS:
+            raise ValueError(f"--tasks: {self.tasks!r} is not one of {', '.join(TASKS)}")
+        if self.lifelong and self.suite != "pogema":
+            raise ValueError("--tasks lifelong plays POGEMA's lifelong instances: add --suite "
+                             "pogema")
         if self.suite == "project":
             for family in self.families:
                 if family not in FAMILIES:
@@ -138,13 +159,16 @@ class MapsBenchmark:
 
 def swarm_config(bench: MapsBenchmark, variant: str, name: str, rows: tuple[str, ...], seed: int,
                  agents: int, episodes: int, frozen: bool, scenario: tuple = (),
-                 max_steps: int | None = None) -> SwarmConfig:
+                 max_steps: int | None = None, tasks: str = "one-shot",
+                 goal_lists: tuple = ()) -> SwarmConfig:
     """A run of ``variant`` on the map ``rows`` (the starts and goals of ``scenario`` if given,
-    else drawn from ``seed``); the oracle never frozen."""
+    else drawn from ``seed``; lifelong ``tasks``: the goals of ``goal_lists`` next, then drawn);
+    the oracle never frozen."""
     return SwarmConfig(run_id=f"m{seed}", n_agents=agents, episodes=episodes,
                        max_steps=max_steps or bench.max_steps or MAX_STEPS, width=len(rows[0]),
                        height=len(rows), seed=seed, map_name=name, map_rows=rows,
-                       scenario=scenario, on_target=bench.on_target,
+                       scenario=scenario, on_target=bench.on_target, tasks=tasks,
+                       goal_lists=goal_lists,
                        frozen=frozen and variant != REFERENCE, **bench.presets[variant])
 
 
@@ -298,10 +322,12 @@ def play_held_out(bench: MapsBenchmark, tables: Tables, seed: int, recorder: Rec
 
 
 def run_benchmark(bench: MapsBenchmark, recorder: Recorder, on_episode=None,
-                  policies: Path | None = None, frozen_play=play_held_out) -> None:
+                  policies: Path | None = None, frozen_play=play_held_out,
+                  from_scratch=scratch) -> None:
     """Play the whole benchmark, seed by seed, every episode into ``recorder`` (and each seed's
     learned tables into ``policies``, ``<variant>-s<seed>.npz``, if given); ``frozen_play(bench,
-    tables, seed, recorder, on_episode)`` plays step 2 (the suite's)."""
+    tables, seed, recorder, on_episode)`` plays step 2 (the suite's), ``from_scratch(bench, seed,
+    agents, recorder, on_episode)`` step 3."""
     for seed in bench.seed_list:
         tables = train(bench, seed, recorder, on_episode)
         if policies is not None and tables:
@@ -310,7 +336,7 @@ def run_benchmark(bench: MapsBenchmark, recorder: Recorder, on_episode=None,
                 np.savez_compressed(policies / f"{variant}-s{seed}.npz", q_ds=q_ds, q_ca=q_ca)
         frozen_play(bench, tables, seed, recorder, on_episode)
         for agents in bench.scratch_agents:
-            scratch(bench, seed, agents, recorder, on_episode)
+            from_scratch(bench, seed, agents, recorder, on_episode)
 
 
 def scratch_window(bench: MapsBenchmark) -> tuple[int, int]:
@@ -334,14 +360,14 @@ def table_rows(bench: MapsBenchmark, rows: list[dict]) -> list[dict]:
     for (phase, family, agents, variant), by_seed in groups.items():
         reference = groups.get((phase, family, agents, REFERENCE), {})
         baseline = groups.get((phase, family, agents, BASELINE), {})
-        per_seed: dict[str, list[float]] = {m: [] for m in METRICS}
+        per_seed: dict[str, list[float]] = {m: [] for m in bench.metrics}
         for seed, episodes in sorted(by_seed.items()):
             values = seed_values(episodes, reference.get(seed), baseline.get(seed))
-            for metric in METRICS:
+            for metric in bench.metrics:
                 per_seed[metric].append(values[metric])
         row = {"phase": phase, "family": family, "agents": agents, "variant": variant,
                "seeds": len(by_seed), "episodes": sum(len(e) for e in by_seed.values())}
-        for metric in METRICS:
+        for metric in bench.metrics:
             column = np.array(per_seed[metric], dtype=float)
             interval = mean_interval(column[np.isfinite(column)])
             row[metric], row[f"{metric}_low"], row[f"{metric}_high"] = (
@@ -357,7 +383,8 @@ def table_rows(bench: MapsBenchmark, rows: list[dict]) -> list[dict]:
 def seed_values(episodes: list[dict], reference: list[dict] | None,
                 baseline: list[dict] | None) -> dict[str, float]:
     """One seed's metrics over its instances; the ratios against the oracle's and QL's same
-    instances (NaN where they were not played or are 0)."""
+    instances (NaN where they were not played or are 0), and the throughput's difference from
+    the oracle's (NaN where it was not played)."""
     def total(rows, column):
         return sum(float(r[column]) for r in rows)
 
@@ -366,6 +393,12 @@ def seed_values(episodes: list[dict], reference: list[dict] | None,
               "soc": total(episodes, "soc") / count, "makespan": total(episodes, "makespan") / count,
               "collisions": total(episodes, "collisions") / count,
               "steps_ratio": total(episodes, "agent_steps") / max(total(episodes, "shortest_sum"), 1)}
+    if "throughput" in episodes[0]:  # rows of a run before lifelong tasks have none
+        values["goals"] = total(episodes, "goals") / count
+        values["throughput"] = total(episodes, "throughput") / count
+        values["throughput_vs_oracle"] = (values["throughput"]
+                                          - total(reference, "throughput") / len(reference)
+                                          if reference else math.nan)
     values["soc_vs_oracle"] = (total(episodes, "soc") / total(reference, "soc")
                                if reference and total(reference, "soc") > 0 else math.nan)
     solved = [float(r["soc"]) / max(float(r["shortest_sum"]), 1.0) for r in episodes
@@ -423,20 +456,24 @@ def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
 
 def learning_curves(bench: MapsBenchmark, rows: list[dict],
                     smoothing: int = 5) -> dict[str, dict[str, np.ndarray]]:
-    """Per metric (ISR, CSR, collisions) and per curve (``train-<variant>``,
-    ``scratch-<agents>-<variant>``), the mean over seeds of each episode, as a running mean."""
+    """Per metric (ISR, CSR, collisions; learning from scratch lifelong: throughput, collisions)
+    and per curve (``train-<variant>``, ``scratch-<agents>-<variant>``), the mean over seeds of
+    each episode, as a running mean."""
+    one_shot: tuple[str, ...] = ("isr", "csr", "collisions")
+    scratch_metrics = ("throughput", "collisions") if bench.lifelong else one_shot
     series: dict[tuple[str, str], dict[int, list[float]]] = {}
     for row in rows:
         if row["phase"] == "train":
-            name = f"train-{row['variant']}"
+            name, metrics = f"train-{row['variant']}", one_shot
         elif row["phase"] == "scratch":
-            name = f"scratch-{row['agents']}-{row['variant']}"
+            name, metrics = f"scratch-{row['agents']}-{row['variant']}", scratch_metrics
         else:
             continue
-        for metric in ("isr", "csr", "collisions"):
+        for metric in metrics:
             series.setdefault((metric, name), {}).setdefault(int(row["instance"]), []).append(
                 float(row[metric]))
-    curves: dict[str, dict[str, np.ndarray]] = {"isr": {}, "csr": {}, "collisions": {}}
+    curves: dict[str, dict[str, np.ndarray]] = {
+        metric: {} for metric in dict.fromkeys(one_shot + scratch_metrics)}
     for (metric, name), by_episode in series.items():
         values = np.array([np.mean(by_episode[e]) for e in sorted(by_episode)])
         cumulative = np.cumsum(np.insert(values, 0, 0.0))

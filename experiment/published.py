@@ -1,8 +1,9 @@
-"""The field's published results on POGEMA's one-shot instances (``maps/pogema/``, 128
-instances a family, POGEMA's ``on_target: nothing``), which the POGEMA suite's table
-(``experiment.pogema``) puts beside ours: each method's CSR (the share of instances where every
-agent is on its goal at the end) per family and agent count, and on the random maps its sum of
-costs over the lower bound on the instances it solved.
+"""The field's published results on POGEMA's instances (``maps/pogema/``, 128 instances a
+family), which the POGEMA suite's tables (``experiment.pogema``, ``experiment.pogema_lifelong``)
+put beside ours: on the one-shot instances (POGEMA's ``on_target: nothing``) each method's CSR
+(the share of instances where every agent is on its goal at the end) per family and agent count,
+and on the random maps its sum of costs over the lower bound on the instances it solved; on the
+lifelong instances (``on_target: restart``) each method's throughput, goals reached a step.
 
 Sources: POGEMA's benchmark (Skrynnik et al., "POGEMA: A Benchmark Platform for Cooperative
 Multi-Agent Pathfinding", ICLR 2025, and its published evaluation data) for LaCAM, SCRIMP and DCC;
@@ -52,6 +53,31 @@ SOC_OVER_LOWER_BOUND: dict[str, dict[str, dict[int, float]]] = {
 }
 """The sum of costs over its lower bound (the sum of the shortest paths) on the instances a
 method solved, per family, method and agent count."""
+
+
+THROUGHPUT_SOURCES = {
+    "RHCR": "POGEMA (ICLR 2025) evaluation data",
+    "Follower": "POGEMA (ICLR 2025) evaluation data",
+    "MATS-LP": "POGEMA (ICLR 2025) evaluation data",
+}
+"""Each method's lifelong figures, where they come from: POGEMA's benchmark (Skrynnik et al.,
+ICLR 2025) and its published evaluation data, the mean over a family's 128 lifelong instances
+(``<family>-lmapf.yaml``), as issue 44 gathered them."""
+
+THROUGHPUT_METHODS = tuple(THROUGHPUT_SOURCES)
+
+THROUGHPUT: dict[str, dict[str, dict[int, float]]] = {
+    "random": _by_count((8, 32, 64), RHCR=(0.63, 2.29, 3.82), Follower=(0.60, 1.83, 2.47),
+                        MATS_LP=(0.61, 1.91, 2.43)),
+    "mazes": _by_count((8, 32, 64), RHCR=(0.48, 1.70, 2.59), Follower=(0.45, 1.31, 1.61),
+                       MATS_LP=(0.46, 1.32, 1.51)),
+    "warehouse": _by_count((32, 128, 192), RHCR=(1.22, 3.49, 1.57), Follower=(1.13, 3.15, 3.94),
+                           MATS_LP=(1.11, 1.82, 1.91)),
+    "movingai": _by_count((64, 128, 256), RHCR=(1.57, 3.00, 5.13), Follower=(1.50, 2.82, 4.81),
+                          MATS_LP=(1.57, 2.98, 4.69)),
+}
+"""Throughput (goals reached a step) per family, method and agent count on the lifelong
+instances. RHCR's 1.57 on the warehouse at 192 agents: it runs out of planning time there."""
 
 
 def figure(table: dict[str, dict[str, dict[int, float]]], family: str, method: str,

@@ -1,7 +1,8 @@
 """``launch/experiment.py maps``: the field's benchmark (``experiment.maps``, POGEMA's
 protocol) from the command line: its options, and a run written to its output directory. With
-``--suite pogema`` frozen play is on POGEMA's published instances (``experiment.pogema``), and the
-options left unset take that suite's defaults (``SUITE_DEFAULTS``)."""
+``--suite pogema`` frozen play is on POGEMA's published instances (``experiment.pogema``; with
+``--tasks lifelong`` its lifelong ones, ``experiment.pogema_lifelong``), and the options left unset
+take that suite's defaults (``SUITE_DEFAULTS``)."""
 
 import argparse
 import functools
@@ -12,13 +13,15 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
-from nnql_swarm.experiment import pogema
+from nnql_swarm.experiment import pogema, pogema_lifelong
 from nnql_swarm.experiment.maps import (
     FAMILIES, REFERENCE, SUITES, TABLE_FILES, MapsBenchmark, Recorder, episodes_total,
-    learning_curves, map_spec, play_held_out, run_benchmark, run_config, table_rows,
+    learning_curves, map_spec, play_held_out, run_benchmark, run_config, scratch, table_rows,
     write_curves, write_tables,
 )
-from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGET, PRESETS
+from nnql_swarm.protocol.config import (
+    DEFAULT_PRESET, LEARNING_FIELDS, ON_TARGET, PRESETS, TASKS,
+)
 from nnql_swarm.recording.curves import log_swarm_curves
 from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.terminal.cli import (
@@ -40,7 +43,8 @@ SUITE_DEFAULTS: dict[str, dict[str, Any]] = {
 }
 """Each suite's value of the options left unset: on POGEMA's instances every family, at its
 published agent counts (``agents`` empty) and step limit (``max_steps`` 0), all 128 instances,
-the field's on-target rule, no learning from scratch."""
+the field's on-target rule, no learning from scratch. With ``--tasks lifelong`` the counts and
+step limit are the family's lifelong ones."""
 
 def parse_counts(text: str) -> tuple[int, ...]:
     """``"8,32,64"`` -> agent counts, each 1..1024 (``none``: no count)."""
@@ -91,6 +95,10 @@ def build_maps_parser() -> OneLineParser:
              "instances, maps/pogema (pogema: its families random,mazes,warehouse,movingai, the "
              "published agent counts and steps, step-aside, the table beside the published "
              "figures)")
+    add("--tasks", choices=TASKS, default="one-shot",
+        help="frozen play on one-shot instances or, with --suite pogema, on POGEMA's lifelong "
+             "instances (maps/pogema/*/lifelong: a new goal on every arrival, scored by "
+             "throughput; training stays one-shot on our maps)")
     add("--preset", default=DEFAULT_PRESET, choices=list(PRESETS),
         help="the learner benchmarked (beside ql and the oracle); oracle: the oracle alone, "
              "nothing trained")
@@ -117,13 +125,14 @@ def build_maps_parser() -> OneLineParser:
         help=f"held-out map families, from {','.join(FAMILIES)} (default all); --suite pogema: "
              f"from {','.join(POGEMA_FAMILIES)} (default all)")
     add("--scratch-episodes", type=bounded(int, 5), default=d.scratch_episodes, metavar="N",
-        help="episodes of learning from scratch on an unseen random map")
+        help="episodes of learning from scratch on an unseen random map (--tasks lifelong: on "
+             "POGEMA's first random lifelong instance)")
     add("--scratch-agents", type=parse_counts, default=argparse.SUPPRESS, metavar="LIST|none",
         help=f"agent counts of learning from scratch (default "
              f"{','.join(map(str, d.scratch_agents))}; --suite pogema: none)")
     add("--max-steps", type=bounded(int, 1), default=argparse.SUPPRESS, metavar="N",
         help=f"an episode's steps at most (default {d.max_steps}; --suite pogema: the family's, "
-             f"128, 256 on MovingAI)")
+             f"128, 256 on MovingAI; lifelong: 256, 128 on the mazes)")
     add("--on-target", choices=ON_TARGET, default=argparse.SUPPRESS,
         help=f"what an arrived agent does, for every variant: stays for good (park) or may make "
              f"way and come back (step-aside, the field's rule; default {d.on_target}, "
@@ -163,14 +172,18 @@ def run_maps(argv: list[str]) -> Path:
                           train_maps=args.train_maps, train_episodes=args.train_episodes,
                           train_agents=args.train_agents, test_maps=args.test_maps,
                           scratch_episodes=args.scratch_episodes, suite=args.suite,
-                          **chosen)
-    frozen_play = (functools.partial(pogema.play_pogema, directory=args.pogema_dir)
+                          tasks=args.tasks, **chosen)
+    suite = pogema_lifelong if bench.lifelong else pogema
+    play = pogema_lifelong.play_lifelong if bench.lifelong else pogema.play_pogema
+    frozen_play = (functools.partial(play, directory=args.pogema_dir)
                    if bench.suite == "pogema" else play_held_out)
+    from_scratch = (functools.partial(pogema_lifelong.scratch_lifelong, directory=args.pogema_dir)
+                    if bench.lifelong else scratch)
     try:
         bench.check()
         first = bench.test_map_seeds(bench.seed_base)[0]
         if bench.suite == "pogema":
-            pogema.check(bench, args.pogema_dir)
+            suite.check(bench, args.pogema_dir)
         for family in bench.families if bench.suite == "project" else ("random",):
             for agents in (*bench.agents, *bench.scratch_agents):
                 run_config(bench, bench.variants[0], map_spec(family, first), first, agents, 1,
@@ -207,7 +220,7 @@ def run_maps(argv: list[str]) -> Path:
         with threads(args.workers), progress(episodes_total(bench), "run-episode",
                                               f"{bench.seeds} seeds") as bar:
             run_benchmark(bench, recorder, on_episode=bar.update, policies=out / "policies",
-                          frozen_play=frozen_play)
+                          frozen_play=frozen_play, from_scratch=from_scratch)
     except (KeyboardInterrupt, Terminated):
         recorder.close()
         print(f"\ninterrupted: the episodes played so far are in {out}/maps_episodes.csv",
@@ -217,7 +230,7 @@ def run_maps(argv: list[str]) -> Path:
     elapsed = time.monotonic() - started
     rows = table_rows(bench, recorder.rows)
     write_tables(out, bench, rows, elapsed,
-                 pogema.markdown(bench, rows, elapsed) if bench.suite == "pogema" else None)
+                 suite.markdown(bench, rows, elapsed) if bench.suite == "pogema" else None)
     curves = learning_curves(bench, recorder.rows)
     write_curves(out / "maps_curves.csv", curves)
     log_swarm_curves(curves, out / "maps_curves.rrd", recording_id="maps-benchmark")

@@ -29,21 +29,25 @@ INSTANCES = Path(__file__).resolve().parent.parent / "maps" / "pogema"
 @dataclass(frozen=True)
 class Family:
     """One of POGEMA's instance sets: its name here, its folder in the benchmark's
-    ``algorithms/experiments/``, the agent counts of the published tables, the episode's step
-    limit (its ``max_episode_steps``) and how many instances it has."""
+    ``algorithms/experiments/``, the agent counts of the published one-shot tables, the one-shot
+    episode's step limit (``<family>-mapf.yaml``'s ``max_episode_steps``), the agent counts of
+    the published lifelong tables and the lifelong episode's step limit (``<family>-lmapf.yaml``'s
+    ``max_episode_steps``), and how many instances it has (of each kind)."""
 
     name: str
     source: str
     agents: tuple[int, ...]
     max_steps: int
+    lifelong_agents: tuple[int, ...]
+    lifelong_steps: int
     instances: int = 128
 
 
 FAMILIES = {f.name: f for f in (
-    Family("random", "01-random", (8, 32, 64), 128),
-    Family("mazes", "02-mazes", (8, 32, 64), 128),
-    Family("warehouse", "03-warehouse", (64, 128, 192), 128),
-    Family("movingai", "04-movingai", (64, 128, 256), 256),
+    Family("random", "01-random", (8, 32, 64), 128, (8, 32, 64), 256),
+    Family("mazes", "02-mazes", (8, 32, 64), 128, (8, 32, 64), 128),
+    Family("warehouse", "03-warehouse", (64, 128, 192), 128, (32, 128, 192), 256),
+    Family("movingai", "04-movingai", (64, 128, 256), 256, (64, 128, 256), 256),
 )}
 
 
@@ -166,3 +170,40 @@ def lifelong_instance(path: str | Path, rows: tuple[str, ...], agents: int) -> d
                               in zip(starts[:agents], goals[:agents])),
             "goal_lists": tuple(tuple(v for cell in sequence[1:] for v in cell)
                                 for sequence in goals[:agents])}
+
+
+@dataclass(frozen=True)
+class LifelongInstance:
+    """One lifelong instance of ``agents`` agents: its name (its ``.goals`` file's stem), map,
+    and the config fields ``scenario`` and ``goal_lists`` (:func:`lifelong_instance`)."""
+
+    name: str
+    map_name: str
+    rows: tuple[str, ...]
+    scenario: tuple[Task, ...]
+    goal_lists: tuple[tuple[int, ...], ...]
+
+
+def goals_files(family: str, directory: Path = INSTANCES) -> list[Path]:
+    """A family's lifelong instances (``<family>/lifelong/*.goals``) in name order; MapError if
+    there are none."""
+    files = sorted((directory / family / "lifelong").glob("*.goals"))
+    if not files:
+        raise MapError(str(directory / family / "lifelong"), 0, "holds no .goals file (POGEMA's "
+                                                                "instances: maps/pogema/README.md)")
+    return files
+
+
+def read_lifelong(path: Path, agents: int) -> LifelongInstance:
+    """The lifelong instance of ``agents`` agents in ``path``, on the map its second line names
+    (in the family's folder, above ``lifelong/``). Raises MapError."""
+    try:
+        second = path.read_text().splitlines()[1]
+    except (OSError, UnicodeDecodeError, IndexError):
+        raise MapError(str(path), 2, "cannot be read, or names no map") from None
+    if not second.startswith("map "):
+        raise MapError(str(path), 2, "expected 'map <file>'")
+    map_name = second[4:]
+    rows = read_map(path.parent.parent / map_name)
+    fields = lifelong_instance(path, rows, agents)
+    return LifelongInstance(path.stem, map_name, rows, fields["scenario"], fields["goal_lists"])

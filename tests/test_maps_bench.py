@@ -83,8 +83,9 @@ def test_an_agent_off_its_goal_at_the_end_costs_the_episode_s_steps():
 
 def test_the_field_s_columns_are_in_the_episode_rows():
     from nnql_swarm.world.engine import EPISODE_FIELDS
+    from nnql_swarm.world.rules import TASK_COLUMNS
 
-    assert EPISODE_FIELDS[-len(FIELD_COLUMNS):] == FIELD_COLUMNS
+    assert EPISODE_FIELDS[-len(FIELD_COLUMNS + TASK_COLUMNS):] == FIELD_COLUMNS + TASK_COLUMNS
 
 
 def small_bench(**changes) -> MapsBenchmark:
