@@ -8,13 +8,23 @@ it: every process the launcher spawns imports its main module again (multiproces
 this file or the ``nnql-swarm`` script, and so loads nothing it does not run.
 """
 
+import signal
 import sys
 
 
 def main(argv: list[str] | None = None) -> int:
+    heard: list[int] = []
+
+    def interrupt(signum, frame):  # noted too: raised inside importlib, it would be swallowed
+        heard.append(signum)
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGINT, interrupt)
     try:
         from nnql_swarm.launch.swarm_cli import main as command_line
 
+        if heard:
+            raise KeyboardInterrupt
         return command_line(argv)
     except KeyboardInterrupt:  # before the run's own handlers: nothing was started yet
         print("\ninterrupted", file=sys.stderr)

@@ -147,6 +147,7 @@ class Supervisor:
         # (SIGTERM). Here the signal is blocked meanwhile (Linux keeps a blocked signal pending,
         # ignored or not), so a Ctrl-C that comes now reaches this process's handler after.
         held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        _run_pending_handlers()
         handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
         try:
             process.start()
@@ -206,3 +207,9 @@ def describe_exit(code: int | None) -> str:
         except ValueError:
             return f"killed by signal {-code}"
     return f"exit code {code}"
+
+
+def _run_pending_handlers() -> None:
+    """Nothing, in Python: entering a Python function runs the Python handlers of the signals
+    already caught. A Ctrl-C caught just before SIGINT is set to be ignored would otherwise be
+    dropped (CPython runs a caught signal's handler later, and skips it if it is ignored by then)."""

@@ -588,7 +588,8 @@ def test_the_known_map_shows_one_path_and_the_world_an_episodes_moves():
                  for v in views(blueprint(SwarmConfig()).root_container)}
     assert not by_origin["known_map"].visualizer_overrides
     assert set(by_origin["world"].visualizer_overrides) == {
-        "world/intents", "world/negotiation", "world/collisions"}
+        "world/intents", "world/negotiation", "world/collisions", "world/refused",
+        "world/pushes", "world/reached"}
 
 
 def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):

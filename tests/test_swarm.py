@@ -179,7 +179,8 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
     ("pibt-nnql", "auto", ("--grid", "14x12", "--obstacle-density", "0.25", "--agents", "12")),
     ("pibt-nnql", "hub-peer", ("--map", "maze:15x15:4", "--agents", "10")),
     ("pibt-nnql", "auto", ("--map", "random:16x16:0.2:3", "--tasks", "lifelong", "--agents", "8")),
-    ("path-nnql", "auto", ("--grid", "12x12", "--tasks", "lifelong"))])
+    ("path-nnql", "auto", ("--grid", "12x12", "--obstacle-density", "0.15", "--tasks",
+                            "lifelong"))])
 def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topology, grid,
                                                                    tmp_path):
     """The paper's reading (each agent its own tables) and the best options (one table shared

@@ -50,7 +50,7 @@ def test_the_last_intent_closes_the_tick_where_it_arrives_and_rows_go_to_the_mai
 
 
 def test_a_bug_while_closing_a_tick_on_zenohs_thread_stops_the_world(node):
-    def broken(actions, learned=None):
+    def broken(actions, learned=None, orders=None):
         raise RuntimeError("a bug in the rules")
 
     node.world.apply = broken
