@@ -13,7 +13,8 @@ README's; 8 agents with walls (``--obstacle-density 0.2``, the reference too) as
 ``docs/viewer-walls.png``; 64 agents on 32 x 32 as ``docs/viewer-64.png``; 128 agents on
 40 x 40 as ``docs/viewer-128.png``; 8 agents in a 15 x 15 maze (``--map maze:15x15``), where
 agents end short of their goals, as ``docs/viewer-maze.png`` (``--in-process``, the same runs
-as distributed). The runs go to
+as distributed); 8 agents in a lifelong run (``--tasks lifelong``, 30 episodes, distributed) as
+``docs/viewer-lifelong.png``. The runs go to
 ``runs/screenshots/``. Each picture is taken once the viewer shows what ``tests/browser.py``
 checks of the newest episode (the grid, walls, labels, moves and waits), or after ``--wait``.
 
@@ -40,6 +41,8 @@ DOCS_RUNS = {
     "viewer-64.png": ("64-agents", ["--agents", "64", "--grid", "32x32", "--in-process"]),
     "viewer-128.png": ("128-agents", ["--agents", "128", "--grid", "40x40", "--in-process"]),
     "viewer-maze.png": ("maze", ["--agents", "8", "--map", "maze:15x15", "--in-process"]),
+    "viewer-lifelong.png": ("lifelong", ["--agents", "8", "--tasks", "lifelong", "--episodes",
+                                         "30"]),
 }
 """Each picture of the docs: its run's id under ``runs/screenshots/`` and options."""
 
