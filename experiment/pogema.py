@@ -64,7 +64,7 @@ def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
                        f"{steps(bench, f)} steps" for f in bench.families)
     lines = [f"# The maps benchmark on POGEMA's instances: seeds {bench.seed_base}-"
              f"{bench.seed_base + bench.seeds - 1}, on target: {bench.on_target}", "",
-             _trained(bench) + f"frozen on the first {bench.instances} of POGEMA's 128 instances "
+             trained(bench) + f"frozen on the first {bench.instances} of POGEMA's 128 instances "
              f"a family (maps/pogema): {counts}. Each cell: the mean over seeds [95 % t "
              f"interval]; SoC / LB: the sum of costs over the sum of shortest paths, on the "
              f"solved instances. {elapsed_s:.0f} s.", "",
@@ -106,11 +106,12 @@ def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _trained(bench: MapsBenchmark) -> str:
+def trained(bench: MapsBenchmark, how: str = "") -> str:
+    """The table's words on the policies: trained (``how``: e.g. one-shot) on our maps, or none."""
     if not bench.learners:
         return f"The {REFERENCE} alone, nothing trained; "
-    return (f"Trained on {bench.train_maps} of our random maps x {bench.train_episodes} "
-            f"episodes, {bench.train_agents} agents; ")
+    return (f"Trained {how + ' ' if how else ''}on {bench.train_maps} of our random maps x "
+            f"{bench.train_episodes} episodes, {bench.train_agents} agents; ")
 
 
 def _published(value: float | None) -> str:

@@ -22,6 +22,7 @@ from nnql_swarm.experiment.maps import (
     REFERENCE, MapsBenchmark, Recorder, Tables, play_configs, scratch_window, swarm_config,
     with_interval,
 )
+from nnql_swarm.experiment.pogema import trained
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
 from nnql_swarm.experiment.published import (
     THROUGHPUT, THROUGHPUT_METHODS, THROUGHPUT_SOURCES, figure,
@@ -94,7 +95,8 @@ def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
                        f"{steps(bench, f)} steps" for f in bench.families)
     lines = [f"# The maps benchmark on POGEMA's lifelong instances: seeds {bench.seed_base}-"
              f"{bench.seed_base + bench.seeds - 1}, on target: {bench.on_target}", "",
-             _trained(bench) + f"frozen on the first {bench.instances} of POGEMA's 128 lifelong "
+             trained(bench, "one-shot")
+             + f"frozen on the first {bench.instances} of POGEMA's 128 lifelong "
              f"instances a family (maps/pogema/*/lifelong): {counts}. Each cell: the mean over "
              f"seeds [95 % t interval]." + _scratch(bench) + f" {elapsed_s:.0f} s.", "",
              "| phase | family | agents | variant | throughput | throughput - oracle's | goals "
@@ -136,13 +138,6 @@ def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:
               "Throughput: goals reached over the episode's steps; goals: goals reached in the "
               "episode (docs/swarm.md, \"Lifelong tasks\")."]
     return "\n".join(lines) + "\n"
-
-
-def _trained(bench: MapsBenchmark) -> str:
-    if not bench.learners:
-        return f"The {REFERENCE} alone, nothing trained; "
-    return (f"Trained one-shot on {bench.train_maps} of our random maps x "
-            f"{bench.train_episodes} episodes, {bench.train_agents} agents; ")
 
 
 def _scratch(bench: MapsBenchmark) -> str:

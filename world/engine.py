@@ -334,8 +334,9 @@ class SwarmWorld:
         if arbiter is not None:
             refusal_rewards(arbiter.ranks, chosen, self._learns, c.n_agents, self._r_ca,
                             self._row_f)
-        reached = python_values(self._arrived)
+        reached: list = []
         if c.lifelong:  # each agent that reached its goal has the next one at once
+            reached = python_values(self._arrived)
             renew_goals(self._goal_x, self._goal_y, self._arrived, c.n_agents, self._tasks,
                         c.max_steps, self._next_goal, self._row)
             self._goal_cells = list(zip(python_values(self._goal_x)[:c.n_agents],
