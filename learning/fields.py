@@ -70,11 +70,17 @@ rows ``(s_i, s'_i)`` (``s'_i`` -1: it left view, no bootstrap); its floats are t
 known map)."""
 
 
+V_FINAL, V_CROWD = 0, N_ACTIONS
+VALUES_SIZE = 2 * N_ACTIONS
+"""A learner's ``values`` scratch: the five actions' Q_final (Eq. 7) from ``V_FINAL``, then
+their collision-avoidance sums Q_CA(a) (Eq. 6) from ``V_CROWD``."""
+
+
 class LearnerBuffers(NamedTuple):
     """One learner's buffers, as its kernel reads them: the tables ``q_ds`` and ``q_ca``,
     ``params`` and ``params_f``, its state ``state`` and ``state_f``, its known map ``wmap``
     (``learning.known_map``), its learning record ``rec`` and ``rec_f``, and ``values``, scratch
-    for the five actions' values."""
+    for the five actions' values (``VALUES_SIZE``)."""
     q_ds: Buffer
     q_ca: Buffer
     params: Buffer

@@ -71,7 +71,7 @@ from nnql_swarm.learning.fields import (
     FP_ALPHA, FP_BETA, FP_GAMMA, LP_DETOUR, LP_WALL_SIGHT, LP_ESCAPE_SHIELD, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_SHIELD, LS_ACTION, LS_COUNT, LS_GOAL,
     LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_TAKEN, LS_X, LS_Y, NB_ID, NB_KNOWN, NB_NEXT_X,
-    NB_NEXT_Y, NB_ROW, NB_X, NB_Y,
+    NB_NEXT_Y, NB_ROW, NB_X, NB_Y, V_CROWD,
 )
 from nnql_swarm.learning.known_map import path_length, track
 from nnql_swarm.learning.readings import ds_state, read_rows, shield_mask, uses_map
@@ -126,6 +126,11 @@ def choose(learner, grid, sight, random_action, ties):
     values[2] = beta * ds[2] + rest * ca2
     values[3] = beta * ds[3] + rest * ca3
     values[4] = beta * ds[4] + rest * ca4
+    values[V_CROWD] = ca0
+    values[V_CROWD + 1] = ca1
+    values[V_CROWD + 2] = ca2
+    values[V_CROWD + 3] = ca3
+    values[V_CROWD + 4] = ca4
     mask = shield_mask(params[LP_READING], params[LP_STILL_SHIELD], params[LP_ESCAPE_SHIELD], ox,
                        oy, nb, m, width, height) \
         if params[LP_SHIELD] != 0 else 0
@@ -271,8 +276,11 @@ def preference_ranks(values, ties, wmap, x, y, width, height, first, by_value, r
     """An agent's order over its moves, announced for priority inheritance (``--arbitration
     pibt``; ``world.pibt.plan`` reads it): the rank of each action into ``ranks[base + a]``.
     Moves come by the length of the way to the goal they leave on the agent's known map
-    (:func:`move_length`); among moves as short that bring it nearer, by their learned
-    ``values`` (Q_final, Eq. 7) where ``by_value``; else by this step's tie-breakers (``ties``,
+    (:func:`move_length`); among moves as short that bring it nearer, by what it has learned of
+    the crowd where ``by_value``: their collision-avoidance sums Q_CA(a) (Eq. 6, ``values`` from
+    ``V_CROWD``), which tell apart moves that destination seeking, on the known map, cannot
+    (frozen play on POGEMA's random maps at 64 agents: sum of costs 0.97 of PIBT-greedy's,
+    against 1.00 by Q_final; docs/swarm.md); else by this step's tie-breakers (``ties``,
     the larger first). How an agent makes way (staying, stepping aside or back) is left to the
     tie-breakers, which change every step, as PIBT's: learned values are a fixed order there,
     and two agents that make way alike, step after step, trade cells for good (frozen play on
@@ -290,8 +298,8 @@ def preference_ranks(values, ties, wmap, x, y, width, height, first, by_value, r
                 lb = move_length(wmap, x, y, b, width, height)
                 if lb != la:
                     better = lb < la
-                elif by_value and la < here and values[b] != values[a]:
-                    better = values[b] > values[a]
+                elif by_value and la < here and values[V_CROWD + b] != values[V_CROWD + a]:
+                    better = values[V_CROWD + b] > values[V_CROWD + a]
                 else:
                     better = ties[b] > ties[a] or (ties[b] == ties[a] and b < a)
                 if better:

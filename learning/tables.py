@@ -6,7 +6,7 @@ import numpy as np
 
 from nnql_swarm.learning.fields import (
     LF_FIELDS, LS_PENDING, LS_TAKEN, READINGS, REC_COUNT, REC_PAIRS, RF_FIELDS, LearnerBuffers,
-    ca_rows, learner_params, record_size, state_size,
+    VALUES_SIZE, ca_rows, learner_params, record_size, state_size,
 )
 from nnql_swarm.learning.known_map import fresh_map, known_cells, map_size, restore_known
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
@@ -36,7 +36,7 @@ class Learner:
         self.state_f = floats([0.0] * LF_FIELDS)
         self.rec = ints([0] * record_size(config.n_bodies))
         self.rec_f = floats([0.0] * RF_FIELDS)
-        self.values = floats([0.0] * N_ACTIONS)
+        self.values = floats([0.0] * VALUES_SIZE)
         self.width, self.height = config.width, config.height
         self.wmap = ints([0] * map_size(config.width, config.height))
         fresh_map(self.wmap)

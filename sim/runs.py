@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from nnql_swarm.learning.fields import (
-    LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, ca_rows, learner_params, record_size,
-    state_size,
+    LF_FIELDS, LS_TAKEN, NB_FIELDS, READINGS, RF_FIELDS, VALUES_SIZE, ca_rows, learner_params,
+    record_size, state_size,
 )
 from nnql_swarm.learning.known_map import check_cell_order, fresh_map, known_cells, map_size
 from nnql_swarm.learning.learner import draw_noise
@@ -181,7 +181,7 @@ class Batch:
         self._rec = _ints(r, learners, record_size(n))
         self._rec_f = np.zeros((r, learners, RF_FIELDS))
         self._pending_rec = np.zeros((r, learners), dtype=bool)
-        self._values, self._nb = np.zeros((r, N_ACTIONS)), _ints(r, n, NB_FIELDS)
+        self._values, self._nb = np.zeros((r, VALUES_SIZE)), _ints(r, n, NB_FIELDS)
 
     def play(self, episodes: int, results: Episodes | None = None, on_episode=None) -> Episodes:
         """Play the next ``episodes`` episodes of every run; ``on_episode(e, batch)`` after each

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from nnql_swarm.learning.known_map import fresh_map, map_size, plan_field
+from nnql_swarm.learning.fields import V_CROWD, V_FINAL, VALUES_SIZE
 from nnql_swarm.learning.learner import UNREACHED, move_length, preference_ranks
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
@@ -22,26 +23,29 @@ def known_field(width, height, goal):
     return wmap
 
 
-def test_an_order_goes_by_the_known_way_then_by_learned_value_then_by_tie():
+def test_an_order_goes_by_the_known_way_then_by_learned_crowd_value_then_by_tie():
     """From (2, 2) to (4, 4) on an open map: right and down leave 3 to go, staying 4, up and
-    left 5 each. Lengths come first; the learned values order the moves as short that bring the
-    agent nearer; the tie-breakers the rest (how it makes way), whatever their values; a random
-    step (or staying on the goal) goes first."""
+    left 5 each. Lengths come first; the learned collision-avoidance values (Eq. 6, not Q_final)
+    order the moves as short that bring the agent nearer; the tie-breakers the rest (how it makes
+    way), whatever their values; a random step (or staying on the goal) goes first."""
     wmap = known_field(5, 5, (4, 4))
     lengths = [move_length(wmap, 2, 2, a, 5, 5) for a in range(N_ACTIONS)]
     nearer = [a for a in range(N_ACTIONS) if lengths[a] == 3]
     away = [a for a in range(N_ACTIONS) if lengths[a] == 5]
     assert len(nearer) == 2 and len(away) == 2 and lengths[STAY] == 4
-    values = np.zeros(N_ACTIONS)
+    values = np.zeros(VALUES_SIZE)  # Q_final from V_FINAL, Q_CA(a) from V_CROWD
     ties = np.array([0.1, 0.2, 0.3, 0.4, 0.5])
     ranks = np.zeros(N_ACTIONS, dtype=np.int64)
     preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0)
     by_tie = sorted(nearer, key=lambda a: -ties[a])
     assert [ranks[a] for a in by_tie] == [0, 1] and ranks[STAY] == 2
     assert sorted(ranks[away]) == [3, 4]
-    values[by_tie[-1]] = 1.0  # a learned value outranks the tie-breaker among nearer moves
+    values[V_FINAL + by_tie[0]] = 9.0  # Q_final does not order them
+    preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0)
+    assert [ranks[a] for a in by_tie] == [0, 1]
+    values[V_CROWD + by_tie[-1]] = 1.0  # a learned crowd value outranks the tie-breaker there
     away_by_tie = sorted(away, key=lambda a: -ties[a])
-    values[away_by_tie[-1]] = 1.0  # but not among the moves that make way
+    values[V_CROWD + away_by_tie[-1]] = 1.0  # but not among the moves that make way
     preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0)
     assert ranks[by_tie[-1]] == 0 and ranks[by_tie[0]] == 1
     assert [ranks[a] for a in away_by_tie] == [3, 4]

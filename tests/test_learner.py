@@ -9,7 +9,7 @@ import pytest
 from nnql_swarm.learning.fields import (
     FP_FIELDS, LF_FIELDS, LP_FIELDS, LP_KNOWN_STATE, LP_RADIUS, LP_RANDOM_STEP, LP_READING,
     LP_SHIELD, LS_PENDING, LS_TAKEN, NB_FIELDS, READ_DAQL, READ_DIR, READ_NNQL, READ_QL, REC_COUNT,
-    REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, Grid, LearnerBuffers, Sight, ca_rows, record_size,
+    REC_PAIRS, RF_FIELDS, UNKNOWN_MOVE, V_CROWD, V_FINAL, VALUES_SIZE, Grid, LearnerBuffers, Sight, ca_rows, record_size,
     state_size,
 )
 from nnql_swarm.learning.known_map import fresh_map, map_size
@@ -51,7 +51,7 @@ class Agent:
         self.state_f = np.zeros(LF_FIELDS)
         self.rec = np.zeros(record_size(neighbours + 1), np.int64)
         self.rec_f = np.zeros(RF_FIELDS)
-        self.values = np.zeros(N_ACTIONS)
+        self.values = np.zeros(VALUES_SIZE)
         self.wmap = np.zeros(map_size(SIZE, SIZE), np.int64)
         fresh_map(self.wmap)
         self.walls = np.zeros((2, 0), np.int64)  # wall_x, wall_y
@@ -196,8 +196,10 @@ def test_q_final_mixes_eq_6_and_7_with_inverse_distance_weights():
     agent.q_ca[s(3, 4)] = [0, 5, 0, 0, 0]
     agent.decide((0, 0), (2, 0), [neighbour(1, 0, 1), neighbour(2, 3, 4)])
     q_ca = np.array([10.0, 5.0 / 5, 0, 0, 0])
-    assert agent.values.tolist() == pytest.approx(beta * np.arange(1, 6) + (1 - beta) * q_ca)
-    assert agent.values[0] == beta * 1 + (1 - beta) * (1 / math.sqrt(1) * 10.0)
+    final, crowd = agent.values[V_FINAL:V_FINAL + N_ACTIONS], agent.values[V_CROWD:V_CROWD + N_ACTIONS]
+    assert final.tolist() == pytest.approx(beta * np.arange(1, 6) + (1 - beta) * q_ca)
+    assert final[0] == beta * 1 + (1 - beta) * (1 / math.sqrt(1) * 10.0)
+    assert crowd.tolist() == pytest.approx(q_ca)  # Eq. 6 alone, for the preference order
 
 
 def test_ties_are_broken_by_the_largest_tie_breaker_among_the_best():
