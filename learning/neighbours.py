@@ -22,7 +22,7 @@ def awaited_cells(obs: Observation, config: SwarmConfig) -> list[tuple[int, int,
     """:func:`awaited` as ``(id, x, y)``."""
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
-    meet, arrived = config.meet_only, obs.arrived and config.parks
+    meet, arrived = config.meet_only, obs.arrived and not config.step_aside
     if meet and arrived:
         return []  # what awaits_answer says of every neighbour, without asking it
     (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank

@@ -73,6 +73,10 @@ def test_a_killed_agent_is_restarted_from_its_checkpoint(tmp_path):
             os.killpg(swarm.pid, signal.SIGKILL)
     assert swarm.returncode == 0, stderr
     assert "nnql-agent-3 exited (killed by SIGKILL)" in stderr
+    assert stats(out, "supervisor") == {"restarts": {"nnql-agent-3": ["killed by SIGKILL"]}}
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith(f"run finished: {out}; not the run its seed gives"), stderr
+    assert "the run is no longer the run its seed gives" in stderr
     rows = episodes_once(out, 30)
     config = SwarmConfig.from_json((out / "config.json").read_text())
     at_kill = AgentBrain(3, config)

@@ -208,7 +208,7 @@ class SwarmWorld:
     def _observation(self, i: int, neighbours: tuple[tuple[int, int, int], ...]) -> Observation:
         c = self.config
         r_ds, r_ca, collided, arrived = self._outcome
-        parked = tuple(j for j, _, _ in neighbours if arrived[j]) if c.parks else ()
+        parked = tuple(j for j, _, _ in neighbours if arrived[j]) if not c.step_aside else ()
         updates = self._updates
         unheard = self._unheard.pop(i, None)
         if unheard or i in self._syncing:
