@@ -199,6 +199,8 @@ def test_agents_reconnect_to_a_restarted_world(tmp_path):
     episodes_once(out, 80)
     for agent in range(6):
         assert stats(out, f"agent-{agent}")["shutdown_by_world"]
+    assert stats(out, "incarnation") == {"world": 2}  # the second world's messages say so
+    assert stats(out, "world")["forgers"] == []  # no honest agent's intent taken as forged
     assert_copies_equal_the_worlds(out, SwarmConfig.from_json((out / "config.json").read_text()),
                                    range(6))
 
