@@ -71,9 +71,10 @@ class AgentBrain:
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         """The neighbours whose intents this agent decides with, of those it waits for
         (``awaited``, ``learning.neighbours.awaited``): none at an episode's end, nor once it
-        has parked on its goal (``SwarmConfig.parks``), where it stays (it still waits, to relay
-        them down the chain); an arrived agent that may step aside needs them to make way."""
-        if (obs.arrived and self.config.parks) or obs.episode_end or not self.reads_intents:
+        has parked on its goal (``SwarmConfig.step_aside`` off), where it stays (it still waits,
+        to relay them down the chain); an arrived agent that may step aside needs them to make way."""
+        if (obs.arrived and not self.config.step_aside) or obs.episode_end \
+                or not self.reads_intents:
             return []
         return awaited
 
@@ -85,7 +86,7 @@ class AgentBrain:
         self._prepared = (obs.episode, obs.tick)
         if self.config.shared and obs.updates:
             self.rejected_updates += write_updates(self.learner.entries, obs.updates)
-        if ((obs.arrived and self.config.parks) or obs.episode_end
+        if ((obs.arrived and not self.config.step_aside) or obs.episode_end
                 or self._noise_episode == obs.episode):
             return
         draw_noise(self.rng, self._random_actions, self._ties)
@@ -114,7 +115,7 @@ class AgentBrain:
                                  x, y, self.config.width, self.config.height, STAY, False,
                                  self._ranks, 0)
                 self.order = self._ordered()
-            elif not obs.episode_end and not self.config.parks:
+            elif not obs.episode_end and self.config.step_aside:
                 action = self._make_way(obs, answers)
         else:
             noise = self._noise

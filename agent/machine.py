@@ -396,7 +396,7 @@ class AgentMachine(QueryAnswering, Machine):
         learned = self.brain.learned
         if learned or not obs.settled:  # settled: the world expects no intent (world.engine)
             intent = Intent(answer.run, tick, answer.sender, self.agent, obs.episode, action,
-                            learned, self.brain.order)
+                            learned, self.brain.order, obs.world)
             out.append(SendIntent(intent, encode(intent)))
         if obs.episode_end:
             out.append(EpisodeEnded(obs.episode))

@@ -87,7 +87,7 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
         return []
     n, tick, radius, me = config.n_agents, obs.tick, config.interaction_radius, obs.agent
     meet, (x, y), rank = config.meet_only, obs.position, obs.rank
-    if meet and obs.arrived and config.parks:
+    if meet and obs.arrived and not config.step_aside:
         return []  # what awaits_answer says of every neighbour, without asking it
     parked = set(obs.parked)
     near = within(obs.neighbours, x, y, 2 * radius)  # the waiters and those they wait for

@@ -14,7 +14,7 @@ directory (``--out``, default ``runs/<run-id>``) receives ``config.json``, ``epi
 import argparse
 import logging
 import math
-from dataclasses import fields, replace
+from dataclasses import fields
 import multiprocessing as mp
 import os
 import shlex
@@ -25,7 +25,7 @@ from typing import Any, Callable
 
 from nnql_swarm.transport import zenoh_files
 from nnql_swarm.terminal.cli import (
-    EXIT_INTERRUPTED, OneLineParser, invocation, parse_grid, prepare_simulator,
+    EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator,
     episode_summary, progress as progress_bar,
 )
 from nnql_swarm.recording.session import RecordingSession
@@ -35,25 +35,22 @@ from nnql_swarm.supervision.resume import (
 )
 from nnql_swarm.supervision.capacity import check_fits
 from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
-from nnql_swarm.protocol.config import (
-    DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
+from nnql_swarm.supervision.restarts import (
+    STATS_NAME, record as record_restarts, warning as restarts_warning,
 )
+from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig
 from nnql_swarm.kernel.jit import plain_python_environment
-from nnql_swarm.terrain.maps import run_map
-from nnql_swarm.terrain.pogema import lifelong_instance
+from nnql_swarm.api.options import (
+    LAUNCH_DEFAULTS as L, LAUNCHER_TOPOLOGIES, RUN_NAMES, Launch, config_of, config_values,
+)
 from nnql_swarm.storage.runfiles import (
     CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, EXIT_NO_SPACE, LOCK_FILE, PARTS_DIR,
     RECORDING_FILE, STATS_DIR, write_text_atomic,
 )
 from nnql_swarm.storage.runlock import RunLock, RunLocked
 from nnql_swarm.transport.settings import EXIT_NO_WORLD, MODES, TransportSettings
-from nnql_swarm.agent.machine import WORLD_WAIT_S
 from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
 from nnql_swarm.launch.processes import agent_main, world_main
-
-LAUNCHER_TOPOLOGIES = ("mesh", "hub-peer", "hub-router", "star-peers")
-"""The one-machine topologies the launcher starts (``transport.topology.EmbeddedLayout``; the
-``router`` one needs a router process of its own)."""
 
 log = logging.getLogger("nnql.launch")
 
@@ -80,12 +77,12 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
                       "negotiating over Zenoh (--in-process: the same run in one process).")
     d = SwarmConfig()
     run = p.add_argument_group("the run")
-    run.add_argument("--preset", choices=tuple(PRESETS), default=None,
+    run.add_argument("--preset", default=None, metavar="{" + ",".join(PRESETS) + "}",
                      help=f"learning options by name (default: {DEFAULT_PRESET}, the swarm "
                           f"experiment's best; nnql or ql: the paper's reading); the options "
                           f"below override it")
     add_config_options(run, exclude=LEARNING_FIELDS)
-    run.add_argument("--grid", type=parse_grid, default=argparse.SUPPRESS, metavar="WxH",
+    run.add_argument("--grid", default=argparse.SUPPRESS, metavar="WxH",  # read by the config's
                      help=f"grid size (default: {d.width}x{d.height})")
     run.add_argument("--map", default=None, metavar="FILE|SPEC",
                      help="the grid from a MovingAI .map file, or a generated one: "
@@ -111,16 +108,16 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
                      help="run world and agents in this process, without Zenoh")
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     z = p.add_argument_group("Zenoh (several machines)")
-    z.add_argument("--role", choices=("all", "world", "agents"), default="all",
+    z.add_argument("--role", choices=("all", "world", "agents"), default=L.role,
                    help="start everything, only the world, or only agents")
     z.add_argument("--agent-ids", type=parse_ids, default=None,
                    help="with --role agents: which agents to start, e.g. 0-3")
-    z.add_argument("--world-wait", type=float, default=WORLD_WAIT_S, metavar="SECONDS",
+    z.add_argument("--world-wait", type=float, default=L.world_wait, metavar="SECONDS",
                    help="how long the agents wait for a world that left to come back before "
-                        f"they stop (exit code {EXIT_NO_WORLD}; default: {WORLD_WAIT_S:.0f})")
+                        f"they stop (exit code {EXIT_NO_WORLD}; default: {L.world_wait:.0f})")
     z.add_argument("--port", type=int, default=None,
                    help="one machine: the loopback port the world listens on (default: a free one)")
-    z.add_argument("--topology", choices=("auto", *LAUNCHER_TOPOLOGIES), default="auto",
+    z.add_argument("--topology", choices=("auto", *LAUNCHER_TOPOLOGIES), default=L.topology,
                    help="one machine: mesh (every process a peer of every other), hub-peer or "
                         "hub-router (the agents clients of the world), star-peers (peers of the "
                         f"world only); auto: mesh below {HUB_FROM_AGENTS} agents, hub-peer from "
@@ -140,7 +137,7 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
     v.add_argument("--reference", action="store_true",
                    help="also play these settings with the paper's QL (in this process, "
                         "compiled) and plot its learning curves beside the run's")
-    v.add_argument("--map-agent", type=int, default=0, metavar="ID",
+    v.add_argument("--map-agent", type=int, default=L.map_agent, metavar="ID",
                    help="the agent whose known map and planned path the recording shows, where "
                         "the learners read a map (default: 0)")
     viewer = v.add_mutually_exclusive_group()
@@ -151,9 +148,9 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
     viewer.add_argument("--rerun-serve-web", action="store_true",
                         help="serve the web viewer (for another machine); prints its URL and "
                              "keeps serving after the run until Ctrl-C")
-    v.add_argument("--rerun-port", type=int, default=9876,
+    v.add_argument("--rerun-port", type=int, default=L.rerun_port,
                    help="gRPC port of the viewer that --rerun-spawn / --rerun-serve-web start")
-    v.add_argument("--rerun-web-port", type=int, default=9090,
+    v.add_argument("--rerun-web-port", type=int, default=L.rerun_web_port,
                    help="HTTP port of the web viewer of --rerun-serve-web: the page and the "
                         "run's data, on one origin")
     return p
@@ -161,13 +158,18 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
 
 def add_config_options(group, only=None, exclude=()) -> None:
     """One option per :class:`SwarmConfig` field that has one (its metadata): its flag, type,
-    help and default, all from the field."""
+    help and default, all from the field. A field's choices are shown, and checked by the
+    config (``SwarmConfig``), not by the parser: one check, one line, for the command and the
+    API."""
     for f in fields(SwarmConfig):
         if "help" not in f.metadata or f.name in exclude or (only and f.name not in only):
             continue
         meta = dict(f.metadata)
         flags = meta.pop("flag") or "--" + f.name.replace("_", "-")
         text = meta.pop("help")
+        choices = meta.pop("choices", None)
+        if choices:
+            meta["metavar"] = "{" + ",".join(choices) + "}"
         shown = "on" if f.default is True else "off" if f.default is False else f.default
         kwargs: dict[str, Any] = dict(dest=f.name, default=argparse.SUPPRESS,
                                       help=f"{text} (default: {shown})" if shown != "" else text)
@@ -178,66 +180,74 @@ def add_config_options(group, only=None, exclude=()) -> None:
         group.add_argument(*([flags] if isinstance(flags, str) else flags), **kwargs, **meta)
 
 
-def config_values(args: argparse.Namespace) -> dict:
-    """The config fields the options give: the preset's learning options, then every option
-    given explicitly."""
-    values = dict(PRESETS[args.preset]) if args.preset else {}
-    values.update({f.name: getattr(args, f.name) for f in fields(SwarmConfig)
-                   if "help" in f.metadata and hasattr(args, f.name)})
-    if hasattr(args, "grid"):
-        values["width"], values["height"] = args.grid
-    return values
+def cli_options(args: argparse.Namespace) -> dict:
+    """The run's options among the command's parsed ones, by name (those not given absent, or
+    None), as :func:`api.options.config_of` takes them."""
+    names = [f.name for f in fields(SwarmConfig) if "help" in f.metadata] + list(RUN_NAMES)
+    return {name: getattr(args, name) for name in names if hasattr(args, name)}
 
 
-def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Path]:
-    """The run's config and directory from the options; raises UsageError on bad values."""
-    values = config_values(args)
-    values.update(map_values(args, values))
+def given_values(args: argparse.Namespace) -> dict:
+    """The config fields the command's options give explicitly (a preset's learning options
+    among them), and the run id if given: what ``--resume`` compares with the run's."""
     try:
-        config = SwarmConfig(run_id="pending", **values)
-    except (ValueError, TypeError) as error:
-        raise UsageError(str(error)) from None
-    name = args.preset or ("custom" if set(values) & set(LEARNING_FIELDS) else DEFAULT_PRESET)
-    run_id = args.run_id or f"{name}-{config.n_agents}a-s{config.seed}-{time.strftime('%Y%m%d-%H%M%S')}"
-    try:
-        config = replace(config, run_id=run_id)
+        given = config_values(cli_options(args))
     except ValueError as error:
         raise UsageError(str(error)) from None
-    if not args.in_process:
+    if args.run_id is not None:
+        given["run_id"] = args.run_id
+    return given
+
+
+def resolve(args: argparse.Namespace) -> tuple[SwarmConfig, Launch, Path]:
+    """The run's config, how it is played and its directory, from the command's parsed
+    options; raises UsageError on bad values."""
+    try:
+        config = config_of(cli_options(args), args.run_id)
+    except ValueError as error:
+        raise UsageError(str(error)) from None
+    launch = Launch.of(args)
+    check_launch(launch, config, named=args.run_id is not None)
+    return config, launch, launch.out or Path("runs") / config.run_id
+
+
+def check_launch(launch: Launch, config: SwarmConfig, named: bool = True) -> None:
+    """Refuse launch options that do not go together, or with the run's config (``named``: the
+    run id was given, as the parts of a run on several hosts need); raises UsageError."""
+    if not launch.in_process:
         check_distributable(config)
-    if args.topology != "auto" and (args.role != "all" or args.listen or args.connect
-                                    or args.zenoh_config or args.zenoh_config_dir):
+    if launch.topology != "auto" and (launch.role != "all" or launch.listen or launch.connect
+                                      or launch.zenoh_config or launch.zenoh_config_dir):
         raise UsageError("--topology lays out one machine's embedded Zenoh; with --role, "
                          "--listen, --connect or a Zenoh config the layout is yours")
-    if args.zenoh_config and not Path(args.zenoh_config).is_file():
-        raise UsageError(f"no Zenoh config file at {args.zenoh_config}")
-    if args.agent_ids is not None:
-        if args.role != "agents":
+    if launch.zenoh_config and not Path(launch.zenoh_config).is_file():
+        raise UsageError(f"no Zenoh config file at {launch.zenoh_config}")
+    if launch.agent_ids is not None:
+        if launch.role != "agents":
             raise UsageError("--agent-ids goes with --role agents")
-        bad = [i for i in args.agent_ids if not 0 <= i < config.n_agents]
+        bad = [i for i in launch.agent_ids if not 0 <= i < config.n_agents]
         if bad:
             raise UsageError(f"agent ids {bad} out of range 0..{config.n_agents - 1}")
-    if args.port is not None and (args.role != "all" or args.listen or args.connect):
+    if launch.port is not None and (launch.role != "all" or launch.listen or launch.connect):
         raise UsageError("--port sets the one-machine layout; with --role, --listen or --connect "
                          "give endpoints instead")
-    if not 0 <= args.map_agent < config.n_agents:
-        raise UsageError(f"--map-agent {args.map_agent} out of range 0..{config.n_agents - 1}")
-    if not 0 < args.world_wait < math.inf:
-        raise UsageError(f"--world-wait must be positive and finite, not {args.world_wait}")
-    if args.port is not None and not 1 <= args.port <= 65535:
-        raise UsageError(f"--port must be 1..65535, not {args.port}")
-    check_zenoh_files(args, config)
-    if args.role != "all" and not (args.listen or args.connect or args.zenoh_config
-                                   or args.zenoh_config_dir):
-        raise UsageError(f"--role {args.role} needs --listen/--connect endpoints or --zenoh-config")
-    if args.role != "all" and args.run_id is None:
-        raise UsageError(f"--role {args.role} needs --run-id, the same on every host")
-    check_capacity(args, config)
-    out = args.out or Path("runs") / run_id
-    return config, out
+    if not 0 <= launch.map_agent < config.n_agents:
+        raise UsageError(f"--map-agent {launch.map_agent} out of range 0..{config.n_agents - 1}")
+    if not 0 < launch.world_wait < math.inf:
+        raise UsageError(f"--world-wait must be positive and finite, not {launch.world_wait}")
+    if launch.port is not None and not 1 <= launch.port <= 65535:
+        raise UsageError(f"--port must be 1..65535, not {launch.port}")
+    check_zenoh_files(launch, config)
+    if launch.role != "all" and not (launch.listen or launch.connect or launch.zenoh_config
+                                     or launch.zenoh_config_dir):
+        raise UsageError(f"--role {launch.role} needs --listen/--connect endpoints or "
+                         f"--zenoh-config")
+    if launch.role != "all" and not named:
+        raise UsageError(f"--role {launch.role} needs --run-id, the same on every host")
+    check_capacity(launch, config)
 
 
-def check_capacity(args: argparse.Namespace, config: SwarmConfig) -> None:
+def check_capacity(args: Launch, config: SwarmConfig) -> None:
     """Refuse a run, or the part of one this host starts, that this machine cannot hold
     (``supervision.capacity``); raises UsageError."""
     if args.in_process:
@@ -247,31 +257,6 @@ def check_capacity(args: argparse.Namespace, config: SwarmConfig) -> None:
         processes = agents + (args.role != "agents")
     try:
         check_fits(processes, agents, config.max_steps)
-    except ValueError as error:
-        raise UsageError(str(error)) from None
-
-
-def map_values(args: argparse.Namespace, values: dict) -> dict:
-    """The config fields of ``--map`` and ``--scen`` (none without them); raises UsageError,
-    naming the file and line of a malformed map or scenario."""
-    if args.map is None:
-        if args.scen is not None or getattr(args, "goals", None) is not None:
-            raise UsageError(f"--{'scen' if args.scen else 'goals'} needs --map, the map it is "
-                             "for")
-        return {}
-    if getattr(args, "goals", None) is not None and args.scen is not None:
-        raise UsageError("--goals brings its own starts and goals: give no --scen with it")
-    if hasattr(args, "grid") or values.get("obstacle_density"):
-        raise UsageError("--map brings its own grid and walls: give no --grid or "
-                         "--obstacle-density with it")
-    d = SwarmConfig()
-    try:
-        fields = run_map(args.map, args.scen, values.get("seed", d.seed),
-                         values.get("n_agents", d.n_agents))
-        if getattr(args, "goals", None) is not None:
-            fields.update(lifelong_instance(args.goals, fields["map_rows"],
-                                            values.get("n_agents", d.n_agents)))
-        return fields
     except ValueError as error:
         raise UsageError(str(error)) from None
 
@@ -350,29 +335,32 @@ def own(out: Path) -> RunLock:
                          f"{error.strerror or error}") from None
 
 
-def resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path, RunLock | None]:
+def resume(args: Launch, given: dict | None = None
+           ) -> tuple[SwarmConfig, ResumePoint, Path, RunLock | None]:
     """The config, start point and directory of a run to continue (its rows past the cut
     dropped: ``supervision.resume``), and the folder's lock (none for ``--role agents``), which
-    the caller releases when the run ends; raises ResumeError or UsageError."""
+    the caller releases when the run ends; ``given``: config fields given with ``--resume``,
+    which must be the run's (:func:`given_values`). Raises ResumeError or UsageError."""
     if args.out is None:
         raise UsageError("--resume needs --out DIR, the run directory to continue")
     if args.in_process:
         raise UsageError("--resume continues distributed runs only")
     if args.role == "agents" or not (Path(args.out) / CONFIG_FILE).is_file():
-        return (*_resume(args), None)  # (no run there: refused, and no lock file left behind)
+        return (*_resume(args, given or {}), None)  # (no run there: refused, no lock left)
     lock = own(args.out)
     try:
-        return (*_resume(args), lock)
+        return (*_resume(args, given or {}), lock)
     except BaseException:
         lock.release()
         raise
 
 
-def _resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
+def _resume(args: Launch, given: dict) -> tuple[SwarmConfig, ResumePoint, Path]:
     """:func:`resume`, once the folder is owned."""
+    assert args.out is not None
     agents = agent_ids(args, read_config(args.out)) if args.role != "world" else []
     config, start = resume_point(args.out, agents, world=args.role != "agents")
-    check_same_options(args, config)
+    check_same_options(args.out, config, given)
     check_zenoh_files(args, config)
     if args.role != "agents":
         shared_table(args.out, config, start)
@@ -388,28 +376,26 @@ def _resume(args: argparse.Namespace) -> tuple[SwarmConfig, ResumePoint, Path]:
     return config, start, args.out
 
 
-def check_same_options(args: argparse.Namespace, config: SwarmConfig) -> None:
+def check_same_options(out: Path, config: SwarmConfig, given: dict) -> None:
     """Refuse run options given with ``--resume`` that differ from the run's ``config.json``
     (a resumed run is the run it continues); raises UsageError."""
-    given = config_values(args)
-    if args.run_id is not None:
-        given["run_id"] = args.run_id
     differ = [name for name, value in given.items() if getattr(config, name) != value]
     if differ:
         shown = ", ".join(f"{name} {given[name]!r} (the run's: {getattr(config, name)!r})"
                           for name in differ)
-        raise UsageError(f"--resume continues the run as {Path(args.out) / CONFIG_FILE} says; "
+        raise UsageError(f"--resume continues the run as {Path(out) / CONFIG_FILE} says; "
                          f"these options differ from it: {shown}")
 
 
-def check_zenoh_files(args: argparse.Namespace, config: SwarmConfig) -> None:
+def check_zenoh_files(args: Launch, config: SwarmConfig) -> None:
     """Every Zenoh config file this launcher will hand out exists and reads; else UsageError."""
     if args.zenoh_config and args.zenoh_config_dir:
         raise UsageError("give --zenoh-config or --zenoh-config-dir, not both")
     try:
         if args.zenoh_config_dir:
             agents = agent_ids(args, config) if args.role != "world" else []
-            files = zenoh_files.config_files(args.zenoh_config_dir, args.role != "agents", agents)
+            files = zenoh_files.config_files(Path(args.zenoh_config_dir), args.role != "agents",
+                                             agents)
         else:
             files = {"all": args.zenoh_config} if args.zenoh_config else {}
         for path in files.values():
@@ -418,15 +404,16 @@ def check_zenoh_files(args: argparse.Namespace, config: SwarmConfig) -> None:
         raise UsageError(str(error)) from None
 
 
-def embedded_layout(args: argparse.Namespace, n_agents: int):
+def embedded_layout(args: Launch, n_agents: int):
     """The one-machine layout's ``(world settings, agent i -> settings, hub to wait for)``."""
     topology = embedded_topology(n_agents) if args.topology == "auto" else args.topology
-    layout = EmbeddedLayout(topology=topology, **({} if args.port is None else {"port": args.port}))
+    layout = EmbeddedLayout(topology=topology) if args.port is None else \
+        EmbeddedLayout(topology=topology, port=args.port)
     return (layout.world(), lambda _agent: layout.agent(),
             (layout.host, layout.port) if layout.agents_wait_for_hub else None)
 
 
-def transports(args: argparse.Namespace, config: SwarmConfig):
+def transports(args: Launch, config: SwarmConfig):
     """The world's Zenoh settings, a function giving agent i's, and the ``(host, port)`` agents
     wait for before they open their sessions (None: they need not): embedded, or from the
     options."""
@@ -486,7 +473,7 @@ def run_in_process(config: SwarmConfig, out: Path, record, progress: bool,
     return 1 if result.violations else 0
 
 
-def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
+def run_processes(args: Launch, config: SwarmConfig, out: Path,
                   start: ResumePoint, on_poll: Callable[[], bool | None] | None = None) -> int:
     """Start the world and/or agents as supervised processes and wait for the run to end;
     ``on_poll``: as ``Supervisor.run`` takes it."""
@@ -510,6 +497,8 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
 
             supervisor.add(f"nnql-agent-{i}", agent_main, restartable=True, make_args=agent_args)
     code = supervisor.run(leader=world, on_poll=on_poll)
+    restarted = record_restarts(out, supervisor.restarted(),
+                                STATS_NAME if args.role != "agents" else f"{STATS_NAME}-agents")
     merged = recording.finish()
     plan = recording.plan
     if code == 0 and plan is not None and plan.parts_dir and merged is None and unmerged(out):
@@ -526,6 +515,9 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
     elif code == EXIT_NO_WORLD:
         print(f"the agents stopped: no world for {args.world_wait:g} s (--world-wait); once "
               f"it runs again, continue with {resume_command(args, out)}", file=sys.stderr)
+    said = restarts_warning(restarted)
+    if said is not None:
+        print(said, file=sys.stderr)
     return code
 
 
@@ -544,7 +536,7 @@ def play_reference(config: SwarmConfig, plan) -> None:
     log_reference(config, plan.open("reference"))
 
 
-def resume_command(args: argparse.Namespace, out: Path) -> str:
+def resume_command(args: Launch, out: Path) -> str:
     """The command line that continues this run: the program as it was called, ``--resume --out``
     and the options that are not in ``config.json`` (where the processes run and connect)."""
     words = [*invocation(), "--resume", "--out", str(out)]
@@ -554,7 +546,7 @@ def resume_command(args: argparse.Namespace, out: Path) -> str:
         words += ["--agent-ids", ",".join(map(str, args.agent_ids))]
     if args.topology != "auto":
         words += ["--topology", args.topology]
-    if args.world_wait != WORLD_WAIT_S:
+    if args.world_wait != L.world_wait:
         words += ["--world-wait", f"{args.world_wait:g}"]
     for flag, value in (("--mode", args.mode), ("--zenoh-config", args.zenoh_config),
                         ("--zenoh-config-dir", args.zenoh_config_dir)):
@@ -568,5 +560,5 @@ def resume_command(args: argparse.Namespace, out: Path) -> str:
     return shlex.join(words)
 
 
-def agent_ids(args: argparse.Namespace, config: SwarmConfig) -> list[int]:
+def agent_ids(args: Launch, config: SwarmConfig) -> list[int]:
     return list(args.agent_ids) if args.agent_ids is not None else list(range(config.n_agents))

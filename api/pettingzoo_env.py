@@ -1,11 +1,21 @@
 """A PettingZoo ``ParallelEnv`` over the world rules: N learning agents, each seeking its own goal.
 
+## Configuration
+The swarm's own config (:class:`~nnql_swarm.protocol.config.SwarmConfig`):
+``SwarmGridEnv(swarm.config)`` plays the world of ``Swarm(...)``'s run, or options by name, as
+``Swarm`` takes them (``SwarmGridEnv(n_agents=4, width=8, height=8, negotiation_radius=2)``),
+over the paper's reading (the ``nnql`` preset: every agent in view waited for) where they say
+nothing. The env reads the agents, the grid, ``max_steps``, ``count_swaps``, the rewards
+(``goal_reward``, ``stay_reward``), ``interaction_radius`` and ``wait_rule``; it plays the open
+grid, one goal each, arrived agents parked, and refuses a config that asks for more (walls, a
+map, lifelong tasks, step-aside, priority inheritance).
+
 ## Description
 A swarm episode (:func:`world.scenario.swarm_episode`): ``n_agents`` agents start on distinct cells
 of a ``width x height`` grid, each with its own goal cell, all starts and goals distinct. Every
 step all agents move at once and :func:`world.rules.world_step` resolves the moves: two agents
 trying to occupy one cell collide and stay where they were (``world.rules``), and so do two agents
-swapping cells when ``count_swaps`` is set (the default here, as in swarm mode).
+swapping cells when ``count_swaps`` is set (the default, as in swarm mode).
 
 ## Action space
 ``Discrete(5)`` per agent, the paper's actions (:mod:`protocol.actions`):
@@ -33,13 +43,13 @@ Agents that have arrived stay on their goals and are still seen (and can still b
 ## Rewards
 Per step, the paper's two rewards added (:mod:`world.rules`): destination seeking ``1/d`` if the
 Euclidean distance ``d`` to the goal decreased, ``0.5/d`` if it stayed, 0 if it grew, and
-``GOAL_REWARD`` on arriving; plus collision avoidance ``CA_REWARD`` (10) without a collision, 0 with
+``goal_reward`` on arriving (``0.5/d`` is ``stay_reward / d``); plus collision avoidance ``CA_REWARD`` (10) without a collision, 0 with
 one. ``infos[agent]`` holds the two parts (``reward_ds``, ``reward_ca``) and ``collided``.
 
 ## Negotiation
 ``infos[agent]["waits_for"]`` names the agents whose intents this agent would wait for before
 its next step in the swarm's negotiation (``protocol.ranks.waits_for``: higher-ranked agents within
-``negotiation_radius``, all of them or, with ``wait_rule="meet"``, those on their way that it could
+``interaction_radius``, all of them or, with ``wait_rule="meet"``, those on their way that it could
 meet on the next step; ranks rotating every step), so that a policy that reads intents can be
 stepped in that order.
 
@@ -80,16 +90,40 @@ import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 
-from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, VIEW_RADIUS, offset_state, sees
+from nnql_swarm.api.options import config_of
+from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, offset_state, sees
+from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import flags, floats, ints, python_values
-from nnql_swarm.protocol.ranks import WAIT_RULES, awaits_answer, priority_rank
+from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
 from nnql_swarm.world.rules import (
-    GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, Bodies, Outcome, Rules, Scratch, Score, world_step,
+    ROW_FLOATS, ROW_INTS, Bodies, Outcome, Rules, Scratch, Score, world_step,
 )
 from nnql_swarm.world.scenario import swarm_episode
 
 NOT_IN_VIEW = N_STATES
 """The observation slot value of another agent out of view."""
+
+ENV_PRESET = "nnql"
+"""The learning options the env's config takes where its options say nothing: the paper's
+reading (every agent in view waited for)."""
+
+
+def env_config(config: SwarmConfig | None, options: dict) -> SwarmConfig:
+    """The env's config: ``config``, or one of ``options`` by name (``api.options.config_of``)
+    over :data:`ENV_PRESET`; raises ValueError for a bad option, or a config the env does not
+    play (module docstring)."""
+    if config is None:
+        config = config_of({"preset": ENV_PRESET, **options}, run_id="env")
+    elif options:
+        raise ValueError("give a SwarmConfig or options, not both")
+    unplayable = [what for what, asked in (
+        ("walls", config.n_walls > 0), ("a scenario", bool(config.scenario)),
+        ("lifelong tasks", config.lifelong), ("--on-target step-aside", config.step_aside),
+        ("--arbitration pibt", config.arbitration != "paper")) if asked]
+    if unplayable:
+        raise ValueError(f"the env plays the open grid, one goal each, arrived agents parked: "
+                         f"not {', '.join(unplayable)}")
+    return config
 
 
 class SwarmGridEnv(ParallelEnv):
@@ -100,33 +134,25 @@ class SwarmGridEnv(ParallelEnv):
 
     def __init__(
         self,
-        n_agents: int = 4,
-        width: int = 11,
-        height: int = 11,
-        max_steps: int = 100,
-        count_swaps: bool = True,
-        goal_reward: float = GOAL_REWARD,
-        negotiation_radius: int = VIEW_RADIUS,
-        wait_rule: str = "reach",
+        config: SwarmConfig | None = None,
+        *,
         render_mode: str | None = None,
         rerun: str | Path | None = None,
         cell_pixels: int = 16,
+        **options,
     ) -> None:
-        if n_agents < 1:
-            raise ValueError(f"need at least one agent, got {n_agents}")
-        if 2 * n_agents > width * height:
-            raise ValueError(f"{n_agents} agents need {2 * n_agents} cells; {width}x{height} has fewer")
-        if wait_rule not in WAIT_RULES:
-            raise ValueError(f"wait_rule must be one of {', '.join(WAIT_RULES)}, got {wait_rule!r}")
+        """``config``: the swarm's (``Swarm(...).config``), or ``options`` by name as ``Swarm``
+        takes them (module docstring)."""
+        config = env_config(config, options)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"unsupported render mode {render_mode!r}")
-        self.n_agents = n_agents
-        self.width, self.height = width, height
-        self.max_steps = max_steps
-        self.count_swaps = count_swaps
-        self.goal_reward = goal_reward
-        self.negotiation_radius = negotiation_radius
-        self.meet_only = wait_rule == "meet"
+        self.config = config
+        n_agents = self.n_agents = config.n_agents
+        self.width, self.height = config.width, config.height
+        self.max_steps = config.max_steps
+        self.count_swaps = config.count_swaps
+        self.negotiation_radius = config.interaction_radius
+        self.meet_only = config.meet_only
         if cell_pixels < 4:
             raise ValueError(f"cell_pixels must be at least 4, got {cell_pixels}")
         self.render_mode = render_mode
@@ -179,8 +205,8 @@ class SwarmGridEnv(ParallelEnv):
             chosen[self._index[agent]] = int(actions.get(agent, STAY))
         x, y, arrived = ints(self._x), ints(self._y), flags(self._arrived)
         collided, r_ds, r_ca = flags([False] * n), floats([0.0] * n), floats([0.0] * n)
-        rules = Rules(n, self.width, self.height, self.count_swaps, False, self.goal_reward,
-                      STAY_REWARD)
+        rules = Rules(n, self.width, self.height, self.count_swaps, False,
+                      self.config.goal_reward, self.config.stay_reward)
         bodies = Bodies(x, y, ints(self._goal_x), ints(self._goal_y), flags([True] * n), arrived,
                         ints([0] * n))
         outcome = Outcome(ints([0] * n), ints([0] * n), collided, r_ds, r_ca)

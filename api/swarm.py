@@ -2,11 +2,12 @@
 as the world and agent processes over Zenoh, and :class:`Run` reads what it left.
 
 The command (``launch/swarm.py``) is a Swarm made from its parsed options
-(:meth:`Swarm.from_args`) and played (:meth:`Swarm.play`). Options given here by name become the
-command's arguments, which its parser and ``api.command.resolve`` check (one path from options to
-config), so a bad option raises ValueError with the very line the command prints; the run
-directory is prepared, played and recorded by the same functions, so a run made here and one
-made by ``launch/swarm.py`` with the same options are the same run, file for file.
+(:meth:`Swarm.from_args`) and played (:meth:`Swarm.play`). Options given here by name make the
+run's config directly (``api.options.config_of``, the command's path from its parsed options
+too; no argv, no parser), its values checked once, by the config, so a bad option raises
+ValueError with the very line the command prints; the run directory is prepared, played and
+recorded by the same functions, so a run made here and one made by ``launch/swarm.py`` with the
+same options are the same run, file for file.
 """
 
 import argparse
@@ -14,22 +15,24 @@ import csv
 import io
 import os
 from contextlib import contextmanager
-from dataclasses import fields
+from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Literal, NoReturn
+from typing import Callable, Literal
 
 import numpy as np
 
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.api import command
+from nnql_swarm.api.options import Launch, config_of, split
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import MODE_VARIABLE
 from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE
 from nnql_swarm.storage.runlock import RunLock
+from nnql_swarm.supervision import restarts
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint
 from nnql_swarm.supervision.supervisor import describe_exit
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED, OneLineParser
+from nnql_swarm.terminal.cli import EXIT_INTERRUPTED
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import COLUMNS
@@ -42,12 +45,6 @@ _FLOAT_COLUMNS = ("reward_sum", "isr", "throughput", "duration_s", "ticks_per_s"
 EPISODE_DTYPE = np.dtype([(name, np.float64 if name in _FLOAT_COLUMNS else np.int64)
                           for name in COLUMNS])
 """The dtype of :attr:`Run.episodes`: ``episodes.csv``'s columns, in its order."""
-
-NOT_OPTIONS = ("out", "resume", "in_process", "no_progress", "no_record", "role", "agent_ids",
-               "help", "version")
-"""The command's options that :meth:`Swarm.run`'s own arguments stand for (``out``,
-``distributed``, ``record``, ``progress``), ``--resume`` (:func:`resume`), and the parts of a run
-on several hosts, which the command starts (docs/operations.md)."""
 
 Progress = Callable[[dict], None]
 """``progress(row)``: called as each episode ends, with its deterministic columns
@@ -74,19 +71,18 @@ class Swarm:
     ``<preset>-<agents>a-s<seed>-<time>``, fixed when the Swarm is made).
     """
 
-    _args: argparse.Namespace
-    _argv: list[str] | None
+    launch: Launch
     _lock: RunLock | None = None
     config: SwarmConfig
     out: Path
 
     def __init__(self, config: SwarmConfig | None = None, **options) -> None:
-        if config is not None:
-            if options:
-                raise ValueError("give a SwarmConfig or options, not both")
-            options = config_options(config)
-        self._argv = command_arguments(options)
-        self._take(_usage(Swarm.from_args, parse([*self._argv, "--in-process"])))
+        if config is not None and options:
+            raise ValueError("give a SwarmConfig or options, not both")
+        config_options, launch_options = split(options)
+        if config is None:
+            config = config_of(config_options)
+        self._set(config, Launch(in_process=True, **launch_options), None)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "Swarm":
@@ -94,28 +90,31 @@ class Swarm:
         of them kept: where the run goes, how its processes connect, what it records. Raises
         ``api.command.UsageError`` (the command's one line) for a bad one."""
         swarm = cls.__new__(cls)
-        swarm._args = args
-        swarm._argv = None
-        swarm.config, swarm.out = command.resolve(args)
+        swarm.config, swarm.launch, swarm.out = command.resolve(args)
         return swarm
 
-    def _take(self, other: "Swarm") -> None:
-        self._args, self.config, self.out = other._args, other.config, other.out
+    def _set(self, config: SwarmConfig, launch: Launch, out: Path | None) -> None:
+        """Take ``config`` played as ``launch`` says, into ``out`` (default ``runs/<run-id>``);
+        raises ValueError where they do not go together (``api.command.check_launch``)."""
+        _usage(command.check_launch, launch, config)
+        self.config, self.launch = config, launch
+        self.out = out or launch.out or Path("runs") / config.run_id
 
     def __repr__(self) -> str:
-        return f"Swarm({' '.join(self._argv or [])})"
+        return f"Swarm({self.config.run_id!r}: {self.config.n_agents} agents, " \
+               f"{self.config.episodes} episodes)"
 
     def prepare(self) -> None:
         """Make the run directory (:attr:`out`), own it (``storage.runlock``, until :meth:`play`
         ends) and write its config; raises ``api.command.UsageError`` for a directory that is
         not usable, holds a run or is another run's."""
-        self._lock = command.prepare_out_dir(self.out, self.config, self._args.role)
+        self._lock = command.prepare_out_dir(self.out, self.config, self.launch.role)
 
     def play(self, on_row: "Progress | None" = None) -> int:
         """Play the prepared run as its options say (in this process, or as the world and the
         agent processes of ``--role``); returns the command's exit code. ``on_row(row)`` follows
         each episode's row."""
-        args, config, path = self._args, self.config, self.out
+        args, config, path = self.launch, self.config, self.out
         try:
             if args.in_process:
                 return command.run_in_process(config, path,
@@ -144,11 +143,10 @@ class Swarm:
         """
         if not (progress is None or isinstance(progress, bool) or callable(progress)):
             raise ValueError(f"progress must be a callable, True or False, not {progress!r}")
-        args = argparse.Namespace(**vars(self._args))
-        args.run_id, args.in_process = self.config.run_id, not distributed
-        args.out = None if out is None else Path(out)
-        args.no_record, args.no_progress = not record, progress is not True
-        swarm = _usage(Swarm.from_args, args)
+        swarm = Swarm.__new__(Swarm)
+        swarm._set(self.config, replace(self.launch, in_process=not distributed,
+                                        no_record=not record, no_progress=progress is not True),
+                   None if out is None else Path(out))
         _usage(swarm.prepare)
         code = swarm.play(progress if callable(progress) else None)
         return _finished(code, swarm.out, distributed)
@@ -167,8 +165,7 @@ def resume(out: str | Path, *, progress: Progress | bool | None = None) -> "Run"
     ``launch/swarm.py --resume --out OUT`` does (to the very rows and Q-tables of the run left
     alone: docs/operations.md); returns it finished. A complete run is returned as it is.
     Raises ValueError where the directory cannot be resumed (the line names the file)."""
-    argv = ["--resume", "--out", str(out)] + ([] if progress is True else ["--no-progress"])
-    args = parse(argv)
+    args = Launch(out=Path(out), resume=True, no_progress=progress is not True)
     config, start, path, lock = _usage(command.resume, args)
     try:
         if start.episode >= config.episodes:
@@ -226,6 +223,13 @@ class Run:
             kind = float if name in _FLOAT_COLUMNS else int
             table[name] = [kind(row[name]) for row in rows]
         return table
+
+    @property
+    def restarts(self) -> dict[str, list[str]]:
+        """The agents the supervisor restarted in a distributed run, each with how each exit it
+        was restarted after ended (``stats/supervisor.json``): empty for the run its seed
+        gives, which a run with restarts is no longer."""
+        return restarts.of_run(self.path)
 
     @property
     def complete(self) -> bool:
@@ -298,73 +302,6 @@ class Run:
         return viewer
 
 
-def command_arguments(options: dict) -> list[str]:
-    """The command's arguments for API options (:class:`Swarm`); raises ValueError for a name
-    that is no option of the command, or a value an on/off option cannot take."""
-    actions = _actions(command.build_parser())
-    argv: list[str] = []
-    for name, value in options.items():
-        action = actions.get(name)
-        if action is None:
-            raise ValueError(f"no option {name!r}; the options are those of launch/swarm.py "
-                             f"--help, by name (agents=8 for --agents 8)")
-        if value is None:
-            continue
-        flag = action.option_strings[0]
-        if isinstance(action, argparse.BooleanOptionalAction) or action.nargs == 0:
-            if not isinstance(value, (bool, np.bool_)):
-                raise ValueError(f"{name} is on or off: True or False, not {value!r}")
-            if value:
-                argv.append(flag)
-            elif isinstance(action, argparse.BooleanOptionalAction):
-                argv.append(action.option_strings[1])
-        elif isinstance(action, argparse._AppendAction):
-            for item in [value] if isinstance(value, (str, Path)) else value:
-                argv += [flag, str(item)]
-        else:
-            if action.dest == "grid" and isinstance(value, (tuple, list)):
-                value = "x".join(str(side) for side in value)
-            argv += [flag, str(value)]
-    return argv
-
-
-def config_options(config: SwarmConfig) -> dict:
-    """The options that give ``config`` exactly (every field, its run id included)."""
-    options = {f.name: getattr(config, f.name) for f in fields(SwarmConfig)
-               if "help" in f.metadata}
-    options["grid"] = (config.width, config.height)
-    options["run_id"] = config.run_id
-    return options
-
-
-def parse(argv: list[str]) -> argparse.Namespace:
-    """The command's parser on ``argv``, raising ValueError with its one-line message where the
-    command would print it and exit."""
-    return command.build_parser(_RaisingParser).parse_args(argv)
-
-
-class _RaisingParser(OneLineParser):
-    """The swarm command's parser, raising ValueError with its one-line message."""
-
-    def error(self, message: str) -> NoReturn:
-        raise ValueError(message)
-
-
-def _actions(parser: argparse.ArgumentParser) -> dict[str, argparse.Action]:
-    """The parser's options the API takes, by each of their names: the flag's (``agents``,
-    ``radius``, ``negotiation_radius``) and the destination's (``n_agents``)."""
-    found: dict[str, argparse.Action] = {}
-    for action in parser._actions:
-        if not action.option_strings or action.dest in NOT_OPTIONS:
-            continue
-        found[action.dest] = action
-        for flag in action.option_strings:
-            if flag.startswith("--") and not (flag.startswith("--no-") and
-                                              isinstance(action, argparse.BooleanOptionalAction)):
-                found[flag[2:].replace("-", "_")] = action
-    return found
-
-
 def _usage(function, *args):
     """``function(*args)``, its usage errors (the command's one line and exit code 2) raised as
     ValueError with the same line."""
@@ -374,7 +311,7 @@ def _usage(function, *args):
         raise ValueError(str(error)) from None
 
 
-def _play_processes(args: argparse.Namespace, config: SwarmConfig, path: Path,
+def _play_processes(args: Launch, config: SwarmConfig, path: Path,
                     start: ResumePoint, progress: Progress | None) -> int:
     """The world and agent processes of a run, as the command starts them, and their exit code;
     ``progress`` follows ``episodes.csv`` as the world writes it."""

@@ -95,7 +95,7 @@ class MapsBenchmark:
     max_steps: int = MAX_STEPS
     on_target: str = "park"
     suite: str = "project"
-    tasks: str = "one-shot"
+    tasks: str = SwarmConfig.tasks
     presets: dict = field(default_factory=lambda: dict(PRESETS), compare=False)
 
     @property

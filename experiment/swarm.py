@@ -86,18 +86,23 @@ def walls_presets() -> dict[str, dict]:
     }
 
 
+RUN = SwarmConfig()
+"""A swarm run's defaults, which the experiment's world takes (its length is its own)."""
+
+
 @dataclass(frozen=True)
 class SwarmExperiment:
-    """What the experiment runs: the swarm's world, its length, the seeds and the variants."""
+    """What the experiment runs: the swarm's world (by default a swarm run's, :data:`RUN`), its
+    length, the seeds and the variants."""
 
-    agents: int = 8
+    agents: int = RUN.n_agents
     seeds: int = 10
     seed_base: int = 0
     episodes: int = 500
-    max_steps: int = 100
-    width: int = 11
-    height: int = 11
-    obstacle_density: float = 0.0
+    max_steps: int = RUN.max_steps
+    width: int = RUN.width
+    height: int = RUN.height
+    obstacle_density: float = RUN.obstacle_density
     on_target: str = "park"
     map_name: str = ""
     map_rows: tuple[str, ...] = ()

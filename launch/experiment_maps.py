@@ -95,7 +95,7 @@ def build_maps_parser() -> OneLineParser:
              "instances, maps/pogema (pogema: its families random,mazes,warehouse,movingai, the "
              "published agent counts and steps, step-aside, the table beside the published "
              "figures)")
-    add("--tasks", choices=TASKS, default="one-shot",
+    add("--tasks", choices=TASKS, default=d.tasks,
         help="frozen play on one-shot instances or, with --suite pogema, on POGEMA's lifelong "
              "instances (maps/pogema/*/lifelong: a new goal on every arrival, scored by "
              "throughput; training stays one-shot on our maps)")

@@ -10,12 +10,14 @@ its usage errors into one line and exit code 2, and says how the run ended.
 import sys
 
 from nnql_swarm.api.command import (  # noqa: F401 (the command's parts, by their usual names)
-    UsageError, build_parser, check_distributable, prepare_out_dir, resolve, resume,
-    resume_command, run_in_process, run_processes, transports, unmerged,
+    UsageError, build_parser, check_distributable, given_values, prepare_out_dir, resolve,
+    resume, resume_command, run_in_process, run_processes, transports, unmerged,
 )
+from nnql_swarm.api.options import Launch
 from nnql_swarm.api.swarm import Swarm
 from nnql_swarm.recording.merge import merge_parts
 from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
+from nnql_swarm.supervision import restarts
 from nnql_swarm.supervision.resume import ResumeError
 from nnql_swarm.terminal.cli import EXIT_INTERRUPTED
 
@@ -33,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         code = swarm.play()
     except KeyboardInterrupt:  # in-process; the processes' launcher says it itself
-        print(f"\n{interrupted_in_process(args, swarm)}", file=sys.stderr)
+        print(f"\n{interrupted_in_process(swarm)}", file=sys.stderr)
         return EXIT_INTERRUPTED
     except OSError as error:  # in-process: the processes' launcher says it itself
         if not out_of_space(error):
@@ -42,24 +44,25 @@ def main(argv: list[str] | None = None) -> int:
               f"stopped", file=sys.stderr)
         return EXIT_NO_SPACE
     if code == 0 and args.role != "agents":
-        print(f"run finished: {swarm.out}", file=sys.stderr)
+        print(restarts.finished(swarm.out), file=sys.stderr)
     return code
 
 
-def interrupted_in_process(args, swarm: Swarm) -> str:
+def interrupted_in_process(swarm: Swarm) -> str:
     """What an interrupted ``--in-process`` run says: the command that continues it (its
     checkpoints are saved as it stops, and a distributed ``--resume`` plays the same run)."""
     try:
         check_distributable(swarm.config)
     except UsageError:
         return "interrupted (a run the simulator only plays cannot be resumed)"
-    return f"interrupted: continue it with {resume_command(args, swarm.out)}"
+    return f"interrupted: continue it with {resume_command(swarm.launch, swarm.out)}"
 
 
 def resume_run(parser, args) -> int:
     """``--resume``: continue the run in ``--out`` from its last complete episode."""
+    launch = Launch.of(args)
     try:
-        config, start, out, lock = resume(args)
+        config, start, out, lock = resume(launch, given_values(args))
     except (UsageError, ResumeError) as error:
         parser.error(str(error))
     if start.episode >= config.episodes:
@@ -71,7 +74,7 @@ def resume_run(parser, args) -> int:
             return 0
         # Agents elsewhere may still wait for the world that completed the run: this one only
         # tells them to stop.
-    code = run_processes(args, config, out, start)  # the lock held until this process ends
+    code = run_processes(launch, config, out, start)  # the lock held until this process ends
     if code == 0 and args.role != "agents":
-        print(f"run finished: {out}", file=sys.stderr)
+        print(restarts.finished(out), file=sys.stderr)
     return code

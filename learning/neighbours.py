@@ -1,13 +1,50 @@
 """The neighbours as a learner reads them at an observation: whose intents it waits for
 (:func:`awaited`), whose it knows without waiting (:func:`staying`), and their rows
 (:class:`NeighbourRows`, ``learning.fields.NB_*``). The agent decides with them; the world reads
-the same when it checks the agent's learning record (``world.records``)."""
+the same when it checks the agent's learning record (``world.records``). Each row is written by
+one kernel, :func:`neighbour_row`, which the simulator's ``sim.episode.neighbour_rows`` calls
+too."""
 
-from nnql_swarm.learning.fields import reach
+from nnql_swarm.learning.fields import (
+    NB_FIELDS, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED, NB_PREV_X, NB_PREV_Y,
+    NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, reach,
+)
 from nnql_swarm.learning.known_map import check_cell_order
-from nnql_swarm.protocol.actions import VIEW_RADIUS, sees, target_x, target_y, within
+from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sees, target_x, target_y, within
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.kernel.jit import ints
+from nnql_swarm.kernel.jit import inline_kernel, ints
+
+
+@inline_kernel
+def neighbour_row(row, j, jx, jy, known, action, parked, px, py, width, height):
+    """Write body ``j``'s neighbour row (``learning.fields.NB_*``, but ``NB_ROW``): its cell
+    ``(jx, jy)``; whether its move this tick is ``known`` and the cell it goes to (by
+    ``action``, where known; else its cell), which is also the cell its state reads (the
+    simulator's lookahead overwrites that with the cell planned further on); whether it is
+    ``parked`` on its goal; and its cell a tick ago ``(px, py)``, ``(-1, -1)`` where the agent's
+    cell then did not see it."""
+    row[NB_ID] = j
+    row[NB_X] = jx
+    row[NB_Y] = jy
+    if known:
+        nx = target_x(jx, action, width)
+        ny = target_y(jy, action, height)
+    else:
+        nx = jx
+        ny = jy
+    row[NB_KNOWN] = 1 if known else 0
+    row[NB_NEXT_X] = nx
+    row[NB_NEXT_Y] = ny
+    row[NB_STATE_X] = nx
+    row[NB_STATE_Y] = ny
+    row[NB_PARKED] = 1 if parked else 0
+    row[NB_PREV_X] = px
+    row[NB_PREV_Y] = py
+
+
+write_row = getattr(neighbour_row, "py_func", neighbour_row)
+""":func:`neighbour_row` as plain Python, on a list row (the agent's rows are lists, whether or
+not the kernel is compiled in this process)."""
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.ranks import awaits_answer, in_reach, priority_rank, waits_for
 
@@ -22,7 +59,7 @@ def awaited_cells(obs: Observation, config: SwarmConfig) -> list[tuple[int, int,
     """:func:`awaited` as ``(id, x, y)``."""
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
-    meet, arrived = config.meet_only, obs.arrived and config.parks
+    meet, arrived = config.meet_only, obs.arrived and not config.step_aside
     if meet and arrived:
         return []  # what awaits_answer says of every neighbour, without asking it
     (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
@@ -79,19 +116,20 @@ class NeighbourRows:
         rows = []
         for j, jx, jy in within(obs.neighbours, x, y, far):
             action = answers.get(j)
-            if action is None:
-                nx, ny, known = jx, jy, 0
-            else:
-                nx, ny, known = target_x(jx, action, w), target_y(jy, action, h), 1
             px, py = previous.get(j, (-1, -1))
-            rows.append([j, jx, jy, known, nx, ny, nx, ny, int(j in parked), px, py, 0])
+            row = [0] * NB_FIELDS
+            write_row(row, j, jx, jy, action is not None, STAY if action is None else action,
+                      j in parked, px, py, w, h)
+            rows.append(row)
         if self._walls:
             knows = announcing and self.reads_intents
             radius, meet = self.config.interaction_radius, self.config.meet_only
             for j, jx, jy in self._walls_within(x, y):
                 px, py = (jx, jy) if was_at is not None and sees(*was_at, jx, jy) else (-1, -1)
-                known = int(knows and in_reach(x, y, jx, jy, radius, meet))
-                rows.append([j, jx, jy, known, jx, jy, jx, jy, 0, px, py, 0])
+                row = [0] * NB_FIELDS
+                write_row(row, j, jx, jy, knows and in_reach(x, y, jx, jy, radius, meet), STAY,
+                          False, px, py, w, h)
+                rows.append(row)
         return rows
 
     def _walls_within(self, x: int, y: int) -> list[tuple[int, int, int]]:

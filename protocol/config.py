@@ -372,16 +372,10 @@ class SwarmConfig:
 
     @property
     def step_aside(self) -> bool:
-        """Whether an arrived agent may leave its goal to make way (``world.rules``)."""
+        """Whether an arrived agent may leave its goal to make way (``world.rules``); if not, it
+        is *parked* (``park``): it stays on its goal for the rest of the episode, so every
+        observation that shows it says so and its intent, STAY, is known without asking."""
         return self.on_target == "step-aside"
-
-    @property
-    def parks(self) -> bool:
-        """Whether an arrived agent is *parked*: it stays on its goal for the rest of the
-        episode, so every observation that shows it says so and its intent, STAY, is known
-        without asking (the ``park`` on-target rule). Under ``step-aside`` it negotiates and
-        may make way."""
-        return not self.step_aside
 
     @property
     def meet_only(self) -> bool:
@@ -398,7 +392,7 @@ class SwarmConfig:
         not negotiate (an arrived one never learns an intent that would make it move). Under
         ``reach`` an arrived nnQL agent still relays the intents it learns down the chain, in
         lockstep; under ``step-aside`` it may have to make way."""
-        return not self.lifelong and ((self.meet_only and self.parks)
+        return not self.lifelong and ((self.meet_only and not self.step_aside)
                                       or self.algo not in NEGOTIATING_ALGOS)
 
     @cached_property

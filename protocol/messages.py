@@ -52,7 +52,8 @@ from msgspec import Meta
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 8
+PROTOCOL_VERSION = 9
+"""9: the world's incarnation in observations and intents (``Observation.world``)."""
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -189,6 +190,10 @@ class Observation(AgentMessage, tag=tag("obs"), frozen=True):
     parked: Parked = ()
     updates: Updates = ()  # where the swarm shares one table
     settled: bool = False  # parked since an earlier tick: the world expects no intent (engine)
+    world: Count = 0
+    """The world's incarnation (``storage.runfiles.next_incarnation``: one more each time a
+    run's world starts): an intent names the one it was decided for, so that a world started
+    again takes no intent decided for the world before it."""
 
     agent_lists = ("neighbours",)
 
@@ -202,6 +207,7 @@ class Intent(AgentMessage, tag=tag("intent"), frozen=True):
     action: Action
     record: Learned = ()  # where the swarm shares one table: this tick's learning record
     order: Order = ()
+    world: Count = 0  # the incarnation of the world whose observation it was decided on
 
     from_agent = True
 

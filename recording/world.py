@@ -172,12 +172,12 @@ def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.nda
     for t, tick in enumerate(np.asarray(ticks).tolist()):
         ranks = [priority_rank(i, tick, n) for i in range(n)]
         for i, (x, y) in enumerate(cells[t]):
-            if arrived[t][i] and config.parks:
+            if arrived[t][i] and not config.step_aside:
                 continue
             for j, (jx, jy) in enumerate(cells[t]):
                 asks[t, i, j] = j != i and awaits_answer(ranks[i], ranks[j], x, y, jx, jy,
                                                          radius, meet, False,
-                                                         arrived[t][j] and config.parks)
+                                                         arrived[t][j] and not config.step_aside)
     return asks
 
 

@@ -25,15 +25,15 @@ the same for the whole batch.
 from typing import NamedTuple
 
 from nnql_swarm.learning.fields import (
-    FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y,
-    NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, READ_DIR, READ_NNQL, Grid,
-    LearnerBuffers, Sight,
+    FP_ALPHA, FP_GAMMA, LP_MEET_ONLY, LP_RADIUS, LP_READING, NB_NEXT_X, NB_NEXT_Y, NB_STATE_X,
+    NB_STATE_Y, READ_DIR, READ_NNQL, Grid, LearnerBuffers, Sight,
 )
 from nnql_swarm.learning.learner import (
     announce_order, decide, finish, first_choice, make_way, planned_cell, preference_ranks,
 )
+from nnql_swarm.learning.neighbours import neighbour_row
 from nnql_swarm.learning.record import apply_record, record_outcome
-from nnql_swarm.protocol.actions import N_ACTIONS, STAY, sees, target_x, target_y
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY, sees
 from nnql_swarm.kernel.jit import Buffer, batch_kernel, inline_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.world.pibt import plan
@@ -198,39 +198,20 @@ def neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options, ann
         if j == i or not sees(x[i], y[i], x[j], y[j]):
             continue
         row = nb[m]
-        row[NB_ID] = j
-        row[NB_X] = x[j]
-        row[NB_Y] = y[j]
         known = (negotiates and decided[j]
                  and waits_for(True, rank, rank_of(j, tick, learners), x[i], y[i], x[j], y[j],
                                params[LP_RADIUS], params[LP_MEET_ONLY]))
-        row[NB_KNOWN] = 1 if known else 0
-        if known:
-            nx = target_x(x[j], actions[j], width)
-            ny = target_y(y[j], actions[j], height)
-            row[NB_NEXT_X] = nx
-            row[NB_NEXT_Y] = ny
-            if lookahead > 1 and learns[j]:
-                t = 0 if shared else j
-                sx, sy = planned_cell(q_ds[t], nx, ny, goal_x[j], goal_y[j], lookahead - 1,
-                                      width, height)
-                row[NB_STATE_X] = sx
-                row[NB_STATE_Y] = sy
-            else:
-                row[NB_STATE_X] = nx
-                row[NB_STATE_Y] = ny
-        else:
-            row[NB_NEXT_X] = x[j]
-            row[NB_NEXT_Y] = y[j]
-            row[NB_STATE_X] = x[j]
-            row[NB_STATE_Y] = y[j]
-        row[NB_PARKED] = 1 if learns[j] and arrived[j] and not step_aside else 0
-        if prev_x[i] >= 0 and sees(prev_x[i], prev_y[i], prev_x[j], prev_y[j]):
-            row[NB_PREV_X] = prev_x[j]
-            row[NB_PREV_Y] = prev_y[j]
-        else:
-            row[NB_PREV_X] = -1
-            row[NB_PREV_Y] = -1
+        seen_before = prev_x[i] >= 0 and sees(prev_x[i], prev_y[i], prev_x[j], prev_y[j])
+        neighbour_row(row, j, x[j], y[j], known, actions[j],
+                      learns[j] and arrived[j] and not step_aside,
+                      prev_x[j] if seen_before else -1, prev_y[j] if seen_before else -1,
+                      width, height)
+        if known and lookahead > 1 and learns[j]:
+            t = 0 if shared else j
+            sx, sy = planned_cell(q_ds[t], row[NB_NEXT_X], row[NB_NEXT_Y], goal_x[j], goal_y[j],
+                                  lookahead - 1, width, height)
+            row[NB_STATE_X] = sx
+            row[NB_STATE_Y] = sy
         m += 1
     return m
 

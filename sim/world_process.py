@@ -21,7 +21,7 @@ class WorldProcess(SwarmState):
         w.alive, w.stalled_until, w.waiting, w.timer_at = True, 0.0, [], None
         self.era += 1
         self.world_protocol = WorldMachine(self.config, net.now, first_episode, first_tick,
-                                            table=table)
+                                            table=table, incarnation=w.incarnation)
         for i, a in enumerate(self.agents):
             if a.alive:
                 net.send_reliable(w, a, self._world_token_in, i, True)

@@ -5,6 +5,7 @@
     <out>/checkpoints/agent-<id>.ckpt  each agent's Q-tables (agent.checkpoint; storage.slotfile)
     <out>/checkpoints/world.ckpt       the shared Q-table, where the agents share one (world.checkpoint)
     <out>/stats/world.json, <out>/stats/agent-<id>.json   closing statistics of each process
+    <out>/stats/incarnation.json  how many times the run's world has started (next_incarnation)
     <out>/run.rrd              the Rerun recording
     <out>/rerun-parts/<role>.<pid>.rrd  each process's part of it, until merged into run.rrd
     <out>/run.lock             held by the run's launcher while it runs (storage.runlock)
@@ -41,6 +42,19 @@ def out_of_space(error: BaseException) -> bool:
 def stats_path(out_dir: Path, name: str) -> Path:
     """``<out>/stats/<name>.json``, e.g. name ``world`` or ``agent-3``."""
     return Path(out_dir) / STATS_DIR / f"{name}.json"
+
+
+def next_incarnation(out_dir: Path) -> int:
+    """Count one more start of the run's world in ``<out>/stats/incarnation.json`` and return
+    it (1 for a run's first world): the incarnation its messages carry
+    (``protocol.messages.Observation.world``)."""
+    path = stats_path(out_dir, "incarnation")
+    try:
+        before = int(json.loads(path.read_text())["world"])
+    except (OSError, ValueError, KeyError, TypeError):
+        before = 0
+    write_json_atomic(path, {"world": before + 1})
+    return before + 1
 
 
 def write_text_atomic(path: Path, text: str) -> None:

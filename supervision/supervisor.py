@@ -178,6 +178,12 @@ class Supervisor:
                 child.restarts += 1
                 self._start(child, restarted=True)
 
+    def restarted(self) -> dict[str, list[str]]:
+        """Every child restarted so far, with how each exit that it was restarted after
+        ended (``describe_exit``)."""
+        return {child.name: [describe_exit(code) for code in child.exit_codes[:child.restarts]]
+                for child in self.children if child.restarts}
+
     def stop_all(self, signal_first: bool) -> None:
         """Let children exit (after SIGTERM if ``signal_first``); kill those still there."""
         alive = [c.process for c in self.children if c.process is not None]

@@ -37,10 +37,10 @@ def main(argv: list[str]) -> int:
     rest = [a for k, a in enumerate(argv)
             if a not in ("--from-tick", "--mute") and (k == 0 or argv[k - 1] != "--from-tick")]
     args = swarm_cli.build_parser().parse_args(rest)
-    config, out = swarm_cli.resolve(args)
+    config, launch, out = swarm_cli.resolve(args)
     swarm_cli.prepare_out_dir(out, config, "agents")
-    _, transport, _ = swarm_cli.transports(args, config)
-    [agent] = args.agent_ids
+    _, transport, _ = swarm_cli.transports(launch, config)
+    [agent] = launch.agent_ids
     brain = ForgingBrain(agent, config, from_tick, mute)
     return run_agent(AgentOptions(agent, config, transport(agent), out), brain)
 

@@ -38,7 +38,8 @@ def same_run(a: Run, b: Run) -> None:
     (dict(agents=0), ("--agents", "0"), "agents must be"),
     (dict(agents=80), ("--agents", "80"), "distinct start and goal cells"),
     (dict(grid="11by11"), ("--grid", "11by11"), "WIDTHxHEIGHT"),
-    (dict(algo="dqn"), ("--algo", "dqn"), "invalid choice"),
+    (dict(algo="dqn"), ("--algo", "dqn"), "algo must be one of"),
+    (dict(goal_reward=float("nan")), ("--goal-reward", "nan"), "the goal reward must be"),
     (dict(episodes=-1), ("--episodes", "-1"), "episodes must be"),
     (dict(run_id="bad id!"), ("--run-id", "bad id!"), "invalid run id"),
     (dict(obstacle_density=0.9), ("--obstacle-density", "0.9"), "obstacle density"),
@@ -76,6 +77,37 @@ def test_options_by_flag_or_field_and_a_config_give_the_configs_run():
             Swarm(**bad)
     with pytest.raises(ValueError, match="run it with --in-process"):
         Swarm(algo="oracle").run("never", distributed=True)
+
+
+def test_a_swarm_builds_no_argv(monkeypatch, tmp_path):
+    """``Swarm(...)`` makes its config directly (``api.options.config_of``): no parser is built
+    or run, from the options to a finished run, and the command's parsed options give the same
+    config."""
+    import argparse
+
+    def refused(*args, **kwargs):
+        raise AssertionError("argparse invoked")
+
+    for method in ("__init__", "parse_args", "parse_known_args"):
+        monkeypatch.setattr(argparse.ArgumentParser, method, refused)
+    swarm = Swarm(preset="nnql", agents=3, episodes=2, max_steps=10, seed=1, grid="7x6",
+                  radius=3, optimistic=2, run_id="direct")
+    assert swarm.config.optimistic == 2.0 and isinstance(swarm.config.optimistic, float)
+    assert (swarm.config.width, swarm.config.height, swarm.config.interaction_radius) == (7, 6, 3)
+    assert Swarm(swarm.config).config == swarm.config
+    for bad, message in ((dict(agents="3"), "must be an integer"),
+                         (dict(alpha="0.5"), "must be a number"),
+                         (dict(preset="best"), "preset must be one of"),
+                         (dict(topology="ring"), "topology must be one of")):
+        with pytest.raises(ValueError, match=message):
+            Swarm(**bad)
+    run = swarm.run(tmp_path / "run", record=False)
+    assert len(run.episodes) == 2
+    monkeypatch.undo()
+    args = swarm_cli.build_parser().parse_args(
+        ["--preset", "nnql", "--agents", "3", "--episodes", "2", "--max-steps", "10", "--seed",
+         "1", "--grid", "7x6", "--radius", "3", "--optimistic", "2", "--run-id", "direct"])
+    assert Swarm.from_args(args).config == swarm.config
 
 
 @pytest.fixture(scope="module")

@@ -73,6 +73,10 @@ def test_a_killed_agent_is_restarted_from_its_checkpoint(tmp_path):
             os.killpg(swarm.pid, signal.SIGKILL)
     assert swarm.returncode == 0, stderr
     assert "nnql-agent-3 exited (killed by SIGKILL)" in stderr
+    assert stats(out, "supervisor") == {"restarts": {"nnql-agent-3": ["killed by SIGKILL"]}}
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith(f"run finished: {out}; not the run its seed gives"), stderr
+    assert "the run is no longer the run its seed gives" in stderr
     rows = episodes_once(out, 30)
     config = SwarmConfig.from_json((out / "config.json").read_text())
     at_kill = AgentBrain(3, config)
@@ -195,6 +199,8 @@ def test_agents_reconnect_to_a_restarted_world(tmp_path):
     episodes_once(out, 80)
     for agent in range(6):
         assert stats(out, f"agent-{agent}")["shutdown_by_world"]
+    assert stats(out, "incarnation") == {"world": 2}  # the second world's messages say so
+    assert stats(out, "world")["forgers"] == []  # no honest agent's intent taken as forged
     assert_copies_equal_the_worlds(out, SwarmConfig.from_json((out / "config.json").read_text()),
                                    range(6))
 

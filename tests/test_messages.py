@@ -126,7 +126,8 @@ def test_an_intent_with_its_order_of_moves_round_trips():
     for order in ((3,), (3, 0), (3, 0, 4), (3, 4, 2, 1, 0), (RIGHT, STAY, UP, DOWN, LEFT)):
         msg = intent(order=order)
         payload = encode(msg)
-        assert msgpack.unpackb(payload) == ["intent/8", RUN, 7, "agent/2", 2, 1, 3, [], list(order)]
+        assert msgpack.unpackb(payload) == ["intent/9", RUN, 7, "agent/2", 2, 1, 3, [], list(order),
+                                            0]
         for form in (bytes, bytearray, memoryview, zenoh.ZBytes):
             back = parse(form(payload), Intent, RUN, key_agent=2)
             assert back == msg and back.order == order and type(back.order) is tuple
@@ -141,11 +142,12 @@ def test_an_intent_with_its_order_of_moves_round_trips():
 
 
 def test_wire_format_is_an_array_of_the_tag_and_fields_in_order():
-    assert PROTOCOL_VERSION == 8
+    assert PROTOCOL_VERSION == 9
     wire = msgpack.unpackb(encode(intent()))
-    assert wire == ["intent/8", RUN, 7, "agent/2", 2, 1, 3, [], []]
-    assert msgpack.unpackb(encode(control())) == ["control/8", RUN, 7, WORLD_SENDER, "shutdown"]
-    assert msgpack.unpackb(encode(obs()))[0] == "obs/8"
+    assert wire == ["intent/9", RUN, 7, "agent/2", 2, 1, 3, [], [], 0]
+    assert msgpack.unpackb(encode(control())) == ["control/9", RUN, 7, WORLD_SENDER, "shutdown"]
+    assert msgpack.unpackb(encode(obs()))[0] == "obs/9"
+    assert msgpack.unpackb(encode(obs(world=3)))[-1] == 3
     assert msgpack.unpackb(encode(answer()))[-1] == [[0, 4], [5, 0]]
     assert MESSAGES == KINDS
     for cls in MESSAGES:
@@ -160,12 +162,12 @@ def test_messages_are_immutable_structs():
     msg = intent()
     assert isinstance(msg, msgspec.Struct) and msg == Intent(RUN, 7, "agent/2", 2, 1, 3)
     assert (msg.run, msg.tick, msg.sender, msg.agent, msg.episode, msg.action,
-            msg.record, msg.order) == values(msg)
+            msg.record, msg.order, msg.world) == values(msg)
     with pytest.raises(AttributeError):
         msg.action = 4
     assert replaced(msg, action=4).action == 4 and msg.action == 3
     assert hash(msg) == hash(intent()) and Intent.__doc__.startswith("Agent -> world")
-    assert fields_of(Intent)[-1] == "order" and msg.order == () and intent(order=()) == msg
+    assert fields_of(Intent)[-1] == "world" and msg.order == () and intent(order=()) == msg
     assert intent(order=(3, 1)) != msg
     assert obs() == Observation(*values(obs())) == Observation(**msgspec.structs.asdict(obs()))
     assert msg != answer(relayed=()) and intent(record=()) == msg
@@ -283,13 +285,13 @@ def detail_of(payload, kind, run=RUN, key_agent=None) -> str:
 
 def test_wrong_length_says_how_many_items():
     wire = to_wire(intent())
-    assert detail_of(pack(wire[:-1]), Intent) == "wrong-length: expected 9 items, got 8"
-    assert detail_of(pack([*wire, 0, 0]), Intent) == "wrong-length: expected 9 items, got 11"
-    assert detail_of(pack([]), Intent) == "wrong-length: expected 9 items, got 0"
-    assert detail_of(pack([TAG[Intent]]), Intent) == "wrong-length: expected 9 items, got 1"
-    assert detail_of(pack([TAG[Intent], RUN]), Intent) == "wrong-length: expected 9 items, got 2"
+    assert detail_of(pack(wire[:-1]), Intent) == "wrong-length: expected 10 items, got 9"
+    assert detail_of(pack([*wire, 0, 0]), Intent) == "wrong-length: expected 10 items, got 12"
+    assert detail_of(pack([]), Intent) == "wrong-length: expected 10 items, got 0"
+    assert detail_of(pack([TAG[Intent]]), Intent) == "wrong-length: expected 10 items, got 1"
+    assert detail_of(pack([TAG[Intent], RUN]), Intent) == "wrong-length: expected 10 items, got 2"
     full = to_wire(obs())
-    assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 19 items, got 5"
+    assert detail_of(pack(full[:5]), Observation) == "wrong-length: expected 20 items, got 5"
     short = pack(to_wire(answer())[:-1])
     assert detail_of(short, Answer) == "wrong-length: expected 8 items, got 7"
     for cut in (to_wire(obs())[:-3], to_wire(intent())[:-1]):  # fields with defaults: not optional
@@ -313,16 +315,19 @@ def test_checks_come_in_order_version_kind_length_run_fields_rules():
     assert reason_of(encode(control()), Answer) == "wrong-kind"  # shorter
     assert reason_of(pack([TAG[Intent], "other-run"]), Intent) == "wrong-length"
     assert reason_of(pack([TAG[Intent], None, None, None, None, None]), Intent) == "wrong-length"
-    changed = [*wire[:1], "other-run", -1, None, MAX_AGENTS, -1, 99, None, None]
+    changed = [*wire[:1], "other-run", -1, None, MAX_AGENTS, -1, 99, None, None, None]
     assert reason_of(pack(changed), Intent) == "wrong-run"
-    changed = [*wire[:2], -1, "agent/3", MAX_AGENTS, -1, 99, None, None]
+    changed = [*wire[:2], -1, "agent/3", MAX_AGENTS, -1, 99, None, None, None]
     assert reason_of(pack(changed), Intent) == "bad-field:tick"  # the first bad field
-    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 99, [], [9]]), Intent) == "bad-field:action"
-    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 3, [], [9]]), Intent) == "bad-field:order"
+    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 99, [], [9], 0]), Intent) == \
+        "bad-field:action"
+    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 3, [], [9], 0]), Intent) == \
+        "bad-field:order"
     # the order's rule (the action first, each move once) is a rule: after the sender
-    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 3, [], [1, 3]]), Intent) == "forged-sender"
-    assert reason_of(pack([*wire[:-1], [1, 3]]), Intent, key_agent=3) == "forged-sender"
-    assert reason_of(pack([*wire[:-1], [1, 3]]), Intent, key_agent=2) == "bad-field:order"
+    assert reason_of(pack([*wire[:3], "agent/3", 2, 1, 3, [], [1, 3], 0]), Intent) == \
+        "forged-sender"
+    assert reason_of(pack([*wire[:-2], [1, 3], 0]), Intent, key_agent=3) == "forged-sender"
+    assert reason_of(pack([*wire[:-2], [1, 3], 0]), Intent, key_agent=2) == "bad-field:order"
     itself = mutated(obs(), "neighbours", ((2, 0, 0),))
     assert reason_of(itself, Observation) == "bad-field:neighbours"
     forged = to_wire(obs())
@@ -551,8 +556,9 @@ _bad_neighbours = (
 )
 _bad_relayed = (
     _wrong_types.filter(lambda v: not isinstance(v, list) or v)  # [] is valid
-    | st.lists(_wrong_types | st.lists(coords, max_size=5).filter(lambda v: len(v) != 2),
-               min_size=1, max_size=3)
+    | st.lists(_wrong_types.filter(lambda v: not (isinstance(v, list) and len(v) == 2))
+               | st.lists(coords, max_size=5).filter(lambda v: len(v) != 2),
+               min_size=1, max_size=3)  # (a pair of small ints is an entry: [0, 0])
     | st.tuples(_bad_int | _out_of(0, MAX_AGENTS), st.integers(0, N_ACTIONS - 1))
       .map(lambda t: [list(t)])
     | st.tuples(agents, _bad_int | _out_of(0, N_ACTIONS)).map(lambda t: [list(t)])
@@ -627,6 +633,7 @@ BAD = {
     "collided": _bad_bool, "arrived": _bad_bool, "episode_end": _bad_bool, "settled": _bad_bool,
     "command": _wrong_types | _bad_command, "relayed": _bad_relayed,
     "parked": _bad_parked, "updates": _bad_updates, "record": _bad_record, "order": _bad_order,
+    "world": _bad_int | _out_of(0, MAX_TICK),
 }
 BAD_FOR = {"order": lambda msg: _bad_order_for(msg.action)}
 """Bad values that depend on the message's other fields (the rules between fields)."""
@@ -707,13 +714,13 @@ def _is_agent_list(v, *rest):
 
 REFERENCE_KINDS = {  # the kind, then the fields in wire order
     Observation: ("obs run tick sender agent episode step position goal neighbours rank reward_ds "
-                  "reward_ca collided arrived episode_end parked updates settled"),
-    Intent: "intent run tick sender agent episode action record order",
+                  "reward_ca collided arrived episode_end parked updates settled world"),
+    Intent: "intent run tick sender agent episode action record order world",
     Answer: "answer run tick sender agent episode action relayed",
     Control: "control run tick sender command",
 }
-REFERENCE_VERSION = "8"
-REFERENCE_TAGS = {"obs/8", "intent/8", "answer/8", "control/8"}  # protocol version 8
+REFERENCE_VERSION = "9"
+REFERENCE_TAGS = {"obs/9", "intent/9", "answer/9", "control/9"}  # protocol version 9
 FROM_AGENTS = (Intent, Answer)
 AGENT_LISTS = ("neighbours", "relayed")
 REFERENCE_FIELDS = {
@@ -725,6 +732,7 @@ REFERENCE_FIELDS = {
     "collided": lambda v: type(v) is bool, "arrived": lambda v: type(v) is bool,
     "episode_end": lambda v: type(v) is bool, "command": lambda v: v == "shutdown",
     "settled": lambda v: type(v) is bool,
+    "world": lambda v: _is_int(v, 0, MAX_TICK),
     "neighbours": lambda v: _is_agent_list(v, lambda c: _is_int(c, 0, MAX_GRID),
                                            lambda c: _is_int(c, 0, MAX_GRID)),
     "relayed": lambda v: _is_agent_list(v, lambda a: _is_int(a, 0, 5)),
@@ -947,23 +955,23 @@ def encoding_of(msg):
 def test_wire_bytes_are_pinned():
     """The exact bytes of protocol version 8 (item order, int / float / bool types)."""
     pinned = {
-        obs():  # 19 items: an array 16 header
-            "dc0013a56f62732f38a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
-            "cb3fd0000000000000cb4024000000000000c2c2c29090c2",
-        obs(parked=(5,), updates=(((7, 2210), (0.5, 10)), ((), ()))):
-            "dc0013a56f62732f38a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
+        obs():  # 20 items: an array 16 header; the world's incarnation last
+            "dc0014a56f62732f39a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
+            "cb3fd0000000000000cb4024000000000000c2c2c29090c200",
+        obs(parked=(5,), updates=(((7, 2210), (0.5, 10)), ((), ())), world=2):
+            "dc0014a56f62732f39a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
             "cb3fd0000000000000cb4024000000000000c2c2c2910592929207cd08a292cb3fe00000000000000a"
-            "929090c2",
+            "929090c202",
         answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
-            "98a8616e737765722f38a572756e2d3103a76167656e742f3202000192920004920100",
-        intent():  # 9 items: the record, then the order, both empty
-            "99a8696e74656e742f38a572756e2d3107a76167656e742f320201039090",
+            "98a8616e737765722f39a572756e2d3103a76167656e742f3202000192920004920100",
+        intent():  # 10 items: the record, then the order, both empty, then the world's
+            "9aa8696e74656e742f39a572756e2d3107a76167656e742f32020103909000",
         intent(order=(3, 0, 4)):  # the order: the action (3) first, then 0, then 4
-            "99a8696e74656e742f38a572756e2d3107a76167656e742f320201039093030004",
+            "9aa8696e74656e742f39a572756e2d3107a76167656e742f32020103909303000400",
         control():
-            "95a9636f6e74726f6c2f38a572756e2d3107a5776f726c64a873687574646f776e",
+            "95a9636f6e74726f6c2f39a572756e2d3107a5776f726c64a873687574646f776e",
         control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
-            "95a9636f6e74726f6c2f38d940" + "72" * 64
+            "95a9636f6e74726f6c2f39d940" + "72" * 64
             + "cf0000010000000000a5776f726c64a873687574646f776e",
     }
     for msg, hexed in pinned.items():
@@ -971,7 +979,7 @@ def test_wire_bytes_are_pinned():
         assert parse(bytes.fromhex(hexed), type(msg), msg.run) == msg
         assert msgpack.unpackb(bytes.fromhex(hexed)) == [TAG[type(msg)], *_as_lists(values(msg))]
     assert msgpack.unpackb(bytes.fromhex(pinned[intent(order=(3, 0, 4))])) == [
-        "intent/8", RUN, 7, "agent/2", 2, 1, 3, [], [3, 0, 4]]
+        "intent/9", RUN, 7, "agent/2", 2, 1, 3, [], [3, 0, 4], 0]
 
 
 @given(any_message, st.sampled_from([bytes, bytearray, memoryview, zenoh.ZBytes]))
@@ -1005,7 +1013,7 @@ def test_numpy_values_lists_str_subclasses_and_ints_for_floats_go_on_the_wire_pl
 # Values a field may be given, valid or not, each tried in every field of every kind, both ways.
 _EDGES = [
     None, "", "x", "world", "agent/2", "shutdown", "obs/8", "intent/8", "control/8", "answer/8",
-    "obs/7", "intent/7", "intent/6", "control/7", "intent/9",
+    "obs/7", "intent/7", "intent/6", "control/7", "intent/10", "obs/9", "intent/9",
     "x" * messages.MAX_STR_LEN,
     "x" * (messages.MAX_STR_LEN + 1), b"x",
     0, 1, 2, 4, 5, -1, MAX_GRID - 1, MAX_GRID, MAX_AGENTS - 1, MAX_AGENTS, MAX_TICK - 1, MAX_TICK,
@@ -1212,7 +1220,7 @@ def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
     assert msgpack.unpackb(encode(Plan(RUN, 7, "agent/2", 2, ())))[-1] == []
     good = Plan(RUN, 7, "agent/2", 2, ((0, 1, 1, True), (5, 2, 2, False)), (1, 4))
     payload = encode(good)
-    assert msgpack.unpackb(payload) == ["plan/8", RUN, 7, "agent/2", 2,
+    assert msgpack.unpackb(payload) == ["plan/9", RUN, 7, "agent/2", 2,
                                         [[0, 1, 1, True], [5, 2, 2, False]], [1, 4]]
     assert parse(payload, Plan, RUN, key_agent=2) == good
     for change, reason in [
@@ -1238,9 +1246,9 @@ def test_a_bad_item_is_named_by_its_fields_own_decoder():
         rejected = messages._rejection(mutated(obs(), name, value), Observation, RUN)
         assert rejected.reason == f"bad-field:{name}"
     assert messages._rejection(encode(obs()), Observation, RUN) is None
-    array16 = b"\xdc\x00\x09" + encode(intent())[1:]  # 9 items, in a longer header than needed
+    array16 = b"\xdc\x00\x0a" + encode(intent())[1:]  # 10 items, in a longer header than needed
     assert parse(array16, Intent, RUN) == intent()
-    assert reason_of(b"\xdc\x00\x0a" + encode(intent())[1:], Intent) == "not-msgpack"
+    assert reason_of(b"\xdc\x00\x0b" + encode(intent())[1:], Intent) == "not-msgpack"
 
 
 def test_oversize_rejected_before_unpacking(monkeypatch):

@@ -124,7 +124,7 @@ def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(a
                                 np.array([arrived]), np.array([tick]))[0]
         for i in range(n):
             obs = observe(i, tick, n, cells, arrived={j for j in range(n) if arrived[j]},
-                          parks=c.parks)
+                          parks=not c.step_aside)
             asked = brains[i].neighbours_to_ask(obs, neighbours.awaited(obs, c))
             assert set(asked) == set(np.flatnonzero(mask[i]).tolist())
         waited += int(mask.sum())
@@ -205,11 +205,11 @@ def test_an_arrived_agent_makes_way_only_when_it_may_step_aside(on_target):
     n, tick = 2, 0
     c = config(n, "nnql", 2, "reach", on_target)
     cells = {0: (5, 5), 1: (6, 5)}
-    obs = observe(1, tick, n, cells, arrived={1}, parks=c.parks)
+    obs = observe(1, tick, n, cells, arrived={1}, parks=not c.step_aside)
     brain = AgentBrain(1, c)
     asked = brain.neighbours_to_ask(obs, neighbours.awaited(obs, c))
     action = brain.act(obs, {0: RIGHT} if asked else {})
-    if c.parks:
+    if not c.step_aside:
         assert (asked, action) == ([], STAY)
     else:
         assert asked == [0] and action != STAY

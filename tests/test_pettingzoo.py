@@ -137,7 +137,7 @@ def test_infos_under_the_meet_rule_leave_out_a_neighbour_it_cannot_meet():
         place(env, [(0, 0), (2, 2)], [(7, 7), (7, 0)])
         _, _, _, _, infos = env.step({a: STAY for a in env.agents})
         assert infos["agent_0"]["waits_for"] == expected  # two cells off along both axes
-    with pytest.raises(ValueError, match="wait_rule"):
+    with pytest.raises(ValueError, match="wait rule"):
         SwarmGridEnv(wait_rule="near")
 
 
@@ -160,8 +160,37 @@ def test_ansi_render_draws_agents_and_goals():
 
 
 def test_too_many_agents_for_the_grid_is_refused():
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="distinct start and goal cells"):
         SwarmGridEnv(n_agents=5, width=3, height=3)
+
+
+def test_the_env_takes_the_swarms_config():
+    """``SwarmGridEnv(swarm.config)``: the swarm's agents, grid, steps, rewards and waits, the
+    same values, not restated; what the env does not play is refused in one line."""
+    from nnql_swarm.api import Swarm
+
+    swarm = Swarm(agents=5, grid=(9, 7), max_steps=30, goal_reward=4.0, stay_reward=0.25,
+                  radius=3, wait_rule="meet", count_swaps=False)
+    env = SwarmGridEnv(swarm.config)
+    assert env.config is swarm.config
+    assert (env.n_agents, env.width, env.height, env.max_steps, env.count_swaps,
+            env.negotiation_radius, env.meet_only) == (5, 9, 7, 30, False, 3, True)
+    assert SwarmGridEnv(n_agents=5, grid=(9, 7), max_steps=30, goal_reward=4.0,
+                        stay_reward=0.25, radius=3, wait_rule="meet",
+                        count_swaps=False).config.learning() != swarm.config.learning()
+    env.reset(seed=0)
+    place(env, [(0, 0), (8, 6), (4, 0), (0, 6), (8, 0)],
+          [(1, 0), (8, 5), (4, 2), (0, 5), (7, 0)])
+    _, rewards, terminations, _, infos = env.step(
+        {"agent_0": RIGHT, "agent_1": UP, "agent_2": STAY, "agent_3": UP, "agent_4": LEFT})
+    assert terminations["agent_0"] and infos["agent_0"]["reward_ds"] == 4.0
+    assert infos["agent_2"]["reward_ds"] == 0.25 / 2  # stayed, two cells from its goal
+    assert SwarmGridEnv().config.n_agents == Swarm().config.n_agents  # the config's defaults
+    for bad in (Swarm(obstacle_density=0.1).config, Swarm(on_target="step-aside").config):
+        with pytest.raises(ValueError, match="the env plays the open grid"):
+            SwarmGridEnv(bad)
+    with pytest.raises(ValueError, match="not both"):
+        SwarmGridEnv(swarm.config, n_agents=3)
 
 
 def test_rgb_array_draws_goals_and_agents_in_their_colours():

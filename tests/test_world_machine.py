@@ -173,6 +173,22 @@ def test_a_stop_tells_everyone_once_and_ends():
     assert protocol.stop(0.2) == [] and intent(protocol, 0, 0.3) == []
 
 
+def test_an_intent_decided_for_an_earlier_world_is_not_taken_for_this_ones():
+    """A world started again (``--resume`` under agents that kept running) is another
+    incarnation: its observations name it, and an intent decided on the world before it is
+    refused, counted, and the agent waited for, not taken as this world's."""
+    protocol = WorldMachine(CONFIG, 0.0, incarnation=2)
+    alive(protocol, 0, 0.0)
+    [batch] = [e for e in alive(protocol, 1, 0.0) if isinstance(e, SendObservations)]
+    assert {obs.world for obs, _ in batch.observations} == {2}
+    for agent, world in ((0, 2), (1, 1)):
+        payload = encode(Intent("wproto", 0, agent_sender(agent), agent, 0, STAY, world=world))
+        assert kinds(protocol.on_intent(keys.intent_key("wproto", agent), payload, 0.1)) == []
+    assert protocol.inbox.rejections["other-world"] == 1 and protocol.awaited == {1}
+    payload = encode(Intent("wproto", 0, agent_sender(1), 1, 0, STAY, world=2))
+    assert "TickClosed" in kinds(protocol.on_intent(keys.intent_key("wproto", 1), payload, 0.2))
+
+
 def test_bad_intents_are_counted_never_raised():
     protocol, _ = started()
     for payload in (b"", b"\xc1", encode(Intent("wproto", 0, agent_sender(1), 1, 0, 2))):

@@ -88,6 +88,9 @@ class TickReport:
 class SwarmWorld:
     """The lockstep world of a swarm run (every agent learns, each has its own goal)."""
 
+    incarnation = 0
+    """Which start of the run's world this is (``Observation.world``)."""
+
     def __init__(self, config: SwarmConfig, first_episode: int = 0, first_tick: int = 0,
                  table: SharedState | None = None) -> None:
         """A world at the start of ``first_episode`` (``--resume`` starts after the last row,
@@ -208,7 +211,7 @@ class SwarmWorld:
     def _observation(self, i: int, neighbours: tuple[tuple[int, int, int], ...]) -> Observation:
         c = self.config
         r_ds, r_ca, collided, arrived = self._outcome
-        parked = tuple(j for j, _, _ in neighbours if arrived[j]) if c.parks else ()
+        parked = tuple(j for j, _, _ in neighbours if arrived[j]) if not c.step_aside else ()
         updates = self._updates
         unheard = self._unheard.pop(i, None)
         if unheard or i in self._syncing:
@@ -223,7 +226,7 @@ class SwarmWorld:
                            self._cells[i], self._goal_cells[i], neighbours,
                            priority_rank(i, self.tick, c.n_agents), r_ds[i], r_ca[i],
                            collided[i], arrived[i], self.ending, parked, updates,
-                           i in self.settled)
+                           i in self.settled, self.incarnation)
 
     def unsettle(self, agents: set[int]) -> None:
         """Make ``agents`` not settled at this tick: the world must hear from them (to send a

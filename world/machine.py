@@ -110,11 +110,13 @@ class WorldMachine(Machine):
 
     def __init__(self, config: SwarmConfig, now: float, first_episode: int = 0,
                  first_tick: int = 0, startup_timeout_s: float | None = None,
-                 trace: TickTrace = _NO_TRACE, table=None) -> None:
-        """``table``: the shared ``(Q_DS, Q_CA)`` a resumed run continues from (``--resume``)."""
+                 trace: TickTrace = _NO_TRACE, table=None, incarnation: int = 0) -> None:
+        """``table``: the shared ``(Q_DS, Q_CA)`` a resumed run continues from (``--resume``);
+        ``incarnation``: which start of the run's world this is (``Observation.world``)."""
         self.config = config
         self.n = config.n_agents
         self.world = SwarmWorld(config, first_episode, first_tick, table)
+        self.world.incarnation = incarnation
         self.trace = trace
         self._out: list = []
         self.inbox = Inbox(config.run_id, EffectLog(self))
@@ -206,6 +208,9 @@ class WorldMachine(Machine):
             self.inbox.reject("stale-tick", f"intent for tick {intent.tick} at tick {tick}")
         elif intent.tick > tick:
             self.inbox.reject("future-tick", f"intent for tick {intent.tick} at tick {tick}")
+        elif intent.world != self.world.incarnation:  # decided for the world before this one
+            self.inbox.reject("other-world", f"intent of agent {intent.agent} for tick "
+                                             f"{intent.tick} of world {intent.world}")
         elif intent.episode != self.world.episode:
             self.inbox.reject("wrong-episode", f"episode {intent.episode}")
         elif intent.agent in self.heard:

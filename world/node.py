@@ -33,7 +33,9 @@ from nnql_swarm.machines import trace
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
-from nnql_swarm.storage.runfiles import EPISODES_FILE, stats_path, write_json_atomic
+from nnql_swarm.storage.runfiles import (
+    EPISODES_FILE, next_incarnation, stats_path, write_json_atomic,
+)
 from nnql_swarm.transport.adapter import ProtocolAdapter
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
@@ -86,7 +88,7 @@ class WorldNode(ProtocolAdapter):
         self.table_file = world_checkpoint.table_path(options.out_dir)
         self.protocol = WorldMachine(self.config, time.monotonic(), options.first_episode,
                                       options.first_tick, options.startup_timeout_s, self.trace,
-                                      options.table)
+                                      options.table, next_incarnation(options.out_dir))
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False
