@@ -3,19 +3,20 @@
 ## Configuration
 The swarm's own config (:class:`~nnql_swarm.protocol.config.SwarmConfig`):
 ``SwarmGridEnv(swarm.config)`` plays the world of ``Swarm(...)``'s run, or options by name, as
-``Swarm`` takes them (``SwarmGridEnv(n_agents=4, width=8, height=8, negotiation_radius=2)``),
-over the paper's reading (the ``nnql`` preset: every agent in view waited for) where they say
-nothing. The env reads the agents, the grid, ``max_steps``, ``count_swaps``, the rewards
-(``goal_reward``, ``stay_reward``), ``interaction_radius`` and ``wait_rule``; it plays the open
-grid, one goal each, arrived agents parked, and refuses a config that asks for more (walls, a
-map, lifelong tasks, step-aside, priority inheritance).
+``Swarm`` takes them (``SwarmGridEnv(n_agents=4, width=8, height=8, negotiation_radius=2)``,
+``SwarmGridEnv(map="maps/....map", tasks="lifelong")``), over the paper's reading (the ``nnql``
+preset: every agent in view waited for) where they say nothing. The world is the swarm's own
+(:class:`world.engine.SwarmWorld`): the grid or the map and its walls, a scenario, ``max_steps``,
+``count_swaps``, the rewards, the on-target rule, the arbitration (under ``pibt`` each agent's
+action is its whole order: it is never pushed) and the task mode are the run's.
 
 ## Description
-A swarm episode (:func:`world.scenario.swarm_episode`): ``n_agents`` agents start on distinct cells
-of a ``width x height`` grid, each with its own goal cell, all starts and goals distinct. Every
-step all agents move at once and :func:`world.rules.world_step` resolves the moves: two agents
-trying to occupy one cell collide and stay where they were (``world.rules``), and so do two agents
-swapping cells when ``count_swaps`` is set (the default, as in swarm mode).
+A swarm episode (:func:`world.scenario.swarm_episode`): ``n_agents`` agents start on distinct
+free cells, each with its own goal cell, all starts and goals distinct. Every step all agents
+move at once and the world resolves the moves (``world.rules``): two agents trying to occupy one
+cell collide and stay where they were, and so do two agents swapping cells when ``count_swaps``
+is set (the default, as in swarm mode); a wall is never entered. ``reset(options={"starts":
+[(x, y), ...], "goals": [(x, y), ...]})`` plays those starts and goals instead (a scenario).
 
 ## Action space
 ``Discrete(5)`` per agent, the paper's actions (:mod:`protocol.actions`):
@@ -54,8 +55,12 @@ meet on the next step; ranks rotating every step), so that a policy that reads i
 stepped in that order.
 
 ## Episode end
-An agent is terminated when it reaches its goal, and then leaves ``agents``. Every agent still on its
-way is truncated after ``max_steps`` steps.
+One goal each (``tasks="one-shot"``): an agent is terminated when it reaches its goal, and then
+leaves ``agents``, parked on it (``on_target="park"``); under ``on_target="step-aside"`` an agent
+on its goal stays among ``agents`` (it may have to make way) and all are terminated together
+when every one is home. Lifelong (``tasks="lifelong"``): an agent that reaches its goal is given
+the next at once (``infos[agent]["reached"]``, its observation's goal the new one), and nobody is
+terminated. Every agent still among ``agents`` is truncated after ``max_steps`` steps.
 
 ## Rendering
 ``render_mode`` (PettingZoo's convention: chosen at construction, ``render()`` takes no argument):
@@ -68,10 +73,10 @@ way is truncated after ``max_steps`` steps.
   otherwise keeps them in memory (``env.rerun_memory``, a ``rerun.MemoryRecording``) with a
   warning that says how to see them, so that a machine without a screen never fails.
 - ``"rgb_array"``: an ``(height * cell_pixels, width * cell_pixels, 3)`` ``uint8`` picture:
-  grid lines, each goal a square outline and each agent a disc in the agent's colour (the
+  grid lines, walls dark grey, each goal a square outline and each agent a disc in the agent's colour (the
   colours of the swarm's recording, ``recording.world.agent_colors``).
-- ``"ansi"``: a string, one line per row: ``.`` a free cell, ``a``, ``b``, ... goals, ``A``, ``B``,
-  ... agents.
+- ``"ansi"``: a string, one line per row: ``.`` a free cell, ``#`` a wall, ``a``, ``b``, ...
+  goals, ``A``, ``B``, ... agents.
 
 ## Seeding
 ``reset(seed=S)`` starts episode 0 of seed ``S``; each later ``reset()`` without a seed moves on to the
@@ -79,6 +84,7 @@ next episode of the same seed. Scenarios come from :mod:`protocol.seeding` strea
 dynamics draw nothing, so the same seed and actions give the same trajectory.
 """
 
+import dataclasses
 import functools
 import os
 import sys
@@ -93,12 +99,8 @@ from pettingzoo import ParallelEnv
 from nnql_swarm.api.options import config_of
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, offset_state, sees
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.kernel.jit import flags, floats, ints, python_values
-from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
-from nnql_swarm.world.rules import (
-    ROW_FLOATS, ROW_INTS, Bodies, Outcome, Rules, Scratch, Score, world_step,
-)
-from nnql_swarm.world.scenario import swarm_episode
+from nnql_swarm.protocol.ranks import awaits_answer
+from nnql_swarm.world.engine import SwarmWorld
 
 NOT_IN_VIEW = N_STATES
 """The observation slot value of another agent out of view."""
@@ -110,19 +112,11 @@ reading (every agent in view waited for)."""
 
 def env_config(config: SwarmConfig | None, options: dict) -> SwarmConfig:
     """The env's config: ``config``, or one of ``options`` by name (``api.options.config_of``)
-    over :data:`ENV_PRESET`; raises ValueError for a bad option, or a config the env does not
-    play (module docstring)."""
+    over :data:`ENV_PRESET`; raises ValueError for a bad option."""
     if config is None:
-        config = config_of({"preset": ENV_PRESET, **options}, run_id="env")
-    elif options:
+        return config_of({"preset": ENV_PRESET, **options}, run_id="env")
+    if options:
         raise ValueError("give a SwarmConfig or options, not both")
-    unplayable = [what for what, asked in (
-        ("walls", config.n_walls > 0), ("a scenario", bool(config.scenario)),
-        ("lifelong tasks", config.lifelong), ("--on-target step-aside", config.step_aside),
-        ("--arbitration pibt", config.arbitration != "paper")) if asked]
-    if unplayable:
-        raise ValueError(f"the env plays the open grid, one goal each, arrived agents parked: "
-                         f"not {', '.join(unplayable)}")
     return config
 
 
@@ -169,7 +163,9 @@ class SwarmGridEnv(ParallelEnv):
         self._x, self._y = [0] * n_agents, [0] * n_agents
         self._goal_x, self._goal_y = [0] * n_agents, [0] * n_agents
         self._arrived = [False] * n_agents
-        self._steps = 0
+        self._world: SwarmWorld | None = None
+        self._told: list = []
+        self._walls: list = []
 
     @functools.lru_cache(maxsize=None)
     def observation_space(self, agent: str) -> spaces.MultiDiscrete:
@@ -188,54 +184,81 @@ class SwarmGridEnv(ParallelEnv):
                 assert isinstance(entropy, int), "a SeedSequence made without entropy draws it"
                 self._seed = int(entropy % 2**63)
             self._episode += 1
-        scenario = swarm_episode(self._seed, self._episode, self.width, self.height, self.n_agents)
-        self._x, self._y = scenario.starts[:, 0].tolist(), scenario.starts[:, 1].tolist()
-        self._goal_x, self._goal_y = scenario.goals[:, 0].tolist(), scenario.goals[:, 1].tolist()
-        self._arrived = [False] * self.n_agents
-        self._steps = 0
+        config = dataclasses.replace(self.config, seed=self._seed,
+                                     episodes=max(self.config.episodes, self._episode + 1),
+                                     **self._placed(options or {}))
+        self._world = SwarmWorld(config, first_episode=self._episode)
+        self._walls = config.walls().tolist()
+        self._read()
         self.agents = list(self.possible_agents)
         observations = {agent: self._observe(self._index[agent]) for agent in self.agents}
         return observations, {agent: {} for agent in self.agents}
 
+    def _placed(self, options: dict) -> dict:
+        """The config's fields for ``reset``'s ``options``: ``starts`` and ``goals`` given, a
+        scenario (on the config's map, or the open grid)."""
+        given = {"starts", "goals"} & set(options)  # others are not the env's: ignored
+        if not given:
+            return {}
+        if len(given) == 1:
+            raise ValueError("reset options give both starts and goals, or neither")
+        c = self.config
+        rows = c.map_rows or ("." * c.width,) * c.height
+        tasks = tuple((int(sx), int(sy), int(gx), int(gy))
+                      for (sx, sy), (gx, gy) in zip(options["starts"], options["goals"]))
+        return {"map_rows": rows, "scenario": tasks}
+
+    def _read(self) -> None:
+        """The world's state as the observations give it."""
+        assert self._world is not None, "read after reset"
+        told = self._world.observations()
+        self._x = [o.position[0] for o in told]
+        self._y = [o.position[1] for o in told]
+        self._goal_x = [o.goal[0] for o in told]
+        self._goal_y = [o.goal[1] for o in told]
+        self._arrived = [o.arrived for o in told]
+        self._told = told
+
     def step(self, actions: dict):
         live = list(self.agents)
-        n = self.n_agents
-        chosen = [STAY] * n  # arrived agents stay
+        chosen: list[int | None] = [STAY] * self.n_agents  # agents that left stay
         for agent in live:
             chosen[self._index[agent]] = int(actions.get(agent, STAY))
-        x, y, arrived = ints(self._x), ints(self._y), flags(self._arrived)
-        collided, r_ds, r_ca = flags([False] * n), floats([0.0] * n), floats([0.0] * n)
-        rules = Rules(n, self.width, self.height, self.count_swaps, False,
-                      self.config.goal_reward, self.config.stay_reward)
-        bodies = Bodies(x, y, ints(self._goal_x), ints(self._goal_y), flags([True] * n), arrived,
-                        ints([0] * n))
-        outcome = Outcome(ints([0] * n), ints([0] * n), collided, r_ds, r_ca)
-        world_step(rules, bodies, ints(chosen), outcome,
-                   Scratch(ints([0] * (self.width * self.height)), flags([False] * n)),
-                   Score(ints([0] * ROW_INTS), floats([0.0] * ROW_FLOATS)))
-        self._x, self._y, self._arrived = python_values(x), python_values(y), python_values(arrived)
-        collided, reward_ds, reward_ca = map(python_values, (collided, r_ds, r_ca))
-        self._steps += 1
-
+        if self._world is None:
+            raise RuntimeError("reset() the env before its first step")
+        self._world.apply(chosen)
+        self._read()
+        c, told = self.config, self._told
+        truncated = self._world.step >= self.max_steps
+        everyone_home = all(self._arrived)
         observations, rewards, terminations, truncations, infos = {}, {}, {}, {}, {}
         for agent in live:
             i = self._index[agent]
+            seen = told[i]
             observations[agent] = self._observe(i)
-            rewards[agent] = reward_ds[i] + reward_ca[i]
-            terminations[agent] = self._arrived[i]
-            truncations[agent] = self._steps >= self.max_steps and not self._arrived[i]
-            infos[agent] = {"reward_ds": reward_ds[i], "reward_ca": reward_ca[i],
-                            "collided": collided[i], "waits_for": self._waits_for(i)}
+            rewards[agent] = seen.reward_ds + seen.reward_ca
+            if c.lifelong:
+                done = False
+            elif c.step_aside:
+                done = everyone_home
+            else:
+                done = seen.arrived
+            terminations[agent] = done
+            truncations[agent] = truncated and not done
+            infos[agent] = {"reward_ds": seen.reward_ds, "reward_ca": seen.reward_ca,
+                            "collided": seen.collided, "waits_for": self._waits_for(i)}
+            if c.lifelong:
+                infos[agent]["reached"] = seen.arrived
         self.agents = [a for a in live if not (terminations[a] or truncations[a])]
         return observations, rewards, terminations, truncations, infos
 
     def _waits_for(self, i: int) -> list[str]:
-        """The agents whose intents agent ``i`` waits for before the next step."""
-        n, step, x, y = self.n_agents, self._steps, self._x, self._y
-        rank = priority_rank(i, step, n)
-        return [self.possible_agents[j] for j in range(n)
-                if j != i and awaits_answer(rank, priority_rank(j, step, n), x[i], y[i], x[j],
-                                            y[j], self.negotiation_radius, self.meet_only,
+        """The agents whose intents agent ``i`` waits for before the next step (the ranks its
+        world gives this tick)."""
+        told, x, y = self._told, self._x, self._y
+        return [self.possible_agents[j] for j in range(self.n_agents)
+                if j != i and awaits_answer(told[i].rank, told[j].rank, x[i], y[i], x[j], y[j],
+                                            self.negotiation_radius, self.meet_only,
                                             self._arrived[i], self._arrived[j])]
 
     def render(self) -> "str | np.ndarray | None":
@@ -263,6 +286,8 @@ class SwarmGridEnv(ParallelEnv):
 
     def _text(self) -> str:
         rows = [["." for _ in range(self.width)] for _ in range(self.height)]
+        for x, y in self._walls:
+            rows[y][x] = "#"
         for i, (x, y) in enumerate(zip(self._goal_x, self._goal_y)):
             rows[y][x] = chr(ord("a") + i % 26)
         for i, (x, y) in enumerate(zip(self._x, self._y)):
@@ -276,6 +301,8 @@ class SwarmGridEnv(ParallelEnv):
         image = np.full((self.height * c, self.width * c, 3), 255, dtype=np.uint8)
         image[::c, :] = image[:, ::c] = 200  # grid lines
         image[-1, :] = image[:, -1] = 200
+        for x, y in self._walls:
+            image[y * c:(y + 1) * c, x * c:(x + 1) * c] = 60
         yy, xx = np.mgrid[0:c, 0:c]
         middle = (c - 1) / 2
         disc = (xx - middle) ** 2 + (yy - middle) ** 2 <= (0.36 * c) ** 2
@@ -301,6 +328,12 @@ class SwarmGridEnv(ParallelEnv):
             centers=goals, half_sizes=np.full_like(goals, 0.4)))  # per half-size given
         stream.log("world/agents", rr.Points2D(
             np.column_stack([self._x, self._y]).astype(np.float32)))
+        if self._walls:  # drawn as the swarm's recording draws them
+            from nnql_swarm.recording.world import WALL_COLOUR, WALL_HALF, WALL_LINE, WALLS
+
+            walls = np.array(self._walls, dtype=np.float32)
+            stream.log(WALLS, rr.Boxes2D(centers=walls, half_sizes=np.full_like(walls, WALL_HALF),
+                                         colors=[WALL_COLOUR], radii=WALL_LINE))
 
     def _rerun_stream(self):
         """The ``"human"`` mode's Rerun stream, opened on first use (module docstring)."""

@@ -1,6 +1,8 @@
 """The PettingZoo adapter: the library's API, seed and render tests, and the world rules seen
 through it."""
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import rerun as rr
@@ -84,9 +86,8 @@ def test_reset_without_seed_moves_on_to_the_next_episode_of_the_seed():
 
 
 def place(env: SwarmGridEnv, positions, goals) -> None:
-    """Put a reset env into a hand-made state."""
-    env._x, env._y = [x for x, _ in positions], [y for _, y in positions]
-    env._goal_x, env._goal_y = [x for x, _ in goals], [y for _, y in goals]
+    """Start the env's episode on hand-made starts and goals (``reset``'s options)."""
+    env.reset(seed=0, options={"starts": positions, "goals": goals})
 
 
 def test_observation_holds_goal_offset_and_neighbour_offsets():
@@ -101,7 +102,6 @@ def test_observation_holds_goal_offset_and_neighbour_offsets():
 
 def test_rewards_collisions_arrival_and_removal():
     env = SwarmGridEnv(n_agents=3, width=5, height=5, count_swaps=True)
-    env.reset(seed=0)
     # agent_0 steps onto its goal; agent_1 and agent_2 try to swap cells.
     place(env, [(0, 0), (3, 3), (4, 3)], [(1, 0), (0, 4), (4, 0)])
     _, rewards, terminations, truncations, infos = env.step({"agent_0": RIGHT, "agent_1": RIGHT, "agent_2": LEFT})
@@ -114,10 +114,14 @@ def test_rewards_collisions_arrival_and_removal():
     assert infos["agent_1"]["reward_ds"] == pytest.approx(0.5 / np.hypot(3, 1))
     assert env.agents == ["agent_1", "agent_2"]
     # The arrived agent stays on its goal, and running into it is a collision.
-    place(env, [(1, 0), (1, 1), (4, 3)], [(1, 0), (0, 4), (4, 0)])
-    _, _, _, _, infos = env.step({"agent_1": UP, "agent_2": STAY})
+    for _ in range(2):
+        _, _, _, _, infos = env.step({"agent_1": UP, "agent_2": STAY})
+    _, _, _, _, infos = env.step({"agent_1": LEFT, "agent_2": STAY})  # (3, 1) to (2, 1)
+    _, _, _, _, infos = env.step({"agent_1": LEFT, "agent_2": STAY})  # to (1, 1)
+    assert (env._x[1], env._y[1]) == (1, 1)
+    _, _, _, _, infos = env.step({"agent_1": UP, "agent_2": STAY})  # into agent_0 on (1, 0)
     assert infos["agent_1"]["collided"] and "agent_0" not in infos
-    assert (env._x[0], env._y[0]) == (1, 0)
+    assert (env._x[0], env._y[0]) == (1, 0) and (env._x[1], env._y[1]) == (1, 1)
 
 
 def test_infos_name_whom_each_agent_waits_for():
@@ -186,9 +190,6 @@ def test_the_env_takes_the_swarms_config():
     assert terminations["agent_0"] and infos["agent_0"]["reward_ds"] == 4.0
     assert infos["agent_2"]["reward_ds"] == 0.25 / 2  # stayed, two cells from its goal
     assert SwarmGridEnv().config.n_agents == Swarm().config.n_agents  # the config's defaults
-    for bad in (Swarm(obstacle_density=0.1).config, Swarm(on_target="step-aside").config):
-        with pytest.raises(ValueError, match="the env plays the open grid"):
-            SwarmGridEnv(bad)
     with pytest.raises(ValueError, match="not both"):
         SwarmGridEnv(swarm.config, n_agents=3)
 
@@ -251,3 +252,46 @@ def test_rgb_array_draws_every_agents_goal():
 def test_an_unknown_render_mode_is_refused():
     with pytest.raises(ValueError, match="render mode"):
         SwarmGridEnv(render_mode="rgb")
+
+
+MAZE = Path(__file__).resolve().parents[1] / "maps" / "maze-19x19-s0.map"
+
+
+def test_the_env_plays_a_map_file_and_never_enters_a_wall():
+    """``map=``: the swarm's map, its walls drawn in every mode, and nobody ever on one."""
+    env = SwarmGridEnv(n_agents=6, map=str(MAZE), max_steps=40, render_mode="ansi")
+    walls = {tuple(cell) for cell in env.config.walls().tolist()}
+    assert walls and (env.width, env.height) == (19, 19)
+    env.reset(seed=3)
+    text = env.render().splitlines()
+    assert {(x, y) for y, row in enumerate(text) for x, ch in enumerate(row) if ch == "#"} == walls
+    rng = np.random.default_rng(0)
+    while env.agents:
+        env.step({agent: int(rng.integers(5)) for agent in env.agents})
+        assert not walls & set(zip(env._x, env._y))
+    picture = SwarmGridEnv(n_agents=6, map=str(MAZE), render_mode="rgb_array", cell_pixels=8)
+    picture.reset(seed=3)
+    x, y = next(iter(walls))
+    assert (picture.render()[y * 8 + 4, x * 8 + 4] == 60).all()
+
+
+def test_lifelong_hands_out_the_next_goal_and_nobody_is_terminated():
+    env = SwarmGridEnv(n_agents=2, width=6, height=6, tasks="lifelong", max_steps=5)
+    place(env, [(0, 0), (5, 5)], [(1, 0), (5, 3)])
+    _, rewards, terminations, truncations, infos = env.step({"agent_0": RIGHT, "agent_1": STAY})
+    assert infos["agent_0"]["reached"] and not infos["agent_1"]["reached"]
+    assert rewards["agent_0"] == pytest.approx(GOAL_REWARD + CA_REWARD)
+    assert (env._goal_x[0], env._goal_y[0]) != (1, 0)  # its next goal, already
+    assert env.agents == ["agent_0", "agent_1"] and not any(terminations.values())
+    for _ in range(4):
+        _, _, terminations, truncations, _ = env.step({a: STAY for a in env.agents})
+    assert all(truncations.values()) and not any(terminations.values()) and env.agents == []
+
+
+def test_under_step_aside_all_are_terminated_together():
+    env = SwarmGridEnv(n_agents=2, width=6, height=6, on_target="step-aside")
+    place(env, [(0, 0), (5, 5)], [(1, 0), (5, 4)])
+    _, _, terminations, _, _ = env.step({"agent_0": RIGHT, "agent_1": STAY})
+    assert not any(terminations.values()) and env.agents == ["agent_0", "agent_1"]
+    _, _, terminations, _, _ = env.step({"agent_0": STAY, "agent_1": UP})
+    assert all(terminations.values()) and env.agents == []
