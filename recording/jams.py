@@ -12,8 +12,9 @@ import numpy as np
 JAM_COLOUR = (220, 40, 30)
 """The heat map's colour; its opacity grows with the steps waited on a cell."""
 
-JAM_HALF = 0.5
-"""Each cell's box, its half-size: the whole cell."""
+JAM_HALF, JAM_LINE = 0.25, 0.26
+"""Each cell's box, its half-size and its outline's radius: an outline wider than the box fills
+it, so the box covers the cell (as the walls are drawn, ``recording.world``)."""
 
 MIN_ALPHA, MAX_ALPHA = 40, 200
 """The opacity of a cell waited on once, and of the episode's most waited-on cell."""

@@ -46,6 +46,7 @@ from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
+from nnql_swarm.recording.jams import JAM_HALF, JAM_LINE, JamMap
 from nnql_swarm.recording.palette import (
     COLLISION_RED, PUSH_COLOUR, REACHED_COLOUR, WAIT_COLOUR, WALL_COLOUR, agent_colors,
 )
@@ -68,6 +69,7 @@ CAPTION = "world/caption"
 REFUSED = "world/refused"
 PUSHES = "world/pushes"
 REACHED = "world/reached"
+JAMS = "world/jams"
 EVENTS = "events"
 LEGEND = "legend"
 
@@ -205,7 +207,9 @@ goal. Every agent has a colour of its own.{walls}
 On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
 move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
 discs), and the agents where the episode left them; a small dot in an agent's colour is where
-it started, a red ring around an agent the episode left short of its goal. On the `tick`
+it started, a red ring around an agent the episode left short of its goal, and red shading
+where agents on their way waited (the traffic jams: the deeper the red, the more steps waited
+there). On the `tick`
 timeline it shows one tick (the caption above the grid names its episode and step): where each
 agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
 {waits}{arbitration}{lifelong}
@@ -294,6 +298,8 @@ class WorldViz:
         self._starts_of: dict[int, np.ndarray] = {}  # the current episode's starts
         self._refused = 0  # first choices refused in the current episode (--arbitration pibt)
         self._reached: list[tuple[int, int, np.ndarray]] = []  # lifelong: goals reached
+        self._jams = JamMap(config.width, config.height)
+        self._jam_maps: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # per episode's end
         self._log_static()
         self.known_map = None
         if map_agent is not None and 0 <= map_agent < n:
@@ -348,6 +354,7 @@ class WorldViz:
                                                 draw_order=43.0), static=True)
         rec.log(REACHED, rr.Points2D.from_fields(colors=[REACHED_COLOUR], radii=0.22,
                                                  draw_order=11.0), static=True)
+        rec.log(JAMS, rr.Boxes2D.from_fields(radii=JAM_LINE, draw_order=2.0), static=True)
         rec.log(CAPTION, rr.Points2D.from_fields(colors=[[90, 90, 90]], radii=0.01,
                                                  show_labels=True, draw_order=50.0), static=True)
         for path in METRICS:
@@ -397,7 +404,12 @@ class WorldViz:
             self._events.add(report.tick, report.episode,
                              f"{step}: collision of agents "
                              f"{', '.join(map(str, report.collided))}", "WARN")
+        if report.moved:
+            self._jams.add(before, world.cells,
+                           (True,) * c.n_agents if c.lifelong else
+                           tuple(not home for home in self._arrived))
         if report.episode_row is not None:  # its end tick: nobody moves, as the episode left them
+            self._jam_maps.append((report.tick, report.episode, *self._jams.take()))
             short = [cell for cell, home in zip(before, self._arrived)
                      if not home and not c.lifelong]  # lifelong: everyone is on its way
             self._stuck.append((report.tick, report.episode,
@@ -419,6 +431,8 @@ class WorldViz:
         self._goals.append((report.tick, report.episode, episode.goals.astype(np.float32),
                             episode.starts.astype(np.float32)))
         self._stuck.append((report.tick, report.episode, np.zeros((0, 2), np.float32)))
+        self._jam_maps.append((report.tick, report.episode, np.zeros((0, 2), np.float32),
+                               np.zeros((0, 4), np.uint8)))
         self._goal_cells = episode.goals.tolist()
 
     def _end_episode(self, report: TickReport, row: dict) -> None:
@@ -481,6 +495,13 @@ class WorldViz:
             rings = np.concatenate(cells)[:, None, :] + STUCK_RING[None]
             self.rec.send_columns(STUCK, time_columns(s_ticks, s_episodes), rr.LineStrips2D.columns(
                 strips=rings).partition([len(c) for c in cells]))
+        if self._jam_maps:
+            j_ticks, j_episodes, centres, colours = zip(*self._jam_maps)
+            self._jam_maps = []
+            every = np.concatenate(centres)
+            self.rec.send_columns(JAMS, time_columns(j_ticks, j_episodes), rr.Boxes2D.columns(
+                centers=every, half_sizes=np.full(every.shape, JAM_HALF, np.float32),
+                colors=np.concatenate(colours)).partition([len(c) for c in centres]))
         if self._reached:
             r_ticks, r_episodes, cells = zip(*self._reached)
             self._reached = []

@@ -598,6 +598,7 @@ def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):
     (each against ``episodes.csv``), the same distributed as in-process."""
     options = ("--agents", "10", "--episodes", "3", "--max-steps", "40", "--preset", "pibt-nnql",
                "--tasks", "lifelong", "--map", "random:12x12:0.2:3")
+    jams = {}
     for where, extra in (("local", ("--in-process",)), ("dist", ())):
         out = tmp_path / where
         result = run_swarm(out, *options, *extra)
@@ -622,3 +623,12 @@ def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):
             "a push goes to a neighbouring cell"
         assert not recording.column("world/collisions", "Points2D:positions") or all(
             len(c) == 0 for c in recording.column("world/collisions", "Points2D:positions"))
+        # Where the jams were: each episode's end draws the cells waited on (none are walls),
+        # each episode's start clears them.
+        jams[where] = recording.by_time("world/jams", "Boxes2D:centers")
+        ends = [cells for cells in jams[where].values() if cells]
+        walls = {tuple(cell) for cell in
+                 SwarmConfig.from_json((out / "config.json").read_text()).walls().tolist()}
+        assert len(ends) == len(rows) and all(
+            not walls & {tuple(map(int, cell)) for cell in cells} for cells in ends)
+    assert jams["local"] == jams["dist"]
