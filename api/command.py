@@ -15,8 +15,6 @@ import argparse
 import logging
 import math
 from dataclasses import fields, replace
-import multiprocessing as mp
-import os
 import shlex
 import sys
 import time
@@ -38,7 +36,6 @@ from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
 from nnql_swarm.protocol.config import (
     DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig,
 )
-from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.terrain.maps import run_map
 from nnql_swarm.terrain.pogema import lifelong_instance
 from nnql_swarm.storage.runfiles import (
@@ -49,7 +46,7 @@ from nnql_swarm.storage.runlock import RunLock, RunLocked
 from nnql_swarm.transport.settings import EXIT_NO_WORLD, MODES, TransportSettings
 from nnql_swarm.agent.machine import WORLD_WAIT_S
 from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
-from nnql_swarm.launch.processes import agent_main, world_main
+from nnql_swarm.launch.processes import agent_main, process_context, world_main
 
 LAUNCHER_TOPOLOGIES = ("mesh", "hub-peer", "hub-router", "star-peers")
 """The one-machine topologies the launcher starts (``transport.topology.EmbeddedLayout``; the
@@ -495,8 +492,7 @@ def run_processes(args: argparse.Namespace, config: SwarmConfig, out: Path,
     record, progress = recording.plan or False, not args.no_progress
     if args.reference and recording.plan is not None and args.role != "agents":
         play_reference(config, recording.plan)
-    os.environ.update(plain_python_environment())  # the world and agents run the kernel uncompiled
-    supervisor = Supervisor(mp.get_context("spawn"))
+    supervisor = Supervisor(process_context())  # the world and agents run the kernel uncompiled
     resumes = args.resume and start.cut >= 0  # a run started afresh loads no checkpoint
     world = None
     if args.role in ("all", "world"):

@@ -12,7 +12,7 @@ import logging
 import signal
 import time
 from dataclasses import dataclass, field
-from multiprocessing.context import SpawnContext
+from multiprocessing.context import ForkServerContext, SpawnContext
 from multiprocessing.process import BaseProcess
 from typing import Callable
 
@@ -59,7 +59,7 @@ class Child:
 class Supervisor:
     """Runs children until the leader (the world, or else every agent) is done."""
 
-    def __init__(self, context: SpawnContext) -> None:
+    def __init__(self, context: SpawnContext | ForkServerContext) -> None:
         self.context = context
         self.children: list[Child] = []
         self.stop_requested = False
