@@ -9,7 +9,7 @@ by a process that records.
 import logging
 import multiprocessing as mp
 import os
-from multiprocessing import forkserver
+from multiprocessing import forkserver, resource_tracker
 from multiprocessing.context import ForkServerContext, SpawnContext
 import sys
 import time
@@ -21,6 +21,7 @@ from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.settings import TransportSettings
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
+from nnql_swarm.supervision.supervisor import start_ignoring_sigint
 
 
 PRELOADED = ("nnql_swarm.agent.node", "nnql_swarm.world.node", "nnql_swarm.recording.loggers",
@@ -49,7 +50,10 @@ def process_context() -> SpawnContext | ForkServerContext:
     context = mp.get_context("forkserver")
     if _SERVED is None:
         context.set_forkserver_preload([__name__, *PRELOADED])
-        forkserver.ensure_running()
+        # The resource tracker first, on its own: starting it unblocks SIGINT, which a Ctrl-C
+        # blocked meanwhile would reach while it is ignored, and be lost.
+        resource_tracker.ensure_running()
+        start_ignoring_sigint(forkserver.ensure_running)  # and so do its children
         _SERVED = environment
     return context
 
@@ -171,10 +175,24 @@ def die_with_launcher() -> None:
     import signal
 
     ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+    _let_go_of_the_server()
     parent = mp.parent_process()
     if (parent is not None and parent.pid is not None and os.getppid() != parent.pid
             and not _running(parent.pid)):
         os.kill(os.getpid(), signal.SIGTERM)  # it died before prctl took effect
+
+
+def _let_go_of_the_server() -> None:
+    """A process forked by the forkserver (:func:`process_context`) is the server's child: it
+    gets its signal when the server ends, which the server does once every holder of the pipe
+    that tells it its launcher lives has closed it. multiprocessing hands each child that pipe
+    too (for children of its own, which ours never start): closed here, or the server, and so
+    every process, would outlive a launcher killed outright."""
+    server = forkserver._forkserver
+    fd = getattr(server, "_forkserver_alive_fd", None)  # multiprocessing's own, set in a child
+    if fd is not None:
+        os.close(fd)
+        setattr(server, "_forkserver_alive_fd", None)
 
 
 def _running(pid: int) -> bool:
