@@ -362,7 +362,8 @@ def test_the_processes_are_forked_from_one_server_and_end_with_a_launcher_killed
                              start_new_session=True)
 
     def titled() -> dict[int, str]:
-        return {pid: line for pid, _, line in _live_processes() if line.endswith("killed-outright")}
+        return {pid: line for pid, _, line in _live_processes()
+                if line.startswith("nnql-") and line.endswith(" killed-outright")}
 
     try:
         wait_for_rows(out / "episodes.csv", 1, 120, swarm)
