@@ -9,10 +9,10 @@ by a process that records.
 import logging
 import multiprocessing as mp
 import os
-from multiprocessing import forkserver, resource_tracker
-from multiprocessing.context import ForkServerContext, SpawnContext
 import sys
 import time
+from multiprocessing import forkserver, resource_tracker
+from multiprocessing.context import ForkServerContext, SpawnContext
 from pathlib import Path
 
 from nnql_swarm.kernel.jit import plain_python_environment
