@@ -43,7 +43,7 @@ from nnql_swarm.transport.adapter import ProtocolAdapter
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.settings import (
-    EXIT_NO_WORLD, EXIT_TRANSPORT, TransportError, TransportSettings, open_session,
+    EXIT_NO_WORLD, EXIT_TRANSPORT, TransportError, TransportSettings, closing, open_session,
 )
 
 log = logging.getLogger("nnql.agent")
@@ -252,7 +252,7 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
     except TransportError as error:
         log.error("%s", error)
         return EXIT_TRANSPORT
-    with session:
+    with closing(session):
         node = AgentNode(options, session, brain, on_episode_end)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())

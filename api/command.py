@@ -15,8 +15,6 @@ import argparse
 import logging
 import math
 from dataclasses import fields
-import multiprocessing as mp
-import os
 import shlex
 import sys
 import time
@@ -39,7 +37,6 @@ from nnql_swarm.supervision.restarts import (
     STATS_NAME, record as record_restarts, warning as restarts_warning,
 )
 from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig
-from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.api.options import (
     LAUNCH_DEFAULTS as L, LAUNCHER_TOPOLOGIES, RUN_NAMES, Launch, config_of, config_values,
 )
@@ -50,7 +47,7 @@ from nnql_swarm.storage.runfiles import (
 from nnql_swarm.storage.runlock import RunLock, RunLocked
 from nnql_swarm.transport.settings import EXIT_NO_WORLD, MODES, TransportSettings
 from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
-from nnql_swarm.launch.processes import agent_main, world_main
+from nnql_swarm.launch.processes import agent_main, process_context, world_main
 
 log = logging.getLogger("nnql.launch")
 
@@ -482,8 +479,7 @@ def run_processes(args: Launch, config: SwarmConfig, out: Path,
     record, progress = recording.plan or False, not args.no_progress
     if args.reference and recording.plan is not None and args.role != "agents":
         play_reference(config, recording.plan)
-    os.environ.update(plain_python_environment())  # the world and agents run the kernel uncompiled
-    supervisor = Supervisor(mp.get_context("spawn"))
+    supervisor = Supervisor(process_context())  # the world and agents run the kernel uncompiled
     resumes = args.resume and start.cut >= 0  # a run started afresh loads no checkpoint
     world = None
     if args.role in ("all", "world"):

@@ -1,14 +1,11 @@
 """What the swarm benchmarks share: run a swarm (distributed or in-process) and time its ticks."""
 
 import math
-import multiprocessing as mp
-import os
 from pathlib import Path
 from typing import Callable
 
 from nnql_swarm.recording.sinks import RecordingPlan
 from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
-from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.topology import EmbeddedLayout
 from nnql_swarm.world.metrics import read_episodes
@@ -37,10 +34,9 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
     """The launcher's world and agent processes on one machine; ``agent_target`` replaces the
     agents' entry point (same arguments as ``launch.processes.agent_main``); ``memory`` (a
     ``bench.procstat.MemorySampler``) is told every process as ``world`` and ``agent-<i>``."""
-    from nnql_swarm.launch.processes import agent_main, world_main
+    from nnql_swarm.launch.processes import agent_main, process_context, world_main
 
-    os.environ.update(plain_python_environment())  # as the launcher's world and agents run
-    ctx = mp.get_context("spawn")
+    ctx = process_context()  # the kernel uncompiled, as the launcher's world and agents run
     layout = layout or EmbeddedLayout()
     out.mkdir(parents=True)
     plan = RecordingPlan.to_files(config, out) if record else False

@@ -12,7 +12,6 @@ tick, for the same number of processes and the same topology.
 """
 
 import argparse
-import multiprocessing as mp
 import statistics
 import sys
 import threading
@@ -21,6 +20,7 @@ import time
 import msgpack
 
 from bench.procstat import MemorySampler
+from nnql_swarm.launch.processes import process_context
 from nnql_swarm.transport.callbacks import callback
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
@@ -111,7 +111,7 @@ def router(transport: TransportSettings) -> None:
 def run(n: int, topology: str, ticks: int) -> dict:
     """One bare loop of ``n`` agents: ``rate`` (ticks a second), ``startup_s`` (until every
     agent was alive), ``rss`` (peak MiB by process name)."""
-    ctx = mp.get_context("spawn")
+    ctx = process_context()  # started as the swarm's processes are
     layout = EmbeddedLayout(topology=topology)
     results = ctx.Queue()
     extra = []

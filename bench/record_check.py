@@ -20,9 +20,9 @@ import statistics
 import time
 from dataclasses import replace
 
-os.environ["NNQL_KERNEL"] = "python"  # as in the world process
+os.environ.setdefault("NNQL_KERNEL", "python")  # as in the world process (unless told)
 
-from nnql_swarm.protocol.config import PRESETS, SwarmConfig
+from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from nnql_swarm.sim.distributed import SimSwarm
 from nnql_swarm.sim.schedule import DEADLINE_S, Schedule
 from nnql_swarm.world.engine import SwarmWorld
@@ -65,10 +65,10 @@ class Timers:
             finally:
                 timers.check += clock() - start - (timers.check - nested)
 
-        def timed_apply(world, actions, learned=None):
+        def timed_apply(world, *args):
             start = clock()
             try:
-                return apply(world, actions, learned)
+                return apply(world, *args)
             finally:
                 timers.apply += clock() - start
                 timers.ticks += 1
@@ -90,9 +90,9 @@ class Timers:
         WorldMachine._encoded = timed_encoded
 
 
-def one_run(agents: int, episodes: int, seed: int) -> Timers:
+def one_run(agents: int, episodes: int, seed: int, preset: str = DEFAULT_PRESET) -> Timers:
     side = GRIDS.get(agents, 11)
-    config = SwarmConfig(**PRESETS["shield-nnql"], run_id=f"bench{seed}", n_agents=agents,
+    config = SwarmConfig(**PRESETS[preset], run_id=f"bench{seed}", n_agents=agents,
                          episodes=episodes, max_steps=100, width=side, height=side, seed=seed,
                          tick_deadline_s=DEADLINE_S)
     timers = Timers()
@@ -114,10 +114,11 @@ def main() -> None:
     parser.add_argument("--agents", default="8,32")
     parser.add_argument("--episodes", type=int, default=5)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--preset", choices=tuple(PRESETS), default=DEFAULT_PRESET)
     args = parser.parse_args()
     print("agents  ticks  records/tick  check us/tick  us/record  apply us/tick  observe us/tick")
     for agents in (int(a) for a in args.agents.split(",")):
-        runs = [one_run(agents, args.episodes, seed) for seed in range(args.repeats)]
+        runs = [one_run(agents, args.episodes, seed, args.preset) for seed in range(args.repeats)]
 
         def per_tick(part: str) -> float:
             return statistics.median(getattr(r, part) / r.ticks / 1e3 for r in runs)

@@ -1,8 +1,9 @@
-"""What each spawned process of a swarm runs: the world's and an agent's entry points.
+"""What each process of a swarm runs: the world's and an agent's entry points, and how they start.
 
-Apart from the command line (``launch.swarm_cli``) so that a spawned agent imports only what it
-runs: every process imports its entry point's module, and an agent's resident memory is the
-measure (``bench/scale.py``). The heavy parts (the nodes, the recording) are imported inside.
+Apart from the command line (``launch.swarm_cli``) so that an agent imports only what it runs:
+the processes are forked from a server that imported the nodes once (:func:`process_context`),
+and an agent's resident memory is the measure (``bench/scale.py``). Rerun is imported inside,
+by a process that records.
 """
 
 import logging
@@ -10,13 +11,51 @@ import multiprocessing as mp
 import os
 import sys
 import time
+from multiprocessing import forkserver, resource_tracker
+from multiprocessing.context import ForkServerContext, SpawnContext
 from pathlib import Path
 
+from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.settings import TransportSettings
 from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
+from nnql_swarm.supervision.supervisor import start_ignoring_sigint
+
+
+PRELOADED = ("nnql_swarm.agent.node", "nnql_swarm.world.node", "nnql_swarm.recording.loggers",
+             "nnql_swarm.terminal.cli", "setproctitle")
+"""What the server the processes of a swarm are forked from imports, once (:func:`process_context`)."""
+
+_SERVED: dict[str, str] | None = None
+"""The environment the forkserver was started with (None: not started by this process yet)."""
+
+
+def process_context() -> SpawnContext | ForkServerContext:
+    """How a swarm's world and agents start: forked from one server process that imported what
+    they run (multiprocessing's ``forkserver``, :data:`PRELOADED`), rather than each a fresh
+    interpreter importing it all again (``spawn``): a process imports in about half a second of
+    CPU, so 64 agents spawned on 2 cores took 10 to 20 s to start (docs/performance.md, "At
+    scale"). The server holds no Zenoh session (a session has threads, which a fork does not
+    carry) and runs the kernel uncompiled, as the processes do (``kernel.jit``); it is started
+    here, with the environment now. A child of the server has the server's environment, not its
+    launcher's: a launcher whose environment has changed since it started the server (a test
+    setting a variable for one run) spawns its processes, as do systems without a forkserver."""
+    global _SERVED
+    os.environ.update(plain_python_environment())
+    environment = dict(os.environ)
+    if "forkserver" not in mp.get_all_start_methods() or _SERVED not in (None, environment):
+        return mp.get_context("spawn")
+    context = mp.get_context("forkserver")
+    if _SERVED is None:
+        context.set_forkserver_preload([__name__, *PRELOADED])
+        # The resource tracker first, on its own: starting it unblocks SIGINT, which a Ctrl-C
+        # blocked meanwhile would reach while it is ignored, and be lost.
+        resource_tracker.ensure_running()
+        start_ignoring_sigint(forkserver.ensure_running)  # and so do its children
+        _SERVED = environment
+    return context
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
@@ -136,9 +175,37 @@ def die_with_launcher() -> None:
     import signal
 
     ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM))
+    _let_go_of_the_server()
     parent = mp.parent_process()
-    if parent is not None and os.getppid() != parent.pid:  # it died before prctl took effect
-        os.kill(os.getpid(), signal.SIGTERM)
+    if (parent is not None and parent.pid is not None and os.getppid() != parent.pid
+            and not _running(parent.pid)):
+        os.kill(os.getpid(), signal.SIGTERM)  # it died before prctl took effect
+
+
+def _let_go_of_the_server() -> None:
+    """A process forked by the forkserver (:func:`process_context`) is the server's child: it
+    gets its signal when the server ends, which the server does once every holder of the pipe
+    that tells it its launcher lives has closed it. multiprocessing hands each child that pipe
+    too (for children of its own, which ours never start): closed here, or the server, and so
+    every process, would outlive a launcher killed outright."""
+    server = forkserver._forkserver
+    fd = getattr(server, "_forkserver_alive_fd", None)  # multiprocessing's own, set in a child
+    if fd is not None:
+        os.close(fd)
+        setattr(server, "_forkserver_alive_fd", None)
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` is still there. A process forked by the forkserver
+    (:func:`process_context`) is the server's child, not the launcher's: the server ends with the
+    launcher, and its children then get their signal."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
 
 
 def setup_logging(name: str) -> None:

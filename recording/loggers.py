@@ -29,13 +29,13 @@ def open_world_viz(record, config: SwarmConfig, out: Path, distributed: bool = T
     """The world's logger (``recording.world.WorldViz``) with the blueprint, or None if not recording.
     ``distributed``: the agents are processes that time their negotiation (the blueprint plots
     it)."""
-    from nnql_swarm.recording.blueprint import blueprint
-    from nnql_swarm.world.metrics import read_episodes
-    from nnql_swarm.recording.world import WorldViz
-
     plan = plan_of(record, config, out)
-    if plan is None:
+    if plan is None:  # a world that does not record never loads Rerun
         return None
+    from nnql_swarm.recording.blueprint import blueprint
+    from nnql_swarm.recording.world import WorldViz
+    from nnql_swarm.world.metrics import read_episodes
+
     episodes = Path(out) / "episodes.csv"  # a resumed run's complete episodes so far
     before = sum(int(row["collisions"]) for row in read_episodes(episodes)) \
         if episodes.exists() else 0

@@ -12,7 +12,7 @@ import logging
 import signal
 import time
 from dataclasses import dataclass, field
-from multiprocessing.context import SpawnContext
+from multiprocessing.context import ForkServerContext, SpawnContext
 from multiprocessing.process import BaseProcess
 from typing import Callable
 
@@ -59,7 +59,7 @@ class Child:
 class Supervisor:
     """Runs children until the leader (the world, or else every agent) is done."""
 
-    def __init__(self, context: SpawnContext) -> None:
+    def __init__(self, context: SpawnContext | ForkServerContext) -> None:
         self.context = context
         self.children: list[Child] = []
         self.stop_requested = False
@@ -141,19 +141,10 @@ class Supervisor:
             target=child.target, name=child.name, args=child.make_args(restarted)
         )
         child.process = process
-        # The child starts with SIGINT ignored (a disposition exec keeps), until its node takes
-        # the signal (``world.node``, ``agent.node``): a Ctrl-C while it still starts up would
-        # raise in the middle of an import and print a traceback; the launcher stops it then
-        # (SIGTERM). Here the signal is blocked meanwhile (Linux keeps a blocked signal pending,
-        # ignored or not), so a Ctrl-C that comes now reaches this process's handler after.
-        held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-        _run_pending_handlers()
-        handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
-        try:
-            process.start()
-        finally:
-            signal.signal(signal.SIGINT, handler)
-            signal.pthread_sigmask(signal.SIG_SETMASK, held)
+        if isinstance(self.context, ForkServerContext):  # forked by a server that ignores it
+            process.start()  # (and may first finish its imports: Ctrl-C must not be ignored)
+        else:
+            start_ignoring_sigint(process.start)
         child.started_at = time.monotonic()
         child.restart_at = None
 
@@ -213,6 +204,24 @@ def describe_exit(code: int | None) -> str:
         except ValueError:
             return f"killed by signal {-code}"
     return f"exit code {code}"
+
+
+def start_ignoring_sigint(start: Callable[[], None]) -> None:
+    """``start()`` a child process that starts with SIGINT ignored (a disposition exec and fork
+    keep), until its node takes the signal (``world.node``, ``agent.node``): a Ctrl-C while it
+    still starts up would raise in the middle of an import and print a traceback; the launcher
+    stops it then (SIGTERM). The forkserver the children are forked from starts so too
+    (``launch.processes.process_context``), and hands it on. Here the signal is blocked meanwhile
+    (Linux keeps a blocked signal pending, ignored or not), so a Ctrl-C that comes now reaches
+    this process's handler after."""
+    held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    _run_pending_handlers()
+    handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        start()
+    finally:
+        signal.signal(signal.SIGINT, handler)
+        signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def _run_pending_handlers() -> None:

@@ -344,3 +344,43 @@ def test_an_interrupted_in_process_run_says_how_to_resume_it_and_the_resumed_run
         return [tuple(r[f] for f in EPISODE_FIELDS) for r in read_episodes(path / "episodes.csv")]
 
     assert rows(out) == rows(tmp_path / "whole")
+
+
+@pytest.mark.full
+def test_the_processes_are_forked_from_one_server_and_end_with_a_launcher_killed_outright(
+        tmp_path):
+    """The world and agents are forked from the server that imported the nodes once
+    (``launch.processes.process_context``), not its children's launcher's; the launcher killed by
+    SIGKILL alone (no handler runs) takes the server, and so every process, with it."""
+    from tests.swarm_helpers import _live_processes, wait_for_rows
+
+    out = tmp_path / "run"
+    swarm = subprocess.Popen([sys.executable, str(SWARM), "--agents", "3", "--episodes", "5000",
+                              "--out", str(out), "--no-progress", "--no-record",
+                              "--run-id", "killed-outright"],
+                             cwd=ROOT, stderr=subprocess.PIPE, text=True,
+                             start_new_session=True)
+
+    def titled() -> dict[int, str]:
+        return {pid: line for pid, _, line in _live_processes()
+                if line.startswith("nnql-") and line.endswith(" killed-outright")}
+
+    try:
+        wait_for_rows(out / "episodes.csv", 1, 120, swarm)
+        processes = titled()
+        assert len(processes) == 4, processes  # the world and 3 agents
+        parents = {int(Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1])
+                   for pid in processes}
+        [server] = parents
+        assert server != swarm.pid
+        os.kill(swarm.pid, signal.SIGKILL)
+        swarm.wait(timeout=10)
+        deadline = time.monotonic() + 30
+        while titled() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not titled()
+    finally:
+        if swarm.poll() is None:
+            os.killpg(swarm.pid, signal.SIGKILL)
+        for pid in titled():
+            os.kill(pid, signal.SIGKILL)

@@ -319,3 +319,16 @@ def test_under_park_an_arrived_agent_stays_whatever_it_says():
     step([RIGHT])
     step([DOWN])
     assert step.actions[0] == STAY and step.arrived[0] and step.arrival[0] == 1
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(0, 40), st.integers(0, 40)), min_size=1, max_size=30))
+def test_the_sight_matrix_is_sees_between_every_two_cells(cells):
+    from nnql_swarm.protocol.actions import sees, sight_matrix
+
+    xs, ys = [x for x, _ in cells], [y for _, y in cells]
+    seen = sight_matrix(xs, ys)
+    assert seen.shape == (len(cells), len(cells))
+    for i, (ax, ay) in enumerate(cells):
+        for j, (bx, by) in enumerate(cells):
+            assert bool(seen[i, j]) == (i != j and sees(ax, ay, bx, by))

@@ -9,12 +9,17 @@ on. Across machines, pass a Zenoh config file and/or listen and connect endpoint
 """
 
 import json
+import logging
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import zenoh
 
 from nnql_swarm.transport.runtime import QUEUE_BATCHES, RUNTIME_DEFAULT, RUNTIME_ENV
+
+log = logging.getLogger("nnql.transport")
 
 MODES = ("peer", "client", "router")
 
@@ -84,3 +89,17 @@ def open_session(settings: TransportSettings) -> zenoh.Session:
         where = ", ".join(settings.connect or settings.listen) or settings.config_file or "defaults"
         reason = str(error).split(" at /")[0]  # drop the Rust source location
         raise TransportError(f"cannot open a Zenoh {settings.mode or 'session'} ({where}): {reason}") from None
+
+
+@contextmanager
+def closing(session: zenoh.Session) -> Iterator[zenoh.Session]:
+    """The session, closed when the block ends. A close that times out (Zenoh closing hundreds of
+    links at once on a loaded machine: 512 agents) is logged, not raised: the process's work is
+    done, and its stats and exit code are still to come."""
+    try:
+        yield session
+    finally:
+        try:
+            session.close()
+        except zenoh.ZError as error:
+            log.warning("closing the Zenoh session: %s", str(error).split(" at /")[0])

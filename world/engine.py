@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sees
+from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.kernel.jit import flags, floats, ints, python_values
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation
@@ -253,13 +253,8 @@ class SwarmWorld:
         everyone = tuple(zip(range(len(xs)), xs, ys))
         if self._sees_all:
             return [everyone[:i] + everyone[i + 1:] for i in range(len(xs))]
-        seen: list[list[tuple[int, int, int]]] = [[] for _ in xs]
-        for i in range(len(xs)):  # each pair once: seeing is mutual
-            for j in range(i + 1, len(xs)):
-                if sees(xs[i], ys[i], xs[j], ys[j]):
-                    seen[i].append(everyone[j])
-                    seen[j].append(everyone[i])
-        return [tuple(others) for others in seen]
+        return [tuple([everyone[j] for j in np.flatnonzero(row).tolist()])
+                for row in sight_matrix(xs, ys)]
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
               orders: list[tuple[int, ...] | None] | None = None) -> TickReport:

@@ -40,7 +40,7 @@ from nnql_swarm.transport.adapter import ProtocolAdapter
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.settings import (
-    EXIT_TRANSPORT, TransportError, TransportSettings, open_session,
+    EXIT_TRANSPORT, TransportError, TransportSettings, closing, open_session,
 )
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import SwarmWorld, TickReport
@@ -213,7 +213,7 @@ def run_world(options: WorldOptions,
     except TransportError as error:
         log.error("%s", error)
         return EXIT_TRANSPORT
-    with session:
+    with closing(session):
         node = WorldNode(options, session, on_tick, before_row)
         for signum in (signal.SIGINT, signal.SIGTERM):
             signal.signal(signum, lambda *_: node.stop())
