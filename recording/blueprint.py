@@ -29,9 +29,7 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
         visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
                                          y_range=[-0.5 - world_viz.caption_room(config),
                                                   config.height - 0.4]),
-        overrides={path: episode for path in (world_viz.INTENTS, world_viz.NEGOTIATION,
-                                              world_viz.COLLISIONS, world_viz.REFUSED,
-                                              world_viz.PUSHES, world_viz.REACHED)},
+        overrides={path: episode for path in episode_wide(config)},
     )
     events = rrb.TextLogView(origin=world_viz.EVENTS, name="Events", columns=rrb.TextLogColumns(
         timeline_columns=[rrb.encodings.TimelineColumn("episode"),
@@ -112,6 +110,17 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
         rrb.TimePanel(timeline="episode", play_state="following", state="collapsed"),
         collapse_panels=False,
     )
+
+
+def episode_wide(config: SwarmConfig) -> list[str]:
+    """The entities the world view shows for a whole episode on the ``episode`` timeline: every
+    agent's path, announced moves and waits (``recording.agent_entities``), the collisions, and
+    under priority inheritance and lifelong tasks the refusals, pushes and goals reached."""
+    from nnql_swarm.recording import world as world_viz
+    from nnql_swarm.recording.agent_entities import EPISODE_WIDE, part_paths
+
+    return [*(path for part in EPISODE_WIDE for path in part_paths(config.n_agents, part)),
+            world_viz.COLLISIONS, world_viz.REFUSED, world_viz.PUSHES, world_viz.REACHED]
 
 
 def recorded_blueprint(config: SwarmConfig, chunks):

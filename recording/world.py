@@ -45,6 +45,9 @@ import rerun as rr
 from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
+from nnql_swarm.recording.agent_entities import (
+    DISC, GOAL, INTENT, PATH, START, TRAIL, WAITS, EntityColumns, by_entity, owners, part_paths,
+)
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
 from nnql_swarm.recording.palette import (
     COLLISION_RED, PUSH_COLOUR, REACHED_COLOUR, WAIT_COLOUR, WALL_COLOUR, agent_colors,
@@ -56,13 +59,7 @@ APP_ID = "nnql-swarm"
 
 GRID = "world/grid"
 WALLS = "world/walls"
-AGENTS = "world/agents"
-GOALS = "world/goals"
-TRAILS = "world/trails"
-INTENTS = "world/intents"
-NEGOTIATION = "world/negotiation"
 COLLISIONS = "world/collisions"
-STARTS = "world/starts"
 STUCK = "world/stuck"
 CAPTION = "world/caption"
 REFUSED = "world/refused"
@@ -324,22 +321,27 @@ class WorldViz:
                                       half_sizes=np.full(walls.shape, WALL_HALF, np.float32),
                                       colors=[WALL_COLOUR], radii=WALL_LINE, draw_order=1.0),
                     static=True)
-        labels = [str(i) for i in range(c.n_agents)]
-        rec.log(AGENTS, rr.Points2D.from_fields(colors=self.colors, labels=labels, radii=0.3,
-                                                show_labels=True, draw_order=30.0), static=True)
-        rec.log(GOALS, rr.Boxes2D.from_fields(colors=self.colors, labels=labels, show_labels=True,
-                                              radii=0.07, draw_order=10.0), static=True)
-        rec.log(TRAILS, rr.LineStrips2D.from_fields(colors=with_alpha(self.colors, 110), radii=0.06,
-                                                    draw_order=15.0), static=True)
-        rec.log(INTENTS, rr.Arrows2D.from_fields(colors=self.colors, radii=0.09, draw_order=40.0),
+        for path, agents in owners(c.n_agents):
+            colours, labels = self.colors[agents], [str(i) for i in agents]
+            rec.log(f"{path}/{DISC}", rr.Points2D.from_fields(
+                colors=colours, labels=labels, radii=0.3, show_labels=True, draw_order=30.0),
                 static=True)
-        rec.log(NEGOTIATION, rr.Arrows2D.from_fields(colors=[WAIT_COLOUR], radii=0.045,
-                                                     draw_order=45.0), static=True)
+            rec.log(f"{path}/{GOAL}", rr.Boxes2D.from_fields(
+                colors=colours, labels=labels, show_labels=True, radii=0.07, draw_order=10.0),
+                static=True)
+            rec.log(f"{path}/{TRAIL}", rr.LineStrips2D.from_fields(
+                colors=with_alpha(colours, 110), radii=0.06, draw_order=15.0), static=True)
+            rec.log(f"{path}/{PATH}", rr.LineStrips2D.from_fields(
+                colors=with_alpha(colours, 90), radii=0.05, draw_order=14.0), static=True)
+            rec.log(f"{path}/{INTENT}", rr.Arrows2D.from_fields(
+                colors=colours, radii=0.09, draw_order=40.0), static=True)
+            rec.log(f"{path}/{WAITS}", rr.Arrows2D.from_fields(
+                colors=[WAIT_COLOUR], radii=0.045, draw_order=45.0), static=True)
+            rec.log(f"{path}/{START}", rr.Points2D.from_fields(
+                colors=with_alpha(colours, 150), radii=0.12, draw_order=12.0), static=True)
         rec.log(LEGEND, rr.TextDocument(legend(c), media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log(COLLISIONS, rr.Points2D.from_fields(colors=[COLLISION_RED], radii=0.5,
                                                     draw_order=20.0), static=True)
-        rec.log(STARTS, rr.Points2D.from_fields(colors=with_alpha(self.colors, 150), radii=0.12,
-                                                draw_order=12.0), static=True)
         rec.log(STUCK, rr.LineStrips2D.from_fields(colors=[COLLISION_RED], radii=0.045,
                                                    draw_order=25.0), static=True)
         rec.log(REFUSED, rr.Arrows2D.from_fields(colors=[COLLISION_RED], radii=0.05,
@@ -468,13 +470,16 @@ class WorldViz:
         if self._goals:
             g_ticks, g_episodes, goals, starts = zip(*self._goals)
             self._goals = []
-            index = time_columns(g_ticks, g_episodes)
-            centers = np.concatenate(goals)
-            self.rec.send_columns(GOALS, index, rr.Boxes2D.columns(
+            n, k = self.config.n_agents, len(goals)
+            order, lengths = by_entity(np.repeat(np.arange(k), n), np.tile(np.arange(n), k), k, n)
+            columns = EntityColumns(time_columns(g_ticks, g_episodes), k)
+            centers = np.concatenate(goals)[order]
+            columns.add(part_paths(n, GOAL), rr.Boxes2D.columns(
                 centers=centers, half_sizes=np.full(centers.shape, 0.42, np.float32)
-            ).partition([len(g) for g in goals]))
-            self.rec.send_columns(STARTS, index, rr.Points2D.columns(
-                positions=np.concatenate(starts)).partition([len(g) for g in starts]))
+            ).partition(lengths))
+            columns.add(part_paths(n, START), rr.Points2D.columns(
+                positions=np.concatenate(starts)[order]).partition(lengths))
+            columns.send(self.rec)
         if self._stuck:
             s_ticks, s_episodes, cells = zip(*self._stuck)
             self._stuck = []
@@ -506,22 +511,26 @@ class WorldViz:
         ticks, episodes = np.array(tick_list, dtype=np.int64), np.array(episode_list, np.int64)
         positions = np.array(before, dtype=np.int64)  # (k, n, 2): the cells each tick started from
         index = time_columns(ticks, episodes)
-        each = [n] * k
         cells = positions.astype(np.float32)
-        flat = cells.reshape(-1, 2)
-        rec.send_columns(AGENTS, index, rr.Points2D.columns(positions=flat).partition(each))
         rec.send_columns(CAPTION, index, rr.Points2D.columns(
             positions=np.tile(np.array([[(self.config.width - 1) / 2, caption_y(self.config)]],
                                        np.float32), (k, 1)),
             labels=[f"episode {e}, {f'step {s}' if m else 'its end'} (tick {t})"
                     for e, s, t, m in zip(episode_list, steps, tick_list, moved)]))
-        moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32).reshape(-1, 2)
-        rec.send_columns(INTENTS, index,
-                         rr.Arrows2D.columns(origins=flat, vectors=moves).partition(each))
+        # Every agent's parts, entity by entity (recording.agent_entities), in one call.
+        parts = EntityColumns(index, k)
+        order, lengths = by_entity(np.repeat(np.arange(k), n), np.tile(np.arange(n), k), k, n)
+        flat = cells.reshape(-1, 2)[order]
+        parts.add(part_paths(n, DISC), rr.Points2D.columns(positions=flat).partition(lengths))
+        moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32)
+        parts.add(part_paths(n, INTENT), rr.Arrows2D.columns(
+            origins=flat, vectors=moves.reshape(-1, 2)[order]).partition(lengths))
         trails = np.concatenate([self._trails(cells[first:last], int(episodes[first]))
                                  for first, last in episode_spans(episodes)])
-        rec.send_columns(TRAILS, index, rr.LineStrips2D.columns(
-            strips=trails.reshape(-1, TRAIL_LENGTH, 2)).partition(each))
+        trails = trails.reshape(-1, TRAIL_LENGTH, 2)[order]
+        parts.add(part_paths(n, TRAIL), rr.LineStrips2D.columns(strips=trails).partition(lengths))
+        parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(  # the step that led here
+            strips=np.ascontiguousarray(trails[:, -2:])).partition(lengths))
 
         asks = negotiation_mask(self.config, positions, np.array(arrived_then, dtype=bool), ticks)
         asks &= np.array(moved, dtype=bool)[:, None, None]
@@ -531,9 +540,11 @@ class WorldViz:
         start, end = cells[t, asker], cells[t, asked]
         gap = end - start
         unit = gap / np.maximum(np.linalg.norm(gap, axis=-1, keepdims=True), 1e-6)
-        rec.send_columns(NEGOTIATION, index, rr.Arrows2D.columns(
-            origins=start + unit * 0.2, vectors=gap - unit * 0.4,
-        ).partition(asks.sum(axis=(1, 2))))  # in WAIT_COLOUR, logged once (static)
+        order, lengths = by_entity(t, asker, k, n)
+        parts.add(part_paths(n, WAITS), rr.Arrows2D.columns(  # WAIT_COLOUR, logged once (static)
+            origins=(start + unit * 0.2)[order], vectors=(gap - unit * 0.4)[order],
+        ).partition(lengths))
+        parts.send(rec)
 
         if self.config.arbitration == "pibt":
             self._send_arbitration(index, cells, np.array(actions, np.int64),
