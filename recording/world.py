@@ -49,6 +49,7 @@ from nnql_swarm.recording.agent_entities import (
     DISC, GOAL, INTENT, PATH, START, TRAIL, WAITS, EntityColumns, by_entity, owners, part_paths,
 )
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
+from nnql_swarm.recording.shown import ca_learns, collision_bound, learns
 from nnql_swarm.recording.palette import (
     COLLISION_RED, PUSH_COLOUR, REACHED_COLOUR, WAIT_COLOUR, WALL_COLOUR, agent_colors,
 )
@@ -103,6 +104,7 @@ METRICS = {
     "metrics/steps/episode": "ticks until every agent arrived, or max steps",
     "metrics/arrived": "agents on their goal when the episode ended",
     "metrics/reward_sum": "sum of every agent's DS and CA rewards in the episode",
+    "metrics/reward_smoothed": "reward_sum smoothed as the steps ratio is (SMOOTHING)",
     "metrics/missed_intents": "intents that missed the tick deadline (counted as STAY)",
     "metrics/ticks_per_s": "wall-clock ticks per second of the world's clock in the episode",
     "metrics/negotiation/awaited_per_tick": "intents waited for per tick, all agents (world-derived)",
@@ -123,6 +125,7 @@ SERIES_NAMES = {
     "metrics/steps/episode": "ticks in the episode",
     "metrics/arrived": "agents arrived",
     "metrics/reward_sum": "reward sum",
+    "metrics/reward_smoothed": "smoothed",
     "metrics/missed_intents": "missed intents",
     "metrics/ticks_per_s": "ticks per second",
     "metrics/negotiation/awaited_per_tick": "intents awaited per tick",
@@ -138,10 +141,13 @@ SERIES_COLOURS = {
     "metrics/steps/shortest_path": (150, 150, 150),
     "metrics/collisions/per_episode": (230, 40, 40),
     "metrics/collisions/cumulative": (120, 20, 20),
+    "metrics/reward_sum": (230, 190, 120),
+    "metrics/reward_smoothed": (150, 90, 0),
 }
 
 SMOOTHING = 0.1
-"""The weight of each new episode in the smoothed steps ratio: a memory of about ten episodes."""
+"""The weight of each new episode in the smoothed curves (the steps ratio, the reward): a memory
+of about ten episodes."""
 
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
@@ -182,9 +188,10 @@ def legend(config: SwarmConfig) -> str:
     """The recording's key (``legend``, a markdown document): what the world view and the heat
     maps draw, and what their colours mean."""
     walls = " Dark blocks are walls." if config.obstacle_density > 0 else ""
-    shared = ("The agents learn into one shared table: the heat maps show it once." if config.shared
-              else "Each agent has its own tables: one tab per agent (the first "
-                   f"{min(config.n_agents, 8)}).")
+    shared = ("" if not learns(config) else
+              "The agents learn into one shared table: the heat maps show it once."
+              if config.shared else "Each agent has its own tables: one tab per agent (the "
+              f"first {min(config.n_agents, 8)}).")
     waits = ("Black arrows from an agent to a neighbour: it waited for that neighbour's "
              "announced move before deciding (negotiation)." if config.algo in NEGOTIATING_ALGOS
              else f"{config.algo} agents do not negotiate: they wait for nobody.")
@@ -202,21 +209,54 @@ goal. Every agent has a colour of its own.{walls}
 On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
 move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
 discs), and the agents where the episode left them; a small dot in an agent's colour is where
-it started, a red ring around an agent the episode left short of its goal. On the `tick`
-timeline it shows one tick (the caption above the grid names its episode and step): where each
-agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
+it started, a thin line in its colour the path it took, a red ring around an agent the episode
+left short of its goal. On the `tick` timeline it shows one tick (the caption above the grid
+names its episode and step): where each agent stood, the move it announced, its last
+{TRAIL_LENGTH} cells.
 {waits}{arbitration}{lifelong}
+Each agent is an entity of its own, `world/agents/<id>` ({following(config)}): click its disc to
+select it, or open the blueprint panel (top left) to hide the others and follow one.
 
 **Learning curves** run against episodes: the share of agents that arrived, the steps they took
-over their shortest paths (1 is perfect), and collisions (each agent in one counts one).
+over their shortest paths (1 is perfect), collisions (each agent in one counts one), the
+reward (pale: each episode; dark: smoothed over about ten episodes){explored(config)}.
 
 {tables(config)}
 {shared}
 """
 
 
+def following(config: SwarmConfig) -> str:
+    """What the key says of the agents' entities: one each, or groups of many agents."""
+    from nnql_swarm.recording.agent_entities import GROUP_SIZE, GROUPED_FROM
+
+    if config.n_agents < GROUPED_FROM:
+        return "its disc, trail, path, moves, waits, goal and start"
+    return (f"from {GROUPED_FROM} agents on, groups of {GROUP_SIZE}: "
+            f"`world/agents/group-<k>` holds agents {GROUP_SIZE}k to {GROUP_SIZE}k + "
+            f"{GROUP_SIZE - 1}")
+
+
+def explored(config: SwarmConfig) -> str:
+    """What the key says of the exploration curve."""
+    if not learns(config):
+        return ""
+    tables = "Q_DS and Q_CA" if ca_learns(config) else "Q_DS"
+    return (f", and the share of the states of {tables} met so far (exploration: every "
+            f"{config.random_step}th action is random, {100 / config.random_step:g} % "
+            f"throughout, and these curves say how much of the tables that reached)")
+
+
 def tables(config: SwarmConfig) -> str:
     """The key's paragraphs on the known map and the Q-tables, for this run's learners."""
+    if not learns(config):
+        return f"**{config.algo}** agents plan; they learn no tables."
+    if not ca_learns(config):
+        rest_ca = (" **Q_CA** is not shown: with the shield, negotiating agents do not collide, "
+                   f"and the table starts at {collision_bound(config):g}, the value of never "
+                   "colliding, so it has nothing to learn.")
+    else:
+        rest_ca = ""
     scale = ("the colour is the best action's value, dark purple (low) to yellow (high), on a "
              "fixed scale: ")
     rest = ("Light grey: an entry still above anything it can learn, i.e. on its optimistic "
@@ -226,7 +266,8 @@ def tables(config: SwarmConfig) -> str:
     if config.ds_state == "goal":
         return (f"**Heat maps**: one pixel per offset of the goal (Q_DS) or of a neighbour (Q_CA)"
                 f" from the agent, the red square in the middle; {scale}Q_DS 0 to the goal "
-                f"reward {config.goal_reward:g} (bright: close to the goal), {ca}. {rest}")
+                f"reward {config.goal_reward:g} (bright: close to the goal), {ca}. {rest}"
+                f"{rest_ca}")
     state = ("the next cell of its planned path" if config.ds_state == "waypoint"
              else "the moves that bring it nearer its goal")
     return (f"**Known map** (one agent's, `--map-agent`): the walls it has seen (dark blocks) "
@@ -236,14 +277,10 @@ def tables(config: SwarmConfig) -> str:
             f"free.\n\n"
             f"**Q_DS** is read on that map: its state is {state}, so it is a table, one row per "
             f"state: the best move, its value (up to {config.goal_reward:g}, the goal reward), "
-            f"and whether that move follows the planned path. **Q_CA heat map**: one pixel per "
-            f"offset of a neighbour from the agent, the red square in the middle; {scale}{ca}. "
-            f"{rest}")
-
-
-def collision_bound(config: SwarmConfig) -> float:
-    """The largest value Q_CA can learn: the no-collision reward (10) every step, discounted."""
-    return 10.0 / (1.0 - config.gamma)
+            f"and whether that move follows the planned path. " + (
+                rest_ca.strip() if rest_ca else
+                f"**Q_CA heat map**: one pixel per offset of a neighbour from the agent, the red "
+                f"square in the middle; {scale}{ca}. {rest}"))
 
 
 class WorldViz:
@@ -268,7 +305,7 @@ class WorldViz:
         n = config.n_agents
         self.colors = agent_colors(n)
         self.cumulative_collisions = collisions_before
-        self._smoothed: float | None = None  # the steps ratio's moving average
+        self._smoothed: dict[str, float] = {}  # the smoothed curves' moving averages
         self.next_tick = 0
         self._before: tuple | None = None  # cells at the start of the next tick
         self._arrived: tuple = (False,) * n
@@ -432,12 +469,10 @@ class WorldViz:
         self._episode_clock, self._episode_first_tick = now, report.tick + 1
         self.cumulative_collisions += row["collisions"]
         ratio = row["agent_steps"] / max(row["shortest_sum"], 1)
-        self._smoothed = ratio if self._smoothed is None else \
-            (1 - SMOOTHING) * self._smoothed + SMOOTHING * ratio
         values = {
             "metrics/arrived_share": row["arrived"] / n,
             "metrics/steps/over_shortest": ratio,
-            "metrics/steps/smoothed": self._smoothed,
+            "metrics/steps/smoothed": self._smooth("metrics/steps/smoothed", ratio),
             "metrics/steps/shortest_path": 1.0,
             "metrics/collisions/per_episode": row["collisions"],
             "metrics/collisions/cumulative": self.cumulative_collisions,
@@ -446,6 +481,7 @@ class WorldViz:
             "metrics/steps/episode": row["steps"],
             "metrics/arrived": row["arrived"],
             "metrics/reward_sum": row["reward_sum"],
+            "metrics/reward_smoothed": self._smooth("metrics/reward_smoothed", row["reward_sum"]),
             "metrics/missed_intents": row["missed_intents"],
             "metrics/ticks_per_s": rate,
         }
@@ -463,6 +499,14 @@ class WorldViz:
                          f"{row['steps']} steps, {done}, "
                          f"{row['collisions']} collisions, {row['missed_intents']} missed, "
                          f"{rate:.0f} ticks/s, reward {row['reward_sum']:.0f}", "INFO")
+
+    def _smooth(self, path: str, value: float) -> float:
+        """The next value of an exponential moving average (:data:`SMOOTHING`) from the run's
+        (or the resume's) first episode."""
+        before = self._smoothed.get(path)
+        self._smoothed[path] = value if before is None else \
+            (1 - SMOOTHING) * before + SMOOTHING * value
+        return self._smoothed[path]
 
     def flush(self) -> None:
         """Send everything buffered: the ticks' geometry computed at once, one call per entity."""

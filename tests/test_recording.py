@@ -329,9 +329,11 @@ def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
     cells = {tuple(map(round, cell)) for tick in recording.agents(DISC, "Points2D:positions")
              .values() for cell in tick}
     assert cells and not cells & walls
-    # the default preset shares one table: only agent 0 logs it, once for all
+    # the default preset shares one table: only agent 0 logs it, once for all; its Q_CA learns
+    # nothing (recording.shown), and nobody logs it
     assert config.shared
-    assert {"agents/0/q_ds/table", "agents/0/q_ca/value"} <= recording.entities
+    assert "agents/0/q_ds/table" in recording.entities
+    assert not {e for e in recording.entities if "q_ca" in e}
     assert not {e for e in recording.entities if e.startswith("agents/1/")}
 
 
@@ -367,8 +369,7 @@ def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     logged = recording.scalars("metrics/collisions/per_episode")
     assert [logged[e][1] for e in range(len(rows))] == [float(r["collisions"]) for r in rows]
     # the default preset's destination seeking reads the known map: its Q_DS is a table
-    assert {"world/agents/0/disc", "agents/0/q_ds/table", "agents/0/q_ca/value"} \
-        <= recording.entities
+    assert {"world/agents/0/disc", "agents/0/q_ds/table"} <= recording.entities
 
 
 @pytest.mark.full
@@ -671,3 +672,40 @@ def test_each_agent_is_an_entity_of_its_own_and_from_128_a_group(run, tmp_path):
     cells = grouped.agents(DISC, "Points2D:positions")
     starts = swarm_episode(0, 0, 24, 24, 130).starts
     assert np.array_equal(np.array(cells[0]), starts)
+
+
+@pytest.mark.full
+def test_every_panel_has_data_distributed_and_in_process(run):
+    """The blueprint's panels of a distributed run (the agents' negotiation wait among them)
+    and of an in-process one, each with data (``tests/test_panels.py``: every preset)."""
+    from tests.test_panels import Panels
+
+    mode, out, _ = run
+    panels = Panels(out)
+    assert not {view.name: lack for view in panels.views if (lack := panels.has_data(view))}
+    assert ("Negotiation wait (ms)" in {view.name for view in panels.views}) == \
+        (mode == "distributed")
+
+
+def test_a_copy_follows_one_agent_tick_by_tick(run, tmp_path):
+    """``recording.follow``: a copy of the run up to a tick, whose world view shows every
+    agent's disc and only the followed agent's parts, on the ``tick`` timeline."""
+    from nnql_swarm.recording.blueprint import blueprint
+    from nnql_swarm.recording.follow import follow_copy
+    from tests.test_panels import included, views
+
+    _, out, recording = run
+    copy = Recording(follow_copy(out, tmp_path / "follow.rrd", 3, 30))
+    assert len(copy.blueprints) == 1
+    assert max(copy.column("world/agents/3/disc", "tick")) == 30
+    assert copy.agents(DISC, "Points2D:positions")[30] == \
+        recording.agents(DISC, "Points2D:positions")[30]
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    [world] = [v for v in views(blueprint(config, follow=3).root_container)
+               if str(v.origin) == "world"]
+    shown = {e for e in recording.entities if included(e, "world", list(world.contents))}
+    parts = {e.rsplit("/", 1)[1] for e in shown if e.startswith("world/agents/3/")}
+    assert parts == {*PER_TICK_PARTS, GOAL, START}
+    assert {e for e in shown if e.startswith("world/agents/") and "/3/" not in e} == \
+        {f"world/agents/{i}/disc" for i in range(AGENTS) if i != 3}
+    assert "world/grid" in shown and "world/caption" in shown
