@@ -25,6 +25,10 @@ saying what the state is (the next cell of the planned path; or the moves that b
 nearer on its map), whether it was met yet, the best move and its value, and whether that move
 follows the planned path.
 
+Agent 0 also logs, every episode, the share of its tables' states met so far
+(``metrics/explored/q_ds``, ``.../q_ca``: :func:`states_met`), the exploration curve. Q_CA is left
+out where it cannot learn (``recording.shown``).
+
 Only the first ``recording.loggers.RECORDED_AGENTS`` agents log these, and only agent 0 where
 the agents share one table (every copy is the same table). What an agent logs is
 buffered and sent in columns every few seconds (:class:`AgentViz`).

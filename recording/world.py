@@ -1,9 +1,9 @@
 """The world's Rerun recording: what happens each tick and why, and the run's metrics per episode.
 
-At time ``tick = t`` the viewer shows the state in which the agents decided tick ``t``: their cells
-(``world/agents``), their goals (``world/goals``), the last cells they came through
-(``world/trails``), the move each announced (``world/intents``), whose intent each agent waited
-for (``world/negotiation``) and who collided as a result (``world/collisions``, plus a warning in
+At time ``tick = t`` the viewer shows the state in which the agents decided tick ``t``: for each
+agent, under ``world/agents/<id>`` (``recording.agent_entities``), its cell, its goal, the last
+cells it came through, the step that brought it there, the move it announced and whose intent
+it waited for; and who collided as a result (``world/collisions``, plus a warning in
 ``events``); under ``--arbitration pibt`` whose first choice was refused (``world/refused``) and
 who pushed whom (``world/pushes``), and in a lifelong run the goals reached (``world/reached``),
 the goals moving on to the next. The next tick shows where everybody ended up.
@@ -16,8 +16,8 @@ that themselves (``recording.agent``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
-``legend``) are logged once. Each entity holds every agent (one ``Points2D`` for all agents, one
-``Boxes2D`` for all goals, ...), whatever their number. Agents and goals share a colour
+``legend``) are logged once. Each agent is an entity of its own (from 128 agents on, each
+group of 16), all of them sent in one call per flush. Agents and goals share a colour
 (:func:`agent_colors`, one per agent, all different) and a label, the agent's id. With a learner
 that reads the known map, one agent's map and planned path go with the world's ticks too
 (``recording.known_map``). The blueprint
