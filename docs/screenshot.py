@@ -52,7 +52,8 @@ DOCS_RUNS = {
 
 VIEWS = {"viewer-follow.png": "follow", "viewer-curves.png": "curves"}
 """The pictures of a copy of their run that opens on another view (``recording.follow``):
-agent 0 followed on the ``tick`` timeline, a third into the last episode; the learning curves
+agent 0 followed on the ``tick`` timeline, a third into the last episode (the world's ticks of
+that episode only, so that the viewer has them soon); the learning curves
 alone. The viewer shows them after ``FIXED_WAIT`` seconds (the world view's checks are those of
 the ``episode`` view)."""
 FIXED_WAIT = 120.0
@@ -101,7 +102,7 @@ def other_view(run_dir: Path, view: str) -> Path:
         return curves_copy(run_dir, copy)
     last = read_episodes(run_dir / "episodes.csv")[-1]
     start = int(last["end_tick"]) - int(last["steps"])
-    return follow_copy(run_dir, copy, 0, start + int(last["steps"]) // 3)
+    return follow_copy(run_dir, copy, 0, start + int(last["steps"]) // 3, since=start)
 
 
 def main() -> int:

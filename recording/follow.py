@@ -18,14 +18,15 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.recording.sinks import APP_ID
 
 
-def follow_copy(run_dir: Path, out: Path, agent: int, until: int) -> Path:
+def follow_copy(run_dir: Path, out: Path, agent: int, until: int, since: int = 0) -> Path:
     """``run_dir``'s recording up to tick ``until``, opening on ``agent`` followed on the
-    ``tick`` timeline (``recording.blueprint.blueprint(..., follow=agent)``)."""
+    ``tick`` timeline (``recording.blueprint.blueprint(..., follow=agent)``); the world's and the
+    known map's ticks only from ``since`` on (a smaller copy loads sooner)."""
     from nnql_swarm.recording.blueprint import blueprint
 
     return copy_opening_on(run_dir, out, lambda config, distributed, map_agent, reference:
                            blueprint(config, distributed, map_agent, reference, follow=agent),
-                           until)
+                           until, since)
 
 
 def curves_copy(run_dir: Path, out: Path) -> Path:
@@ -43,12 +44,14 @@ def curves_copy(run_dir: Path, out: Path) -> Path:
             rrb.TimePanel(timeline="episode", play_state="following", state="collapsed"),
             collapse_panels=False)
 
-    return copy_opening_on(run_dir, out, curves)
+    return copy_opening_on(run_dir, out, curves, keep=("metrics/", LEGEND))
 
 
-def copy_opening_on(run_dir: Path, out: Path, make: Callable, until: int | None = None) -> Path:
-    """Write ``out``: the recording of ``run_dir`` (its ``run.rrd``; up to tick ``until``, static
-    data whole) with the blueprint ``make(config, distributed, map_agent, reference)`` (the run's
+def copy_opening_on(run_dir: Path, out: Path, make: Callable, until: int | None = None,
+                    since: int = 0, keep: tuple[str, ...] | None = None) -> Path:
+    """Write ``out``: the recording of ``run_dir`` (its ``run.rrd``; up to tick ``until``, and
+    the world's and known map's ticks from ``since`` on; static data whole; with ``keep``, only
+    the entities whose paths start so) with the blueprint ``make(config, distributed, map_agent, reference)`` (the run's
     options read back as ``recording.blueprint.recorded_options`` reads them). Returns ``out``."""
     from nnql_swarm.recording.blueprint import recorded_options
     from nnql_swarm.recording.world import close_stream
@@ -62,11 +65,17 @@ def copy_opening_on(run_dir: Path, out: Path, make: Callable, until: int | None 
     stream.set_sinks(rr.FileSink(str(out)), default_blueprint=make(config, distributed,
                                                                    map_agent, reference))
     for chunk in chunks:
+        if keep is not None and not chunk.entity_path.lstrip("/").startswith(keep):
+            continue
         batch = None if chunk.is_static or until is None else chunk.to_record_batch()
         if batch is None or "tick" not in batch.schema.names:
             stream.send_chunks(chunk)
             continue
-        kept = batch.filter(pc.less_equal(batch.column("tick"), until))
+        ticks = batch.column("tick")
+        keep = pc.less_equal(ticks, until)
+        if chunk.entity_path.lstrip("/").startswith(("world/", "known_map/")):
+            keep = pc.and_(keep, pc.greater_equal(ticks, since))
+        kept = batch.filter(keep)
         if kept.num_rows:
             names = [n for n in kept.schema.names if n != "rerun.controls.RowId"]
             kept = kept.select(names).replace_schema_metadata(
