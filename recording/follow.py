@@ -72,10 +72,10 @@ def copy_opening_on(run_dir: Path, out: Path, make: Callable, until: int | None 
             stream.send_chunks(chunk)
             continue
         ticks = batch.column("tick")
-        keep = pc.less_equal(ticks, until)
+        rows = pc.less_equal(ticks, until)
         if chunk.entity_path.lstrip("/").startswith(("world/", "known_map/")):
-            keep = pc.and_(keep, pc.greater_equal(ticks, since))
-        kept = batch.filter(keep)
+            rows = pc.and_(rows, pc.greater_equal(ticks, since))
+        kept = batch.filter(rows)
         if kept.num_rows:
             names = [n for n in kept.schema.names if n != "rerun.controls.RowId"]
             kept = kept.select(names).replace_schema_metadata(

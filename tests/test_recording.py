@@ -694,10 +694,17 @@ def test_a_copy_follows_one_agent_tick_by_tick(run, tmp_path):
     from nnql_swarm.recording.follow import follow_copy
     from tests.test_panels import included, views
 
+    from nnql_swarm.recording.follow import curves_copy
+
     _, out, recording = run
-    copy = Recording(follow_copy(out, tmp_path / "follow.rrd", 3, 30))
+    copy = Recording(follow_copy(out, tmp_path / "follow.rrd", 3, 30, since=20))
     assert len(copy.blueprints) == 1
-    assert max(copy.column("world/agents/3/disc", "tick")) == 30
+    assert sorted(copy.column("world/agents/3/disc", "tick")) == list(range(20, 31))
+    assert copy.scalars("metrics/reward_sum") == {
+        e: v for e, v in recording.scalars("metrics/reward_sum").items() if v[0] <= 30}
+    curves = Recording(curves_copy(out, tmp_path / "curves.rrd"))
+    assert curves.scalars("metrics/reward_sum") == recording.scalars("metrics/reward_sum")
+    assert not {e for e in curves.entities if e.startswith("world/")}
     assert copy.agents(DISC, "Points2D:positions")[30] == \
         recording.agents(DISC, "Points2D:positions")[30]
     config = SwarmConfig.from_json((out / "config.json").read_text())
