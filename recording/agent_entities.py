@@ -31,7 +31,8 @@ DISC, TRAIL, PATH, INTENT, WAITS, GOAL, START = ("disc", "trail", "path", "inten
 PER_TICK = (DISC, TRAIL, PATH, INTENT, WAITS)
 PER_EPISODE = (GOAL, START)
 EPISODE_WIDE = (PATH, INTENT, WAITS)
-"""The parts the world view shows for a whole episode at once on the ``episode`` timeline."""
+"""The parts the world view shows for a whole episode at once on the ``episode`` timeline (the
+path only below :data:`GROUPED_FROM` agents: above, the paths of an episode cover the grid)."""
 
 
 def owners(n_agents: int) -> list[tuple[str, np.ndarray]]:

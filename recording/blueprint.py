@@ -150,12 +150,16 @@ def learning_curves(config: SwarmConfig, distributed: bool = True, reference: bo
 
 def episode_wide(config: SwarmConfig) -> list[str]:
     """The entities the world view shows for a whole episode on the ``episode`` timeline: every
-    agent's path, announced moves and waits (``recording.agent_entities``), the collisions, and
+    agent's path (below 128 agents), announced moves and waits (``recording.agent_entities``),
+    the collisions, and
     under priority inheritance and lifelong tasks the refusals, pushes and goals reached."""
     from nnql_swarm.recording import world as world_viz
-    from nnql_swarm.recording.agent_entities import EPISODE_WIDE, part_paths
+    from nnql_swarm.recording.agent_entities import EPISODE_WIDE, GROUPED_FROM, PATH, part_paths
 
-    return [*(path for part in EPISODE_WIDE for path in part_paths(config.n_agents, part)),
+    # From GROUPED_FROM agents on, a whole episode's paths cover the grid: the moves show it.
+    parts = EPISODE_WIDE if config.n_agents < GROUPED_FROM else \
+        tuple(part for part in EPISODE_WIDE if part != PATH)
+    return [*(path for part in parts for path in part_paths(config.n_agents, part)),
             world_viz.COLLISIONS, world_viz.REFUSED, world_viz.PUSHES, world_viz.REACHED]
 
 
