@@ -17,7 +17,7 @@ that themselves (``recording.agent``).
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
 ``legend``) are logged once. Each agent is an entity of its own (from 128 agents on, each
-group of 16), all of them sent in one call per flush. Agents and goals share a colour
+group of 64), all of them sent in one call per flush. Agents and goals share a colour
 (:func:`agent_colors`, one per agent, all different) and a label, the agent's id. With a learner
 that reads the known map, one agent's map and planned path go with the world's ticks too
 (``recording.known_map``). The blueprint
