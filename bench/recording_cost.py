@@ -9,7 +9,8 @@ negotiation timing each episode (``recording.agent``), each process saves its pa
 The rate is ticks / seconds over every episode but the first (which includes start-up), from
 ``episodes.csv``; the figures are the medians over repeats (and the median of each repeat's
 own off/on difference, which drift in the machine's load disturbs less); the merge into
-``run.rrd`` after the run is timed separately. ``--in-process`` measures the one-process runner instead.
+``run.rrd`` after the run is timed separately. The grid grows with the agents
+(``bench.harness.grid_side``: 11 x 11 for 8, 32 x 32 for 64). ``--in-process`` measures the one-process runner instead.
 
     python -m bench.recording_cost --agents 8 --repeats 5
 """
@@ -21,7 +22,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from bench.harness import add_preset_option, run_distributed, run_local, swarm_config
+from bench.harness import (
+    add_preset_option, grid_side, run_distributed, run_local, swarm_config,
+)
 from nnql_swarm.recording.merge import merge_parts
 
 TARGET = 0.10
@@ -38,7 +41,8 @@ def main() -> int:
     add_preset_option(p)
     args = p.parse_args()
     config = swarm_config(args.preset, run_id="recording-cost", n_agents=args.agents,
-                          episodes=args.episodes, max_steps=args.max_steps)
+                          episodes=args.episodes, max_steps=args.max_steps,
+                          width=grid_side(args.agents), height=grid_side(args.agents))
     run = run_local if args.in_process else run_distributed
     rates: dict[bool, list[float]] = {False: [], True: []}
     merges, sizes = [], []

@@ -14,7 +14,9 @@ README's; 8 agents with walls (``--obstacle-density 0.2``, the reference too) as
 40 x 40 as ``docs/viewer-128.png``; 8 agents in a 15 x 15 maze (``--map maze:15x15``), where
 agents end short of their goals, as ``docs/viewer-maze.png`` (``--in-process``, the same runs
 as distributed); 8 agents in a lifelong run (``--tasks lifelong``, 30 episodes, distributed) as
-``docs/viewer-lifelong.png``. The runs go to
+``docs/viewer-lifelong.png``; from the default run, agent 0 followed on the ``tick`` timeline as
+``docs/viewer-follow.png`` and the learning curves alone as ``docs/viewer-curves.png``
+(``recording.follow``). ``--only PICTURE...`` takes only those. The runs go to
 ``runs/screenshots/``. Each picture is taken once the viewer shows what ``tests/browser.py``
 checks of the newest episode (the grid, walls, labels, moves and waits), or after ``--wait``.
 
@@ -43,8 +45,18 @@ DOCS_RUNS = {
     "viewer-maze.png": ("maze", ["--agents", "8", "--map", "maze:15x15", "--in-process"]),
     "viewer-lifelong.png": ("lifelong", ["--agents", "8", "--tasks", "lifelong", "--episodes",
                                          "30"]),
+    "viewer-follow.png": ("default", ["--agents", "8", "--reference"]),
+    "viewer-curves.png": ("default", ["--agents", "8", "--reference"]),
 }
 """Each picture of the docs: its run's id under ``runs/screenshots/`` and options."""
+
+VIEWS = {"viewer-follow.png": "follow", "viewer-curves.png": "curves"}
+"""The pictures of a copy of their run that opens on another view (``recording.follow``):
+agent 0 followed on the ``tick`` timeline, a third into the last episode (the world's ticks of
+that episode only, so that the viewer has them soon); the learning curves
+alone. The viewer shows them after ``FIXED_WAIT`` seconds (the world view's checks are those of
+the ``episode`` view)."""
+FIXED_WAIT = 120.0
 
 
 def take(browser, recording: Path, png: Path, wait: float, run_dir: Path | None = None) -> str:
@@ -80,6 +92,19 @@ def take(browser, recording: Path, png: Path, wait: float, run_dir: Path | None 
     return seen
 
 
+def other_view(run_dir: Path, view: str) -> Path:
+    """A copy of the run's recording that opens on ``view`` (:data:`VIEWS`)."""
+    from nnql_swarm.recording.follow import curves_copy, follow_copy
+    from nnql_swarm.world.metrics import read_episodes
+
+    copy = run_dir / f"{view}.rrd"
+    if view == "curves":
+        return curves_copy(run_dir, copy)
+    last = read_episodes(run_dir / "episodes.csv")[-1]
+    start = int(last["end_tick"]) - int(last["steps"])
+    return follow_copy(run_dir, copy, 0, start + int(last["steps"]) // 3, since=start)
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("recording", type=Path, nargs="?")
@@ -90,6 +115,7 @@ def main() -> int:
                    help="seconds to let the viewer load (a saved recording: the time it gets; "
                         "--docs: the most it waits for the checks)")
     p.add_argument("--chromium", type=Path, default=CHROMIUM)
+    p.add_argument("--only", nargs="+", choices=tuple(DOCS_RUNS), help="with --docs: only these")
     args = p.parse_args()
     if not args.docs and (args.recording is None or args.png is None):
         p.error("give a recording and a picture, or --docs")
@@ -101,12 +127,18 @@ def main() -> int:
             print(f"{args.png}: {take(browser, args.recording, args.png, args.wait)}")
             return 0
         for picture, (run_id, options) in DOCS_RUNS.items():
+            if args.only and picture not in args.only:
+                continue
             out = ROOT / "runs" / "screenshots" / run_id
             if not (out / "run.rrd").exists():
                 subprocess.run([sys.executable, str(ROOT / "launch" / "swarm.py"), *options,
                                 "--run-id", run_id, "--out", str(out)], check=True,
                                stdout=subprocess.DEVNULL)
             png = ROOT / "docs" / picture
+            if picture in VIEWS:
+                copy = other_view(out, VIEWS[picture])
+                print(f"{png}: {take(browser, copy, png, FIXED_WAIT)}", flush=True)
+                continue
             print(f"{png}: {take(browser, out / 'run.rrd', png, args.wait, out)}", flush=True)
     return 0
 

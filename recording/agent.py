@@ -25,6 +25,10 @@ saying what the state is (the next cell of the planned path; or the moves that b
 nearer on its map), whether it was met yet, the best move and its value, and whether that move
 follows the planned path.
 
+Agent 0 also logs, every episode, the share of its tables' states met so far
+(``metrics/explored/q_ds``, ``.../q_ca``: :func:`states_met`), the exploration curve. Q_CA is left
+out where it cannot learn (``recording.shown``).
+
 Only the first ``recording.loggers.RECORDED_AGENTS`` agents log these, and only agent 0 where
 the agents share one table (every copy is the same table). What an agent logs is
 buffered and sent in columns every few seconds (:class:`AgentViz`).
@@ -54,6 +58,7 @@ from nnql_swarm.protocol.actions import (
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, time_columns
+from nnql_swarm.recording.shown import ca_learns
 
 TABLES = ("q_ds", "q_ca")
 
@@ -90,6 +95,24 @@ DS_STATE_TITLES = {
 
 def agent_path(agent: int) -> str:
     return f"agents/{agent}"
+
+
+def explored_path(table: str) -> str:
+    return f"metrics/explored/{table}"
+
+
+EXPLORED_COLOURS = {"q_ds": (60, 120, 200), "q_ca": (200, 110, 40)}
+
+
+def states_met(q: np.ndarray, initial: float, ds_state: str = "goal") -> float:
+    """The share of a table's states met so far: some entry moved off its ``initial`` value. A
+    map-reading Q_DS (``ds_state`` waypoint or progress) counts its few states
+    (:func:`ds_states`); a table of several blocks of 441 offsets counts an offset met in any."""
+    if ds_state != "goal":
+        rows = [state for state, _, _ in ds_states(ds_state)]
+        return float(np.any(np.asarray(q)[rows] != initial, axis=-1).mean())
+    blocks = np.asarray(q).reshape(-1, N_STATES, N_ACTIONS)
+    return float(np.any(blocks != initial, axis=(0, 2)).mean())
 
 
 def latency_path(agent: int) -> str:
@@ -270,9 +293,17 @@ class AgentViz:
         self._series = SeriesColumns()
         self._pictures: list[tuple[int, int, list[tuple]]] = []  # tick, episode, per table
         self._ds_tables: list[str] = []  # per entry of _pictures, where Q_DS is a table
-        self.pictured = tuple(table for table in TABLES if table != "q_ds" or
-                              config.ds_state == "goal") if heat_maps else ()
-        """The tables drawn as 21 x 21 pictures; Q_DS of a map-reading learner is a table."""
+        self.pictured = tuple(table for table in TABLES
+                              if (table != "q_ds" or config.ds_state == "goal")
+                              and (table != "q_ca" or ca_learns(config))) if heat_maps else ()
+        """The tables drawn as 21 x 21 pictures; Q_DS of a map-reading learner is a table, and
+        Q_CA is left out where it learns nothing (``recording.shown``)."""
+        self.explored = tuple(table for table in TABLES if table != "q_ca" or ca_learns(config)) \
+            if heat_maps and agent == 0 else ()
+        """The tables whose share of states met this agent logs every episode: agent 0's."""
+        for table in self.explored:
+            stream.log(explored_path(table), rr.SeriesLines(
+                names=table.upper(), colors=[EXPLORED_COLOURS[table]], widths=2.0), static=True)
         root = agent_path(agent)
         centre = np.array([[VIEW_RADIUS + 0.5, VIEW_RADIUS + 0.5]], dtype=np.float32)
         for table in self.pictured:
@@ -311,6 +342,11 @@ class AgentViz:
                                    learnable_bound("q_ds", c))
                 self._ds_tables.append(f"**Q_DS {DS_STATE_TITLES[c.ds_state]}**, at "
                                        f"episode {episode}\n\n{text}")
+        if self.explored:
+            c, tables = self.config, dict(zip(TABLES, brain.learner.tables()))
+            for table in self.explored:
+                self._series.add(explored_path(table), tick, episode, states_met(
+                    tables[table], c.optimistic, c.ds_state if table == "q_ds" else "goal"))
         if isinstance(brain, TimedBrain):
             latencies, unanswered = brain.take_timings()
             if latencies:

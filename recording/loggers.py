@@ -4,6 +4,7 @@ runner's, each opened on its process's sinks (``recording.sinks``)."""
 from pathlib import Path
 
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.recording.shown import learns
 from nnql_swarm.recording.sinks import RecordingPlan, plan_of
 
 RECORDED_AGENTS = 8
@@ -15,8 +16,9 @@ own would give it over a thousand."""
 
 def logs_own_heat_maps(agent: int, config: SwarmConfig) -> bool:
     """Whether a recorded agent logs its heat maps: each of them, or only agent 0 where the
-    agents share one table (the same table in every copy)."""
-    return agent < RECORDED_AGENTS and (agent == 0 or not config.shared)
+    agents share one table (the same table in every copy); nobody where the agents learn no
+    tables (``recording.shown``)."""
+    return agent < RECORDED_AGENTS and (agent == 0 or not config.shared) and learns(config)
 
 
 def heat_map_agents(config: SwarmConfig) -> list[int]:

@@ -1,5 +1,7 @@
 """The run's recording in one file: each process's part merged into ``<out>/run.rrd``, with
-Rerun's own ``rerun rrd merge`` (the Python SDK has no merge).
+Rerun's own ``rerun rrd optimize`` (the Python SDK has no merge), which merges and compacts: the
+world sends each agent's entities as chunks of their own every episode, and compacted they take
+about a sixth of the room (the default run: 12.4 MiB of 8,218 chunks, 1.9 MiB of 211).
 
 The launcher merges when the run ends, Ctrl-C included; an existing ``run.rrd`` of a resumed run
 is merged in too; the parts are kept if merging fails.
@@ -31,7 +33,7 @@ def merge_parts(out: Path) -> Path | None:
     for extra in ([], ["--continue-on-error"]):
         try:
             result = subprocess.run(
-                [*rerun_binary(), "rrd", "merge", *extra, *map(str, inputs), "-o", str(tmp)],
+                [*rerun_binary(), "rrd", "optimize", *extra, *map(str, inputs), "-o", str(tmp)],
                 capture_output=True, text=True, timeout=600)
         except (OSError, subprocess.TimeoutExpired) as error:
             print(f"rerun: merging the recording failed ({error}); the parts are in {parts_dir}",

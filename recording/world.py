@@ -1,9 +1,9 @@
 """The world's Rerun recording: what happens each tick and why, and the run's metrics per episode.
 
-At time ``tick = t`` the viewer shows the state in which the agents decided tick ``t``: their cells
-(``world/agents``), their goals (``world/goals``), the last cells they came through
-(``world/trails``), the move each announced (``world/intents``), whose intent each agent waited
-for (``world/negotiation``) and who collided as a result (``world/collisions``, plus a warning in
+At time ``tick = t`` the viewer shows the state in which the agents decided tick ``t``: for each
+agent, under ``world/agents/<id>`` (``recording.agent_entities``), its cell, its goal, the last
+cells it came through, the step that brought it there, the move it announced and whose intent
+it waited for; and who collided as a result (``world/collisions``, plus a warning in
 ``events``); under ``--arbitration pibt`` whose first choice was refused (``world/refused``) and
 who pushed whom (``world/pushes``), and in a lifelong run the goals reached (``world/reached``),
 the goals moving on to the next. The next tick shows where everybody ended up.
@@ -16,8 +16,8 @@ that themselves (``recording.agent``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
-``legend``) are logged once. Each entity holds every agent (one ``Points2D`` for all agents, one
-``Boxes2D`` for all goals, ...), whatever their number. Agents and goals share a colour
+``legend``) are logged once. Each agent is an entity of its own (from 128 agents on, each
+group of 64), all of them sent in one call per flush. Agents and goals share a colour
 (:func:`agent_colors`, one per agent, all different) and a label, the agent's id. With a learner
 that reads the known map, one agent's map and planned path go with the world's ticks too
 (``recording.known_map``). The blueprint
@@ -45,8 +45,12 @@ import rerun as rr
 from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
+from nnql_swarm.recording.agent_entities import (
+    DISC, GOAL, INTENT, PATH, START, TRAIL, WAITS, EntityColumns, by_entity, owners, part_paths,
+)
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
 from nnql_swarm.recording.jams import JAM_HALF, JAM_LINE, JamMap
+from nnql_swarm.recording.shown import ca_learns, collision_bound, learns
 from nnql_swarm.recording.palette import (
     COLLISION_RED, PUSH_COLOUR, REACHED_COLOUR, WAIT_COLOUR, WALL_COLOUR, agent_colors,
 )
@@ -57,13 +61,7 @@ APP_ID = "nnql-swarm"
 
 GRID = "world/grid"
 WALLS = "world/walls"
-AGENTS = "world/agents"
-GOALS = "world/goals"
-TRAILS = "world/trails"
-INTENTS = "world/intents"
-NEGOTIATION = "world/negotiation"
 COLLISIONS = "world/collisions"
-STARTS = "world/starts"
 STUCK = "world/stuck"
 CAPTION = "world/caption"
 REFUSED = "world/refused"
@@ -108,6 +106,7 @@ METRICS = {
     "metrics/steps/episode": "ticks until every agent arrived, or max steps",
     "metrics/arrived": "agents on their goal when the episode ended",
     "metrics/reward_sum": "sum of every agent's DS and CA rewards in the episode",
+    "metrics/reward_smoothed": "reward_sum smoothed as the steps ratio is (SMOOTHING)",
     "metrics/missed_intents": "intents that missed the tick deadline (counted as STAY)",
     "metrics/ticks_per_s": "wall-clock ticks per second of the world's clock in the episode",
     "metrics/negotiation/awaited_per_tick": "intents waited for per tick, all agents (world-derived)",
@@ -128,6 +127,7 @@ SERIES_NAMES = {
     "metrics/steps/episode": "ticks in the episode",
     "metrics/arrived": "agents arrived",
     "metrics/reward_sum": "reward sum",
+    "metrics/reward_smoothed": "smoothed",
     "metrics/missed_intents": "missed intents",
     "metrics/ticks_per_s": "ticks per second",
     "metrics/negotiation/awaited_per_tick": "intents awaited per tick",
@@ -143,10 +143,13 @@ SERIES_COLOURS = {
     "metrics/steps/shortest_path": (150, 150, 150),
     "metrics/collisions/per_episode": (230, 40, 40),
     "metrics/collisions/cumulative": (120, 20, 20),
+    "metrics/reward_sum": (230, 190, 120),
+    "metrics/reward_smoothed": (150, 90, 0),
 }
 
 SMOOTHING = 0.1
-"""The weight of each new episode in the smoothed steps ratio: a memory of about ten episodes."""
+"""The weight of each new episode in the smoothed curves (the steps ratio, the reward): a memory
+of about ten episodes."""
 
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
@@ -187,9 +190,10 @@ def legend(config: SwarmConfig) -> str:
     """The recording's key (``legend``, a markdown document): what the world view and the heat
     maps draw, and what their colours mean."""
     walls = " Dark blocks are walls." if config.obstacle_density > 0 else ""
-    shared = ("The agents learn into one shared table: the heat maps show it once." if config.shared
-              else "Each agent has its own tables: one tab per agent (the first "
-                   f"{min(config.n_agents, 8)}).")
+    shared = ("" if not learns(config) else
+              "The agents learn into one shared table: the heat maps show it once."
+              if config.shared else "Each agent has its own tables: one tab per agent (the "
+              f"first {min(config.n_agents, 8)}).")
     waits = ("Black arrows from an agent to a neighbour: it waited for that neighbour's "
              "announced move before deciding (negotiation)." if config.algo in NEGOTIATING_ALGOS
              else f"{config.algo} agents do not negotiate: they wait for nobody.")
@@ -207,23 +211,55 @@ goal. Every agent has a colour of its own.{walls}
 On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
 move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
 discs), and the agents where the episode left them; a small dot in an agent's colour is where
-it started, a red ring around an agent the episode left short of its goal, and red shading
-where agents on their way waited (the traffic jams: the deeper the red, the more steps waited
-there). On the `tick`
-timeline it shows one tick (the caption above the grid names its episode and step): where each
-agent stood, the move it announced, its last {TRAIL_LENGTH} cells.
+it started, a thin line in its colour the path it took, a red ring around an agent the episode
+left short of its goal, and red shading where agents on their way waited (the traffic jams: the
+deeper the red, the more steps waited there). On the `tick` timeline it shows one tick (the
+caption above the grid names its episode and step): where each agent stood, the move it
+announced, its last {TRAIL_LENGTH} cells.
 {waits}{arbitration}{lifelong}
+Each agent is an entity of its own, `world/agents/<id>` ({following(config)}): click its disc to
+select it, or open the blueprint panel (top left) to hide the others and follow one.
 
 **Learning curves** run against episodes: the share of agents that arrived, the steps they took
-over their shortest paths (1 is perfect), and collisions (each agent in one counts one).
+over their shortest paths (1 is perfect), collisions (each agent in one counts one), the
+reward (pale: each episode; dark: smoothed over about ten episodes){explored(config)}.
 
 {tables(config)}
 {shared}
 """
 
 
+def following(config: SwarmConfig) -> str:
+    """What the key says of the agents' entities: one each, or groups of many agents."""
+    from nnql_swarm.recording.agent_entities import GROUP_SIZE, GROUPED_FROM
+
+    if config.n_agents < GROUPED_FROM:
+        return "its disc, trail, path, moves, waits, goal and start"
+    return (f"from {GROUPED_FROM} agents on, groups of {GROUP_SIZE}: "
+            f"`world/agents/group-<k>` holds agents {GROUP_SIZE}k to {GROUP_SIZE}k + "
+            f"{GROUP_SIZE - 1}")
+
+
+def explored(config: SwarmConfig) -> str:
+    """What the key says of the exploration curve."""
+    if not learns(config):
+        return ""
+    tables = "Q_DS and Q_CA" if ca_learns(config) else "Q_DS"
+    return (f", and the share of the states of {tables} met so far (exploration: every "
+            f"{config.random_step}th action is random, {100 / config.random_step:g} % "
+            f"throughout, and these curves say how much of the tables that reached)")
+
+
 def tables(config: SwarmConfig) -> str:
     """The key's paragraphs on the known map and the Q-tables, for this run's learners."""
+    if not learns(config):
+        return f"**{config.algo}** agents plan; they learn no tables."
+    if not ca_learns(config):
+        rest_ca = (" **Q_CA** is not shown: with the shield, negotiating agents do not collide, "
+                   f"and the table starts at {collision_bound(config):g}, the value of never "
+                   "colliding, so it has nothing to learn.")
+    else:
+        rest_ca = ""
     scale = ("the colour is the best action's value, dark purple (low) to yellow (high), on a "
              "fixed scale: ")
     rest = ("Light grey: an entry still above anything it can learn, i.e. on its optimistic "
@@ -233,7 +269,8 @@ def tables(config: SwarmConfig) -> str:
     if config.ds_state == "goal":
         return (f"**Heat maps**: one pixel per offset of the goal (Q_DS) or of a neighbour (Q_CA)"
                 f" from the agent, the red square in the middle; {scale}Q_DS 0 to the goal "
-                f"reward {config.goal_reward:g} (bright: close to the goal), {ca}. {rest}")
+                f"reward {config.goal_reward:g} (bright: close to the goal), {ca}. {rest}"
+                f"{rest_ca}")
     state = ("the next cell of its planned path" if config.ds_state == "waypoint"
              else "the moves that bring it nearer its goal")
     return (f"**Known map** (one agent's, `--map-agent`): the walls it has seen (dark blocks) "
@@ -243,14 +280,10 @@ def tables(config: SwarmConfig) -> str:
             f"free.\n\n"
             f"**Q_DS** is read on that map: its state is {state}, so it is a table, one row per "
             f"state: the best move, its value (up to {config.goal_reward:g}, the goal reward), "
-            f"and whether that move follows the planned path. **Q_CA heat map**: one pixel per "
-            f"offset of a neighbour from the agent, the red square in the middle; {scale}{ca}. "
-            f"{rest}")
-
-
-def collision_bound(config: SwarmConfig) -> float:
-    """The largest value Q_CA can learn: the no-collision reward (10) every step, discounted."""
-    return 10.0 / (1.0 - config.gamma)
+            f"and whether that move follows the planned path. " + (
+                rest_ca.strip() if rest_ca else
+                f"**Q_CA heat map**: one pixel per offset of a neighbour from the agent, the red "
+                f"square in the middle; {scale}{ca}. {rest}"))
 
 
 class WorldViz:
@@ -275,7 +308,7 @@ class WorldViz:
         n = config.n_agents
         self.colors = agent_colors(n)
         self.cumulative_collisions = collisions_before
-        self._smoothed: float | None = None  # the steps ratio's moving average
+        self._smoothed: dict[str, float] = {}  # the smoothed curves' moving averages
         self.next_tick = 0
         self._before: tuple | None = None  # cells at the start of the next tick
         self._arrived: tuple = (False,) * n
@@ -330,22 +363,27 @@ class WorldViz:
                                       half_sizes=np.full(walls.shape, WALL_HALF, np.float32),
                                       colors=[WALL_COLOUR], radii=WALL_LINE, draw_order=1.0),
                     static=True)
-        labels = [str(i) for i in range(c.n_agents)]
-        rec.log(AGENTS, rr.Points2D.from_fields(colors=self.colors, labels=labels, radii=0.3,
-                                                show_labels=True, draw_order=30.0), static=True)
-        rec.log(GOALS, rr.Boxes2D.from_fields(colors=self.colors, labels=labels, show_labels=True,
-                                              radii=0.07, draw_order=10.0), static=True)
-        rec.log(TRAILS, rr.LineStrips2D.from_fields(colors=with_alpha(self.colors, 110), radii=0.06,
-                                                    draw_order=15.0), static=True)
-        rec.log(INTENTS, rr.Arrows2D.from_fields(colors=self.colors, radii=0.09, draw_order=40.0),
+        for path, agents in owners(c.n_agents):
+            colours, labels = self.colors[agents], [str(i) for i in agents]
+            rec.log(f"{path}/{DISC}", rr.Points2D.from_fields(
+                colors=colours, labels=labels, radii=0.3, show_labels=True, draw_order=30.0),
                 static=True)
-        rec.log(NEGOTIATION, rr.Arrows2D.from_fields(colors=[WAIT_COLOUR], radii=0.045,
-                                                     draw_order=45.0), static=True)
+            rec.log(f"{path}/{GOAL}", rr.Boxes2D.from_fields(
+                colors=colours, labels=labels, show_labels=True, radii=0.07, draw_order=10.0),
+                static=True)
+            rec.log(f"{path}/{TRAIL}", rr.LineStrips2D.from_fields(
+                colors=with_alpha(colours, 110), radii=0.06, draw_order=15.0), static=True)
+            rec.log(f"{path}/{PATH}", rr.LineStrips2D.from_fields(
+                colors=with_alpha(colours, 90), radii=0.05, draw_order=14.0), static=True)
+            rec.log(f"{path}/{INTENT}", rr.Arrows2D.from_fields(
+                colors=colours, radii=0.09, draw_order=40.0), static=True)
+            rec.log(f"{path}/{WAITS}", rr.Arrows2D.from_fields(
+                colors=[WAIT_COLOUR], radii=0.045, draw_order=45.0), static=True)
+            rec.log(f"{path}/{START}", rr.Points2D.from_fields(
+                colors=with_alpha(colours, 150), radii=0.12, draw_order=12.0), static=True)
         rec.log(LEGEND, rr.TextDocument(legend(c), media_type=rr.MediaType.MARKDOWN), static=True)
         rec.log(COLLISIONS, rr.Points2D.from_fields(colors=[COLLISION_RED], radii=0.5,
                                                     draw_order=20.0), static=True)
-        rec.log(STARTS, rr.Points2D.from_fields(colors=with_alpha(self.colors, 150), radii=0.12,
-                                                draw_order=12.0), static=True)
         rec.log(STUCK, rr.LineStrips2D.from_fields(colors=[COLLISION_RED], radii=0.045,
                                                    draw_order=25.0), static=True)
         rec.log(REFUSED, rr.Arrows2D.from_fields(colors=[COLLISION_RED], radii=0.05,
@@ -444,12 +482,10 @@ class WorldViz:
         self._episode_clock, self._episode_first_tick = now, report.tick + 1
         self.cumulative_collisions += row["collisions"]
         ratio = row["agent_steps"] / max(row["shortest_sum"], 1)
-        self._smoothed = ratio if self._smoothed is None else \
-            (1 - SMOOTHING) * self._smoothed + SMOOTHING * ratio
         values = {
             "metrics/arrived_share": row["arrived"] / n,
             "metrics/steps/over_shortest": ratio,
-            "metrics/steps/smoothed": self._smoothed,
+            "metrics/steps/smoothed": self._smooth("metrics/steps/smoothed", ratio),
             "metrics/steps/shortest_path": 1.0,
             "metrics/collisions/per_episode": row["collisions"],
             "metrics/collisions/cumulative": self.cumulative_collisions,
@@ -458,6 +494,7 @@ class WorldViz:
             "metrics/steps/episode": row["steps"],
             "metrics/arrived": row["arrived"],
             "metrics/reward_sum": row["reward_sum"],
+            "metrics/reward_smoothed": self._smooth("metrics/reward_smoothed", row["reward_sum"]),
             "metrics/missed_intents": row["missed_intents"],
             "metrics/ticks_per_s": rate,
         }
@@ -476,19 +513,30 @@ class WorldViz:
                          f"{row['collisions']} collisions, {row['missed_intents']} missed, "
                          f"{rate:.0f} ticks/s, reward {row['reward_sum']:.0f}", "INFO")
 
+    def _smooth(self, path: str, value: float) -> float:
+        """The next value of an exponential moving average (:data:`SMOOTHING`) from the run's
+        (or the resume's) first episode."""
+        before = self._smoothed.get(path)
+        self._smoothed[path] = value if before is None else \
+            (1 - SMOOTHING) * before + SMOOTHING * value
+        return self._smoothed[path]
+
     def flush(self) -> None:
         """Send everything buffered: the ticks' geometry computed at once, one call per entity."""
         self.clock.flushed()
         if self._goals:
             g_ticks, g_episodes, goals, starts = zip(*self._goals)
             self._goals = []
-            index = time_columns(g_ticks, g_episodes)
-            centers = np.concatenate(goals)
-            self.rec.send_columns(GOALS, index, rr.Boxes2D.columns(
+            n, k = self.config.n_agents, len(goals)
+            order, lengths = by_entity(np.repeat(np.arange(k), n), np.tile(np.arange(n), k), k, n)
+            columns = EntityColumns(time_columns(g_ticks, g_episodes), k)
+            centers = np.concatenate(goals)[order]
+            columns.add(part_paths(n, GOAL), rr.Boxes2D.columns(
                 centers=centers, half_sizes=np.full(centers.shape, 0.42, np.float32)
-            ).partition([len(g) for g in goals]))
-            self.rec.send_columns(STARTS, index, rr.Points2D.columns(
-                positions=np.concatenate(starts)).partition([len(g) for g in starts]))
+            ).partition(lengths))
+            columns.add(part_paths(n, START), rr.Points2D.columns(
+                positions=np.concatenate(starts)[order]).partition(lengths))
+            columns.send(self.rec)
         if self._stuck:
             s_ticks, s_episodes, cells = zip(*self._stuck)
             self._stuck = []
@@ -527,22 +575,26 @@ class WorldViz:
         ticks, episodes = np.array(tick_list, dtype=np.int64), np.array(episode_list, np.int64)
         positions = np.array(before, dtype=np.int64)  # (k, n, 2): the cells each tick started from
         index = time_columns(ticks, episodes)
-        each = [n] * k
         cells = positions.astype(np.float32)
-        flat = cells.reshape(-1, 2)
-        rec.send_columns(AGENTS, index, rr.Points2D.columns(positions=flat).partition(each))
         rec.send_columns(CAPTION, index, rr.Points2D.columns(
             positions=np.tile(np.array([[(self.config.width - 1) / 2, caption_y(self.config)]],
                                        np.float32), (k, 1)),
             labels=[f"episode {e}, {f'step {s}' if m else 'its end'} (tick {t})"
                     for e, s, t, m in zip(episode_list, steps, tick_list, moved)]))
-        moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32).reshape(-1, 2)
-        rec.send_columns(INTENTS, index,
-                         rr.Arrows2D.columns(origins=flat, vectors=moves).partition(each))
+        # Every agent's parts, entity by entity (recording.agent_entities), in one call.
+        parts = EntityColumns(index, k)
+        order, lengths = by_entity(np.repeat(np.arange(k), n), np.tile(np.arange(n), k), k, n)
+        flat = cells.reshape(-1, 2)[order]
+        parts.add(part_paths(n, DISC), rr.Points2D.columns(positions=flat).partition(lengths))
+        moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32)
+        parts.add(part_paths(n, INTENT), rr.Arrows2D.columns(
+            origins=flat, vectors=moves.reshape(-1, 2)[order]).partition(lengths))
         trails = np.concatenate([self._trails(cells[first:last], int(episodes[first]))
                                  for first, last in episode_spans(episodes)])
-        rec.send_columns(TRAILS, index, rr.LineStrips2D.columns(
-            strips=trails.reshape(-1, TRAIL_LENGTH, 2)).partition(each))
+        trails = trails.reshape(-1, TRAIL_LENGTH, 2)[order]
+        parts.add(part_paths(n, TRAIL), rr.LineStrips2D.columns(strips=trails).partition(lengths))
+        parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(  # the step that led here
+            strips=np.ascontiguousarray(trails[:, -2:])).partition(lengths))
 
         asks = negotiation_mask(self.config, positions, np.array(arrived_then, dtype=bool), ticks)
         asks &= np.array(moved, dtype=bool)[:, None, None]
@@ -552,9 +604,11 @@ class WorldViz:
         start, end = cells[t, asker], cells[t, asked]
         gap = end - start
         unit = gap / np.maximum(np.linalg.norm(gap, axis=-1, keepdims=True), 1e-6)
-        rec.send_columns(NEGOTIATION, index, rr.Arrows2D.columns(
-            origins=start + unit * 0.2, vectors=gap - unit * 0.4,
-        ).partition(asks.sum(axis=(1, 2))))  # in WAIT_COLOUR, logged once (static)
+        order, lengths = by_entity(t, asker, k, n)
+        parts.add(part_paths(n, WAITS), rr.Arrows2D.columns(  # WAIT_COLOUR, logged once (static)
+            origins=(start + unit * 0.2)[order], vectors=(gap - unit * 0.4)[order],
+        ).partition(lengths))
+        parts.send(rec)
 
         if self.config.arbitration == "pibt":
             self._send_arbitration(index, cells, np.array(actions, np.int64),

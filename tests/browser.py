@@ -356,34 +356,45 @@ class Episode:
     waits: tuple[np.ndarray, np.ndarray]  # origins, vectors
 
 
-def last_episode(recording: Path) -> Episode:
-    """The newest episode of a run's ``run.rrd`` (the one the viewer opens on)."""
+def last_episode(recording: Path, n_agents: int) -> Episode:
+    """The newest episode of a run's ``run.rrd`` (the one the viewer opens on), of
+    ``n_agents`` agents, each (or each group) an entity of its own
+    (``recording.agent_entities``)."""
     import rerun as rr
 
-    rows: dict[str, list] = {}
+    from nnql_swarm.recording.agent_entities import DISC, GOAL, INTENT, WAITS, agents_of
+
+    rows: dict[tuple[str, int], list] = {}  # (part, first agent of its entity): its rows
+    holds: dict[int, np.ndarray] = {}
     for chunk in rr.chunk.RrdReader(recording).stream():
-        entity = chunk.entity_path.lstrip("/")
-        if entity in ("world/agents", "world/goals", "world/intents", "world/negotiation") \
-                and not chunk.is_static:
-            batch = chunk.to_record_batch()
-            columns = {name: batch.column(name).to_pylist() for name in batch.schema.names}
-            rows.setdefault(entity, []).extend(
-                {name: values[i] for name, values in columns.items()} for i in range(batch.num_rows))
-    last = max(row["episode"] for row in rows["world/agents"])
+        agents = agents_of(chunk.entity_path, n_agents)
+        part = chunk.entity_path.rsplit("/", 1)[-1]
+        if agents is None or chunk.is_static or part not in (DISC, GOAL, INTENT, WAITS):
+            continue
+        holds[int(agents[0])] = agents
+        batch = chunk.to_record_batch()
+        columns = {name: batch.column(name).to_pylist() for name in batch.schema.names}
+        rows.setdefault((part, int(agents[0])), []).extend(
+            {name: values[i] for name, values in columns.items()} for i in range(batch.num_rows))
+    last = max(row["episode"] for (part, _), held in rows.items() if part == DISC for row in held)
 
-    def of_last(entity: str) -> list[dict]:
-        return sorted((r for r in rows[entity] if r["episode"] == last), key=lambda r: r["tick"])
+    def of_last(part: str, first: int) -> list[dict]:
+        return sorted((r for r in rows.get((part, first), []) if r["episode"] == last),
+                      key=lambda r: r["tick"])
 
-    agents = np.array(of_last("world/agents")[-1]["Points2D:positions"])
-    goals = np.array(of_last("world/goals")[-1]["Boxes2D:centers"])
+    firsts = sorted(holds)
+    agents = np.concatenate([of_last(DISC, f)[-1]["Points2D:positions"] for f in firsts])
+    goals = np.concatenate([of_last(GOAL, f)[-1]["Boxes2D:centers"] for f in firsts])
     origins, vectors, who = [], [], []
-    for row in of_last("world/intents"):
-        for i, (o, v) in enumerate(zip(row["Arrows2D:origins"], row["Arrows2D:vectors"])):
-            if v[0] or v[1]:
-                origins.append(o), vectors.append(v), who.append(i)
-    waits = [(o, v) for row in of_last("world/negotiation")
+    for first in firsts:
+        for row in of_last(INTENT, first):
+            for i, (o, v) in enumerate(zip(row["Arrows2D:origins"], row["Arrows2D:vectors"])):
+                if v[0] or v[1]:
+                    origins.append(o), vectors.append(v), who.append(int(holds[first][i]))
+    waits = [(o, v) for first in firsts for row in of_last(WAITS, first)
              for o, v in zip(row.get("Arrows2D:origins") or [], row.get("Arrows2D:vectors") or [])]
-    return Episode(agents, goals, (np.array(origins), np.array(vectors), np.array(who, int)),
+    return Episode(np.array(agents), np.array(goals),
+                   (np.array(origins), np.array(vectors), np.array(who, int)),
                    (np.array([o for o, _ in waits]).reshape(-1, 2),
                     np.array([v for _, v in waits]).reshape(-1, 2)))
 
@@ -396,7 +407,7 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     from nnql_swarm.recording.palette import WAIT_COLOUR, WALL_COLOUR, agent_colors
 
     grid = find_grid(image, config.width, config.height)
-    episode = last_episode(run_dir / "run.rrd")
+    episode = last_episode(run_dir / "run.rrd", config.n_agents)
     colours = agent_colors(config.n_agents)
     found = {"grid": grid}
     walls = config.walls()

@@ -194,7 +194,7 @@ def test_show_hands_the_whole_recording_to_the_notebook_viewer(example):
             assert store.recording_id == run.config.run_id
             shown.update(reader.store(store=store).schema().entity_paths())
     whole = set(RrdReader(str(run.recording)).store().schema().entity_paths())
-    assert "/world/agents" in whole and "/agents/0/q_ds/table" in whole
+    assert "/world/agents/0/disc" in whole and "/agents/0/q_ds/table" in whole
     assert whole <= shown
     with pytest.raises(FileNotFoundError, match="no run here"):
         Run.open(ROOT / "nonexistent")

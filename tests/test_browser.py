@@ -131,7 +131,7 @@ def test_the_checks_fail_on_a_blank_or_broken_page(pictures):
     with pytest.raises(AssertionError, match="not drawn"):
         check_walls(image, grid, walls + np.array([1, 0]) * (walls[:, :1] < config.width - 1),
                     [], WALL_COLOUR)
-    episode = last_episode(run_dir / "run.rrd")
+    episode = last_episode(run_dir / "run.rrd", config.n_agents)
     with pytest.raises(AssertionError, match="labels under only"):
         check_labels(image, grid, episode.goals, others[[0] * len(episode.goals)])
 

@@ -29,14 +29,18 @@ from nnql_swarm.world.metrics import read_episodes
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.recording.palette import KEEP_APART, PALETTE, agent_colors
 from nnql_swarm.recording.world import METRICS, negotiation_mask
+from nnql_swarm.recording.agent_entities import (
+    DISC, GOAL, PER_TICK as PER_TICK_PARTS, START, TRAIL, WAITS,
+)
 
 AGENTS, EPISODES = 8, 3
 RUN = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", "25", "--seed", "5",
        "--preset", "nnql")  # the paper's nnQL collides, so collisions show
-WORLD_ENTITIES = ("world/grid", "world/agents", "world/goals", "world/trails", "world/intents",
-                  "world/negotiation", "world/collisions", "events")
-PER_TICK = ("world/agents", "world/trails", "world/intents", "world/negotiation",
-            "world/collisions")
+WORLD_ENTITIES = ("world/grid", "world/collisions", "events",
+                  *(f"world/agents/{i}/{part}" for i in range(AGENTS)
+                    for part in (*PER_TICK_PARTS, GOAL, START)))
+PER_TICK = ("world/collisions",
+            *(f"world/agents/{i}/{part}" for i in range(AGENTS) for part in PER_TICK_PARTS))
 
 
 class Recording:
@@ -75,6 +79,18 @@ class Recording:
 
     def rows(self, entity: str) -> int:
         return sum(batch.num_rows for batch in self.temporal[entity])
+
+    def agents(self, part: str, name: str, timeline: str = "tick") -> dict:
+        """A part of every agent (``recording.agent_entities``: each agent, or each group, an
+        entity of its own) by the timeline's value: the entities' values, agent by agent, as
+        one list, as one entity of all agents would hold them (its last row per value)."""
+        held = [entity for entity in self.temporal
+                if entity.startswith("world/agents/") and entity.endswith(f"/{part}")]
+        whole: dict = defaultdict(list)
+        for entity in sorted(held, key=lambda e: int(e.split("/")[2].removeprefix("group-"))):
+            for key, values in self.by_time(entity, name, timeline).items():
+                whole[key].extend(values or [])
+        return dict(whole)
 
 
 def verify(path: Path) -> None:
@@ -135,16 +151,15 @@ def test_the_world_is_there_every_tick(run):
     ticks = int(read_episodes(out / "episodes.csv")[-1]["end_tick"]) + 1
     for entity in PER_TICK:
         assert sorted(recording.column(entity, "tick")) == list(range(ticks)), entity
-    assert recording.rows("world/goals") == EPISODES
+    assert all(recording.rows(f"world/agents/{i}/goal") == EPISODES for i in range(AGENTS))
 
 
 @pytest.mark.full
 def test_positions_and_trails_are_the_worlds(run):
     _, out, recording = run
     config = SwarmConfig.from_json((out / "config.json").read_text())
-    ticks = recording.column("world/agents", "tick")
-    cells = dict(zip(ticks, recording.column("world/agents", "Points2D:positions")))
-    trails = recording.by_time("world/trails", "LineStrips2D:strips")
+    cells = recording.agents(DISC, "Points2D:positions")
+    trails = recording.agents(TRAIL, "LineStrips2D:strips")
     first_tick = 0
     for row in read_episodes(out / "episodes.csv"):
         starts = swarm_episode(config.seed, int(row["episode"]), config.width, config.height,
@@ -161,8 +176,8 @@ def test_starts_stuck_agents_and_the_caption_are_the_worlds(run):
     every tick a caption naming its episode."""
     _, out, recording = run
     config = SwarmConfig.from_json((out / "config.json").read_text())
-    cells = recording.by_time("world/agents", "Points2D:positions")
-    starts = recording.by_time("world/starts", "Points2D:positions", "episode")
+    cells = recording.agents(DISC, "Points2D:positions")
+    starts = recording.agents(START, "Points2D:positions", "episode")
     stuck = defaultdict(list)
     for tick, rings in zip(recording.column("world/stuck", "tick"),
                            recording.column("world/stuck", "LineStrips2D:strips")):
@@ -183,7 +198,7 @@ def test_starts_stuck_agents_and_the_caption_are_the_worlds(run):
         ended_short += len(ringed)
         first_tick = end + 1
     assert ended_short > 0, "no agent ended short: the rings were not tested"
-    episodes = recording.by_time("world/agents", "episode")
+    episodes = recording.by_time("world/agents/0/disc", "episode")
     for tick, labels in recording.by_time("world/caption", "Points2D:labels").items():
         assert labels[0].startswith(f"episode {episodes[tick]}, ") and f"(tick {tick})" in labels[0]
 
@@ -274,9 +289,9 @@ def test_the_negotiation_is_logged_as_the_agents_ask(run):
     config = SwarmConfig.from_json((out / "config.json").read_text())
     rows = read_episodes(out / "episodes.csv")
     end_ticks = {int(r["end_tick"]) for r in rows}
-    cells = recording.by_time("world/agents", "Points2D:positions")
-    episode_of = recording.by_time("world/agents", "episode")
-    arrows = recording.by_time("world/negotiation", "Arrows2D:origins")
+    cells = recording.agents(DISC, "Points2D:positions")
+    episode_of = recording.by_time("world/agents/0/disc", "episode")
+    arrows = recording.agents(WAITS, "Arrows2D:origins")
     total = 0
     for tick, logged in arrows.items():
         positions = np.array(cells[tick], dtype=np.int64)
@@ -311,13 +326,14 @@ def test_a_grid_with_walls_shows_them_and_nobody_ever_stands_on_one(tmp_path):
              if chunk.entity_path.lstrip("/") == "world/walls"]
     assert [len(batch) for batch in sizes] == [len(walls)]
     recording = Recording(out / "run.rrd")
-    cells = {tuple(map(round, cell)) for tick in recording.column("world/agents",
-                                                                 "Points2D:positions")
-             for cell in tick}
+    cells = {tuple(map(round, cell)) for tick in recording.agents(DISC, "Points2D:positions")
+             .values() for cell in tick}
     assert cells and not cells & walls
-    # the default preset shares one table: only agent 0 logs it, once for all
+    # the default preset shares one table: only agent 0 logs it, once for all; its Q_CA learns
+    # nothing (recording.shown), and nobody logs it
     assert config.shared
-    assert {"agents/0/q_ds/table", "agents/0/q_ca/value"} <= recording.entities
+    assert "agents/0/q_ds/table" in recording.entities
+    assert not {e for e in recording.entities if "q_ca" in e}
     assert not {e for e in recording.entities if e.startswith("agents/1/")}
 
 
@@ -353,7 +369,7 @@ def test_ctrl_c_still_leaves_a_loadable_recording(tmp_path):
     logged = recording.scalars("metrics/collisions/per_episode")
     assert [logged[e][1] for e in range(len(rows))] == [float(r["collisions"]) for r in rows]
     # the default preset's destination seeking reads the known map: its Q_DS is a table
-    assert {"world/agents", "agents/0/q_ds/table", "agents/0/q_ca/value"} <= recording.entities
+    assert {"world/agents/0/disc", "agents/0/q_ds/table"} <= recording.entities
 
 
 @pytest.mark.full
@@ -391,7 +407,7 @@ def test_a_run_killed_outright_and_resumed_records_every_episode(tmp_path, kille
     assert sorted(logged) == list(range(episodes))
     assert {e for e, times in logged.items() if times > 1} <= replayed, resumed.stderr
     rows = read_episodes(out / "episodes.csv")
-    ticks = set(recording.column("world/agents", "tick"))
+    ticks = set(recording.column("world/agents/0/disc", "tick"))
     assert all(int(r["end_tick"]) in ticks for r in rows)
 
 
@@ -495,7 +511,7 @@ def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_refere
     paths = recording.column("known_map/path", "LineStrips2D:strips")
     here = recording.by_time("known_map/agent", "Points2D:positions")
     goals = recording.by_time("known_map/goal", "Boxes2D:centers")
-    world = recording.by_time("world/agents", "Points2D:positions")
+    world = recording.agents(DISC, "Points2D:positions")
     changes = sorted(known_at)
     reached = 0
     for tick, strips in zip(ticks, paths):
@@ -588,8 +604,8 @@ def test_the_known_map_shows_one_path_and_the_world_an_episodes_moves():
                  for v in views(blueprint(SwarmConfig()).root_container)}
     assert not by_origin["known_map"].visualizer_overrides
     assert set(by_origin["world"].visualizer_overrides) == {
-        "world/intents", "world/negotiation", "world/collisions", "world/refused",
-        "world/pushes", "world/reached"}
+        *(f"world/agents/{i}/{part}" for i in range(8) for part in ("path", "intent", "waits")),
+        "world/collisions", "world/refused", "world/pushes", "world/reached"}
 
 
 def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):
@@ -612,7 +628,7 @@ def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):
             int(r["episode"]): float(r["throughput"]) for r in rows}
         reached = recording.column("world/reached", "Points2D:positions")
         assert sum(len(cells) for cells in reached) == sum(int(r["goals"]) for r in rows) > 0
-        goals = recording.column("world/goals", "Boxes2D:centers")
+        goals = recording.column("world/agents/0/goal", "Boxes2D:centers")
         assert len(goals) > len(rows), "the goals move on within an episode"
         refused = recording.column("world/refused", "Arrows2D:origins")
         refusals = recording.scalars("metrics/refused")
@@ -632,3 +648,81 @@ def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):
         assert len(ends) == len(rows) and all(
             not walls & {tuple(map(int, cell)) for cell in cells} for cells in ends)
     assert jams["local"] == jams["dist"]
+
+
+def test_each_agent_is_an_entity_of_its_own_and_from_128_a_group(run, tmp_path):
+    """A person can pick one agent: each is ``world/agents/<id>`` with its disc, trail, path,
+    announced moves, waits, goal and start, each with data; from 128 agents on, groups of 64
+    (``world/agents/group-<k>``), so that the viewer does not get hundreds more entities."""
+    from nnql_swarm.recording.agent_entities import GROUP_SIZE, PER_EPISODE
+
+    _, out, recording = run
+    ticks = int(read_episodes(out / "episodes.csv")[-1]["end_tick"]) + 1
+    for i in range(AGENTS):
+        for part in PER_TICK_PARTS:
+            assert recording.rows(f"world/agents/{i}/{part}") == ticks, (i, part)
+        for part in PER_EPISODE:
+            assert recording.rows(f"world/agents/{i}/{part}") == EPISODES, (i, part)
+        assert all(len(cell) == 1 for cell in recording.column(f"world/agents/{i}/disc",
+                                                               "Points2D:positions"))
+    waits = sum(len(w or []) for i in range(AGENTS)
+                for w in recording.column(f"world/agents/{i}/waits", "Arrows2D:origins"))
+    assert waits > 0
+    crowd = tmp_path / "crowd"
+    result = run_swarm(crowd, "--agents", "130", "--grid", "24x24", "--episodes", "1",
+                       "--max-steps", "6", "--in-process")
+    assert result.returncode == 0, result.stderr
+    grouped = Recording(crowd / "run.rrd")
+    owners = {e.split("/")[2] for e in grouped.entities if e.startswith("world/agents/")}
+    assert owners == {f"group-{k}" for k in range(3)}
+    sizes = {k: {len(cells) for cells in grouped.column(f"world/agents/group-{k}/disc",
+                                                        "Points2D:positions")}
+             for k in range(3)}
+    assert sizes == {0: {GROUP_SIZE}, 1: {GROUP_SIZE}, 2: {2}}
+    cells = grouped.agents(DISC, "Points2D:positions")
+    starts = swarm_episode(0, 0, 24, 24, 130).starts
+    assert np.array_equal(np.array(cells[0]), starts)
+
+
+@pytest.mark.full
+def test_every_panel_has_data_distributed_and_in_process(run):
+    """The blueprint's panels of a distributed run (the agents' negotiation wait among them)
+    and of an in-process one, each with data (``tests/test_panels.py``: every preset)."""
+    from tests.test_panels import Panels
+
+    mode, out, _ = run
+    panels = Panels(out)
+    assert not {view.name: lack for view in panels.views if (lack := panels.has_data(view))}
+    assert ("Negotiation wait (ms)" in {view.name for view in panels.views}) == \
+        (mode == "distributed")
+
+
+def test_a_copy_follows_one_agent_tick_by_tick(run, tmp_path):
+    """``recording.follow``: a copy of the run up to a tick, whose world view shows every
+    agent's disc and only the followed agent's parts, on the ``tick`` timeline."""
+    from nnql_swarm.recording.blueprint import blueprint
+    from nnql_swarm.recording.follow import follow_copy
+    from tests.test_panels import included, views
+
+    from nnql_swarm.recording.follow import curves_copy
+
+    _, out, recording = run
+    copy = Recording(follow_copy(out, tmp_path / "follow.rrd", 3, 30, since=20))
+    assert len(copy.blueprints) == 1
+    assert sorted(copy.column("world/agents/3/disc", "tick")) == list(range(20, 31))
+    assert copy.scalars("metrics/reward_sum") == {
+        e: v for e, v in recording.scalars("metrics/reward_sum").items() if v[0] <= 30}
+    curves = Recording(curves_copy(out, tmp_path / "curves.rrd"))
+    assert curves.scalars("metrics/reward_sum") == recording.scalars("metrics/reward_sum")
+    assert not {e for e in curves.entities if e.startswith("world/")}
+    assert copy.agents(DISC, "Points2D:positions")[30] == \
+        recording.agents(DISC, "Points2D:positions")[30]
+    config = SwarmConfig.from_json((out / "config.json").read_text())
+    [world] = [v for v in views(blueprint(config, follow=3).root_container)
+               if str(v.origin) == "world"]
+    shown = {e for e in recording.entities if included(e, "world", list(world.contents))}
+    parts = {e.rsplit("/", 1)[1] for e in shown if e.startswith("world/agents/3/")}
+    assert parts == {*PER_TICK_PARTS, GOAL, START}
+    assert {e for e in shown if e.startswith("world/agents/") and "/3/" not in e} == \
+        {f"world/agents/{i}/disc" for i in range(AGENTS) if i != 3}
+    assert "world/grid" in shown and "world/caption" in shown
