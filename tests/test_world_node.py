@@ -17,10 +17,11 @@ from nnql_swarm.world.node import WorldNode, WorldOptions
 CONFIG = SwarmConfig(run_id="worldnode", n_agents=2, episodes=2, max_steps=5)
 
 
-def intent_sample(agent: int, tick: int, action: int = 4) -> SimpleNamespace:
-    """What the handler reads of a zenoh.Sample (one cannot be built by hand)."""
+def intent_sample(agent: int, tick: int, action: int = 4, world: int = 1) -> SimpleNamespace:
+    """What the handler reads of a zenoh.Sample (one cannot be built by hand): an intent
+    decided for ``world``, the first start of the run's world (``storage.runfiles``)."""
     payload = encode(Intent(run="worldnode", tick=tick, sender=agent_sender(agent), agent=agent,
-                            episode=0, action=action))
+                            episode=0, action=action, world=world))
     return SimpleNamespace(key_expr=keys.intent_key("worldnode", agent), payload=payload)
 
 
@@ -29,6 +30,7 @@ def node(tmp_path):
     settings = TransportSettings(mode="peer")
     with zenoh.open(settings.zenoh_config()) as session:
         node = WorldNode(WorldOptions(CONFIG, settings, tmp_path), session)
+        assert node.world.incarnation == 1, "a fresh run folder: the world's first start"
         node.publishers = [session.declare_publisher(keys.obs_key("worldnode", i))
                            for i in range(CONFIG.n_agents)]
         for agent in range(CONFIG.n_agents):
