@@ -12,6 +12,7 @@ maps/pogema/<family>/<instance>.scen --agents k --max-steps 128 --on-target step
 --episodes 1 --in-process``.
 """
 
+from collections.abc import Callable
 import math
 from pathlib import Path
 
@@ -44,17 +45,23 @@ def play_pogema(bench: MapsBenchmark, tables: Tables, seed: int, recorder: Recor
                              {**keys, "map": instance.name}, on_episode, first=index)
 
 
-def check(bench: MapsBenchmark, directory: Path = INSTANCES) -> None:
-    """Refuse what cannot be played: a family that is not POGEMA's, an agent count above an
-    instance's, more instances than a family has (ValueError; a missing file: MapError)."""
+def check_families(bench: MapsBenchmark, read_first: Callable[[str, int], object]) -> None:
+    """Refuse what cannot be played: a family that is not POGEMA's, more instances than a family
+    has (ValueError), an agent count above an instance's (``read_first(family, agents)`` reads
+    the family's first instance for that many agents: ValueError; a missing file: MapError)."""
     for family in bench.families:
         if family not in FAMILIES:
             raise ValueError(f"--families: {family!r} is not one of POGEMA's "
                              f"({', '.join(FAMILIES)})")
         if bench.instances > FAMILIES[family].instances:
             raise ValueError(f"--instances: {family} has {FAMILIES[family].instances}")
-        first = scen_files(family, directory)[0]
-        read_instance(first, max(bench.agent_counts(family)))
+        read_first(family, max(bench.agent_counts(family)))
+
+
+def check(bench: MapsBenchmark, directory: Path = INSTANCES) -> None:
+    """:func:`check_families` over the one-shot instances (``.scen``)."""
+    check_families(bench, lambda family, agents: read_instance(scen_files(family, directory)[0],
+                                                               agents))
 
 
 def markdown(bench: MapsBenchmark, rows: list[dict], elapsed_s: float) -> str:

@@ -22,7 +22,7 @@ from nnql_swarm.experiment.maps import (
     REFERENCE, MapsBenchmark, Recorder, Tables, play_configs, scratch_window, swarm_config,
     with_interval,
 )
-from nnql_swarm.experiment.pogema import trained
+from nnql_swarm.experiment.pogema import check_families, trained
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
 from nnql_swarm.experiment.published import (
     THROUGHPUT, THROUGHPUT_METHODS, THROUGHPUT_SOURCES, figure,
@@ -75,15 +75,10 @@ def scratch_lifelong(bench: MapsBenchmark, seed: int, agents: int, recorder: Rec
 
 
 def check(bench: MapsBenchmark, directory: Path = INSTANCES) -> None:
-    """Refuse what cannot be played: a family that is not POGEMA's, an agent count above an
-    instance's, more instances than a family has (ValueError; a missing file: MapError)."""
-    for family in bench.families:
-        if family not in FAMILIES:
-            raise ValueError(f"--families: {family!r} is not one of POGEMA's "
-                             f"({', '.join(FAMILIES)})")
-        if bench.instances > FAMILIES[family].instances:
-            raise ValueError(f"--instances: {family} has {FAMILIES[family].instances}")
-        read_lifelong(goals_files(family, directory)[0], max(bench.agent_counts(family)))
+    """``experiment.pogema.check_families`` over the lifelong instances (``.goals``), and the
+    instance learned on from scratch."""
+    check_families(bench, lambda family, agents: read_lifelong(goals_files(family, directory)[0],
+                                                               agents))
     if bench.scratch_agents:
         read_lifelong(goals_files("random", directory)[0], max(bench.scratch_agents))
 
