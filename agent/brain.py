@@ -113,7 +113,7 @@ class AgentBrain:
                 assert self._noise is not None, "prepare draws the episode's noise"
                 preference_ranks(learner.values, floats(self._noise[1][obs.step]), learner.wmap,
                                  x, y, self.config.width, self.config.height, STAY, False,
-                                 self._ranks, 0)
+                                 self._ranks, 0, nb, m)
                 self.order = self._ordered()
             elif not obs.episode_end and self.config.step_aside:
                 action = self._make_way(obs, answers)
@@ -152,11 +152,12 @@ class AgentBrain:
         return self._rows(obs, answers, announcing, previous, self._was_at)
 
     def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:
-        """DAQL's (and the still shield's) memory: the neighbours' cells at the previous tick of
-        this episode, where they were in view, and the agent's own then (:attr:`_was_at`); and
-        this tick's, for the next."""
+        """DAQL's (the still shield's, and the hindrance's under ``--arbitration pibt``) memory:
+        the neighbours' cells at the previous tick of this episode, where they were in view, and
+        the agent's own then (:attr:`_was_at`); and this tick's, for the next."""
         params = self.learner.params
-        if params[LP_READING] != READ_DAQL and not (params[LP_SHIELD] and params[LP_STILL_SHIELD]):
+        if params[LP_READING] != READ_DAQL and not (params[LP_SHIELD] and params[LP_STILL_SHIELD]) \
+                and not self._pibt:
             return {}
         tick, cells, was_at = self._seen
         recent = tick == obs.tick - 1 and obs.step > 0

@@ -71,7 +71,7 @@ from nnql_swarm.learning.fields import (
     FP_ALPHA, FP_BETA, FP_GAMMA, LP_DETOUR, LP_WALL_SIGHT, LP_ESCAPE_SHIELD, LP_RADIUS,
     LP_RANDOM_STEP, LP_READING, LP_SHIELD, LP_STILL_SHIELD, LS_ACTION, LS_COUNT, LS_GOAL,
     LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_TAKEN, LS_X, LS_Y, NB_ID, NB_KNOWN, NB_NEXT_X,
-    NB_NEXT_Y, NB_ROW, NB_X, NB_Y, V_CROWD,
+    NB_NEXT_Y, NB_PREV_X, NB_PREV_Y, NB_ROW, NB_X, NB_Y, V_CROWD,
 )
 from nnql_swarm.learning.known_map import path_length, track
 from nnql_swarm.learning.readings import ds_state, read_rows, shield_mask, uses_map
@@ -272,16 +272,44 @@ def move_length(wmap, x, y, a, width, height):
 
 
 @kernel
-def preference_ranks(values, ties, wmap, x, y, width, height, first, by_value, ranks, base):
+def hindrance(nb, m, x, y, a, width, height):
+    """How many neighbours next to ``(x, y)`` would find the cell move ``a`` leads to in their
+    way: a neighbour coming into this agent's cell (its announced move, ``NB_NEXT``, where known;
+    else the move it made last, from ``NB_PREV``) would go on straight into it. PIBT's hindrance
+    (Okumura and Nagai, 2025) counts the cells that bring a neighbour nearer its goal, which an
+    agent does not know; the way a neighbour comes is what the negotiation and the last tick
+    tell it."""
+    tx, ty = target_x(x, a, width), target_y(y, a, height)
+    count = 0
+    for k in range(m):
+        jx, jy = nb[k][NB_X], nb[k][NB_Y]
+        if nb[k][NB_KNOWN] != 0:
+            dx, dy = nb[k][NB_NEXT_X] - jx, nb[k][NB_NEXT_Y] - jy
+        elif nb[k][NB_PREV_X] >= 0:
+            dx, dy = jx - nb[k][NB_PREV_X], jy - nb[k][NB_PREV_Y]
+        else:
+            continue
+        if (dx != 0 or dy != 0) and jx + dx == x and jy + dy == y \
+                and tx == x + dx and ty == y + dy:
+            count += 1
+    return count
+
+
+@kernel
+def preference_ranks(values, ties, wmap, x, y, width, height, first, by_value, ranks, base,
+                     nb, m):
     """An agent's order over its moves, announced for priority inheritance (``--arbitration
     pibt``; ``world.pibt.plan`` reads it): the rank of each action into ``ranks[base + a]``.
     Moves come by the length of the way to the goal they leave on the agent's known map
-    (:func:`move_length`); among moves as short that bring it nearer, by what it has learned of
-    the crowd where ``by_value``: their collision-avoidance sums Q_CA(a) (Eq. 6, ``values`` from
-    ``V_CROWD``), which tell apart moves that destination seeking, on the known map, cannot
-    (frozen play on POGEMA's random maps at 64 agents: sum of costs 0.97 of PIBT-greedy's,
-    against 1.00 by Q_final; docs/swarm.md); else by this step's tie-breakers (``ties``,
-    the larger first). How an agent makes way (staying, stepping aside or back) is left to the
+    (:func:`move_length`); among moves as short, the one fewer neighbours coming this way would
+    find in their way first (:func:`hindrance`, over the first ``m`` rows of ``nb``): a pushed
+    agent steps aside rather than on ahead of its pusher (frozen play on POGEMA's random maps at
+    64 agents: sum of costs 0.93 of PIBT-greedy's, against 0.97 without; docs/swarm.md). Then,
+    among moves that bring it nearer, by what it has learned of the crowd where ``by_value``:
+    their collision-avoidance sums Q_CA(a) (Eq. 6, ``values`` from ``V_CROWD``), which tell
+    apart moves that destination seeking, on the known map, cannot (against Q_final, which
+    played at PIBT-greedy's cost); else by this step's tie-breakers (``ties``, the larger
+    first). How an agent makes way otherwise (staying, stepping aside or back) is left to the
     tie-breakers, which change every step, as PIBT's: learned values are a fixed order there,
     and two agents that make way alike, step after step, trade cells for good (frozen play on
     POGEMA's random maps at 64 agents: CSR 0.71-0.78 with the values there, 0.96 without). The
@@ -298,6 +326,10 @@ def preference_ranks(values, ties, wmap, x, y, width, height, first, by_value, r
                 lb = move_length(wmap, x, y, b, width, height)
                 if lb != la:
                     better = lb < la
+                elif hindrance(nb, m, x, y, a, width, height) != \
+                        hindrance(nb, m, x, y, b, width, height):
+                    better = hindrance(nb, m, x, y, b, width, height) < \
+                        hindrance(nb, m, x, y, a, width, height)
                 elif by_value and la < here and values[V_CROWD + b] != values[V_CROWD + a]:
                     better = values[V_CROWD + b] > values[V_CROWD + a]
                 else:
@@ -330,7 +362,7 @@ def announce_order(learner, grid, sight, action, ties, ranks, base):
     one it learns from). Returns it."""
     first = action if random_step_taken(learner.params, learner.state) else -1
     preference_ranks(learner.values, ties, learner.wmap, sight.x, sight.y, grid.width,
-                     grid.height, first, True, ranks, base)
+                     grid.height, first, True, ranks, base, sight.nb, sight.m)
     first = first_choice(ranks, base)
     learner.state[LS_ACTION] = first
     return first

@@ -351,7 +351,7 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
                 actions[i] = STAY
                 if pibt and not ending:  # on its goal, it offers to stay; it may be pushed
                     preference_ranks(values, ties[i, step], wmap[i], x[i], y[i], width, height,
-                                     STAY, False, ranks, i * N_ACTIONS)
+                                     STAY, False, ranks, i * N_ACTIONS, nb, m)
                 elif step_aside and not ending:  # on its goal: it makes way if told to
                     m = neighbour_rows(i, tick, rules, bodies, moves, q_ds, nb, params, options,
                                        True)

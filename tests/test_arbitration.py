@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 
 from nnql_swarm.learning.known_map import fresh_map, map_size, plan_field
-from nnql_swarm.learning.fields import V_CROWD, V_FINAL, VALUES_SIZE
-from nnql_swarm.learning.learner import UNREACHED, move_length, preference_ranks
+from nnql_swarm.learning.fields import (
+    NB_FIELDS, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PREV_X, NB_PREV_Y, NB_X, NB_Y, V_CROWD,
+    V_FINAL, VALUES_SIZE,
+)
+from nnql_swarm.learning.learner import UNREACHED, hindrance, move_length, preference_ranks
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.sim.runs import Batch, swarm_world
@@ -23,6 +26,20 @@ def known_field(width, height, goal):
     return wmap
 
 
+NO_ROWS = np.zeros((0, NB_FIELDS), dtype=np.int64)
+
+
+def coming_from_the_left(known: bool, seen_before: bool) -> np.ndarray:
+    """One neighbour row: an agent at (1, 2), next to (2, 2), coming right into it (its
+    announced move where ``known``, else the move it made last where ``seen_before``)."""
+    row = np.zeros((1, NB_FIELDS), dtype=np.int64)
+    row[0, NB_ID], row[0, NB_X], row[0, NB_Y] = 1, 1, 2
+    row[0, NB_KNOWN] = int(known)
+    row[0, NB_NEXT_X], row[0, NB_NEXT_Y] = (2, 2) if known else (1, 2)
+    row[0, NB_PREV_X], row[0, NB_PREV_Y] = (0, 2) if seen_before else (-1, -1)
+    return row
+
+
 def test_an_order_goes_by_the_known_way_then_by_learned_crowd_value_then_by_tie():
     """From (2, 2) to (4, 4) on an open map: right and down leave 3 to go, staying 4, up and
     left 5 each. Lengths come first; the learned collision-avoidance values (Eq. 6, not Q_final)
@@ -36,25 +53,47 @@ def test_an_order_goes_by_the_known_way_then_by_learned_crowd_value_then_by_tie(
     values = np.zeros(VALUES_SIZE)  # Q_final from V_FINAL, Q_CA(a) from V_CROWD
     ties = np.array([0.1, 0.2, 0.3, 0.4, 0.5])
     ranks = np.zeros(N_ACTIONS, dtype=np.int64)
-    preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0)
+    preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0, NO_ROWS, 0)
     by_tie = sorted(nearer, key=lambda a: -ties[a])
     assert [ranks[a] for a in by_tie] == [0, 1] and ranks[STAY] == 2
     assert sorted(ranks[away]) == [3, 4]
     values[V_FINAL + by_tie[0]] = 9.0  # Q_final does not order them
-    preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0)
+    preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0, NO_ROWS, 0)
     assert [ranks[a] for a in by_tie] == [0, 1]
     values[V_CROWD + by_tie[-1]] = 1.0  # a learned crowd value outranks the tie-breaker there
     away_by_tie = sorted(away, key=lambda a: -ties[a])
     values[V_CROWD + away_by_tie[-1]] = 1.0  # but not among the moves that make way
-    preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0)
+    preference_ranks(values, ties, wmap, 2, 2, 5, 5, -1, True, ranks, 0, NO_ROWS, 0)
     assert ranks[by_tie[-1]] == 0 and ranks[by_tie[0]] == 1
     assert [ranks[a] for a in away_by_tie] == [3, 4]
-    preference_ranks(values, ties, wmap, 2, 2, 5, 5, STAY, True, ranks, 0)  # a random step
+    preference_ranks(values, ties, wmap, 2, 2, 5, 5, STAY, True, ranks, 0, NO_ROWS, 0)  # a random step
     assert ranks[STAY] == 0 and ranks[by_tie[-1]] == 1
     assert sorted(ranks) == list(range(N_ACTIONS))
     off_grid = [a for a in range(N_ACTIONS) if a != STAY
                 and (target_x(0, a, 5), target_y(0, a, 5)) == (0, 0)]
     assert off_grid and move_length(wmap, 0, 0, off_grid[0], 5, 5) == UNREACHED
+
+
+def test_a_pushed_agent_steps_aside_rather_than_on_ahead_of_its_pusher():
+    """On its goal at (2, 2), an agent offers to stay, then its four moves, all one step from
+    the goal. A neighbour coming right into its cell would find the cell on its right in its way
+    (hindrance): that move goes last, whatever the tie-breakers, whether the neighbour announced
+    its move or was seen making it last tick; a neighbour not seen coming hinders nothing."""
+    wmap = known_field(5, 5, (2, 2))
+    right = next(a for a in range(N_ACTIONS) if (target_x(2, a, 5), target_y(2, a, 5)) == (3, 2))
+    ties = np.array([0.1, 0.2, 0.3, 0.4, 0.5])
+    ties[right] = 0.9  # the tie-breakers would put it first
+    ranks = np.zeros(N_ACTIONS, dtype=np.int64)
+    values = np.zeros(VALUES_SIZE)
+    for known, seen_before in ((True, False), (False, True)):
+        nb = coming_from_the_left(known, seen_before)
+        assert [hindrance(nb, 1, 2, 2, a, 5, 5) for a in range(N_ACTIONS)] == [
+            int(a == right) for a in range(N_ACTIONS)]
+        preference_ranks(values, ties, wmap, 2, 2, 5, 5, STAY, False, ranks, 0, nb, 1)
+        assert ranks[STAY] == 0 and ranks[right] == N_ACTIONS - 1
+    preference_ranks(values, ties, wmap, 2, 2, 5, 5, STAY, False, ranks, 0,
+                     coming_from_the_left(False, False), 1)
+    assert ranks[STAY] == 0 and ranks[right] == 1
 
 
 def plan_once(x, y, gx, gy, width, height, step, learned, ranks, walls=()):
