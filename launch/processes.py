@@ -33,6 +33,9 @@ what an agent runs, and no more. A forked process starts with the server's memor
 resident memory: the world's modules (its rules, the shared table, the progress bar's tqdm) would
 make every agent larger, so the one world imports them itself, once forked."""
 
+SERVED = "nnql_swarm.launch.served"
+"""Imported by the server after everything else: its memory tidied before it forks."""
+
 _SERVED: dict[str, str] | None = None
 """The environment the forkserver was started with (None: not started by this process yet)."""
 
@@ -54,7 +57,7 @@ def process_context() -> SpawnContext | ForkServerContext:
         return mp.get_context("spawn")
     context = mp.get_context("forkserver")
     if _SERVED is None:
-        context.set_forkserver_preload([__name__, *PRELOADED, *_launcher_main()])
+        context.set_forkserver_preload([__name__, *PRELOADED, *_launcher_main(), SERVED])
         # The resource tracker first, on its own: starting it unblocks SIGINT, which a Ctrl-C
         # blocked meanwhile would reach while it is ignored, and be lost.
         resource_tracker.ensure_running()
