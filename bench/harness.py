@@ -7,7 +7,7 @@ from typing import Callable
 from nnql_swarm.recording.sinks import RecordingPlan
 from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from nnql_swarm.transport.ports import wait_listening
-from nnql_swarm.transport.topology import EmbeddedLayout
+from nnql_swarm.transport.topology import EmbeddedLayout, embedded_topology
 from nnql_swarm.world.metrics import read_episodes
 
 
@@ -33,11 +33,13 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
                     layout: EmbeddedLayout | None = None) -> float:
     """The launcher's world and agent processes on one machine; ``agent_target`` replaces the
     agents' entry point (same arguments as ``launch.processes.agent_main``); ``memory`` (a
-    ``bench.procstat.MemorySampler``) is told every process as ``world`` and ``agent-<i>``."""
+    ``bench.procstat.MemorySampler``) is told every process as ``world`` and ``agent-<i>``;
+    ``layout``: the launcher's for this many agents unless given (a mesh up to
+    ``transport.topology.HUB_FROM_AGENTS``, then the world as hub)."""
     from nnql_swarm.launch.processes import agent_main, process_context, world_main
 
     ctx = process_context()  # the kernel uncompiled, as the launcher's world and agents run
-    layout = layout or EmbeddedLayout()
+    layout = layout or EmbeddedLayout(topology=embedded_topology(config.n_agents))
     out.mkdir(parents=True)
     plan = RecordingPlan.to_files(config, out) if record else False
     world = ctx.Process(target=world_main, args=(config, layout.world(), out, plan, False))

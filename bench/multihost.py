@@ -110,8 +110,9 @@ def log(out: Path, name: str):
 
 
 def swarm_rate(layout: str, lan: netns.Lan, port: int, secure_dir: Path, out: Path,
-               episodes: int, agents: int) -> tuple[float, int, int]:
-    """Ticks a second, missed intents, and episodes run of one swarm in a layout."""
+               episodes: int, agents: int) -> tuple[float, int, int, int]:
+    """Ticks a second, missed intents (the first episode's, with the start-up in it; the
+    others'), and episodes run of one swarm in a layout."""
     side = grid_side(agents)
     run = ["--agents", str(agents), "--grid", f"{side}x{side}", "--episodes", str(episodes),
            "--max-steps", "100", "--seed", "3", "--run-id", "bench", "--no-record", "--no-progress"]
@@ -135,7 +136,8 @@ def swarm_rate(layout: str, lan: netns.Lan, port: int, secure_dir: Path, out: Pa
     rows = read_episodes(out / "world" / "episodes.csv")
     ticks = sum(int(r["steps"]) + 1 for r in rows)
     seconds = sum(float(r["duration_s"]) for r in rows)
-    return ticks / seconds, sum(int(r["missed_intents"]) for r in rows), len(rows)
+    missed = [int(r["missed_intents"]) for r in rows]
+    return ticks / seconds, sum(missed[:1]), sum(missed[1:]), len(rows)
 
 
 def main() -> int:
@@ -165,19 +167,22 @@ def main() -> int:
                                    check=True, capture_output=True)
                     rtt = probe_rtt(layout, lan, port, secure_dir)
                 with netns.Lan(["world", "a", "b"], subnet) as lan:
-                    rate, missed, ran = swarm_rate(layout, lan, port, secure_dir,
+                    rate, missed_first, missed, ran = swarm_rate(layout, lan, port, secure_dir,
                                                    Path(tmp) / f"{repeat}-{layout}", args.episodes,
                                                    args.agents)
-                results.setdefault(layout, []).append((rtt, rate, missed))
-                print(f"  {layout:10s} get {rtt:.3f} ms, {rate:.0f} ticks/s, missed {missed}, "
+                results.setdefault(layout, []).append((rtt, rate, missed_first, missed))
+                print(f"  {layout:10s} get {rtt:.3f} ms, {rate:.0f} ticks/s, missed "
+                      f"{missed_first} in the first episode, {missed} after, "
                       f"{ran} of {args.episodes} episodes "
                       f"(load {os.getloadavg()[0]:.1f})", file=sys.stderr, flush=True)
-    print(f"{'layout':10s} {'get_ms':>8s} {'ticks_per_s':>12s} {'missed':>7s}   "
+    print(f"{'layout':10s} {'get_ms':>8s} {'ticks_per_s':>12s} {'missed 1st':>10s} "
+          f"{'after':>6s}   "
           f"(medians of {args.repeats}, {args.agents} agents, {args.episodes} episodes of <= 100 "
           f"steps)")
     for layout, rows in results.items():
         print(f"{layout:10s} {statistics.median(r[0] for r in rows):8.3f} "
-              f"{statistics.median(r[1] for r in rows):12.0f} {sum(r[2] for r in rows):7d}")
+              f"{statistics.median(r[1] for r in rows):12.0f} {sum(r[2] for r in rows):10d} "
+              f"{sum(r[3] for r in rows):6d}")
     print(f"load average at the end: {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
     return 0
 

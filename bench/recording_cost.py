@@ -38,8 +38,13 @@ def main() -> int:
     p.add_argument("--max-steps", type=int, default=100)
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--in-process", action="store_true", help="the one-process runner instead")
+    p.add_argument("--keep", type=Path, default=None, metavar="DIR",
+                   help="keep the runs in this new folder (one per repeat and setting: the "
+                        "recorded ones' run.rrd to open in the viewer), not a temporary one")
     add_preset_option(p)
     args = p.parse_args()
+    if args.keep is not None and args.keep.exists():
+        p.error(f"--keep {args.keep}: already there; name a new folder")
     config = swarm_config(args.preset, run_id="recording-cost", n_agents=args.agents,
                           episodes=args.episodes, max_steps=args.max_steps,
                           width=grid_side(args.agents), height=grid_side(args.agents))
@@ -47,6 +52,8 @@ def main() -> int:
     rates: dict[bool, list[float]] = {False: [], True: []}
     merges, sizes = [], []
     with tempfile.TemporaryDirectory() as tmp:
+        if args.keep is not None:
+            tmp = str(args.keep)
         for r in range(args.repeats):
             for record in ((False, True) if r % 2 == 0 else (True, False)):
                 out = Path(tmp) / f"{r}-{'on' if record else 'off'}"

@@ -14,19 +14,27 @@ import time
 from multiprocessing import forkserver, resource_tracker
 from multiprocessing.context import ForkServerContext, SpawnContext
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from nnql_swarm.kernel.jit import plain_python_environment
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.settings import TransportSettings
-from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
 from nnql_swarm.supervision.supervisor import start_ignoring_sigint
 
+if TYPE_CHECKING:
+    from nnql_swarm.supervision.resume import ResumePoint
 
-PRELOADED = ("nnql_swarm.agent.node", "nnql_swarm.world.node", "nnql_swarm.recording.loggers",
-             "nnql_swarm.terminal.cli", "setproctitle")
-"""What the server the processes of a swarm are forked from imports, once (:func:`process_context`)."""
+
+PRELOADED = ("nnql_swarm.agent.node", "nnql_swarm.recording.loggers", "setproctitle")
+"""What the server the processes of a swarm are forked from imports, once (:func:`process_context`):
+what an agent runs, and no more. A forked process starts with the server's memory, counted in its
+resident memory: the world's modules (its rules, the shared table, the progress bar's tqdm) would
+make every agent larger, so the one world imports them itself, once forked."""
+
+SERVED = "nnql_swarm.launch.served"
+"""Imported by the server after everything else: its memory tidied before it forks."""
 
 _SERVED: dict[str, str] | None = None
 """The environment the forkserver was started with (None: not started by this process yet)."""
@@ -49,7 +57,7 @@ def process_context() -> SpawnContext | ForkServerContext:
         return mp.get_context("spawn")
     context = mp.get_context("forkserver")
     if _SERVED is None:
-        context.set_forkserver_preload([__name__, *PRELOADED])
+        context.set_forkserver_preload([__name__, *PRELOADED, *_launcher_main(), SERVED])
         # The resource tracker first, on its own: starting it unblocks SIGINT, which a Ctrl-C
         # blocked meanwhile would reach while it is ignored, and be lost.
         resource_tracker.ensure_running()
@@ -58,13 +66,28 @@ def process_context() -> SpawnContext | ForkServerContext:
     return context
 
 
+def _launcher_main() -> tuple[str, ...]:
+    """The launcher's main module if it was run by name (``python -m bench.scale``), for the
+    server to import once. Every child runs its launcher's main module again before its target
+    (multiprocessing's preparation, for targets defined there): by name, a fresh import of all
+    that module imports, some 25 ms of CPU and its memory in each process, unless the server
+    holds them already. A main run from its path (``launch/swarm.py``) is run again from its
+    source, which is why the launcher's imports nothing at its top."""
+    main = sys.modules.get("__main__")
+    name = getattr(getattr(main, "__spec__", None), "name", None)
+    return () if name is None or name.endswith("__main__") else (name,)
+
+
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
-               progress: bool, start: ResumePoint = ResumePoint(0, 0)) -> None:
-    """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False."""
+               progress: bool, start: "ResumePoint | None" = None) -> None:
+    """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False;
+    ``start``: where it resumes (None: the run's start)."""
     from nnql_swarm.recording.loggers import open_world_viz
+    from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
     from nnql_swarm.terminal.cli import episode_summary, progress as progress_bar
     from nnql_swarm.world.node import WorldOptions, run_world
 
+    start = start or ResumePoint(0, 0)
     name_process("nnql-world", config)
     setup_logging("world")
     bar = progress_bar(config.episodes - start.episode, "episode") if progress else None
