@@ -33,8 +33,23 @@ DISC, TRAIL, PATH, INTENT, WAITS, GOAL, START = ("disc", "trail", "path", "inten
 PER_TICK = (DISC, TRAIL, PATH, INTENT, WAITS)
 PER_EPISODE = (GOAL, START)
 EPISODE_WIDE = (PATH, INTENT, WAITS)
-"""The parts the world view shows for a whole episode at once on the ``episode`` timeline (the
-path only below :data:`GROUPED_FROM` agents: above, the paths of an episode cover the grid)."""
+"""The parts the world view shows for a whole episode at once on the ``episode`` timeline,
+below :data:`CROWDED_FROM` agents."""
+CROWDED_FROM = 32
+"""From this many agents on, the world view's episode (the ``episode`` timeline) shows each
+agent's path alone, faded by age (``recording.fading``), not its every move and wait: 64
+agents' 256 steps of arrows covered the grid. Where they waited, the jams' heat map shows; each
+move and wait, the ``tick`` timeline."""
+CROWDED_EPISODE_WIDE = (PATH,)
+
+
+def episode_parts(n_agents: int) -> tuple[str, ...]:
+    """The parts the ``episode`` timeline shows of a whole episode at once."""
+    return EPISODE_WIDE if n_agents < CROWDED_FROM else CROWDED_EPISODE_WIDE
+
+
+def crowded(n_agents: int) -> bool:
+    return n_agents >= CROWDED_FROM
 
 
 def owners(n_agents: int) -> list[tuple[str, np.ndarray]]:

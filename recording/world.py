@@ -46,8 +46,10 @@ from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
 from nnql_swarm.recording.agent_entities import (
-    DISC, GOAL, INTENT, PATH, START, TRAIL, WAITS, EntityColumns, by_entity, owners, part_paths,
+    CROWDED_FROM, DISC, GOAL, INTENT, PATH, START, TRAIL, WAITS, EntityColumns, by_entity,
+    crowded, owners, part_paths,
 )
+from nnql_swarm.recording.fading import FRESH_STEPS, path_alpha
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
 from nnql_swarm.recording.jams import JAM_HALF, JAM_LINE, JamMap
 from nnql_swarm.recording.shown import ca_learns, collision_bound, learns
@@ -151,6 +153,10 @@ SMOOTHING = 0.1
 """The weight of each new episode in the smoothed curves (the steps ratio, the reward): a memory
 of about ten episodes."""
 
+INTENT_SCALE = 0.7
+"""An announced move's arrow, in cells: short of the next cell, so that arrows in a row do not
+join."""
+
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
 
@@ -208,12 +214,11 @@ def legend(config: SwarmConfig) -> str:
     return f"""**World** ({config.width} x {config.height}, {config.n_agents} agents).
 Discs are agents, labelled with their id; the box with the same id and colour is that agent's
 goal. Every agent has a colour of its own.{walls}
-On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
-move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
-discs), and the agents where the episode left them; a small dot in an agent's colour is where
-it started, a thin line in its colour the path it took, a red ring around an agent the episode
-left short of its goal, and red shading where agents on their way waited (the traffic jams: the
-deeper the red, the more steps waited there). On the `tick` timeline it shows one tick (the
+On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: {moves(config)}
+the collisions (red discs), and the agents where the episode left them; a small dot in an
+agent's colour is where it started, a red ring around an agent the episode left short of its
+goal, and red shading where agents on their way waited (the traffic jams: the deeper the red,
+the more steps waited there). On the `tick` timeline it shows one tick (the
 caption above the grid names its episode and step): where each agent stood, the move it
 announced, its last {TRAIL_LENGTH} cells.
 {waits}{arbitration}{lifelong}
@@ -227,6 +232,16 @@ reward (pale: each episode; dark: smoothed over about ten episodes){explored(con
 {tables(config)}
 {shared}
 """
+
+
+def moves(config: SwarmConfig) -> str:
+    """What the ``episode`` timeline draws of the agents' moves."""
+    if crowded(config.n_agents):
+        return (f"each agent's path (a line in its colour: opaque for the episode's last "
+                f"{FRESH_STEPS} steps, fainter the earlier the step; from {CROWDED_FROM} "
+                f"agents on the moves and waits are on the `tick` timeline only),")
+    return ("every move announced (thick arrows in the agent's colour), every wait (below), "
+            "the path each agent took (a thin line in its colour),")
 
 
 def following(config: SwarmConfig) -> str:
@@ -373,8 +388,9 @@ class WorldViz:
                 static=True)
             rec.log(f"{path}/{TRAIL}", rr.LineStrips2D.from_fields(
                 colors=with_alpha(colours, 110), radii=0.06, draw_order=15.0), static=True)
-            rec.log(f"{path}/{PATH}", rr.LineStrips2D.from_fields(
-                colors=with_alpha(colours, 90), radii=0.05, draw_order=14.0), static=True)
+            rec.log(f"{path}/{PATH}", rr.LineStrips2D.from_fields(  # crowded: colours per step
+                colors=with_alpha(colours, 90), radii=0.08 if crowded(c.n_agents) else 0.05,
+                draw_order=14.0), static=True)
             rec.log(f"{path}/{INTENT}", rr.Arrows2D.from_fields(
                 colors=colours, radii=0.09, draw_order=40.0), static=True)
             rec.log(f"{path}/{WAITS}", rr.Arrows2D.from_fields(
@@ -586,15 +602,22 @@ class WorldViz:
         order, lengths = by_entity(np.repeat(np.arange(k), n), np.tile(np.arange(n), k), k, n)
         flat = cells.reshape(-1, 2)[order]
         parts.add(part_paths(n, DISC), rr.Points2D.columns(positions=flat).partition(lengths))
-        moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32)
+        moves = (MOVES[np.array(actions, dtype=np.int64)] * INTENT_SCALE).astype(np.float32)
         parts.add(part_paths(n, INTENT), rr.Arrows2D.columns(
             origins=flat, vectors=moves.reshape(-1, 2)[order]).partition(lengths))
         trails = np.concatenate([self._trails(cells[first:last], int(episodes[first]))
                                  for first, last in episode_spans(episodes)])
         trails = trails.reshape(-1, TRAIL_LENGTH, 2)[order]
         parts.add(part_paths(n, TRAIL), rr.LineStrips2D.columns(strips=trails).partition(lengths))
-        parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(  # the step that led here
-            strips=np.ascontiguousarray(trails[:, -2:])).partition(lengths))
+        steps_in = np.ascontiguousarray(trails[:, -2:])  # the step that led here
+        if crowded(n):  # faded by age: the episode view shows the paths alone
+            alpha = np.repeat(path_alpha(np.array(steps), episodes), n)  # items: tick, agent
+            colours = np.concatenate([np.tile(self.colors, (k, 1)), alpha[:, None]], axis=1)
+            parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(
+                strips=steps_in, colors=colours[order]).partition(lengths))
+        else:
+            parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(
+                strips=steps_in).partition(lengths))
 
         asks = negotiation_mask(self.config, positions, np.array(arrived_then, dtype=bool), ticks)
         asks &= np.array(moved, dtype=bool)[:, None, None]
