@@ -30,6 +30,9 @@ draw it as one entity of all agents did.)"""
 
 DISC, TRAIL, PATH, INTENT, WAITS, GOAL, START = ("disc", "trail", "path", "intent", "waits",
                                                  "goal", "start")
+ROUTE = "route"
+"""From :data:`CROWDED_FROM` agents on: the agent's whole path of an episode, at the episode's
+end, in bands faded by age (``recording.fading``); nothing from the next episode's start."""
 PER_TICK = (DISC, TRAIL, PATH, INTENT, WAITS)
 PER_EPISODE = (GOAL, START)
 EPISODE_WIDE = (PATH, INTENT, WAITS)
@@ -37,10 +40,11 @@ EPISODE_WIDE = (PATH, INTENT, WAITS)
 below :data:`CROWDED_FROM` agents."""
 CROWDED_FROM = 32
 """From this many agents on, the world view's episode (the ``episode`` timeline) shows each
-agent's path alone, faded by age (``recording.fading``), not its every move and wait: 64
-agents' 256 steps of arrows covered the grid. Where they waited, the jams' heat map shows; each
-move and wait, the ``tick`` timeline."""
-CROWDED_EPISODE_WIDE = (PATH,)
+agent's path alone, faded by age (:data:`ROUTE`), not its every move and wait: 64 agents' 256
+steps of arrows covered the grid. Where they waited, the jams' heat map shows; each move and
+wait, the ``tick`` timeline."""
+CROWDED_EPISODE_WIDE: tuple[str, ...] = ()
+"""Nothing a tick: the route, at the episode's end, is what the episode view shows."""
 
 
 def episode_parts(n_agents: int) -> tuple[str, ...]:

@@ -46,10 +46,10 @@ from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
 from nnql_swarm.recording.agent_entities import (
-    CROWDED_FROM, DISC, GOAL, INTENT, PATH, START, TRAIL, WAITS, EntityColumns, by_entity,
+    CROWDED_FROM, DISC, GOAL, INTENT, PATH, ROUTE, START, TRAIL, WAITS, EntityColumns, by_entity,
     crowded, owners, part_paths,
 )
-from nnql_swarm.recording.fading import FRESH_STEPS, path_alpha
+from nnql_swarm.recording.fading import BANDS, FRESH_STEPS, route_strips
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
 from nnql_swarm.recording.jams import JAM_HALF, JAM_LINE, JamMap
 from nnql_swarm.recording.shown import ca_learns, collision_bound, learns
@@ -237,9 +237,10 @@ reward (pale: each episode; dark: smoothed over about ten episodes){explored(con
 def moves(config: SwarmConfig) -> str:
     """What the ``episode`` timeline draws of the agents' moves."""
     if crowded(config.n_agents):
-        return (f"each agent's path (a line in its colour: opaque for the episode's last "
-                f"{FRESH_STEPS} steps, fainter the earlier the step; from {CROWDED_FROM} "
-                f"agents on the moves and waits are on the `tick` timeline only),")
+        return (f"each agent's path, drawn at the episode's end (a line in its colour: opaque "
+                f"for the episode's last {FRESH_STEPS} steps, the steps before them in {BANDS} "
+                f"bands, the earlier the fainter; from {CROWDED_FROM} agents on the moves and "
+                f"waits are on the `tick` timeline only),")
     return ("every move announced (thick arrows in the agent's colour), every wait (below), "
             "the path each agent took (a thin line in its colour),")
 
@@ -348,6 +349,10 @@ class WorldViz:
         self._reached: list[tuple[int, int, np.ndarray]] = []  # lifelong: goals reached
         self._jams = JamMap(config.width, config.height)
         self._jam_maps: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # per episode's end
+        # Crowded runs: every agent's cells this episode, and the routes to send (empty at an
+        # episode's start, the episode's at its end).
+        self._route: list[tuple] = []
+        self._routes: list[tuple[int, int, np.ndarray | None]] = []
         self._log_static()
         self.known_map = None
         if map_agent is not None and 0 <= map_agent < n:
@@ -388,9 +393,11 @@ class WorldViz:
                 static=True)
             rec.log(f"{path}/{TRAIL}", rr.LineStrips2D.from_fields(
                 colors=with_alpha(colours, 110), radii=0.06, draw_order=15.0), static=True)
-            rec.log(f"{path}/{PATH}", rr.LineStrips2D.from_fields(  # crowded: colours per step
-                colors=with_alpha(colours, 90), radii=0.08 if crowded(c.n_agents) else 0.05,
-                draw_order=14.0), static=True)
+            rec.log(f"{path}/{PATH}", rr.LineStrips2D.from_fields(
+                colors=with_alpha(colours, 90), radii=0.05, draw_order=14.0), static=True)
+            if crowded(c.n_agents):  # colours per band (recording.fading)
+                rec.log(f"{path}/{ROUTE}", rr.LineStrips2D.from_fields(
+                    radii=0.08, draw_order=14.0), static=True)
             rec.log(f"{path}/{INTENT}", rr.Arrows2D.from_fields(
                 colors=colours, radii=0.09, draw_order=40.0), static=True)
             rec.log(f"{path}/{WAITS}", rr.Arrows2D.from_fields(
@@ -462,8 +469,13 @@ class WorldViz:
             self._jams.add(before, world.cells,
                            (True,) * c.n_agents if c.lifelong else
                            tuple(not home for home in self._arrived))
+        if crowded(c.n_agents):
+            self._route.append(before)
         if report.episode_row is not None:  # its end tick: nobody moves, as the episode left them
             self._jam_maps.append((report.tick, report.episode, *self._jams.take()))
+            if crowded(c.n_agents):
+                self._routes.append((report.tick, report.episode,
+                                     np.array(self._route, np.float32)))
             short = [cell for cell, home in zip(before, self._arrived)
                      if not home and not c.lifelong]  # lifelong: everyone is on its way
             self._stuck.append((report.tick, report.episode,
@@ -487,6 +499,9 @@ class WorldViz:
         self._stuck.append((report.tick, report.episode, np.zeros((0, 2), np.float32)))
         self._jam_maps.append((report.tick, report.episode, np.zeros((0, 2), np.float32),
                                np.zeros((0, 4), np.uint8)))
+        self._route = []
+        if crowded(c.n_agents):
+            self._routes.append((report.tick, report.episode, None))
         self._goal_cells = episode.goals.tolist()
 
     def _end_episode(self, report: TickReport, row: dict) -> None:
@@ -566,6 +581,8 @@ class WorldViz:
             self.rec.send_columns(JAMS, time_columns(j_ticks, j_episodes), rr.Boxes2D.columns(
                 centers=every, half_sizes=np.full(every.shape, JAM_HALF, np.float32),
                 colors=np.concatenate(colours)).partition([len(c) for c in centres]))
+        if self._routes:
+            self._send_routes()
         if self._reached:
             r_ticks, r_episodes, cells = zip(*self._reached)
             self._reached = []
@@ -609,15 +626,8 @@ class WorldViz:
                                  for first, last in episode_spans(episodes)])
         trails = trails.reshape(-1, TRAIL_LENGTH, 2)[order]
         parts.add(part_paths(n, TRAIL), rr.LineStrips2D.columns(strips=trails).partition(lengths))
-        steps_in = np.ascontiguousarray(trails[:, -2:])  # the step that led here
-        if crowded(n):  # faded by age: the episode view shows the paths alone
-            alpha = np.repeat(path_alpha(np.array(steps), episodes), n)  # items: tick, agent
-            colours = np.concatenate([np.tile(self.colors, (k, 1)), alpha[:, None]], axis=1)
-            parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(
-                strips=steps_in, colors=colours[order]).partition(lengths))
-        else:
-            parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(
-                strips=steps_in).partition(lengths))
+        parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(  # the step that led here
+            strips=np.ascontiguousarray(trails[:, -2:])).partition(lengths))
 
         asks = negotiation_mask(self.config, positions, np.array(arrived_then, dtype=bool), ticks)
         asks &= np.array(moved, dtype=bool)[:, None, None]
@@ -643,6 +653,34 @@ class WorldViz:
         hit_t, hit_agent = np.nonzero(hit)
         rec.send_columns(COLLISIONS, index, rr.Points2D.columns(
             positions=cells[hit_t, hit_agent]).partition(hit.sum(axis=1)))
+
+    def _send_routes(self) -> None:
+        """Each agent's path of each episode in bands faded by age (``recording.fading``), at the
+        episode's end tick; nothing from its start tick on."""
+        n = self.config.n_agents
+        ticks, episodes, routes = zip(*self._routes)
+        self._routes = []
+        rows, agents, strips, alphas = [], [], [], []
+        for row, cells in enumerate(routes):
+            if cells is None:
+                continue
+            who, these, alpha = route_strips(cells)
+            rows.append(np.full(len(who), row))
+            agents.append(who)
+            alphas.append(alpha)
+            strips += these
+        k = len(routes)
+        row_of = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+        agent_of = np.concatenate(agents) if agents else np.zeros(0, np.int64)
+        order, lengths = by_entity(row_of, agent_of, k, n)
+        colours = np.zeros((len(strips), 4), np.uint8)
+        if strips:
+            colours[:, :3] = self.colors[agent_of]
+            colours[:, 3] = np.concatenate(alphas)
+        columns = EntityColumns(time_columns(ticks, episodes), k)
+        columns.add(part_paths(n, ROUTE), rr.LineStrips2D.columns(
+            strips=[strips[i] for i in order], colors=colours[order]).partition(lengths))
+        columns.send(self.rec)
 
     def _send_arbitration(self, index, cells: np.ndarray, actions: np.ndarray,
                           wanted: np.ndarray, moved: np.ndarray) -> None:

@@ -1,54 +1,63 @@
-"""A crowded run's episode view: each agent's path alone, faded by age (``recording.fading``),
-read back from a real recording of 32 agents."""
+"""A crowded run's episode view: each agent's path alone, in bands faded by age
+(``recording.fading``), read back from a real recording of 32 agents."""
 
 import numpy as np
 import rerun as rr
 
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.recording.agent_entities import CROWDED_FROM, PATH, agents_of
+from nnql_swarm.recording.agent_entities import CROWDED_FROM, ROUTE
 from nnql_swarm.recording.blueprint import episode_wide
-from nnql_swarm.recording.fading import FRESH_STEPS, OLDEST_ALPHA, path_alpha
+from nnql_swarm.recording.fading import BANDS, FRESH_STEPS, OLDEST_ALPHA, route_bands
 from nnql_swarm.recording.world import legend
+from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import run_swarm
 
 
-def test_the_newest_steps_are_opaque_and_the_first_the_faintest():
-    steps = np.arange(101)
-    alpha = path_alpha(steps, np.zeros_like(steps))
-    assert alpha[0] == OLDEST_ALPHA and (alpha[-FRESH_STEPS:] == 255).all()
-    assert alpha[-FRESH_STEPS - 1] < 255 and (np.diff(alpha.astype(int)) >= 0).all()
+def test_the_newest_steps_are_one_opaque_band_and_the_older_fade_in_bands():
+    bands = route_bands(100)
+    assert bands[-1] == (100 - FRESH_STEPS, 100, 255)
+    assert len(bands) == BANDS + 1 and bands[0][:1] == (0,) and bands[0][2] == OLDEST_ALPHA
+    assert all(a[1] == b[0] for a, b in zip(bands, bands[1:]))  # joined, cell to cell
+    assert [alpha for *_, alpha in bands] == sorted({alpha for *_, alpha in bands})
 
 
-def test_each_episode_fades_from_its_own_newest_step():
-    alpha = path_alpha([0, 1, 40, 0, 1, 2], [3, 3, 3, 4, 4, 4])
-    assert alpha.tolist() == [OLDEST_ALPHA, path_alpha([1, 40], [0, 0])[0], 255, 255, 255, 255]
+def test_a_short_episode_is_one_opaque_band_and_an_empty_one_none():
+    assert route_bands(FRESH_STEPS) == [(0, FRESH_STEPS, 255)]
+    assert route_bands(0) == []
 
 
-def test_a_crowded_episode_view_shows_the_paths_alone_and_a_smaller_one_every_move_and_wait():
+def test_a_crowded_episode_view_shows_the_routes_and_a_smaller_one_every_move_and_wait():
     crowded = SwarmConfig(n_agents=CROWDED_FROM, width=16, height=16)
-    parts = {path.rsplit("/", 1)[-1] for path in episode_wide(crowded)
-             if path.startswith("world/agents/")}
-    assert parts == {PATH}
-    assert "tick` timeline only" in legend(crowded)
+    assert not [path for path in episode_wide(crowded) if path.startswith("world/agents/")]
+    assert "`tick` timeline only" in legend(crowded)
     fewer = SwarmConfig(n_agents=CROWDED_FROM - 1, width=16, height=16)
     assert {path.rsplit("/", 1)[-1] for path in episode_wide(fewer)
             if path.startswith("world/agents/")} == {"path", "intent", "waits"}
+    assert "`tick` timeline only" not in legend(fewer)
 
 
-def test_a_crowded_runs_paths_are_recorded_faded_by_age(tmp_path):
+def test_a_crowded_runs_routes_are_recorded_at_each_episodes_end_and_cleared_at_its_start(
+        tmp_path):
     result = run_swarm(tmp_path / "run", "--agents", str(CROWDED_FROM), "--grid", "16x16",
                        "--episodes", "2", "--max-steps", "60", "--seed", "2", "--in-process")
     assert result.returncode == 0, result.stderr
-    rows = []  # (tick, episode, alpha) of agent 0's path
+    rows = {}  # tick: agent 3's route strips and their alphas
     for chunk in rr.chunk.RrdReader(tmp_path / "run" / "run.rrd").stream():
-        agents = agents_of(chunk.entity_path, CROWDED_FROM)
-        if agents is None or chunk.is_static or not chunk.entity_path.endswith(f"0/{PATH}"):
+        if chunk.is_static or chunk.entity_path.lstrip("/") != f"world/agents/3/{ROUTE}":
             continue
         batch = chunk.to_record_batch()
-        colours = batch.column("LineStrips2D:colors").to_pylist()
-        rows += [(tick, episode, colour[0] & 0xFF) for tick, episode, colour in zip(
-            batch.column("tick").to_pylist(), batch.column("episode").to_pylist(), colours)]
-    assert rows
-    for episode in (0, 1):
-        alphas = [alpha for _, e, alpha in sorted(rows) if e == episode]
-        assert alphas[-1] == 255 and alphas[0] < 255 and alphas == sorted(alphas)
+        for tick, strips, colours in zip(batch.column("tick").to_pylist(),
+                                         batch.column("LineStrips2D:strips").to_pylist(),
+                                         batch.column("LineStrips2D:colors").to_pylist()):
+            rows[tick] = (strips or [], [c & 0xFF for c in colours or []])
+    episodes = read_episodes(tmp_path / "run" / "episodes.csv")
+    first = 0
+    for row in episodes:
+        end = int(row["end_tick"])
+        assert rows[first] == ([], [])  # cleared as the episode starts
+        strips, alphas = rows[end]
+        assert len(strips) == len(route_bands(int(row["steps"]))) and alphas[-1] == 255
+        path = np.concatenate([np.array(s) for s in strips])
+        assert len(path) == int(row["steps"]) + len(strips)  # every cell, bands joined
+        assert (np.abs(np.diff(path, axis=0)).sum(axis=1) <= 1).all()  # a step at a time
+        first = end + 1
