@@ -5,8 +5,7 @@ first.
 
 The newest :data:`FRESH_STEPS` steps are one opaque band; the steps before them are split into
 :data:`BANDS` bands, from :data:`OLDEST_ALPHA` (the episode's first steps) up. A few strips an
-agent an episode, not one a step: the web viewer draws them at once (a strip of its own per
-step and agent made it draw the grid out of place).
+agent an episode, not one a step and agent: fewer things for the viewer to draw.
 """
 
 import numpy as np
