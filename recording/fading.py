@@ -3,8 +3,9 @@ each agent's path of the episode is drawn once, at the episode's end, in a few b
 colour, the older the fainter, so that where the agents went last reads over where they went
 first.
 
-The newest :data:`FRESH_STEPS` steps are one opaque band; the steps before them are split into
-:data:`BANDS` bands, from :data:`OLDEST_ALPHA` (the episode's first steps) up. A few strips an
+Each agent's path runs to its last move; its newest :data:`FRESH_STEPS` steps are one opaque
+band, the steps before them are split into :data:`BANDS` bands, from :data:`OLDEST_ALPHA` (the
+episode's first steps) up. A few strips an
 agent an episode, not one a step and agent: fewer things for the viewer to draw.
 """
 
@@ -29,14 +30,23 @@ def route_bands(steps: int) -> list[tuple[int, int, int]]:
     return [*bands, (older, steps, 255)] if steps > 0 else []
 
 
+def moved_steps(cells: np.ndarray) -> np.ndarray:
+    """For each agent, the steps of ``cells`` ``(steps + 1, n, 2)`` up to its last move (0: it
+    never moved): an agent that arrived early and stood still has its own newest steps."""
+    moved = np.any(np.diff(cells, axis=0) != 0, axis=2)  # (steps, n)
+    last = len(moved) - np.argmax(moved[::-1], axis=0)
+    return np.where(moved.any(axis=0), last, 0)
+
+
 def route_strips(cells: np.ndarray) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
     """Every agent's path of an episode in bands, from ``cells`` ``(steps + 1, n, 2)`` (where
-    each agent stood at each tick, the end's included): ``(agents, strips, alphas)``, one item
-    per agent and band, agent by agent, oldest band first."""
-    bands = route_bands(len(cells) - 1)
-    n = cells.shape[1]
-    agents = np.repeat(np.arange(n), len(bands))
-    strips = [np.ascontiguousarray(cells[first:last + 1, agent])
-              for agent in range(n) for first, last, _ in bands]
-    alphas = np.tile(np.array([alpha for _, _, alpha in bands], np.uint8), n)
-    return agents, strips, alphas
+    each agent stood at each tick, the end's included), each up to its last move
+    (:func:`moved_steps`): ``(agents, strips, alphas)``, one item per agent and band, agent by
+    agent, oldest band first."""
+    agents, strips, alphas = [], [], []
+    for agent, steps in enumerate(moved_steps(cells).tolist()):
+        for first, last, alpha in route_bands(steps):
+            agents.append(agent)
+            strips.append(np.ascontiguousarray(cells[first:last + 1, agent]))
+            alphas.append(alpha)
+    return np.array(agents, np.int64), strips, np.array(alphas, np.uint8)

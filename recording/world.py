@@ -238,9 +238,9 @@ def moves(config: SwarmConfig) -> str:
     """What the ``episode`` timeline draws of the agents' moves."""
     if crowded(config.n_agents):
         return (f"each agent's path, drawn at the episode's end (a line in its colour: opaque "
-                f"for the episode's last {FRESH_STEPS} steps, the steps before them in {BANDS} "
-                f"bands, the earlier the fainter; from {CROWDED_FROM} agents on the moves and "
-                f"waits are on the `tick` timeline only),")
+                f"for its last {FRESH_STEPS} steps, the steps before them in {BANDS} bands, the "
+                f"earlier the fainter; from {CROWDED_FROM} agents on the moves and waits are on "
+                f"the `tick` timeline only),")
     return ("every move announced (thick arrows in the agent's colour), every wait (below), "
             "the path each agent took (a thin line in its colour),")
 

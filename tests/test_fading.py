@@ -7,7 +7,9 @@ import rerun as rr
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.recording.agent_entities import CROWDED_FROM, ROUTE
 from nnql_swarm.recording.blueprint import episode_wide
-from nnql_swarm.recording.fading import BANDS, FRESH_STEPS, OLDEST_ALPHA, route_bands
+from nnql_swarm.recording.fading import (
+    BANDS, FRESH_STEPS, OLDEST_ALPHA, moved_steps, route_bands,
+)
 from nnql_swarm.recording.world import legend
 from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import run_swarm
@@ -24,6 +26,13 @@ def test_the_newest_steps_are_one_opaque_band_and_the_older_fade_in_bands():
 def test_a_short_episode_is_one_opaque_band_and_an_empty_one_none():
     assert route_bands(FRESH_STEPS) == [(0, FRESH_STEPS, 255)]
     assert route_bands(0) == []
+
+
+def test_an_agent_that_stood_still_has_its_own_newest_steps():
+    cells = np.zeros((11, 3, 2))
+    cells[1:, 0, 0] = 1  # agent 0 moved in the first step only
+    cells[1:, 1, 0] = np.arange(1, 11)  # agent 1 every step; agent 2 never
+    assert moved_steps(cells).tolist() == [1, 10, 0]
 
 
 def test_a_crowded_episode_view_shows_the_routes_and_a_smaller_one_every_move_and_wait():
@@ -56,8 +65,10 @@ def test_a_crowded_runs_routes_are_recorded_at_each_episodes_end_and_cleared_at_
         end = int(row["end_tick"])
         assert rows[first] == ([], [])  # cleared as the episode starts
         strips, alphas = rows[end]
-        assert len(strips) == len(route_bands(int(row["steps"]))) and alphas[-1] == 255
+        assert strips and alphas[-1] == 255
         path = np.concatenate([np.array(s) for s in strips])
-        assert len(path) == int(row["steps"]) + len(strips)  # every cell, bands joined
+        assert len(strips) == len(route_bands(len(path) - len(strips)))  # its steps, in bands
+        assert len(path) - len(strips) <= int(row["steps"])  # to its last move
         assert (np.abs(np.diff(path, axis=0)).sum(axis=1) <= 1).all()  # a step at a time
+        assert np.any(path[-1] != path[-2])  # ending with a move
         first = end + 1
