@@ -397,7 +397,7 @@ class WorldViz:
                 colors=with_alpha(colours, 90), radii=0.05, draw_order=14.0), static=True)
             if crowded(c.n_agents):  # colours per band (recording.fading)
                 rec.log(f"{path}/{ROUTE}", rr.LineStrips2D.from_fields(
-                    radii=0.08, draw_order=14.0), static=True)
+                    radii=0.12, draw_order=14.0), static=True)
             rec.log(f"{path}/{INTENT}", rr.Arrows2D.from_fields(
                 colors=colours, radii=0.09, draw_order=40.0), static=True)
             rec.log(f"{path}/{WAITS}", rr.Arrows2D.from_fields(
