@@ -426,8 +426,13 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     found["colours"] = check_colours(image, grid, colours)
     origins, vectors, who = episode.moves
     if crowded(config.n_agents):  # the paths alone, the newest steps opaque (recording.fading)
-        fresh = episode.ages < FRESH_STEPS // 2
-        found["paths"] = check_arrows(image, grid, origins[fresh], vectors[fresh] / INTENT_SCALE,
+        steps = vectors / INTENT_SCALE
+        # The newest steps end where the agents stand: those under an agent's disc and label
+        # (within a cell of where an agent ended) cannot show.
+        middles = origins + steps / 2
+        apart = np.abs(middles[:, None] - episode.agents[None]).max(axis=2).min(axis=1)
+        fresh = (episode.ages < FRESH_STEPS // 2) & (apart > 1.0)
+        found["paths"] = check_arrows(image, grid, origins[fresh], steps[fresh],
                                       colours[who[fresh]])
         return found
     found["moves"] = check_arrows(image, grid, origins, vectors, colours[who])
