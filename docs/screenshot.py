@@ -13,7 +13,8 @@ README's; 8 agents with walls (``--obstacle-density 0.2``, the reference too) as
 ``docs/viewer-walls.png``; 64 agents on 32 x 32 as ``docs/viewer-64.png``; 128 agents on
 40 x 40 as ``docs/viewer-128.png``; 8 agents in a 15 x 15 maze (``--map maze:15x15``), where
 agents end short of their goals, as ``docs/viewer-maze.png`` (``--in-process``, the same runs
-as distributed); 8 agents in a lifelong run (``--tasks lifelong``, 30 episodes, distributed) as
+as distributed); 64 agents in a 32 x 32 maze, episodes of 256 steps (10 episodes), each agent's
+path faded by age, as ``docs/viewer-crowded.png``; 8 agents in a lifelong run (``--tasks lifelong``, 30 episodes, distributed) as
 ``docs/viewer-lifelong.png``; from the default run, agent 0 followed on the ``tick`` timeline as
 ``docs/viewer-follow.png`` and the learning curves alone as ``docs/viewer-curves.png``
 (``recording.follow``). ``--only PICTURE...`` takes only those. The runs go to
@@ -43,6 +44,8 @@ DOCS_RUNS = {
     "viewer-64.png": ("64-agents", ["--agents", "64", "--grid", "32x32", "--in-process"]),
     "viewer-128.png": ("128-agents", ["--agents", "128", "--grid", "40x40", "--in-process"]),
     "viewer-maze.png": ("maze", ["--agents", "8", "--map", "maze:15x15", "--in-process"]),
+    "viewer-crowded.png": ("64-maze", ["--agents", "64", "--map", "maze:32x32:3", "--max-steps",
+                                       "256", "--episodes", "10", "--in-process"]),
     "viewer-lifelong.png": ("lifelong", ["--agents", "8", "--tasks", "lifelong", "--episodes",
                                          "30"]),
     "viewer-follow.png": ("default", ["--agents", "8", "--reference"]),

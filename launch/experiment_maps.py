@@ -138,7 +138,8 @@ def build_maps_parser() -> OneLineParser:
              f"way and come back (step-aside, the field's rule; default {d.on_target}, "
              f"--suite pogema: step-aside)")
     add("--pogema-dir", type=Path, default=INSTANCES, metavar="DIR",
-        help="--suite pogema: the converted instances (maps/pogema/README.md)")
+        help="--suite pogema: the converted instances (default: the repository's "
+             "maps/pogema; maps/pogema/README.md)")
     add("--set", dest="overrides", action="append", type=parse_override, default=[],
         metavar="OPTION=VALUE",
         help="a learning option of the preset changed (repeatable; e.g. beta=0.7, "

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Write a generated map and its scenario in the MovingAI formats (``terrain.maps``).
+"""Write a generated map and its scenario in the MovingAI formats (terrain.maps).
 
     python launch/maps.py random:19x19:0.2 --seed 0 --out maps/random-19x19-20-s0
 
@@ -17,13 +17,19 @@ from nnql_swarm.protocol.seeding import MAP_STREAM, stream_rng
 from nnql_swarm.terminal.cli import OneLineParser
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> OneLineParser:
     p = OneLineParser(description=__doc__.split("\n\n")[0])
     p.add_argument("spec", help="random:WxH:P[:SEED], maze:WxH[:SEED] or warehouse[:WxH]")
     p.add_argument("--seed", type=int, default=0, help="the map's seed (unless the spec has "
                    "one) and the scenario's (default: 0)")
     p.add_argument("--tasks", type=int, default=64, help="scenario lines (default: 64)")
-    p.add_argument("--out", type=Path, required=True, help="path of the files, without suffix")
+    p.add_argument("--out", type=Path, required=True, help="path of the files without suffix: writes OUT.map and "
+                   "OUT.scen")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = build_parser()
     args = p.parse_args(argv)
     try:
         rows = maps.generated(args.spec, args.seed)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Convert POGEMA's published instance sets into MovingAI files (``terrain.pogema``).
+"""Convert POGEMA's published instance sets into MovingAI files (terrain.pogema).
 
     python launch/pogema_import.py pogema-benchmark/algorithms/experiments --out maps/pogema
 
@@ -23,7 +23,7 @@ from nnql_swarm.terminal.cli import OneLineParser, comma_choices
 from nnql_swarm.terrain import maps, pogema
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> OneLineParser:
     p = OneLineParser(description=__doc__.split("\n\n")[0])
     p.add_argument("source", type=Path, help="the algorithms/experiments folder of "
                    "CognitiveAISystems/pogema-benchmark at commit 3303133")
@@ -32,6 +32,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--families", type=comma_choices(tuple(pogema.FAMILIES), "families"),
                    default=tuple(pogema.FAMILIES), metavar="LIST",
                    help=f"from {','.join(pogema.FAMILIES)} (default: all)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = build_parser()
     args = p.parse_args(argv)
     try:
         import yaml

@@ -30,11 +30,30 @@ draw it as one entity of all agents did.)"""
 
 DISC, TRAIL, PATH, INTENT, WAITS, GOAL, START = ("disc", "trail", "path", "intent", "waits",
                                                  "goal", "start")
+ROUTE = "route"
+"""From :data:`CROWDED_FROM` agents on: the agent's whole path of an episode, at the episode's
+end, in bands faded by age (``recording.fading``); nothing from the next episode's start."""
 PER_TICK = (DISC, TRAIL, PATH, INTENT, WAITS)
 PER_EPISODE = (GOAL, START)
 EPISODE_WIDE = (PATH, INTENT, WAITS)
-"""The parts the world view shows for a whole episode at once on the ``episode`` timeline (the
-path only below :data:`GROUPED_FROM` agents: above, the paths of an episode cover the grid)."""
+"""The parts the world view shows for a whole episode at once on the ``episode`` timeline,
+below :data:`CROWDED_FROM` agents."""
+CROWDED_FROM = 32
+"""From this many agents on, the world view's episode (the ``episode`` timeline) shows each
+agent's path alone, faded by age (:data:`ROUTE`), not its every move and wait: 64 agents' 256
+steps of arrows covered the grid. Where they waited, the jams' heat map shows; each move and
+wait, the ``tick`` timeline."""
+CROWDED_EPISODE_WIDE: tuple[str, ...] = ()
+"""Nothing a tick: the route, at the episode's end, is what the episode view shows."""
+
+
+def episode_parts(n_agents: int) -> tuple[str, ...]:
+    """The parts the ``episode`` timeline shows of a whole episode at once."""
+    return EPISODE_WIDE if n_agents < CROWDED_FROM else CROWDED_EPISODE_WIDE
+
+
+def crowded(n_agents: int) -> bool:
+    return n_agents >= CROWDED_FROM
 
 
 def owners(n_agents: int) -> list[tuple[str, np.ndarray]]:

@@ -29,7 +29,10 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     episode = rrb.VisibleTimeRanges(timeline="episode",
                                     start=rrb.TimeRangeBoundary.cursor_relative(seq=0),
                                     end=rrb.TimeRangeBoundary.cursor_relative(seq=0))
-    name = "World: the episode's moves, waits and collisions"
+    from nnql_swarm.recording.agent_entities import crowded
+
+    name = ("World: the episode's paths, jams and collisions" if crowded(config.n_agents)
+            else "World: the episode's moves, waits and collisions")
     contents = ["$origin/**"]
     if follow is not None:
         from nnql_swarm.recording.agent_entities import DISC, owner_index, owners
@@ -150,15 +153,13 @@ def learning_curves(config: SwarmConfig, distributed: bool = True, reference: bo
 
 def episode_wide(config: SwarmConfig) -> list[str]:
     """The entities the world view shows for a whole episode on the ``episode`` timeline: every
-    agent's path (below 128 agents), announced moves and waits (``recording.agent_entities``),
-    the collisions, and
-    under priority inheritance and lifelong tasks the refusals, pushes and goals reached."""
+    agent's path, announced moves and waits (from ``CROWDED_FROM`` agents on, the path alone:
+    ``recording.agent_entities.episode_parts``), the collisions, and under priority inheritance
+    and lifelong tasks the refusals, pushes and goals reached."""
     from nnql_swarm.recording import world as world_viz
-    from nnql_swarm.recording.agent_entities import EPISODE_WIDE, GROUPED_FROM, PATH, part_paths
+    from nnql_swarm.recording.agent_entities import episode_parts, part_paths
 
-    # From GROUPED_FROM agents on, a whole episode's paths cover the grid: the moves show it.
-    parts = EPISODE_WIDE if config.n_agents < GROUPED_FROM else \
-        tuple(part for part in EPISODE_WIDE if part != PATH)
+    parts = episode_parts(config.n_agents)
     return [*(path for part in parts for path in part_paths(config.n_agents, part)),
             world_viz.COLLISIONS, world_viz.REFUSED, world_viz.PUSHES, world_viz.REACHED]
 

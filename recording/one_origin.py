@@ -83,7 +83,7 @@ class _Forward(BaseHTTPRequestHandler):
             self.end_headers()
             if self.command != "HEAD":
                 self.stream(answer, chunked=not sized)
-        except OSError:  # the browser went away, or the server did
+        except (OSError, http.client.HTTPException):  # the browser went away, or the server did
             self.close_connection = True
         finally:
             upstream.close()

@@ -46,8 +46,10 @@ from nnql_swarm.protocol.actions import MOVES
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank
 from nnql_swarm.recording.agent_entities import (
-    DISC, GOAL, INTENT, PATH, START, TRAIL, WAITS, EntityColumns, by_entity, owners, part_paths,
+    CROWDED_FROM, DISC, GOAL, INTENT, PATH, ROUTE, START, TRAIL, WAITS, EntityColumns, by_entity,
+    crowded, owners, part_paths,
 )
+from nnql_swarm.recording.fading import BANDS, FRESH_STEPS, route_strips
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
 from nnql_swarm.recording.jams import JAM_HALF, JAM_LINE, JamMap
 from nnql_swarm.recording.shown import ca_learns, collision_bound, learns
@@ -151,6 +153,10 @@ SMOOTHING = 0.1
 """The weight of each new episode in the smoothed curves (the steps ratio, the reward): a memory
 of about ten episodes."""
 
+INTENT_SCALE = 0.7
+"""An announced move's arrow, in cells: short of the next cell, so that arrows in a row do not
+join."""
+
 TRAIL_LENGTH = 10
 """How many cells of each agent's recent path the trail shows."""
 
@@ -208,12 +214,11 @@ def legend(config: SwarmConfig) -> str:
     return f"""**World** ({config.width} x {config.height}, {config.n_agents} agents).
 Discs are agents, labelled with their id; the box with the same id and colour is that agent's
 goal. Every agent has a colour of its own.{walls}
-On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: every
-move announced (thick arrows in the agent's colour), every wait (below), the collisions (red
-discs), and the agents where the episode left them; a small dot in an agent's colour is where
-it started, a thin line in its colour the path it took, a red ring around an agent the episode
-left short of its goal, and red shading where agents on their way waited (the traffic jams: the
-deeper the red, the more steps waited there). On the `tick` timeline it shows one tick (the
+On the `episode` timeline (the one the viewer opens on) the view shows a whole episode: {moves(config)}
+the collisions (red discs), and the agents where the episode left them; a small dot in an
+agent's colour is where it started, a red ring around an agent the episode left short of its
+goal, and red shading where agents on their way waited (the traffic jams: the deeper the red,
+the more steps waited there). On the `tick` timeline it shows one tick (the
 caption above the grid names its episode and step): where each agent stood, the move it
 announced, its last {TRAIL_LENGTH} cells.
 {waits}{arbitration}{lifelong}
@@ -227,6 +232,17 @@ reward (pale: each episode; dark: smoothed over about ten episodes){explored(con
 {tables(config)}
 {shared}
 """
+
+
+def moves(config: SwarmConfig) -> str:
+    """What the ``episode`` timeline draws of the agents' moves."""
+    if crowded(config.n_agents):
+        return (f"each agent's path, drawn at the episode's end (a line in its colour: opaque "
+                f"for its last {FRESH_STEPS} steps, the steps before them in {BANDS} bands, the "
+                f"earlier the fainter; from {CROWDED_FROM} agents on the moves and waits are on "
+                f"the `tick` timeline only),")
+    return ("every move announced (thick arrows in the agent's colour), every wait (below), "
+            "the path each agent took (a thin line in its colour),")
 
 
 def following(config: SwarmConfig) -> str:
@@ -333,6 +349,10 @@ class WorldViz:
         self._reached: list[tuple[int, int, np.ndarray]] = []  # lifelong: goals reached
         self._jams = JamMap(config.width, config.height)
         self._jam_maps: list[tuple[int, int, np.ndarray, np.ndarray]] = []  # per episode's end
+        # Crowded runs: every agent's cells this episode, and the routes to send (empty at an
+        # episode's start, the episode's at its end).
+        self._route: list[tuple] = []
+        self._routes: list[tuple[int, int, np.ndarray | None]] = []
         self._log_static()
         self.known_map = None
         if map_agent is not None and 0 <= map_agent < n:
@@ -375,6 +395,9 @@ class WorldViz:
                 colors=with_alpha(colours, 110), radii=0.06, draw_order=15.0), static=True)
             rec.log(f"{path}/{PATH}", rr.LineStrips2D.from_fields(
                 colors=with_alpha(colours, 90), radii=0.05, draw_order=14.0), static=True)
+            if crowded(c.n_agents):  # colours per band (recording.fading)
+                rec.log(f"{path}/{ROUTE}", rr.LineStrips2D.from_fields(
+                    radii=0.12, draw_order=14.0), static=True)
             rec.log(f"{path}/{INTENT}", rr.Arrows2D.from_fields(
                 colors=colours, radii=0.09, draw_order=40.0), static=True)
             rec.log(f"{path}/{WAITS}", rr.Arrows2D.from_fields(
@@ -446,8 +469,13 @@ class WorldViz:
             self._jams.add(before, world.cells,
                            (True,) * c.n_agents if c.lifelong else
                            tuple(not home for home in self._arrived))
+        if crowded(c.n_agents):
+            self._route.append(before)
         if report.episode_row is not None:  # its end tick: nobody moves, as the episode left them
             self._jam_maps.append((report.tick, report.episode, *self._jams.take()))
+            if crowded(c.n_agents):
+                self._routes.append((report.tick, report.episode,
+                                     np.array(self._route, np.float32)))
             short = [cell for cell, home in zip(before, self._arrived)
                      if not home and not c.lifelong]  # lifelong: everyone is on its way
             self._stuck.append((report.tick, report.episode,
@@ -471,6 +499,9 @@ class WorldViz:
         self._stuck.append((report.tick, report.episode, np.zeros((0, 2), np.float32)))
         self._jam_maps.append((report.tick, report.episode, np.zeros((0, 2), np.float32),
                                np.zeros((0, 4), np.uint8)))
+        self._route = []
+        if crowded(c.n_agents):
+            self._routes.append((report.tick, report.episode, None))
         self._goal_cells = episode.goals.tolist()
 
     def _end_episode(self, report: TickReport, row: dict) -> None:
@@ -550,6 +581,8 @@ class WorldViz:
             self.rec.send_columns(JAMS, time_columns(j_ticks, j_episodes), rr.Boxes2D.columns(
                 centers=every, half_sizes=np.full(every.shape, JAM_HALF, np.float32),
                 colors=np.concatenate(colours)).partition([len(c) for c in centres]))
+        if self._routes:
+            self._send_routes()
         if self._reached:
             r_ticks, r_episodes, cells = zip(*self._reached)
             self._reached = []
@@ -586,7 +619,7 @@ class WorldViz:
         order, lengths = by_entity(np.repeat(np.arange(k), n), np.tile(np.arange(n), k), k, n)
         flat = cells.reshape(-1, 2)[order]
         parts.add(part_paths(n, DISC), rr.Points2D.columns(positions=flat).partition(lengths))
-        moves = (MOVES[np.array(actions, dtype=np.int64)] * 0.7).astype(np.float32)
+        moves = (MOVES[np.array(actions, dtype=np.int64)] * INTENT_SCALE).astype(np.float32)
         parts.add(part_paths(n, INTENT), rr.Arrows2D.columns(
             origins=flat, vectors=moves.reshape(-1, 2)[order]).partition(lengths))
         trails = np.concatenate([self._trails(cells[first:last], int(episodes[first]))
@@ -620,6 +653,34 @@ class WorldViz:
         hit_t, hit_agent = np.nonzero(hit)
         rec.send_columns(COLLISIONS, index, rr.Points2D.columns(
             positions=cells[hit_t, hit_agent]).partition(hit.sum(axis=1)))
+
+    def _send_routes(self) -> None:
+        """Each agent's path of each episode in bands faded by age (``recording.fading``), at the
+        episode's end tick; nothing from its start tick on."""
+        n = self.config.n_agents
+        ticks, episodes, routes = zip(*self._routes)
+        self._routes = []
+        rows, agents, strips, alphas = [], [], [], []
+        for row, cells in enumerate(routes):
+            if cells is None:
+                continue
+            who, these, alpha = route_strips(cells)
+            rows.append(np.full(len(who), row))
+            agents.append(who)
+            alphas.append(alpha)
+            strips += these
+        k = len(routes)
+        row_of = np.concatenate(rows) if rows else np.zeros(0, np.int64)
+        agent_of = np.concatenate(agents) if agents else np.zeros(0, np.int64)
+        order, lengths = by_entity(row_of, agent_of, k, n)
+        colours = np.zeros((len(strips), 4), np.uint8)
+        if strips:
+            colours[:, :3] = self.colors[agent_of]
+            colours[:, 3] = np.concatenate(alphas)
+        columns = EntityColumns(time_columns(ticks, episodes), k)
+        columns.add(part_paths(n, ROUTE), rr.LineStrips2D.columns(
+            strips=[strips[i] for i in order], colors=colours[order]).partition(lengths))
+        columns.send(self.rec)
 
     def _send_arbitration(self, index, cells: np.ndarray, actions: np.ndarray,
                           wanted: np.ndarray, moved: np.ndarray) -> None:

@@ -354,6 +354,7 @@ class Episode:
     goals: np.ndarray  # (n, 2)
     moves: tuple[np.ndarray, np.ndarray, np.ndarray]  # origins, vectors, agent of each move
     waits: tuple[np.ndarray, np.ndarray]  # origins, vectors
+    ages: np.ndarray  # of each move: the steps announced after it in the episode
 
 
 def last_episode(recording: Path, n_agents: int) -> Episode:
@@ -385,18 +386,20 @@ def last_episode(recording: Path, n_agents: int) -> Episode:
     firsts = sorted(holds)
     agents = np.concatenate([of_last(DISC, f)[-1]["Points2D:positions"] for f in firsts])
     goals = np.concatenate([of_last(GOAL, f)[-1]["Boxes2D:centers"] for f in firsts])
-    origins, vectors, who = [], [], []
+    end = max(r["tick"] for f in firsts for r in of_last(DISC, f))  # the episode's end tick
+    origins, vectors, who, ages = [], [], [], []
     for first in firsts:
         for row in of_last(INTENT, first):
             for i, (o, v) in enumerate(zip(row["Arrows2D:origins"], row["Arrows2D:vectors"])):
                 if v[0] or v[1]:
                     origins.append(o), vectors.append(v), who.append(int(holds[first][i]))
+                    ages.append(end - 1 - row["tick"])
     waits = [(o, v) for first in firsts for row in of_last(WAITS, first)
              for o, v in zip(row.get("Arrows2D:origins") or [], row.get("Arrows2D:vectors") or [])]
     return Episode(np.array(agents), np.array(goals),
                    (np.array(origins), np.array(vectors), np.array(who, int)),
                    (np.array([o for o, _ in waits]).reshape(-1, 2),
-                    np.array([v for _, v in waits]).reshape(-1, 2)))
+                    np.array([v for _, v in waits]).reshape(-1, 2)), np.array(ages, int))
 
 
 def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
@@ -404,7 +407,10 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     on (``config``: the run's ``SwarmConfig``): the grid, every wall, a label under each agent
     and goal, each agent in its own colour, the moves announced and the waits. Raises
     AssertionError saying what is missing."""
+    from nnql_swarm.recording.agent_entities import crowded
+    from nnql_swarm.recording.fading import FRESH_STEPS
     from nnql_swarm.recording.palette import WAIT_COLOUR, WALL_COLOUR, agent_colors
+    from nnql_swarm.recording.world import INTENT_SCALE
 
     grid = find_grid(image, config.width, config.height)
     episode = last_episode(run_dir / "run.rrd", config.n_agents)
@@ -419,6 +425,16 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
                                    np.concatenate([colours, colours]))
     found["colours"] = check_colours(image, grid, colours)
     origins, vectors, who = episode.moves
+    if crowded(config.n_agents):  # the paths alone, the newest steps opaque (recording.fading)
+        steps = vectors / INTENT_SCALE
+        # The newest steps end where the agents stand: those under an agent's disc and label
+        # (within a cell of where an agent ended) cannot show.
+        middles = origins + steps / 2
+        apart = np.abs(middles[:, None] - episode.agents[None]).max(axis=2).min(axis=1)
+        fresh = (episode.ages < FRESH_STEPS // 2) & (apart > 1.0)
+        found["paths"] = check_arrows(image, grid, origins[fresh], steps[fresh],
+                                      colours[who[fresh]])
+        return found
     found["moves"] = check_arrows(image, grid, origins, vectors, colours[who])
     origins, vectors = episode.waits
     if len(origins):  # an episode in which nobody waited has no such arrows

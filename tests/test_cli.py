@@ -196,32 +196,44 @@ def test_the_command_is_a_swarm_made_from_its_options(monkeypatch, tmp_path):
 
 HELPED = (("nnql-swarm",), ("nnql-experiment",), ("nnql-experiment", "swarm"),
           ("nnql-experiment", "maps"), ("nnql-view",), ("nnql-faultsim",), ("nnql-router",),
-          ("nnql-secure",))
+          ("nnql-secure",), ("launch/maps.py",), ("launch/pogema_import.py",))
+
+
+def command_line(command: tuple[str, ...]) -> list[str]:
+    """An installed command, or a script of the repository's run by this interpreter."""
+    if command[0].endswith(".py"):
+        return [sys.executable, str(ROOT / command[0]), *command[1:]]
+    return [str(BIN / command[0]), *command[1:]]
 
 
 @pytest.mark.parametrize("command", HELPED, ids=" ".join)
 def test_no_help_shows_a_default_in_python(command):
-    """No default that is Python's (None, False, [], a tuple), none on a required option."""
-    text = " ".join(help_of(str(BIN / command[0]), *command[1:]).split())
+    """No default that is Python's (None, False, [], a tuple), none on a required option, no
+    path of this machine, no markup of a docstring."""
+    said = help_of(*command_line(command))
+    text = " ".join(said.split())
     for python in ("(default: None)", "(default: False)", "(default: [])", "(default: (",
-                   "default: True)"):
+                   "default: True)", "``"):
         assert python not in text, f"{python} in {' '.join(command)} --help"
+    assert str(ROOT) not in "".join(said.split()), f"{ROOT} in {' '.join(command)} --help"
 
 
 def test_every_option_of_every_command_says_what_it_is():
     from nnql_swarm.api import command
-    from nnql_swarm.launch import experiment, experiment_maps, faultsim, view
+    from nnql_swarm.launch import experiment, experiment_maps, faultsim, maps, pogema_import, view
     from nnql_swarm.operations import router, secure
 
     parsers = {"swarm": command.build_parser(), "experiment": experiment.build_parser(),
                "experiment swarm": experiment.build_swarm_parser(),
                "experiment maps": experiment_maps.build_maps_parser(),
                "view": view.build_parser(), "faultsim": faultsim.build_parser(),
-               "router": router.build_parser(), "secure": secure.build_parser()}
+               "router": router.build_parser(), "secure": secure.build_parser(),
+               "maps.py": maps.build_parser(), "pogema_import.py": pogema_import.build_parser()}
     unexplained = [f"{name} {action.option_strings[0]}" for name, parser in parsers.items()
                    for action in parser._actions
                    if action.option_strings and not (action.help or "").strip()]
     assert not unexplained
+
 
 def test_the_help_formatter_leaves_out_defaults_not_worth_reading():
     from nnql_swarm.terminal.cli import DefaultsHelpFormatter, OneLineParser
