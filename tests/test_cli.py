@@ -315,7 +315,7 @@ def test_an_interrupted_in_process_run_says_how_to_resume_it_and_the_resumed_run
     from nnql_swarm.world.metrics import read_episodes
 
     options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--seed", "4",
-               "--episodes", "3000", "--no-record", "--in-process")
+               "--episodes", "1000", "--no-record", "--in-process")
     out = tmp_path / "stopped"
     swarm = subprocess.Popen([sys.executable, str(SWARM), "--out", str(out), "--no-progress",
                               *options], cwd=ROOT, stderr=subprocess.PIPE, text=True,
