@@ -2,21 +2,27 @@
 renamed or moved elsewhere breaks no benchmark unseen), and ``bench.collisions`` classifies every
 collision of a frozen episode with the simulator's own neighbour rows."""
 
-import importlib
 import pkgutil
+import subprocess
+import sys
 from collections import Counter
 
 import bench
 from bench.collisions import classify
 from nnql_swarm.experiment.maps import MapsBenchmark, map_spec, run_config
 from nnql_swarm.sim.runs import Batch, swarm_world
+from tests.swarm_helpers import ROOT
 
 
 def test_every_bench_module_imports():
+    """In a process of its own: some set the kernel's mode in the environment as they load."""
     names = [module.name for module in pkgutil.iter_modules(bench.__path__)]
     assert {"collisions", "table1", "harness"} <= set(names)
-    for name in names:
-        importlib.import_module(f"bench.{name}")
+    done = subprocess.run(
+        [sys.executable, "-c", "import importlib, sys\n"
+                               "for name in sys.argv[1:]: importlib.import_module('bench.' + name)",
+         *names], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
 
 
 def test_collisions_classifies_every_collision_of_a_frozen_episode():
