@@ -8,7 +8,7 @@ import pytest
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.supervision.resume import ResumeError, resume_point, rewind
+from nnql_swarm.sim.resume import ResumeError, resume_point, rewind
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.metrics import EpisodeWriter, read_episodes
 from nnql_swarm.world.shared_table import SharedState, SharedTable
