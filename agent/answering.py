@@ -15,8 +15,8 @@ from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import priority_rank
 from nnql_swarm.protocol.inbox import Inbox
 from nnql_swarm.protocol.messages import Answer
-from nnql_swarm.machines.effects import EndQuery, Reply, ReplyError
-from nnql_swarm.machines.phases import Machine, any_phase_input
+from nnql_swarm.protocol.effects import EndQuery, Reply, ReplyError
+from nnql_swarm.protocol.phase_machine import Machine, any_phase_input
 
 MAX_HELD_QUERIES = 4 * 1024
 """Queries for the coming tick held at once; legitimately at most one per other agent."""

@@ -26,7 +26,7 @@ from nnql_swarm.learning.record import record_outcome, write_updates
 from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.kernel.jit import floats, rows
+from nnql_swarm.protocol.jit import floats, rows
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 

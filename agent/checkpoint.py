@@ -1,4 +1,4 @@
-"""Q-table checkpoints of one agent, rewritten in place at every episode's end (``storage.slotfile``:
+"""Q-table checkpoints of one agent, rewritten in place at every episode's end (``transport.slotfile``:
 a reader sees the old checkpoint or the new, whatever is killed when).
 
 A checkpoint holds both tables, the exploration counter, the agent's generator state, the walls
@@ -16,7 +16,7 @@ import numpy as np
 
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.saved import CheckpointError, check_run, check_tables, read_versions
-from nnql_swarm.storage import slotfile
+from nnql_swarm.transport import slotfile
 from nnql_swarm.protocol.config import SwarmConfig
 
 
@@ -76,7 +76,7 @@ FIELDS = ("q_ds", "q_ca", "actions_taken", "episode", "agent", "n_agents", "algo
 
 
 def episodes(path: Path) -> list[int]:
-    """The episodes whose state the file holds, the newest first (``storage.slotfile`` keeps
+    """The episodes whose state the file holds, the newest first (``transport.slotfile`` keeps
     two); raises CheckpointError naming the file."""
     return [int(fields["episode"]) for fields in read_versions(path, FIELDS)]
 

@@ -1,4 +1,4 @@
-"""One agent's side of the swarm protocol, pure: inputs in, effects (``machines.effects``) out.
+"""One agent's side of the swarm protocol, pure: inputs in, effects (``protocol.effects``) out.
 
 No sockets, no threads, no clock reads, no files. Every input carries the time ``now`` it
 happens at and returns the effects it causes, in order; :meth:`AgentMachine.timer` is when it
@@ -6,7 +6,7 @@ next wants :meth:`AgentMachine.on_timer`. ``agent.node`` runs it over Zenoh, ``s
 simulated network in virtual time.
 
 Theory of operation. The machine is in one ``Phase`` at a time, moved only by ``TRANSITIONS``
-(``agent.phases``; ``machines.phases`` runs an input):
+(``agent.phases``; ``protocol.phase_machine`` runs an input):
 
 - ``PEERS``: until it has seen every other agent's liveliness token (or given up waiting, at
   ``ready_by``), observations are kept in order, and handled once it is ``IDLE``.
@@ -50,15 +50,15 @@ from nnql_swarm.learning import neighbours
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, START_S_PER_AGENT, SwarmConfig
-from nnql_swarm.machines.effects import (
+from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, SendIntent, Stopped,
 )
 from nnql_swarm.protocol.inbox import Inbox
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, Answer, Control, Intent, Observation, agent_sender, encode,
 )
-from nnql_swarm.machines.phases import EffectLog, Machine, an_input, any_phase_input
-from nnql_swarm.machines.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
+from nnql_swarm.protocol.phase_machine import EffectLog, Machine, an_input, any_phase_input
+from nnql_swarm.protocol.trace import ACTED, ANSWER_IN, DECIDE, ENCODED, OBS_IN, TickTrace
 
 RESYNC_AFTER = 3
 """Consecutive observations past a gap in the ticks after which an agent follows them."""
@@ -91,7 +91,7 @@ class AgentMachine(QueryAnswering, Machine):
                  negotiation_timeout_s: float | None = None, trace: TickTrace = _NO_TRACE,
                  world_wait_s: float = WORLD_WAIT_S) -> None:
         """``brain`` is an ``agent.brain.AgentBrain`` (fresh, or restored from a checkpoint);
-        ``trace`` only records the time of each step (``machines.trace``), never decides;
+        ``trace`` only records the time of each step (``protocol.trace``), never decides;
         ``world_wait_s``: how long a world that left may stay away."""
         self.agent = agent
         self.config = config

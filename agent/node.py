@@ -32,13 +32,13 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.agent.machine import WORLD_WAIT_S, AgentMachine
 from nnql_swarm.agent.restore import start_brain
-from nnql_swarm.machines import trace
+from nnql_swarm.protocol import trace
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.machines.effects import (
+from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
 )
-from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
+from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
 from nnql_swarm.transport.adapter import ProtocolAdapter
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher

@@ -4,7 +4,7 @@
 import enum
 from dataclasses import dataclass, field
 
-from nnql_swarm.machines.phases import Named
+from nnql_swarm.protocol.phase_machine import Named
 from nnql_swarm.protocol.messages import Observation
 
 

@@ -16,7 +16,7 @@ def start_brain(agent: int, config: SwarmConfig, checkpoint_file: Path, resume: 
                 episode: int | None = None) -> tuple[AgentBrain, dict | None]:
     """``(brain, resumed)``: ``brain`` (a fresh one if None), restored from ``checkpoint_file``
     when ``resume`` and the file exists, its newest version or, for a resumed run, the one of
-    ``episode`` (the run's cut, ``supervision.resume``); ``resumed`` then says from which
+    ``episode`` (the run's cut, ``sim.resume``); ``resumed`` then says from which
     episode and with which tables (``checkpoint.fingerprint``), else None. Raises
     ``CheckpointError``."""
     brain = brain or AgentBrain(agent, config)

@@ -22,29 +22,29 @@ from pathlib import Path
 from typing import Any, Callable
 
 from nnql_swarm.transport import zenoh_files
-from nnql_swarm.terminal.cli import (
+from nnql_swarm.launch.cli import (
     EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator,
     episode_summary, progress as progress_bar,
 )
 from nnql_swarm.recording.session import RecordingSession
 from nnql_swarm.recording.viewers import check_viewer_url
-from nnql_swarm.supervision.resume import (
+from nnql_swarm.sim.resume import (
     ResumeError, ResumePoint, read_config, resume_point, rewind, shared_table,
 )
-from nnql_swarm.supervision.capacity import check_fits
-from nnql_swarm.supervision.supervisor import Supervisor, describe_exit
-from nnql_swarm.supervision.restarts import (
+from nnql_swarm.sim.capacity import check_fits
+from nnql_swarm.sim.supervisor import Supervisor, describe_exit
+from nnql_swarm.sim.restarts import (
     STATS_NAME, record as record_restarts, warning as restarts_warning,
 )
 from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig
 from nnql_swarm.api.options import (
     LAUNCH_DEFAULTS as L, LAUNCHER_TOPOLOGIES, RUN_NAMES, Launch, config_of, config_values,
 )
-from nnql_swarm.storage.runfiles import (
+from nnql_swarm.transport.runfiles import (
     CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, EXIT_NO_SPACE, LOCK_FILE, PARTS_DIR,
     RECORDING_FILE, STATS_DIR, write_text_atomic,
 )
-from nnql_swarm.storage.runlock import RunLock, RunLocked
+from nnql_swarm.transport.runlock import RunLock, RunLocked
 from nnql_swarm.transport.settings import EXIT_NO_WORLD, MODES, TransportSettings
 from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
 from nnql_swarm.launch.processes import agent_main, process_context, world_main
@@ -246,7 +246,7 @@ def check_launch(launch: Launch, config: SwarmConfig, named: bool = True) -> Non
 
 def check_capacity(args: Launch, config: SwarmConfig) -> None:
     """Refuse a run, or the part of one this host starts, that this machine cannot hold
-    (``supervision.capacity``); raises UsageError."""
+    (``sim.capacity``); raises UsageError."""
     if args.in_process:
         processes, agents = 1, config.n_agents
     else:
@@ -271,11 +271,11 @@ def check_distributable(config: SwarmConfig) -> None:
 
 RUN_ENTRIES = (CONFIG_FILE, EPISODES_FILE, RECORDING_FILE, CHECKPOINT_DIR, STATS_DIR, PARTS_DIR,
                LOCK_FILE)
-"""What a run directory holds (``storage.runfiles``); a folder with anything else is not a run."""
+"""What a run directory holds (``transport.runfiles``); a folder with anything else is not a run."""
 
 
 def prepare_out_dir(out: Path, config: SwarmConfig, role: str) -> RunLock | None:
-    """Create the run directory and own it (its lock, :mod:`storage.runlock`; the caller releases
+    """Create the run directory and own it (its lock, :mod:`transport.runlock`; the caller releases
     it when the run ends; ``--role agents``, which shares the folder with the world's launcher
     on one host, takes none); never overwrite a run that is already there, nor write a run
     into a folder that holds anything but a run's files (those of a run that never finished an
@@ -321,7 +321,7 @@ def check_no_run(out: Path) -> None:
 
 
 def own(out: Path) -> RunLock:
-    """The lock of the run folder ``out`` (:mod:`storage.runlock`); raises UsageError where
+    """The lock of the run folder ``out`` (:mod:`transport.runlock`); raises UsageError where
     another run holds it."""
     try:
         return RunLock(out)
@@ -335,7 +335,7 @@ def own(out: Path) -> RunLock:
 def resume(args: Launch, given: dict | None = None
            ) -> tuple[SwarmConfig, ResumePoint, Path, RunLock | None]:
     """The config, start point and directory of a run to continue (its rows past the cut
-    dropped: ``supervision.resume``), and the folder's lock (none for ``--role agents``), which
+    dropped: ``sim.resume``), and the folder's lock (none for ``--role agents``), which
     the caller releases when the run ends; ``given``: config fields given with ``--resume``,
     which must be the run's (:func:`given_values`). Raises ResumeError or UsageError."""
     if args.out is None:

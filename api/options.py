@@ -21,9 +21,9 @@ import numpy as np
 from nnql_swarm.agent.machine import WORLD_WAIT_S
 from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig
 from nnql_swarm.recording.viewers import check_viewer_url
-from nnql_swarm.terminal.cli import parse_grid
-from nnql_swarm.terrain.maps import run_map
-from nnql_swarm.terrain.pogema import lifelong_instance
+from nnql_swarm.launch.cli import parse_grid
+from nnql_swarm.world.terrain import run_map
+from nnql_swarm.world.pogema_instances import lifelong_instance
 from nnql_swarm.transport.settings import MODES
 
 RUN_NAMES = ("preset", "grid", "map", "scen", "goals")

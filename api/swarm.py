@@ -26,13 +26,13 @@ from nnql_swarm.api import command
 from nnql_swarm.api.options import Launch, config_of, split
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.kernel.jit import MODE_VARIABLE
-from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE
-from nnql_swarm.storage.runlock import RunLock
-from nnql_swarm.supervision import restarts
-from nnql_swarm.supervision.resume import ResumeError, ResumePoint
-from nnql_swarm.supervision.supervisor import describe_exit
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED
+from nnql_swarm.protocol.jit import MODE_VARIABLE
+from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE, RECORDING_FILE
+from nnql_swarm.transport.runlock import RunLock
+from nnql_swarm.sim import restarts
+from nnql_swarm.sim.resume import ResumeError, ResumePoint
+from nnql_swarm.sim.supervisor import describe_exit
+from nnql_swarm.launch.cli import EXIT_INTERRUPTED
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import COLUMNS
@@ -105,7 +105,7 @@ class Swarm:
                f"{self.config.episodes} episodes)"
 
     def prepare(self) -> None:
-        """Make the run directory (:attr:`out`), own it (``storage.runlock``, until :meth:`play`
+        """Make the run directory (:attr:`out`), own it (``transport.runlock``, until :meth:`play`
         ends) and write its config; raises ``api.command.UsageError`` for a directory that is
         not usable, holds a run or is another run's."""
         self._lock = command.prepare_out_dir(self.out, self.config, self.launch.role)

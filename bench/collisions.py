@@ -37,7 +37,14 @@ from nnql_swarm.learning.readings import forbids
 from nnql_swarm.protocol.actions import STAY, target_x, target_y
 from nnql_swarm.protocol.config import PRESETS
 from nnql_swarm.sim.runs import Batch, swarm_world
-from nnql_swarm.sim.episode import TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_X, TR_Y, neighbour_rows
+from nnql_swarm.sim.episode import (
+    TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_GOAL_X, TR_GOAL_Y, TR_X, TR_Y, EpisodeRules, Moves,
+    neighbour_rows,
+)
+from nnql_swarm.world.rules import Bodies
+
+rows_of = getattr(neighbour_rows, "py_func", neighbour_rows)
+"""The simulator's neighbour rows as plain Python (the calls it makes stay compiled)."""
 
 
 def classify(batch: Batch, run: int, first_tick: int, steps: int, tally: Counter) -> None:
@@ -47,13 +54,15 @@ def classify(batch: Batch, run: int, first_tick: int, steps: int, tally: Counter
     params = np.array(learner_params(config)[0], dtype=np.int64)
     trace = batch.trace[run]
     learns = np.arange(n) < learners
-    goal_x = np.full(n, -1, dtype=np.int64)
-    goal_y = np.full(n, -1, dtype=np.int64)
+    rules = EpisodeRules(n, learners, w.width, w.height, w.max_steps, w.count_swaps,
+                         w.goal_reward, w.stay_reward, True, w.lifelong, w.max_steps)
+    options = batch.options[run]
     nb = np.zeros((n, NB_FIELDS), dtype=np.int64)
     for s in range(steps):
         x, y = trace[s, :, TR_X].copy(), trace[s, :, TR_Y].copy()
         actions = trace[s, :, TR_ACTION].copy()
         arrived = trace[s, :, TR_ARRIVED].astype(bool)
+        goal_x, goal_y = trace[s, :, TR_GOAL_X].copy(), trace[s, :, TR_GOAL_Y].copy()
         collided = trace[s, :, TR_COLLIDED].astype(bool)
         if s:
             prev_x, prev_y = trace[s - 1, :, TR_X].copy(), trace[s - 1, :, TR_Y].copy()
@@ -71,9 +80,10 @@ def classify(batch: Batch, run: int, first_tick: int, steps: int, tally: Counter
                 continue
             rank = (i - tick) % learners
             decided = np.array([j >= learners or (j - tick) % learners < rank for j in range(n)])
-            m = neighbour_rows(i, tick, n, learners, x, y, prev_x, prev_y, learns, arrived,
-                               actions, decided, config.lookahead, True, params, batch.q_ds[run],
-                               1, goal_x, goal_y, w.width, w.height, False, nb)
+            bodies = Bodies(x, y, goal_x, goal_y, learns, arrived, np.zeros(n, dtype=np.int64))
+            moves = Moves(actions, decided, prev_x, prev_y, np.zeros(n, dtype=np.int64))
+            m = rows_of(i, tick, rules, bodies, moves, batch.q_ds[run], nb, params, options,
+                        True)
             rows = {int(nb[k][0]): nb[k] for k in range(m)}
             gave_up = forbids(params[LP_READING], params[LP_STILL_SHIELD],
                               params[LP_ESCAPE_SHIELD], x[i], y[i], actions[i], nb, m, w.width,

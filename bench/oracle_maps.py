@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """How often the oracle (``world.pibt``, PIBT) brings every agent home on random maps.
 
-Each instance is its own random map (``terrain.maps``: ``random:SxS:P`` with the instance's
+Each instance is its own random map (``world.terrain``: ``random:SxS:P`` with the instance's
 seed, sizes cycling over ``--sizes``) and its own starts and goals (the first episode drawn from
 the same seed), played once in-process under the chosen on-target rule. Prints, per size and in
 all, the instances where every agent was on its goal at the end, the mean share of agents home,
@@ -13,7 +13,7 @@ the steps over the shortest paths and the collisions (none expected).
 
 import argparse
 
-from nnql_swarm.terrain import maps
+from nnql_swarm.world import terrain as maps
 from nnql_swarm.protocol.config import ON_TARGET, PRESETS, SwarmConfig
 from nnql_swarm.sim.runs import Batch, swarm_world
 

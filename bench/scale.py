@@ -34,7 +34,7 @@ from pathlib import Path
 from bench import lockstep
 from bench.harness import add_preset_option, grid_side, run_distributed, swarm_config
 from bench.procstat import MemorySampler
-from nnql_swarm.storage.runfiles import stats_path
+from nnql_swarm.transport.runfiles import stats_path
 from nnql_swarm.transport.topology import (
     TOPOLOGIES, EmbeddedLayout, embedded_topology,
 )

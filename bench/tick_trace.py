@@ -2,7 +2,7 @@
 """Where a tick's time goes: the distributed swarm, with every process marking each step it takes.
 
 Runs the launcher's world and agent processes (embedded Zenoh, recording off) with ``NNQL_TRACE``
-set (``machines.trace``), then lines up the marks of every tick after the first episode: from the
+set (``protocol.trace``), then lines up the marks of every tick after the first episode: from the
 world's first observation through each agent's decision and each answer (from the agent that
 sent it to the one that got it) to the world closing the tick after the last intent. Medians and
 90th percentiles in microseconds. With the paper's preset (``--preset nnql``, radius 10) the
@@ -22,7 +22,7 @@ from collections import defaultdict
 from pathlib import Path
 
 from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config
-from nnql_swarm.machines import trace
+from nnql_swarm.protocol import trace
 from nnql_swarm.world.metrics import read_episodes
 
 FIRST_OBS = "world: first observation handed to Zenoh -> its agent has it"

@@ -21,7 +21,7 @@ Without learners (``learners=()``) the oracle plays alone and nothing is trained
 
 Map seeds: training map ``k`` of seed ``s`` is ``TRAIN_MAP_BASE + s * train_maps + k``, held-out
 map ``j`` is ``TEST_MAP_BASE + s * test_maps + j``: disjoint while ``s * train_maps + k`` stays
-below ``TEST_MAP_BASE``. A map is the generator spec of ``terrain.maps`` (``random:19x19:0.2:SEED``,
+below ``TEST_MAP_BASE``. A map is the generator spec of ``world.terrain`` (``random:19x19:0.2:SEED``,
 ``maze:19x19:SEED``, ``warehouse``), its side drawn from the map seed's own stream, and a run on it
 has the map seed as its seed: ``launch/swarm.py --map <spec> --seed <map seed> --agents N
 --max-steps 128 --preset <variant>`` plays its first episode from scratch.
@@ -40,8 +40,8 @@ import numpy as np
 
 from nnql_swarm.experiment.stats import mean_interval
 from nnql_swarm.protocol.config import PRESETS, TASKS, SwarmConfig
-from nnql_swarm.terrain.maps import WAREHOUSE_SIZE, generated
-from nnql_swarm.terrain.pogema import FAMILIES as POGEMA_FAMILIES
+from nnql_swarm.world.terrain import WAREHOUSE_SIZE, generated
+from nnql_swarm.world.pogema_instances import FAMILIES as POGEMA_FAMILIES
 from nnql_swarm.protocol.seeding import MAP_STREAM, stream_rng
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
 from nnql_swarm.world.engine import EPISODE_FIELDS
@@ -173,7 +173,7 @@ def swarm_config(bench: MapsBenchmark, variant: str, name: str, rows: tuple[str,
 
 
 def map_spec(family: str, map_seed: int) -> str:
-    """The generator spec of a map of a family (``terrain.maps.generated``)."""
+    """The generator spec of a map of a family (``world.terrain.generated``)."""
     if family == "warehouse":
         return f"warehouse:{WAREHOUSE_SIZE[0]}x{WAREHOUSE_SIZE[1]}"
     side = int(stream_rng(map_seed, MAP_STREAM, 1).integers(SIDES[0], SIDES[1] + 1))

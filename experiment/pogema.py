@@ -4,7 +4,7 @@ and its table beside the published figures.
 
 Each seed's policies, trained on the project's own random maps (step 1, disjoint from these),
 and the oracle play, frozen, the first ``instances`` of the 128 instances of each family
-(``maps/pogema/``, ``terrain.pogema``), each instance once: its map, and the first k lines of its
+(``maps/pogema/``, ``world.pogema_instances``), each instance once: its map, and the first k lines of its
 ``.scen`` as the starts and goals of k agents, at the agent counts of the published tables (or
 ``agents``), for the family's step limit (128; 256 on MovingAI; or ``max_steps``). A run on one
 is ``launch/swarm.py --map maps/pogema/<family>/<map>.map --scen
@@ -20,7 +20,7 @@ from nnql_swarm.experiment.maps import (
     REFERENCE, MapsBenchmark, Recorder, Tables, play_configs, swarm_config, with_interval,
 )
 from nnql_swarm.experiment.published import CSR, METHODS, SOC_OVER_LOWER_BOUND, SOURCES, figure
-from nnql_swarm.terrain.pogema import FAMILIES, INSTANCES, read_instance, scen_files
+from nnql_swarm.world.pogema_instances import FAMILIES, INSTANCES, read_instance, scen_files
 
 
 def steps(bench: MapsBenchmark, family: str) -> int:

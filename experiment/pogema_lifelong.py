@@ -5,7 +5,7 @@ scored by throughput (goals reached a step), and its table beside the published 
 Each seed's policies, trained one-shot on the project's own random maps (step 1, as in the
 one-shot suite), and the oracle (PIBT-greedy: priority inheritance with preferences by distance,
 no learning) play, frozen, the first ``instances`` of the 128 lifelong instances of each family
-(``maps/pogema/<family>/lifelong/*.goals``, ``terrain.pogema``), each instance once: its map, the
+(``maps/pogema/<family>/lifelong/*.goals``, ``world.pogema_instances``), each instance once: its map, the
 first k agents' starts and goals in turn, then goals drawn from the seed, at the agent counts of
 the published lifelong tables (or ``agents``), for the family's lifelong step limit (256; 128 on
 the mazes; or ``max_steps``). Learning from scratch (``scratch_agents``): every variant learns
@@ -27,7 +27,7 @@ from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
 from nnql_swarm.experiment.published import (
     THROUGHPUT, THROUGHPUT_METHODS, THROUGHPUT_SOURCES, figure,
 )
-from nnql_swarm.terrain.pogema import FAMILIES, INSTANCES, goals_files, read_lifelong
+from nnql_swarm.world.pogema_instances import FAMILIES, INSTANCES, goals_files, read_lifelong
 
 
 def steps(bench: MapsBenchmark, family: str) -> int:

@@ -36,10 +36,10 @@ from nnql_swarm.experiment.swarm import (
     walls_presets, write_runs, write_tables,
 )
 from nnql_swarm.protocol.config import ON_TARGET, PRESETS
-from nnql_swarm.terrain.maps import run_map
+from nnql_swarm.world.terrain import run_map
 from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.launch.experiment_maps import run_maps
-from nnql_swarm.terminal.cli import (
+from nnql_swarm.launch.cli import (
     DefaultsHelpFormatter, EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, comma_choices,
     make_directory, parse_grid, parse_workers, prepare_simulator, program_name, progress,
     raise_terminated,

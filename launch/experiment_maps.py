@@ -24,13 +24,13 @@ from nnql_swarm.protocol.config import (
 )
 from nnql_swarm.recording.curves import log_swarm_curves
 from nnql_swarm.sim.runs import swarm_world, threads
-from nnql_swarm.terminal.cli import (
+from nnql_swarm.launch.cli import (
     DefaultsHelpFormatter, OneLineParser, Terminated, bounded, comma_choices, make_directory,
     parse_workers, prepare_simulator, program_name, progress,
 )
-from nnql_swarm.terrain.maps import MapError
-from nnql_swarm.terrain.pogema import FAMILIES as POGEMA_FAMILIES
-from nnql_swarm.terrain.pogema import INSTANCES
+from nnql_swarm.world.terrain import MapError
+from nnql_swarm.world.pogema_instances import FAMILIES as POGEMA_FAMILIES
+from nnql_swarm.world.pogema_instances import INSTANCES
 
 ALL_FAMILIES = (*FAMILIES, *(f for f in POGEMA_FAMILIES if f not in FAMILIES))
 _D = MapsBenchmark()

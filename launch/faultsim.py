@@ -28,8 +28,8 @@ import traceback
 from pathlib import Path
 from typing import Callable, NamedTuple
 
-from nnql_swarm.terminal.cli import DefaultsHelpFormatter, OneLineParser, progress
-from nnql_swarm.kernel.jit import plain_python_environment
+from nnql_swarm.launch.cli import DefaultsHelpFormatter, OneLineParser, progress
+from nnql_swarm.protocol.jit import plain_python_environment
 
 CHUNK = 25
 """Schedules a worker runs per task."""

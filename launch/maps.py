@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Write a generated map and its scenario in the MovingAI formats (terrain.maps).
+"""Write a generated map and its scenario in the MovingAI formats (world.terrain).
 
     python launch/maps.py random:19x19:0.2 --seed 0 --out maps/random-19x19-20-s0
 
@@ -12,9 +12,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from nnql_swarm.terrain import maps
+from nnql_swarm.world import terrain as maps
 from nnql_swarm.protocol.seeding import MAP_STREAM, stream_rng
-from nnql_swarm.terminal.cli import OneLineParser
+from nnql_swarm.launch.cli import OneLineParser
 
 
 def build_parser() -> OneLineParser:

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Convert POGEMA's published instance sets into MovingAI files (terrain.pogema).
+"""Convert POGEMA's published instance sets into MovingAI files (world.pogema_instances).
 
     python launch/pogema_import.py pogema-benchmark/algorithms/experiments --out maps/pogema
 
@@ -8,7 +8,7 @@ one-shot instances: ``scenarios``, each a ``map_name``, a ``seed`` and the ``age
 ``targets_xy`` of its largest agent count, ``[row, col]`` each) and ``<family>-lmapf.yaml`` (the
 lifelong instances: the same, each agent's ``targets_xy`` a sequence of goals), and writes into
 ``<out>/<family>/`` one ``.map`` per grid, one ``.scen`` per one-shot instance and, into
-``lifelong/``, one ``.goals`` per lifelong instance (``terrain.pogema.format_goals``). Every file
+``lifelong/``, one ``.goals`` per lifelong instance (``world.pogema_instances.format_goals``). Every file
 written is read back and checked (starts and goals on free cells, distinct, reachable). Needs
 PyYAML (the project's ``pogema`` extra).
 """
@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.protocol.walls import map_walls, path_lengths
-from nnql_swarm.terminal.cli import OneLineParser, comma_choices
-from nnql_swarm.terrain import maps, pogema
+from nnql_swarm.launch.cli import OneLineParser, comma_choices
+from nnql_swarm.world import terrain as maps, pogema_instances as pogema
 
 
 def build_parser() -> OneLineParser:

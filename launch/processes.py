@@ -16,15 +16,15 @@ from multiprocessing.context import ForkServerContext, SpawnContext
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from nnql_swarm.kernel.jit import plain_python_environment
+from nnql_swarm.protocol.jit import plain_python_environment
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
+from nnql_swarm.transport.runfiles import EXIT_NO_SPACE, out_of_space
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.settings import TransportSettings
-from nnql_swarm.supervision.supervisor import start_ignoring_sigint
+from nnql_swarm.sim.supervisor import start_ignoring_sigint
 
 if TYPE_CHECKING:
-    from nnql_swarm.supervision.resume import ResumePoint
+    from nnql_swarm.sim.resume import ResumePoint
 
 
 PRELOADED = ("nnql_swarm.agent.node", "nnql_swarm.recording.loggers", "setproctitle")
@@ -46,7 +46,7 @@ def process_context() -> SpawnContext | ForkServerContext:
     interpreter importing it all again (``spawn``): a process imports in about half a second of
     CPU, so 64 agents spawned on 2 cores took 10 to 20 s to start (docs/performance.md, "At
     scale"). The server holds no Zenoh session (a session has threads, which a fork does not
-    carry) and runs the kernel uncompiled, as the processes do (``kernel.jit``); it is started
+    carry) and runs the kernel uncompiled, as the processes do (``protocol.jit``); it is started
     here, with the environment now. A child of the server has the server's environment, not its
     launcher's: a launcher whose environment has changed since it started the server (a test
     setting a variable for one run) spawns its processes, as do systems without a forkserver."""
@@ -83,8 +83,8 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False;
     ``start``: where it resumes (None: the run's start)."""
     from nnql_swarm.recording.loggers import open_world_viz
-    from nnql_swarm.supervision.resume import ResumeError, ResumePoint, shared_table
-    from nnql_swarm.terminal.cli import episode_summary, progress as progress_bar
+    from nnql_swarm.sim.resume import ResumeError, ResumePoint, shared_table
+    from nnql_swarm.launch.cli import episode_summary, progress as progress_bar
     from nnql_swarm.world.node import WorldOptions, run_world
 
     start = start or ResumePoint(0, 0)

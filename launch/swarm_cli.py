@@ -16,10 +16,10 @@ from nnql_swarm.api.command import (  # noqa: F401 (the command's parts, by thei
 from nnql_swarm.api.options import Launch
 from nnql_swarm.api.swarm import Swarm
 from nnql_swarm.recording.merge import merge_parts
-from nnql_swarm.storage.runfiles import EXIT_NO_SPACE, out_of_space
-from nnql_swarm.supervision import restarts
-from nnql_swarm.supervision.resume import ResumeError
-from nnql_swarm.terminal.cli import EXIT_INTERRUPTED
+from nnql_swarm.transport.runfiles import EXIT_NO_SPACE, out_of_space
+from nnql_swarm.sim import restarts
+from nnql_swarm.sim.resume import ResumeError
+from nnql_swarm.launch.cli import EXIT_INTERRUPTED
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 from nnql_swarm.recording.viewers import port_taken
 
 if TYPE_CHECKING:
-    from nnql_swarm.terminal.cli import OneLineParser
+    from nnql_swarm.launch.cli import OneLineParser
 
 RRD_MAGIC = b"RRF2"
 """The first bytes of a Rerun recording file."""
@@ -166,7 +166,7 @@ def open_native(files: list[Path]) -> int:
 
 
 def build_parser() -> "OneLineParser":
-    from nnql_swarm.terminal.cli import OneLineParser
+    from nnql_swarm.launch.cli import OneLineParser
 
     p = OneLineParser(description="Open a saved run's Rerun recording: the native viewer where "
                                   "there is a display, else the web viewer, served with its URL "

@@ -10,7 +10,7 @@ seeking's states (``DS_*``) and rewards (``REWARD_*``) by name, and the sizes of
 
 from typing import NamedTuple
 
-from nnql_swarm.kernel.jit import Buffer
+from nnql_swarm.protocol.jit import Buffer
 from nnql_swarm.learning.known_map import WHOLE_MAP
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, VIEW_RADIUS
 

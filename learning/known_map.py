@@ -23,7 +23,7 @@ the search uses, whether an arrived agent taken stands there, and the list of th
 from nnql_swarm.protocol.actions import (
     DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, target_x, target_y,
 )
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.protocol.jit import kernel
 
 WHOLE_MAP = 1 << 20
 """The sight of an agent that knows every wall of the map (``--map-known``): farther than any

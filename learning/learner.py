@@ -77,7 +77,7 @@ from nnql_swarm.learning.known_map import path_length, track
 from nnql_swarm.learning.readings import ds_state, read_rows, shield_mask, uses_map
 from nnql_swarm.learning.record import apply_record, complete
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, offset_state, target_x, target_y
-from nnql_swarm.kernel.jit import inline_kernel, kernel
+from nnql_swarm.protocol.jit import inline_kernel, kernel
 
 def draw_noise(rng: np.random.Generator, random_actions: np.ndarray, ties: np.ndarray) -> None:
     """Draw an agent's noise for one episode into its buffers: an exploring action per step

@@ -12,7 +12,7 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.known_map import check_cell_order
 from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sees, target_x, target_y, within
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.kernel.jit import inline_kernel, ints
+from nnql_swarm.protocol.jit import inline_kernel, ints
 
 
 @inline_kernel

@@ -10,7 +10,7 @@ from nnql_swarm.learning.fields import (
 )
 from nnql_swarm.learning.known_map import path_length, progress_moves, waypoint_move
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY, move_of, offset_state, target_x, target_y
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.protocol.jit import kernel
 
 @kernel
 def ca_row(reading, known_state, ox, oy, nb, j):

@@ -17,7 +17,7 @@ from nnql_swarm.learning.fields import (
 )
 from nnql_swarm.learning.readings import ds_reward, ds_state
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, move_of
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.protocol.jit import kernel
 
 def record_is_valid(ints, floats, ca_table_rows: int) -> bool:
     """Whether a learning record received from another agent fits this learner's tables (a

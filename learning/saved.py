@@ -1,5 +1,5 @@
 """A learner's tables as saved: reading a checkpoint file's fields and versions
-(``storage.slotfile``) and checking its tables, refusing with one error naming the file
+(``transport.slotfile``) and checking its tables, refusing with one error naming the file
 (:class:`CheckpointError`). An agent's checkpoints (``agent.checkpoint``) and the world's shared
 table (``world.checkpoint``) are read with them."""
 
@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.storage import slotfile
+from nnql_swarm.transport import slotfile
 
 
 class CheckpointError(ValueError):
@@ -24,7 +24,7 @@ def read_fields(path: Path, expected: tuple[str, ...]) -> dict:
 
 
 def read_versions(path: Path, expected: tuple[str, ...]) -> list[dict]:
-    """The checkpoint file's whole versions, the newest first (``storage.slotfile.read_all``:
+    """The checkpoint file's whole versions, the newest first (``transport.slotfile.read_all``:
     the last and the one before), as :func:`read_fields` gives each."""
     return _read(path, expected, all_versions=True)
 

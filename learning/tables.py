@@ -11,7 +11,7 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.known_map import fresh_map, known_cells, map_size, restore_known
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.kernel.jit import floats, ints, python_values
+from nnql_swarm.protocol.jit import floats, ints, python_values
 
 
 class Learner:
@@ -19,7 +19,7 @@ class Learner:
 
     The two tables are views of one array, ``Q_DS``'s rows first (:attr:`entries`, flat, is how
     a shared table's updates name its Q-values), a numpy array whether the kernel is compiled or
-    not (``kernel.jit``); the other buffers are Python lists in plain Python, among them the
+    not (``protocol.jit``); the other buffers are Python lists in plain Python, among them the
     walls it has seen and its way to its goal (``wmap``, ``learning.known_map``), which the agent
     derives from the run's map (``config.walls()``) and its own positions: the world sends no
     walls."""

@@ -2,13 +2,13 @@
 
 Positions are integer cells ``(x, y)`` on a ``width x height`` grid, ``x`` growing to the right and
 ``y`` growing downwards (row-major, as images and the Rerun viewer draw them), so UP is ``y - 1``.
-The scalar functions are kernel functions (``kernel.jit``): the learner, the world and the
+The scalar functions are kernel functions (``protocol.jit``): the learner, the world and the
 simulator all call these very ones.
 """
 
 import numpy as np
 
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.protocol.jit import kernel
 
 UP, DOWN, LEFT, RIGHT, STAY = 0, 1, 2, 3, 4
 """Action indices, in the paper's order (UP, DOWN, LEFT, RIGHT, DON'T MOVE)."""

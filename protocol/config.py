@@ -210,7 +210,7 @@ class SwarmConfig:
     map_name: str = ""
     """Where the map came from (``--map``: a file or a generator's spec); "" without a map."""
     map_rows: tuple[str, ...] = ()
-    """The run's map (``terrain.maps``), one string per row, ``.`` free and ``@`` wall; empty:
+    """The run's map (``world.terrain``), one string per row, ``.`` free and ``@`` wall; empty:
     the open grid, or walls drawn at ``obstacle_density``."""
     scenario: tuple[tuple[int, int, int, int], ...] = ()
     """Every episode's ``(start_x, start_y, goal_x, goal_y)`` per agent (``--scen``); empty:

@@ -191,7 +191,7 @@ class Observation(AgentMessage, tag=tag("obs"), frozen=True):
     updates: Updates = ()  # where the swarm shares one table
     settled: bool = False  # parked since an earlier tick: the world expects no intent (engine)
     world: Count = 0
-    """The world's incarnation (``storage.runfiles.next_incarnation``: one more each time a
+    """The world's incarnation (``transport.runfiles.next_incarnation``: one more each time a
     run's world starts): an intent names the one it was decided for, so that a world started
     again takes no intent decided for the world before it."""
 

@@ -18,7 +18,7 @@ unknown. The agent process (``agent.brain``), the world's recording of the negot
 """
 
 from nnql_swarm.protocol.actions import chebyshev
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.protocol.jit import kernel
 
 SCRIPTED_RANK = -1
 """The rank of a scripted obstacle (the paper's experiment): above every learner, always."""

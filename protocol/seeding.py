@@ -4,7 +4,7 @@
 scenario of episode ``index``, the noise of agent ``index``, or (the simulator, ``sim``) a fault
 schedule's draws; an agent's goals in an episode of a lifelong run (:func:`task_rng`); and, once
 per run, its walls (``protocol.walls``) or its generated map
-(``terrain.maps``). Nothing else draws randomness.
+(``world.terrain``). Nothing else draws randomness.
 """
 
 import numpy as np

@@ -4,7 +4,7 @@ With ``--obstacle-density P`` a run's grid holds ``round(P * W * H)`` walls, dra
 whole run from its own stream (``protocol.seeding.WALL_STREAM``), so the world, every agent and the
 simulator know the same map without a message. Starts and goals are drawn only from the largest
 4-connected region of free cells (:func:`open_cells`), so every goal can be reached; smaller pockets
-stay empty. A run on a map (``--map``, ``terrain.maps``) has the map's walls instead, which its
+stay empty. A run on a map (``--map``, ``world.terrain``) has the map's walls instead, which its
 config carries.
 
 A wall is a body that always stays: body ``n_agents + k`` is wall ``k`` (walls in cell order,

@@ -28,7 +28,7 @@ from nnql_swarm.learning.learner import observe_map
 from nnql_swarm.learning.readings import uses_map
 from nnql_swarm.protocol.actions import VIEW_RADIUS, target_x, target_y, within
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.kernel.jit import ints, rows
+from nnql_swarm.protocol.jit import ints, rows
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
 from nnql_swarm.recording.columns import time_columns
 from nnql_swarm.recording.palette import WALL_COLOUR

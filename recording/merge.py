@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from nnql_swarm.recording.binary import rerun_binary
-from nnql_swarm.storage.runfiles import PARTS_DIR, RECORDING_FILE
+from nnql_swarm.transport.runfiles import PARTS_DIR, RECORDING_FILE
 
 
 def merge_parts(out: Path) -> Path | None:

@@ -18,7 +18,7 @@ from nnql_swarm.recording.merge import merge_parts
 from nnql_swarm.recording.one_origin import OneOrigin
 from nnql_swarm.recording.sinks import RecordingPlan
 from nnql_swarm.recording.viewers import RecordingError, reachable, serve_web, spawn_viewer
-from nnql_swarm.storage.runfiles import PARTS_DIR
+from nnql_swarm.transport.runfiles import PARTS_DIR
 
 
 class RecordingSession:

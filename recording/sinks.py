@@ -12,7 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.storage.runfiles import PARTS_DIR
+from nnql_swarm.transport.runfiles import PARTS_DIR
 
 APP_ID = "nnql-swarm"
 

@@ -1,4 +1,6 @@
-"""Simulators: the whole swarm inside one process.
+"""Running the swarm: the simulators, the whole swarm inside one process, and the supervision of a
+distributed run (the launcher's supervisor, restarts on record, resuming, whether the machine
+can hold a run).
 
 Two of them, for two questions. ``sim.episode`` (with ``sim.runs`` and ``world.pibt``) steps the
 world and every agent's learner inside the compiled kernel, many seeds and options at once: the

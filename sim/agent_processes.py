@@ -9,7 +9,7 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.agent.machine import AgentMachine
 from nnql_swarm.agent.restore import start_brain
-from nnql_swarm.machines.effects import (
+from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, Reply, ReplyError, SendIntent, Stopped,
 )
 from nnql_swarm.protocol.messages import encode

@@ -2,7 +2,7 @@
 fault schedule, checked as it runs.
 
 This module plays the part that Zenoh, the kernel, the disk and the launcher play for real:
-it carries every effect of a protocol (``machines.effects``) to where it goes, over
+it carries every effect of a protocol (``protocol.effects``) to where it goes, over
 ``sim.network``'s links: observations and control to the agents, intents to the world, an
 agent's asks to its neighbours as queries and their replies back, liveliness tokens to everyone
 who subscribes (with the tokens already there, as Zenoh's history gives them). It writes the
@@ -14,7 +14,7 @@ said the run is over, no agent is restarted (the launcher stops whatever still r
 world exits). Where a schedule kills every process at once, every file a run writes goes to
 disk (``config.json``, ``episodes.csv``, every checkpoint, the world's shared table) and the run
 is continued as ``launch/swarm.py --resume`` continues it, through the same functions
-(``supervision.resume``): from the cut of its files, rows past it dropped.
+(``sim.resume``): from the cut of its files, rows past it dropped.
 """
 
 import hashlib

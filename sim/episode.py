@@ -34,7 +34,7 @@ from nnql_swarm.learning.learner import (
 from nnql_swarm.learning.neighbours import neighbour_row
 from nnql_swarm.learning.record import apply_record, record_outcome
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, sees
-from nnql_swarm.kernel.jit import Buffer, batch_kernel, inline_kernel, kernel, prange
+from nnql_swarm.protocol.jit import Buffer, batch_kernel, inline_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.world.pibt import plan
 from nnql_swarm.world.tasks import renew_goals

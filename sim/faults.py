@@ -9,8 +9,8 @@ from nnql_swarm.sim.agent_processes import START_SPREAD_S
 from nnql_swarm.sim.network import Process
 from nnql_swarm.sim.schedule import FORGE, WINDOWS, Fault
 from nnql_swarm.sim.swarm_state import SwarmState
-from nnql_swarm.storage.runfiles import EPISODES_FILE
-from nnql_swarm.supervision.resume import resume_point, rewind, shared_table
+from nnql_swarm.transport.runfiles import EPISODES_FILE
+from nnql_swarm.sim.resume import resume_point, rewind, shared_table
 from nnql_swarm.world.metrics import EpisodeWriter
 
 REORDER_S = 0.005

@@ -18,7 +18,7 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, EPISODES_FILE
+from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, EPISODES_FILE
 from nnql_swarm.sim.runs import Batch, Episodes, swarm_world
 from nnql_swarm.sim.episode import (
     TR_ACTION, TR_ARRIVED, TR_COLLIDED, TR_GOAL_X, TR_GOAL_Y, TR_WANTED, TR_X, TR_Y,

@@ -23,7 +23,7 @@ from nnql_swarm.learning.known_map import check_cell_order, fresh_map, known_cel
 from nnql_swarm.learning.learner import draw_noise
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, STAY
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.kernel.jit import cached
+from nnql_swarm.protocol.jit import cached
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 from nnql_swarm.protocol.walls import layout
 from nnql_swarm.sim.episode import (
@@ -284,7 +284,7 @@ class Batch:
 
 def compiled_simulator() -> bool:
     """Whether the simulator's kernel loads from the on-disk cache (in a second or two) rather than
-    compiling (about half a minute on a 2-core VM): :func:`kernel.jit.cached`."""
+    compiling (about half a minute on a 2-core VM): :func:`protocol.jit.cached`."""
     return cached(run_episode)
 
 

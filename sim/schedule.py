@@ -14,7 +14,7 @@ opens a given tick, some virtual time into it (at most one fault of each kind):
   other kinds (:data:`FORGE_P`), after them, so that it leaves their draws alone.
 - ``kill-all``: every process dies at once (kill -9 of the process group), and ``duration``
   later the run is continued with ``--resume``, from the cut its files give
-  (``supervision.resume``). Drawn from a stream of its own (one schedule in ten), so that it
+  (``sim.resume``). Drawn from a stream of its own (one schedule in ten), so that it
   leaves the other draws alone.
 
 Latency, duplicates and reordering alone cannot make anyone miss a deadline (they are far

@@ -13,7 +13,7 @@ from nnql_swarm.protocol import keys
 from nnql_swarm.sim.checks import Checker
 from nnql_swarm.sim.network import Network, Process
 from nnql_swarm.sim.schedule import Fault, Schedule, schedule_rng
-from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
+from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.world.metrics import EpisodeWriter
 from nnql_swarm.world.machine import WorldMachine
 from nnql_swarm.world.shared_table import SharedState

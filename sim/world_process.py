@@ -2,7 +2,7 @@
 restarted as ``--resume`` restarts it, and its effects carried to the agents, the rows and the
 checks. A part of ``sim.distributed.SimSwarm``, whose state it shares."""
 
-from nnql_swarm.machines.effects import Finished, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.protocol.effects import Finished, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.sim.network import Process

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nnql_swarm.storage import slotfile
+from nnql_swarm.transport import slotfile
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import find_process, group_pids, swarm_command

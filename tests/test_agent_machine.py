@@ -11,8 +11,8 @@ from nnql_swarm.agent.machine import PEER_WAIT_S, RESYNC_AFTER, AgentMachine
 from nnql_swarm.agent.phases import TRANSITIONS, Event, Phase
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.machines.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
-from nnql_swarm.machines.phases import PhaseError
+from nnql_swarm.protocol.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
+from nnql_swarm.protocol.phase_machine import PhaseError
 from nnql_swarm.world.machine import STARTUP_TIMEOUT_S, WorldMachine
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode, to_wire,

@@ -15,9 +15,9 @@ import pytest
 from nnql_swarm.launch.swarm_cli import build_parser, resume_command
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.sim import runs
-from nnql_swarm.supervision.capacity import available_bytes, check_fits
+from nnql_swarm.sim.capacity import available_bytes, check_fits
 from nnql_swarm.sim.runs import compiled_simulator, swarm_world
-from nnql_swarm.terminal.cli import COMPILING, prepare_simulator
+from nnql_swarm.launch.cli import COMPILING, prepare_simulator
 from tests.swarm_helpers import ROOT
 
 BIN = Path(sys.executable).parent
@@ -136,7 +136,7 @@ def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
 def test_the_kernel_cache_is_the_sources_own_even_when_numba_was_imported_first():
     """numba reads its environment at its own import: a script that imports it before the
     project must still get the cache of this version of the kernel sources, not a stale one."""
-    probe = ("import numba; from nnql_swarm.kernel.jit import cache_directory; "
+    probe = ("import numba; from nnql_swarm.protocol.jit import cache_directory; "
              "print(numba.config.CACHE_DIR == str(cache_directory()))")
     env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "NNQL_KERNEL")}
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
@@ -221,7 +221,7 @@ def test_no_help_shows_a_default_in_python(command):
 def test_every_option_of_every_command_says_what_it_is():
     from nnql_swarm.api import command
     from nnql_swarm.launch import experiment, experiment_maps, faultsim, maps, pogema_import, view
-    from nnql_swarm.operations import router, secure
+    from nnql_swarm.launch import router, secure
 
     parsers = {"swarm": command.build_parser(), "experiment": experiment.build_parser(),
                "experiment swarm": experiment.build_swarm_parser(),
@@ -236,7 +236,7 @@ def test_every_option_of_every_command_says_what_it_is():
 
 
 def test_the_help_formatter_leaves_out_defaults_not_worth_reading():
-    from nnql_swarm.terminal.cli import DefaultsHelpFormatter, OneLineParser
+    from nnql_swarm.launch.cli import DefaultsHelpFormatter, OneLineParser
 
     parser = OneLineParser(prog="p", formatter_class=DefaultsHelpFormatter)
     parser.add_argument("--out", required=True, help="where")
@@ -327,7 +327,7 @@ def test_an_interrupted_in_process_run_says_how_to_resume_it_and_the_resumed_run
     from nnql_swarm.world.metrics import read_episodes
 
     options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--seed", "4",
-               "--episodes", "3000", "--no-record", "--in-process")
+               "--episodes", "1000", "--no-record", "--in-process")
     out = tmp_path / "stopped"
     swarm = subprocess.Popen([sys.executable, str(SWARM), "--out", str(out), "--no-progress",
                               *options], cwd=ROOT, stderr=subprocess.PIPE, text=True,

@@ -20,7 +20,7 @@ from nnql_swarm.experiment.report import (
     EPISODE_COLUMNS, PAPER_TABLE1, TABLE1_COLUMNS, ResultGrid, summarize, table1_markdown, table1_rows,
 )
 from nnql_swarm.experiment.stats import mean_interval, t_quantile
-from nnql_swarm.terminal.cli import progress
+from nnql_swarm.launch.cli import progress
 
 REPO = Path(__file__).resolve().parent.parent
 SCRIPT = "launch/experiment.py"

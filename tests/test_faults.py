@@ -361,7 +361,7 @@ def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_pa
     the run, every episode once. (Whether it is the run left alone depends on where the disk
     filled: the agents' checkpoints, rewritten in place, may have gone two episodes past the
     world's last row, which the resume then says.)"""
-    from nnql_swarm.storage.runfiles import EXIT_NO_SPACE
+    from nnql_swarm.transport.runfiles import EXIT_NO_SPACE
 
     disk = tmp_path / "disk"
     disk.mkdir()

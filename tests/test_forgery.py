@@ -17,7 +17,7 @@ import pytest
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.storage.runfiles import stats_path
+from nnql_swarm.transport.runfiles import stats_path
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes

@@ -1,10 +1,10 @@
 """The rooms' layers (docs/design.md, the contracts of ``[tool.importlinter]`` in pyproject.toml):
 every room imports only the rooms below it; ``world`` and ``agent`` never import each other, and
-neither they, ``learning`` nor ``protocol`` imports ``launch``, ``supervision``, ``recording`` or
-any other room above them; the protocol machines (``agent.machine``, ``world.machine``, and
-``machines``' effects and phases) reach no network, file or recording, however indirectly. The
-contracts hold for the package as it is, and break on a copy of it with one import that crosses
-a layer."""
+neither they, ``learning`` nor ``protocol`` imports ``launch``, ``sim``, ``recording`` or any
+other room above them; the protocol machines (``agent.machine``, ``world.machine``, and
+``protocol``'s effects and phase machine) reach no network, file or recording, however
+indirectly. The contracts hold for the package as it is, and break on a copy of it with one
+import that crosses a layer."""
 
 import shutil
 import subprocess
@@ -32,16 +32,18 @@ def test_the_package_keeps_its_layers(tmp_path):
 @pytest.mark.parametrize("module, crossing", [
     ("world/engine.py", "nnql_swarm.agent.brain"),
     ("agent/brain.py", "nnql_swarm.world.rules"),
-    ("world/node.py", "nnql_swarm.supervision.resume"),
+    ("world/node.py", "nnql_swarm.sim.resume"),
     ("agent/node.py", "nnql_swarm.recording.columns"),
     ("learning/record.py", "nnql_swarm.agent.brain"),
     ("sim/runs.py", "nnql_swarm.launch.swarm_cli"),
-    ("protocol/config.py", "nnql_swarm.terminal.cli"),
+    ("protocol/config.py", "nnql_swarm.launch.cli"),
     ("agent/machine.py", "zenoh"),
-    ("world/machine.py", "nnql_swarm.storage.runfiles"),
+    ("world/machine.py", "nnql_swarm.transport.runfiles"),
     ("world/records.py", "nnql_swarm.transport.adapter"),
     ("agent/negotiation.py", "nnql_swarm.agent.checkpoint"),
-    ("machines/effects.py", "rerun"),
+    ("protocol/effects.py", "rerun"),
+    ("protocol/phase_machine.py", "nnql_swarm.transport.slotfile"),
+    ("world/terrain.py", "nnql_swarm.agent.brain"),
 ])
 def test_an_import_across_the_layers_breaks_a_contract(tmp_path, module, crossing):
     copy = tmp_path / "nnql_swarm"

@@ -1,4 +1,4 @@
-"""Maps as input (``--map``, ``--scen``, ``terrain.maps``): the MovingAI formats read and
+"""Maps as input (``--map``, ``--scen``, ``world.terrain``): the MovingAI formats read and
 written, one-line errors naming the file and line, the generators, the repository's ``maps/``,
 the map carried by the config to every process, and the oracle planning around walls under
 both on-target rules."""
@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from nnql_swarm.terrain import maps
+from nnql_swarm.world import terrain as maps
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.protocol.walls import map_walls, open_cells
 from nnql_swarm.world.metrics import read_episodes

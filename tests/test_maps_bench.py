@@ -18,7 +18,7 @@ from nnql_swarm.experiment.maps import (
     train,
 )
 from nnql_swarm.protocol.actions import DOWN, RIGHT, STAY
-from nnql_swarm.terrain.maps import generated
+from nnql_swarm.world.terrain import generated
 from nnql_swarm.world.rules import (
     FIELD_COLUMNS, GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, Bodies, Outcome, Rules, Scratch,
     Score, field_columns, field_costs, world_step,

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from nnql_swarm.storage.runfiles import stats_path
+from nnql_swarm.transport.runfiles import stats_path
 from nnql_swarm.transport.ports import free_port
 from tests import netns
 from tests.swarm_helpers import ROOT, SWARM, run_swarm

@@ -1,4 +1,4 @@
-"""A run folder has one owner at a time (``storage.runlock``): a second run, or a second
+"""A run folder has one owner at a time (``transport.runlock``): a second run, or a second
 ``--resume``, into a folder a run is using is refused in one line with exit code 2, and the run
 that owns it completes with every episode once; a launcher killed outright leaves the folder
 free to resume."""
@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-from nnql_swarm.storage.runlock import RunLock, RunLocked
+from nnql_swarm.transport.runlock import RunLock, RunLocked
 from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import (
     ROOT, SwarmProcess, start_swarm, stops_within, swarm_command, wait_for_rows,
@@ -84,7 +84,7 @@ def test_a_launcher_killed_outright_leaves_its_folder_free(tmp_path):
 def test_the_lock_is_the_processs_until_released(tmp_path):
     with RunLock(tmp_path):
         held = subprocess.run(
-            [sys.executable, "-c", "import sys; from nnql_swarm.storage.runlock import RunLock;"
+            [sys.executable, "-c", "import sys; from nnql_swarm.transport.runlock import RunLock;"
                                    f"RunLock(sys.argv[1])", str(tmp_path)],
             capture_output=True, text=True, timeout=60)
         assert held.returncode == 1 and "RunLocked" in held.stderr

@@ -1,4 +1,4 @@
-"""POGEMA's instances (``terrain.pogema``, ``maps/pogema/``): the committed files parse, each
+"""POGEMA's instances (``world.pogema_instances``, ``maps/pogema/``): the committed files parse, each
 family has its 128 instances of its agents on free, distinct, reachable cells; POGEMA's grids and
 ``[row, col]`` cells convert as its environment reads them; the converter writes what it reads and
 refuses a bad source with one line."""
@@ -8,7 +8,7 @@ from dataclasses import replace
 import pytest
 
 from nnql_swarm.launch import pogema_import
-from nnql_swarm.terrain import maps, pogema
+from nnql_swarm.world import terrain as maps, pogema_instances as pogema
 
 AGENTS = {"random": 64, "mazes": 64, "warehouse": 192, "movingai": 256}
 MAPS = {"random": 128, "mazes": 128, "warehouse": 1, "movingai": 128}

@@ -13,7 +13,7 @@ import pytest
 from nnql_swarm.experiment.published import (
     THROUGHPUT, THROUGHPUT_METHODS, THROUGHPUT_SOURCES,
 )
-from nnql_swarm.terrain.pogema import FAMILIES, INSTANCES, goals_files, read_lifelong
+from nnql_swarm.world.pogema_instances import FAMILIES, INSTANCES, goals_files, read_lifelong
 from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import ROOT, run_swarm
 

@@ -9,7 +9,7 @@ import sys
 import pytest
 
 from nnql_swarm.experiment.published import CSR, METHODS, SOC_OVER_LOWER_BOUND, SOURCES
-from nnql_swarm.terrain.pogema import FAMILIES, INSTANCES, scen_files
+from nnql_swarm.world.pogema_instances import FAMILIES, INSTANCES, scen_files
 from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import ROOT, run_swarm
 

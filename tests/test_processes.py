@@ -9,7 +9,7 @@ import pytest
 
 from tests.swarm_helpers import ROOT
 
-WORLD_ONLY = ("nnql_swarm.world.node", "nnql_swarm.world.engine", "nnql_swarm.terminal.cli",
+WORLD_ONLY = ("nnql_swarm.world.node", "nnql_swarm.world.engine", "nnql_swarm.launch.cli",
               "tqdm", "rerun")
 """Modules the world (or a recording process) runs and an agent does not."""
 

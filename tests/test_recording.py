@@ -19,7 +19,7 @@ from nnql_swarm.recording.agent import (
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.recording.binary import rerun_binary
 from nnql_swarm.recording.curves import log_experiment
-from nnql_swarm.storage.runfiles import PARTS_DIR
+from nnql_swarm.transport.runfiles import PARTS_DIR
 from nnql_swarm.protocol.actions import RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation

@@ -1,4 +1,4 @@
-"""Supervised restarts on record (``supervision.restarts``): the supervisor names every child it
+"""Supervised restarts on record (``sim.restarts``): the supervisor names every child it
 restarted and how it had exited, with real spawned processes; the run's stats add each launch's
 restarts to the last's, and the launcher's last line says the run is no longer its seed's. The
 distributed run with an agent killed: ``tests/test_faults.py``."""
@@ -9,9 +9,9 @@ import sys
 import time
 from pathlib import Path
 
-from nnql_swarm.storage.runfiles import stats_path
-from nnql_swarm.supervision import restarts
-from nnql_swarm.supervision.supervisor import Supervisor
+from nnql_swarm.transport.runfiles import stats_path
+from nnql_swarm.sim import restarts
+from nnql_swarm.sim.supervisor import Supervisor
 
 
 def dies_once(folder: str, restarted: bool) -> None:

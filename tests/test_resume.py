@@ -8,7 +8,7 @@ import pytest
 from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.supervision.resume import ResumeError, resume_point, rewind
+from nnql_swarm.sim.resume import ResumeError, resume_point, rewind
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.metrics import EpisodeWriter, read_episodes
 from nnql_swarm.world.shared_table import SharedState, SharedTable
@@ -161,7 +161,7 @@ def test_a_run_stopped_in_every_way_and_resumed_is_the_run_left_alone(tmp_path, 
     the same rows and the same Q-tables, generators and shared table as the run left alone (the
     default among walls: the walls each agent has seen come back from its checkpoint; priority
     inheritance in a lifelong run: every agent's goals of an episode drawn again as they were)."""
-    options = ["--preset", preset, "--episodes", "20", "--no-record", *grid]
+    options = ["--preset", preset, "--episodes", "10", "--no-record", *grid]
     expected = tmp_path / "left-alone"
     episodes = run_left_alone(expected, [*options, "--run-id", "left-alone", "--no-progress"])
     lines: list[str] = []

@@ -19,12 +19,12 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from nnql_swarm.operations import secure
+from nnql_swarm.launch import secure
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Control, Intent, Observation, agent_sender, encode,
 )
-from nnql_swarm.storage.runfiles import stats_path
+from nnql_swarm.transport.runfiles import stats_path
 from nnql_swarm.transport.ports import free_port
 from tests.swarm_helpers import ROOT, run_swarm
 from nnql_swarm.world.engine import EPISODE_FIELDS

@@ -1,11 +1,11 @@
-"""storage.slotfile: the record rewritten in place, whole whatever is cut short; and the world's
+"""transport.slotfile: the record rewritten in place, whole whatever is cut short; and the world's
 checkpoint, which keeps the table of the episode before for a world killed before its row."""
 
 import numpy as np
 import pytest
 
 from nnql_swarm.learning.saved import CheckpointError
-from nnql_swarm.storage import slotfile
+from nnql_swarm.transport import slotfile
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.shared_table import SharedState, SharedTable

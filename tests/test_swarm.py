@@ -16,7 +16,7 @@ from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.storage.runfiles import stats_path
+from nnql_swarm.transport.runfiles import stats_path
 from tests.swarm_helpers import SWARM, group_pids, run_swarm, start_swarm, stops_within
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import COLUMNS, read_episodes

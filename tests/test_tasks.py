@@ -3,7 +3,7 @@ arrival, and a lifelong swarm that counts every goal once."""
 
 import numpy as np
 
-from nnql_swarm.kernel.jit import flags, ints
+from nnql_swarm.protocol.jit import flags, ints
 from nnql_swarm.protocol.actions import N_ACTIONS, target_x, target_y
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.protocol.walls import layout, regions

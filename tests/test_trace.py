@@ -1,4 +1,4 @@
-"""Tick traces (machines.trace, bench/tick_trace.py): off by default, and lined up tick by tick."""
+"""Tick traces (protocol.trace, bench/tick_trace.py): off by default, and lined up tick by tick."""
 
 import json
 
@@ -7,7 +7,7 @@ from bench.tick_trace import (
     ANSWER_IN, FIRST_OBS, HOP, LAST_INTENT, LEARNING, NEXT_OBS, TICK, by_tick, read_trace,
     tick_steps,
 )
-from nnql_swarm.machines import trace
+from nnql_swarm.protocol import trace
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 
 

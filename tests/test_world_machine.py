@@ -10,13 +10,13 @@ from nnql_swarm.learning.record import write_updates
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import DOWN, LEFT, RIGHT, STAY, UP
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
 from nnql_swarm.world.machine import (
     SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, TRANSITIONS, Event, Phase, WorldMachine,
 )
-from nnql_swarm.machines.phases import PhaseError
+from nnql_swarm.protocol.phase_machine import PhaseError
 
 CONFIG = SwarmConfig(run_id="wproto", n_agents=2, episodes=2, max_steps=3, tick_deadline_s=0.5)
 

@@ -9,7 +9,7 @@ import zenoh
 
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.machines.effects import WriteRow
+from nnql_swarm.protocol.effects import WriteRow
 from nnql_swarm.protocol.messages import Intent, agent_sender, encode
 from nnql_swarm.transport.settings import TransportSettings
 from nnql_swarm.world.node import WorldNode, WorldOptions
@@ -19,7 +19,7 @@ CONFIG = SwarmConfig(run_id="worldnode", n_agents=2, episodes=2, max_steps=5)
 
 def intent_sample(agent: int, tick: int, action: int = 4, world: int = 1) -> SimpleNamespace:
     """What the handler reads of a zenoh.Sample (one cannot be built by hand): an intent
-    decided for ``world``, the first start of the run's world (``storage.runfiles``)."""
+    decided for ``world``, the first start of the run's world (``transport.runfiles``)."""
     payload = encode(Intent(run="worldnode", tick=tick, sender=agent_sender(agent), agent=agent,
                             episode=0, action=action, world=world))
     return SimpleNamespace(key_expr=keys.intent_key("worldnode", agent), payload=payload)

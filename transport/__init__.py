@@ -1,1 +1,3 @@
-"""Zenoh for every process of a run: session settings, runtime, handlers, ports, topologies."""
+"""I/O for every process of a run: Zenoh (session settings, runtime, handlers, ports,
+topologies) and the run folder's files (its layout and atomic writes, its lock, the checkpoints'
+slot files)."""

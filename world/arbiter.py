@@ -8,7 +8,7 @@ be told). The arbitration's priorities carry over from step to step within an ep
 :meth:`Arbiter.start_episode` sets them from the agents' shortest paths, as the simulator does).
 """
 
-from nnql_swarm.kernel.jit import Buffer, flags, ints
+from nnql_swarm.protocol.jit import Buffer, flags, ints
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.world.pibt import UNWANTED, plan

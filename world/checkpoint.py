@@ -11,8 +11,8 @@ from pathlib import Path
 
 from nnql_swarm.learning.saved import CheckpointError, check_run, check_tables, read_versions
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.storage import slotfile
-from nnql_swarm.storage.runfiles import CHECKPOINT_DIR
+from nnql_swarm.transport import slotfile
+from nnql_swarm.transport.runfiles import CHECKPOINT_DIR
 from nnql_swarm.world.shared_table import SharedState, SharedTable
 
 FILE = "world.ckpt"

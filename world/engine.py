@@ -33,7 +33,7 @@ import numpy as np
 
 from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.kernel.jit import flags, floats, ints, python_values
+from nnql_swarm.protocol.jit import flags, floats, ints, python_values
 from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (

@@ -1,12 +1,12 @@
 """The world's side of the swarm protocol, pure: the lockstep clock as inputs in, effects out.
 
 No sockets, no threads, no clock reads, no files: every input carries its time ``now`` and
-returns the effects it causes (``machines.effects``), in order; :meth:`WorldMachine.timer` is
+returns the effects it causes (``protocol.effects``), in order; :meth:`WorldMachine.timer` is
 when it next wants :meth:`WorldMachine.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
 over a simulated network in virtual time.
 
 Theory of operation. The machine is in one :class:`Phase` at a time, moved only by
-:data:`TRANSITIONS` (``machines.phases``):
+:data:`TRANSITIONS` (``protocol.phase_machine``):
 
 - ``STARTING``: it waits for every agent's liveliness token (at most ``startup_timeout_s``; then
   it is ``DONE``, the run failed).
@@ -16,8 +16,8 @@ Theory of operation. The machine is in one :class:`Phase` at a time, moved only 
   out of the negotiation) has answered or the tick deadline passes (a missing intent counts as
   STAY and as a missed intent; a settled agent stays, and its intent, should one come with a
   learning record, is taken too). Then it applies the tick with ``world.engine``, sends the next
-  observations at once, and reports the tick (:class:`~machines.effects.TickClosed`) and, at an
-  episode's end, its row (:class:`~machines.effects.WriteRow`). A dead agent costs nothing, a
+  observations at once, and reports the tick (:class:`~protocol.effects.TickClosed`) and, at an
+  episode's end, its row (:class:`~protocol.effects.WriteRow`). A dead agent costs nothing, a
   stalled one at most the deadline. A world that every agent has left (dead, told to stop by a
   forged shutdown, cut off for longer than Zenoh's lease) plays on without them for at most
   ``startup_timeout_s``, as long as it waits for them at the start; if none comes back by then
@@ -44,11 +44,11 @@ import logging
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import START_S_PER_AGENT, SwarmConfig
-from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.inbox import Inbox
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, WORLD_SENDER, Control, Intent, encode
-from nnql_swarm.machines.phases import EffectLog, Machine, Named, an_input
-from nnql_swarm.machines.trace import CLOSE, TickTrace
+from nnql_swarm.protocol.phase_machine import EffectLog, Machine, Named, an_input
+from nnql_swarm.protocol.trace import CLOSE, TickTrace
 from nnql_swarm.world.engine import SwarmWorld
 from nnql_swarm.world.records import BARRED, FORGED, UNCHECKED, Decision, RecordCheck, decides
 

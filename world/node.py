@@ -29,11 +29,11 @@ from typing import Callable
 
 import zenoh
 
-from nnql_swarm.machines import trace
+from nnql_swarm.protocol import trace
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.machines.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
-from nnql_swarm.storage.runfiles import (
+from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
+from nnql_swarm.transport.runfiles import (
     EPISODES_FILE, next_incarnation, stats_path, write_json_atomic,
 )
 from nnql_swarm.transport.adapter import ProtocolAdapter

@@ -37,7 +37,7 @@ greedy actions" (PIBT-greedy): the same arbitration, preferences by distance alo
 """
 
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.protocol.jit import kernel
 
 TIES = 1024
 """Tie-breakers per distance under ``step-aside`` (:func:`_tie`)."""

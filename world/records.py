@@ -47,7 +47,7 @@ from nnql_swarm.learning.readings import read_rows, uses_map
 from nnql_swarm.learning.record import complete, record_outcome
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.kernel.jit import floats, ints, python_values, rows
+from nnql_swarm.protocol.jit import floats, ints, python_values, rows
 from nnql_swarm.protocol.messages import Observation
 
 FORGED = "forged-record"

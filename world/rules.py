@@ -1,6 +1,6 @@
 """The world's rules, once: simultaneous moves, collisions, rewards and the end of an episode.
 
-Kernel functions (``kernel.jit``) over one world's buffers, indexed by body (agent) id: the
+Kernel functions (``protocol.jit``) over one world's buffers, indexed by body (agent) id: the
 world process calls them on Python lists, the swarm simulator compiled on rows of its arrays.
 
 Collision rules:
@@ -49,7 +49,7 @@ import math
 from typing import NamedTuple
 
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, target_x, target_y
-from nnql_swarm.kernel.jit import Buffer, kernel
+from nnql_swarm.protocol.jit import Buffer, kernel
 
 Cell = tuple[int, int]
 

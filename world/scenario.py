@@ -61,7 +61,7 @@ def swarm_episode(seed: int, episode: int, width: int, height: int, n_agents: in
                   obstacle_density: float = 0.0, rows: tuple[str, ...] = (),
                   tasks: tuple = ()) -> SwarmEpisode:
     """Draw ``2 * n_agents`` distinct free cells: the starts, then the goals; on the map
-    ``rows`` if given (``terrain.maps``), and with ``tasks`` (a scenario's ``(start_x, start_y,
+    ``rows`` if given (``world.terrain``), and with ``tasks`` (a scenario's ``(start_x, start_y,
     goal_x, goal_y)`` per agent) those starts and goals in every episode."""
     walls, free = layout(seed, width, height, obstacle_density, rows)
     if tasks:

@@ -25,7 +25,7 @@ from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA
 from nnql_swarm.learning.record import apply_record, record_entries, record_is_valid
 from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.kernel.jit import floats, ints
+from nnql_swarm.protocol.jit import floats, ints
 from nnql_swarm.protocol.messages import MAX_AGENTS
 
 Updates = tuple[tuple[tuple[int, ...], tuple[float, ...]], ...]

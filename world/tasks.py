@@ -19,7 +19,7 @@ the goal reached, and the agent is on its way again.
 
 import numpy as np
 
-from nnql_swarm.kernel.jit import kernel
+from nnql_swarm.protocol.jit import kernel
 from nnql_swarm.protocol.seeding import task_rng
 from nnql_swarm.protocol.walls import regions
 from nnql_swarm.world.rules import ROW_ARRIVED, ROW_GOALS

@@ -11,7 +11,7 @@ import fcntl
 import os
 from pathlib import Path
 
-from nnql_swarm.storage.runfiles import LOCK_FILE
+from nnql_swarm.transport.runfiles import LOCK_FILE
 
 
 class RunLocked(Exception):

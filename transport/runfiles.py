@@ -2,13 +2,13 @@
 
     <out>/config.json          the resolved SwarmConfig
     <out>/episodes.csv         one row per finished episode (world.metrics)
-    <out>/checkpoints/agent-<id>.ckpt  each agent's Q-tables (agent.checkpoint; storage.slotfile)
+    <out>/checkpoints/agent-<id>.ckpt  each agent's Q-tables (agent.checkpoint; transport.slotfile)
     <out>/checkpoints/world.ckpt       the shared Q-table, where the agents share one (world.checkpoint)
     <out>/stats/world.json, <out>/stats/agent-<id>.json   closing statistics of each process
     <out>/stats/incarnation.json  how many times the run's world has started (next_incarnation)
     <out>/run.rrd              the Rerun recording
     <out>/rerun-parts/<role>.<pid>.rrd  each process's part of it, until merged into run.rrd
-    <out>/run.lock             held by the run's launcher while it runs (storage.runlock)
+    <out>/run.lock             held by the run's launcher while it runs (transport.runlock)
 """
 
 import errno

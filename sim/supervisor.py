@@ -16,7 +16,7 @@ from multiprocessing.context import ForkServerContext, SpawnContext
 from multiprocessing.process import BaseProcess
 from typing import Callable
 
-from nnql_swarm.storage.runfiles import EXIT_NO_SPACE
+from nnql_swarm.transport.runfiles import EXIT_NO_SPACE
 from nnql_swarm.transport.settings import EXIT_NO_WORLD, EXIT_TRANSPORT
 
 log = logging.getLogger("nnql.supervisor")

@@ -40,7 +40,7 @@ PLAIN = "python"
 COMPILED = os.environ.get(MODE_VARIABLE, "compiled") != PLAIN
 """Whether kernel functions are compiled in this process (fixed at import)."""
 
-KERNEL_ROOMS = ("kernel", "learning", "protocol", "sim", "world")
+KERNEL_ROOMS = ("learning", "protocol", "sim", "world")
 """The packages whose modules may define kernel functions."""
 
 
@@ -56,7 +56,7 @@ def cache_directory() -> Path:
     for room in KERNEL_ROOMS:
         for path in sorted((root / room).glob("*.py")):
             source = path.read_bytes()
-            if b"kernel.jit import" in source or path.name == "jit.py":
+            if b"protocol.jit import" in source or path.name == "jit.py":
                 digest.update(path.name.encode() + source)
     cache = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache"))
     return cache / "nnql-swarm" / "kernels" / digest.hexdigest()[:16]

@@ -7,10 +7,10 @@ checkpoint, having missed ticks and the episode's learning since: ``--in-process
 import json
 from pathlib import Path
 
-from nnql_swarm.storage.runfiles import stats_path, write_json_atomic
+from nnql_swarm.transport.runfiles import stats_path, write_json_atomic
 
 STATS_NAME = "supervisor"
-"""The stats file's name (``storage.runfiles.stats_path``)."""
+"""The stats file's name (``transport.runfiles.stats_path``)."""
 
 
 def record(out: Path, restarted: dict[str, list[str]], name: str = STATS_NAME) -> dict:

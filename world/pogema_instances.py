@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from nnql_swarm.protocol.walls import FREE, WALL
-from nnql_swarm.terrain.maps import MapError, Task, read_map, read_scen
+from nnql_swarm.world.terrain import MapError, Task, read_map, read_scen
 
 POGEMA_FREE = frozenset(".@$!")
 POGEMA_WALL = "#"

@@ -6,7 +6,7 @@ and events as :class:`Named` enums: an event that its table does not allow in th
 is a bug, and raises :class:`PhaseError`.
 Each input is a method decorated :func:`an_input` (nothing happens once the machine is in its
 final phase) or :func:`any_phase_input` (it runs in every phase, and says itself what it does in
-the final one); either way it returns the effects (``machines.effects``) it caused, in order.
+the final one); either way it returns the effects (``protocol.effects``) it caused, in order.
 """
 
 import enum
@@ -14,7 +14,7 @@ import functools
 import logging
 from typing import ClassVar
 
-from nnql_swarm.machines.effects import Log
+from nnql_swarm.protocol.effects import Log
 
 
 class Named(enum.Enum):
@@ -71,7 +71,7 @@ def any_phase_input(handler):
 
 
 class EffectLog:
-    """A logger whose lines become :class:`~machines.effects.Log` effects of the machine's current
+    """A logger whose lines become :class:`~protocol.effects.Log` effects of the machine's current
     input (what ``protocol.messages.Inbox`` is given, so that its rejections are effects too)."""
 
     def __init__(self, owner: Machine) -> None:

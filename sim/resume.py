@@ -4,7 +4,7 @@ Every process writes its own files at each episode's end: an agent its checkpoin
 end tick's intent; the world the shared table's checkpoint, then the episode's row. Whatever
 stopped the run, whenever, those files may stand at different episodes (a Ctrl-C can reach some
 agents before they checkpoint an end tick and others after). Each checkpoint file keeps its
-newest two versions (``storage.slotfile``), so a run has one consistent *cut*: the last episode
+newest two versions (``transport.slotfile``), so a run has one consistent *cut*: the last episode
 with a row in ``episodes.csv`` (a half-written last line dropped) and a checkpoint of it in every
 file of the processes this launcher starts (a process with no file yet stands before episode
 0: the run starts afresh). The resumed run starts every process from the cut's checkpoints; rows
@@ -25,7 +25,7 @@ from nnql_swarm.agent import checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.saved import CheckpointError
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.storage.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
+from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.world import checkpoint as world_checkpoint
 from nnql_swarm.world.metrics import COLUMNS, drop_partial_line, keep_rows, read_episodes
 from nnql_swarm.world.shared_table import SharedState

@@ -147,8 +147,8 @@ COMPILING = "compiling the simulator (first run, about half a minute)..."
 def prepare_simulator(world, run) -> None:
     """Compile or load the simulator before a progress bar starts (``sim.runs.warm_up``), so that
     the bar's first item, and its estimate of the time left, do not include it; says so when it
-    compiles (its kernel is not in the on-disk cache, ``kernel.jit.cached``)."""
-    from nnql_swarm.kernel.jit import cache_directory
+    compiles (its kernel is not in the on-disk cache, ``protocol.jit.cached``)."""
+    from nnql_swarm.protocol.jit import cache_directory
     from nnql_swarm.sim.runs import compiled_simulator, warm_up
 
     cold = not compiled_simulator()

@@ -1,1 +1,0 @@
-"""Zenoh operations: config files per process, a router, and a secured deployment's certificates."""

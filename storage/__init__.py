@@ -1,1 +1,0 @@
-"""Files on disk: a run directory's layout, atomic writes, and the checkpoints' slot files."""

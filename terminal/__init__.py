@@ -1,1 +1,0 @@
-"""What the commands share at the terminal: one-line usage errors, exit codes, progress bars."""

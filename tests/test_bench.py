@@ -1,0 +1,43 @@
+"""The benchmarks under ``bench/`` keep up with the code they time: every module imports (a name
+renamed or moved elsewhere breaks no benchmark unseen), and ``bench.collisions`` classifies every
+collision of a frozen episode with the simulator's own neighbour rows."""
+
+import pkgutil
+import subprocess
+import sys
+from collections import Counter
+
+import bench
+from bench.collisions import classify
+from nnql_swarm.experiment.maps import MapsBenchmark, map_spec, run_config
+from nnql_swarm.sim.runs import Batch, swarm_world
+from tests.swarm_helpers import ROOT
+
+
+def test_every_bench_module_imports():
+    """In a process of its own: some set the kernel's mode in the environment as they load."""
+    names = [module.name for module in pkgutil.iter_modules(bench.__path__)]
+    assert {"collisions", "table1", "harness"} <= set(names)
+    done = subprocess.run(
+        [sys.executable, "-c", "import importlib, sys\n"
+                               "for name in sys.argv[1:]: importlib.import_module('bench.' + name)",
+         *names], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+
+
+def test_collisions_classifies_every_collision_of_a_frozen_episode():
+    maps = MapsBenchmark(seeds=1, learners=("ql",))
+    map_seed = maps.test_map_seeds(0)[0]
+    config = run_config(maps, "ql", map_spec("random", map_seed), map_seed, 32, 1, frozen=True)
+    batch = Batch(swarm_world(config), [config], record=True)
+    episodes = batch.play(1)
+    tally: Counter = Counter()
+    classify(batch, 0, 0, int(episodes.steps[0, -1]), tally)
+    assert sum(tally.values()) == int(episodes.collisions[0, -1]) > 0
+    assert set(tally) <= {kind + gave_up for kind in (
+        "stayed, hit", "into a wall", "into a parked agent", "swap",
+        "into one that stayed, intent known", "into one that stayed, unknown, seen still",
+        "into one that stayed, unknown, seen moving",
+        "into one that stayed, unknown, unseen last step", "into one that was blocked",
+        "two into one free cell", "two into one free cell, other's intent known",
+        "two into a cell being left") for gave_up in ("", " (shield gave up)")}
