@@ -320,16 +320,16 @@ def preference_ranks(values, ties, wmap, x, y, width, height, first, by_value, r
         if a != first:
             rank = 0 if first < 0 else 1
             la = move_length(wmap, x, y, a, width, height)
+            ha = hindrance(nb, m, x, y, a, width, height)
             for b in range(N_ACTIONS):
                 if b == a or b == first:
                     continue
                 lb = move_length(wmap, x, y, b, width, height)
+                hb = hindrance(nb, m, x, y, b, width, height) if lb == la else ha
                 if lb != la:
                     better = lb < la
-                elif hindrance(nb, m, x, y, a, width, height) != \
-                        hindrance(nb, m, x, y, b, width, height):
-                    better = hindrance(nb, m, x, y, b, width, height) < \
-                        hindrance(nb, m, x, y, a, width, height)
+                elif hb != ha:
+                    better = hb < ha
                 elif by_value and la < here and values[V_CROWD + b] != values[V_CROWD + a]:
                     better = values[V_CROWD + b] > values[V_CROWD + a]
                 else:
