@@ -1,12 +1,14 @@
 """What the swarm benchmarks share: run a swarm (distributed or in-process) and time its ticks."""
 
 import math
+import sys
 from pathlib import Path
 from typing import Callable
 
 from nnql_swarm.recording.sinks import RecordingPlan
 from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from nnql_swarm.transport.ports import wait_listening
+from nnql_swarm.transport.settings import TransportSettings
 from nnql_swarm.transport.topology import EmbeddedLayout, embedded_topology
 from nnql_swarm.world.metrics import read_episodes
 
@@ -63,6 +65,23 @@ def run_distributed(config: SwarmConfig, out: Path, record: bool,
     if world.exitcode != 0:
         raise RuntimeError(f"world exited with {world.exitcode}")
     return measured_rate(out)
+
+
+def stay_agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
+                    resume: bool = False, recording=None) -> None:
+    """An agent process (``launch.processes.agent_main``'s arguments) that negotiates exactly as
+    the learning agent does but learns nothing and always stays: the swarm's messages and
+    protocol with the learning taken out. (Imported here: in the agent process, which runs the
+    kernel uncompiled.)"""
+    from nnql_swarm.agent.brain import AgentBrain
+    from nnql_swarm.agent.node import AgentOptions, run_agent
+    from nnql_swarm.protocol.actions import STAY
+
+    class StayBrain(AgentBrain):
+        def act(self, obs, answers) -> int:
+            return STAY
+
+    sys.exit(run_agent(AgentOptions(agent, config, transport, out), StayBrain(agent, config)))
 
 
 def run_local(config: SwarmConfig, out: Path, record: bool) -> float:

@@ -11,7 +11,12 @@ one agent per 16 cells), in the same run and interleaved repeat by repeat:
   opened the first tick, from its stats file) and the peak
   resident memory of the world and of the largest agent;
 - the bare loop of ``bench/lockstep.py`` with as many agents: every agent answers at once, no
-  negotiation, no learning, the floor under a tick.
+  negotiation, no learning, the floor under a tick;
+- with ``--split``, also the swarm with the learning taken out (``bench.harness.stay_agent_main``:
+  every agent observes, negotiates and answers as the learner does, then stays), which splits
+  the gap to the bare loop into what the protocol costs (its messages, its chains of answers,
+  the codec, the world's rules and checks) and what the learning adds. Its agents never arrive,
+  so each of its episodes runs to ``--max-steps``.
 
 ``--obstacle-density P`` puts walls on the swarm's grids (``protocol.walls``), the same grids.
 
@@ -32,7 +37,9 @@ import time
 from pathlib import Path
 
 from bench import lockstep
-from bench.harness import add_preset_option, grid_side, run_distributed, swarm_config
+from bench.harness import (
+    add_preset_option, grid_side, run_distributed, stay_agent_main, swarm_config,
+)
 from bench.procstat import MemorySampler
 from nnql_swarm.transport.runfiles import stats_path
 from nnql_swarm.transport.topology import (
@@ -41,7 +48,7 @@ from nnql_swarm.transport.topology import (
 from nnql_swarm.world.metrics import read_episodes
 
 def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
-               topology: str, obstacle_density: float = 0.0) -> dict:
+               topology: str, obstacle_density: float = 0.0, agent_target=None) -> dict:
     side = grid_side(n)
     config = swarm_config(preset, n_agents=n, width=side, height=side, episodes=episodes,
                           max_steps=max_steps, seed=seed, run_id=f"scale-{n}",
@@ -50,7 +57,7 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
         out = Path(tmp) / "run"
         launched = time.time()  # the processes start within milliseconds of it
         rate = run_distributed(config, out, record=False, memory=memory,
-                               layout=EmbeddedLayout(topology=topology))
+                               layout=EmbeddedLayout(topology=topology), agent_target=agent_target)
         rows = read_episodes(out / "episodes.csv")
         world = json.loads(stats_path(out, "world").read_text())
         startup = world["started_at"] - launched
@@ -88,6 +95,9 @@ def main() -> int:
                         "the launcher's choice for each size)")
     p.add_argument("--obstacle-density", type=float, default=0.0, metavar="P",
                    help="walls on the swarm's grid (the bare loop has none)")
+    p.add_argument("--split", action="store_true",
+                   help="also run the swarm with the learning taken out (agents negotiate, then "
+                        "stay): what the protocol costs apart from the learning")
     add_preset_option(p)
     args = p.parse_args()
     try:
@@ -105,17 +115,22 @@ def main() -> int:
 
     table = []
     for n in sizes:
-        swarm, bare = [], []
+        swarm, bare, staying = [], [], []
         topology = embedded_topology(n) if args.topology == "auto" else args.topology
         for repeat in range(args.repeats):
             swarm.append(swarm_once(n, args.preset, args.episodes, args.max_steps, args.seed,
                                     topology, args.obstacle_density))
             bare.append(bare_once(n, args.bare_ticks, topology))
+            if args.split:
+                staying.append(swarm_once(n, args.preset, args.episodes, args.max_steps,
+                                          args.seed, topology, args.obstacle_density,
+                                          agent_target=stay_agent_main))
             s, b = swarm[-1], bare[-1]
+            split = f", learning nothing {staying[-1]['rate']:.0f} ticks/s" if staying else ""
             print(f"  {n} agents, repeat {repeat + 1}: swarm {s['rate']:.0f} ticks/s "
                   f"(missed {s['missed_first']} then {s['missed']}, start-up "
                   f"{s['startup_s']:.1f} s, agent {s['agent_mib']:.0f} MiB), bare "
-                  f"{b['rate']:.0f} ticks/s", file=sys.stderr, flush=True)
+                  f"{b['rate']:.0f} ticks/s{split}", file=sys.stderr, flush=True)
         ratios = [s["rate"] / b["rate"] for s, b in zip(swarm, bare)]
         row = {"agents": n, "grid": grid_side(n), "topology": topology, "swarm": median(swarm, "rate"),
                "bare": median(bare, "rate"), "ratio": statistics.median(ratios),
@@ -123,6 +138,11 @@ def main() -> int:
                "startup_s": median(swarm, "startup_s"), "agent_mib": median(swarm, "agent_mib"),
                "world_mib": median(swarm, "world_mib"), "arrived": median(swarm, "arrived"),
                "runs": [round(s["rate"]) for s in swarm], "bare_runs": [round(b["rate"]) for b in bare]}
+        if staying:
+            row["staying"] = median(staying, "rate")
+            row["staying_ratio"] = statistics.median(
+                t["rate"] / b["rate"] for t, b in zip(staying, bare))
+            row["staying_runs"] = [round(t["rate"]) for t in staying]
         row["ms_per_agent"] = 1000.0 / row["swarm"] / n
         row["bare_ms_per_agent"] = 1000.0 / row["bare"] / n
         table.append(row)
@@ -147,6 +167,15 @@ def print_table(table: list[dict], args) -> None:
               f"{r['missed_first']:.0f} / {r['missed']:.0f} | {r['startup_s']:.1f} | "
               f"{r['agent_mib']:.0f} | {r['world_mib']:.0f} | "
               f"{' '.join(map(str, r['runs']))}; {' '.join(map(str, r['bare_runs']))} |")
+    split = [r for r in table if "staying" in r]
+    if split:
+        print("\nthe swarm with the learning taken out (agents negotiate, then stay), in the same "
+              "runs; ratios to the bare loop, each repeat's own, medians")
+        print("| agents | learning nothing, ticks/s | its ratio | the swarm's ratio | runs |")
+        print("| ---: | ---: | ---: | ---: | --- |")
+        for r in split:
+            print(f"| {r['agents']} | {r['staying']:.0f} | {r['staying_ratio']:.2f} | "
+                  f"{r['ratio']:.2f} | {' '.join(map(str, r['staying_runs']))} |")
 
 
 def draw(table: list[dict], path: Path) -> None:

@@ -23,25 +23,9 @@ import tempfile
 from pathlib import Path
 
 
-from nnql_swarm.agent.brain import AgentBrain
-from bench.harness import add_preset_option, run_distributed, run_local, swarm_config
-from nnql_swarm.protocol.actions import STAY
-from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.transport.settings import TransportSettings
-
-
-class BareBrain(AgentBrain):
-    """Negotiates exactly as the learning agent does, but learns nothing and always stays."""
-
-    def act(self, obs, answers) -> int:
-        return STAY
-
-
-def bare_agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
-                    resume: bool = False, recording=None) -> None:
-    from nnql_swarm.agent.node import AgentOptions, run_agent
-
-    sys.exit(run_agent(AgentOptions(agent, config, transport, out), BareBrain(agent, config)))
+from bench.harness import (
+    add_preset_option, run_distributed, run_local, stay_agent_main, swarm_config,
+)
 
 
 def main() -> int:
@@ -69,7 +53,7 @@ def main() -> int:
                         rate = run_local(config, out, args.record)
                     else:
                         rate = run_distributed(config, out, args.record,
-                                               bare_agent_main if mode == "bare" else None)
+                                               stay_agent_main if mode == "bare" else None)
                     results.setdefault(mode, []).append(rate)
         for mode, rates in results.items():
             median = statistics.median(rates)
