@@ -171,25 +171,35 @@ def with_alpha(colors: np.ndarray, alpha: int) -> np.ndarray:
     return np.concatenate([colors, np.full((len(colors), 1), alpha, dtype=np.uint8)], axis=1)
 
 
-def negotiation_mask(config: SwarmConfig, positions: np.ndarray, arrived: np.ndarray,
-                     ticks: np.ndarray) -> np.ndarray:
-    """``asks[t, i, j]``: at tick ``ticks[t]`` agent i waits for j's intent (``positions``
-    ``(T, n, 2)``, ``arrived`` ``(T, n)``: as each tick started)."""
+def negotiation_pairs(config: SwarmConfig, positions: np.ndarray, arrived: np.ndarray,
+                      ticks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(t, asker, asked)``: at tick ``ticks[t]`` agent ``asker`` waits for ``asked``'s intent
+    (``positions`` ``(T, n, 2)``, ``arrived`` ``(T, n)``: as each tick started), in the order of
+    ``t``, then ``asker``, then ``asked``. Only the pairs within the interaction radius
+    (Chebyshev, which ``protocol.ranks.in_reach`` requires) are put to the rule, so that a tick
+    of n agents costs about n times its neighbours, not n squared rule calls."""
     n, radius, meet = config.n_agents, config.interaction_radius, config.meet_only
-    asks = np.zeros((len(ticks), n, n), dtype=bool)
-    if config.algo not in NEGOTIATING_ALGOS:
-        return asks
-    cells = np.asarray(positions).tolist()
-    for t, tick in enumerate(np.asarray(ticks).tolist()):
-        ranks = [priority_rank(i, tick, n) for i in range(n)]
-        for i, (x, y) in enumerate(cells[t]):
-            if arrived[t][i] and not config.step_aside:
+    found: tuple[list[int], list[int], list[int]] = ([], [], [])
+    if config.algo in NEGOTIATING_ALGOS:
+        cells = np.asarray(positions, dtype=np.int64)
+        parked = np.asarray(arrived, dtype=bool) & (not config.step_aside)
+        for t, tick in enumerate(np.asarray(ticks).tolist()):
+            near = np.abs(cells[t][:, None, :] - cells[t][None, :, :]).max(axis=2) <= radius
+            np.fill_diagonal(near, False)
+            near[parked[t]] = False  # an agent parked on its goal waits for nobody
+            asker, asked = np.nonzero(near)
+            if not len(asker):
                 continue
-            for j, (jx, jy) in enumerate(cells[t]):
-                asks[t, i, j] = j != i and awaits_answer(ranks[i], ranks[j], x, y, jx, jy,
-                                                         radius, meet, False,
-                                                         arrived[t][j] and not config.step_aside)
-    return asks
+            ranks = [priority_rank(i, tick, n) for i in range(n)]
+            xy, stays = cells[t].tolist(), parked[t].tolist()
+            for i, j in zip(asker.tolist(), asked.tolist()):
+                (x, y), (jx, jy) = xy[i], xy[j]
+                if awaits_answer(ranks[i], ranks[j], x, y, jx, jy, radius, meet, False, stays[j]):
+                    found[0].append(t)
+                    found[1].append(i)
+                    found[2].append(j)
+    ticks_at, askers, asked_ones = (np.array(column, dtype=np.int64) for column in found)
+    return ticks_at, askers, asked_ones
 
 
 def legend(config: SwarmConfig) -> str:
@@ -629,9 +639,10 @@ class WorldViz:
         parts.add(part_paths(n, PATH), rr.LineStrips2D.columns(  # the step that led here
             strips=np.ascontiguousarray(trails[:, -2:])).partition(lengths))
 
-        asks = negotiation_mask(self.config, positions, np.array(arrived_then, dtype=bool), ticks)
-        asks &= np.array(moved, dtype=bool)[:, None, None]
-        t, asker, asked = np.nonzero(asks)
+        t, asker, asked = negotiation_pairs(self.config, positions,
+                                            np.array(arrived_then, dtype=bool), ticks)
+        kept = np.array(moved, dtype=bool)[t]
+        t, asker, asked = t[kept], asker[kept], asked[kept]
         for episode, count in zip(*np.unique(episodes[t], return_counts=True)):
             self._awaited[int(episode)] = self._awaited.get(int(episode), 0) + int(count)
         start, end = cells[t, asker], cells[t, asked]

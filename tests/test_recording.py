@@ -28,7 +28,7 @@ from tests.swarm_helpers import group_pids, run_swarm, start_swarm
 from nnql_swarm.world.metrics import read_episodes
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.recording.palette import KEEP_APART, PALETTE, agent_colors
-from nnql_swarm.recording.world import METRICS, negotiation_mask
+from nnql_swarm.recording.world import METRICS, negotiation_pairs
 from nnql_swarm.recording.agent_entities import (
     DISC, GOAL, PER_TICK as PER_TICK_PARTS, START, TRAIL, WAITS,
 )
@@ -298,8 +298,8 @@ def test_the_negotiation_is_logged_as_the_agents_ask(run):
         goals = swarm_episode(config.seed, episode_of[tick], config.width, config.height,
                               config.n_agents).goals
         arrived = np.all(positions == goals, axis=1)
-        expected = [] if tick in end_ticks else np.argwhere(
-            negotiation_mask(config, positions[None], arrived[None], np.array([tick]))[0]).tolist()
+        expected = [] if tick in end_ticks else negotiation_pairs(
+            config, positions[None], arrived[None], np.array([tick]))[1].tolist()
         assert len(logged or []) == len(expected), tick
         total += len(expected)
     assert total > 0
