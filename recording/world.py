@@ -181,10 +181,12 @@ def negotiation_pairs(config: SwarmConfig, positions: np.ndarray, arrived: np.nd
     n, radius, meet = config.n_agents, config.interaction_radius, config.meet_only
     found: tuple[list[int], list[int], list[int]] = ([], [], [])
     if config.algo in NEGOTIATING_ALGOS:
-        cells = np.asarray(positions, dtype=np.int64)
+        cells = np.asarray(positions, dtype=np.int32)
         parked = np.asarray(arrived, dtype=bool) & (not config.step_aside)
         for t, tick in enumerate(np.asarray(ticks).tolist()):
-            near = np.abs(cells[t][:, None, :] - cells[t][None, :, :]).max(axis=2) <= radius
+            x, y = cells[t, :, 0], cells[t, :, 1]
+            near = np.abs(x[:, None] - x[None, :]) <= radius
+            near &= np.abs(y[:, None] - y[None, :]) <= radius
             np.fill_diagonal(near, False)
             near[parked[t]] = False  # an agent parked on its goal waits for nobody
             asker, asked = np.nonzero(near)
