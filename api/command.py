@@ -169,7 +169,8 @@ def add_config_options(group, only=None, exclude=()) -> None:
             meta["metavar"] = "{" + ",".join(choices) + "}"
         shown = "on" if f.default is True else "off" if f.default is False else f.default
         kwargs: dict[str, Any] = dict(dest=f.name, default=argparse.SUPPRESS,
-                                      help=f"{text} (default: {shown})" if shown != "" else text)
+                                      help=text if shown == "" or "default" in text
+                                      else f"{text} (default: {shown})")
         if f.type is bool:
             kwargs["action"] = argparse.BooleanOptionalAction
         else:
@@ -253,7 +254,7 @@ def check_capacity(args: Launch, config: SwarmConfig) -> None:
         agents = 0 if args.role == "world" else len(agent_ids(args, config))
         processes = agents + (args.role != "agents")
     try:
-        check_fits(processes, agents, config.max_steps)
+        check_fits(processes, agents, config.max_steps, own_processes=not args.in_process)
     except ValueError as error:
         raise UsageError(str(error)) from None
 

@@ -52,6 +52,14 @@ waits so long for every agent to come alive, and an agent to see every other (sp
 import in parallel, slowly where they outnumber the cores: ``bench/scale.py --agents 128``)."""
 
 
+DEADLINE_S = 2.0
+"""The world's tick deadline (``--deadline``) for a swarm of up to 200 agents."""
+DEADLINE_PER_AGENT_S = 0.01
+"""The deadline for each agent of a larger swarm: on 2 cores a tick of 512 agents takes about a
+second, and with the 2 s of small swarms some of their intents come too late at every episode
+(docs/performance.md, "How many agents a machine holds")."""
+
+
 def option(default, help: str, flag: str | tuple[str, ...] | None = None, **argparse_options):
     """A config field with its command-line option: ``flag`` (default ``--<name>``; a tuple for
     several names), ``help``, and any other ``argparse`` keyword (``choices``, ``metavar``)."""
@@ -205,8 +213,10 @@ class SwarmConfig:
     obstacle_density: float = option(0.0, "fraction of the grid's cells that are walls (static "
                                      "obstacles drawn from the seed; starts and goals in the "
                                      "largest free region)", metavar="P")
-    tick_deadline_s: float = option(2.0, "seconds the world waits for intents each tick",
-                                    "--deadline")
+    tick_deadline_s: float = option(0.0, "seconds the world waits for intents each tick "
+                                    f"(default: {DEADLINE_S:g}, or {DEADLINE_PER_AGENT_S * 1000:g} "
+                                    "ms an agent where that is longer: a tick takes longer "
+                                    "with more agents)", "--deadline")
     map_name: str = ""
     """Where the map came from (``--map``: a file or a generator's spec); "" without a map."""
     map_rows: tuple[str, ...] = ()
@@ -226,6 +236,9 @@ class SwarmConfig:
         validate_run_id(self.run_id)
         # JSON gives lists: the config is frozen and hashable, so they become tuples
         object.__setattr__(self, "map_rows", tuple(self.map_rows))
+        if not self.tick_deadline_s:  # the deadline of the swarm's size
+            object.__setattr__(self, "tick_deadline_s",
+                               max(DEADLINE_S, DEADLINE_PER_AGENT_S * self.n_agents))
         if not self.on_target:  # the on-target rule of the arbitration
             object.__setattr__(self, "on_target",
                                "step-aside" if self.arbitration == "pibt" or self.lifelong

@@ -284,13 +284,19 @@ def test_resume_refuses_a_config_json_that_is_not_a_runs_and_appends_nothing(tmp
 
 
 def test_a_swarm_the_machine_cannot_hold_is_refused_with_what_it_needs_and_what_there_is():
-    """``--agents 1024`` where 21 GiB are available (the project's VMs; the command line reads
-    the machine's own figure: ``--max-steps 10000000000`` above needs more than any has)."""
-    with pytest.raises(ValueError, match=r"1024 agents of at most 100 steps need at least "
-                                         r"50.\d GiB of memory here \(1025 processes\), and "
-                                         r"this machine has 21 GiB available"):
-        check_fits(1025, 1024, 100, available=21 * 2**30)
-    check_fits(129, 128, 100, available=21 * 2**30)  # bench/scale.py's largest swarm fits
+    """The memory its processes need against what is available, and the agent processes a core
+    carries (``sim.capacity``; the command line reads the machine's own figures:
+    ``--max-steps 10000000000`` above needs more memory than any machine has)."""
+    gib = 2**30
+    with pytest.raises(ValueError, match=r"512 agents of at most 100 steps need at least "
+                                         r"4\.\d+ GiB of memory here \(513 processes\), and "
+                                         r"this machine has 2 GiB available"):
+        check_fits(513, 512, 100, available=2 * gib, cores=2)
+    with pytest.raises(ValueError, match=r"1024 agent processes need at least 4 cores here \(at "
+                                         r"most 256 a core\), and this machine has 2"):
+        check_fits(1025, 1024, 100, available=21 * gib, cores=2)
+    check_fits(513, 512, 100, available=21 * gib, cores=2)  # bench/scale.py's largest swarm
+    check_fits(1, 1024, 100, own_processes=False, available=21 * gib, cores=2)  # --in-process
     assert available_bytes() is None or available_bytes() > 0
 
 
