@@ -16,7 +16,7 @@ that themselves (``recording.agent``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
-``legend``) are logged once. Each agent is an entity of its own (from 128 agents on, each
+``legend``) are logged once. Each agent is an entity of its own (from 16 agents on, each
 group of 64), all of them sent in one call per flush. Agents and goals share a colour
 (:func:`agent_colors`, one per agent, all different) and a label, the agent's id. With a learner
 that reads the known map, one agent's map and planned path go with the world's ticks too
@@ -222,8 +222,7 @@ the more steps waited there). On the `tick` timeline it shows one tick (the
 caption above the grid names its episode and step): where each agent stood, the move it
 announced, its last {TRAIL_LENGTH} cells.
 {waits}{arbitration}{lifelong}
-Each agent is an entity of its own, `world/agents/<id>` ({following(config)}): click its disc to
-select it, or open the blueprint panel (top left) to hide the others and follow one.
+{following(config)}
 
 **Learning curves** run against episodes: the share of agents that arrived, the steps they took
 over their shortest paths (1 is perfect), collisions (each agent in one counts one), the
@@ -246,14 +245,18 @@ def moves(config: SwarmConfig) -> str:
 
 
 def following(config: SwarmConfig) -> str:
-    """What the key says of the agents' entities: one each, or groups of many agents."""
+    """What the key says of picking an agent: one entity each, or groups of many agents."""
     from nnql_swarm.recording.agent_entities import GROUP_SIZE, GROUPED_FROM
 
     if config.n_agents < GROUPED_FROM:
-        return "its disc, trail, path, moves, waits, goal and start"
-    return (f"from {GROUPED_FROM} agents on, groups of {GROUP_SIZE}: "
-            f"`world/agents/group-<k>` holds agents {GROUP_SIZE}k to {GROUP_SIZE}k + "
-            f"{GROUP_SIZE - 1}")
+        return ("Each agent is an entity of its own, `world/agents/<id>` (its disc, trail, path, "
+                "moves, waits, goal and start): click its disc to select it, or open the "
+                "blueprint panel (top left) to hide the others and follow one.")
+    return (f"From {GROUPED_FROM} agents on the agents go in groups of {GROUP_SIZE} (so that "
+            f"the web viewer draws them on the grid): `world/agents/group-<k>` holds agents "
+            f"{GROUP_SIZE}k to {GROUP_SIZE}k + {GROUP_SIZE - 1}, each of them an instance of "
+            f"its parts; click a disc to select that agent, or hide a group or a part (its "
+            f"routes, its goals) in the blueprint panel (top left).")
 
 
 def explored(config: SwarmConfig) -> str:

@@ -650,11 +650,13 @@ def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):
     assert jams["local"] == jams["dist"]
 
 
-def test_each_agent_is_an_entity_of_its_own_and_from_128_a_group(run, tmp_path):
+def test_each_agent_is_an_entity_of_its_own_and_from_16_in_groups(run, tmp_path):
     """A person can pick one agent: each is ``world/agents/<id>`` with its disc, trail, path,
-    announced moves, waits, goal and start, each with data; from 128 agents on, groups of 64
-    (``world/agents/group-<k>``), so that the viewer does not get hundreds more entities."""
-    from nnql_swarm.recording.agent_entities import GROUP_SIZE, PER_EPISODE
+    announced moves, waits, goal and start, each with data; from ``GROUPED_FROM`` (16) agents on,
+    groups of 64 (``world/agents/group-<k>``), so that the web viewer draws them on the grid."""
+    from nnql_swarm.recording.agent_entities import GROUP_SIZE, GROUPED_FROM, PER_EPISODE
+
+    assert AGENTS < GROUPED_FROM == 16
 
     _, out, recording = run
     ticks = int(read_episodes(out / "episodes.csv")[-1]["end_tick"]) + 1
