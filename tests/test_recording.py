@@ -686,6 +686,18 @@ def test_each_agent_is_an_entity_of_its_own_and_from_16_in_groups(run, tmp_path)
     assert np.array_equal(np.array(cells[0]), starts)
 
 
+def test_the_world_view_holds_few_entities_from_16_agents_on():
+    """Rerun's WebGL depth offsets scale each entity's drawing a step further from the grid's
+    (``recording.agent_entities.GROUPED_FROM``): from 16 agents on, a group holds 64 agents."""
+    from nnql_swarm.recording.agent_entities import owners
+
+    assert [path for path, _ in owners(15)] == [f"world/agents/{i}" for i in range(15)]
+    assert [(path, agents.tolist()) for path, agents in owners(16)] == \
+        [("world/agents/group-0", list(range(16)))]
+    assert [len(agents) for _, agents in owners(64)] == [64]
+    assert [len(agents) for _, agents in owners(130)] == [64, 64, 2]
+
+
 @pytest.mark.full
 def test_every_panel_has_data_distributed_and_in_process(run):
     """The blueprint's panels of a distributed run (the agents' negotiation wait among them)
