@@ -77,6 +77,9 @@ WALL_HALF = 0.2
 """Half the width of a wall's box outline; the outline is :data:`WALL_LINE` wide on each side
 of it, so that the box is a solid block 0.88 of a cell wide."""
 WALL_LINE = 0.24
+GOAL_HALF = 0.42
+"""Half the width of a goal's box, in cells; its outline's radius is :data:`GOAL_LINE`."""
+GOAL_LINE = 0.07
 
 def caption_room(config: SwarmConfig) -> float:
     """The room above the grid, in cells, that the world view leaves for its caption (the tick's
@@ -392,7 +395,7 @@ class WorldViz:
                 colors=colours, labels=labels, radii=0.3, show_labels=True, draw_order=30.0),
                 static=True)
             rec.log(f"{path}/{GOAL}", rr.Boxes2D.from_fields(
-                colors=colours, labels=labels, show_labels=True, radii=0.07, draw_order=10.0),
+                colors=colours, labels=labels, show_labels=True, radii=GOAL_LINE, draw_order=10.0),
                 static=True)
             rec.log(f"{path}/{TRAIL}", rr.LineStrips2D.from_fields(
                 colors=with_alpha(colours, 110), radii=0.06, draw_order=15.0), static=True)
@@ -566,7 +569,7 @@ class WorldViz:
             columns = EntityColumns(time_columns(g_ticks, g_episodes), k)
             centers = np.concatenate(goals)[order]
             columns.add(part_paths(n, GOAL), rr.Boxes2D.columns(
-                centers=centers, half_sizes=np.full(centers.shape, 0.42, np.float32)
+                centers=centers, half_sizes=np.full(centers.shape, GOAL_HALF, np.float32)
             ).partition(lengths))
             columns.add(part_paths(n, START), rr.Points2D.columns(
                 positions=np.concatenate(starts)[order]).partition(lengths))

@@ -459,10 +459,6 @@ def check_layout(image: np.ndarray, config) -> Grid:
     return grid
 
 
-GOAL_HALF, GOAL_LINE = 0.42, 0.07
-"""The goal boxes' half-size and line radius in cells (``recording/world.py``)."""
-
-
 def goal_centres(image: np.ndarray, grid: Grid, goals, colours, reach: float = 3.0,
                  least: float = 0.4) -> np.ndarray:
     """Where each agent's goal box is drawn, in cells of ``grid`` (``(k, 2)``, NaN where none
@@ -473,6 +469,8 @@ def goal_centres(image: np.ndarray, grid: Grid, goals, colours, reach: float = 3
     it as well, but not only inside), if the share of the outline inked less that of the band
     outside is at least ``least``."""
     from scipy import ndimage
+
+    from nnql_swarm.recording.world import GOAL_HALF, GOAL_LINE
 
     half, line = GOAL_HALF * grid.cell, max(GOAL_LINE * grid.cell, 1.0)
     size = 2 * round(half + line + 0.2 * grid.cell) + 1
