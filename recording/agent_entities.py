@@ -1,5 +1,6 @@
 """Each agent an entity of its own in the world view, so that a person can pick one: select it,
-hide it, follow it; at :data:`GROUPED_FROM` agents and more, groups of :data:`GROUP_SIZE`.
+hide it, follow it; at :data:`GROUPED_FROM` agents and more, groups of :data:`GROUP_SIZE` (an
+agent is then an instance of its group's entities: clicking its disc selects it).
 
 Agent ``i`` is ``world/agents/<i>`` (a group: ``world/agents/group-<k>``, agents ``64k`` to
 ``64k + 63``), and under it its parts: :data:`DISC` (where it stands), :data:`TRAIL` (its last
@@ -18,15 +19,22 @@ import rerun as rr
 
 ROOT = "world/agents"
 
-GROUPED_FROM = 128
-"""From this many agents on, the world view's agents are groups, not one entity each: a Rerun
-viewer slows down with several hundred entities (each agent has seven parts), and 128 agents
-of their own would make about 900."""
+GROUPED_FROM = 16
+"""From this many agents on, the world view's agents are groups, not one entity each, so that the
+web viewer draws them on the grid. Rerun orders 2D layers by a depth offset, one step for each
+(visualizer, entity) pair in the view, in order of draw order, whatever the draw orders' values;
+under WebGL (its GLES tier) a step also scales what it draws about the view's centre, by about
+3e-4 (``5120 * 2**-24``, Rerun's ``depth_offset.wgsl``). The grid, drawn first, and the agents'
+discs, drawn over each agent's goal, start, path, route and trail, are then some 6 steps an
+agent apart: at 64 agents of their own the grid was drawn about 0.88 the discs' size, and agents at
+the border stood up to two cells off it (``tests/test_browser.py``). On a grid of ``w`` cells
+an agent at the border is off by ``w / 2 * 3e-4 * 6`` cells an agent: 0.09 cells for 8 agents on
+11 x 11, 0.25 for 16 on 16 x 16, 0.6 for 31 on 22 x 22. One entity an agent (one pair) would
+still make 64 agents 64 steps apart, so the agents go in groups; a group is 8 pairs."""
 GROUP_SIZE = 64
-"""Agents per group from :data:`GROUPED_FROM` on: 128 agents make 2 groups. (Groups of 16, 8 at
-128 agents, made Rerun's web viewer draw the 40 x 40 grid smaller than the world view's bounds,
-its lines covered so that ``tests/test_browser.py`` no longer found the grid; 1 or 2 groups
-draw it as one entity of all agents did.)"""
+"""Agents per group from :data:`GROUPED_FROM` on: 16 to 64 agents make 1 group, 128 make 2.
+(Groups of 16, 8 at 128 agents, made the web viewer draw the 40 x 40 grid smaller than the
+world view's bounds: :data:`GROUPED_FROM` says why.)"""
 
 DISC, TRAIL, PATH, INTENT, WAITS, GOAL, START = ("disc", "trail", "path", "intent", "waits",
                                                  "goal", "start")

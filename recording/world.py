@@ -16,7 +16,7 @@ that themselves (``recording.agent``).
 
 Per-episode metrics (``metrics/...``) are logged at each episode's end tick; see :data:`METRICS`.
 Timelines are ``tick`` and ``episode``; static things (grid, walls, colours, labels, the key
-``legend``) are logged once. Each agent is an entity of its own (from 128 agents on, each
+``legend``) are logged once. Each agent is an entity of its own (from 16 agents on, each
 group of 64), all of them sent in one call per flush. Agents and goals share a colour
 (:func:`agent_colors`, one per agent, all different) and a label, the agent's id. With a learner
 that reads the known map, one agent's map and planned path go with the world's ticks too
@@ -77,6 +77,9 @@ WALL_HALF = 0.2
 """Half the width of a wall's box outline; the outline is :data:`WALL_LINE` wide on each side
 of it, so that the box is a solid block 0.88 of a cell wide."""
 WALL_LINE = 0.24
+GOAL_HALF = 0.42
+"""Half the width of a goal's box, in cells; its outline's radius is :data:`GOAL_LINE`."""
+GOAL_LINE = 0.07
 
 def caption_room(config: SwarmConfig) -> float:
     """The room above the grid, in cells, that the world view leaves for its caption (the tick's
@@ -234,8 +237,7 @@ the more steps waited there). On the `tick` timeline it shows one tick (the
 caption above the grid names its episode and step): where each agent stood, the move it
 announced, its last {TRAIL_LENGTH} cells.
 {waits}{arbitration}{lifelong}
-Each agent is an entity of its own, `world/agents/<id>` ({following(config)}): click its disc to
-select it, or open the blueprint panel (top left) to hide the others and follow one.
+{following(config)}
 
 **Learning curves** run against episodes: the share of agents that arrived, the steps they took
 over their shortest paths (1 is perfect), collisions (each agent in one counts one), the
@@ -258,14 +260,18 @@ def moves(config: SwarmConfig) -> str:
 
 
 def following(config: SwarmConfig) -> str:
-    """What the key says of the agents' entities: one each, or groups of many agents."""
+    """What the key says of picking an agent: one entity each, or groups of many agents."""
     from nnql_swarm.recording.agent_entities import GROUP_SIZE, GROUPED_FROM
 
     if config.n_agents < GROUPED_FROM:
-        return "its disc, trail, path, moves, waits, goal and start"
-    return (f"from {GROUPED_FROM} agents on, groups of {GROUP_SIZE}: "
-            f"`world/agents/group-<k>` holds agents {GROUP_SIZE}k to {GROUP_SIZE}k + "
-            f"{GROUP_SIZE - 1}")
+        return ("Each agent is an entity of its own, `world/agents/<id>` (its disc, trail, path, "
+                "moves, waits, goal and start): click its disc to select it, or open the "
+                "blueprint panel (top left) to hide the others and follow one.")
+    return (f"From {GROUPED_FROM} agents on the agents go in groups of {GROUP_SIZE} (so that "
+            f"the web viewer draws them on the grid): `world/agents/group-<k>` holds agents "
+            f"{GROUP_SIZE}k to {GROUP_SIZE}k + {GROUP_SIZE - 1}, each of them an instance of "
+            f"its parts; click a disc to select that agent, or hide a group or a part (its "
+            f"routes, its goals) in the blueprint panel (top left).")
 
 
 def explored(config: SwarmConfig) -> str:
@@ -401,7 +407,7 @@ class WorldViz:
                 colors=colours, labels=labels, radii=0.3, show_labels=True, draw_order=30.0),
                 static=True)
             rec.log(f"{path}/{GOAL}", rr.Boxes2D.from_fields(
-                colors=colours, labels=labels, show_labels=True, radii=0.07, draw_order=10.0),
+                colors=colours, labels=labels, show_labels=True, radii=GOAL_LINE, draw_order=10.0),
                 static=True)
             rec.log(f"{path}/{TRAIL}", rr.LineStrips2D.from_fields(
                 colors=with_alpha(colours, 110), radii=0.06, draw_order=15.0), static=True)
@@ -575,7 +581,7 @@ class WorldViz:
             columns = EntityColumns(time_columns(g_ticks, g_episodes), k)
             centers = np.concatenate(goals)[order]
             columns.add(part_paths(n, GOAL), rr.Boxes2D.columns(
-                centers=centers, half_sizes=np.full(centers.shape, 0.42, np.float32)
+                centers=centers, half_sizes=np.full(centers.shape, GOAL_HALF, np.float32)
             ).partition(lengths))
             columns.add(part_paths(n, START), rr.Points2D.columns(
                 positions=np.concatenate(starts)[order]).partition(lengths))

@@ -405,7 +405,8 @@ def last_episode(recording: Path, n_agents: int) -> Episode:
 def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     """Everything the world view must show of a run's newest episode, the one the viewer opens
     on (``config``: the run's ``SwarmConfig``): the grid, every wall, a label under each agent
-    and goal, each agent in its own colour, the moves announced and the waits. Raises
+    and goal, each agent in its own colour and its goal box on its cell, the moves announced and
+    the waits. Raises
     AssertionError saying what is missing."""
     from nnql_swarm.recording.agent_entities import crowded
     from nnql_swarm.recording.fading import FRESH_STEPS
@@ -424,6 +425,7 @@ def check_world(image: np.ndarray, config, run_dir: Path) -> dict:
     found["labels"] = check_labels(image, grid, np.concatenate([episode.agents, episode.goals]),
                                    np.concatenate([colours, colours]))
     found["colours"] = check_colours(image, grid, colours)
+    found["on cells"] = check_goals_on_cells(image, grid, episode.goals, colours)
     origins, vectors, who = episode.moves
     if crowded(config.n_agents):  # the paths alone, the newest steps opaque (recording.fading)
         steps = vectors / INTENT_SCALE
@@ -455,3 +457,77 @@ def check_layout(image: np.ndarray, config) -> Grid:
                              f"{y0}, of a page {width} wide (the world view is at the left, "
                              f"over a quarter of the page)")
     return grid
+
+
+def goal_centres(image: np.ndarray, grid: Grid, goals, colours, reach: float = 3.0,
+                 least: float = 0.4) -> np.ndarray:
+    """Where each agent's goal box is drawn, in cells of ``grid`` (``(k, 2)``, NaN where none
+    is found): within ``reach`` cells of where its cell (``goals``) is on the grid, the place
+    where the box's outline in the agent's colour (``colours``, ``(k, 3)``; the top and the
+    sides: its label's pill covers the bottom) best matches the pixels of that colour, and a
+    band just outside it least (the agent's path, as wide as the outline's band, matches along
+    it as well, but not only inside), if the share of the outline inked less that of the band
+    outside is at least ``least``."""
+    from scipy import ndimage
+
+    from nnql_swarm.recording.world import GOAL_HALF, GOAL_LINE
+
+    half, line = GOAL_HALF * grid.cell, max(GOAL_LINE * grid.cell, 1.0)
+    size = 2 * round(half + line + 0.2 * grid.cell) + 1
+    yy, xx = np.mgrid[:size, :size] - size // 2
+    ring = np.maximum(np.abs(xx), np.abs(yy)) - half
+    upper = yy <= 0.5 * half
+    outline = ((np.abs(ring) <= line) & upper).astype(np.float32)
+    outside = ((ring > line + 1) & (ring <= line + 1 + 0.15 * grid.cell) & upper
+               ).astype(np.float32)
+    found = np.full((len(goals), 2), np.nan)
+    for k, ((x, y), colour) in enumerate(zip(goals, colours)):
+        cx, cy = cell_centre(grid, x, y)
+        r = reach * grid.cell
+        top, left = max(round(cy - r), 0), max(round(cx - r), 0)
+        inked = near(image[top:round(cy + r) + 1, left:round(cx + r) + 1], colour,
+                     12).astype(np.float32)
+        score = (ndimage.correlate(inked, outline, mode="constant") / outline.sum()
+                 - ndimage.correlate(inked, outside, mode="constant") / outside.sum())
+        best = np.unravel_index(int(np.argmax(score)), score.shape)
+        if score[best] >= least:
+            found[k] = ((left + best[1] - grid.xs[0]) / grid.cell - 0.5,
+                        (top + best[0] - grid.ys[0]) / grid.cell - 0.5)
+    return found
+
+
+def check_goals_on_cells(image: np.ndarray, grid: Grid, goals, colours, within: float = 0.15,
+                         least: float = 0.6, seen_least: float = 0.3,
+                         scale_within: float = 0.02) -> dict:
+    """The agents' layer drawn where the grid says it is: of the goal boxes found
+    (:func:`goal_centres`; at least ``seen_least`` of the agents': others' discs and labels
+    cover some, and an agent's path can look like a box), at least ``least`` within ``within``
+    of a cell of their cells, and the boxes drawn at the grid's scale within ``scale_within``
+    (the median, over the boxes found 3 cells or more from the grid's centre, of how far from
+    the centre each is drawn against how far its cell is). A view that draws the agents at
+    another scale than the grid (Rerun's WebGL depth offsets, ``recording.agent_entities
+    .GROUPED_FROM``) moves them off their cells the more the farther from the view's centre.
+    Returns that scale, the share of boxes on their cells, how many were found and the
+    median miss (in cells)."""
+    goals = np.asarray(goals, float)
+    drawn = goal_centres(image, grid, goals, colours)
+    seen = ~np.isnan(drawn[:, 0])
+    if seen.mean() < seen_least:
+        raise AssertionError(f"the goal boxes of only {seen.sum()} of {len(goals)} agents "
+                             f"found")
+    miss = np.abs(drawn[seen] - goals[seen]).max(axis=1)
+    centre = np.array([len(grid.xs) - 2, len(grid.ys) - 2]) / 2
+    d, e = goals[seen] - centre, drawn[seen] - centre
+    far = np.abs(d).max(axis=1) >= 3
+    scale = float(np.median((d * e).sum(axis=1)[far] / (d * d).sum(axis=1)[far])) \
+        if far.any() else 1.0
+    on = float(np.mean(miss <= within))
+    found = {"scale": round(scale, 4), "on cells": round(on, 3), "found": int(seen.sum()),
+             "median miss": round(float(np.median(miss)), 3)}
+    if on < least or abs(scale - 1) > scale_within:
+        off = [(tuple(map(int, g)), tuple(np.round(p, 2)))
+               for g, p, m in zip(goals[seen], drawn[seen], miss) if m > within]
+        raise AssertionError(f"the agents' goal boxes drawn at {scale:.3f} of the grid's scale, "
+                             f"{on:.0%} of the {seen.sum()} found on their cells (off: "
+                             f"{off[:6]})")
+    return found

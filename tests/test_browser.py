@@ -1,9 +1,10 @@
 """The web viewer in a real browser: short real runs, each served by ``rerun --serve-web``, opened
 in one headless Chromium; the screenshots' pixels must show what the recording tells.
 
-Two runs: 8 agents on 11 x 11 with walls (``--obstacle-density 0.2``: 24 walls), and 128 agents
-on 40 x 40. In each, the viewer opens on the newest episode, and the pixels must show the grid;
-in the first every wall, each a block at its own cell; in both a label under every agent and
+Three runs: 8 agents on 11 x 11 with walls (``--obstacle-density 0.2``: 24 walls), 64 agents on
+32 x 32 and 128 agents on 40 x 40. In each, the viewer opens on the newest episode, and the
+pixels must show the grid, and the agents' goal boxes on their cells, at the grid's scale;
+in the first every wall, each a block at its own cell; in each a label under every agent and
 every goal, in its colour; each agent's own colour (128 colours, no two alike, each told apart
 from all the others); of 8 agents the moves announced in that episode (arrows in the agent's
 colour) and the waits (dark arrows from an agent to the neighbour it waited for), of 128 (a
@@ -16,6 +17,7 @@ same time as the real ones, so that they had as long to load.
 """
 
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
@@ -28,8 +30,8 @@ from nnql_swarm.recording.agent_entities import crowded
 from nnql_swarm.transport.ports import free_port
 from nnql_swarm.recording.palette import PALETTE, WALL_COLOUR, agent_colors
 from tests.browser import (
-    BACKGROUND, check_labels, check_run, check_walls, check_world, chromium, find_grid,
-    last_episode, near, screenshot, wait_for, web_viewer,
+    BACKGROUND, check_goals_on_cells, check_labels, check_run, check_walls, check_world, chromium,
+    find_grid, last_episode, near, screenshot, wait_for, web_viewer,
 )
 from tests.swarm_helpers import run_swarm
 
@@ -38,6 +40,7 @@ pytestmark = [pytest.mark.browser, pytest.mark.full, pytest.mark.timeout(900)]
 COMMON = ("--episodes", "3", "--max-steps", "40", "--seed", "3", "--in-process")
 RUNS = {
     "walls": ("--agents", "8", "--obstacle-density", "0.2", *COMMON),
+    "64": ("--agents", "64", "--grid", "32x32", *COMMON),
     "crowd": ("--agents", "128", "--grid", "40x40", *COMMON),
 }
 SIZE = (1600, 900)
@@ -58,14 +61,16 @@ def pictures(tmp_path_factory):
         configs[name] = SwarmConfig.from_json((base / name / "config.json").read_text())
     seconds = {"record": time.monotonic() - start}
     shots, failures = {}, {}
-    with web_viewer(base / "walls" / "run.rrd", log=base / "serve-walls.log") as walls_viewer, \
-            web_viewer(base / "crowd" / "run.rrd", log=base / "serve-crowd.log") as crowd_viewer, \
-            chromium(size=SIZE) as browser:
+    with ExitStack() as stack:
+        viewers = {name: stack.enter_context(web_viewer(base / name / "run.rrd",
+                                                        log=base / f"serve-{name}.log"))
+                   for name in RUNS}
+        browser = stack.enter_context(chromium(size=SIZE))
         pages = {name: browser.new_page() for name in ("broken", "blank")}
-        pages["broken"].goto(walls_viewer.url(grpc_port=free_port()))
+        pages["broken"].goto(viewers["walls"].url(grpc_port=free_port()))
         pages["blank"].goto("about:blank")
         # One run at a time: two viewers drawing at once on SwiftShader starve each other.
-        for name, viewer in (("walls", walls_viewer), ("crowd", crowd_viewer)):
+        for name, viewer in viewers.items():
             begun = time.monotonic()
             page = browser.new_page()
             page.goto(viewer.url())
@@ -112,6 +117,24 @@ def test_every_agent_and_goal_is_labelled_and_the_moves_and_waits_show(pictures,
     else:
         assert found["moves"]["arrows"] > 0 and found.get("waits", {}).get("arrows", 0) > 0
     print(name, {key: value for key, value in found.items() if key != "grid"})
+
+
+def test_64_agents_are_drawn_on_the_grid_at_its_scale(pictures):
+    """Rerun's WebGL depth offsets scale each entity's drawing about the view's centre, a step
+    per entity: 64 agents as entities of their own were drawn about 1.14 times the grid's size,
+    those at the border up to two cells off it (``recording.agent_entities.GROUPED_FROM``)."""
+    image, config, run_dir = shown(pictures, "64")
+    found = check_world(image, config, run_dir)["on cells"]
+    assert abs(found["scale"] - 1) <= 0.02 and found["on cells"] >= 0.6, found
+    # The check fails where the agents are drawn at another scale than the grid, as the fault
+    # drew them (1 / 0.88 of it): here, told the cells 0.88 of the way from the centre.
+    grid = find_grid(image, config.width, config.height)
+    goals = last_episode(run_dir / "run.rrd", config.n_agents).goals
+    centre = (config.width - 1) / 2
+    with pytest.raises(AssertionError, match=r"goal boxes drawn at 1\.1"):
+        check_goals_on_cells(image, grid, centre + (goals - centre) * 0.88,
+                             agent_colors(config.n_agents))
+    print("64", found)
 
 
 def test_the_checks_fail_on_a_blank_or_broken_page(pictures):

@@ -5,11 +5,12 @@ import numpy as np
 import rerun as rr
 
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.recording.agent_entities import CROWDED_FROM, ROUTE
+from nnql_swarm.recording.agent_entities import CROWDED_FROM, ROUTE, owner_index, owners
 from nnql_swarm.recording.blueprint import episode_wide
 from nnql_swarm.recording.fading import (
     BANDS, FRESH_STEPS, OLDEST_ALPHA, moved_steps, route_bands,
 )
+from nnql_swarm.recording.palette import agent_colors
 from nnql_swarm.recording.world import legend
 from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import run_swarm
@@ -50,15 +51,19 @@ def test_a_crowded_runs_routes_are_recorded_at_each_episodes_end_and_cleared_at_
     result = run_swarm(tmp_path / "run", "--agents", str(CROWDED_FROM), "--grid", "16x16",
                        "--episodes", "2", "--max-steps", "60", "--seed", "2", "--in-process")
     assert result.returncode == 0, result.stderr
-    rows = {}  # tick: agent 3's route strips and their alphas
+    rows = {}  # tick: agent 3's route strips and their alphas (its entity's, of its colour)
+    entity = f"{owners(CROWDED_FROM)[owner_index(CROWDED_FROM)[3]][0]}/{ROUTE}"
+    red, green, blue = (int(v) for v in agent_colors(CROWDED_FROM)[3])
+    rgb = red << 16 | green << 8 | blue
     for chunk in rr.chunk.RrdReader(tmp_path / "run" / "run.rrd").stream():
-        if chunk.is_static or chunk.entity_path.lstrip("/") != f"world/agents/3/{ROUTE}":
+        if chunk.is_static or chunk.entity_path.lstrip("/") != entity:
             continue
         batch = chunk.to_record_batch()
         for tick, strips, colours in zip(batch.column("tick").to_pylist(),
                                          batch.column("LineStrips2D:strips").to_pylist(),
                                          batch.column("LineStrips2D:colors").to_pylist()):
-            rows[tick] = (strips or [], [c & 0xFF for c in colours or []])
+            own = [(s, c) for s, c in zip(strips or [], colours or []) if c >> 8 == rgb]
+            rows[tick] = ([s for s, _ in own], [c & 0xFF for _, c in own])
     episodes = read_episodes(tmp_path / "run" / "episodes.csv")
     first = 0
     for row in episodes:

@@ -650,11 +650,13 @@ def test_priority_inheritance_and_lifelong_goals_are_seen(tmp_path):
     assert jams["local"] == jams["dist"]
 
 
-def test_each_agent_is_an_entity_of_its_own_and_from_128_a_group(run, tmp_path):
+def test_each_agent_is_an_entity_of_its_own_and_from_16_in_groups(run, tmp_path):
     """A person can pick one agent: each is ``world/agents/<id>`` with its disc, trail, path,
-    announced moves, waits, goal and start, each with data; from 128 agents on, groups of 64
-    (``world/agents/group-<k>``), so that the viewer does not get hundreds more entities."""
-    from nnql_swarm.recording.agent_entities import GROUP_SIZE, PER_EPISODE
+    announced moves, waits, goal and start, each with data; from ``GROUPED_FROM`` (16) agents on,
+    groups of 64 (``world/agents/group-<k>``), so that the web viewer draws them on the grid."""
+    from nnql_swarm.recording.agent_entities import GROUP_SIZE, GROUPED_FROM, PER_EPISODE
+
+    assert AGENTS < GROUPED_FROM == 16
 
     _, out, recording = run
     ticks = int(read_episodes(out / "episodes.csv")[-1]["end_tick"]) + 1
@@ -682,6 +684,18 @@ def test_each_agent_is_an_entity_of_its_own_and_from_128_a_group(run, tmp_path):
     cells = grouped.agents(DISC, "Points2D:positions")
     starts = swarm_episode(0, 0, 24, 24, 130).starts
     assert np.array_equal(np.array(cells[0]), starts)
+
+
+def test_the_world_view_holds_few_entities_from_16_agents_on():
+    """Rerun's WebGL depth offsets scale each entity's drawing a step further from the grid's
+    (``recording.agent_entities.GROUPED_FROM``): from 16 agents on, a group holds 64 agents."""
+    from nnql_swarm.recording.agent_entities import owners
+
+    assert [path for path, _ in owners(15)] == [f"world/agents/{i}" for i in range(15)]
+    assert [(path, agents.tolist()) for path, agents in owners(16)] == \
+        [("world/agents/group-0", list(range(16)))]
+    assert [len(agents) for _, agents in owners(64)] == [64]
+    assert [len(agents) for _, agents in owners(130)] == [64, 64, 2]
 
 
 @pytest.mark.full
