@@ -26,6 +26,7 @@ from nnql_swarm.launch.cli import (
     EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator,
     episode_summary, progress as progress_bar,
 )
+from nnql_swarm.recording.merge import cut_at
 from nnql_swarm.recording.session import RecordingSession
 from nnql_swarm.recording.viewers import check_viewer_url
 from nnql_swarm.sim.resume import (
@@ -362,6 +363,7 @@ def _resume(args: Launch, given: dict) -> tuple[SwarmConfig, ResumePoint, Path]:
     if args.role != "agents":
         shared_table(args.out, config, start)
         rewind(args.out, start)
+        cut_at(args.out, start.tick, config.run_id)  # what is played again is recorded again
     if start.episode < config.episodes:
         again = f"; episodes {start.episode}..{start.episode + start.replayed - 1} are played " \
                 f"again (not every process had saved them)" if start.replayed else ""
