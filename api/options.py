@@ -18,7 +18,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from nnql_swarm.agent.machine import WORLD_WAIT_S
+from nnql_swarm.agent.agent_machine import WORLD_WAIT_S
 from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig
 from nnql_swarm.recording.viewers import check_viewer_url
 from nnql_swarm.launch.cli import parse_grid

@@ -39,7 +39,7 @@ class BareBrain(AgentBrain):
 
 def bare_agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, out: Path,
                     resume: bool = False, recording=None) -> None:
-    from nnql_swarm.agent.node import AgentOptions, run_agent
+    from nnql_swarm.agent.agent_node import AgentOptions, run_agent
 
     sys.exit(run_agent(AgentOptions(agent, config, transport, out), BareBrain(agent, config)))
 

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.learning.saved import read_fields
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.ports import free_port
@@ -80,11 +80,11 @@ def test_a_killed_agent_is_restarted_from_its_checkpoint(tmp_path):
     rows = episodes_once(out, 30)
     config = SwarmConfig.from_json((out / "config.json").read_text())
     at_kill = AgentBrain(3, config)
-    checkpoint.load(saved, at_kill)
+    agent_checkpoint.load(saved, at_kill)
     assert np.abs(at_kill.learner.q_ca).sum() > 0, "the checkpoint held learned values"
     resumed = stats(out, "agent-3")["resumed"]
     assert resumed is not None, "the restarted agent loaded a checkpoint"
-    assert resumed["fingerprint"] == checkpoint.fingerprint(at_kill), "and it was the one at the kill"
+    assert resumed["fingerprint"] == agent_checkpoint.fingerprint(at_kill), "and it was the one at the kill"
     assert sum(int(r["missed_intents"]) for r in rows) > 0, "the dead agent's ticks were missed"
     assert stats(out, "world")["violations"] == 0
     assert_copies_equal_the_worlds(out, config, range(8))
@@ -95,7 +95,7 @@ def assert_copies_equal_the_worlds(out, config, agents) -> None:
     restarted agent, or a restarted world, was sent the whole table and caught up."""
     shared = world_checkpoint.load(world_checkpoint.table_path(out), config, config.episodes - 1)
     for agent in agents:
-        mine = read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
+        mine = read_fields(agent_checkpoint.checkpoint_path(out / "checkpoints", agent), ())
         assert np.array_equal(mine["q_ds"], shared[0]), agent
         assert np.array_equal(mine["q_ca"], shared[1]), agent
 
@@ -166,7 +166,7 @@ def test_sigterm_to_the_launcher_stops_everything_within_3_s(tmp_path):
             os.killpg(swarm.pid, signal.SIGKILL)
     config = SwarmConfig.from_json((out / "config.json").read_text())
     for agent in range(8):
-        checkpoint.load(out / "checkpoints" / f"agent-{agent}.ckpt", AgentBrain(agent, config))
+        agent_checkpoint.load(out / "checkpoints" / f"agent-{agent}.ckpt", AgentBrain(agent, config))
     episodes_once(out, len(read_episodes(out / "episodes.csv")))
 
 
@@ -274,7 +274,7 @@ def test_a_launcher_killed_outright_takes_its_processes_with_it(tmp_path):
             os.killpg(swarm.pid, signal.SIGKILL)
     config = SwarmConfig.from_json((out / "config.json").read_text())
     for agent in range(4):  # they stopped as on Ctrl-C: checkpoints intact
-        checkpoint.load(out / "checkpoints" / f"agent-{agent}.ckpt", AgentBrain(agent, config))
+        agent_checkpoint.load(out / "checkpoints" / f"agent-{agent}.ckpt", AgentBrain(agent, config))
 
 
 def test_a_forged_shutdown_on_the_unsecured_layout_ends_the_run_with_a_reason(tmp_path):
@@ -286,7 +286,7 @@ def test_a_forged_shutdown_on_the_unsecured_layout_ends_the_run_with_a_reason(tm
     from nnql_swarm.protocol import keys
     from nnql_swarm.protocol.messages import WORLD_SENDER, Control, encode
     from nnql_swarm.transport.settings import TransportSettings
-    from nnql_swarm.world.machine import STARTUP_TIMEOUT_S
+    from nnql_swarm.world.world_machine import STARTUP_TIMEOUT_S
 
     out, port = tmp_path / "forged", free_port()
     swarm = start_swarm(out, "--agents", "2", "--episodes", "100000", "--max-steps", "20",

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.recording.blueprint import recorded_blueprint
@@ -144,7 +144,7 @@ def test_a_q_ca_left_out_had_nothing_to_learn(preset_runs):
     assert "path-nnql" in left_out
     for preset in left_out:
         config = SwarmConfig(**PRESETS[preset])
-        q_ca = read_fields(checkpoint.checkpoint_path(preset_runs[preset] / "checkpoints", 0),
+        q_ca = read_fields(agent_checkpoint.checkpoint_path(preset_runs[preset] / "checkpoints", 0),
                            ())["q_ca"]
         assert np.all(np.asarray(q_ca) == config.optimistic), preset
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.recording.agent import (
     OPTIMISTIC, TABLES, UNVISITED, TimedBrain, ds_table, learnable_bound, logs_heat_maps,
     table_picture,
@@ -272,7 +272,7 @@ def test_every_agent_logged_what_it_learned_every_tenth_episode_and_the_last(run
             assert all(0 < v < 2000 for _, v in latency.values())
     # the last heat map is the picture of the agent's checkpointed table
     agent = 3
-    q_ds = read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())["q_ds"]
+    q_ds = read_fields(agent_checkpoint.checkpoint_path(out / "checkpoints", agent), ())["q_ds"]
     batches = recording.temporal[f"agents/{agent}/q_ds/value"]
     last = max(((b, i) for b in batches for i in range(b.num_rows)),
                key=lambda bi: bi[0].column("episode")[bi[1]].as_py())
@@ -512,7 +512,7 @@ def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_refere
     for tick in known_at:
         assert cells_of(known_at[tick]) | cells_of(unseen_at[tick]) == walls
         assert not cells_of(known_at[tick]) & cells_of(unseen_at[tick])
-    kept = read_fields(checkpoint.checkpoint_path(out / "checkpoints", 2), ())
+    kept = read_fields(agent_checkpoint.checkpoint_path(out / "checkpoints", 2), ())
     learner_known = {(c % config.width, c // config.width) for c in kept["known_walls"].tolist()}
     assert cells_of(known_at[max(known_at)]) == learner_known
     # every planned path: from the agent's cell to its goal, step by step, off the known walls
@@ -534,7 +534,7 @@ def test_the_known_map_path_and_q_ds_table_are_the_learners_and_ql_is_the_refere
             reached += 1
     assert reached > len(ticks) / 2
     # Q_DS: a table of its 16 progress states, the checkpointed table's at the run's end
-    q_ds = read_fields(checkpoint.checkpoint_path(out / "checkpoints", 0), ())["q_ds"]
+    q_ds = read_fields(agent_checkpoint.checkpoint_path(out / "checkpoints", 0), ())["q_ds"]
     texts = recording.by_time("agents/0/q_ds/table", "TextDocument:text", "episode")
     table, learned = ds_table(q_ds, "progress", config.optimistic, learnable_bound("q_ds", config))
     assert learned and table in texts[config.episodes - 1][0]
