@@ -79,9 +79,11 @@ def _launcher_main() -> tuple[str, ...]:
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
-               progress: bool, start: "ResumePoint | None" = None) -> None:
+               progress: bool, start: "ResumePoint | None" = None,
+               agent_wait_s: float | None = None) -> None:
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False;
-    ``start``: where it resumes (None: the run's start)."""
+    ``start``: where it resumes (None: the run's start); ``agent_wait_s``: how long it waits
+    for its agents (``--agent-wait``; None: ``world.world_machine.startup_timeout``)."""
     from nnql_swarm.recording.loggers import open_world_viz
     from nnql_swarm.sim.resume import ResumeError, ResumePoint, shared_table
     from nnql_swarm.launch.cli import episode_summary, progress as progress_bar
@@ -117,7 +119,8 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
             code = 1
         else:
             code = run_world(WorldOptions(config, transport, out, first_episode=start.episode,
-                                          first_tick=start.tick, table=table), on_tick,
+                                          first_tick=start.tick, table=table,
+                                          startup_timeout_s=agent_wait_s), on_tick,
                              None if viz is None else viz.before_row)
     except OSError as error:
         code = no_space_left(error, "world")

@@ -14,7 +14,7 @@ from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.recording.blueprint import recorded_blueprint
 from nnql_swarm.recording.shown import ca_learns
-from tests.swarm_helpers import run_swarm
+from tests.swarm_helpers import run_swarms
 
 COUNTS_OF_NONE = ("metrics/collisions/per_episode", "metrics/refused")
 """Curves where a run of zeros is the news (no collision, no refusal), not a panel with
@@ -111,15 +111,15 @@ class Panels:
 
 @pytest.fixture(scope="module")
 def preset_runs(tmp_path_factory):
+    """A recorded in-process run of every preset, two at a time (each is one process)."""
     base = tmp_path_factory.mktemp("presets")
-    runs = {}
-    for preset in PRESETS:
-        out = base / preset
-        result = run_swarm(out, "--agents", "8", "--episodes", str(EPISODES), "--max-steps", "40",
-                           "--preset", preset, "--seed", "3", "--in-process")
+    options = ("--agents", "8", "--episodes", str(EPISODES), "--max-steps", "40", "--seed", "3",
+               "--in-process")
+    results = run_swarms({preset: (base / preset, (*options, "--preset", preset))
+                          for preset in PRESETS})
+    for preset, result in results.items():
         assert result.returncode == 0, (preset, result.stderr)
-        runs[preset] = out
-    return runs
+    return {preset: base / preset for preset in PRESETS}
 
 
 @pytest.mark.full
