@@ -128,7 +128,7 @@ def test_a_stalled_agent_costs_at_most_the_deadline_and_its_stale_intents_are_re
 
 def test_a_killed_world_resumes_without_duplicate_or_missing_episodes(tmp_path):
     out = tmp_path / "resumed"
-    options = ("--agents", "8", "--episodes", "40", "--max-steps", "30", "--run-id", "resumed")
+    options = ("--agents", "8", "--episodes", "20", "--max-steps", "30", "--run-id", "resumed")
     swarm = start_swarm(out, *options)
     try:
         wait_for_rows(out / "episodes.csv", 3, 120, swarm)
@@ -141,13 +141,13 @@ def test_a_killed_world_resumes_without_duplicate_or_missing_episodes(tmp_path):
     assert swarm.returncode != 0
     assert "--resume" in stderr
     done = len(read_episodes(out / "episodes.csv"))
-    assert done < 40
+    assert done < 20
     resumed = run_swarm(out, "--resume")
     assert resumed.returncode == 0, resumed.stderr
     assert f"resuming resumed at episode {done}" in resumed.stderr
-    rows = episodes_once(out, 40)
+    rows = episodes_once(out, 20)
     ticks = [int(r["end_tick"]) for r in rows]
-    assert ticks == sorted(ticks) and len(set(ticks)) == 40
+    assert ticks == sorted(ticks) and len(set(ticks)) == 20
     again = run_swarm(out, "--resume")
     assert again.returncode == 0 and "already complete" in again.stderr
 

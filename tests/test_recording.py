@@ -420,6 +420,37 @@ def test_a_run_killed_outright_and_resumed_records_every_episode(tmp_path, kille
     assert sorted(ticks) == list(range(int(rows[-1]["end_tick"]) + 1))
 
 
+@pytest.mark.full
+def test_a_recording_cut_at_a_tick_keeps_every_row_before_it_and_none_after(distributed,
+                                                                            tmp_path):
+    """``recording.merge.cut_at``, as a resume runs it: the recording keeps its id and its static
+    data, and of every timed entity exactly its rows before the tick; a cut at tick 0 (a run
+    that starts afresh) leaves no recording."""
+    import shutil
+
+    from nnql_swarm.recording.merge import cut_at
+
+    out, whole = distributed
+    folder = tmp_path / "cut"
+    folder.mkdir()
+    shutil.copy(out / "run.rrd", folder / "run.rrd")
+    ticks = sorted(set(whole.column("world/agents/0/disc", "tick")))
+    tick = ticks[len(ticks) // 2]
+    cut_at(folder, tick, "rec-dist")
+    verify(folder / "run.rrd")
+    kept = Recording(folder / "run.rrd")
+    assert [s.recording_id for s in kept.recordings] == ["rec-dist"]
+    assert kept.static == whole.static
+    timed = [e for e, batches in whole.temporal.items()
+             if all("tick" in batch.schema.names for batch in batches)]
+    assert len(timed) > 20
+    for entity in timed:
+        before = sorted(t for t in whole.column(entity, "tick") if t < tick)
+        assert sorted(kept.column(entity, "tick")) == before, entity
+    cut_at(folder, 0, "rec-dist")
+    assert not (folder / "run.rrd").exists()
+
+
 def test_a_bad_viewer_url_is_a_one_line_usage_error(tmp_path):
     result = run_swarm(tmp_path / "bad", "--rerun-connect", "http://nowhere", timeout=60)
     assert result.returncode == 2
