@@ -372,7 +372,8 @@ def _resume(args: Launch, given: dict) -> tuple[SwarmConfig, ResumePoint, Path]:
     if args.role != "agents":
         shared_table(args.out, config, start)
         rewind(args.out, start)
-        cut_at(args.out, start.tick, config.run_id)  # what is played again is recorded again
+        if not args.no_record:  # what is played again is recorded again, once
+            cut_at(args.out, start.tick, config.run_id)
     if start.episode < config.episodes:
         again = f"; episodes {start.episode}..{start.episode + start.replayed - 1} are played " \
                 f"again (not every process had saved them)" if start.replayed else ""
