@@ -1,5 +1,5 @@
 """How an agent answers its neighbours' queries for its intent: the half of its machine
-(``agent.machine.AgentMachine``) that serves what others ask, pure as the rest of it.
+(``agent.agent_machine.AgentMachine``) that serves what others ask, pure as the rest of it.
 
 A query for a decided tick is answered at once; one for a coming tick (at most
 :data:`AHEAD_TICKS` past the decision) is held until the decision, and the held ones are then

@@ -1,6 +1,6 @@
 """One swarm agent's decisions, pure: observation and neighbours' answers in, action out.
 
-The agent process (``agent.node``) runs it; it calls the learner's kernel functions
+The agent process (``agent.agent_node``) runs it; it calls the learner's kernel functions
 (``learning.learner``) on Python lists and its tables' array, the very functions the swarm
 simulator (``sim.episode``) runs compiled, so that for the same seed the distributed swarm and the
 simulator play the same run.

@@ -13,7 +13,7 @@ ranked just above:
 the negotiation becomes a chain of N - 1 answers a tick instead of N (N - 1) / 2, and every agent
 knows exactly the intents it would have known by asking each neighbour. Should an answer lack an
 intent it was expected to bring (its sender missed it, or died), the agent asks for the missing
-ones directly (``agent.node``). Why a chain: ``docs/design.md``.
+ones directly (``agent.agent_node``). Why a chain: ``docs/design.md``.
 
 Under the paper's ``reach`` rule an agent that has arrived still waits for the awaited intents,
 although it needs none of them, so that it can relay them down the chain. Under ``meet`` nobody

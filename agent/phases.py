@@ -1,5 +1,5 @@
 """The agent machine's named phases, the events that move it and its one transition table
-(``agent.machine`` runs them), and the state of a negotiation in progress."""
+(``agent.agent_machine`` runs them), and the state of a negotiation in progress."""
 
 import enum
 from dataclasses import dataclass, field

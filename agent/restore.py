@@ -6,7 +6,7 @@ simulator is the restart a real process makes.
 
 from pathlib import Path
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 
@@ -17,10 +17,10 @@ def start_brain(agent: int, config: SwarmConfig, checkpoint_file: Path, resume: 
     """``(brain, resumed)``: ``brain`` (a fresh one if None), restored from ``checkpoint_file``
     when ``resume`` and the file exists, its newest version or, for a resumed run, the one of
     ``episode`` (the run's cut, ``sim.resume``); ``resumed`` then says from which
-    episode and with which tables (``checkpoint.fingerprint``), else None. Raises
+    episode and with which tables (``agent_checkpoint.fingerprint``), else None. Raises
     ``CheckpointError``."""
     brain = brain or AgentBrain(agent, config)
     if not (resume and Path(checkpoint_file).exists()):
         return brain, None
-    episode = checkpoint.load(checkpoint_file, brain, episode)
-    return brain, {"episode": episode, "fingerprint": checkpoint.fingerprint(brain)}
+    episode = agent_checkpoint.load(checkpoint_file, brain, episode)
+    return brain, {"episode": episode, "fingerprint": agent_checkpoint.fingerprint(brain)}

@@ -15,7 +15,7 @@ the world and agent processes over Zenoh as the command does, and gives the same
 Q-tables. docs/api.md has the whole of it.
 """
 
-from nnql_swarm.api.swarm import (
+from nnql_swarm.api.python_api import (
     DETERMINISTIC_COLUMNS, EPISODE_DTYPE, Run, RunError, Swarm, open_run, resume, run,
 )
 

@@ -26,6 +26,7 @@ from nnql_swarm.launch.cli import (
     EXIT_INTERRUPTED, OneLineParser, invocation, prepare_simulator,
     episode_summary, progress as progress_bar,
 )
+from nnql_swarm.recording.merge import cut_at
 from nnql_swarm.recording.session import RecordingSession
 from nnql_swarm.recording.viewers import check_viewer_url
 from nnql_swarm.sim.resume import (
@@ -36,7 +37,8 @@ from nnql_swarm.sim.supervisor import Supervisor, describe_exit
 from nnql_swarm.sim.restarts import (
     STATS_NAME, record as record_restarts, warning as restarts_warning,
 )
-from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig
+from nnql_swarm.protocol.config import (DEFAULT_PRESET, LEARNING_FIELDS, PRESETS,
+                                        START_S_PER_AGENT, SwarmConfig)
 from nnql_swarm.api.options import (
     LAUNCH_DEFAULTS as L, LAUNCHER_TOPOLOGIES, RUN_NAMES, Launch, config_of, config_values,
 )
@@ -48,6 +50,7 @@ from nnql_swarm.transport.runlock import RunLock, RunLocked
 from nnql_swarm.transport.settings import EXIT_NO_WORLD, MODES, TransportSettings
 from nnql_swarm.transport.topology import HUB_FROM_AGENTS, EmbeddedLayout, embedded_topology
 from nnql_swarm.launch.processes import agent_main, process_context, world_main
+from nnql_swarm.world.world_machine import STARTUP_TIMEOUT_S
 
 log = logging.getLogger("nnql.launch")
 
@@ -112,6 +115,11 @@ def build_parser(parser: type[OneLineParser] = OneLineParser) -> OneLineParser:
     z.add_argument("--world-wait", type=float, default=L.world_wait, metavar="SECONDS",
                    help="how long the agents wait for a world that left to come back before "
                         f"they stop (exit code {EXIT_NO_WORLD}; default: {L.world_wait:.0f})")
+    z.add_argument("--agent-wait", type=float, default=L.agent_wait, metavar="SECONDS",
+                   help="how long the world waits for every agent to come alive at the start, "
+                        "and for one to come back once all have left, before it ends the run "
+                        f"with an error (default: {STARTUP_TIMEOUT_S:.0f}, or "
+                        f"{START_S_PER_AGENT:g} an agent if more)")
     z.add_argument("--port", type=int, default=None,
                    help="one machine: the loopback port the world listens on (default: a free one)")
     z.add_argument("--topology", choices=("auto", *LAUNCHER_TOPOLOGIES), default=L.topology,
@@ -233,6 +241,8 @@ def check_launch(launch: Launch, config: SwarmConfig, named: bool = True) -> Non
         raise UsageError(f"--map-agent {launch.map_agent} out of range 0..{config.n_agents - 1}")
     if not 0 < launch.world_wait < math.inf:
         raise UsageError(f"--world-wait must be positive and finite, not {launch.world_wait}")
+    if launch.agent_wait is not None and not 0 < launch.agent_wait < math.inf:
+        raise UsageError(f"--agent-wait must be positive and finite, not {launch.agent_wait}")
     if launch.port is not None and not 1 <= launch.port <= 65535:
         raise UsageError(f"--port must be 1..65535, not {launch.port}")
     check_zenoh_files(launch, config)
@@ -363,6 +373,8 @@ def _resume(args: Launch, given: dict) -> tuple[SwarmConfig, ResumePoint, Path]:
     if args.role != "agents":
         shared_table(args.out, config, start)
         rewind(args.out, start)
+        if not args.no_record:  # what is played again is recorded again, once
+            cut_at(args.out, start.tick, config.run_id)
     if start.episode < config.episodes:
         again = f"; episodes {start.episode}..{start.episode + start.replayed - 1} are played " \
                 f"again (not every process had saved them)" if start.replayed else ""
@@ -485,7 +497,7 @@ def run_processes(args: Launch, config: SwarmConfig, out: Path,
     world = None
     if args.role in ("all", "world"):
         world = supervisor.add("nnql-world", world_main, restartable=False, make_args=lambda _: (
-            config, world_transport, out, record, progress, start))
+            config, world_transport, out, record, progress, start, args.agent_wait))
     if args.role in ("all", "agents"):
         for i in agent_ids(args, config):
             def agent_args(restarted: bool, i: int = i) -> tuple:
@@ -545,6 +557,8 @@ def resume_command(args: Launch, out: Path) -> str:
         words += ["--topology", args.topology]
     if args.world_wait != L.world_wait:
         words += ["--world-wait", f"{args.world_wait:g}"]
+    if args.agent_wait is not None:
+        words += ["--agent-wait", f"{args.agent_wait:g}"]
     for flag, value in (("--mode", args.mode), ("--zenoh-config", args.zenoh_config),
                         ("--zenoh-config-dir", args.zenoh_config_dir)):
         if value is not None:

@@ -18,7 +18,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from nnql_swarm.agent.machine import WORLD_WAIT_S
+from nnql_swarm.agent.agent_machine import WORLD_WAIT_S
 from nnql_swarm.protocol.config import DEFAULT_PRESET, LEARNING_FIELDS, PRESETS, SwarmConfig
 from nnql_swarm.recording.viewers import check_viewer_url
 from nnql_swarm.launch.cli import parse_grid
@@ -59,6 +59,7 @@ class Launch:
     role: str = "all"
     agent_ids: tuple[int, ...] | None = None
     world_wait: float = WORLD_WAIT_S
+    agent_wait: float | None = None  # None: world.world_machine.startup_timeout
     port: int | None = None
     topology: str = "auto"
     mode: str | None = None
@@ -87,7 +88,7 @@ class Launch:
 
 LAUNCH_DEFAULTS = Launch()
 
-API_LAUNCH = ("world_wait", "port", "topology", "mode", "listen", "connect", "zenoh_config",
+API_LAUNCH = ("world_wait", "agent_wait", "port", "topology", "mode", "listen", "connect", "zenoh_config",
               "zenoh_config_dir", "reference", "map_agent", "rerun_spawn", "rerun_connect",
               "rerun_serve_web", "rerun_port", "rerun_web_port")
 """The launch options the API takes by name; the others are :meth:`Swarm.run`'s arguments
@@ -206,7 +207,7 @@ def _grid(grid) -> tuple[int, int]:
 
 
 def _launch_type(name: str):
-    return {"world_wait": float, "port": int, "map_agent": int, "rerun_port": int,
+    return {"world_wait": float, "agent_wait": float, "port": int, "map_agent": int, "rerun_port": int,
             "rerun_web_port": int, "listen": tuple, "connect": tuple, "reference": bool,
             "rerun_spawn": bool, "rerun_serve_web": bool}.get(name, str)
 

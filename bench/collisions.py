@@ -3,7 +3,7 @@
 classified from the simulator's trace.
 
 For each seed the learner (``--preset``, with ``--set`` options) is trained as the maps benchmark
-trains it (``experiment.maps.train``), then played frozen on the seed's held-out random maps at
+trains it (``experiment.maps_benchmark.train``), then played frozen on the seed's held-out random maps at
 ``--agents``, every tick recorded. Each learner that collided in a step is classified by what it
 did and what stood where it went:
 
@@ -28,7 +28,7 @@ from collections import Counter
 
 import numpy as np
 
-from nnql_swarm.experiment.maps import MapsBenchmark, Recorder, map_spec, run_config, train
+from nnql_swarm.experiment.maps_benchmark import MapsBenchmark, Recorder, map_spec, run_config, train
 from nnql_swarm.learning.fields import (
     LP_ESCAPE_SHIELD, LP_READING, LP_STILL_SHIELD, NB_FIELDS, NB_KNOWN, NB_PREV_X, NB_PREV_Y,
     learner_params,

@@ -74,7 +74,7 @@ def stay_agent_main(agent: int, config: SwarmConfig, transport: TransportSetting
     protocol with the learning taken out. (Imported here: in the agent process, which runs the
     kernel uncompiled.)"""
     from nnql_swarm.agent.brain import AgentBrain
-    from nnql_swarm.agent.node import AgentOptions, run_agent
+    from nnql_swarm.agent.agent_node import AgentOptions, run_agent
     from nnql_swarm.protocol.actions import STAY
 
     class StayBrain(AgentBrain):

@@ -35,13 +35,13 @@ os.environ["NNQL_KERNEL"] = "python"  # as in the swarm's processes
 import zenoh
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.node import AgentNode, AgentOptions
+from nnql_swarm.agent.agent_node import AgentNode, AgentOptions
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
 from bench.harness import add_preset_option, grid_side, swarm_config
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.settings import TransportSettings
-from nnql_swarm.world.node import WorldNode, WorldOptions
+from nnql_swarm.world.world_node import WorldNode, WorldOptions
 
 
 class _Callback:

@@ -26,7 +26,7 @@ from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from nnql_swarm.sim.distributed import SimSwarm
 from nnql_swarm.sim.schedule import DEADLINE_S, Schedule
 from nnql_swarm.world.engine import SwarmWorld
-from nnql_swarm.world.machine import WorldMachine
+from nnql_swarm.world.world_machine import WorldMachine
 from nnql_swarm.world.records import RecordCheck
 
 GRIDS = {8: 11, 16: 16, 32: 22, 64: 32}

@@ -24,7 +24,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 import numpy as np
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from tests.swarm_helpers import find_process, group_pids, swarm_command
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.world.metrics import read_episodes
@@ -104,7 +104,7 @@ def main() -> int:
     lost = len(set(range(max(episodes) + 1)) - set(episodes)) + (len(episodes) - len(set(episodes)))
     zeroed = 0
     for agent in range(args.agents):
-        data = read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
+        data = read_fields(agent_checkpoint.checkpoint_path(out / "checkpoints", agent), ())
         zeroed += int(np.abs(data["q_ds"]).sum() == 0 or np.abs(data["q_ca"]).sum() == 0)
     ticks = int(rows[-1]["end_tick"]) + 1
     print(f"\nsoak: {args.minutes:g} min, {args.agents} agents, {ticks} ticks, {len(rows)} episodes")

@@ -2,7 +2,7 @@
 """Seconds for a swarm sweep on the simulator: 8 agents x 500 episodes x 10 seeds x {QL, nnQL}.
 
 The paper's QL and nnQL presets (the slowest learners, so the longest episodes) for every seed,
-played by ``experiment.swarm.run_experiment`` in one batch over the cores. The kernel is loaded
+played by ``experiment.swarm_experiment.run_experiment`` in one batch over the cores. The kernel is loaded
 (or compiled) by an untimed warm-up; each repeat's wall time is printed, then the median against
 the 20 s target, and the runs are checked to give the same episodes every time.
 
@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from nnql_swarm.experiment.swarm import SwarmExperiment, run_experiment
+from nnql_swarm.experiment.swarm_experiment import SwarmExperiment, run_experiment
 
 TARGET_SECONDS = 20.0
 

@@ -161,7 +161,7 @@ SWARM_FIGURES = {"arrival": ("swarm_arrival.png", "Share of agents on their goal
 
 def write_swarm_figures(out_dir: Path, curves: dict[str, dict[str, np.ndarray]],
                         seeds: int, smoothing: int) -> list[Path]:
-    """Draw the swarm experiment's learning curves (``experiment.swarm.curves``)."""
+    """Draw the swarm experiment's learning curves (``experiment.swarm_experiment.curves``)."""
     plt = require_matplotlib()
     paths = []
     for metric, (name, title) in SWARM_FIGURES.items():

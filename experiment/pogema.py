@@ -1,5 +1,5 @@
 """The maps benchmark on POGEMA's own instances (``launch/experiment.py maps --suite pogema``):
-step 2 of ``experiment.maps`` played on the published instances instead of our held-out maps,
+step 2 of ``experiment.maps_benchmark`` played on the published instances instead of our held-out maps,
 and its table beside the published figures.
 
 Each seed's policies, trained on the project's own random maps (step 1, disjoint from these),
@@ -16,7 +16,7 @@ from collections.abc import Callable
 import math
 from pathlib import Path
 
-from nnql_swarm.experiment.maps import (
+from nnql_swarm.experiment.maps_benchmark import (
     REFERENCE, MapsBenchmark, Recorder, Tables, play_configs, swarm_config, with_interval,
 )
 from nnql_swarm.experiment.published import CSR, METHODS, SOC_OVER_LOWER_BOUND, SOURCES, figure

@@ -1,5 +1,5 @@
 """The maps benchmark on POGEMA's lifelong instances (``launch/experiment.py maps --suite pogema
---tasks lifelong``): step 2 of ``experiment.maps`` played on the published lifelong instances,
+--tasks lifelong``): step 2 of ``experiment.maps_benchmark`` played on the published lifelong instances,
 scored by throughput (goals reached a step), and its table beside the published figures.
 
 Each seed's policies, trained one-shot on the project's own random maps (step 1, as in the
@@ -18,7 +18,7 @@ maps/pogema/<family>/<map>.map --goals maps/pogema/<family>/lifelong/<instance>.
 import math
 from pathlib import Path
 
-from nnql_swarm.experiment.maps import (
+from nnql_swarm.experiment.maps_benchmark import (
     REFERENCE, MapsBenchmark, Recorder, Tables, play_configs, scratch_window, swarm_config,
     with_interval,
 )

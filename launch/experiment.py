@@ -31,7 +31,7 @@ from nnql_swarm.experiment.paper import (
 from nnql_swarm.experiment.report import (
     ResultGrid, summarize, table1_markdown, table1_rows, write_episodes_csv, write_table1_csv,
 )
-from nnql_swarm.experiment.swarm import (
+from nnql_swarm.experiment.swarm_experiment import (
     TABLE_FILES, VARIANTS, SwarmExperiment, ablation_presets, curves, run_experiment, table_rows,
     walls_presets, write_runs, write_tables,
 )

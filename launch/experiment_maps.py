@@ -1,4 +1,4 @@
-"""``launch/experiment.py maps``: the field's benchmark (``experiment.maps``, POGEMA's
+"""``launch/experiment.py maps``: the field's benchmark (``experiment.maps_benchmark``, POGEMA's
 protocol) from the command line: its options, and a run written to its output directory. With
 ``--suite pogema`` frozen play is on POGEMA's published instances (``experiment.pogema``; with
 ``--tasks lifelong`` its lifelong ones, ``experiment.pogema_lifelong``), and the options left unset
@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from nnql_swarm.experiment import pogema, pogema_lifelong
-from nnql_swarm.experiment.maps import (
+from nnql_swarm.experiment.maps_benchmark import (
     FAMILIES, REFERENCE, SUITES, TABLE_FILES, MapsBenchmark, Recorder, episodes_total,
     learning_curves, map_spec, play_held_out, run_benchmark, run_config, scratch, table_rows,
     write_curves, write_tables,

@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from nnql_swarm.sim.resume import ResumePoint
 
 
-PRELOADED = ("nnql_swarm.agent.node", "nnql_swarm.recording.loggers", "setproctitle")
+PRELOADED = ("nnql_swarm.agent.agent_node", "nnql_swarm.recording.loggers", "setproctitle")
 """What the server the processes of a swarm are forked from imports, once (:func:`process_context`):
 what an agent runs, and no more. A forked process starts with the server's memory, counted in its
 resident memory: the world's modules (its rules, the shared table, the progress bar's tqdm) would
@@ -79,13 +79,15 @@ def _launcher_main() -> tuple[str, ...]:
 
 
 def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, record,
-               progress: bool, start: "ResumePoint | None" = None) -> None:
+               progress: bool, start: "ResumePoint | None" = None,
+               agent_wait_s: float | None = None) -> None:
     """The world process (spawned); ``record``: a RecordingPlan, True (to files) or False;
-    ``start``: where it resumes (None: the run's start)."""
+    ``start``: where it resumes (None: the run's start); ``agent_wait_s``: how long it waits
+    for its agents (``--agent-wait``; None: ``world.world_machine.startup_timeout``)."""
     from nnql_swarm.recording.loggers import open_world_viz
     from nnql_swarm.sim.resume import ResumeError, ResumePoint, shared_table
     from nnql_swarm.launch.cli import episode_summary, progress as progress_bar
-    from nnql_swarm.world.node import WorldOptions, run_world
+    from nnql_swarm.world.world_node import WorldOptions, run_world
 
     start = start or ResumePoint(0, 0)
     name_process("nnql-world", config)
@@ -117,7 +119,8 @@ def world_main(config: SwarmConfig, transport: TransportSettings, out: Path, rec
             code = 1
         else:
             code = run_world(WorldOptions(config, transport, out, first_episode=start.episode,
-                                          first_tick=start.tick, table=table), on_tick,
+                                          first_tick=start.tick, table=table,
+                                          startup_timeout_s=agent_wait_s), on_tick,
                              None if viz is None else viz.before_row)
     except OSError as error:
         code = no_space_left(error, "world")
@@ -135,8 +138,8 @@ def agent_main(agent: int, config: SwarmConfig, transport: TransportSettings, ou
     """An agent process (spawned); ``resume`` reloads its checkpoint if there is one (the
     version of ``resume_episode``, or else the newest); ``hub``: the ``(host, port)`` of the
     world to wait for, where the agent is its client; ``world_wait_s``: how long a world that
-    left may stay away (None: ``agent.machine.WORLD_WAIT_S``)."""
-    from nnql_swarm.agent.node import AgentOptions, run_agent
+    left may stay away (None: ``agent.agent_machine.WORLD_WAIT_S``)."""
+    from nnql_swarm.agent.agent_node import AgentOptions, run_agent
     from nnql_swarm.recording.loggers import open_agent_viz
 
     name_process(f"nnql-agent {agent}", config)

@@ -14,7 +14,7 @@ from nnql_swarm.api.command import (  # noqa: F401 (the command's parts, by thei
     resume, resume_command, run_in_process, run_processes, transports, unmerged,
 )
 from nnql_swarm.api.options import Launch
-from nnql_swarm.api.swarm import Swarm
+from nnql_swarm.api.python_api import Swarm
 from nnql_swarm.recording.merge import merge_parts
 from nnql_swarm.transport.runfiles import EXIT_NO_SPACE, out_of_space
 from nnql_swarm.sim import restarts

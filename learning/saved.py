@@ -1,7 +1,7 @@
 """A learner's tables as saved: reading a checkpoint file's fields and versions
 (``transport.slotfile``) and checking its tables, refusing with one error naming the file
-(:class:`CheckpointError`). An agent's checkpoints (``agent.checkpoint``) and the world's shared
-table (``world.checkpoint``) are read with them."""
+(:class:`CheckpointError`). An agent's checkpoints (``agent.agent_checkpoint``) and the world's shared
+table (``world.world_checkpoint``) are read with them."""
 
 from pathlib import Path
 

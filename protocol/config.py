@@ -230,7 +230,7 @@ class SwarmConfig:
     order, flat, per agent; ``world.tasks``); empty: all drawn."""
     frozen: bool = False
     """Play learned tables as they are: no learning, no random step (the simulator only; the
-    maps benchmark, ``experiment.maps``, loads the tables: ``sim.runs.Batch.load_tables``)."""
+    maps benchmark, ``experiment.maps_benchmark``, loads the tables: ``sim.runs.Batch.load_tables``)."""
 
     def __post_init__(self) -> None:
         validate_run_id(self.run_id)

@@ -1,9 +1,9 @@
 """What the protocol machines ask their adapters to do: small typed records, one per effect.
 
-``agent.machine.AgentMachine`` and ``world.machine.WorldMachine`` are pure: every input
+``agent.agent_machine.AgentMachine`` and ``world.world_machine.WorldMachine`` are pure: every input
 (a payload that arrived, a query, a liveliness change, a timer at time ``now``) returns the list
-of effects it causes, in the order they must be carried out. The Zenoh nodes (``agent.node``,
-``world.node``) carry them out on a real network and disk; the simulator (``sim``) carries them
+of effects it causes, in the order they must be carried out. The Zenoh nodes (``agent.agent_node``,
+``world.world_node``) carry them out on a real network and disk; the simulator (``sim``) carries them
 between protocol instances in virtual time. Records that send a message hold both the message
 (for whoever wants to look at it without decoding: the simulator's checks) and its encoded
 payload (what goes on the wire).

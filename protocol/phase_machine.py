@@ -1,4 +1,4 @@
-"""What the two protocol machines (``agent.machine``, ``world.machine``) share: a phase named by
+"""What the two protocol machines (``agent.agent_machine``, ``world.world_machine``) share: a phase named by
 an enum, moved only by the machine's one transition table, and the way every input runs.
 
 A machine lists its transitions as ``{(phase, event): next phase}`` (h11's manner), its phases

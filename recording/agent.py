@@ -1,6 +1,6 @@
 """What one agent learned, in Rerun: its Q-tables as 21 x 21 heat maps, and its negotiation timing.
 
-Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.node.run_agent`` and
+Every tenth episode and the last (from the ``on_episode_end`` hook of ``agent.agent_node.run_agent`` and
 ``sim.inprocess.run_in_process``) each agent logs, under ``agents/<id>/``:
 
 - ``q_ds/value``: an RGB image, one pixel per egocentric offset ``(dx, dy)`` of the *goal* from
@@ -238,7 +238,7 @@ class TimedBrain(AgentBrain):
     """An AgentBrain that times its negotiation: from choosing whose intents to wait for to
     deciding.
 
-    ``agent.node`` calls :meth:`neighbours_to_ask`, learns those intents (its queries, and what
+    ``agent.agent_node`` calls :meth:`neighbours_to_ask`, learns those intents (its queries, and what
     the answers relay), then calls :meth:`act` with them: the time between the two calls is the
     negotiation wait. Decisions are exactly those of AgentBrain.
     """

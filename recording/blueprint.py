@@ -57,7 +57,7 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
     key = rrb.TextDocumentView(origin=world_viz.LEGEND, name="Key")
     n = config.n_agents
     metrics = learning_curves(config, distributed, reference)
-    from nnql_swarm.recording import known_map
+    from nnql_swarm.recording import known_map_view
     from nnql_swarm.recording.agent import DS_STATE_TITLES
 
     shared = config.shared
@@ -83,9 +83,9 @@ def blueprint(config: SwarmConfig, distributed: bool = True, map_agent: int | No
         for i in heat_map_agents(config)
     ], active_tab=0, name="What the agents learned") if heat_map_agents(config) else None
     learned: rrb.Tabs | rrb.Vertical | rrb.Spatial2DView | None = heat_maps
-    if map_agent is not None and 0 <= map_agent < n and known_map.shows_known_map(config):
+    if map_agent is not None and 0 <= map_agent < n and known_map_view.shows_known_map(config):
         map_view = rrb.Spatial2DView(
-            origin=known_map.ROOT, background=[255, 255, 255],
+            origin=known_map_view.ROOT, background=[255, 255, 255],
             name=f"Agent {map_agent}'s known map and planned path",
             visual_bounds=rrb.VisualBounds2D(x_range=[-0.6, config.width - 0.4],
                                              y_range=[-0.6, config.height - 0.4]))
@@ -177,7 +177,7 @@ def recorded_options(chunks) -> tuple[bool, bool, int | None]:
 
     Distributed: agents logged their negotiation wait over time; reference: the paper's QL's
     steps curve is there; map agent: the id in the known map's agent label (None: no map)."""
-    from nnql_swarm.recording import known_map
+    from nnql_swarm.recording import known_map_view
     from nnql_swarm.recording.reference import CURVES
 
     distributed, reference, map_agent = False, False, None
@@ -187,7 +187,7 @@ def recorded_options(chunks) -> tuple[bool, bool, int | None]:
             distributed = True
         elif entity in CURVES:
             reference = True
-        elif entity == known_map.AGENT and chunk.is_static:
+        elif entity == known_map_view.AGENT and chunk.is_static:
             labels = chunk.to_record_batch().column("Points2D:labels").to_pylist()
             map_agent = int(labels[0][0].split()[-1])
     return distributed, reference, map_agent

@@ -55,7 +55,7 @@ def log_experiment(specs, metrics, target, *, recording_id: str = "experiment"):
 
 def log_swarm_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
                      recording_id: str = "swarm-experiment") -> None:
-    """The swarm experiment's learning curves (``experiment.swarm.curves``) into a new ``.rrd``:
+    """The swarm experiment's learning curves (``experiment.swarm_experiment.curves``) into a new ``.rrd``:
     ``swarm/<metric>/<variant>`` on the ``episode`` timeline, one plot per metric."""
     import rerun as rr
     import rerun.blueprint as rrb

@@ -24,7 +24,7 @@ class RecordingPlan:
     run_id: str
     parts_dir: Path | None = None  # save a part here (None: no file)
     url: str | None = None  # also stream to this viewer
-    map_agent: int | None = 0  # whose known map the recording shows (recording.known_map)
+    map_agent: int | None = 0  # whose known map the recording shows (recording.known_map_view)
     reference: bool = False  # the paper's QL's curves are in it (recording.reference)
 
     @staticmethod

@@ -5,7 +5,7 @@ can hold a run).
 Two of them, for two questions. ``sim.episode`` (with ``sim.runs`` and ``world.pibt``) steps the
 world and every agent's learner inside the compiled kernel, many seeds and options at once: the
 sweeps and the experiments run on it. ``sim.distributed`` runs the very protocol machines that run
-over Zenoh (``agent.machine``, ``world.machine``) over a simulated network (``sim.network``) in
+over Zenoh (``agent.agent_machine``, ``world.world_machine``) over a simulated network (``sim.network``) in
 virtual time: every effect one of them produces is carried to the others with a seeded latency,
 and the network injects drops, duplicates, reordering, partitions, stalls (a process that stops
 answering for a while) and crashes with a restart from the last checkpoint. One seed gives one

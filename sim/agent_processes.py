@@ -5,9 +5,9 @@ world, asks to its neighbours as queries and their replies back, checkpoints to 
 
 import msgspec
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.machine import AgentMachine
+from nnql_swarm.agent.agent_machine import AgentMachine
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, Reply, ReplyError, SendIntent, Stopped,
@@ -32,7 +32,7 @@ class AgentProcesses(SwarmState):
         a.incarnation += 1
         a.alive, a.stalled_until, a.waiting, a.timer_at = True, 0.0, [], None
         if i in self.checkpointed:
-            brain, resumed = start_brain(i, c, checkpoint.checkpoint_path(self._checkpoints(), i),
+            brain, resumed = start_brain(i, c, agent_checkpoint.checkpoint_path(self._checkpoints(), i),
                                          resume, episode=episode)
         else:
             brain, resumed = AgentBrain(i, c), None
@@ -106,9 +106,9 @@ class AgentProcesses(SwarmState):
             elif kind is Checkpoint:
                 if i in self.saving:
                     brain = self._machine(i).brain
-                    checkpoint.save(checkpoint.checkpoint_path(self._checkpoints(), i), brain,
+                    agent_checkpoint.save(agent_checkpoint.checkpoint_path(self._checkpoints(), i), brain,
                                     effect.episode)
-                    tables = checkpoint.fingerprint(brain)
+                    tables = agent_checkpoint.fingerprint(brain)
                     self.saved[i] = (effect.episode, tables)
                     self.saved_at[i][effect.episode] = tables
             elif kind is Stopped:

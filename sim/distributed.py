@@ -24,7 +24,7 @@ from pathlib import Path
 
 import msgspec
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.sim.agent_processes import START_SPREAD_S, AgentProcesses
 from nnql_swarm.sim.faults import Faults
 from nnql_swarm.sim.schedule import Schedule
@@ -41,7 +41,7 @@ EVENT_LIMIT = 2_000_000
 class Outcome:
     """What one simulated run gave: its failures (none: it passed), its size, a digest of its
     history (the same seed gives the same digest), the metrics rows and, if asked for, the
-    agents' final tables (``checkpoint.fingerprint``)."""
+    agents' final tables (``agent_checkpoint.fingerprint``)."""
 
     seed: int
     failures: list[str]
@@ -81,7 +81,7 @@ class SimSwarm(WorldProcess, AgentProcesses, Faults):
         ticks = sum(row["steps"] + 1 for row in self.rows)
         prints = None
         if fingerprints:
-            prints = [None if b is None else checkpoint.fingerprint(b) for b in self.final_brains]
+            prints = [None if b is None else agent_checkpoint.fingerprint(b) for b in self.final_brains]
         return Outcome(self.schedule.seed, check.failures, ticks, net.events, net.now, digest,
                        self.rows, prints, tuple(self.fired))
 

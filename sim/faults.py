@@ -3,7 +3,7 @@ reordering, partitions, stalls, crashes and restarts, forged records, and every 
 once and the run continued as ``launch/swarm.py --resume`` continues it. A part of
 ``sim.distributed.SimSwarm``, whose state it shares."""
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.sim.agent_processes import START_SPREAD_S
 from nnql_swarm.sim.network import Process
@@ -91,7 +91,7 @@ class Faults(SwarmState):
         if start.episode >= self.config.episodes:  # every row was written: nothing to play
             for i in everyone:  # what the agents end with is what they checkpointed last
                 self.final_brains[i] = start_brain(
-                    i, self.config, checkpoint.checkpoint_path(self._checkpoints(), i), True)[0]
+                    i, self.config, agent_checkpoint.checkpoint_path(self._checkpoints(), i), True)[0]
             self.completed = self.world_done = True
             self.net.halted = True
             return

@@ -14,8 +14,8 @@ from typing import Callable, NamedTuple
 
 import numpy as np
 
-from nnql_swarm.agent import checkpoint
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.agent import agent_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, EPISODES_FILE
@@ -111,7 +111,7 @@ def run_in_process(
         # episode's end with a row, so none is saved and a --resume plays the run afresh.
         if checkpoints and batch.episode and not playing and batch.episode == rowed:
             for agent in agents:
-                checkpoint.save(checkpoint.checkpoint_path(out_dir / CHECKPOINT_DIR, agent.agent),
+                agent_checkpoint.save(agent_checkpoint.checkpoint_path(out_dir / CHECKPOINT_DIR, agent.agent),
                                 agent, batch.episode - 1)
             if config.shared:  # the world's copy, for a distributed --resume
                 world_checkpoint.save(world_checkpoint.table_path(out_dir),

@@ -9,7 +9,7 @@ very same Q-tables, bit for bit.
 import tempfile
 from pathlib import Path
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.sim.inprocess import run_in_process
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.world.engine import EPISODE_FIELDS
@@ -24,7 +24,7 @@ def in_process_reference(config: SwarmConfig, scratch: Path | None = None) -> tu
 
     def at_episode_end(brain, episode: int) -> None:
         if episode == last:
-            prints[brain.agent] = checkpoint.fingerprint(brain)
+            prints[brain.agent] = agent_checkpoint.fingerprint(brain)
 
     with tempfile.TemporaryDirectory(prefix="nnql-ref-", dir=scratch) as tmp:
         run_in_process(config, Path(tmp), checkpoints=False, on_episode_end=at_episode_end)

@@ -21,12 +21,12 @@ file is refused with one line naming it. The checks load every version the proce
 from dataclasses import dataclass
 from pathlib import Path
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.saved import CheckpointError
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.metrics import COLUMNS, drop_partial_line, keep_rows, read_episodes
 from nnql_swarm.world.shared_table import SharedState
 
@@ -93,12 +93,12 @@ def _rows(out: Path) -> list[dict]:
 def _agent_versions(out: Path, config: SwarmConfig, agent: int) -> tuple[Path, list[int]]:
     """An agent's checkpoint file and the episodes it holds, the newest first (none if there is
     no file); each version is loaded into a scratch brain, so a bad one is refused here."""
-    path = checkpoint.checkpoint_path(Path(out) / CHECKPOINT_DIR, agent)
+    path = agent_checkpoint.checkpoint_path(Path(out) / CHECKPOINT_DIR, agent)
     if not path.exists():
         return path, []
     try:
-        return path, [checkpoint.load(path, AgentBrain(agent, config), episode)
-                      for episode in checkpoint.episodes(path)]
+        return path, [agent_checkpoint.load(path, AgentBrain(agent, config), episode)
+                      for episode in agent_checkpoint.episodes(path)]
     except CheckpointError as error:
         raise ResumeError(str(error)) from None
 

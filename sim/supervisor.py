@@ -208,7 +208,7 @@ def describe_exit(code: int | None) -> str:
 
 def start_ignoring_sigint(start: Callable[[], None]) -> None:
     """``start()`` a child process that starts with SIGINT ignored (a disposition exec and fork
-    keep), until its node takes the signal (``world.node``, ``agent.node``): a Ctrl-C while it
+    keep), until its node takes the signal (``world.world_node``, ``agent.agent_node``): a Ctrl-C while it
     still starts up would raise in the middle of an import and print a traceback; the launcher
     stops it then (SIGTERM). The forkserver the children are forked from starts so too
     (``launch.processes.process_context``), and hands it on. Here the signal is blocked meanwhile

@@ -8,14 +8,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.machine import AgentMachine
+from nnql_swarm.agent.agent_machine import AgentMachine
 from nnql_swarm.protocol import keys
 from nnql_swarm.sim.checks import Checker
 from nnql_swarm.sim.network import Network, Process
 from nnql_swarm.sim.schedule import Fault, Schedule, schedule_rng
 from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, CONFIG_FILE, EPISODES_FILE
 from nnql_swarm.world.metrics import EpisodeWriter
-from nnql_swarm.world.machine import WorldMachine
+from nnql_swarm.world.world_machine import WorldMachine
 from nnql_swarm.world.shared_table import SharedState
 
 

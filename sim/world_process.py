@@ -3,11 +3,11 @@ restarted as ``--resume`` restarts it, and its effects carried to the agents, th
 checks. A part of ``sim.distributed.SimSwarm``, whose state it shares."""
 
 from nnql_swarm.protocol.effects import Finished, SendControl, SendObservations, TickClosed, WriteRow
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.sim.network import Process
 from nnql_swarm.sim.swarm_state import SwarmState
-from nnql_swarm.world.machine import WorldMachine
+from nnql_swarm.world.world_machine import WorldMachine
 from nnql_swarm.world.shared_table import SharedState
 
 

@@ -12,7 +12,7 @@ import sys
 os.environ.setdefault("NNQL_KERNEL", "python")  # as the launcher runs its agents; before imports
 
 from nnql_swarm.agent.brain import AgentBrain  # noqa: E402
-from nnql_swarm.agent.node import AgentOptions, run_agent  # noqa: E402
+from nnql_swarm.agent.agent_node import AgentOptions, run_agent  # noqa: E402
 from nnql_swarm.launch import swarm_cli  # noqa: E402
 from nnql_swarm.sim.forgery import forged  # noqa: E402
 

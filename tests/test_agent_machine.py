@@ -7,13 +7,13 @@ import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.fields import LS_PENDING
-from nnql_swarm.agent.machine import PEER_WAIT_S, RESYNC_AFTER, AgentMachine
+from nnql_swarm.agent.agent_machine import PEER_WAIT_S, RESYNC_AFTER, AgentMachine
 from nnql_swarm.agent.phases import TRANSITIONS, Event, Phase
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Ask, Checkpoint, EndQuery, Log, Reply, SendIntent, Stopped
 from nnql_swarm.protocol.phase_machine import PhaseError
-from nnql_swarm.world.machine import STARTUP_TIMEOUT_S, WorldMachine
+from nnql_swarm.world.world_machine import STARTUP_TIMEOUT_S, WorldMachine
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode, to_wire,
 )

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import zenoh
 
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.node import AgentNode, AgentOptions
+from nnql_swarm.agent.agent_node import AgentNode, AgentOptions
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation, encode

@@ -9,7 +9,7 @@ from collections import Counter
 
 import bench
 from bench.collisions import classify
-from nnql_swarm.experiment.maps import MapsBenchmark, map_spec, run_config
+from nnql_swarm.experiment.maps_benchmark import MapsBenchmark, map_spec, run_config
 from nnql_swarm.sim.runs import Batch, swarm_world
 from tests.swarm_helpers import ROOT
 

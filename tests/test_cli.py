@@ -260,6 +260,7 @@ def test_the_help_formatter_leaves_out_defaults_not_worth_reading():
     (["--max-steps", "1e17"], "invalid int value"),
     (["--max-steps", "10000000000"], "GiB of memory here"),
     (["--deadline", "inf"], "positive and finite"),
+    (["--agent-wait", "nan"], "--agent-wait must be positive and finite"),
 ])
 def test_what_the_wire_refuses_the_command_line_refuses_in_one_line(tmp_path, options, message):
     out = tmp_path / "run"

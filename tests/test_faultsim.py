@@ -16,8 +16,8 @@ import msgspec
 import numpy as np
 import pytest
 
-from nnql_swarm.agent import checkpoint
-from nnql_swarm.agent.machine import AgentMachine
+from nnql_swarm.agent import agent_checkpoint
+from nnql_swarm.agent.agent_machine import AgentMachine
 from nnql_swarm.launch import faultsim
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.sim.inprocess import run_in_process
@@ -186,9 +186,9 @@ def test_without_faults_the_simulator_gives_the_in_process_run_file_for_file(tmp
     assert deterministic(tmp_path / "sim") == deterministic(tmp_path / "local")
     assert sum(int(r[3]) for r in deterministic(tmp_path / "sim")) == 0, "no intent missed"
     for agent in range(8):
-        a = read_fields(checkpoint.checkpoint_path(tmp_path / "sim" / "checkpoints",
+        a = read_fields(agent_checkpoint.checkpoint_path(tmp_path / "sim" / "checkpoints",
                                                               agent), ())
-        b = read_fields(checkpoint.checkpoint_path(tmp_path / "local" / "checkpoints",
+        b = read_fields(agent_checkpoint.checkpoint_path(tmp_path / "local" / "checkpoints",
                                                               agent), ())
         assert np.array_equal(a["q_ds"], b["q_ds"]) and np.array_equal(a["q_ca"], b["q_ca"])
         assert np.array_equal(a["known_walls"], b["known_walls"])

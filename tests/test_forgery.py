@@ -14,11 +14,11 @@ import sys
 import numpy as np
 import pytest
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.runfiles import stats_path
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes
 from tests.swarm_helpers import ROOT, SWARM
@@ -103,6 +103,6 @@ def test_a_forging_agents_records_are_refused_and_the_honest_agents_table_is_unc
     shared, reference = tables(forging), tables(mute)
     assert np.array_equal(shared[0], reference[0]) and np.array_equal(shared[1], reference[1])
     for agent in range(FORGER):
-        saved = checkpoint.checkpoint_path(forging / "checkpoints", agent)
+        saved = agent_checkpoint.checkpoint_path(forging / "checkpoints", agent)
         mine = read_fields(saved, ())
         assert np.array_equal(mine["q_ds"], shared[0]) and np.array_equal(mine["q_ca"], shared[1])

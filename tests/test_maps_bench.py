@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nnql_swarm.experiment.maps import (
+from nnql_swarm.experiment.maps_benchmark import (
     EPISODE_COLUMNS, MapsBenchmark, Recorder, map_spec, play_frozen, run_config, table_rows,
     train,
 )

@@ -26,10 +26,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes
 from tests import netfault_runs as runs
@@ -83,7 +83,7 @@ def check_outcome(outcome: runs.Outcome, reference) -> None:
                                    EPISODES - 1)
     for agent in range(AGENTS):
         where = outcome.agent_outs[0 if agent < AGENTS // 2 else 1]
-        mine = read_fields(checkpoint.checkpoint_path(where / "checkpoints", agent), ())
+        mine = read_fields(agent_checkpoint.checkpoint_path(where / "checkpoints", agent), ())
         assert np.array_equal(mine["q_ds"], shared[0]), agent
         assert np.array_equal(mine["q_ca"], shared[1]), agent
 

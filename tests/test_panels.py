@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 import rerun as rr
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import PRESETS, SwarmConfig
 from nnql_swarm.recording.blueprint import recorded_blueprint
 from nnql_swarm.recording.shown import ca_learns
-from tests.swarm_helpers import run_swarm
+from tests.swarm_helpers import run_swarms
 
 COUNTS_OF_NONE = ("metrics/collisions/per_episode", "metrics/refused")
 """Curves where a run of zeros is the news (no collision, no refusal), not a panel with
@@ -111,15 +111,15 @@ class Panels:
 
 @pytest.fixture(scope="module")
 def preset_runs(tmp_path_factory):
+    """A recorded in-process run of every preset, two at a time (each is one process)."""
     base = tmp_path_factory.mktemp("presets")
-    runs = {}
-    for preset in PRESETS:
-        out = base / preset
-        result = run_swarm(out, "--agents", "8", "--episodes", str(EPISODES), "--max-steps", "40",
-                           "--preset", preset, "--seed", "3", "--in-process")
+    options = ("--agents", "8", "--episodes", str(EPISODES), "--max-steps", "40", "--seed", "3",
+               "--in-process")
+    results = run_swarms({preset: (base / preset, (*options, "--preset", preset))
+                          for preset in PRESETS})
+    for preset, result in results.items():
         assert result.returncode == 0, (preset, result.stderr)
-        runs[preset] = out
-    return runs
+    return {preset: base / preset for preset in PRESETS}
 
 
 @pytest.mark.full
@@ -144,7 +144,7 @@ def test_a_q_ca_left_out_had_nothing_to_learn(preset_runs):
     assert "path-nnql" in left_out
     for preset in left_out:
         config = SwarmConfig(**PRESETS[preset])
-        q_ca = read_fields(checkpoint.checkpoint_path(preset_runs[preset] / "checkpoints", 0),
+        q_ca = read_fields(agent_checkpoint.checkpoint_path(preset_runs[preset] / "checkpoints", 0),
                            ())["q_ca"]
         assert np.all(np.asarray(q_ca) == config.optimistic), preset
 

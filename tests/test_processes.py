@@ -9,7 +9,7 @@ import pytest
 
 from tests.swarm_helpers import ROOT
 
-WORLD_ONLY = ("nnql_swarm.world.node", "nnql_swarm.world.engine", "nnql_swarm.launch.cli",
+WORLD_ONLY = ("nnql_swarm.world.world_node", "nnql_swarm.world.engine", "nnql_swarm.launch.cli",
               "tqdm", "rerun")
 """Modules the world (or a recording process) runs and an agent does not."""
 
@@ -18,10 +18,10 @@ WORLD_ONLY = ("nnql_swarm.world.node", "nnql_swarm.world.engine", "nnql_swarm.la
 def test_a_forked_process_holds_none_of_the_worlds_modules_and_the_launchers_main_once():
     """And its collections never walk what it inherited: the server froze it."""
     done = subprocess.run([sys.executable, "-m", "tests.forked_modules",
-                           "nnql_swarm.agent.node", *WORLD_ONLY],
+                           "nnql_swarm.agent.agent_node", *WORLD_ONLY],
                           cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     child = json.loads(done.stdout.splitlines()[-1])
-    assert child["held"] == ["nnql_swarm.agent.node"]
+    assert child["held"] == ["nnql_swarm.agent.agent_node"]
     assert child["main_by_name"]  # the server imported it: the child did not import it again
     assert child["frozen"] > 10_000

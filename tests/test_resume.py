@@ -5,11 +5,11 @@ import re
 
 import pytest
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.sim.resume import ResumeError, resume_point, rewind
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.metrics import EpisodeWriter, read_episodes
 from nnql_swarm.world.shared_table import SharedState, SharedTable
 from tests.interruptions import STOPS, draw_trials, run_left_alone, run_trials
@@ -32,7 +32,7 @@ def lay_out_run(out, rows: int, agents: list[list[int]], world: list[int]) -> Sw
         for e in episodes:
             brain = AgentBrain(agent, config)
             brain.learner.q_ds[0, 0] = float(e)
-            checkpoint.save(checkpoint.checkpoint_path(out / "checkpoints", agent), brain, e)
+            agent_checkpoint.save(agent_checkpoint.checkpoint_path(out / "checkpoints", agent), brain, e)
     for e in world:
         q_ds, q_ca = SharedTable(config).tables()
         world_checkpoint.save(world_checkpoint.table_path(out), SharedState(q_ds, q_ca), e, config)
@@ -49,7 +49,7 @@ def test_the_cut_is_the_last_episode_every_process_saved_and_later_rows_are_play
     rewind(tmp_path, start)
     assert [int(r["episode"]) for r in read_episodes(tmp_path / "episodes.csv")] == list(range(45))
     brain = AgentBrain(0, config)
-    assert checkpoint.load(checkpoint.checkpoint_path(tmp_path / "checkpoints", 0), brain,
+    assert agent_checkpoint.load(agent_checkpoint.checkpoint_path(tmp_path / "checkpoints", 0), brain,
                            start.cut) == 44
     assert brain.learner.q_ds[0, 0] == 44.0
 
@@ -101,7 +101,7 @@ def test_a_checkpoint_of_another_run_of_the_same_shape_is_refused_naming_the_fil
     other = SwarmConfig(n_agents=N, run_id="cut", seed=7)
     assert other.identity != config.identity
     brain = AgentBrain(2, other)
-    checkpoint.save(checkpoint.checkpoint_path(theirs, 2), brain, 10)
+    agent_checkpoint.save(agent_checkpoint.checkpoint_path(theirs, 2), brain, 10)
     q_ds, q_ca = SharedTable(other).tables()
     world_checkpoint.save(theirs / "world.ckpt", SharedState(q_ds, q_ca), 10, other)
     (ours / "checkpoints" / file).write_bytes((theirs / file).read_bytes())

@@ -7,7 +7,7 @@ import pytest
 from nnql_swarm.learning.saved import CheckpointError
 from nnql_swarm.transport import slotfile
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.shared_table import SharedState, SharedTable
 
 

@@ -11,9 +11,9 @@ import time
 import numpy as np
 import pytest
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.learning.saved import read_fields
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.runfiles import stats_path
@@ -74,7 +74,7 @@ def test_every_agent_checkpointed_its_last_episode(distributed_run):
     config = SwarmConfig.from_json((out / "config.json").read_text())
     for agent in range(config.n_agents):
         brain = AgentBrain(agent, config)
-        episode = checkpoint.load(checkpoint.checkpoint_path(out / "checkpoints", agent), brain)
+        episode = agent_checkpoint.load(agent_checkpoint.checkpoint_path(out / "checkpoints", agent), brain)
         assert episode == config.episodes - 1
         assert np.abs(brain.learner.q_ds).sum() > 0
     assert config.shared
@@ -92,8 +92,8 @@ def test_in_process_and_distributed_runs_are_identical(distributed_run, tmp_path
     assert deterministic(read_episodes(local / "episodes.csv")) == deterministic(
         read_episodes(out / "episodes.csv"))
     for agent in range(8):
-        a = read_fields(checkpoint.checkpoint_path(local / "checkpoints", agent), ())
-        b = read_fields(checkpoint.checkpoint_path(out / "checkpoints", agent), ())
+        a = read_fields(agent_checkpoint.checkpoint_path(local / "checkpoints", agent), ())
+        b = read_fields(agent_checkpoint.checkpoint_path(out / "checkpoints", agent), ())
         assert np.array_equal(a["q_ds"], b["q_ds"]) and np.array_equal(a["q_ca"], b["q_ca"])
         assert np.array_equal(a["known_walls"], b["known_walls"])
 
@@ -164,7 +164,7 @@ def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
         assert all(len(row) == len(COLUMNS) for row in csv.reader(f))
     config = SwarmConfig.from_json((out / "config.json").read_text())
     for agent in range(8):
-        checkpoint.load(checkpoint.checkpoint_path(out / "checkpoints", agent), AgentBrain(agent, config))
+        agent_checkpoint.load(agent_checkpoint.checkpoint_path(out / "checkpoints", agent), AgentBrain(agent, config))
 
 
 @pytest.mark.parametrize("preset, topology, grid", [
@@ -201,7 +201,7 @@ def test_each_preset_plays_the_same_run_distributed_and_in_process(preset, topol
     assert distributed.returncode == 0 and local.returncode == 0, distributed.stderr
     assert deterministic(read_episodes(tmp_path / "dist" / "episodes.csv")) == deterministic(
         read_episodes(tmp_path / "local" / "episodes.csv"))
-    tables = [read_fields(checkpoint.checkpoint_path(tmp_path / side / "checkpoints", 0),
+    tables = [read_fields(agent_checkpoint.checkpoint_path(tmp_path / side / "checkpoints", 0),
                                      ()) for side in ("dist", "local")]
     assert np.array_equal(tables[0]["q_ca"], tables[1]["q_ca"])
     assert np.array_equal(tables[0]["q_ds"], tables[1]["q_ds"])

@@ -13,7 +13,7 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
-from nnql_swarm.world.machine import (
+from nnql_swarm.world.world_machine import (
     SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, TRANSITIONS, Event, Phase, WorldMachine,
 )
 from nnql_swarm.protocol.phase_machine import PhaseError

@@ -12,7 +12,7 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import WriteRow
 from nnql_swarm.protocol.messages import Intent, agent_sender, encode
 from nnql_swarm.transport.settings import TransportSettings
-from nnql_swarm.world.node import WorldNode, WorldOptions
+from nnql_swarm.world.world_node import WorldNode, WorldOptions
 
 CONFIG = SwarmConfig(run_id="worldnode", n_agents=2, episodes=2, max_steps=5)
 

@@ -2,8 +2,8 @@
 
     <out>/config.json          the resolved SwarmConfig
     <out>/episodes.csv         one row per finished episode (world.metrics)
-    <out>/checkpoints/agent-<id>.ckpt  each agent's Q-tables (agent.checkpoint; transport.slotfile)
-    <out>/checkpoints/world.ckpt       the shared Q-table, where the agents share one (world.checkpoint)
+    <out>/checkpoints/agent-<id>.ckpt  each agent's Q-tables (agent.agent_checkpoint; transport.slotfile)
+    <out>/checkpoints/world.ckpt       the shared Q-table, where the agents share one (world.world_checkpoint)
     <out>/stats/world.json, <out>/stats/agent-<id>.json   closing statistics of each process
     <out>/stats/incarnation.json  how many times the run's world has started (next_incarnation)
     <out>/run.rrd              the Rerun recording

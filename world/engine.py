@@ -14,7 +14,7 @@ obstacle to the others. The episode ends when every agent has arrived or after `
 Where an arrived agent takes no part in the negotiation (``SwarmConfig.quiet_settled``: the
 ``meet`` rule, or agents that do not negotiate), it is *settled* from the tick after its first
 arrived observation (which finished its learning) until the end tick
-(:attr:`SwarmWorld.settled`): it stays, the world needs no intent from it (``world.machine``),
+(:attr:`SwarmWorld.settled`): it stays, the world needs no intent from it (``world.world_machine``),
 and it is *quiet*: :meth:`observations_by_rank` sends it nothing, keeping the shared table's entries it did not
 hear of. Its next observation (at the end tick, or once :data:`QUIET_CATCH_UP` entries are
 waiting, which then says ``settled``) brings their current values, so that its copy is the

@@ -33,7 +33,7 @@ Updates = tuple[tuple[tuple[int, ...], tuple[float, ...]], ...]
 
 
 class SharedState(NamedTuple):
-    """What the shared table's checkpoint holds (``world.checkpoint``): the tables as an
+    """What the shared table's checkpoint holds (``world.world_checkpoint``): the tables as an
     episode's end tick found them, which every agent checkpointed then, and the learning records
     that tick brought (``(agent, integers, rewards)`` in agent-id order), which the next
     episode's first observations hand out applied."""

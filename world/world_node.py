@@ -1,11 +1,11 @@
-"""The world process: ``world.machine.WorldMachine`` over a Zenoh session.
+"""The world process: ``world.world_machine.WorldMachine`` over a Zenoh session.
 
 The machine keeps the clock (when a tick opens and closes, what goes to whom); this adapter
 feeds it the intents and liveliness changes Zenoh delivers, with the time, and carries out its
 effects: publish each observation on ``world/obs/<id>`` and the control messages, hand each
 closed tick to ``on_tick`` (the launcher records it to Rerun there), write each episode's row
 to ``episodes.csv`` (and, where the agents share one table, its checkpoint first), log. A resumed
-world starts from the shared table of its checkpoint (``world.checkpoint``), which whoever starts
+world starts from the shared table of its checkpoint (``world.world_checkpoint``), which whoever starts
 it reads (``WorldOptions.table``).
 
 Threads, in three sentences. Every input reaches the machine under the node's one lock, and its
@@ -42,10 +42,10 @@ from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.settings import (
     EXIT_TRANSPORT, TransportError, TransportSettings, closing, open_session,
 )
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.metrics import EpisodeWriter
-from nnql_swarm.world.machine import WorldMachine
+from nnql_swarm.world.world_machine import WorldMachine
 from nnql_swarm.world.shared_table import SharedState
 
 log = logging.getLogger("nnql.world")
@@ -55,7 +55,7 @@ _PUT = zenoh.SampleKind.PUT
 
 class RunFailed(RuntimeError):
     """The run cannot go on: not every agent came alive in time, or every agent left for good
-    (``world.machine``)."""
+    (``world.world_machine``)."""
 
 
 @dataclass(frozen=True)
@@ -65,7 +65,7 @@ class WorldOptions:
     config: SwarmConfig
     transport: TransportSettings
     out_dir: Path
-    startup_timeout_s: float | None = None  # None: world.machine.startup_timeout of the agents
+    startup_timeout_s: float | None = None  # None: world.world_machine.startup_timeout of the agents
     first_episode: int = 0
     first_tick: int = 0
     table: SharedState | None = None  # the shared state a resumed run starts from

@@ -2,7 +2,7 @@
 
 No sockets, no threads, no clock reads, no files. Every input carries the time ``now`` it
 happens at and returns the effects it causes, in order; :meth:`AgentMachine.timer` is when it
-next wants :meth:`AgentMachine.on_timer`. ``agent.node`` runs it over Zenoh, ``sim`` over a
+next wants :meth:`AgentMachine.on_timer`. ``agent.agent_node`` runs it over Zenoh, ``sim`` over a
 simulated network in virtual time.
 
 Theory of operation. The machine is in one ``Phase`` at a time, moved only by ``TRANSITIONS``

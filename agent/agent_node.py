@@ -1,4 +1,4 @@
-"""The agent process: ``agent.machine.AgentMachine`` over a Zenoh session.
+"""The agent process: ``agent.agent_machine.AgentMachine`` over a Zenoh session.
 
 The machine decides everything (what to ask, when to answer, when to decide); this adapter
 feeds it what Zenoh delivers, with the time, and carries out its effects: publish the intent on
@@ -28,9 +28,9 @@ from typing import Callable
 
 import zenoh
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
-from nnql_swarm.agent.machine import WORLD_WAIT_S, AgentMachine
+from nnql_swarm.agent.agent_machine import WORLD_WAIT_S, AgentMachine
 from nnql_swarm.agent.restore import start_brain
 from nnql_swarm.protocol import trace
 from nnql_swarm.protocol import keys
@@ -87,7 +87,7 @@ class AgentNode(ProtocolAdapter):
         self.agent = options.agent
         self.session = session
         self.on_episode_end = on_episode_end
-        self.checkpoint_file = checkpoint.checkpoint_path(options.out_dir / CHECKPOINT_DIR,
+        self.checkpoint_file = agent_checkpoint.checkpoint_path(options.out_dir / CHECKPOINT_DIR,
                                                           self.agent)
         brain, self.resumed = start_brain(self.agent, self.config, self.checkpoint_file,
                                           options.resume, brain, options.resume_episode)
@@ -185,7 +185,7 @@ class AgentNode(ProtocolAdapter):
             query.drop()
 
     def _checkpoint(self, effect: Checkpoint) -> None:
-        checkpoint.save(self.checkpoint_file, self.brain, effect.episode)
+        agent_checkpoint.save(self.checkpoint_file, self.brain, effect.episode)
 
     def _episode_ended(self, effect: EpisodeEnded) -> None:
         if self.on_episode_end is not None:

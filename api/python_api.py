@@ -21,7 +21,7 @@ from typing import Callable, Literal
 
 import numpy as np
 
-from nnql_swarm.agent import checkpoint
+from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.api import command
 from nnql_swarm.api.options import Launch, config_of, split
 from nnql_swarm.learning.saved import read_fields
@@ -33,7 +33,7 @@ from nnql_swarm.sim import restarts
 from nnql_swarm.sim.resume import ResumeError, ResumePoint
 from nnql_swarm.sim.supervisor import describe_exit
 from nnql_swarm.launch.cli import EXIT_INTERRUPTED
-from nnql_swarm.world import checkpoint as world_checkpoint
+from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import COLUMNS
 
@@ -247,7 +247,7 @@ class Run:
         read (the message names the file)."""
         if not (isinstance(agent, (int, np.integer)) and 0 <= agent < self.config.n_agents):
             raise ValueError(f"agent {agent!r} out of range 0..{self.config.n_agents - 1}")
-        path = checkpoint.checkpoint_path(self.path / CHECKPOINT_DIR, int(agent))
+        path = agent_checkpoint.checkpoint_path(self.path / CHECKPOINT_DIR, int(agent))
         saved = read_fields(path, ("q_ds", "q_ca"))
         return np.array(saved["q_ds"]), np.array(saved["q_ca"])
 

@@ -2,7 +2,7 @@
 
 No sockets, no threads, no clock reads, no files: every input carries its time ``now`` and
 returns the effects it causes (``protocol.effects``), in order; :meth:`WorldMachine.timer` is
-when it next wants :meth:`WorldMachine.on_timer`. ``world.node`` runs it over Zenoh, ``sim``
+when it next wants :meth:`WorldMachine.on_timer`. ``world.world_node`` runs it over Zenoh, ``sim``
 over a simulated network in virtual time.
 
 Theory of operation. The machine is in one :class:`Phase` at a time, moved only by
