@@ -19,7 +19,6 @@ sleeping on the queue until the next timer is due, at most ``transport.adapter.P
 
 import logging
 import queue
-import signal
 import threading
 import time
 from dataclasses import dataclass
@@ -39,7 +38,7 @@ from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
 )
 from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
-from nnql_swarm.transport.adapter import ProtocolAdapter
+from nnql_swarm.transport.adapter import ProtocolAdapter, stop_on_signals
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.settings import (
@@ -254,8 +253,7 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
         return EXIT_TRANSPORT
     with closing(session):
         node = AgentNode(options, session, brain, on_episode_end)
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signum, lambda *_: node.stop())
+        stop_on_signals(node)
         node.run()
     node.trace.save()
     write_json_atomic(stats_path(options.out_dir, f"agent-{options.agent}"), node.stats())

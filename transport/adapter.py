@@ -6,6 +6,7 @@ machine's timer (:class:`ProtocolAdapter`).
 """
 
 import queue
+import signal
 import threading
 import time
 from typing import Callable, Protocol
@@ -79,3 +80,9 @@ class ProtocolAdapter:
             due = self.protocol.timer()
         if due is not None and time.monotonic() >= due:
             self.feed(self.protocol.on_timer)
+
+
+def stop_on_signals(node: ProtocolAdapter) -> None:
+    """SIGINT and SIGTERM stop ``node``: its main thread then winds it down."""
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(signum, lambda *_: node.stop())

@@ -20,7 +20,6 @@ queue until the next timer is due, at most ``transport.adapter.POLL_S``.
 
 import logging
 import queue
-import signal
 import threading
 import time
 from dataclasses import dataclass
@@ -36,7 +35,7 @@ from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservat
 from nnql_swarm.transport.runfiles import (
     EPISODES_FILE, next_incarnation, stats_path, write_json_atomic,
 )
-from nnql_swarm.transport.adapter import ProtocolAdapter
+from nnql_swarm.transport.adapter import ProtocolAdapter, stop_on_signals
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.settings import (
@@ -215,8 +214,7 @@ def run_world(options: WorldOptions,
         return EXIT_TRANSPORT
     with closing(session):
         node = WorldNode(options, session, on_tick, before_row)
-        for signum in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(signum, lambda *_: node.stop())
+        stop_on_signals(node)
         try:
             completed = node.run()
         except RunFailed as error:
