@@ -13,9 +13,10 @@ Theory of operation. The machine is in one ``Phase`` at a time, moved only by ``
 - ``IDLE``: waiting for an observation, in tick order. One whose decision awaits no intent (as
   ``agent.negotiation`` plans it) is decided at once; otherwise the agent is ``NEGOTIATING``.
 - ``NEGOTIATING``: it learns the intents of the visible higher-ranked neighbours from the
-  standing queries it keeps open on every other agent (``?since=T;from=<id>``), answered by each
-  neighbour whose plan asks it, and, where no standing query is open yet, with one ask each
-  (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked neighbour
+  standing queries it keeps open on the neighbours it asks (``?since=T;from=<id>``), answered
+  by each neighbour whose plan asks it, and, where no standing query is open yet, with one ask
+  each (``?tick=T;from=<id>``), after which it opens one; answers relay what their senders
+  learned. Once every asked neighbour
   answered, refused, or the negotiation timed out, it asks directly for any awaited intent no
   answer brought (``ASKING_MISSING``), then decides with what it knows and is ``IDLE`` again.
 - ``STOPPED``: the world said so, or the process is stopping; inputs do nothing.
@@ -116,10 +117,12 @@ class AgentMachine(QueryAnswering, Machine):
         self.decided_payload = b""
         self.held = []
         self.standing = {}
+        self.standing_used: dict[int, int] = {}
         self.intents: dict[int, negotiation.TickIntents] = {}  # tick -> what was learned of it
         self.asks: dict[int, OpenAsk] = {}
         self.next_ask = 0
         self.streams: dict[int, int] = {}  # neighbour -> generation of its open standing query
+        self.wanted: set[int] = set()  # asked without a stream since the last decision
         self.stream_generation = 0
         self.gap_tick, self.gap_run = -1, 0
         self.shutdown = False  # stopped by the world
@@ -162,6 +165,7 @@ class AgentMachine(QueryAnswering, Machine):
                 if (p is not None and self.phase is Phase.NEGOTIATING and p.deadline > now
                         and j in p.asks and j not in self._intents_of(p.obs.tick).answered):
                     self._ask(j, p.obs.tick, p.deadline - now)  # not by the stream
+                    self.wanted.add(j)
         elif open_ask.agent not in self.peers_seen:  # gone: no answer is coming
             self._refused(open_ask, now)
 
@@ -187,6 +191,7 @@ class AgentMachine(QueryAnswering, Machine):
             self.peers_seen.discard(agent)
             self.streams.pop(agent, None)  # ask its next incarnation afresh
             query = self.standing.pop(agent, None)
+            self.standing_used.pop(agent, None)
             if query is not None:
                 self._out.append(EndQuery(query))
 
@@ -209,6 +214,7 @@ class AgentMachine(QueryAnswering, Machine):
             # are ignored from now on, and the standing queries are opened afresh.
             self.asks = {}
             self.streams = {}
+            self.wanted = set()
 
     @any_phase_input
     def on_control(self, payload, now: float) -> None:
@@ -304,6 +310,7 @@ class AgentMachine(QueryAnswering, Machine):
         for j in asks:
             if j not in got.answered and j not in self.streams:
                 self._ask(j, tick, self.timeout_s)
+                self.wanted.add(j)
         self._go(Event.AWAITS)
         self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s, staying)
         self.brain.prepare(obs)  # while the answers are on their way
@@ -347,6 +354,7 @@ class AgentMachine(QueryAnswering, Machine):
             for j in p.asks:
                 if j not in got.answered:
                     self.streams.pop(j, None)  # it did not answer in time: open a fresh one
+                    self.wanted.add(j)
             self._go(Event.ANSWERS_IN)
             p.missing = [j for j in p.awaited if j not in got.actions and j not in refused]
             if p.missing and remaining > 0:
@@ -400,8 +408,7 @@ class AgentMachine(QueryAnswering, Machine):
             out.append(SendIntent(intent, encode(intent)))
         if obs.episode_end:
             out.append(EpisodeEnded(obs.episode))
-        peers = len(self.peers_seen) - (self.agent in self.peers_seen)
-        if self.negotiates and len(self.streams) < peers:
+        if self.wanted:
             self._open_streams(tick + 1)
 
     def _resync(self, obs: Observation) -> bool:
@@ -432,12 +439,14 @@ class AgentMachine(QueryAnswering, Machine):
         self._new_ask(neighbour, tick, keys.intent_query_params(tick, self.agent), timeout_s)
 
     def _open_streams(self, since: int) -> None:
-        """Open a standing query on the intent key of every agent seen that has none (nnQL)."""
+        """Open a standing query on the intent key of every neighbour asked without one since
+        the last decision (nnQL: its neighbours, not the swarm)."""
+        wanted, self.wanted = self.wanted, set()
         if since >= keys.MAX_TICK:
             return
         params = keys.standing_query_params(since, self.agent)
-        for j in sorted(self.peers_seen):
-            if j != self.agent and j not in self.streams:
+        for j in sorted(wanted):
+            if j in self.peers_seen and j not in self.streams:
                 self.stream_generation += 1
                 self._new_ask(j, since, params, STANDING_QUERY_S, self.stream_generation)
                 self.streams[j] = self.stream_generation
@@ -469,6 +478,7 @@ class AgentMachine(QueryAnswering, Machine):
         for query in self.standing.values():
             self._out.append(EndQuery(query))
         self.standing = {}
+        self.standing_used = {}
         self.pending = None
         self._go(Event.STOP)
         self._out.append(Stopped(by_world))

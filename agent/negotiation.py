@@ -21,10 +21,12 @@ waits for a parked agent: every observation that shows it says it is parked, so 
 STAY, is known (:func:`staying`), and it waits for nobody in turn. At an episode's end nobody
 negotiates.
 
-Each agent keeps a *standing* query open on every other agent's intent key (``?since=T``),
-and a decider answers through it exactly the agents whose plan asks it (:func:`standing_answers`):
-the negotiation then costs one message per planned ask, instead of a query, an answer and the
-query's end. A decider can tell whose plan asks it when it sees every agent its waiters wait for
+An agent that asks a neighbour once (``?tick=T``) then keeps a *standing* query open on its
+intent key (``?since=T``), and a decider answers through it exactly the agents whose plan asks it
+(:func:`standing_answers`): the negotiation then costs one message per planned ask, instead of a
+query, an answer and the query's end. A decider ends a standing query that its plans have not
+asked through for a while (``agent.answering.STANDING_IDLE_TICKS``), so an agent holds the
+queries of its neighbours, not of the swarm: n of them across the swarm, not n squared. A decider can tell whose plan asks it when it sees every agent its waiters wait for
 (:func:`plans_are_known`: on grids that fit in the view, or with a radius of at most half the
 view); otherwise it answers every agent that waits for it, a superset of the plans.
 """

@@ -10,7 +10,6 @@ from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from nnql_swarm.transport.ports import wait_listening
 from nnql_swarm.transport.settings import TransportSettings
 from nnql_swarm.transport.topology import EmbeddedLayout, embedded_topology
-from nnql_swarm.world.metrics import read_episodes
 
 
 SCALE_GRIDS = {8: 11, 16: 16, 32: 22, 64: 32, 128: 45}
@@ -24,6 +23,9 @@ def grid_side(n: int) -> int:
 
 def measured_rate(out: Path) -> float:
     """Ticks per second over every episode but the first (which includes start-up)."""
+    # not at the top: the agents fork from a server that imported this module
+    from nnql_swarm.world.metrics import read_episodes
+
     rows = read_episodes(out / "episodes.csv")[1:]
     ticks = sum(int(r["steps"]) + 1 for r in rows)
     seconds = sum(float(r["duration_s"]) for r in rows)

@@ -30,25 +30,24 @@ ticks a second and milliseconds a tick per agent against N for both.
 import argparse
 import json
 import math
-import statistics
 import sys
-import tempfile
 import time
 from pathlib import Path
 
-from bench import lockstep
-from bench.harness import (
-    add_preset_option, grid_side, run_distributed, stay_agent_main, swarm_config,
-)
-from bench.procstat import MemorySampler
-from nnql_swarm.transport.runfiles import stats_path
-from nnql_swarm.transport.topology import (
-    TOPOLOGIES, EmbeddedLayout, embedded_topology,
-)
-from nnql_swarm.world.metrics import read_episodes
+# The rest is imported where it is used: the swarm's processes fork from a server that imported
+# this module (``launch.processes._launcher_main``), so what it imports at the top would be in
+# every agent, and an agent's memory is one of the figures measured.
 
 def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
                topology: str, obstacle_density: float = 0.0, agent_target=None) -> dict:
+    import tempfile
+
+    from bench.harness import grid_side, run_distributed, swarm_config
+    from bench.procstat import MemorySampler
+    from nnql_swarm.transport.runfiles import stats_path
+    from nnql_swarm.transport.topology import EmbeddedLayout
+    from nnql_swarm.world.metrics import read_episodes
+
     side = grid_side(n)
     config = swarm_config(preset, n_agents=n, width=side, height=side, episodes=episodes,
                           max_steps=max_steps, seed=seed, run_id=f"scale-{n}",
@@ -71,16 +70,25 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
 
 
 def bare_once(n: int, ticks: int, topology: str) -> dict:
+    from bench import lockstep
+
     result = lockstep.run(n, topology, ticks)
     return {"rate": result["rate"], "startup_s": result["startup_s"]}
 
 
 def median(runs: list[dict], key: str) -> float:
+    import statistics
+
     values = [r[key] for r in runs if r[key] is not None and not math.isnan(r[key])]
     return statistics.median(values) if values else math.nan
 
 
 def main() -> int:
+    import statistics
+
+    from bench.harness import add_preset_option, grid_side, stay_agent_main, swarm_config
+    from nnql_swarm.transport.topology import TOPOLOGIES, embedded_topology
+
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--agents", default="8,16,32,64,128", help="comma-separated agent counts")
     p.add_argument("--repeats", type=int, default=3)
@@ -129,7 +137,7 @@ def main() -> int:
             split = f", learning nothing {staying[-1]['rate']:.0f} ticks/s" if staying else ""
             print(f"  {n} agents, repeat {repeat + 1}: swarm {s['rate']:.0f} ticks/s "
                   f"(missed {s['missed_first']} then {s['missed']}, start-up "
-                  f"{s['startup_s']:.1f} s, agent {s['agent_mib']:.0f} MiB), bare "
+                  f"{s['startup_s']:.1f} s, agent {s['agent_mib']:.1f} MiB), bare "
                   f"{b['rate']:.0f} ticks/s{split}", file=sys.stderr, flush=True)
         ratios = [s["rate"] / b["rate"] for s, b in zip(swarm, bare)]
         row = {"agents": n, "grid": grid_side(n), "topology": topology, "swarm": median(swarm, "rate"),
@@ -165,7 +173,7 @@ def print_table(table: list[dict], args) -> None:
         print(f"| {r['agents']} | {r['grid']}x{r['grid']} | {r['topology']} | {r['swarm']:.0f} | {r['bare']:.0f} | "
               f"{r['ratio']:.2f} | {r['ms_per_agent']:.3f} / {r['bare_ms_per_agent']:.3f} | "
               f"{r['missed_first']:.0f} / {r['missed']:.0f} | {r['startup_s']:.1f} | "
-              f"{r['agent_mib']:.0f} | {r['world_mib']:.0f} | "
+              f"{r['agent_mib']:.1f} | {r['world_mib']:.0f} | "
               f"{' '.join(map(str, r['runs']))}; {' '.join(map(str, r['bare_runs']))} |")
     split = [r for r in table if "staying" in r]
     if split:

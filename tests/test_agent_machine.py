@@ -8,6 +8,7 @@ import pytest
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.fields import LS_PENDING
 from nnql_swarm.agent.agent_machine import PEER_WAIT_S, RESYNC_AFTER, AgentMachine
+from nnql_swarm.agent.answering import STANDING_IDLE_TICKS
 from nnql_swarm.agent.phases import TRANSITIONS, Event, Phase
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
@@ -127,11 +128,34 @@ def test_held_and_standing_queries_are_answered_with_the_decision_the_next_in_ra
 def test_an_episodes_end_checkpoints_before_the_intent_goes_out():
     protocol = ready()
     effects = protocol.on_observation(observation(0, episode_end=True), 0.0)
-    assert kinds(effects) == ["Checkpoint", "SendIntent", "EpisodeEnded", "Ask", "Ask"]
+    assert kinds(effects) == ["Checkpoint", "SendIntent", "EpisodeEnded"]  # nobody asked
     assert effects[0] == Checkpoint(0)
-    streams = [e for e in effects if isinstance(e, Ask)]  # a standing query on every other agent
-    assert [(a.agent, a.parameters) for a in streams] == [(1, "since=1;from=0"),
-                                                          (2, "since=1;from=0")]
+
+
+def test_standing_queries_go_to_the_neighbours_asked_and_end_once_they_ask_no_more():
+    """An agent opens a standing query on a neighbour only after it had to ask it directly; the
+    neighbour ends it once its plans have not asked through it for STANDING_IDLE_TICKS decided
+    ticks, and the agent does not open another until it asks that neighbour again."""
+    asker, answerer = ready(agent=1), ready(agent=0)
+    # tick 0: agent 0 outranks agent 1, which sees it: a direct ask, then a stream from tick 1
+    effects = asker.on_observation(observation(0, agent=1, others=[(0, 2, 2)]), 0.0)
+    [ask] = [e for e in effects if isinstance(e, Ask)]
+    assert ask.parameters == "tick=0;from=1"
+    effects = asker.on_answer(ask.ask, answer(0, agent=0, action=3), 0.1)
+    [stream] = [e for e in effects if isinstance(e, Ask)]
+    assert (stream.agent, stream.parameters) == (0, "since=1;from=1") and asker.streams == {0: 1}
+    assert answerer.on_query(stream.ask, stream.parameters, 0.1) == []
+    # agent 0 decides ticks with agent 1 out of sight: past the idle ticks, it ends the stream
+    ended = []
+    for tick in range(1, STANDING_IDLE_TICKS + 3):
+        ended += [e for e in answerer.on_observation(observation(tick), 0.2)
+                  if isinstance(e, EndQuery)]
+    assert ended == [EndQuery(stream.ask)] and answerer.standing == {}
+    assert asker.on_ask_end(stream.ask, 0.3) == [] and asker.streams == {}
+    # agent 1, deciding alone, opens nothing; asked again, it asks directly and streams again
+    tick = 2 * CONFIG.n_agents + 1  # agent 1 first: it decides at once
+    assert not any(isinstance(e, Ask) for e in asker.on_observation(
+        observation(tick, agent=1), 0.4))
 
 
 def test_a_settled_agent_sends_the_world_no_intent_unless_it_has_a_record():
@@ -197,6 +221,9 @@ def test_a_standing_query_that_ends_mid_negotiation_is_replaced_by_a_direct_ask(
     ask at once, not waited out to the negotiation's time-out."""
     protocol = ready(agent=1)
     others = [(0, 2, 2)]
+    [ask] = [e for e in protocol.on_observation(observation(0, agent=1, others=others), 0.0)
+             if isinstance(e, Ask)]
+    protocol.on_answer(ask.ask, answer(0, agent=0, action=3), 0.0)  # and a stream opens
     protocol.on_observation(observation(1, agent=1, others=others), 0.0)  # decides: it is first
     [stream] = [a for a, open_ask in protocol.asks.items()
                 if open_ask.generation is not None and open_ask.agent == 0]
@@ -281,8 +308,7 @@ def test_a_token_of_an_agent_outside_the_run_is_rejected_and_never_asked():
     protocol = ready(agent=0)
     effects = protocol.on_liveliness(keys.alive_key(CONFIG.run_id, keys.ROLE_AGENT, 99), True, 0.0)
     assert kinds(effects) == [] and protocol.inbox.rejections["unknown-agent"] == 1
-    effects = protocol.on_observation(observation(0), 0.0)
-    assert sorted(e.agent for e in effects if isinstance(e, Ask)) == [1, 2]
+    assert protocol.peers_seen == {0, 1, 2}, "not a peer to ask or to wait for"
 
 
 def test_the_phases_move_only_as_the_transition_table_says():
