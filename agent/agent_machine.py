@@ -13,11 +13,10 @@ Theory of operation. The machine is in one ``Phase`` at a time, moved only by ``
 - ``IDLE``: waiting for an observation, in tick order. One whose decision awaits no intent (as
   ``agent.negotiation`` plans it) is decided at once; otherwise the agent is ``NEGOTIATING``.
 - ``NEGOTIATING``: it learns the intents of the visible higher-ranked neighbours from the
-  standing queries it keeps open on the neighbours it asks (``?since=T;from=<id>``), answered
+  standing queries it keeps open on the agents near it (``?since=T;from=<id>``), answered
   by each neighbour whose plan asks it, and, where no standing query is open yet, with one ask
-  each (``?tick=T;from=<id>``), after which it opens one; answers relay what their senders
-  learned. Once every asked neighbour
-  answered, refused, or the negotiation timed out, it asks directly for any awaited intent no
+  each (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked
+  neighbour answered, refused, or the negotiation timed out, it asks directly for any awaited intent no
   answer brought (``ASKING_MISSING``), then decides with what it knows and is ``IDLE`` again.
 - ``STOPPED``: the world said so, or the process is stopping; inputs do nothing.
 
@@ -113,16 +112,16 @@ class AgentMachine(QueryAnswering, Machine):
         self.decided_tick = -1
         self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
         self.decided_waiters = []  # whom the decided tick's answer goes to by stream
+        self.decided_near: list[tuple[int, int, int]] = []  # negotiation.streamed, decided tick
         self.decided_answer = None
         self.decided_payload = b""
         self.held = []
         self.standing = {}
-        self.standing_used: dict[int, int] = {}
+        self.standing_seen: dict[int, int] = {}
         self.intents: dict[int, negotiation.TickIntents] = {}  # tick -> what was learned of it
         self.asks: dict[int, OpenAsk] = {}
         self.next_ask = 0
         self.streams: dict[int, int] = {}  # neighbour -> generation of its open standing query
-        self.wanted: set[int] = set()  # asked without a stream since the last decision
         self.stream_generation = 0
         self.gap_tick, self.gap_run = -1, 0
         self.shutdown = False  # stopped by the world
@@ -165,7 +164,6 @@ class AgentMachine(QueryAnswering, Machine):
                 if (p is not None and self.phase is Phase.NEGOTIATING and p.deadline > now
                         and j in p.asks and j not in self._intents_of(p.obs.tick).answered):
                     self._ask(j, p.obs.tick, p.deadline - now)  # not by the stream
-                    self.wanted.add(j)
         elif open_ask.agent not in self.peers_seen:  # gone: no answer is coming
             self._refused(open_ask, now)
 
@@ -191,7 +189,7 @@ class AgentMachine(QueryAnswering, Machine):
             self.peers_seen.discard(agent)
             self.streams.pop(agent, None)  # ask its next incarnation afresh
             query = self.standing.pop(agent, None)
-            self.standing_used.pop(agent, None)
+            self.standing_seen.pop(agent, None)
             if query is not None:
                 self._out.append(EndQuery(query))
 
@@ -214,7 +212,6 @@ class AgentMachine(QueryAnswering, Machine):
             # are ignored from now on, and the standing queries are opened afresh.
             self.asks = {}
             self.streams = {}
-            self.wanted = set()
 
     @any_phase_input
     def on_control(self, payload, now: float) -> None:
@@ -310,7 +307,6 @@ class AgentMachine(QueryAnswering, Machine):
         for j in asks:
             if j not in got.answered and j not in self.streams:
                 self._ask(j, tick, self.timeout_s)
-                self.wanted.add(j)
         self._go(Event.AWAITS)
         self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s, staying)
         self.brain.prepare(obs)  # while the answers are on their way
@@ -354,7 +350,6 @@ class AgentMachine(QueryAnswering, Machine):
             for j in p.asks:
                 if j not in got.answered:
                     self.streams.pop(j, None)  # it did not answer in time: open a fresh one
-                    self.wanted.add(j)
             self._go(Event.ANSWERS_IN)
             p.missing = [j for j in p.awaited if j not in got.actions and j not in refused]
             if p.missing and remaining > 0:
@@ -392,6 +387,8 @@ class AgentMachine(QueryAnswering, Machine):
         if obs.arrived and self.config.quiet_settled:  # quiet from the next tick (world.engine)
             self.quiet_episode = obs.episode
         self.decided_waiters = negotiation.standing_answers(obs, self.config)
+        if self.negotiates:
+            self.decided_near = negotiation.streamed(obs, self.config)
         self.decided_payload = encode(answer)
         trace.mark(ENCODED, tick)
         self.intents = {t: got for t, got in self.intents.items() if t > tick}
@@ -408,7 +405,7 @@ class AgentMachine(QueryAnswering, Machine):
             out.append(SendIntent(intent, encode(intent)))
         if obs.episode_end:
             out.append(EpisodeEnded(obs.episode))
-        if self.wanted:
+        if self.negotiates and not obs.episode_end:  # a new episode places everyone anew
             self._open_streams(tick + 1)
 
     def _resync(self, obs: Observation) -> bool:
@@ -439,14 +436,16 @@ class AgentMachine(QueryAnswering, Machine):
         self._new_ask(neighbour, tick, keys.intent_query_params(tick, self.agent), timeout_s)
 
     def _open_streams(self, since: int) -> None:
-        """Open a standing query on the intent key of every neighbour asked without one since
-        the last decision (nnQL: its neighbours, not the swarm)."""
-        wanted, self.wanted = self.wanted, set()
-        if since >= keys.MAX_TICK:
+        """Open a standing query on the intent key of every agent near enough to be asked soon
+        (``negotiation.streamed``) that has none; those agents end them once it is far
+        (``agent.answering``)."""
+        streams, peers = self.streams, self.peers_seen
+        new = [j for j, _, _ in self.decided_near if j not in streams and j in peers]
+        if not new or since >= keys.MAX_TICK:
             return
         params = keys.standing_query_params(since, self.agent)
-        for j in sorted(wanted):
-            if j in self.peers_seen and j not in self.streams:
+        for j in sorted(new):
+            if j != self.agent:
                 self.stream_generation += 1
                 self._new_ask(j, since, params, STANDING_QUERY_S, self.stream_generation)
                 self.streams[j] = self.stream_generation
@@ -478,7 +477,7 @@ class AgentMachine(QueryAnswering, Machine):
         for query in self.standing.values():
             self._out.append(EndQuery(query))
         self.standing = {}
-        self.standing_used = {}
+        self.standing_seen = {}
         self.pending = None
         self._go(Event.STOP)
         self._out.append(Stopped(by_world))

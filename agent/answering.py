@@ -6,12 +6,13 @@ A query for a decided tick is answered at once; one for a coming tick (at most
 answered the next in rank first; one for an older tick, or too far ahead, or one too many, is
 refused with a reason and counted. A standing query (``?since=T;from=<id>``, one per asker: a
 newer one replaces it) stays open and is answered at every decided tick whose plan asks this
-agent, until :data:`STANDING_IDLE_TICKS` decided ticks in a row have not asked it: then this
-agent ends it, and its asker opens another only once it asks this agent again. So an agent holds
-the standing queries of its neighbours, not of the whole swarm. The state lives on the machine,
-which sets it; :class:`QueryAnswering` declares what it reads and writes: ``held``,
-``standing``, ``standing_used``, and the decided tick's ``decided_tick``, ``decided_answer``, its
-``decided_payload`` and ``decided_waiters``.
+agent, until its asker has not been near (``agent.negotiation.streamed``) for
+:data:`STANDING_UNSEEN_TICKS` decided ticks: then this agent ends it (its asker, which opens one
+on every agent near it, opens another when they come near again). So an agent holds the
+standing queries of the agents around it, not of the whole swarm. The state lives on the
+machine, which sets it; :class:`QueryAnswering` declares what it reads and writes: ``held``,
+``standing``, ``standing_seen``, and the decided tick's ``decided_tick``, ``decided_answer``,
+its ``decided_payload``, ``decided_waiters`` and ``decided_near``.
 """
 
 from nnql_swarm.protocol import keys
@@ -24,10 +25,12 @@ from nnql_swarm.protocol.phase_machine import Machine, any_phase_input
 MAX_HELD_QUERIES = 4 * 1024
 """Queries for the coming tick held at once; legitimately at most one per other agent."""
 
-STANDING_IDLE_TICKS = 16
-"""Decided ticks a standing query may go unanswered (its asker no longer a neighbour that asks
-this agent) before this agent ends it: a neighbour met again within them is answered by the
-stream still open, one met later asks once directly and opens a stream again."""
+STANDING_UNSEEN_TICKS = 256
+"""Decided ticks an asker may stay away before this agent ends its standing query. Every episode
+places the agents anew, so streams kept over a few episodes serve the next ones: with 64 agents
+(10 episodes of up to 60 steps, on the simulated network) 16 ticks made 32 queries a tick, 64
+made 19, 256 made 7.6, about as many as one stream on every agent opened at the start (6.9); an
+agent holds the streams of those that came near within these ticks, not the swarm's."""
 
 AHEAD_TICKS = 2
 """How far past its last decision an agent holds queries and keeps answers: a neighbour that has
@@ -44,9 +47,10 @@ class QueryAnswering(Machine):
     decided_answer: Answer | None  # set with decided_tick
     decided_payload: bytes
     decided_waiters: list[int]  # whom the decided tick's answer goes to by stream
+    decided_near: list[tuple[int, int, int]]  # negotiation.streamed at the decided tick
     held: list[tuple[int, int, int]]  # (tick, asker's rank, query)
     standing: dict[int, int]  # asker -> its standing query on this agent
-    standing_used: dict[int, int]  # asker -> the last tick its standing query was answered
+    standing_seen: dict[int, int]  # asker -> the last decided tick it was near
 
     @any_phase_input
     def on_query(self, query: int, parameters, now: float) -> None:
@@ -86,7 +90,7 @@ class QueryAnswering(Machine):
         for asker, held in list(self.standing.items()):
             if held == query:
                 del self.standing[asker]
-                self.standing_used.pop(asker, None)
+                self.standing_seen.pop(asker, None)
                 self._out.append(EndQuery(query))
 
     def _standing_query(self, query: int, since: int, asker: int | None) -> None:
@@ -103,24 +107,26 @@ class QueryAnswering(Machine):
         if old is not None:
             out.append(EndQuery(old))
         self.standing[asker] = query
-        self.standing_used[asker] = max(since - 1, self.decided_tick)
+        self.standing_seen[asker] = max(since - 1, self.decided_tick)
         if since <= self.decided_tick and asker in self.decided_waiters:
             self._out.append(self._decided_reply(query))
 
     def _answer_standing_queries(self) -> None:
         """Answer the standing queries owed at the decided tick, the next in rank first, and
-        end those left unanswered for :data:`STANDING_IDLE_TICKS`."""
-        standing, used, out, tick = self.standing, self.standing_used, self._out, self.decided_tick
+        end those of askers away for :data:`STANDING_UNSEEN_TICKS`."""
+        standing, seen, out, tick = self.standing, self.standing_seen, self._out, self.decided_tick
         for asker in self.decided_waiters:
             query = standing.get(asker)
             if query is not None:
                 out.append(self._decided_reply(query))
-                used[asker] = tick
-        for asker, last in list(used.items()):
+        for j, _, _ in self.decided_near:
+            if j in seen:
+                seen[j] = tick
+        for asker, last in list(seen.items()):
             if last > tick:  # a world that came back replays tick numbers
-                used[asker] = tick
-            elif tick - last > STANDING_IDLE_TICKS:
-                del used[asker]
+                seen[asker] = tick
+            elif tick - last > STANDING_UNSEEN_TICKS:
+                del seen[asker]
                 out.append(EndQuery(standing.pop(asker)))
 
     def _answer_held(self) -> None:

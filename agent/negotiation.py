@@ -21,12 +21,14 @@ waits for a parked agent: every observation that shows it says it is parked, so 
 STAY, is known (:func:`staying`), and it waits for nobody in turn. At an episode's end nobody
 negotiates.
 
-An agent that asks a neighbour once (``?tick=T``) then keeps a *standing* query open on its
-intent key (``?since=T``), and a decider answers through it exactly the agents whose plan asks it
-(:func:`standing_answers`): the negotiation then costs one message per planned ask, instead of a
-query, an answer and the query's end. A decider ends a standing query that its plans have not
-asked through for a while (``agent.answering.STANDING_IDLE_TICKS``), so an agent holds the
-queries of its neighbours, not of the swarm: n of them across the swarm, not n squared. A decider can tell whose plan asks it when it sees every agent its waiters wait for
+Each agent keeps a *standing* query open on the intent key of every agent near enough to be
+asked soon (:func:`streamed`: within the interaction radius and a margin), and a decider answers
+through it exactly the agents whose plan asks it (:func:`standing_answers`): the negotiation
+then costs one message per planned ask, instead of a query, an answer and the query's end. A
+decider ends the standing query of an agent that has not been that near for a while
+(``agent.answering.STANDING_UNSEEN_TICKS``), so an agent holds the queries of the agents around
+it, not of the swarm. A neighbour with no standing query open yet (one just come near) is asked
+for the one tick (``?tick=T``). A decider can tell whose plan asks it when it sees every agent its waiters wait for
 (:func:`plans_are_known`: on grids that fit in the view, or with a radius of at most half the
 view); otherwise it answers every agent that waits for it, a superset of the plans.
 """
@@ -71,6 +73,21 @@ def plan_for(obs: Observation, config: SwarmConfig) -> tuple[list[int], list[int
     tick, n = obs.tick, config.n_agents
     return waiting_for, plan_asks(waiting_for, cells, lambda j: priority_rank(j, tick, n),
                                   config.interaction_radius, config.meet_only)
+
+
+STREAM_MARGIN = 4
+"""How far beyond the interaction radius an agent keeps standing queries open (cells, Chebyshev):
+two agents close in on each other by at most two cells a tick, so one that comes this near is
+streamed a tick or two before it can be asked."""
+
+
+def streamed(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]]:
+    """The agents of ``obs`` that the observing agent keeps a standing query open on, and whose
+    standing queries on it it keeps: those within the interaction radius and
+    :data:`STREAM_MARGIN` (at most the view), the only ones it can soon ask or be asked by."""
+    reach = min(VIEW_RADIUS, config.interaction_radius + STREAM_MARGIN)
+    x, y = obs.position
+    return within(obs.neighbours, x, y, reach)
 
 
 def plans_are_known(config: SwarmConfig) -> bool:

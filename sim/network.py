@@ -24,6 +24,7 @@ stalled waits, in order, until the stall ends.
 
 import heapq
 import random
+from collections import Counter
 from typing import Callable
 
 
@@ -63,6 +64,7 @@ class Network:
         self.reorder_s = 0.0
         self.cut: frozenset[str] | None = None
         self.sent = self.lost = 0
+        self.sent_by: Counter[str] = Counter()  # messages sent (lost or not), by what they call
 
     def at(self, time: float, function: Callable, *args) -> None:
         """Call ``function(*args)`` at virtual ``time``."""
@@ -78,6 +80,7 @@ class Network:
         it arrives no sooner than ``not_before`` (what it must not overtake). Returns when it
         arrives (0.0 if lost)."""
         self.sent += 1
+        self.sent_by[function.__name__] += 1
         cut = self.cut
         if cut is not None and (src.name in cut) != (dst.name in cut):
             self.lost += 1

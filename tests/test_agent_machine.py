@@ -8,7 +8,8 @@ import pytest
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.fields import LS_PENDING
 from nnql_swarm.agent.agent_machine import PEER_WAIT_S, RESYNC_AFTER, AgentMachine
-from nnql_swarm.agent.answering import STANDING_IDLE_TICKS
+from nnql_swarm.agent.answering import STANDING_UNSEEN_TICKS
+from nnql_swarm.agent.negotiation import STREAM_MARGIN
 from nnql_swarm.agent.phases import TRANSITIONS, Event, Phase
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.config import SwarmConfig
@@ -132,10 +133,13 @@ def test_an_episodes_end_checkpoints_before_the_intent_goes_out():
     assert effects[0] == Checkpoint(0)
 
 
-def test_standing_queries_go_to_the_neighbours_asked_and_end_once_they_ask_no_more():
-    """An agent opens a standing query on a neighbour only after it had to ask it directly; the
-    neighbour ends it once its plans have not asked through it for STANDING_IDLE_TICKS decided
-    ticks, and the agent does not open another until it asks that neighbour again."""
+def test_standing_queries_go_to_the_agents_near_and_end_once_they_are_far():
+    """An agent opens a standing query on every agent within the interaction radius and
+    STREAM_MARGIN once it has decided (one not yet streamed is asked directly); the agent
+    streamed from keeps it while the asker is that near and ends it once it has been farther for
+    STANDING_UNSEEN_TICKS decided ticks."""
+    reach = CONFIG.interaction_radius + STREAM_MARGIN
+    near, far = (1 + reach, 1), (2 + reach, 1)  # seen from (1, 1), where observation() puts it
     asker, answerer = ready(agent=1), ready(agent=0)
     # tick 0: agent 0 outranks agent 1, which sees it: a direct ask, then a stream from tick 1
     effects = asker.on_observation(observation(0, agent=1, others=[(0, 2, 2)]), 0.0)
@@ -144,18 +148,24 @@ def test_standing_queries_go_to_the_neighbours_asked_and_end_once_they_ask_no_mo
     effects = asker.on_answer(ask.ask, answer(0, agent=0, action=3), 0.1)
     [stream] = [e for e in effects if isinstance(e, Ask)]
     assert (stream.agent, stream.parameters) == (0, "since=1;from=1") and asker.streams == {0: 1}
+    # agent 1 ranks first at tick 1 and decides at once: a stream on agent 2, just near enough
+    effects = asker.on_observation(observation(1, agent=1, others=[(0, 2, 2), (2, *near)]), 0.2)
+    assert [(e.agent, e.parameters) for e in effects if isinstance(e, Ask)] == [
+        (2, "since=2;from=1")]
+    effects = asker.on_observation(observation(2, agent=1, others=[(2, *far)]), 0.2)
+    assert kinds(effects) == ["SendIntent"], "no stream on an agent farther away"
     assert answerer.on_query(stream.ask, stream.parameters, 0.1) == []
-    # agent 0 decides ticks with agent 1 out of sight: past the idle ticks, it ends the stream
+    # agent 0 keeps the stream while agent 1 is near, however long it goes unasked
+    for tick in range(1, STANDING_UNSEEN_TICKS + 3):
+        effects = answerer.on_observation(observation(tick, others=[(1, *near)]), 0.3)
+        assert not any(isinstance(e, EndQuery) for e in effects)
+    # and ends it once agent 1 has been farther for STANDING_UNSEEN_TICKS decided ticks
     ended = []
-    for tick in range(1, STANDING_IDLE_TICKS + 3):
-        ended += [e for e in answerer.on_observation(observation(tick), 0.2)
+    for tick in range(STANDING_UNSEEN_TICKS + 3, 2 * STANDING_UNSEEN_TICKS + 4):
+        ended += [e for e in answerer.on_observation(observation(tick, others=[(1, *far)]), 0.4)
                   if isinstance(e, EndQuery)]
     assert ended == [EndQuery(stream.ask)] and answerer.standing == {}
-    assert asker.on_ask_end(stream.ask, 0.3) == [] and asker.streams == {}
-    # agent 1, deciding alone, opens nothing; asked again, it asks directly and streams again
-    tick = 2 * CONFIG.n_agents + 1  # agent 1 first: it decides at once
-    assert not any(isinstance(e, Ask) for e in asker.on_observation(
-        observation(tick, agent=1), 0.4))
+    assert asker.on_ask_end(stream.ask, 0.5) == [] and asker.streams == {2: 2}
 
 
 def test_a_settled_agent_sends_the_world_no_intent_unless_it_has_a_record():
@@ -221,9 +231,6 @@ def test_a_standing_query_that_ends_mid_negotiation_is_replaced_by_a_direct_ask(
     ask at once, not waited out to the negotiation's time-out."""
     protocol = ready(agent=1)
     others = [(0, 2, 2)]
-    [ask] = [e for e in protocol.on_observation(observation(0, agent=1, others=others), 0.0)
-             if isinstance(e, Ask)]
-    protocol.on_answer(ask.ask, answer(0, agent=0, action=3), 0.0)  # and a stream opens
     protocol.on_observation(observation(1, agent=1, others=others), 0.0)  # decides: it is first
     [stream] = [a for a, open_ask in protocol.asks.items()
                 if open_ask.generation is not None and open_ask.agent == 0]
