@@ -332,6 +332,9 @@ class SwarmConfig:
             raise ValueError(
                 f"{self.n_agents} agents need {2 * self.n_agents} distinct start and goal cells; "
                 f"the largest free region of {where} has {free}")
+        # Digested now, so that it goes with the config to every process of the run: an agent
+        # that digested it itself would load OpenSSL's digests, 1.4 MiB of its memory.
+        self.identity
 
     def _check_map(self) -> None:
         """The map fits the grid; the scenario, if any, has a task per agent on distinct free
