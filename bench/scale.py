@@ -35,7 +35,7 @@ import time
 from pathlib import Path
 
 # The rest is imported where it is used: the swarm's processes fork from a server that imported
-# this module (``launch.processes._launcher_main``), so what it imports at the top would be in
+# this module (``launch.processes.main_to_serve``), so what it imports at the top would be in
 # every agent, and an agent's memory is one of the figures measured.
 
 def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,

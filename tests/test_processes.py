@@ -2,6 +2,7 @@
 more (``launch.processes.process_context``), real processes."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -23,5 +24,17 @@ def test_a_forked_process_holds_none_of_the_worlds_modules_and_the_launchers_mai
     assert done.returncode == 0, done.stderr
     child = json.loads(done.stdout.splitlines()[-1])
     assert child["held"] == ["nnql_swarm.agent.agent_node"]
-    assert child["main_by_name"]  # the server imported it: the child did not import it again
+    assert not child["main_run_again"]  # the server ran it as its __main__: the child did not
     assert child["frozen"] > 10_000
+
+
+@pytest.mark.full
+def test_a_forked_process_finds_a_launcher_run_from_its_path_run_by_the_server():
+    """A launcher run from its path (``launch/swarm.py``) is run once by the server, not again by
+    each child: its source is compiled once (no ``.pyc`` is written here)."""
+    done = subprocess.run([sys.executable, str(ROOT / "tests" / "forked_modules.py")],
+                          cwd=ROOT, capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert done.returncode == 0, done.stderr
+    child = json.loads(done.stdout.splitlines()[-1])
+    assert not child["main_run_again"]
