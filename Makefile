@@ -1,6 +1,8 @@
 # Two commands for a fresh machine: `make run` (the swarm) and `make test` (the type checker over
 # the package, then the test suite's fast tier: every room, in minutes). `make test-all` runs the
-# whole suite (the fast tier and the tests marked `full`), as CI does (.ci/run).
+# whole suite (the fast tier and the tests marked `full`), as CI does (.ci/run). Each runs its
+# tests in two passes: all but those marked `serial` on TEST_WORKERS pytest-xdist workers (most
+# tests wait on real processes, so more workers than cores pay), then the `serial` ones alone.
 # Both create a local virtualenv in .venv and install the project into it first.
 # `make browser-test` installs Debian's chromium (as root, with apt-get) and Playwright, and runs
 # the tests of the web viewer in headless Chromium (`make test` runs them too when both are there).
@@ -16,6 +18,14 @@ CHROMIUM := /usr/bin/chromium
 
 AGENTS ?= 8
 ARGS ?=
+TEST_WORKERS ?= 3
+
+# $(call tiers,MARKERS): the tests MARKERS selects (all if empty), in parallel then serially;
+# both passes run, and either failing fails. Exit code 5 is pytest's "no tests selected".
+tiers = $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup \
+	  -m "$(if $(1),($(1)) and )not serial"; parallel=$$?; \
+	$(PY) -m pytest -q -m "$(if $(1),($(1)) and )serial"; serial=$$?; \
+	[ $$serial = 5 ] && serial=0; exit $$(( parallel || serial ))
 
 .PHONY: run test test-all chromium netfault-tools playwright browser-test experiment bench clean
 
@@ -33,11 +43,11 @@ run: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m mypy
-	$(PY) -m pytest -q -m "not full"
+	$(call tiers,not full)
 
 test-all: $(STAMP)
 	$(PY) -m mypy
-	$(PY) -m pytest -q
+	$(call tiers,)
 
 # Debian's chromium, installed only if missing; fails (saying why) where that needs root or apt-get.
 chromium:

@@ -1,5 +1,7 @@
 """Session hooks: the ``browser`` tests run where Chromium and Playwright are, and are
-deselected elsewhere, with one line in the summary saying why."""
+deselected elsewhere, with one line in the summary saying why; under pytest-xdist
+(``--dist loadgroup``, as ``make test`` and ``make test-all`` run it), the tests that must share
+a worker are grouped onto one."""
 
 import pytest
 
@@ -7,17 +9,60 @@ from tests.browser import unavailable
 
 DESELECTED = pytest.StashKey[str]()
 
+BROWSER_GROUP = "browser"
+"""The browser tests' worker: one SwiftShader at a time, since two viewers drawing at once on a
+2-core machine starve each other."""
 
-def pytest_collection_modifyitems(config, items):
+
+def shared_fixture_modules(session, items) -> set[str]:
+    """The modules that define a fixture of module (or wider) scope: their tests run on one
+    worker, so that each such fixture (a run, a router, a LAN of namespaces) is built once. A
+    test may reach such a fixture by name at run time (``request.getfixturevalue``), so the
+    whole module goes together, not just the tests that name it."""
+    manager = session._fixturemanager
+    shared = set()
+    for module in {item.getparent(pytest.Module) for item in items}:
+        if module is None:
+            continue
+        for name in vars(module.obj):
+            if any(d.scope != "function" and d.baseid == module.nodeid
+                   for d in manager.getfixturedefs(name, module) or ()):
+                shared.add(module.nodeid)
+                break
+    return shared
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist reads the groups into the tests' ids
+def pytest_collection_modifyitems(session, config, items):
     browser = [item for item in items if item.get_closest_marker("browser")]
     reason = unavailable() if browser else None
-    if reason is None:
+    if reason is not None:
+        config.hook.pytest_deselected(items=browser)
+        items[:] = [item for item in items if not item.get_closest_marker("browser")]
+        config.stash[DESELECTED] = (f"deselected {len(browser)} browser tests: {reason}; "
+                                    f"`make browser-test` installs what they need (Chromium "
+                                    f"as root, with apt-get)")
+    shared = shared_fixture_modules(session, items)
+    for item in items:
+        module = item.getparent(pytest.Module)
+        if item.get_closest_marker("browser"):
+            item.add_marker(pytest.mark.xdist_group(BROWSER_GROUP))
+        elif module is not None and module.nodeid in shared:
+            item.add_marker(pytest.mark.xdist_group(module.nodeid))
+
+
+def pytest_collection_finish(session):
+    """In an xdist worker of ``--dist loadgroup``: each grouped test's id carries its group, or
+    the groups were lost (pytest-xdist 3.8 under pytest 9.2, pytest-xdist#1386) and the run
+    would build the shared fixtures once per worker and start browsers side by side."""
+    if not getattr(session.config.option, "loadgroup", False):
         return
-    config.hook.pytest_deselected(items=browser)
-    items[:] = [item for item in items if not item.get_closest_marker("browser")]
-    config.stash[DESELECTED] = (f"deselected {len(browser)} browser tests: {reason}; "
-                                f"`make browser-test` installs what they need (Chromium as "
-                                f"root, with apt-get)")
+    lost = [item.nodeid for item in session.items
+            if item.get_closest_marker("xdist_group") and "@" not in item.nodeid]
+    if lost:
+        raise pytest.UsageError(f"pytest-xdist lost the xdist_group of {len(lost)} tests "
+                                f"({lost[0]}, ...): this pytest and pytest-xdist do not work "
+                                f"together; pyproject.toml's test extra names ones that do")
 
 
 def pytest_terminal_summary(terminalreporter, exitstatus, config):

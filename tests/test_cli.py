@@ -301,6 +301,7 @@ def test_a_swarm_the_machine_cannot_hold_is_refused_with_what_it_needs_and_what_
     assert available_bytes() is None or available_bytes() > 0
 
 
+@pytest.mark.serial  # moments after the launch
 @pytest.mark.full
 @pytest.mark.parametrize("moment", [0.1, 0.4, 0.8, 1.2, 1.8])
 def test_ctrl_c_in_the_first_seconds_stops_the_swarm_in_a_line_without_a_traceback(tmp_path,

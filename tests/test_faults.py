@@ -100,6 +100,7 @@ def assert_copies_equal_the_worlds(out, config, agents) -> None:
         assert np.array_equal(mine["q_ca"], shared[1]), agent
 
 
+@pytest.mark.serial  # a tick within 250 ms of the deadline
 def test_a_stalled_agent_costs_at_most_the_deadline_and_its_stale_intents_are_rejected(tmp_path):
     out = tmp_path / "stalled"
     swarm = start_swarm(out, "--agents", "8", "--episodes", "30", "--max-steps", "40",
@@ -152,6 +153,7 @@ def test_a_killed_world_resumes_without_duplicate_or_missing_episodes(tmp_path):
     assert again.returncode == 0 and "already complete" in again.stderr
 
 
+@pytest.mark.serial  # within 3 s
 def test_sigterm_to_the_launcher_stops_everything_within_3_s(tmp_path):
     out = tmp_path / "terminated"
     swarm = start_swarm(out, "--agents", "8", "--episodes", "1000", "--run-id", "terminated")

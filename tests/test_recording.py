@@ -387,13 +387,15 @@ def test_a_run_killed_outright_and_resumed_records_every_episode(tmp_path, kille
     from tests.swarm_helpers import find_process, stops_within, wait_for_rows
 
     out, episodes = tmp_path / "killed", 120
+    # a run id of its own: find_process below must not find another test's world
+    run_id = "killed-" + "-".join(killed.replace(",", "").split())
     preset = ["--preset", "nnql"] if killed.endswith("behind") else []
     swarm = start_swarm(out, "--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes",
-                        str(episodes), "--seed", "2", "--run-id", "killed", *preset)
+                        str(episodes), "--seed", "2", "--run-id", run_id, *preset)
     try:
         wait_for_rows(out / "episodes.csv", 40, 120, swarm)
         if killed == "world":
-            [world] = find_process("nnql-world killed")
+            [world] = find_process(f"nnql-world {run_id}")
             os.kill(world, signal.SIGKILL)
         else:
             os.killpg(swarm.pid, signal.SIGKILL)
@@ -410,7 +412,7 @@ def test_a_run_killed_outright_and_resumed_records_every_episode(tmp_path, kille
     assert not (out / PARTS_DIR).exists()
     verify(out / "run.rrd")
     recording = Recording(out / "run.rrd")
-    assert [s.recording_id for s in recording.recordings] == ["killed"]
+    assert [s.recording_id for s in recording.recordings] == [run_id]
     logged = Counter(recording.column("metrics/collisions/per_episode", "episode"))
     assert sorted(logged) == list(range(episodes))
     assert set(logged.values()) == {1}, resumed.stderr

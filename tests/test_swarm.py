@@ -136,6 +136,7 @@ def test_an_existing_run_is_never_overwritten(distributed_run):
     assert (out / "episodes.csv").read_bytes() == before
 
 
+@pytest.mark.serial  # within 3 s
 def test_ctrl_c_stops_every_process_within_3_s(tmp_path):
     out = tmp_path / "interrupted"
     swarm = start_swarm(out, "--agents", "8", "--episodes", "1000")
