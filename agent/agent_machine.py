@@ -16,8 +16,9 @@ Theory of operation. The machine is in one ``Phase`` at a time, moved only by ``
   standing queries it keeps open on the agents near it (``?since=T;from=<id>``), answered
   by each neighbour whose plan asks it, and, where no standing query is open yet, with one ask
   each (``?tick=T;from=<id>``); answers relay what their senders learned. Once every asked
-  neighbour answered, refused, or the negotiation timed out, it asks directly for any awaited intent no
-  answer brought (``ASKING_MISSING``), then decides with what it knows and is ``IDLE`` again.
+  neighbour answered, refused, or the negotiation timed out, it asks directly for any awaited
+  intent no answer brought (``ASKING_MISSING``), then decides with what it knows and is ``IDLE``
+  again.
 - ``STOPPED``: the world said so, or the process is stopping; inputs do nothing.
 
 A decision answers the standing and held queries the agent owes (the next in rank first) and

@@ -28,9 +28,10 @@ then costs one message per planned ask, instead of a query, an answer and the qu
 decider ends the standing query of an agent that has not been that near for a while
 (``agent.answering.STANDING_UNSEEN_TICKS``), so an agent holds the queries of the agents around
 it, not of the swarm. A neighbour with no standing query open yet (one just come near) is asked
-for the one tick (``?tick=T``). A decider can tell whose plan asks it when it sees every agent its waiters wait for
-(:func:`plans_are_known`: on grids that fit in the view, or with a radius of at most half the
-view); otherwise it answers every agent that waits for it, a superset of the plans.
+for the one tick (``?tick=T``). A decider can tell whose plan asks it when it sees every agent
+its waiters wait for (:func:`plans_are_known`: on grids that fit in the view, or with a radius
+of at most half the view); otherwise it answers every agent that waits for it, a superset of the
+plans.
 """
 
 from dataclasses import dataclass, field

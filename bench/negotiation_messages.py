@@ -46,8 +46,8 @@ def main() -> int:
         print("the run failed its checks: " + "; ".join(outcome.failures[:3]), file=sys.stderr)
         return 1
     ticks = outcome.ticks
-    print(f"{args.agents} agents on {side} x {side}, preset {args.preset}, {args.episodes} episodes "
-          f"of at most {args.max_steps} steps: {ticks} ticks, virtual ms a tick "
+    print(f"{args.agents} agents on {side} x {side}, preset {args.preset}, "
+          f"{args.episodes} episodes of at most {args.max_steps} steps: {ticks} ticks, virtual ms a tick "
           f"{1000 * outcome.virtual_s / ticks:.3f}")
     print("| message (what its arrival calls) | sent | a tick |")
     print("| --- | ---: | ---: |")
