@@ -92,6 +92,7 @@ class WorldNode(ProtocolAdapter):
         self.lock = threading.RLock()
         self.stopping = False
         self.failure: BaseException | None = None
+        self.write_failed = False  # an episode's checkpoint or row could not be written
         self.on_tick = on_tick
         self.publishers: list[zenoh.Publisher] = []
         self.control: zenoh.Publisher | None = None
@@ -166,7 +167,8 @@ class WorldNode(ProtocolAdapter):
                     self.stopping = True
                     if not protocol.done:
                         self.perform(protocol.stop(time.monotonic()))
-                self._write_queued_rows()
+                if not self.write_failed:
+                    self._write_queued_rows()
                 if self.writer is not None:
                     self.writer.close()
                 for publisher in self.publishers:
@@ -180,7 +182,17 @@ class WorldNode(ProtocolAdapter):
     def _write(self, row: WriteRow) -> None:
         """Append an episode's row (the file is opened at the first: a world that never
         started leaves no ``episodes.csv``), after the shared table's checkpoint, if any, and
-        after the episode is on its way to the recording (``before_row``)."""
+        after the episode is on its way to the recording (``before_row``). Once one could not
+        be written (a full disk), no later episode is: its checkpoint, rewritten in place, would
+        succeed where its row fails, and leave the checkpoint ahead of the rows a resume
+        continues from."""
+        try:
+            self._write_row(row)
+        except BaseException:
+            self.write_failed = True
+            raise
+
+    def _write_row(self, row: WriteRow) -> None:
         if self.before_row is not None:
             with self.lock:  # the recording's ticks are logged under it
                 self.before_row()
