@@ -279,7 +279,7 @@ class SwarmGridEnv(ParallelEnv):
         if self.rerun_memory is not None:
             self._stream.flush()  # disconnecting would drop the memory sink's frames
             return
-        from nnql_swarm.recording.world import close_stream
+        from nnql_swarm.recording.sinks import close_stream
 
         close_stream(self._stream)
         self._stream = None

@@ -44,7 +44,6 @@ higher-ranked neighbours, averaged per episode over the ticks where it asked any
 (``metrics/negotiation/unanswered/<id>``). The in-process runner has no such wait to measure.
 """
 
-import sys
 import time
 from typing import Callable
 
@@ -59,6 +58,7 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, time_columns
 from nnql_swarm.recording.shown import ca_learns
+from nnql_swarm.recording.sinks import close_stream
 
 TABLES = ("q_ds", "q_ca")
 
@@ -394,9 +394,4 @@ class AgentViz:
     def close(self) -> None:
         """Send what is buffered and close the agent's own stream."""
         self.flush()
-        try:
-            self.rec.flush(timeout_sec=3.0)
-        except Exception as error:  # noqa: BLE001 - rerun raises RuntimeError for a lost viewer
-            print(f"rerun: agent {self.agent} could not flush its recording: {error}",
-                  file=sys.stderr)
-        self.rec.disconnect()
+        close_stream(self.rec, who=f"agent {self.agent}'s recording")

@@ -21,7 +21,7 @@ def log_experiment(specs, metrics, target, *, recording_id: str = "experiment"):
     """
     import rerun as rr
 
-    from nnql_swarm.recording.world import close_stream
+    from nnql_swarm.recording.sinks import close_stream
 
     groups: dict[tuple[str, int], list[int]] = {}
     for row, spec in enumerate(specs):
@@ -60,7 +60,7 @@ def log_swarm_curves(curves: dict[str, dict[str, np.ndarray]], path: Path,
     import rerun as rr
     import rerun.blueprint as rrb
 
-    from nnql_swarm.recording.world import close_stream
+    from nnql_swarm.recording.sinks import close_stream
 
     stream = rr.RecordingStream(APP_ID, recording_id=recording_id)
     blueprint = rrb.Blueprint(rrb.Grid(*(rrb.TimeSeriesView(origin=f"swarm/{metric}", name=metric)

@@ -54,7 +54,7 @@ def copy_opening_on(run_dir: Path, out: Path, make: Callable, until: int | None 
     the entities whose paths start so) with the blueprint ``make(config, distributed, map_agent, reference)`` (the run's
     options read back as ``recording.blueprint.recorded_options`` reads them). Returns ``out``."""
     from nnql_swarm.recording.blueprint import recorded_options
-    from nnql_swarm.recording.world import close_stream
+    from nnql_swarm.recording.sinks import close_stream
 
     config = SwarmConfig.from_json((Path(run_dir) / "config.json").read_text())
     reader = rr.chunk.RrdReader(Path(run_dir) / "run.rrd")

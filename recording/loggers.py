@@ -43,7 +43,7 @@ def open_world_viz(record, config: SwarmConfig, out: Path, distributed: bool = T
         if episodes.exists() else 0
     viz = WorldViz(config, plan.open("world", blueprint(config, distributed, plan.map_agent,
                                                       plan.reference)),
-                   collisions_before=before, map_agent=plan.map_agent)
+                   collisions_before=before, map_agent=plan.map_agent, files=plan.parts_dir)
     if plan.url is not None:
         viz.row_flush_s = 0.0
     return viz

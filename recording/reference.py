@@ -47,7 +47,7 @@ def play_reference(config: SwarmConfig) -> dict[str, np.ndarray]:
 
 def log_reference(config: SwarmConfig, stream: rr.RecordingStream) -> None:
     """Play the reference and log its curves into ``stream`` (which this closes)."""
-    from nnql_swarm.recording.world import close_stream
+    from nnql_swarm.recording.sinks import close_stream
 
     episodes = np.arange(config.episodes)
     for path, values in play_reference(config).items():

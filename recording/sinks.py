@@ -8,6 +8,8 @@ streams to it (``rr.GrpcSink``).
 """
 
 import os
+import sys
+import threading
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -60,3 +62,27 @@ def plan_of(record, config: SwarmConfig, out: Path) -> RecordingPlan | None:
     if isinstance(record, RecordingPlan):
         return record if record.enabled else None
     return RecordingPlan.to_files(config, out) if record else None
+
+
+CLOSE_S = 3.0
+"""How long closing a stream waits for its data to leave, and then for its sinks to close."""
+
+
+def close_stream(stream, timeout_s: float = CLOSE_S, who: str = "the recording",
+                 quiet: bool = False) -> None:
+    """Flush and close ``stream`` (an ``rr.RecordingStream``), each step for at most
+    ``timeout_s``: a viewer that went away, or a file the disk refused, costs a warning, not the
+    run. Rerun's ``disconnect`` can wait for ever on a file sink whose writes failed (a full
+    disk), so it waits in a thread of its own, which the process's exit ends. ``quiet``: the
+    stream's failure was said already."""
+    try:
+        stream.flush(timeout_sec=timeout_s)
+    except Exception as error:  # noqa: BLE001 - rerun raises RuntimeError for an unreachable viewer
+        if not quiet:
+            print(f"rerun: could not flush {who}: {error}", file=sys.stderr)
+    closing = threading.Thread(target=stream.disconnect, name="rerun-disconnect", daemon=True)
+    closing.start()
+    closing.join(timeout_s)
+    if closing.is_alive():
+        print(f"rerun: {who} did not close within {timeout_s:g} s; its file may lack its last "
+              f"ticks", file=sys.stderr)

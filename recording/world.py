@@ -53,9 +53,11 @@ from nnql_swarm.recording.fading import BANDS, FRESH_STEPS, route_strips
 from nnql_swarm.recording.columns import FlushClock, SeriesColumns, TextColumns, time_columns
 from nnql_swarm.recording.jams import JAM_HALF, JAM_LINE, JamMap
 from nnql_swarm.recording.shown import ca_learns, collision_bound, learns
+from nnql_swarm.recording.sinks import close_stream
 from nnql_swarm.recording.palette import (
     COLLISION_RED, PUSH_COLOUR, REACHED_COLOUR, WAIT_COLOUR, WALL_COLOUR, agent_colors,
 )
+from nnql_swarm.transport.runfiles import check_space
 from nnql_swarm.world.engine import SwarmWorld, TickReport
 from nnql_swarm.world.scenario import swarm_episode
 
@@ -334,13 +336,16 @@ class WorldViz:
 
     def __init__(self, config: SwarmConfig, stream: rr.RecordingStream,
                  flush_every: int = FLUSH_EVERY, collisions_before: int = 0,
-                 map_agent: int | None = 0) -> None:
+                 map_agent: int | None = 0, files: Path | None = None) -> None:
         """``collisions_before``: the collisions of the episodes a resumed run already has;
         ``map_agent``: the agent whose known map and planned path the recording shows
-        (``recording.known_map_view``; None: nobody's)."""
+        (``recording.known_map_view``; None: nobody's); ``files``: the folder the stream's
+        file is written to (None: streamed to a viewer only)."""
         self.config = config
         self.rec = stream
+        self.files = files
         self.row_flush_s = ROW_FLUSH_S  # 0 where a viewer is streamed to: no wait for it
+        self.flush_failed = False  # said once
         self.clock = FlushClock(flush_every)
         n = config.n_agents
         self.colors = agent_colors(n)
@@ -746,25 +751,24 @@ class WorldViz:
         is written (``world.world_node``): a world killed after the row leaves its episodes in its
         part, which the next ``--resume`` merges, and the resumed world records from the row
         on, so that every episode is recorded. Waits for the file at most
-        :data:`ROW_FLUSH_S` (not for a viewer, where one is streamed to)."""
+        :data:`ROW_FLUSH_S` (not for a viewer, where one is streamed to). A file that could
+        not be written for want of space stops the run as any of its files would (the
+        OSError of ``transport.runfiles.check_space``): the row is not written, and the run
+        resumes from the episode before, every episode recorded once. Else the run goes on."""
         self.flush()
         try:
             self.rec.flush(timeout_sec=self.row_flush_s)
-        except Exception as error:  # noqa: BLE001 - as close_stream: the run goes on
-            print(f"rerun: could not flush the recording: {error}", file=sys.stderr)
+        except Exception as error:  # noqa: BLE001 - as sinks.close_stream: the run goes on
+            said, self.flush_failed = self.flush_failed, True
+            if self.files is not None:
+                check_space(self.files)
+            if not said:
+                print(f"rerun: could not flush the recording: {error} (said once)",
+                      file=sys.stderr)
 
     def close(self) -> None:
         self.flush()
-        close_stream(self.rec)
-
-
-def close_stream(stream: rr.RecordingStream, timeout_s: float = 3.0) -> None:
-    """Flush and close a stream; a viewer that went away costs a warning, not the run."""
-    try:
-        stream.flush(timeout_sec=timeout_s)
-    except Exception as error:  # noqa: BLE001 - rerun raises RuntimeError for an unreachable viewer
-        print(f"rerun: could not flush the recording: {error}", file=sys.stderr)
-    stream.disconnect()
+        close_stream(self.rec, quiet=self.flush_failed)
 
 
 

@@ -358,6 +358,63 @@ def test_agents_whose_world_stays_away_stop_with_a_message(tmp_path):
     assert all(stats(out, f"agent-{i}")["world_lost"] for i in range(2))
 
 
+@pytest.fixture
+def small_disk(tmp_path):
+    """A 256 KiB tmpfs."""
+    disk = tmp_path / "disk"
+    disk.mkdir()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(disk)],
+                             capture_output=True, text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here (needs root): {mounted.stderr.strip()}")
+    try:
+        yield disk
+    finally:
+        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+def fill(disk: Path) -> None:
+    with open(disk / "filler", "wb", buffering=0) as filler:
+        with pytest.raises(OSError, match="No space"):
+            while True:
+                filler.write(bytes(4096))
+
+
+def test_a_recording_the_full_disk_refuses_stops_the_world_before_its_row(small_disk, capsys):
+    """The world's part of the recording on a disk that fills: the flush before an episode's
+    row fails, and the world stops as for any of its files (the row unwritten, the run
+    resumable), instead of recording nothing more and flushing in vain at every episode.
+    Closing the stream then returns, whatever Rerun's file sink is left waiting for."""
+    from nnql_swarm.recording.sinks import RecordingPlan
+    from nnql_swarm.recording.world import WorldViz
+    from nnql_swarm.transport.runfiles import check_space, out_of_space
+
+    config = SwarmConfig(run_id="full", n_agents=2, episodes=2, max_steps=5)
+    parts = small_disk / "parts"
+    viz = WorldViz(config, RecordingPlan("full", parts_dir=parts).open("world"), files=parts)
+    check_space(parts)
+    fill(small_disk)
+    with pytest.raises(OSError) as refused:
+        check_space(parts)
+    assert out_of_space(refused.value)
+    assert [path.name for path in parts.iterdir()] == [f"world.{os.getpid()}.rrd"], \
+        "the probe is gone"
+    viz.rec.log("noise", rr_points(20_000))
+    with pytest.raises(OSError) as stopped:
+        viz.before_row()
+    assert out_of_space(stopped.value)
+    started = time.monotonic()
+    viz.close()
+    assert time.monotonic() - started < 10
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def rr_points(n: int):
+    import rerun as rr
+
+    return rr.Points2D(np.random.default_rng(0).random((n, 2)))
+
+
 def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_path):
     """The run's folder on a 1 MiB tmpfs: the recording, the checkpoints and the rows fill it.
     Every process says it has no space left (no traceback), the launcher stops the run with
@@ -374,10 +431,10 @@ def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_pa
                              capture_output=True, text=True)
     if mounted.returncode != 0:
         pytest.skip(f"cannot mount a small tmpfs here (needs root): {mounted.stderr.strip()}")
-    # 400 episodes record about 20 MB (the world's part alone about 50 KB an episode): the
+    # 120 episodes record about 6 MB (the world's part alone about 50 KB an episode): the
     # 1 MiB disk fills within the first 30, and the rest, played on resume and left alone, is
     # what the test spends its time on
-    options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes", "400",
+    options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes", "120",
                "--seed", "6")
     try:
         full = run_swarm(disk / "run", *options, timeout=240)
@@ -390,7 +447,7 @@ def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_pa
         subprocess.run(["mount", "-o", "remount,size=512m", str(disk)], check=True)
         resumed = run_swarm(disk / "run", "--resume", timeout=240)
         assert resumed.returncode == 0, resumed.stderr
-        rows = episodes_once(disk / "run", 400)
+        rows = episodes_once(disk / "run", 120)
         assert (disk / "run" / "run.rrd").is_file()
     finally:
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)

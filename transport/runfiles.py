@@ -39,6 +39,28 @@ def out_of_space(error: BaseException) -> bool:
     return False
 
 
+SPACE_PROBE_BYTES = 64 * 1024
+"""What :func:`check_space` asks the disk for: about a recording's chunk of an episode."""
+
+
+def check_space(folder: Path) -> None:
+    """Raise the OSError (``ENOSPC``, ``EDQUOT``) of a disk that cannot give ``folder``
+    :data:`SPACE_PROBE_BYTES` more; a probe file allocated there and removed. Any other error
+    of the probe is left to whoever writes there next."""
+    probe = Path(folder) / f".space-probe.{os.getpid()}"
+    try:
+        fd = os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        try:
+            os.posix_fallocate(fd, 0, SPACE_PROBE_BYTES)
+        finally:
+            os.close(fd)
+    except OSError as error:
+        if out_of_space(error):
+            raise
+    finally:
+        probe.unlink(missing_ok=True)
+
+
 def stats_path(out_dir: Path, name: str) -> Path:
     """``<out>/stats/<name>.json``, e.g. name ``world`` or ``agent-3``."""
     return Path(out_dir) / STATS_DIR / f"{name}.json"
