@@ -20,14 +20,16 @@ AGENTS ?= 8
 ARGS ?=
 TEST_WORKERS ?= 3
 
-# $(call tiers,MARKERS): the tests MARKERS selects (all if empty), in parallel then serially;
-# both passes run, and either failing fails. Exit code 5 is pytest's "no tests selected".
-tiers = $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup \
+# $(call tiers,MARKERS[,OPTIONS]): the tests MARKERS selects (all if empty), in parallel then
+# serially; both passes run, and either failing fails. Exit code 5 is pytest's "no tests
+# selected". The parallel pass hands out its work longest first (tests/durations.json, by
+# tests/conftest.py), which --no-loadscope-reorder keeps.
+tiers = $(PY) -m pytest -q -n $(TEST_WORKERS) --dist loadgroup --no-loadscope-reorder $(2) \
 	  -m "$(if $(1),($(1)) and )not serial"; parallel=$$?; \
-	$(PY) -m pytest -q -m "$(if $(1),($(1)) and )serial"; serial=$$?; \
+	$(PY) -m pytest -q $(2) -m "$(if $(1),($(1)) and )serial"; serial=$$?; \
 	[ $$serial = 5 ] && serial=0; exit $$(( parallel || serial ))
 
-.PHONY: run test test-all chromium netfault-tools playwright browser-test experiment bench clean
+.PHONY: run test test-all test-durations chromium netfault-tools playwright browser-test experiment bench clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -48,6 +50,11 @@ test: $(STAMP)
 test-all: $(STAMP)
 	$(PY) -m mypy
 	$(call tiers,)
+
+# The whole suite, as test-all, writing each test's seconds into tests/durations.json (commit it
+# after adding or changing long tests).
+test-durations: $(STAMP)
+	$(call tiers,,--store-durations)
 
 # Debian's chromium, installed only if missing; fails (saying why) where that needs root or apt-get.
 chromium:

@@ -1,7 +1,11 @@
 """Session hooks: the ``browser`` tests run where Chromium and Playwright are, and are
 deselected elsewhere, with one line in the summary saying why; under pytest-xdist
 (``--dist loadgroup``, as ``make test`` and ``make test-all`` run it), the tests that must share
-a worker are grouped onto one."""
+a worker are grouped onto one, and the longest work is handed out first (``durations.json``)."""
+
+import json
+import re
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +16,24 @@ DESELECTED = pytest.StashKey[str]()
 BROWSER_GROUP = "browser"
 """The browser tests' worker: one SwiftShader at a time, since two viewers drawing at once on a
 2-core machine starve each other."""
+
+
+DURATIONS = Path(__file__).with_name("durations.json")
+"""Each test's seconds (its setup, call and teardown) in a whole run of the suite in parallel on
+a 2-core machine, written by ``make test-durations``: the parallel pass hands out its work
+longest first, so that no long test or group starts last and runs alone at the end."""
+
+UNMEASURED_S = 1.0
+"""The seconds assumed of a test the file does not name yet (a test is typically 0.1 to 5)."""
+
+GROUP_SUFFIX = re.compile(r"@[^@\[\]]+$")
+"""What pytest-xdist's loadgroup appends to a grouped test's id (``@`` and the group)."""
+
+
+def pytest_addoption(parser):
+    parser.addoption("--store-durations", action="store_true",
+                     help=f"write each test's seconds into {DURATIONS.name} (make "
+                          f"test-durations), which orders the parallel pass's work")
 
 
 def shared_fixture_modules(session, items) -> set[str]:
@@ -49,6 +71,41 @@ def pytest_collection_modifyitems(session, config, items):
             item.add_marker(pytest.mark.xdist_group(BROWSER_GROUP))
         elif module is not None and module.nodeid in shared:
             item.add_marker(pytest.mark.xdist_group(module.nodeid))
+    if hasattr(config, "workerinput"):  # an xdist worker: its order is the one handed out
+        longest_first(items, json.loads(DURATIONS.read_text()) if DURATIONS.exists() else {})
+
+
+def longest_first(items: list, durations: dict[str, float]) -> None:
+    """Reorder ``items`` so that the units xdist hands out (a group, or a test alone) come
+    longest first, each unit's tests in their order; with ``--no-loadscope-reorder`` (the
+    Makefile's), xdist hands them out in this order, to each worker as it becomes free."""
+    units: dict[str, list] = {}
+    for item in items:
+        group = item.get_closest_marker("xdist_group")
+        units.setdefault(group.args[0] if group else item.nodeid, []).append(item)
+    seconds = {unit: sum(durations.get(item.nodeid, UNMEASURED_S) for item in members)
+               for unit, members in units.items()}
+    items[:] = [item for unit in sorted(units, key=lambda u: -seconds[u]) for item in units[unit]]
+
+
+_SPENT: dict[str, float] = {}
+"""This run's seconds of each test so far, by its id without xdist's group."""
+
+
+def pytest_runtest_logreport(report):
+    nodeid = GROUP_SUFFIX.sub("", report.nodeid)
+    _SPENT[nodeid] = _SPENT.get(nodeid, 0.0) + report.duration
+
+
+def pytest_sessionfinish(session):
+    """With --store-durations, in the process that sees every test (xdist's controller, or the
+    only one): this run's seconds merged into the file's, one per line."""
+    config = session.config
+    if not config.getoption("store_durations") or hasattr(config, "workerinput"):
+        return
+    durations = json.loads(DURATIONS.read_text()) if DURATIONS.exists() else {}
+    durations.update({nodeid: round(seconds, 2) for nodeid, seconds in _SPENT.items()})
+    DURATIONS.write_text(json.dumps(dict(sorted(durations.items())), indent=0) + "\n")
 
 
 def pytest_collection_finish(session):
