@@ -121,7 +121,10 @@ def test_the_resume_command_carries_the_options_config_json_does_not():
 def test_a_cold_kernel_cache_is_told_apart_from_a_warm_one(tmp_path):
     probe = ("from nnql_swarm.sim.runs import compiled_simulator; "
              "print(compiled_simulator())")
-    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "empty-cache")}
+    # compiled, whatever this worker's environment says: a launcher run here before sets
+    # NNQL_KERNEL=python in it for the processes it forks (launch.processes.process_context)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "empty-cache"),
+           "NNQL_KERNEL": "compiled"}
     cold = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, env=env,
                           timeout=120)
     assert cold.stdout.strip() == "False", cold.stderr

@@ -149,6 +149,7 @@ def test_a_workers_schedules_do_not_see_each_others_files(tmp_path):
 
 
 @pytest.mark.full
+@pytest.mark.timeout(1200)  # 3.5 to 6.5 minutes beside the rest of the parallel pass
 def test_ten_thousand_schedules_pass(capsys):
     started = time.monotonic()
     results = faultsim.run_schedules(SCHEDULES, seed_base=0, agents=8, workers=2)
