@@ -10,6 +10,7 @@ import shutil
 import signal
 import subprocess
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -358,12 +359,12 @@ def test_agents_whose_world_stays_away_stop_with_a_message(tmp_path):
     assert all(stats(out, f"agent-{i}")["world_lost"] for i in range(2))
 
 
-@pytest.fixture
-def small_disk(tmp_path):
-    """A 256 KiB tmpfs."""
-    disk = tmp_path / "disk"
+@contextmanager
+def tmpfs(disk: Path, size: str):
+    """``disk`` made a tmpfs of ``size`` (``mount``'s, e.g. ``1m``) for the block; the test is
+    skipped where mounting one needs a root this machine does not give."""
     disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(disk)],
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(disk)],
                              capture_output=True, text=True)
     if mounted.returncode != 0:
         pytest.skip(f"cannot mount a small tmpfs here (needs root): {mounted.stderr.strip()}")
@@ -371,6 +372,12 @@ def small_disk(tmp_path):
         yield disk
     finally:
         subprocess.run(["umount", "-l", str(disk)], capture_output=True)
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    with tmpfs(tmp_path / "disk", "256k") as disk:
+        yield disk
 
 
 def fill(disk: Path) -> None:
@@ -425,18 +432,12 @@ def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_pa
     miss the tick's deadline, after which the run is another, as any missed intent makes it.)"""
     from nnql_swarm.transport.runfiles import EXIT_NO_SPACE
 
-    disk = tmp_path / "disk"
-    disk.mkdir()
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(disk)],
-                             capture_output=True, text=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"cannot mount a small tmpfs here (needs root): {mounted.stderr.strip()}")
     # 120 episodes record about 6 MB (the world's part alone about 50 KB an episode): the
     # 1 MiB disk fills within the first 30, and the rest, played on resume and left alone, is
     # what the test spends its time on
     options = ("--agents", "2", "--grid", "5x5", "--max-steps", "8", "--episodes", "120",
                "--seed", "6")
-    try:
+    with tmpfs(tmp_path / "disk", "1m") as disk:
         full = run_swarm(disk / "run", *options, timeout=240)
         assert full.returncode == EXIT_NO_SPACE, full.stderr
         assert "Traceback" not in full.stderr, full.stderr
@@ -449,8 +450,6 @@ def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_pa
         assert resumed.returncode == 0, resumed.stderr
         rows = episodes_once(disk / "run", 120)
         assert (disk / "run" / "run.rrd").is_file()
-    finally:
-        subprocess.run(["umount", "-l", str(disk)], capture_output=True)
     if "is not the one left alone" not in resumed.stderr:
         alone = run_swarm(tmp_path / "alone", *options, "--in-process", "--no-record")
         assert alone.returncode == 0, alone.stderr
