@@ -30,7 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-os.environ["NNQL_KERNEL"] = "python"  # as in the swarm's processes
+os.environ.setdefault("NNQL_KERNEL", "python")  # as in the swarm's processes
 
 import zenoh
 
@@ -135,6 +135,16 @@ class _LearnNothing(AgentBrain):
         return STAY
 
 
+def _ends_of_asks(agents: list[AgentNode]) -> None:
+    """Hand each agent the ends of its asks, which its node queues for its main thread (a
+    standing query its neighbour ended, once far for long enough: ``agent.answering``)."""
+    for node in agents:
+        while not node.events.empty():
+            kind, item = node.events.get()
+            if kind == "ask-end":
+                node.feed(node.protocol.on_ask_end, item)
+
+
 def run(config: SwarmConfig, out: Path, bare: bool,
         clock=time.perf_counter) -> tuple[int, Wire]:
     """Run ``config`` through the real handlers over a :class:`Wire` timed on ``clock``;
@@ -162,6 +172,8 @@ def run(config: SwarmConfig, out: Path, bare: bool,
     for i in range(n):  # the last one opens the first tick
         world.feed(world.protocol.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, i), True)
     while not world.world.finished:
+        if not wire.queue:
+            _ends_of_asks(agents)
         if not wire.queue:
             raise RuntimeError(f"nothing to deliver at tick {world.world.tick}")
         wire.drain()

@@ -13,11 +13,21 @@ seeking reads them (``learning.learner``: ``LP_DS_STATE``, ``LP_DS_REWARD``). Wi
 this episode (they stay there until it ends), unless they cut it off its goal. The field is worked
 out again only when the goal changes, a new wall is seen or a newly arrived agent is taken.
 
+An agent reads the distances of its cell, the cells next to it and the cell it came from, all at
+most one step farther from the goal than its own. So the search is *lazy*: it stops once every
+cell at most one step farther than the agent's has its distance, and goes on from where it
+stopped when the agent comes to a cell farther out (:func:`grow_field`). A cell the search has
+not reached reads -1, as a cell cut off does; no reading ever asks for one. The distances read
+are those of the whole field, and the search visits about a third of the cells (64 agents on a
+32 x 32 grid, the default preset: docs/performance.md).
+
 One buffer of integers per agent (``wmap``, :func:`map_size`): ``MAP_GOAL`` (the goal cell the
 field is for, -1 when stale), ``MAP_KNOWN`` (walls known), ``MAP_PARKED`` (arrived agents taken),
-``MAP_CUT`` (whether they cut the agent off, so the field ignores them), then per cell
-(``y * W + x``) whether it is a known wall, its distance to the goal (-1 where cut off), a queue
-the search uses, whether an arrived agent taken stands there, and the list of those cells.
+``MAP_CUT`` (whether they cut the agent off, so the field ignores them), ``MAP_PENDING`` (see
+:func:`see_parked`), the search's queue ``MAP_HEAD`` and ``MAP_TAIL`` and whether it goes
+around the arrived agents taken (``MAP_AROUND``), then per cell (``y * W + x``) whether it is a
+known wall, its distance to the goal (-1 where cut off or not reached yet), the search's queue,
+whether an arrived agent taken stands there, and the list of those cells.
 """
 
 from nnql_swarm.protocol.actions import (
@@ -30,7 +40,8 @@ WHOLE_MAP = 1 << 20
 grid is wide."""
 
 MAP_GOAL, MAP_KNOWN, MAP_PARKED, MAP_CUT, MAP_PENDING = 0, 1, 2, 3, 4
-MAP_HEADER = 5
+MAP_HEAD, MAP_TAIL, MAP_AROUND = 5, 6, 7
+MAP_HEADER = 8
 NOTHING_PENDING = 1 << 30
 SECTIONS = 5
 """Per cell: known wall, distance, queue, arrived agent planned around, and the list of those."""
@@ -134,6 +145,7 @@ def see_parked(wmap, nb, m, ox, oy, around, starts, width, height):
             wmap[listed + wmap[MAP_PARKED]] = cell
             wmap[MAP_PARKED] += 1
             if wmap[MAP_GOAL] >= 0 and wmap[MAP_CUT] == 0:  # (cut off: the field ignores them)
+                wmap[MAP_AROUND] = 1  # the search goes around it if it has not reached it yet
                 d = wmap[MAP_HEADER + cells + cell]
                 if 0 <= d < wmap[MAP_PENDING]:
                     wmap[MAP_PENDING] = d
@@ -141,68 +153,95 @@ def see_parked(wmap, nb, m, ox, oy, around, starts, width, height):
 
 @kernel
 def plan_field(wmap, ox, oy, gx, gy, width, height):
-    """The breadth-first distance of every cell to the goal ``(gx, gy)`` around the known walls
-    and the parked agents taken (:func:`see_parked`; around the walls alone where those cut
-    ``(ox, oy)`` off the goal), 4-connected, -1 where cut off; unless the field is current.
+    """Make the distance field to the goal ``(gx, gy)`` current at ``(ox, oy)``: around the known
+    walls and the parked agents taken (:func:`see_parked`; around the walls alone where those cut
+    ``(ox, oy)`` off the goal), 4-connected, grown as far as the agent reads it
+    (:func:`grow_field`).
 
     A field that does not plan around the pending parked agents yet (:func:`see_parked`) is as
     good as current while each of them is at least 2 steps farther from the goal than the agent:
     a cell's distance depends only on the cells nearer the goal, and the agent reads the
     distances of its cell, the cells next to it and the cell it came from."""
     goal = gy * width + gx
-    here = wmap[MAP_HEADER + width * height + oy * width + ox]
-    if wmap[MAP_GOAL] == goal and 0 <= here and here + 2 <= wmap[MAP_PENDING]:
-        return
+    at = oy * width + ox
+    if wmap[MAP_GOAL] == goal:
+        here = grow_field(wmap, at, width, height)
+        if 0 <= here and here + 2 <= wmap[MAP_PENDING]:
+            return
     wmap[MAP_PENDING] = NOTHING_PENDING
-    breadth_first(wmap, goal, width, height, wmap[MAP_PARKED] > 0)
+    start_field(wmap, goal, width, height, wmap[MAP_PARKED] > 0)
     wmap[MAP_CUT] = 0
-    if wmap[MAP_PARKED] > 0 and wmap[MAP_HEADER + width * height + oy * width + ox] < 0:
-        breadth_first(wmap, goal, width, height, False)
+    if grow_field(wmap, at, width, height) < 0 and wmap[MAP_PARKED] > 0:
+        start_field(wmap, goal, width, height, False)
+        grow_field(wmap, at, width, height)
         wmap[MAP_CUT] = 1
     wmap[MAP_GOAL] = goal
 
 
 @kernel
-def breadth_first(wmap, goal, width, height, parked):
-    """The distance field from ``goal`` around the known walls (and the arrived agents taken, if
-    ``parked``). The four neighbours are spelled out: it is the agent's costliest step in plain
-    Python."""
+def start_field(wmap, goal, width, height, around):
+    """Start the breadth-first search from ``goal``: no distance known but the goal's; it goes
+    around the arrived agents taken if ``around``."""
+    cells = width * height
+    dist = MAP_HEADER + cells
+    for c in range(cells):
+        wmap[dist + c] = -1
+    wmap[dist + goal] = 0
+    wmap[MAP_HEADER + 2 * cells] = goal
+    wmap[MAP_HEAD] = 0
+    wmap[MAP_TAIL] = 1
+    wmap[MAP_AROUND] = 1 if around else 0
+
+
+@kernel
+def grow_field(wmap, at, width, height):
+    """Go on with the breadth-first search (:func:`start_field`) until cell ``at`` has its
+    distance and so has every cell at most one step farther (or every cell reachable has);
+    returns ``at``'s distance, -1 where it is cut off. A cell is entered unless it is a known
+    wall, or an arrived agent taken where the search goes around them (``MAP_AROUND``). The four
+    neighbours are spelled out: it is the agent's costliest step in plain Python."""
     cells = width * height
     dist = MAP_HEADER + cells
     queue = MAP_HEADER + 2 * cells
     flag = MAP_HEADER + 3 * cells
-    for c in range(cells):
-        wmap[dist + c] = -1
-        if wmap[MAP_HEADER + c] != 0 or (parked and wmap[flag + c] != 0):
-            wmap[dist + c] = -2  # closed: never entered
-    wmap[dist + goal] = 0
-    wmap[queue] = goal
-    head = 0
-    tail = 1
+    around = wmap[MAP_AROUND] != 0
+    head = wmap[MAP_HEAD]
+    tail = wmap[MAP_TAIL]
     while head < tail:
         c = wmap[queue + head]
+        here = wmap[dist + at]
+        if 0 <= here < wmap[dist + c]:  # every cell nearer than here + 2 has its distance
+            break
         head += 1
         d = wmap[dist + c] + 1
         cx = c % width
-        if cx > 0 and wmap[dist + c - 1] == -1:
-            wmap[dist + c - 1] = d
-            wmap[queue + tail] = c - 1
+        n = c - 1
+        if cx > 0 and wmap[dist + n] == -1 and wmap[MAP_HEADER + n] == 0 \
+                and not (around and wmap[flag + n] != 0):
+            wmap[dist + n] = d
+            wmap[queue + tail] = n
             tail += 1
-        if cx < width - 1 and wmap[dist + c + 1] == -1:
-            wmap[dist + c + 1] = d
-            wmap[queue + tail] = c + 1
+        n = c + 1
+        if cx < width - 1 and wmap[dist + n] == -1 and wmap[MAP_HEADER + n] == 0 \
+                and not (around and wmap[flag + n] != 0):
+            wmap[dist + n] = d
+            wmap[queue + tail] = n
             tail += 1
-        if c >= width and wmap[dist + c - width] == -1:
-            wmap[dist + c - width] = d
-            wmap[queue + tail] = c - width
+        n = c - width
+        if c >= width and wmap[dist + n] == -1 and wmap[MAP_HEADER + n] == 0 \
+                and not (around and wmap[flag + n] != 0):
+            wmap[dist + n] = d
+            wmap[queue + tail] = n
             tail += 1
-        if c + width < cells and wmap[dist + c + width] == -1:
-            wmap[dist + c + width] = d
-            wmap[queue + tail] = c + width
+        n = c + width
+        if n < cells and wmap[dist + n] == -1 and wmap[MAP_HEADER + n] == 0 \
+                and not (around and wmap[flag + n] != 0):
+            wmap[dist + n] = d
+            wmap[queue + tail] = n
             tail += 1
-    for c in range(cells):
-        if wmap[dist + c] == -2:
-            wmap[dist + c] = -1
+    wmap[MAP_HEAD] = head
+    wmap[MAP_TAIL] = tail
+    return wmap[dist + at]
 
 
 @kernel
@@ -218,7 +257,8 @@ def track(wmap, wall_x, wall_y, first, last, ox, oy, gx, gy, width, height, nb, 
 
 @kernel
 def path_length(wmap, x, y, width, height):
-    """The cell's distance to the goal on the known map (-1 if cut off; the field current)."""
+    """The cell's distance to the goal on the known map (-1 if cut off; the field current and
+    grown past it: the agent's cell, a cell next to it, or one nearer the goal)."""
     return wmap[MAP_HEADER + width * height + y * width + x]
 
 

@@ -9,7 +9,7 @@ import pytest
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.known_map import (
     WHOLE_MAP,
-    MAP_KNOWN, check_cell_order, fresh_map, known_cells, map_size, path_length, progress_moves,
+    MAP_CUT, MAP_KNOWN, check_cell_order, fresh_map, known_cells, map_size, path_length, progress_moves,
     restore_known, see_walls, track, waypoint_move,
 )
 from nnql_swarm.learning.fields import (
@@ -121,6 +121,67 @@ def test_the_detour_goes_around_parked_agents_within_reach_unless_they_close_the
     closed = fresh()
     track(closed, *walls_of(*corridor), 0, len(corridor), 1, 1, 4, 1, W, H, rows, 1, 4, False, VIEW_RADIUS)
     assert path_length(closed, 1, 1, W, H) == 3 and waypoint_move(closed, 1, 1, 4, 1, W, H) == RIGHT
+
+
+def whole_field(blocked, goal, width, height):
+    """The distances to ``goal`` of every cell around the ``blocked`` ones, by a plain search."""
+    dist = {goal: 0}
+    frontier = [goal]
+    while frontier:
+        reached = []
+        for x, y in frontier:
+            for cell in ((x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)):
+                if (0 <= cell[0] < width and 0 <= cell[1] < height and cell not in dist
+                        and cell not in blocked):
+                    dist[cell] = dist[(x, y)] + 1
+                    reached.append(cell)
+        frontier = reached
+    return dist
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_the_lazy_field_reads_as_the_whole_field_would(seed):
+    """An agent walks about a map of walls while arrived agents are taken as it goes: every
+    distance it reads (its cell, the cells next to it, the one it came from) is that cell's in
+    the whole field of the map it plans on, although the search stops once those are known."""
+    rng = np.random.default_rng(seed)
+    width, height = int(rng.integers(6, 16)), int(rng.integers(6, 16))
+    walls = [(x, y) for y in range(height) for x in range(width) if rng.random() < 0.2]
+    free = [(x, y) for y in range(height) for x in range(width) if (x, y) not in walls]
+    wx, wy = walls_of(*walls)
+    wmap = fresh(width, height)
+    goal = free[rng.integers(len(free))]
+    here = free[rng.integers(len(free))]
+    parked_cells: list[tuple[int, int]] = []
+    rows = NONE
+    for step in range(80):
+        if rng.random() < 0.15:
+            cell = free[rng.integers(len(free))]
+            if cell != here and cell not in parked_cells:
+                parked_cells.append(cell)
+                rows = np.array([parked(j + 1, *c) for j, c in enumerate(parked_cells)], np.int64)
+        if rng.random() < 0.05:  # a new goal
+            goal = free[rng.integers(len(free))]
+        came_from = here
+        track(wmap, wx, wy, 0, len(walls), *here, *goal, width, height, rows, len(rows),
+              width + height, step == 0, VIEW_RADIUS)
+        blocked = set(known_cells_of(wmap, width, height))
+        planned = whole_field(blocked | set(parked_cells) if not wmap[MAP_CUT] else blocked,
+                              goal, width, height)
+        reads = [here, came_from] + [(here[0] + dx, here[1] + dy) for dx, dy in
+                                     ((-1, 0), (1, 0), (0, -1), (0, 1))]
+        for x, y in reads:
+            if 0 <= x < width and 0 <= y < height:
+                assert path_length(wmap, x, y, width, height) == planned.get((x, y), -1), \
+                    f"step {step}: cell {(x, y)}, the agent at {here}, its goal {goal}"
+        moves = [(here[0] + dx, here[1] + dy) for dx, dy in ((-1, 0), (1, 0), (0, -1), (0, 1))]
+        moves = [c for c in moves if c in free and c not in parked_cells]
+        if moves:
+            here = moves[rng.integers(len(moves))]
+
+
+def known_cells_of(wmap, width, height):
+    return [(c % width, c // width) for c in known_cells(wmap, width, height)]
 
 
 def test_destination_seeking_reads_the_waypoint_or_the_progress_moves():
