@@ -26,7 +26,7 @@ simulator runs compiled. The buffers hold every body: the agents, then the run's
 (``protocol.walls``), which always stay and which nobody is told about (every process knows them).
 """
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
@@ -189,7 +189,7 @@ class SwarmWorld:
     def observations(self) -> list[Observation]:
         """Every agent's observation for the current tick, indexed by agent id."""
         neighbours = self._neighbours()
-        return [self._observation(i, neighbours[i]) for i in range(self.config.n_agents)]
+        return [self._observation(i, neighbours(i)) for i in range(self.config.n_agents)]
 
     def observations_by_rank(self) -> Iterator[Observation]:
         """The observations to send, in rank order, each built only when the one before it is
@@ -206,7 +206,7 @@ class SwarmWorld:
                     unheard.update(entries)
                 if len(unheard) < QUIET_CATCH_UP:
                     continue
-            yield self._observation(agent, neighbours[agent])
+            yield self._observation(agent, neighbours(agent))
 
     def _observation(self, i: int, neighbours: tuple[tuple[int, int, int], ...]) -> Observation:
         c = self.config
@@ -246,15 +246,17 @@ class SwarmWorld:
         """The agents still being sent the whole table."""
         return tuple(sorted(self._syncing))
 
-    def _neighbours(self) -> list[tuple[tuple[int, int, int], ...]]:
-        """Each agent's visible others as ``(id, x, y)`` in id order, by agent id."""
+    def _neighbours(self) -> Callable[[int], tuple[tuple[int, int, int], ...]]:
+        """Each agent's visible others as ``(id, x, y)`` in id order, by agent id: worked out
+        for an agent only when it is sent an observation (a settled agent is not), from one
+        sight matrix of everyone."""
         n = self.config.n_agents
         xs, ys = python_values(self._x)[:n], python_values(self._y)[:n]
         everyone = tuple(zip(range(len(xs)), xs, ys))
         if self._sees_all:
-            return [everyone[:i] + everyone[i + 1:] for i in range(len(xs))]
-        return [tuple([everyone[j] for j in np.flatnonzero(row).tolist()])
-                for row in sight_matrix(xs, ys)]
+            return lambda i: everyone[:i] + everyone[i + 1:]
+        seen = sight_matrix(xs, ys)
+        return lambda i: tuple([everyone[j] for j in np.flatnonzero(seen[i]).tolist()])
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
               orders: list[tuple[int, ...] | None] | None = None) -> TickReport:
