@@ -62,8 +62,8 @@ def within(neighbours, x: int, y: int, distance: int) -> list[tuple[int, int, in
     """The ``(id, x, y)`` of ``neighbours`` at most ``distance`` king's moves (:func:`chebyshev`)
     from cell ``(x, y)``, in their order: a cheap cut, spelled out rather than a call per
     neighbour, before a rule looks at the few left."""
-    return [(j, jx, jy) for j, jx, jy in neighbours
-            if -distance <= jx - x <= distance and -distance <= jy - y <= distance]
+    low_x, high_x, low_y, high_y = x - distance, x + distance, y - distance, y + distance
+    return [n for n in neighbours if low_x <= n[1] <= high_x and low_y <= n[2] <= high_y]
 
 
 @kernel
