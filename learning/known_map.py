@@ -196,8 +196,8 @@ def start_field(wmap, goal, width, height, around):
 @kernel
 def grow_field(wmap, at, width, height):
     """Go on with the breadth-first search (:func:`start_field`) until cell ``at`` has its
-    distance and so has every cell at most one step farther (or every cell reachable has);
-    returns ``at``'s distance, -1 where it is cut off. A cell is entered unless it is a known
+    distance and so has every cell at most one step farther (or every cell reachable has; every
+    one, for ``at`` -1); returns ``at``'s distance, -1 where it is cut off. A cell is entered unless it is a known
     wall, or an arrived agent taken where the search goes around them (``MAP_AROUND``). The four
     neighbours are spelled out: it is the agent's costliest step in plain Python."""
     cells = width * height
@@ -209,7 +209,7 @@ def grow_field(wmap, at, width, height):
     tail = wmap[MAP_TAIL]
     while head < tail:
         c = wmap[queue + head]
-        here = wmap[dist + at]
+        here = wmap[dist + at] if at >= 0 else -1
         if 0 <= here < wmap[dist + c]:  # every cell nearer than here + 2 has its distance
             break
         head += 1
@@ -241,7 +241,7 @@ def grow_field(wmap, at, width, height):
             tail += 1
     wmap[MAP_HEAD] = head
     wmap[MAP_TAIL] = tail
-    return wmap[dist + at]
+    return wmap[dist + at] if at >= 0 else -1
 
 
 @kernel
