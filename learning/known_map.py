@@ -54,9 +54,12 @@ def map_size(width: int, height: int) -> int:
 
 def fresh_map(wmap) -> None:
     """Forget everything (a buffer of :func:`map_size`): no wall known, no arrived agent, no
-    field."""
+    field (no cell has a distance)."""
     for c in range(len(wmap)):
         wmap[c] = 0
+    cells = (len(wmap) - MAP_HEADER) // SECTIONS
+    for c in range(MAP_HEADER + cells, MAP_HEADER + 2 * cells):
+        wmap[c] = -1
     wmap[MAP_GOAL] = -1
     wmap[MAP_PENDING] = NOTHING_PENDING
 
@@ -181,13 +184,15 @@ def plan_field(wmap, ox, oy, gx, gy, width, height):
 @kernel
 def start_field(wmap, goal, width, height, around):
     """Start the breadth-first search from ``goal``: no distance known but the goal's; it goes
-    around the arrived agents taken if ``around``."""
+    around the arrived agents taken if ``around``. Only the cells the last search reached have a
+    distance to forget: they are those of its queue (:func:`fresh_map` leaves none)."""
     cells = width * height
     dist = MAP_HEADER + cells
-    for c in range(cells):
-        wmap[dist + c] = -1
+    queue = MAP_HEADER + 2 * cells
+    for k in range(wmap[MAP_TAIL]):
+        wmap[dist + wmap[queue + k]] = -1
     wmap[dist + goal] = 0
-    wmap[MAP_HEADER + 2 * cells] = goal
+    wmap[queue] = goal
     wmap[MAP_HEAD] = 0
     wmap[MAP_TAIL] = 1
     wmap[MAP_AROUND] = 1 if around else 0

@@ -186,6 +186,7 @@ def known_cells_of(wmap, width, height):
 
 def test_destination_seeking_reads_the_waypoint_or_the_progress_moves():
     agent = Agent()
+    agent.wmap = fresh()  # a map of this grid
     agent.params[LP_DS_STATE] = DS_WAYPOINT
     track(agent.wmap, *walls_of(), 0, 0, 1, 1, 5, 3, W, H, NONE, 0, -1, False, VIEW_RADIUS)
     assert ds_state(agent.params, agent.wmap, 1, 1, 5, 3, W, H) == offset_state(1, 0)
