@@ -30,6 +30,8 @@ known wall, its distance to the goal (-1 where cut off or not reached yet), the 
 whether an arrived agent taken stands there, and the list of those cells.
 """
 
+import numpy as np
+
 from nnql_swarm.protocol.actions import (
     DOWN, LEFT, N_ACTIONS, RIGHT, STAY, UP, target_x, target_y,
 )
@@ -55,11 +57,15 @@ def map_size(width: int, height: int) -> int:
 def fresh_map(wmap) -> None:
     """Forget everything (a buffer of :func:`map_size`): no wall known, no arrived agent, no
     field (no cell has a distance)."""
-    for c in range(len(wmap)):
-        wmap[c] = 0
-    cells = (len(wmap) - MAP_HEADER) // SECTIONS
-    for c in range(MAP_HEADER + cells, MAP_HEADER + 2 * cells):
-        wmap[c] = -1
+    size = len(wmap)
+    cells = (size - MAP_HEADER) // SECTIONS
+    distances = slice(MAP_HEADER + cells, MAP_HEADER + 2 * cells)
+    if isinstance(wmap, np.ndarray):
+        wmap[:] = 0
+        wmap[distances] = -1
+    else:
+        wmap[:] = [0] * size
+        wmap[distances] = [-1] * cells
     wmap[MAP_GOAL] = -1
     wmap[MAP_PENDING] = NOTHING_PENDING
 
