@@ -208,9 +208,10 @@ def start_field(wmap, goal, width, height, around):
 def grow_field(wmap, at, width, height):
     """Go on with the breadth-first search (:func:`start_field`) until cell ``at`` has its
     distance and so has every cell at most one step farther (or every cell reachable has; every
-    one, for ``at`` -1); returns ``at``'s distance, -1 where it is cut off. A cell is entered unless it is a known
-    wall, or an arrived agent taken where the search goes around them (``MAP_AROUND``). The four
-    neighbours are spelled out: it is the agent's costliest step in plain Python."""
+    one, for ``at`` -1); returns ``at``'s distance, -1 where it is cut off. A cell is entered
+    unless it is a known wall, or an arrived agent taken where the search goes around them
+    (``MAP_AROUND``). The four neighbours are spelled out: it is the agent's costliest step in
+    plain Python."""
     cells = width * height
     dist = MAP_HEADER + cells
     queue = MAP_HEADER + 2 * cells

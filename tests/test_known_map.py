@@ -8,9 +8,8 @@ import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.learning.known_map import (
-    WHOLE_MAP,
-    MAP_CUT, MAP_KNOWN, check_cell_order, fresh_map, known_cells, map_size, path_length, progress_moves,
-    restore_known, see_walls, track, waypoint_move,
+    MAP_CUT, MAP_KNOWN, WHOLE_MAP, check_cell_order, fresh_map, known_cells, map_size, path_length,
+    progress_moves, restore_known, see_walls, track, waypoint_move,
 )
 from nnql_swarm.learning.fields import (
     LP_WALL_SIGHT, learner_params,
@@ -152,6 +151,7 @@ def test_the_lazy_field_reads_as_the_whole_field_would(seed):
     wmap = fresh(width, height)
     goal = free[rng.integers(len(free))]
     here = free[rng.integers(len(free))]
+    came_from = here
     parked_cells: list[tuple[int, int]] = []
     rows = NONE
     for step in range(80):
@@ -162,7 +162,6 @@ def test_the_lazy_field_reads_as_the_whole_field_would(seed):
                 rows = np.array([parked(j + 1, *c) for j, c in enumerate(parked_cells)], np.int64)
         if rng.random() < 0.05:  # a new goal
             goal = free[rng.integers(len(free))]
-        came_from = here
         track(wmap, wx, wy, 0, len(walls), *here, *goal, width, height, rows, len(rows),
               width + height, step == 0, VIEW_RADIUS)
         blocked = set(known_cells_of(wmap, width, height))
@@ -176,8 +175,27 @@ def test_the_lazy_field_reads_as_the_whole_field_would(seed):
                     f"step {step}: cell {(x, y)}, the agent at {here}, its goal {goal}"
         moves = [(here[0] + dx, here[1] + dy) for dx, dy in ((-1, 0), (1, 0), (0, -1), (0, 1))]
         moves = [c for c in moves if c in free and c not in parked_cells]
+        came_from = here
         if moves:
             here = moves[rng.integers(len(moves))]
+
+
+def test_an_arrived_agent_the_search_has_not_reached_yet_is_gone_around_when_it_does():
+    """A field started with no arrived agent in view, grown only as far as the agent read it;
+    an agent arrives beyond, where the search has not been: as the agent walks out towards it,
+    the search goes around it, as a whole field would."""
+    width, height = 10, 2
+    wmap = fresh(width, height)
+    track(wmap, *walls_of(), 0, 0, 3, 0, 0, 0, width, height, NONE, 0, width, True, VIEW_RADIUS)
+    assert path_length(wmap, 3, 0, width, height) == 3
+    assert path_length(wmap, 6, 0, width, height) == -1, "not reached yet"
+    rows = np.array([parked(1, 6, 0)], np.int64)
+    for x in (3, 4, 5):
+        track(wmap, *walls_of(), 0, 0, x, 0, 0, 0, width, height, rows, 1, width, False,
+              VIEW_RADIUS)
+    assert path_length(wmap, 5, 0, width, height) == 5
+    assert path_length(wmap, 6, 0, width, height) == -1, "the arrived agent's cell is never entered"
+    assert path_length(wmap, 5, 1, width, height) == 6
 
 
 def known_cells_of(wmap, width, height):
