@@ -30,7 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-os.environ.setdefault("NNQL_KERNEL", "python")  # as in the swarm's processes
+os.environ.setdefault("NNQL_KERNEL", "python")  # as in the swarm's processes, unless told
 
 import zenoh
 
