@@ -66,68 +66,86 @@ class _Sample:
         self.key_expr, self.payload = key, payload
 
 
+WORLD = -1
+"""The world's number where a message's sender or receiver is told (agents are 0 .. N - 1)."""
+
+
 class Wire:
     """Every message sent, delivered in order; each delivery timed by the handler's kind, on
-    ``clock``."""
+    ``clock``. ``on_send(number, kind, sender, receiver, item, cause)``, if given, is told each
+    message as it is sent: its number (messages are delivered in the order of their numbers),
+    who sends it to whom (:data:`WORLD`, an agent, or None: everyone, or nobody in particular),
+    and the number of the message whose handler sent it (-1: none)."""
 
-    def __init__(self, clock=time.perf_counter) -> None:
+    def __init__(self, clock=time.perf_counter, on_send=None) -> None:
         self.clock = clock
+        self.on_send = on_send
         self.queue: collections.deque = collections.deque()
         self.subscribers: dict[str, list] = collections.defaultdict(list)
         self.queryables: dict[str, object] = {}
+        self.owners: dict[str, int] = {}  # an agent's intent key -> the agent
         self.seconds: collections.Counter = collections.Counter()
         self.count: collections.Counter = collections.Counter()
+        self.sent = 0
+        self.handling, self.handler_of = -1, None  # the message being handled, its receiver
 
-    def send(self, kind: str, handler, item) -> None:
-        self.queue.append((kind, handler, item))
+    def send(self, kind: str, handler, item, receiver: int | None = None) -> None:
+        number, self.sent = self.sent, self.sent + 1
+        self.queue.append((kind, handler, item, number, receiver))
+        if self.on_send is not None:
+            self.on_send(number, kind, self.handler_of, receiver, item, self.handling)
 
     def drain(self) -> None:
         clock = self.clock
         while self.queue:
-            kind, handler, item = self.queue.popleft()
+            kind, handler, item, self.handling, self.handler_of = self.queue.popleft()
             start = clock()
             handler(item)
             self.seconds[kind] += clock() - start
             self.count[kind] += 1
+        self.handling, self.handler_of = -1, None
 
 
 class _Publisher:
-    def __init__(self, wire: Wire, key: str, kind: str) -> None:
-        self.wire, self.key, self.kind = wire, key, kind
+    def __init__(self, wire: Wire, key: str, kind: str, receiver: int | None = None) -> None:
+        self.wire, self.key, self.kind, self.receiver = wire, key, kind, receiver
 
     def put(self, payload: bytes) -> None:
         for handler in self.wire.subscribers[self.key]:
-            self.wire.send(self.kind, handler, _Sample(self.key, payload))
+            self.wire.send(self.kind, handler, _Sample(self.key, payload), self.receiver)
 
     def undeclare(self) -> None:
         pass
 
 
 class _Query:
-    def __init__(self, wire: Wire, key: str, parameters: str, handler) -> None:
+    def __init__(self, wire: Wire, key: str, parameters: str, handler, asker: int) -> None:
         self.wire, self.key_expr, self.parameters, self.handler = wire, key, parameters, handler
+        self.asker = asker
 
     def reply(self, key, payload: bytes) -> None:
-        self.wire.send("answer", self.handler.callback, _Reply(payload))
+        self.wire.send("answer", self.handler.callback, _Reply(payload), self.asker)
 
     def reply_err(self, payload: bytes) -> None:
         pass
 
     def drop(self) -> None:
         if self.handler.drop is not None:
-            self.wire.send("query end", lambda _: self.handler.drop(), None)
+            self.wire.send("query end", lambda _: self.handler.drop(), None, self.asker)
 
 
 class _Session:
-    """What the nodes call on their session, in the harness: ``get`` and nothing else."""
+    """What the nodes call on their session, in the harness: ``get`` and nothing else.
+    ``owner``: the node's number (:data:`WORLD` or its agent)."""
 
-    def __init__(self, wire: Wire) -> None:
-        self.wire = wire
+    def __init__(self, wire: Wire, owner: int) -> None:
+        self.wire, self.owner = wire, owner
 
     def get(self, selector: str, handler, **_) -> None:
         key, _, parameters = selector.partition("?")
         self.wire.send("query", self.wire.queryables[key],
-                       _Query(self.wire, key, parameters, handler))
+                       _Query(self.wire, key, parameters, handler, self.owner),
+                       self.wire.owners[key])
 
 
 class _LearnNothing(AgentBrain):
@@ -146,28 +164,29 @@ def _ends_of_asks(agents: list[AgentNode]) -> None:
 
 
 def run(config: SwarmConfig, out: Path, bare: bool,
-        clock=time.perf_counter) -> tuple[int, Wire]:
-    """Run ``config`` through the real handlers over a :class:`Wire` timed on ``clock``;
-    (ticks, the wire)."""
+        clock=time.perf_counter, on_send=None) -> tuple[int, Wire]:
+    """Run ``config`` through the real handlers over a :class:`Wire` timed on ``clock`` and
+    telling ``on_send`` each message (:class:`Wire`); (ticks, the wire)."""
     zenoh.handlers.Callback = _Callback  # the nodes build their handlers at call time
-    wire = Wire(clock)
+    wire = Wire(clock, on_send)
     transport = TransportSettings()
     run_id, n = config.run_id, config.n_agents
-    world = WorldNode(WorldOptions(config, transport, out), _Session(wire))
-    world.publishers = [_Publisher(wire, keys.obs_key(run_id, i), "observation")
+    world = WorldNode(WorldOptions(config, transport, out), _Session(wire, WORLD))
+    world.publishers = [_Publisher(wire, keys.obs_key(run_id, i), "observation", i)
                         for i in range(n)]
     world.control = _Publisher(wire, keys.control_key(run_id), "control")
     agents = []
     for i in range(n):
         brain = (_LearnNothing if bare else AgentBrain)(i, config)
-        node = AgentNode(AgentOptions(i, config, transport, out), _Session(wire), brain)
+        node = AgentNode(AgentOptions(i, config, transport, out), _Session(wire, i), brain)
         for j in range(n):
             node.feed(node.protocol.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, j), True)
         intent_key = keys.intent_key(run_id, i)
-        node.publisher = _Publisher(wire, intent_key, "intent")
+        node.publisher = _Publisher(wire, intent_key, "intent", WORLD)
         wire.subscribers[intent_key].append(world._on_intent)
         wire.subscribers[keys.obs_key(run_id, i)].append(node._on_observation)
         wire.queryables[intent_key] = node._on_query
+        wire.owners[intent_key] = i
         agents.append(node)
     for i in range(n):  # the last one opens the first tick
         world.feed(world.protocol.on_liveliness, keys.alive_key(run_id, keys.ROLE_AGENT, i), True)

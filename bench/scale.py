@@ -16,7 +16,10 @@ one agent per 16 cells), in the same run and interleaved repeat by repeat:
   every agent observes, negotiates and answers as the learner does, then stays), which splits
   the gap to the bare loop into what the protocol costs (its messages, its chains of answers,
   the codec, the world's rules and checks) and what the learning adds. Its agents never arrive,
-  so each of its episodes runs to ``--max-steps``.
+  so each of its episodes runs to ``--max-steps``;
+- with ``--pattern``, also the swarm's own messages with no work in them (``bench/pattern.py``:
+  the same run's messages, tick by tick, replayed by bare processes): the most the swarm could
+  reach were our Python free.
 
 ``--obstacle-density P`` puts walls on the swarm's grids (``protocol.walls``), the same grids.
 
@@ -76,6 +79,12 @@ def bare_once(n: int, ticks: int, topology: str) -> dict:
     return {"rate": result["rate"], "startup_s": result["startup_s"]}
 
 
+def pattern_once(pattern, ticks: int, topology: str) -> dict:
+    from bench.pattern import replay
+
+    return replay(pattern, topology, ticks)
+
+
 def median(runs: list[dict], key: str) -> float:
     import statistics
 
@@ -106,6 +115,9 @@ def main() -> int:
     p.add_argument("--split", action="store_true",
                    help="also run the swarm with the learning taken out (agents negotiate, then "
                         "stay): what the protocol costs apart from the learning")
+    p.add_argument("--pattern", action="store_true",
+                   help="also replay the swarm's own messages with no work in them "
+                        "(bench/pattern.py): the most the swarm could reach were our Python free")
     add_preset_option(p)
     args = p.parse_args()
     try:
@@ -123,8 +135,17 @@ def main() -> int:
 
     table = []
     for n in sizes:
-        swarm, bare, staying = [], [], []
+        swarm, bare, staying, replays = [], [], [], []
         topology = embedded_topology(n) if args.topology == "auto" else args.topology
+        pattern = None
+        if args.pattern:
+            from bench.pattern import record
+
+            side = grid_side(n)
+            pattern = record(swarm_config(
+                args.preset, run_id=f"scale-{n}", n_agents=n, width=side, height=side,
+                episodes=args.episodes, max_steps=args.max_steps, seed=args.seed,
+                obstacle_density=args.obstacle_density))
         for repeat in range(args.repeats):
             swarm.append(swarm_once(n, args.preset, args.episodes, args.max_steps, args.seed,
                                     topology, args.obstacle_density))
@@ -133,8 +154,11 @@ def main() -> int:
                 staying.append(swarm_once(n, args.preset, args.episodes, args.max_steps,
                                           args.seed, topology, args.obstacle_density,
                                           agent_target=stay_agent_main))
+            if pattern is not None:
+                replays.append(pattern_once(pattern, args.bare_ticks, topology))
             s, b = swarm[-1], bare[-1]
             split = f", learning nothing {staying[-1]['rate']:.0f} ticks/s" if staying else ""
+            split += f", its messages alone {replays[-1]['rate']:.0f} ticks/s" if replays else ""
             print(f"  {n} agents, repeat {repeat + 1}: swarm {s['rate']:.0f} ticks/s "
                   f"(missed {s['missed_first']} then {s['missed']}, start-up "
                   f"{s['startup_s']:.1f} s, agent {s['agent_mib']:.1f} MiB), bare "
@@ -151,6 +175,11 @@ def main() -> int:
             row["staying_ratio"] = statistics.median(
                 t["rate"] / b["rate"] for t, b in zip(staying, bare))
             row["staying_runs"] = [round(t["rate"]) for t in staying]
+        if replays:
+            row["pattern"] = median(replays, "rate")
+            row["pattern_ratio"] = statistics.median(
+                t["rate"] / b["rate"] for t, b in zip(replays, bare))
+            row["pattern_runs"] = [round(t["rate"]) for t in replays]
         row["ms_per_agent"] = 1000.0 / row["swarm"] / n
         row["bare_ms_per_agent"] = 1000.0 / row["bare"] / n
         table.append(row)
@@ -184,6 +213,15 @@ def print_table(table: list[dict], args) -> None:
         for r in split:
             print(f"| {r['agents']} | {r['staying']:.0f} | {r['staying_ratio']:.2f} | "
                   f"{r['ratio']:.2f} | {' '.join(map(str, r['staying_runs']))} |")
+    replayed = [r for r in table if "pattern" in r]
+    if replayed:
+        print("\nthe swarm's own messages with no work in them (bench/pattern.py), in the same "
+              "runs; ratios to the bare loop, each repeat's own, medians")
+        print("| agents | its messages alone, ticks/s | their ratio | the swarm's ratio | runs |")
+        print("| ---: | ---: | ---: | ---: | --- |")
+        for r in replayed:
+            print(f"| {r['agents']} | {r['pattern']:.0f} | {r['pattern_ratio']:.2f} | "
+                  f"{r['ratio']:.2f} | {' '.join(map(str, r['pattern_runs']))} |")
 
 
 def draw(table: list[dict], path: Path) -> None:

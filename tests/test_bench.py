@@ -41,3 +41,28 @@ def test_collisions_classifies_every_collision_of_a_frozen_episode():
         "into one that stayed, unknown, unseen last step", "into one that was blocked",
         "two into one free cell", "two into one free cell, other's intent known",
         "two into a cell being left") for gave_up in ("", " (shield gave up)")}
+
+
+def test_the_swarms_message_pattern_is_recorded_from_its_handlers_and_replays_through_zenoh():
+    """``bench.pattern``: 8 agents of the default preset negotiate (answers, chains longer than
+    the bare loop's two hops); what each agent waited for is what its neighbours sent it when
+    they decided, so the replay of bare processes on loopback plays every tick to the end."""
+    from bench.harness import swarm_config
+    from bench.pattern import WORLD, record, replay
+    from nnql_swarm.protocol.config import DEFAULT_PRESET
+
+    config = swarm_config(DEFAULT_PRESET, run_id="pattern-test", n_agents=8, width=11,
+                          height=11, episodes=3, max_steps=100, seed=0)
+    pattern = record(config)
+    assert 0 < pattern.timed_from < len(pattern.ticks)
+    assert pattern.answers_per_tick() > 0.5 and 2 < pattern.hops_per_tick() < 8
+    for tick in pattern.ticks:
+        observed = {agent for agent, _ in tick.observations}
+        assert set(tick.decisions) <= observed
+        for agent, decision in tick.decisions.items():
+            assert [to for kind, to, _ in decision.sends if kind == "intent"] in ([], [WORLD])
+            assert all(agent in tick.decisions[neighbour].answered
+                       for neighbour in decision.awaits)
+    assert pattern.recorded(len(pattern.ticks)) == pattern.timed_from
+    result = replay(pattern, "mesh", timed_ticks=300, timeout_s=20)
+    assert result["rate"] > 0, "the replay stalled"

@@ -1,0 +1,457 @@
+#!/usr/bin/env python3
+"""The swarm's own messages with no work in them: how fast its ticks could go were our Python free.
+
+Two steps, for each size:
+
+1. **Record** which messages a run of the swarm sends at each tick: the real world and agent
+   handlers in one thread (``bench.node_cpu``'s harness, every message delivered in the order it
+   was sent), the default preset unless ``--preset``, on the grid ``bench.scale`` gives that many
+   agents, its first ``--episodes`` episodes. For each tick: the observations the world sends
+   (to whom, how large); for each agent that decides, the answers it had when it decided (from
+   whom) and what it sent then (answers to whom, its intent), each of its size.
+2. **Replay** exactly that pattern with bare processes, started and connected as
+   ``bench/lockstep.py`` starts the bare loop (the launcher's start method and layout, one
+   session each, handlers on Zenoh's thread): the world sends each tick's observations and waits
+   for the tick's intents; an agent, once it has its observation and the answers it waited for,
+   answers through the standing queries its neighbours keep open on it and sends its intent,
+   and does nothing else. No codec, no rules, no learning, no checks, no files.
+
+Beside each replay, in the same run and interleaved, the bare loop of as many processes. The
+replay's ticks a second over every episode but the first, as ``bench.scale`` times the swarm,
+is a ceiling: the swarm's tick cannot be cheaper than its own hops. Its ratio to the bare loop
+is the most the swarm could reach with every line of our Python taken out of the tick.
+
+What the recording leaves out makes the ceiling higher, never lower: the asks for one tick to
+a neighbour with no standing query yet (counted, and few after the first episode), the replies
+to asks for a tick already decided, the end-of-episode checkpoints.
+
+    python -m bench.pattern --agents 8,64 --repeats 3
+"""
+
+import argparse
+import statistics
+import struct
+import sys
+import tempfile
+import threading
+import time
+from collections import Counter, defaultdict
+from dataclasses import dataclass, field
+from functools import partial
+from pathlib import Path
+
+START_TIMEOUT_S = 120.0
+WORLD = -1  # as bench.node_cpu.WORLD (not imported here: see bench.scale on what the top imports)
+_HEAD = struct.Struct("<qi")  # tick, sender
+OPENED = -2  # the tick of a standing query's first reply: it is open
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What one agent does at one tick: once it has its observation and an answer from each of
+    ``awaits``, it sends ``sends`` in order: ``("answer", asker, bytes)`` or
+    ``("intent", WORLD, bytes)``."""
+
+    awaits: frozenset[int]
+    sends: tuple[tuple[str, int, int], ...]
+
+    @property
+    def answered(self) -> set[int]:
+        return {to for kind, to, _ in self.sends if kind == "answer"}
+
+
+@dataclass
+class TickPattern:
+    observations: list[tuple[int, int]] = field(default_factory=list)  # (agent, bytes), in order
+    decisions: dict[int, Decision] = field(default_factory=dict)
+
+    @property
+    def intents(self) -> int:
+        return sum(1 for d in self.decisions.values() for kind, _, _ in d.sends if kind == "intent")
+
+
+@dataclass
+class Pattern:
+    """A run's messages, tick by tick; ``timed_from``: the first tick of the second episode."""
+
+    n: int
+    ticks: list[TickPattern]
+    timed_from: int
+    asks: int = 0  # asks for one tick, after the first episode (left out of the replay)
+    late_replies: int = 0  # replies to asks for a tick already decided (left out)
+
+    def recorded(self, tick: int) -> int:
+        """The recorded tick a replay's ``tick`` plays: the ticks from :attr:`timed_from` on
+        are played again and again, so that a replay times as many as it is told."""
+        if tick < self.timed_from:
+            return tick
+        return self.timed_from + (tick - self.timed_from) % (len(self.ticks) - self.timed_from)
+
+    def answers_per_tick(self) -> float:
+        timed = self.ticks[self.timed_from:]
+        return sum(1 for t in timed for d in t.decisions.values() for kind, _, _ in d.sends
+                   if kind == "answer") / max(len(timed), 1)
+
+    def hops_per_tick(self) -> float:
+        """The hops on each tick's longest chain (the observation, each answer waited for, the
+        intent), averaged over the timed ticks: the bare loop's is 2."""
+        hops = []
+        for tick in self.ticks[self.timed_from:]:
+            depth: dict[int, int] = {}
+
+            def chain(agent: int, seen: frozenset = frozenset()) -> int:
+                if agent not in depth:
+                    decision = tick.decisions.get(agent)
+                    awaited = decision.awaits - seen - {agent} if decision else frozenset()
+                    depth[agent] = 1 + max((chain(a, seen | {agent}) for a in awaited),
+                                           default=0)
+                return depth[agent]
+
+            senders = [a for a, d in tick.decisions.items()
+                       if any(kind == "intent" for kind, _, _ in d.sends)]
+            hops.append(1 + max((chain(a) for a in senders), default=0))
+        return statistics.mean(hops) if hops else 0.0
+
+
+def record(config) -> Pattern:
+    """The messages of a run of ``config`` through the real handlers (see the module
+    docstring)."""
+    from bench import node_cpu
+    from nnql_swarm.protocol.messages import Answer, Intent, Observation, parse
+
+    run_id = config.run_id
+    observations: dict[int, list[tuple[int, int]]] = defaultdict(list)
+    answers_to: dict[tuple[int, int], list[tuple[int, int]]] = defaultdict(list)
+    sends: dict[tuple[int, int], list[tuple[int, str, int, int]]] = defaultdict(list)
+    episodes: dict[int, int] = {}
+    asks_at: Counter[int] = Counter()
+
+    def on_send(number, kind, sender, receiver, item, cause) -> None:
+        if kind == "observation":
+            msg = parse(item.payload, Observation, run_id)
+            observations[msg.tick].append((receiver, len(item.payload)))
+            episodes.setdefault(msg.tick, msg.episode)
+        elif kind == "intent":
+            msg = parse(item.payload, Intent, run_id)
+            sends[sender, msg.tick].append((cause, "intent", WORLD, len(item.payload)))
+        elif kind == "answer":
+            payload = item.ok.payload
+            msg = parse(payload, Answer, run_id)
+            answers_to[receiver, msg.tick].append((number, sender))
+            sends[sender, msg.tick].append((cause, "answer", receiver, len(payload)))
+        elif kind == "query" and "tick=" in item.parameters:
+            asks_at[int(item.parameters.split("tick=")[1].split(";")[0])] += 1
+
+    with tempfile.TemporaryDirectory() as tmp:
+        ticks, _ = node_cpu.run(config, Path(tmp), False, on_send=on_send)
+    pattern = Pattern(config.n_agents, [TickPattern() for _ in range(ticks)],
+                      timed_from=min((t for t, e in episodes.items() if e >= 1), default=0))
+    for tick, observed in observations.items():
+        if tick < ticks:
+            pattern.ticks[tick].observations = observed
+    for (agent, tick), sent in sends.items():
+        if tick >= ticks:
+            continue
+        decided = sent[0][0]  # the message whose handler decided: its first send's cause
+        awaits = frozenset(s for number, s in answers_to[agent, tick] if number <= decided)
+        pattern.ticks[tick].decisions[agent] = Decision(
+            awaits, tuple((kind, to, size) for cause, kind, to, size in sent if cause == decided))
+        if tick >= pattern.timed_from:
+            pattern.late_replies += sum(1 for cause, *_ in sent if cause != decided)
+    # An answer its sender did not send with its decision (a reply to an ask for a tick it had
+    # decided) is left out, and so is waiting for it.
+    for tick in pattern.ticks:
+        decisions = tick.decisions
+        for agent, decision in decisions.items():
+            sent = frozenset(s for s in decision.awaits
+                             if s in decisions and agent in decisions[s].answered)
+            if sent != decision.awaits:
+                decisions[agent] = Decision(sent, decision.sends)
+    pattern.asks = sum(count for tick, count in asks_at.items() if tick >= pattern.timed_from)
+    return pattern
+
+
+def _payload(tick: int, sender: int, size: int) -> bytes:
+    head = _HEAD.pack(tick, sender)
+    return head + bytes(max(size - len(head), 0))
+
+
+def agent(me: int, script: dict[int, Decision], recorded, transport,
+          timeout_s: float = START_TIMEOUT_S) -> None:
+    """One agent of the replay: at each tick, once its observation and awaited answers are in,
+    it sends what it sent at the tick it plays (``recorded(tick)``: :meth:`Pattern.recorded`);
+    it leaves on a negative tick (or when it has waited ``timeout_s`` for its neighbours)."""
+    from nnql_swarm.transport.callbacks import callback
+    from nnql_swarm.transport.runtime import declare_lockstep_publisher
+    from nnql_swarm.transport.settings import open_session
+    import zenoh
+
+    answerers = {a for d in script.values() for a in d.awaits}
+    lock = threading.Lock()
+    done, everyone_up, streamed = threading.Event(), threading.Event(), threading.Event()
+    up: set[str] = set()
+    unconfirmed, to_ask = set(answerers), set(answerers)  # standing queries not yet open
+    standing: dict[int, object] = {}  # asker -> its standing query on this agent
+    unsent: dict[int, list[bytes]] = defaultdict(list)  # answers owed before the query came
+    observed: set[int] = set()
+    heard: dict[int, set[int]] = defaultdict(set)
+    with open_session(transport) as s:
+        publisher = declare_lockstep_publisher(s, f"pat/intent/{me}")
+        key = f"pat/intent/{me}"
+
+        def reply(asker: int, payload: bytes) -> None:
+            query = standing.get(asker)
+            if query is None:
+                unsent[asker].append(payload)
+            else:
+                query.reply(key, payload)
+
+        def try_decide(tick: int) -> None:
+            decision = script.get(recorded(tick))
+            if tick not in observed or decision is None or not decision.awaits <= heard[tick]:
+                return
+            observed.discard(tick)
+            heard.pop(tick, None)
+            for kind, to, size in decision.sends:
+                if kind == "answer":
+                    reply(to, _payload(tick, me, size))
+                else:
+                    publisher.put(_payload(tick, me, size))
+
+        def on_obs(sample) -> None:
+            tick, _ = _HEAD.unpack_from(sample.payload.to_bytes())
+            if tick < 0:
+                done.set()
+                return
+            with lock:
+                observed.add(tick)
+                try_decide(tick)
+
+        def on_answer(reply_) -> None:
+            if reply_.ok is None:
+                return
+            tick, sender = _HEAD.unpack_from(reply_.ok.payload.to_bytes())
+            with lock:
+                if tick == OPENED:
+                    unconfirmed.discard(sender)
+                    if not unconfirmed:
+                        streamed.set()
+                else:
+                    heard[tick].add(sender)
+                    try_decide(tick)
+
+        def on_ended(answerer: int) -> None:
+            with lock:
+                if answerer in unconfirmed:
+                    to_ask.add(answerer)  # it never reached the neighbour: ask again
+
+        def on_query(query) -> None:
+            asker = int(str(query.parameters).split("from=")[1])
+            with lock:
+                standing[asker] = query
+                query.reply(key, _payload(OPENED, me, 0))
+                for payload in unsent.pop(asker, []):
+                    query.reply(key, payload)
+
+        def on_up(sample) -> None:
+            up.add(str(sample.key_expr))
+            if len(up) == len(everyone):
+                everyone_up.set()
+
+        everyone = {f"pat/up/{a}" for a in answerers}
+        s.declare_subscriber(f"pat/obs/{me}", callback(on_obs))
+        s.declare_queryable(key, callback(on_query))
+        tokens = [s.liveliness().declare_token(f"pat/up/{me}")]
+        s.liveliness().declare_subscriber("pat/up/*", callback(on_up), history=True)
+        if not everyone:
+            everyone_up.set()
+        everyone_up.wait(timeout_s)
+        # A query sent before this session has heard of the neighbour's queryable ends at once,
+        # unanswered: each is sent again until its neighbour says it is open.
+        deadline = time.monotonic() + timeout_s
+        while answerers and not streamed.is_set() and time.monotonic() < deadline:
+            with lock:
+                asking, _ = sorted(to_ask), to_ask.clear()
+            for a in asking:
+                s.get(f"pat/intent/{a}?from={me}", callback(on_answer, partial(on_ended, a)),
+                      consolidation=zenoh.ConsolidationMode.NONE, timeout=10 * timeout_s)
+            streamed.wait(0.1)
+        tokens.append(s.liveliness().declare_token(f"pat/ready/{me}"))
+        done.wait()
+        for token in tokens:
+            token.undeclare()
+        time.sleep(0.2)
+
+
+def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, total: int,
+          timed_from: int, transport, results, timeout_s: float = START_TIMEOUT_S) -> None:
+    """The replay's clock: ``total`` ticks, each the observations of the tick it plays
+    (``recorded(tick)``, into ``ticks``) out and its intents in; puts ``(ticks a second from
+    ``timed_from``, the time every agent was ready)`` on ``results``."""
+    from nnql_swarm.transport.callbacks import callback
+    from nnql_swarm.transport.runtime import declare_lockstep_publisher
+    from nnql_swarm.transport.settings import open_session
+
+    ready: set[str] = set()
+    everyone, finished = threading.Event(), threading.Event()
+    state = {"tick": 0, "heard": 0, "start": 0.0}
+    with open_session(transport) as s:
+        pubs = [declare_lockstep_publisher(s, f"pat/obs/{i}") for i in range(n)]
+
+        def open_tick(tick: int) -> None:
+            while True:
+                if tick == timed_from:
+                    state["start"] = time.perf_counter()
+                if tick == total:
+                    finished.set()
+                    return
+                observed, intents = ticks[recorded(tick)]
+                state["tick"], state["heard"] = tick, 0
+                for to, size in observed:
+                    pubs[to].put(_payload(tick, WORLD, size))
+                if intents:
+                    return
+                tick += 1  # nobody owes this tick an intent
+
+        def on_intent(sample) -> None:
+            tick, _ = _HEAD.unpack_from(sample.payload.to_bytes())
+            if tick != state["tick"]:
+                return
+            state["heard"] += 1
+            if state["heard"] == ticks[recorded(tick)][1]:
+                open_tick(tick + 1)
+
+        def on_ready(sample) -> None:
+            ready.add(str(sample.key_expr))
+            if len(ready) == n:
+                everyone.set()
+
+        s.declare_subscriber("pat/intent/*", callback(on_intent))
+        s.liveliness().declare_subscriber("pat/ready/*", callback(on_ready), history=True)
+        if not everyone.wait(timeout_s):
+            print(f"world: only {len(ready)} of {n} agents ready", file=sys.stderr, flush=True)
+            results.put((float("nan"), float("nan")))
+            return
+        startup = time.time()
+        time.sleep(0.5)  # let the standing queries settle before the clock starts
+        open_tick(0)
+        if not finished.wait(5 * timeout_s):
+            print(f"world: stalled at tick {state['tick']} (plays {recorded(state['tick'])}), "
+                  f"{state['heard']} intents of {ticks[recorded(state['tick'])][1]}",
+                  file=sys.stderr, flush=True)
+            results.put((float("nan"), startup))
+        else:
+            timed = total - timed_from
+            results.put((timed / (time.perf_counter() - state["start"]), startup))
+        for pub in pubs:
+            pub.put(_payload(-1, WORLD, 0))
+        time.sleep(0.3)
+
+
+def replay(pattern: Pattern, topology: str, timed_ticks: int,
+           timeout_s: float = START_TIMEOUT_S) -> dict:
+    """One replay of ``pattern``, its ticks from the second episode on played until
+    ``timed_ticks`` are timed: ``rate`` (ticks a second over those; nan if it stalled for
+    ``5 * timeout_s``), ``startup_s`` (until every agent was ready)."""
+    from bench.lockstep import stop_all
+    from nnql_swarm.launch.processes import process_context
+    from nnql_swarm.transport.ports import wait_listening
+    from nnql_swarm.transport.topology import EmbeddedLayout
+
+    ctx = process_context()
+    layout = EmbeddedLayout(topology=topology)
+    results = ctx.Queue()
+    scripts: list[dict[int, Decision]] = [{} for _ in range(pattern.n)]
+    for tick, tp in enumerate(pattern.ticks):
+        for a, decision in tp.decisions.items():
+            scripts[a][tick] = decision
+    clock = [(tp.observations, tp.intents) for tp in pattern.ticks]
+    processes = []
+    if layout.router() is not None:
+        from bench.lockstep import router
+
+        processes.append(ctx.Process(target=router, args=(layout.router(),)))
+    total = pattern.timed_from + timed_ticks
+    processes.append(ctx.Process(target=world, args=(
+        pattern.n, clock, pattern.recorded, total, pattern.timed_from, layout.world(), results,
+        timeout_s)))
+    processes += [ctx.Process(target=agent, args=(i, scripts[i], pattern.recorded,
+                                                  layout.agent(), timeout_s))
+                  for i in range(pattern.n)]
+    launched = time.time()
+    for i, p in enumerate(processes):
+        p.start()
+        if i < len(processes) - pattern.n and not wait_listening(layout.host, layout.port):
+            raise TimeoutError(f"nothing listens on {layout.endpoint} after 30 s")
+    try:
+        rate, startup = results.get(timeout=8 * timeout_s)
+    except Exception:  # noqa: BLE001 - a replay that hung is reported as nan, not fatal
+        rate, startup = float("nan"), float("nan")
+    stop_all(processes)
+    return {"rate": rate, "startup_s": startup - launched}
+
+
+def main() -> int:
+    from bench.harness import add_preset_option, grid_side, swarm_config
+    from bench.scale import bare_once
+    from nnql_swarm.transport.topology import embedded_topology
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--agents", default="8,64", help="comma-separated agent counts")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--episodes", type=int, default=6,
+                   help="episodes recorded and replayed (the first is not timed)")
+    p.add_argument("--max-steps", type=int, default=100)
+    p.add_argument("--ticks", type=int, default=2000, help="ticks timed in each replay (the "
+                   "recorded ticks from the second episode on, again and again) and in each "
+                   "bare loop")
+    p.add_argument("--seed", type=int, default=0)
+    add_preset_option(p)
+    args = p.parse_args()
+    try:
+        sizes = [int(v) for v in args.agents.split(",")]
+    except ValueError:
+        p.error(f"--agents takes comma-separated numbers, not {args.agents!r}")
+    if args.repeats < 1 or args.episodes < 2 or any(n < 2 for n in sizes):
+        p.error("need --repeats >= 1, --episodes >= 2 and at least 2 agents per size")
+    rows = []
+    for n in sizes:
+        side = grid_side(n)
+        try:
+            config = swarm_config(args.preset, run_id=f"pattern-{n}", n_agents=n, width=side,
+                                  height=side, episodes=args.episodes,
+                                  max_steps=args.max_steps, seed=args.seed)
+        except ValueError as error:
+            p.error(f"{n} agents: {error}")
+        pattern = record(config)
+        print(f"  {n} agents: {len(pattern.ticks)} ticks recorded, {pattern.timed_from} in the "
+              f"first episode; {pattern.answers_per_tick():.2f} answers and "
+              f"{pattern.hops_per_tick():.2f} hops on the longest chain a tick; "
+              f"{pattern.asks} asks for one tick and {pattern.late_replies} late replies "
+              f"left out", file=sys.stderr, flush=True)
+        topology = embedded_topology(n)
+        replays, bares = [], []
+        for repeat in range(args.repeats):
+            replays.append(replay(pattern, topology, args.ticks))
+            bares.append(bare_once(n, args.ticks, topology))
+            print(f"  {n} agents, repeat {repeat + 1}: the pattern {replays[-1]['rate']:.0f} "
+                  f"ticks/s, bare {bares[-1]['rate']:.0f}", file=sys.stderr, flush=True)
+        ratios = [r["rate"] / b["rate"] for r, b in zip(replays, bares)]
+        rows.append((n, topology, pattern, statistics.median(r["rate"] for r in replays),
+                     statistics.median(b["rate"] for b in bares), statistics.median(ratios),
+                     replays, bares))
+    print(f"preset {args.preset}, {args.episodes} episodes of at most {args.max_steps} steps, "
+          f"medians of {args.repeats}")
+    print("| agents | topology | hops a tick (bare: 2) | answers a tick | the pattern, ticks/s | "
+          "bare, ticks/s | ratio | runs (pattern; bare) |")
+    print("| ---: | --- | ---: | ---: | ---: | ---: | ---: | --- |")
+    for n, topology, pattern, rate, bare, ratio, replays, bares in rows:
+        print(f"| {n} | {topology} | {pattern.hops_per_tick():.2f} | "
+              f"{pattern.answers_per_tick():.2f} | {rate:.0f} | {bare:.0f} | {ratio:.2f} | "
+              f"{' '.join(str(round(r['rate'])) for r in replays)}; "
+              f"{' '.join(str(round(b['rate'])) for b in bares)} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
