@@ -37,7 +37,6 @@ import threading
 import time
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
-from functools import partial
 from pathlib import Path
 
 START_TIMEOUT_S = 120.0
@@ -190,7 +189,9 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
     lock = threading.Lock()
     done, everyone_up, streamed = threading.Event(), threading.Event(), threading.Event()
     up: set[str] = set()
-    unconfirmed, to_ask = set(answerers), set(answerers)  # standing queries not yet open
+    unconfirmed = set(answerers)  # the neighbours whose standing queries are not open yet
+    if not unconfirmed:
+        streamed.set()
     standing: dict[int, object] = {}  # asker -> its standing query on this agent
     unsent: dict[int, list[bytes]] = defaultdict(list)  # answers owed before the query came
     observed: set[int] = set()
@@ -240,11 +241,6 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
                     heard[tick].add(sender)
                     try_decide(tick)
 
-        def on_ended(answerer: int) -> None:
-            with lock:
-                if answerer in unconfirmed:
-                    to_ask.add(answerer)  # it never reached the neighbour: ask again
-
         def on_query(query) -> None:
             asker = int(str(query.parameters).split("from=")[1])
             with lock:
@@ -267,15 +263,20 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
             everyone_up.set()
         everyone_up.wait(timeout_s)
         # A query sent before this session has heard of the neighbour's queryable ends at once,
-        # unanswered: each is sent again until its neighbour says it is open.
+        # unanswered, and one may wait long in a crowd: each is sent again, later each time,
+        # until its neighbour says it is open (the newest query it got is the one it answers).
         deadline = time.monotonic() + timeout_s
-        while answerers and not streamed.is_set() and time.monotonic() < deadline:
+        ask_at = dict.fromkeys(answerers, 0.0)  # answerer -> when to ask it (again)
+        backoff = dict.fromkeys(answerers, 0.2)
+        while not streamed.is_set() and time.monotonic() < deadline:
+            now = time.monotonic()
             with lock:
-                asking, _ = sorted(to_ask), to_ask.clear()
-            for a in asking:
-                s.get(f"pat/intent/{a}?from={me}", callback(on_answer, partial(on_ended, a)),
+                due = sorted(a for a in unconfirmed if ask_at[a] <= now)
+            for a in due:
+                s.get(f"pat/intent/{a}?from={me}", callback(on_answer),
                       consolidation=zenoh.ConsolidationMode.NONE, timeout=10 * timeout_s)
-            streamed.wait(0.1)
+                ask_at[a], backoff[a] = now + backoff[a], min(2 * backoff[a], 3.0)
+            streamed.wait(0.05)
         tokens.append(s.liveliness().declare_token(f"pat/ready/{me}"))
         done.wait()
         for token in tokens:
@@ -349,10 +350,13 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
 
 
 def replay(pattern: Pattern, topology: str, timed_ticks: int,
-           timeout_s: float = START_TIMEOUT_S) -> dict:
+           timeout_s: float | None = None) -> dict:
     """One replay of ``pattern``, its ticks from the second episode on played until
-    ``timed_ticks`` are timed: ``rate`` (ticks a second over those; nan if it stalled for
-    ``5 * timeout_s``), ``startup_s`` (until every agent was ready)."""
+    ``timed_ticks`` are timed: ``rate`` (ticks a second over those; nan if its agents were not
+    ready within ``timeout_s``, by default :data:`START_TIMEOUT_S` or half a second an agent,
+    or it stalled for five times that), ``startup_s`` (until every agent was ready)."""
+    if timeout_s is None:
+        timeout_s = max(START_TIMEOUT_S, pattern.n / 2)
     from bench.lockstep import stop_all
     from nnql_swarm.launch.processes import process_context
     from nnql_swarm.transport.ports import wait_listening
@@ -448,8 +452,8 @@ def main() -> int:
     for n, topology, pattern, rate, bare, ratio, replays, bares in rows:
         print(f"| {n} | {topology} | {pattern.hops_per_tick():.2f} | "
               f"{pattern.answers_per_tick():.2f} | {rate:.0f} | {bare:.0f} | {ratio:.2f} | "
-              f"{' '.join(str(round(r['rate'])) for r in replays)}; "
-              f"{' '.join(str(round(b['rate'])) for b in bares)} |")
+              f"{' '.join(format(r['rate'], '.0f') for r in replays)}; "
+              f"{' '.join(format(b['rate'], '.0f') for b in bares)} |")
     return 0
 
 

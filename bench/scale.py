@@ -179,7 +179,8 @@ def main() -> int:
             row["pattern"] = median(replays, "rate")
             row["pattern_ratio"] = statistics.median(
                 t["rate"] / b["rate"] for t, b in zip(replays, bare))
-            row["pattern_runs"] = [round(t["rate"]) for t in replays]
+            row["pattern_runs"] = [t["rate"] if math.isnan(t["rate"]) else round(t["rate"])
+                                   for t in replays]  # nan: a replay that never started
         row["ms_per_agent"] = 1000.0 / row["swarm"] / n
         row["bare_ms_per_agent"] = 1000.0 / row["bare"] / n
         table.append(row)
@@ -234,10 +235,16 @@ def draw(table: list[dict], path: Path) -> None:
     fig, (rate, cost) = plt.subplots(1, 2, figsize=(11, 4.2))
     rate.plot(n, [r["swarm"] for r in table], "o-", label="swarm (negotiation, learning)")
     rate.plot(n, [r["bare"] for r in table], "s--", label="bare loop (all answer at once)")
+    if all("pattern" in r for r in table):
+        rate.plot(n, [r["pattern"] for r in table], "^:",
+                  label="the swarm's messages, no work (--pattern)")
     rate.set(xscale="log", yscale="log", xlabel="agents", ylabel="ticks a second",
              title="Ticks a second, constant density")
     cost.plot(n, [r["ms_per_agent"] for r in table], "o-", label="swarm")
     cost.plot(n, [r["bare_ms_per_agent"] for r in table], "s--", label="bare loop")
+    if all("pattern" in r for r in table):
+        cost.plot(n, [1000.0 / r["pattern"] / r["agents"] for r in table], "^:",
+                  label="the swarm's messages, no work")
     cost.set(xscale="log", xlabel="agents", ylabel="ms a tick / agents",
              title="Cost of a tick per agent (flat = linear)")
     for axis in (rate, cost):
