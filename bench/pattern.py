@@ -37,11 +37,11 @@ import threading
 import time
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 
 START_TIMEOUT_S = 120.0
-WORLD = -1  # as bench.node_cpu.WORLD (not imported here: see bench.scale on what the top imports)
-_HEAD = struct.Struct("<qi")  # tick, sender
+_HEAD = struct.Struct("<qi")  # tick, sender (an answer's; 0 in the others)
 OPENED = -2  # the tick of a standing query's first reply: it is open
 
 
@@ -49,14 +49,26 @@ OPENED = -2  # the tick of a standing query's first reply: it is open
 class Decision:
     """What one agent does at one tick: once it has its observation and an answer from each of
     ``awaits``, it sends ``sends`` in order: ``("answer", asker, bytes)`` or
-    ``("intent", WORLD, bytes)``."""
+    ``("intent", None, bytes)``."""
 
     awaits: frozenset[int]
-    sends: tuple[tuple[str, int, int], ...]
+    sends: tuple[tuple[str, int | None, int], ...]
 
     @property
-    def answered(self) -> set[int]:
+    def answered(self) -> set[int | None]:
         return {to for kind, to, _ in self.sends if kind == "answer"}
+
+    @property
+    def intends(self) -> bool:
+        return any(kind == "intent" for kind, _, _ in self.sends)
+
+
+def played(tick: int, timed_from: int, recorded: int) -> int:
+    """The tick of ``recorded`` that a replay's ``tick`` plays: those from ``timed_from`` on are
+    played again and again, so that a replay times as many ticks as it is told."""
+    if tick < timed_from:
+        return tick
+    return timed_from + (tick - timed_from) % (recorded - timed_from)
 
 
 @dataclass
@@ -66,7 +78,7 @@ class TickPattern:
 
     @property
     def intents(self) -> int:
-        return sum(1 for d in self.decisions.values() for kind, _, _ in d.sends if kind == "intent")
+        return sum(1 for d in self.decisions.values() if d.intends)
 
 
 @dataclass
@@ -80,11 +92,8 @@ class Pattern:
     late_replies: int = 0  # replies to asks for a tick already decided (left out)
 
     def recorded(self, tick: int) -> int:
-        """The recorded tick a replay's ``tick`` plays: the ticks from :attr:`timed_from` on
-        are played again and again, so that a replay times as many as it is told."""
-        if tick < self.timed_from:
-            return tick
-        return self.timed_from + (tick - self.timed_from) % (len(self.ticks) - self.timed_from)
+        """The recorded tick a replay's ``tick`` plays (:func:`played`)."""
+        return played(tick, self.timed_from, len(self.ticks))
 
     def answers_per_tick(self) -> float:
         timed = self.ticks[self.timed_from:]
@@ -106,8 +115,7 @@ class Pattern:
                                            default=0)
                 return depth[agent]
 
-            senders = [a for a, d in tick.decisions.items()
-                       if any(kind == "intent" for kind, _, _ in d.sends)]
+            senders = [a for a, d in tick.decisions.items() if d.intends]
             hops.append(1 + max((chain(a) for a in senders), default=0))
         return statistics.mean(hops) if hops else 0.0
 
@@ -121,7 +129,7 @@ def record(config) -> Pattern:
     run_id = config.run_id
     observations: dict[int, list[tuple[int, int]]] = defaultdict(list)
     answers_to: dict[tuple[int, int], list[tuple[int, int]]] = defaultdict(list)
-    sends: dict[tuple[int, int], list[tuple[int, str, int, int]]] = defaultdict(list)
+    sends: dict[tuple[int, int], list[tuple[int, str, int | None, int]]] = defaultdict(list)
     episodes: dict[int, int] = {}
     asks_at: Counter[int] = Counter()
 
@@ -132,7 +140,7 @@ def record(config) -> Pattern:
             episodes.setdefault(msg.tick, msg.episode)
         elif kind == "intent":
             msg = parse(item.payload, Intent, run_id)
-            sends[sender, msg.tick].append((cause, "intent", WORLD, len(item.payload)))
+            sends[sender, msg.tick].append((cause, "intent", None, len(item.payload)))
         elif kind == "answer":
             payload = item.ok.payload
             msg = parse(payload, Answer, run_id)
@@ -170,7 +178,7 @@ def record(config) -> Pattern:
     return pattern
 
 
-def _payload(tick: int, sender: int, size: int) -> bytes:
+def _payload(tick: int, size: int, sender: int = 0) -> bytes:
     head = _HEAD.pack(tick, sender)
     return head + bytes(max(size - len(head), 0))
 
@@ -178,8 +186,8 @@ def _payload(tick: int, sender: int, size: int) -> bytes:
 def agent(me: int, script: dict[int, Decision], recorded, transport,
           timeout_s: float = START_TIMEOUT_S) -> None:
     """One agent of the replay: at each tick, once its observation and awaited answers are in,
-    it sends what it sent at the tick it plays (``recorded(tick)``: :meth:`Pattern.recorded`);
-    it leaves on a negative tick (or when it has waited ``timeout_s`` for its neighbours)."""
+    it sends what it sent at the tick it plays (``recorded(tick)``: :func:`played`);
+    it leaves on a negative tick (:func:`replay` stops it if its world gave up)."""
     from nnql_swarm.transport.callbacks import callback
     from nnql_swarm.transport.runtime import declare_lockstep_publisher
     from nnql_swarm.transport.settings import open_session
@@ -215,9 +223,9 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
             heard.pop(tick, None)
             for kind, to, size in decision.sends:
                 if kind == "answer":
-                    reply(to, _payload(tick, me, size))
+                    reply(to, _payload(tick, size, me))
                 else:
-                    publisher.put(_payload(tick, me, size))
+                    publisher.put(_payload(tick, size))
 
         def on_obs(sample) -> None:
             tick, _ = _HEAD.unpack_from(sample.payload.to_bytes())
@@ -245,14 +253,15 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
             asker = int(str(query.parameters).split("from=")[1])
             with lock:
                 standing[asker] = query
-                query.reply(key, _payload(OPENED, me, 0))
+                query.reply(key, _payload(OPENED, 0, me))
                 for payload in unsent.pop(asker, []):
                     query.reply(key, payload)
 
         def on_up(sample) -> None:
-            up.add(str(sample.key_expr))
-            if len(up) == len(everyone):
-                everyone_up.set()
+            with lock:
+                up.add(str(sample.key_expr))
+                if everyone <= up:
+                    everyone_up.set()
 
         everyone = {f"pat/up/{a}" for a in answerers}
         s.declare_subscriber(f"pat/obs/{me}", callback(on_obs))
@@ -309,7 +318,7 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
                 observed, intents = ticks[recorded(tick)]
                 state["tick"], state["heard"] = tick, 0
                 for to, size in observed:
-                    pubs[to].put(_payload(tick, WORLD, size))
+                    pubs[to].put(_payload(tick, size))
                 if intents:
                     return
                 tick += 1  # nobody owes this tick an intent
@@ -345,7 +354,7 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
             timed = total - timed_from
             results.put((timed / (time.perf_counter() - state["start"]), startup))
         for pub in pubs:
-            pub.put(_payload(-1, WORLD, 0))
+            pub.put(_payload(-1, 0))
         time.sleep(0.3)
 
 
@@ -376,11 +385,12 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
 
         processes.append(ctx.Process(target=router, args=(layout.router(),)))
     total = pattern.timed_from + timed_ticks
+    recorded = partial(played, timed_from=pattern.timed_from, recorded=len(pattern.ticks))
     processes.append(ctx.Process(target=world, args=(
-        pattern.n, clock, pattern.recorded, total, pattern.timed_from, layout.world(), results,
+        pattern.n, clock, recorded, total, pattern.timed_from, layout.world(), results,
         timeout_s)))
-    processes += [ctx.Process(target=agent, args=(i, scripts[i], pattern.recorded,
-                                                  layout.agent(), timeout_s))
+    processes += [ctx.Process(target=agent, args=(i, scripts[i], recorded, layout.agent(),
+                                                  timeout_s))
                   for i in range(pattern.n)]
     launched = time.time()
     for i, p in enumerate(processes):

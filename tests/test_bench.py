@@ -48,7 +48,7 @@ def test_the_swarms_message_pattern_is_recorded_from_its_handlers_and_replays_th
     the bare loop's two hops); what each agent waited for is what its neighbours sent it when
     they decided, so the replay of bare processes on loopback plays every tick to the end."""
     from bench.harness import swarm_config
-    from bench.pattern import WORLD, record, replay
+    from bench.pattern import record, replay
     from nnql_swarm.protocol.config import DEFAULT_PRESET
 
     config = swarm_config(DEFAULT_PRESET, run_id="pattern-test", n_agents=8, width=11,
@@ -60,7 +60,7 @@ def test_the_swarms_message_pattern_is_recorded_from_its_handlers_and_replays_th
         observed = {agent for agent, _ in tick.observations}
         assert set(tick.decisions) <= observed
         for agent, decision in tick.decisions.items():
-            assert [to for kind, to, _ in decision.sends if kind == "intent"] in ([], [WORLD])
+            assert [to for kind, to, _ in decision.sends if kind == "intent"] in ([], [None])
             assert all(agent in tick.decisions[neighbour].answered
                        for neighbour in decision.awaits)
     assert pattern.recorded(len(pattern.ticks)) == pattern.timed_from
