@@ -426,8 +426,9 @@ def main() -> int:
         sizes = [int(v) for v in args.agents.split(",")]
     except ValueError:
         p.error(f"--agents takes comma-separated numbers, not {args.agents!r}")
-    if args.repeats < 1 or args.episodes < 2 or any(n < 2 for n in sizes):
-        p.error("need --repeats >= 1, --episodes >= 2 and at least 2 agents per size")
+    if args.repeats < 1 or args.episodes < 2 or args.ticks < 1 or any(n < 2 for n in sizes):
+        p.error("need --repeats >= 1, --episodes >= 2, --ticks >= 1 and at least 2 agents per "
+                "size")
     rows = []
     for n in sizes:
         side = grid_side(n)
