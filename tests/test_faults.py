@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from nnql_swarm.transport.runlock import RunLock
 from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.world import world_checkpoint
@@ -462,3 +463,14 @@ def test_a_full_disk_stops_the_run_in_a_line_and_what_was_written_resumes(tmp_pa
         assert first_miss > 0, "the run missed an intent in its first episode"
         assert [tuple(r[f] for f in EPISODE_FIELDS) for r in rows[:first_miss]] == \
             [tuple(r[f] for f in EPISODE_FIELDS) for r in left_alone[:first_miss]]
+
+
+def test_a_run_lock_that_cannot_name_its_holder_on_a_full_disk_lets_the_folder_go(small_disk):
+    """The lock is taken, then its file cannot be written: the error reaches the caller (a
+    one-line refusal at the command line) and the lock goes with it, so that the same process
+    (the API's, in a notebook) can start the run once there is room."""
+    fill(small_disk)
+    with pytest.raises(OSError, match="No space"):
+        RunLock(small_disk)
+    (small_disk / "filler").unlink()
+    RunLock(small_disk).release()  # not refused: nobody holds the folder

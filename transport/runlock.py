@@ -20,7 +20,8 @@ class RunLocked(Exception):
 
 class RunLock:
     """The lock of the run folder ``out`` (which must exist), taken at once or refused:
-    raises RunLocked if another process holds it, OSError if the file cannot be opened."""
+    raises RunLocked if another process holds it, OSError if the file cannot be opened or
+    written (the lock then let go)."""
 
     def __init__(self, out: Path) -> None:
         self.path = Path(out) / LOCK_FILE
@@ -32,8 +33,12 @@ class RunLock:
             self.release()
             raise RunLocked(f"{out} is in use by another run (process {holder or '?'}): one run "
                             f"at a time in a folder; wait for it to end, or choose another --out")
-        os.ftruncate(self._fd, 0)
-        os.pwrite(self._fd, f"{os.getpid()}\n".encode(), 0)
+        try:
+            os.ftruncate(self._fd, 0)
+            os.pwrite(self._fd, f"{os.getpid()}\n".encode(), 0)
+        except OSError:  # a full disk: the caller says so, and the folder is nobody's
+            self.release()
+            raise
 
     def release(self) -> None:
         """Give the folder up (closing the file drops the lock); again: nothing."""
