@@ -31,6 +31,11 @@ where settled agents are quiet (``SwarmConfig.quiet_settled``), the world skips 
 the episode's end tick or until it owes it a catch-up of the shared table (``world.engine``):
 within that episode, a later tick is not a gap.
 
+A decision made without an intent it needed (the negotiation timed out, or the neighbour
+refused) may differ from the one a run without faults makes: its episode is counted
+(``decided_short`` in the agent's stats), so that a run can be compared with one without faults
+up to there.
+
 Faults it survives: an observation lost on the way (it follows the clock again after
 :data:`RESYNC_AFTER` observations in a row), an answer lost or late (the negotiation times out;
 the standing query is replaced, at once if it ends mid-negotiation), a neighbour that dies or
@@ -111,6 +116,7 @@ class AgentMachine(QueryAnswering, Machine):
         self.peers_seen: set[int] = set()
         self.pending: Pending | None = None  # while NEGOTIATING or ASKING_MISSING
         self.decided_tick = -1
+        self.decided_short: dict[int, int] = {}  # episode -> its decisions short of an intent
         self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
         self.decided_waiters = []  # whom the decided tick's answer goes to by stream
         self.decided_near: list[tuple[int, int, int]] = []  # negotiation.streamed, decided tick
@@ -263,7 +269,8 @@ class AgentMachine(QueryAnswering, Machine):
     def stats(self) -> dict:
         return {"agent": self.agent, "decided_tick": self.decided_tick,
                 "accepted": self.inbox.accepted, "rejected": dict(self.inbox.rejections),
-                "shutdown_by_world": self.shutdown, "world_lost": self.world_lost}
+                "shutdown_by_world": self.shutdown, "world_lost": self.world_lost,
+                "decided_short": dict(self.decided_short)}
 
     # The negotiation.
 
@@ -366,6 +373,9 @@ class AgentMachine(QueryAnswering, Machine):
         p, self.pending = self.pending, None
         assert p is not None
         known = self.intents.get(p.obs.tick, _NOTHING).actions
+        if any(j not in known for j in p.needed):  # timed out, or refused: may differ
+            episode = p.obs.episode
+            self.decided_short[episode] = self.decided_short.get(episode, 0) + 1
         self._decide(p.obs, {**p.staying, **{j: known[j] for j in p.needed if j in known}})
 
     def _decide(self, obs: Observation, answers: dict[int, int]) -> None:

@@ -99,6 +99,7 @@ def test_an_agent_asks_and_decides_once_the_answer_is_in_or_the_time_is_up():
     effects = protocol.on_answer(ask.ask, answer(0, agent=0, action=3), 10.1)
     [intent] = [e for e in effects if isinstance(e, SendIntent)]
     assert intent.intent.tick == 0 and protocol.decided_tick == 0
+    assert protocol.stats()["decided_short"] == {}
     # tick 1: nobody outranks agent 1 that it sees (agent 0 is now last): it decides at once
     assert "SendIntent" in kinds(protocol.on_observation(observation(1, agent=1, others=[(0, 2, 2)]),
                                                          10.2))
@@ -109,6 +110,7 @@ def test_an_agent_asks_and_decides_once_the_answer_is_in_or_the_time_is_up():
     assert protocol.on_timer(10.5) == []
     assert "SendIntent" in kinds(protocol.on_timer(protocol.timer()))
     assert protocol.decided_tick == 3
+    assert protocol.stats()["decided_short"] == {0: 2}  # ticks 2 and 3, short of agent 0
 
 
 def test_held_and_standing_queries_are_answered_with_the_decision_the_next_in_rank_first():

@@ -7,9 +7,10 @@ netem); random loss by iptables; host a cut off for half a tick deadline and for
 two and a half; the router killed and started again mid-run. Every run must complete: the
 world and both agent launchers exit 0, every episode is written once and in order, the world's
 invariants hold (``stats/world.json``: no violation), and no learned value is lost (every agent's
-last checkpoint equals the world's copy of the shared table). The rows before the first missed
-intent equal ``--in-process``'s; where no intent was missed at all, every row does, and so does
-the shared table.
+last checkpoint equals the world's copy of the shared table). The rows before the first episode
+in which an intent was missed, or an agent decided without an intent it needed (its negotiation
+timed out: ``decided_short`` in its stats), equal ``--in-process``'s; where neither happened,
+every row does, and so does the shared table.
 
 A partition that outlasts both Zenoh's lease and the run is not among them: it leaves the cut-off
 host's launcher waiting (docs/operations.md; ``bench/netfaults.py --faults
@@ -29,6 +30,7 @@ import pytest
 from nnql_swarm.agent import agent_checkpoint
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.transport.runfiles import stats_path
 from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.engine import EPISODE_FIELDS
 from nnql_swarm.world.metrics import read_episodes
@@ -90,10 +92,20 @@ def check_outcome(outcome: runs.Outcome, reference) -> None:
     rows, table = reference
     missed = [int(r["missed_intents"]) for r in outcome.rows]
     first_miss = next((i for i, m in enumerate(missed) if m), len(missed))
-    assert outcome.deterministic()[:first_miss] == rows[:first_miss]
-    if first_miss == len(missed):
+    first_short = min((int(episode) for episode in decided_short(outcome)), default=len(missed))
+    same_until = min(first_miss, first_short)
+    assert outcome.deterministic()[:same_until] == rows[:same_until]
+    if same_until == len(missed):
         assert outcome.deterministic() == rows
         assert np.array_equal(shared[0], table[0]) and np.array_equal(shared[1], table[1])
+
+
+def decided_short(outcome: runs.Outcome) -> set[str]:
+    """The episodes in which some agent decided without an intent it needed."""
+    return {episode for agent in range(AGENTS)
+            for episode in json.loads(stats_path(outcome.agent_outs[0 if agent < AGENTS // 2
+                                                                    else 1],
+                                                 f"agent-{agent}").read_text())["decided_short"]}
 
 
 def run_fault(name: str, lan, tmp_path: Path, port: int,
@@ -110,7 +122,7 @@ def test_clean_run_equals_in_process(lan, reference, tmp_path):
     """The layout without a fault: the baseline every fault is checked like."""
     outcome = run_fault("clean", lan, tmp_path, 7701)
     check_outcome(outcome, reference)
-    assert outcome.missed == 0
+    assert outcome.missed == 0 and decided_short(outcome) == set()
 
 
 def test_netem_delay_jitter_reordering_and_loss(lan, reference, tmp_path):
