@@ -385,16 +385,20 @@ def test_the_inline_viewer_shows_the_run_in_a_browser(tmp_path):
             errors = []
             page.on("pageerror", lambda error: errors.append(str(error)))
             page.goto(f"http://127.0.0.1:{server.server_address[1]}/index.html")
+            def every_message_handed_over_and_drawn(image):
+                # The run may be drawn before the page has fetched the last messages.
+                assert page.title() == "sent", "the page has not handed over every message yet"
+                return check_run(image, run.config.width, run.config.height, colours)
+
             try:
-                image, found, _ = wait_for(
-                    page, lambda image: check_run(image, run.config.width, run.config.height,
-                                                  colours), 240.0, every=2.0)
+                image, found, _ = wait_for(page, every_message_handed_over_and_drawn, 240.0,
+                                           every=2.0)
             except AssertionError as failure:
                 screenshot(page, tmp_path / "inline.png")
                 raise AssertionError(f"{failure}; page errors: {errors}; the page: "
                                      f"{tmp_path / 'inline.png'}") from None
             screenshot(page, tmp_path / "inline.png")
-            assert page.title() == "sent" and not errors, errors
+            assert not errors, errors
     finally:
         server.shutdown()
     assert len(found["pixels"]) == run.config.n_agents
