@@ -102,6 +102,18 @@ def add_preset_option(parser) -> None:
                              "everyone waiting for everyone in view)")
 
 
+def agent_sizes(parser, text: str) -> list[int]:
+    """``--agents``' comma-separated agent counts (each at least 2), or the parser's one-line
+    error."""
+    try:
+        sizes = [int(v) for v in text.split(",")]
+    except ValueError:
+        parser.error(f"--agents takes comma-separated numbers, not {text!r}")
+    if any(n < 2 for n in sizes):
+        parser.error("need at least 2 agents per size")
+    return sizes
+
+
 def swarm_config(preset: str, **fields) -> SwarmConfig:
     """A benchmark's swarm config: the preset's learning options and the given fields."""
     return SwarmConfig(**{**PRESETS[preset], **fields})

@@ -406,7 +406,7 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
 
 
 def main() -> int:
-    from bench.harness import add_preset_option, grid_side, swarm_config
+    from bench.harness import add_preset_option, agent_sizes, grid_side, swarm_config
     from bench.scale import bare_once
     from nnql_swarm.transport.topology import embedded_topology
 
@@ -422,13 +422,9 @@ def main() -> int:
     p.add_argument("--seed", type=int, default=0)
     add_preset_option(p)
     args = p.parse_args()
-    try:
-        sizes = [int(v) for v in args.agents.split(",")]
-    except ValueError:
-        p.error(f"--agents takes comma-separated numbers, not {args.agents!r}")
-    if args.repeats < 1 or args.episodes < 2 or args.ticks < 1 or any(n < 2 for n in sizes):
-        p.error("need --repeats >= 1, --episodes >= 2, --ticks >= 1 and at least 2 agents per "
-                "size")
+    sizes = agent_sizes(p, args.agents)
+    if args.repeats < 1 or args.episodes < 2 or args.ticks < 1:
+        p.error("need --repeats >= 1, --episodes >= 2 and --ticks >= 1")
     rows = []
     for n in sizes:
         side = grid_side(n)

@@ -95,7 +95,9 @@ def median(runs: list[dict], key: str) -> float:
 def main() -> int:
     import statistics
 
-    from bench.harness import add_preset_option, grid_side, stay_agent_main, swarm_config
+    from bench.harness import (
+        add_preset_option, agent_sizes, grid_side, stay_agent_main, swarm_config,
+    )
     from nnql_swarm.transport.topology import TOPOLOGIES, embedded_topology
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -120,12 +122,9 @@ def main() -> int:
                         "(bench/pattern.py): the most the swarm could reach were our Python free")
     add_preset_option(p)
     args = p.parse_args()
-    try:
-        sizes = [int(v) for v in args.agents.split(",")]
-    except ValueError:
-        p.error(f"--agents takes comma-separated numbers, not {args.agents!r}")
-    if args.repeats < 1 or args.episodes < 2 or any(n < 2 for n in sizes):
-        p.error("need --repeats >= 1, --episodes >= 2 and at least 2 agents per size")
+    sizes = agent_sizes(p, args.agents)
+    if args.repeats < 1 or args.episodes < 2:
+        p.error("need --repeats >= 1 and --episodes >= 2")
     for n in sizes:
         try:
             swarm_config(args.preset, n_agents=n, width=grid_side(n), height=grid_side(n),
@@ -205,24 +204,24 @@ def print_table(table: list[dict], args) -> None:
               f"{r['missed_first']:.0f} / {r['missed']:.0f} | {r['startup_s']:.1f} | "
               f"{r['agent_mib']:.1f} | {r['world_mib']:.0f} | "
               f"{' '.join(map(str, r['runs']))}; {' '.join(map(str, r['bare_runs']))} |")
-    split = [r for r in table if "staying" in r]
-    if split:
-        print("\nthe swarm with the learning taken out (agents negotiate, then stay), in the same "
-              "runs; ratios to the bare loop, each repeat's own, medians")
-        print("| agents | learning nothing, ticks/s | its ratio | the swarm's ratio | runs |")
-        print("| ---: | ---: | ---: | ---: | --- |")
-        for r in split:
-            print(f"| {r['agents']} | {r['staying']:.0f} | {r['staying_ratio']:.2f} | "
-                  f"{r['ratio']:.2f} | {' '.join(map(str, r['staying_runs']))} |")
-    replayed = [r for r in table if "pattern" in r]
-    if replayed:
-        print("\nthe swarm's own messages with no work in them (bench/pattern.py), in the same "
-              "runs; ratios to the bare loop, each repeat's own, medians")
-        print("| agents | its messages alone, ticks/s | their ratio | the swarm's ratio | runs |")
-        print("| ---: | ---: | ---: | ---: | --- |")
-        for r in replayed:
-            print(f"| {r['agents']} | {r['pattern']:.0f} | {r['pattern_ratio']:.2f} | "
-                  f"{r['ratio']:.2f} | {' '.join(map(str, r['pattern_runs']))} |")
+    beside(table, "staying", "the swarm with the learning taken out (agents negotiate, then "
+           "stay)", "learning nothing, ticks/s | its ratio")
+    beside(table, "pattern", "the swarm's own messages with no work in them (bench/pattern.py)",
+           "its messages alone, ticks/s | their ratio")
+
+
+def beside(table: list[dict], key: str, what: str, columns: str) -> None:
+    """The table of a swarm run beside the swarm (``--split``: ``staying``, ``--pattern``:
+    ``pattern``), where the rows have it."""
+    rows = [r for r in table if key in r]
+    if not rows:
+        return
+    print(f"\n{what}, in the same runs; ratios to the bare loop, each repeat's own, medians")
+    print(f"| agents | {columns} | the swarm's ratio | runs |")
+    print("| ---: | ---: | ---: | ---: | --- |")
+    for r in rows:
+        print(f"| {r['agents']} | {r[key]:.0f} | {r[key + '_ratio']:.2f} | {r['ratio']:.2f} | "
+              f"{' '.join(map(str, r[key + '_runs']))} |")
 
 
 def draw(table: list[dict], path: Path) -> None:
