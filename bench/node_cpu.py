@@ -23,6 +23,7 @@ disk, drop out (what those processes do to the caches does not).
 
 import argparse
 import collections
+import contextlib
 import os
 import statistics
 import sys
@@ -167,7 +168,24 @@ def run(config: SwarmConfig, out: Path, bare: bool,
         clock=time.perf_counter, on_send=None) -> tuple[int, Wire]:
     """Run ``config`` through the real handlers over a :class:`Wire` timed on ``clock`` and
     telling ``on_send`` each message (:class:`Wire`); (ticks, the wire)."""
-    zenoh.handlers.Callback = _Callback  # the nodes build their handlers at call time
+    with _stand_in_callbacks():
+        return _run(config, out, bare, clock, on_send)
+
+
+@contextlib.contextmanager
+def _stand_in_callbacks():
+    """``zenoh.handlers.Callback`` is :class:`_Callback` inside, as it was again after: the nodes
+    build their handlers at call time, and other code of the same process (a test run's) needs
+    the real one."""
+    real = zenoh.handlers.Callback
+    zenoh.handlers.Callback = _Callback
+    try:
+        yield
+    finally:
+        zenoh.handlers.Callback = real
+
+
+def _run(config: SwarmConfig, out: Path, bare: bool, clock, on_send) -> tuple[int, Wire]:
     wire = Wire(clock, on_send)
     transport = TransportSettings()
     run_id, n = config.run_id, config.n_agents

@@ -7,6 +7,8 @@ import subprocess
 import sys
 from collections import Counter
 
+import zenoh
+
 import bench
 from bench.collisions import classify
 from nnql_swarm.experiment.maps_benchmark import MapsBenchmark, map_spec, run_config
@@ -53,7 +55,9 @@ def test_the_swarms_message_pattern_is_recorded_from_its_handlers_and_replays_th
 
     config = swarm_config(DEFAULT_PRESET, run_id="pattern-test", n_agents=8, width=11,
                           height=11, episodes=3, max_steps=100, seed=0)
+    real_callback = zenoh.handlers.Callback
     pattern = record(config)
+    assert zenoh.handlers.Callback is real_callback, "the harness's stand-in stays inside it"
     assert 0 < pattern.timed_from < len(pattern.ticks)
     assert pattern.answers_per_tick() > 0.5 and 2 < pattern.hops_per_tick() < 8
     for tick in pattern.ticks:
