@@ -6,7 +6,9 @@ layout, multicast off). Each tick the world publishes every agent its observatio
 msgpack tuple, first rank first); each agent answers with its intent the moment its observation
 arrives, from Zenoh's callback; the world waits for every intent, then opens the next tick from
 its own callback. No negotiation, no codec, no rules, no learning: the floor under the swarm's
-tick, for the same number of processes and the same topology.
+tick, for the same number of processes and the same topology. Beside its ticks a second, the
+machine's busy CPU microseconds a tick (``CPU us``: every process's, Zenoh's threads and the
+kernel's, from ``/proc/stat``).
 
     python -m bench.lockstep --agents 8,32,64 --repeats 3 --topology mesh
 """
@@ -19,7 +21,7 @@ import time
 
 import msgpack
 
-from bench.procstat import MemorySampler
+from bench.procstat import MemorySampler, machine_busy_s
 from nnql_swarm.launch.processes import process_context
 from nnql_swarm.transport.callbacks import callback
 from nnql_swarm.transport.ports import wait_listening
@@ -51,11 +53,12 @@ def agent(me: int, transport: TransportSettings) -> None:
 
 
 def world(n: int, transport: TransportSettings, ticks: int, results) -> None:
-    """The clock; puts ``(ticks a second, the time every agent was alive)`` on ``results``."""
+    """The clock; puts ``(ticks a second, the time every agent was alive, the machine's busy
+    CPU microseconds a tick)`` on ``results`` (rate and CPU over the ticks after the warm-up)."""
     alive: set[str] = set()
     everyone = threading.Event()
     finished = threading.Event()
-    state = {"tick": 0, "heard": 0, "start": 0.0}
+    state = {"tick": 0, "heard": 0, "start": 0.0, "busy": 0.0}
     warm_up = ticks // 5
     with open_session(transport) as s:
         pubs = [declare_lockstep_publisher(s, f"bare/obs/{i}") for i in range(n)]
@@ -73,7 +76,7 @@ def world(n: int, transport: TransportSettings, ticks: int, results) -> None:
                 return
             state["tick"], state["heard"] = tick + 1, 0
             if tick + 1 == warm_up:
-                state["start"] = time.perf_counter()
+                state["start"], state["busy"] = time.perf_counter(), machine_busy_s()
             if tick + 1 == ticks:
                 finished.set()
             else:
@@ -88,15 +91,17 @@ def world(n: int, transport: TransportSettings, ticks: int, results) -> None:
         s.liveliness().declare_subscriber("bare/alive/*", callback(on_alive), history=True)
         if not everyone.wait(START_TIMEOUT_S):
             print(f"world: only {len(alive)} of {n} agents alive", file=sys.stderr, flush=True)
-            results.put((float("nan"), float("nan")))
+            results.put((float("nan"), float("nan"), float("nan")))
             return
         startup = time.time()
         time.sleep(0.5)  # let late declarations settle before the clock starts
         open_tick(0)
         if not finished.wait(START_TIMEOUT_S):
-            results.put((float("nan"), startup))
+            results.put((float("nan"), startup, float("nan")))
         else:
-            results.put(((ticks - warm_up) / (time.perf_counter() - state["start"]), startup))
+            timed = ticks - warm_up
+            results.put((timed / (time.perf_counter() - state["start"]), startup,
+                         1e6 * (machine_busy_s() - state["busy"]) / timed))
         for pub in pubs:
             pub.put(msgpack.packb((-1, 0)))
         time.sleep(0.3)
@@ -110,7 +115,8 @@ def router(transport: TransportSettings) -> None:
 
 def run(n: int, topology: str, ticks: int) -> dict:
     """One bare loop of ``n`` agents: ``rate`` (ticks a second), ``startup_s`` (until every
-    agent was alive), ``rss`` (peak MiB by process name)."""
+    agent was alive), ``cpu_us`` (the machine's busy CPU microseconds a tick), ``rss`` (peak MiB
+    by process name)."""
     ctx = process_context()  # started as the swarm's processes are
     layout = EmbeddedLayout(topology=topology)
     results = ctx.Queue()
@@ -129,11 +135,12 @@ def run(n: int, topology: str, ticks: int) -> dict:
             if name in ("router", "world") and not wait_listening(layout.host, layout.port):
                 raise TimeoutError(f"nothing listens on {layout.endpoint} after 30 s")
         try:
-            rate, startup = results.get(timeout=3 * START_TIMEOUT_S)
+            rate, startup, cpu_us = results.get(timeout=3 * START_TIMEOUT_S)
         except Exception:  # noqa: BLE001 - a run that hung is reported as nan, not fatal
-            rate, startup = float("nan"), float("nan")
+            rate, startup, cpu_us = float("nan"), float("nan"), float("nan")
     stop_all([p for _, p in processes])
-    return {"rate": rate, "startup_s": startup - launched, "rss": memory.peaks()}
+    return {"rate": rate, "startup_s": startup - launched, "cpu_us": cpu_us,
+            "rss": memory.peaks()}
 
 
 def stop_all(processes, grace_s: float = 5.0) -> None:
@@ -157,7 +164,7 @@ def main() -> int:
     topologies = args.topology.split(",")
     if any(t not in TOPOLOGIES for t in topologies):
         p.error(f"topologies are {', '.join(TOPOLOGIES)}")
-    print(f"{'agents':>6} {'topology':>11} {'ticks/s':>8} {'start s':>8}  runs")
+    print(f"{'agents':>6} {'topology':>11} {'ticks/s':>8} {'start s':>8} {'CPU us':>7}  runs")
     for n in (int(v) for v in args.agents.split(",")):
         results: dict[str, list[dict]] = {t: [] for t in topologies}
         for _ in range(args.repeats):
@@ -168,8 +175,10 @@ def main() -> int:
         for t in topologies:
             rates = [r["rate"] for r in results[t]]
             starts = [r["startup_s"] for r in results[t]]
+            cpu = [r["cpu_us"] for r in results[t]]
             print(f"{n:>6} {t:>11} {statistics.median(rates):>8.0f} "
-                  f"{statistics.median(starts):>8.2f}  {' '.join(f'{x:.0f}' for x in rates)}",
+                  f"{statistics.median(starts):>8.2f} {statistics.median(cpu):>7.0f}  "
+                  f"{' '.join(f'{x:.0f}' for x in rates)}",
                   flush=True)
     return 0
 

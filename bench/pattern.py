@@ -19,7 +19,10 @@ Two steps, for each size:
 Beside each replay, in the same run and interleaved, the bare loop of as many processes. The
 replay's ticks a second over every episode but the first, as ``bench.scale`` times the swarm,
 is a ceiling: the swarm's tick cannot be cheaper than its own hops. Its ratio to the bare loop
-is the most the swarm could reach with every line of our Python taken out of the tick.
+is the most the swarm could reach with every line of our Python taken out of the tick. Both
+also report the machine's busy CPU time a tick over the timed ticks (``/proc/stat``): what Zenoh
+and the processes' bare loops cost, against which ``bench.tick_cpu``'s figure for the swarm
+shows what our Python costs in the processes.
 
 What the recording leaves out makes the ceiling higher, never lower: the asks for one tick to
 a neighbour with no standing query yet (counted, and few after the first episode), the replies
@@ -39,6 +42,8 @@ from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
+
+from bench.procstat import machine_busy_s
 
 START_TIMEOUT_S = 120.0
 _HEAD = struct.Struct("<qi")  # tick, sender (an answer's; 0 in the others)
@@ -297,21 +302,22 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
           timed_from: int, transport, results, timeout_s: float = START_TIMEOUT_S) -> None:
     """The replay's clock: ``total`` ticks, each the observations of the tick it plays
     (``recorded(tick)``, into ``ticks``) out and its intents in; puts ``(ticks a second from
-    ``timed_from``, the time every agent was ready)`` on ``results``."""
+    ``timed_from``, the time every agent was ready, the machine's busy CPU microseconds a tick
+    from ``timed_from``)`` on ``results``."""
     from nnql_swarm.transport.callbacks import callback
     from nnql_swarm.transport.runtime import declare_lockstep_publisher
     from nnql_swarm.transport.settings import open_session
 
     ready: set[str] = set()
     everyone, finished = threading.Event(), threading.Event()
-    state = {"tick": 0, "heard": 0, "start": 0.0}
+    state = {"tick": 0, "heard": 0, "start": 0.0, "busy": 0.0}
     with open_session(transport) as s:
         pubs = [declare_lockstep_publisher(s, f"pat/obs/{i}") for i in range(n)]
 
         def open_tick(tick: int) -> None:
             while True:
                 if tick == timed_from:
-                    state["start"] = time.perf_counter()
+                    state["start"], state["busy"] = time.perf_counter(), machine_busy_s()
                 if tick == total:
                     finished.set()
                     return
@@ -340,7 +346,7 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
         s.liveliness().declare_subscriber("pat/ready/*", callback(on_ready), history=True)
         if not everyone.wait(timeout_s):
             print(f"world: only {len(ready)} of {n} agents ready", file=sys.stderr, flush=True)
-            results.put((float("nan"), float("nan")))
+            results.put((float("nan"), float("nan"), float("nan")))
             return
         startup = time.time()
         time.sleep(0.5)  # let the standing queries settle before the clock starts
@@ -349,10 +355,11 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
             print(f"world: stalled at tick {state['tick']} (plays {recorded(state['tick'])}), "
                   f"{state['heard']} intents of {ticks[recorded(state['tick'])][1]}",
                   file=sys.stderr, flush=True)
-            results.put((float("nan"), startup))
+            results.put((float("nan"), startup, float("nan")))
         else:
             timed = total - timed_from
-            results.put((timed / (time.perf_counter() - state["start"]), startup))
+            results.put((timed / (time.perf_counter() - state["start"]), startup,
+                         1e6 * (machine_busy_s() - state["busy"]) / timed))
         for pub in pubs:
             pub.put(_payload(-1, 0))
         time.sleep(0.3)
@@ -363,7 +370,8 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
     """One replay of ``pattern``, its ticks from the second episode on played until
     ``timed_ticks`` are timed: ``rate`` (ticks a second over those; nan if its agents were not
     ready within ``timeout_s``, by default :data:`START_TIMEOUT_S` or half a second an agent,
-    or it stalled for five times that), ``startup_s`` (until every agent was ready)."""
+    or it stalled for five times that), ``startup_s`` (until every agent was ready),
+    ``cpu_us`` (the machine's busy CPU microseconds a tick over the timed ticks)."""
     if timeout_s is None:
         timeout_s = max(START_TIMEOUT_S, pattern.n / 2)
     from bench.lockstep import stop_all
@@ -398,16 +406,16 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
         if i < len(processes) - pattern.n and not wait_listening(layout.host, layout.port):
             raise TimeoutError(f"nothing listens on {layout.endpoint} after 30 s")
     try:
-        rate, startup = results.get(timeout=8 * timeout_s)
+        rate, startup, cpu_us = results.get(timeout=8 * timeout_s)
     except Exception:  # noqa: BLE001 - a replay that hung is reported as nan, not fatal
-        rate, startup = float("nan"), float("nan")
+        rate, startup, cpu_us = float("nan"), float("nan"), float("nan")
     stop_all(processes)
-    return {"rate": rate, "startup_s": startup - launched}
+    return {"rate": rate, "startup_s": startup - launched, "cpu_us": cpu_us}
 
 
 def main() -> int:
     from bench.harness import add_preset_option, agent_sizes, grid_side, swarm_config
-    from bench.scale import bare_once
+    from bench.scale import bare_once, median
     from nnql_swarm.transport.topology import embedded_topology
 
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -454,11 +462,12 @@ def main() -> int:
     print(f"preset {args.preset}, {args.episodes} episodes of at most {args.max_steps} steps, "
           f"medians of {args.repeats}")
     print("| agents | topology | hops a tick (bare: 2) | answers a tick | the pattern, ticks/s | "
-          "bare, ticks/s | ratio | runs (pattern; bare) |")
-    print("| ---: | --- | ---: | ---: | ---: | ---: | ---: | --- |")
+          "bare, ticks/s | ratio | CPU us a tick, the pattern | bare | runs (pattern; bare) |")
+    print("| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
     for n, topology, pattern, rate, bare, ratio, replays, bares in rows:
         print(f"| {n} | {topology} | {pattern.hops_per_tick():.2f} | "
               f"{pattern.answers_per_tick():.2f} | {rate:.0f} | {bare:.0f} | {ratio:.2f} | "
+              f"{median(replays, 'cpu_us'):.0f} | {median(bares, 'cpu_us'):.0f} | "
               f"{' '.join(format(r['rate'], '.0f') for r in replays)}; "
               f"{' '.join(format(b['rate'], '.0f') for b in bares)} |")
     return 0

@@ -1,5 +1,7 @@
-"""Resident memory of running processes, sampled from ``/proc/<pid>/status`` while they run."""
+"""What running processes hold: resident memory, sampled from ``/proc/<pid>/status`` while they
+run, and the machine's busy CPU time (``/proc/stat``)."""
 
+import os
 import threading
 from pathlib import Path
 
@@ -14,6 +16,17 @@ def resident_mib(pid: int) -> float | None:
         if line.startswith("VmRSS:"):
             return int(line.split()[1]) / 1024
     return None
+
+
+_TICKS_PER_S = os.sysconf("SC_CLK_TCK")
+
+
+def machine_busy_s() -> float:
+    """CPU seconds every core of the machine has spent busy since boot (user, nice, system, irq,
+    softirq and steal time: all but idle and I/O wait), in steps of ``1 / SC_CLK_TCK``."""
+    fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]
+    user, nice, system, _idle, _iowait, irq, softirq, steal = map(int, fields)
+    return (user + nice + system + irq + softirq + steal) / _TICKS_PER_S
 
 
 class MemorySampler:

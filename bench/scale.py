@@ -76,7 +76,7 @@ def bare_once(n: int, ticks: int, topology: str) -> dict:
     from bench import lockstep
 
     result = lockstep.run(n, topology, ticks)
-    return {"rate": result["rate"], "startup_s": result["startup_s"]}
+    return {"rate": result["rate"], "startup_s": result["startup_s"], "cpu_us": result["cpu_us"]}
 
 
 def pattern_once(pattern, ticks: int, topology: str) -> dict:
