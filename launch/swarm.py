@@ -12,18 +12,28 @@ import signal
 import sys
 
 
-def main(argv: list[str] | None = None) -> int:
-    heard: list[int] = []
+class EarlyInterrupt:
+    """SIGINT's handler until the run's own: raises KeyboardInterrupt wherever the launcher is,
+    and notes that it did (:attr:`heard`). Raised inside importlib, or in a finalizer or a
+    library's ``except BaseException``, the exception is swallowed; the note is not: the
+    supervisor, taking over the signal, stops the run at once if it finds it
+    (``sim.supervisor.Supervisor.run``)."""
 
-    def interrupt(signum, frame):  # noted too: raised inside importlib, it would be swallowed
-        heard.append(signum)
+    def __init__(self) -> None:
+        self.heard = False
+
+    def __call__(self, signum, frame):
+        self.heard = True
         raise KeyboardInterrupt
 
+
+def main(argv: list[str] | None = None) -> int:
+    interrupt = EarlyInterrupt()
     signal.signal(signal.SIGINT, interrupt)
     try:
         from nnql_swarm.launch.swarm_cli import main as command_line
 
-        if heard:
+        if interrupt.heard:
             raise KeyboardInterrupt
         return command_line(argv)
     except KeyboardInterrupt:  # before the run's own handlers: nothing was started yet

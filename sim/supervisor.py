@@ -78,10 +78,15 @@ class Supervisor:
     def run(self, leader: Child | None, on_poll: Callable[[], bool | None] | None = None) -> int:
         """Start every child and supervise; returns the leader's exit code (130 on a stop).
         ``on_poll()`` is called at every poll (every :data:`POLL_S`); a true result stops the run
-        as Ctrl-C does."""
+        as Ctrl-C does. A SIGINT handler found in place whose ``heard`` is true (the launcher's
+        first, ``launch/swarm.py``) counts as a Ctrl-C already."""
         previous = {s: signal.signal(s, self.request_stop) for s in (signal.SIGINT, signal.SIGTERM)}
+        if getattr(previous[signal.SIGINT], "heard", False):
+            self.stop_requested = True  # a Ctrl-C the launcher's first handler heard was swallowed
         try:
             for child in self.children:
+                if self.stop_requested:
+                    break
                 self._start(child, restarted=False)
             while not self.stop_requested:
                 if self._leader_done(leader) or self._fatal_exit():

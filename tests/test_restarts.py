@@ -5,10 +5,14 @@ distributed run with an agent killed: ``tests/test_faults.py``."""
 
 import json
 import multiprocessing as mp
+import signal
 import sys
 import time
 from pathlib import Path
 
+import pytest
+
+from nnql_swarm.launch.swarm import EarlyInterrupt
 from nnql_swarm.transport.runfiles import stats_path
 from nnql_swarm.sim import restarts
 from nnql_swarm.sim.supervisor import Supervisor
@@ -38,6 +42,32 @@ def test_the_supervisor_names_the_children_it_restarted(tmp_path):
                    restartable=True)
     assert supervisor.run(leader) == 0
     assert supervisor.restarted() == {"nnql-agent-0": ["exit code 1"]}
+
+
+def test_a_ctrl_c_swallowed_before_the_supervisor_took_over_stops_the_run(tmp_path):
+    """The launcher's first SIGINT handler raises KeyboardInterrupt wherever it lands; where that
+    is swallowed (importlib, a finalizer), the supervisor finds the handler's note and stops the
+    run before it starts anyone, with the exit code of a Ctrl-C."""
+    early = EarlyInterrupt()
+    with pytest.raises(KeyboardInterrupt):
+        early(signal.SIGINT, None)
+    assert early.heard
+    previous = signal.signal(signal.SIGINT, early)
+    try:
+        supervisor = Supervisor(mp.get_context("spawn"))
+        leader = supervisor.add("leader", waits_for_the_restart, lambda _: (str(tmp_path),),
+                                restartable=False)
+        started = time.monotonic()
+        assert supervisor.run(leader) == 130
+        assert time.monotonic() - started < 5 and leader.process is None
+        assert signal.getsignal(signal.SIGINT) is early, "the handler it found is put back"
+        signal.signal(signal.SIGINT, EarlyInterrupt())
+        supervisor = Supervisor(mp.get_context("spawn"))
+        leader = supervisor.add("leader", dies_once, lambda _: (str(tmp_path), True),
+                                restartable=False)
+        assert supervisor.run(leader) == 0, "one that heard nothing: the run is played"
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def test_the_runs_stats_keep_every_launchs_restarts(tmp_path):
