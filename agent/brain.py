@@ -26,7 +26,7 @@ from nnql_swarm.learning.record import record_outcome, write_updates
 from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import floats, rows
+from nnql_swarm.protocol.jit import floats, ints, rows
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 
@@ -53,7 +53,7 @@ class AgentBrain:
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
         self.order: tuple[int, ...] = ()  # this tick's moves by preference (--arbitration pibt)
         self._pibt = config.arbitration == "pibt"
-        self._ranks = [0] * N_ACTIONS
+        self._ranks = ints([0] * N_ACTIONS)  # an array where the kernel is compiled
         self.rejected_updates = 0  # shared-table entries refused (outside, or uneven groups)
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
