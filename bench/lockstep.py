@@ -21,7 +21,7 @@ import time
 
 import msgpack
 
-from bench.procstat import MemorySampler, machine_busy_s
+from bench.procstat import MemorySampler, TimedTicks
 from nnql_swarm.launch.processes import process_context
 from nnql_swarm.transport.callbacks import callback
 from nnql_swarm.transport.ports import wait_listening
@@ -58,7 +58,8 @@ def world(n: int, transport: TransportSettings, ticks: int, results) -> None:
     alive: set[str] = set()
     everyone = threading.Event()
     finished = threading.Event()
-    state = {"tick": 0, "heard": 0, "start": 0.0, "busy": 0.0}
+    state = {"tick": 0, "heard": 0}
+    timed = TimedTicks()
     warm_up = ticks // 5
     with open_session(transport) as s:
         pubs = [declare_lockstep_publisher(s, f"bare/obs/{i}") for i in range(n)]
@@ -76,7 +77,7 @@ def world(n: int, transport: TransportSettings, ticks: int, results) -> None:
                 return
             state["tick"], state["heard"] = tick + 1, 0
             if tick + 1 == warm_up:
-                state["start"], state["busy"] = time.perf_counter(), machine_busy_s()
+                timed.start()
             if tick + 1 == ticks:
                 finished.set()
             else:
@@ -99,9 +100,8 @@ def world(n: int, transport: TransportSettings, ticks: int, results) -> None:
         if not finished.wait(START_TIMEOUT_S):
             results.put((float("nan"), startup, float("nan")))
         else:
-            timed = ticks - warm_up
-            results.put((timed / (time.perf_counter() - state["start"]), startup,
-                         1e6 * (machine_busy_s() - state["busy"]) / timed))
+            rate, cpu_us = timed.measure(ticks - warm_up)
+            results.put((rate, startup, cpu_us))
         for pub in pubs:
             pub.put(msgpack.packb((-1, 0)))
         time.sleep(0.3)

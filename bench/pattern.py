@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
-from bench.procstat import machine_busy_s
+from bench.procstat import TimedTicks
 
 START_TIMEOUT_S = 120.0
 _HEAD = struct.Struct("<qi")  # tick, sender (an answer's; 0 in the others)
@@ -310,14 +310,15 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
 
     ready: set[str] = set()
     everyone, finished = threading.Event(), threading.Event()
-    state = {"tick": 0, "heard": 0, "start": 0.0, "busy": 0.0}
+    state = {"tick": 0, "heard": 0}
+    timed = TimedTicks()
     with open_session(transport) as s:
         pubs = [declare_lockstep_publisher(s, f"pat/obs/{i}") for i in range(n)]
 
         def open_tick(tick: int) -> None:
             while True:
                 if tick == timed_from:
-                    state["start"], state["busy"] = time.perf_counter(), machine_busy_s()
+                    timed.start()
                 if tick == total:
                     finished.set()
                     return
@@ -357,9 +358,8 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
                   file=sys.stderr, flush=True)
             results.put((float("nan"), startup, float("nan")))
         else:
-            timed = total - timed_from
-            results.put((timed / (time.perf_counter() - state["start"]), startup,
-                         1e6 * (machine_busy_s() - state["busy"]) / timed))
+            rate, cpu_us = timed.measure(total - timed_from)
+            results.put((rate, startup, cpu_us))
         for pub in pubs:
             pub.put(_payload(-1, 0))
         time.sleep(0.3)

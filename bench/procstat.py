@@ -3,6 +3,7 @@ run, and the machine's busy CPU time (``/proc/stat``)."""
 
 import os
 import threading
+import time
 from pathlib import Path
 
 
@@ -27,6 +28,22 @@ def machine_busy_s() -> float:
     fields = Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]
     user, nice, system, _idle, _iowait, irq, softirq, steal = map(int, fields)
     return (user + nice + system + irq + softirq + steal) / _TICKS_PER_S
+
+
+class TimedTicks:
+    """The ticks a loop times from :meth:`start` on: their rate, and the machine's busy CPU
+    microseconds a tick (:func:`machine_busy_s`), by :meth:`measure`."""
+
+    def __init__(self) -> None:
+        self.wall = self.busy = 0.0
+
+    def start(self) -> None:
+        self.wall, self.busy = time.perf_counter(), machine_busy_s()
+
+    def measure(self, ticks: int) -> tuple[float, float]:
+        """(ticks a second, busy CPU microseconds a tick) over ``ticks`` ticks since start."""
+        return (ticks / (time.perf_counter() - self.wall),
+                1e6 * (machine_busy_s() - self.busy) / ticks)
 
 
 class MemorySampler:
