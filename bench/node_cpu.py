@@ -15,15 +15,20 @@ less, but it is still best compared between runs made one after the other. It co
 hot in one process: in the swarm, each process wakes from cold caches and the same code takes
 several times as long (docs/performance.md). With ``--cpu-time`` each handler is timed by its
 thread's CPU time: the time other processes take the cores, and the checkpoints' waits for the
-disk, drop out (what those processes do to the caches does not).
+disk, drop out (what those processes do to the caches does not). With ``--cold-caches``, before
+each message (outside the timed part) a buffer larger than a core's L2 cache is written over
+(:class:`CacheEvictor`): each handler then starts on caches other work has cooled, as a swarm
+process does when it wakes, and the same code costs what it costs in the swarm.
 
     python -m bench.node_cpu --agents 8 --episodes 20 --repeats 5
     python -m bench.node_cpu --agents 8 --episodes 20 --repeats 7 --cpu-time
+    python -m bench.node_cpu --agents 8 --episodes 10 --repeats 3 --cpu-time --cold-caches
 """
 
 import argparse
 import collections
 import contextlib
+import mmap
 import os
 import statistics
 import sys
@@ -33,6 +38,7 @@ from pathlib import Path
 
 os.environ.setdefault("NNQL_KERNEL", "python")  # as in the swarm's processes, unless told
 
+import numpy as np
 import zenoh
 
 from nnql_swarm.agent.brain import AgentBrain
@@ -67,6 +73,33 @@ class _Sample:
         self.key_expr, self.payload = key, payload
 
 
+class CacheEvictor:
+    """Cools a core's private caches: writes over a buffer of ``factor`` times its L2 cache (as
+    Linux tells it; 2 MiB where it does not), so that what a handler reads next comes from the
+    shared cache or from memory, as after another process ran on the core."""
+
+    def __init__(self, factor: int = 4) -> None:
+        # its own mapping: in small pages whatever the allocator's settings, so that it also
+        # cools as much of the TLB each time
+        self._map = mmap.mmap(-1, factor * l2_cache_bytes())
+        self.buffer = np.frombuffer(self._map, dtype=np.float64)
+
+    def __call__(self) -> None:
+        self.buffer += 1.0
+
+
+def l2_cache_bytes(default: int = 2 << 20) -> int:
+    """The size of the first CPU's level-2 cache, from ``/sys``; ``default`` where it is not told."""
+    for index in Path("/sys/devices/system/cpu/cpu0/cache").glob("index*"):
+        try:
+            if (index / "level").read_text().strip() == "2":
+                size = (index / "size").read_text().strip()
+                return int(size[:-1]) << 10 if size.endswith("K") else int(size)
+        except (OSError, ValueError):
+            pass
+    return default
+
+
 WORLD = -1
 """The world's number where a message's sender or receiver is told (agents are 0 .. N - 1)."""
 
@@ -76,11 +109,13 @@ class Wire:
     ``clock``. ``on_send(number, kind, sender, receiver, item, cause)``, if given, is told each
     message as it is sent: its number (messages are delivered in the order of their numbers),
     who sends it to whom (:data:`WORLD`, an agent, or None: everyone, or nobody in particular),
-    and the number of the message whose handler sent it (-1: none)."""
+    and the number of the message whose handler sent it (-1: none). ``before_each()``, if given,
+    runs before each delivery, outside its timing (:class:`CacheEvictor`)."""
 
-    def __init__(self, clock=time.perf_counter, on_send=None) -> None:
+    def __init__(self, clock=time.perf_counter, on_send=None, before_each=None) -> None:
         self.clock = clock
         self.on_send = on_send
+        self.before_each = before_each
         self.queue: collections.deque = collections.deque()
         self.subscribers: dict[str, list] = collections.defaultdict(list)
         self.queryables: dict[str, object] = {}
@@ -97,9 +132,11 @@ class Wire:
             self.on_send(number, kind, self.handler_of, receiver, item, self.handling)
 
     def drain(self) -> None:
-        clock = self.clock
+        clock, before_each = self.clock, self.before_each
         while self.queue:
             kind, handler, item, self.handling, self.handler_of = self.queue.popleft()
+            if before_each is not None:
+                before_each()
             start = clock()
             handler(item)
             self.seconds[kind] += clock() - start
@@ -165,11 +202,12 @@ def _ends_of_asks(agents: list[AgentNode]) -> None:
 
 
 def run(config: SwarmConfig, out: Path, bare: bool,
-        clock=time.perf_counter, on_send=None) -> tuple[int, Wire]:
-    """Run ``config`` through the real handlers over a :class:`Wire` timed on ``clock`` and
-    telling ``on_send`` each message (:class:`Wire`); (ticks, the wire)."""
+        clock=time.perf_counter, on_send=None, before_each=None) -> tuple[int, Wire]:
+    """Run ``config`` through the real handlers over a :class:`Wire` timed on ``clock``, telling
+    ``on_send`` each message and running ``before_each`` before each (:class:`Wire`); (ticks,
+    the wire)."""
     with _stand_in_callbacks():
-        return _run(config, out, bare, clock, on_send)
+        return _run(config, out, bare, Wire(clock, on_send, before_each))
 
 
 @contextlib.contextmanager
@@ -185,8 +223,7 @@ def _stand_in_callbacks():
         zenoh.handlers.Callback = real
 
 
-def _run(config: SwarmConfig, out: Path, bare: bool, clock, on_send) -> tuple[int, Wire]:
-    wire = Wire(clock, on_send)
+def _run(config: SwarmConfig, out: Path, bare: bool, wire: Wire) -> tuple[int, Wire]:
     transport = TransportSettings()
     run_id, n = config.run_id, config.n_agents
     world = WorldNode(WorldOptions(config, transport, out), _Session(wire, WORLD))
@@ -231,6 +268,9 @@ def main() -> int:
     p.add_argument("--cpu-time", action="store_true",
                    help="time by the thread's CPU time rather than the wall clock: steadier on "
                         "a shared machine, and without the checkpoints' waits for the disk")
+    p.add_argument("--cold-caches", action="store_true",
+                   help="write over a buffer four times a core's L2 cache before each message: each "
+                        "handler starts on cooled caches, as in the swarm's processes")
     args = p.parse_args()
     n = args.agents
     config = swarm_config(args.preset, run_id="cpu", n_agents=n, episodes=args.episodes,
@@ -239,14 +279,17 @@ def main() -> int:
     for r in range(args.repeats):
         with tempfile.TemporaryDirectory() as tmp:
             ticks, wire = run(config, Path(tmp), args.bare,
-                              time.thread_time if args.cpu_time else time.perf_counter)
+                              time.thread_time if args.cpu_time else time.perf_counter,
+                              before_each=CacheEvictor() if args.cold_caches else None)
         for kind in wire.seconds:
             per_tick[kind].append(1e6 * wire.seconds[kind] / ticks)
         per_tick["whole tick"].append(1e6 * sum(wire.seconds.values()) / ticks)
         per_message = {k: 1e6 * wire.seconds[k] / wire.count[k] for k in wire.seconds}
         for kind, us in per_message.items():
             per_tick[f"one {kind}"].append(us)
-    print(f"{n} agents, {ticks} ticks a repeat, {args.repeats} repeats; us (median over repeats)")
+    caches = ", each message on cooled caches" if args.cold_caches else ""
+    print(f"{n} agents, {ticks} ticks a repeat, {args.repeats} repeats{caches}; us (median over "
+          "repeats)")
     for kind in sorted(per_tick, key=lambda k: (not k.startswith("one "), k)):
         values = per_tick[kind]
         print(f"  {kind:<22} {statistics.median(values):8.1f}  "

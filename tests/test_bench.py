@@ -70,3 +70,37 @@ def test_the_swarms_message_pattern_is_recorded_from_its_handlers_and_replays_th
     assert pattern.recorded(len(pattern.ticks)) == pattern.timed_from
     result = replay(pattern, "mesh", timed_ticks=300, timeout_s=20)
     assert result["rate"] > 0, "the replay stalled"
+
+
+def test_the_handlers_harness_cools_the_caches_before_each_message_outside_its_timing(tmp_path):
+    """``bench.node_cpu --cold-caches``: the evictor runs once before each delivery, writes over
+    more than a core's L2 cache, and its time is not counted in any handler's."""
+    from bench.harness import swarm_config
+    from bench.node_cpu import CacheEvictor, l2_cache_bytes, run
+    from nnql_swarm.protocol.config import DEFAULT_PRESET
+
+    config = swarm_config(DEFAULT_PRESET, run_id="cold-test", n_agents=4, width=8, height=8,
+                          episodes=1, max_steps=20, seed=0)
+    evictor = CacheEvictor()
+    assert evictor.buffer.nbytes == 4 * l2_cache_bytes() > 0
+    calls = []
+    ticks = {}
+    clock_now = [0.0]
+
+    def clock() -> float:  # advances only in the handlers: the evictor's time would show
+        return clock_now[0]
+
+    def before_each() -> None:
+        evictor()
+        calls.append((evictor.buffer[0], evictor.buffer[-1]))
+        clock_now[0] += 1.0  # time that must not be counted
+
+    ticks["cooled"], wire = run(config, tmp_path / "cooled", False, clock,
+                                before_each=before_each)
+    delivered = sum(wire.count.values())
+    assert len(calls) == delivered > ticks["cooled"]
+    assert calls == [(float(k), float(k)) for k in range(1, delivered + 1)]
+    assert evictor.buffer.sum() == delivered * evictor.buffer.size, "every byte, every time"
+    assert sum(wire.seconds.values()) == 0.0, "the evictor's time is outside the handlers'"
+    ticks["warm"], _ = run(config, tmp_path / "warm", False)
+    assert ticks["warm"] == ticks["cooled"], "cooling the caches changes no message"
