@@ -109,16 +109,16 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     meet, (x, y), rank = config.meet_only, obs.position, obs.rank
     if meet and obs.arrived and not config.step_aside:
         return []  # what awaits_answer says of every neighbour, without asking it
-    parked = set(obs.parked)
+    parked = obs.parked
+    waiters = sorted((r, j) for j, jx, jy in within(obs.neighbours, x, y, radius)
+                     if (r := priority_rank(j, tick, n)) > rank  # only the lower-ranked wait
+                     and awaits_answer(r, rank, jx, jy, x, y, radius, meet, j in parked, False))
+    if not waiters or not plans_are_known(config):
+        return [j for _, j in waiters]
+    parked = set(parked)
     near = within(obs.neighbours, x, y, 2 * radius)  # the waiters and those they wait for
     cells = {j: (jx, jy) for j, jx, jy in near}
     ranks = {j: priority_rank(j, tick, n) for j in cells}
-    waiters = sorted((ranks[j], j) for j, (jx, jy) in cells.items()
-                     if ranks[j] > rank  # a cheap cut: only the lower-ranked wait for it
-                     and awaits_answer(ranks[j], rank, jx, jy, x, y, radius, meet, j in parked,
-                                       False))
-    if not waiters or not plans_are_known(config):
-        return [j for _, j in waiters]
     cells[me], ranks[me] = (x, y), rank
     answered = []
     for w_rank, w in waiters:
