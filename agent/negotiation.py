@@ -109,13 +109,13 @@ def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     meet, (x, y), rank = config.meet_only, obs.position, obs.rank
     if meet and obs.arrived and not config.step_aside:
         return []  # what awaits_answer says of every neighbour, without asking it
-    parked = obs.parked
     waiters = sorted((r, j) for j, jx, jy in within(obs.neighbours, x, y, radius)
                      if (r := priority_rank(j, tick, n)) > rank  # only the lower-ranked wait
-                     and awaits_answer(r, rank, jx, jy, x, y, radius, meet, j in parked, False))
+                     and awaits_answer(r, rank, jx, jy, x, y, radius, meet, j in obs.parked,
+                                       False))
     if not waiters or not plans_are_known(config):
         return [j for _, j in waiters]
-    parked = set(parked)
+    parked = set(obs.parked)
     near = within(obs.neighbours, x, y, 2 * radius)  # the waiters and those they wait for
     cells = {j: (jx, jy) for j, jx, jy in near}
     ranks = {j: priority_rank(j, tick, n) for j in cells}

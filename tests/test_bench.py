@@ -104,3 +104,16 @@ def test_the_handlers_harness_cools_the_caches_before_each_message_outside_its_t
     assert sum(wire.seconds.values()) == 0.0, "the evictor's time is outside the handlers'"
     ticks["warm"], _ = run(config, tmp_path / "warm", False)
     assert ticks["warm"] == ticks["cooled"], "cooling the caches changes no message"
+
+
+def test_the_handler_floor_times_every_handler_on_real_observations():
+    """``bench.handler_floor``: a run's observations reach every handler, which accepts them, and
+    each is timed warm and cooled."""
+    from bench.handler_floor import HANDLERS, observations, time_calls
+    from bench.node_cpu import CacheEvictor
+
+    payloads = observations(4, 1)
+    assert len(payloads) > 4 and all(isinstance(p, bytes) for p in payloads)
+    for handler in HANDLERS.values():
+        assert time_calls(handler, payloads[:20]) >= 0.0
+        assert time_calls(handler, payloads[:5], CacheEvictor()) >= 0.0
