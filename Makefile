@@ -1,8 +1,9 @@
 # Two commands for a fresh machine: `make run` (the swarm) and `make test` (the type checker over
 # the package, then the test suite's fast tier: every room, in minutes). `make test-all` runs the
-# whole suite (the fast tier and the tests marked `full`), as CI does (.ci/run). Each runs its
-# tests in two passes: all but those marked `serial` on TEST_WORKERS pytest-xdist workers (most
-# tests wait on real processes, so more workers than cores pay), then the `serial` ones alone.
+# whole suite (the fast tier and the tests marked `full`), as CI does (.ci/run), and lists the
+# 20 slowest tests of each pass, to keep the suite's time in view. Each runs its tests in two
+# passes: all but those marked `serial` on TEST_WORKERS pytest-xdist workers (most tests wait on
+# real processes, so more workers than cores pay), then the `serial` ones alone.
 # Both create a local virtualenv in .venv and install the project into it first.
 # `make browser-test` installs Debian's chromium (as root, with apt-get) and Playwright, and runs
 # the tests of the web viewer in headless Chromium (`make test` runs them too when both are there).
@@ -49,7 +50,7 @@ test: $(STAMP)
 
 test-all: $(STAMP)
 	$(PY) -m mypy
-	$(call tiers,)
+	$(call tiers,,--durations=20)
 
 # The whole suite, as test-all, writing each test's seconds into tests/durations.json (commit it
 # after adding or changing long tests).
