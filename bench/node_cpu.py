@@ -13,7 +13,7 @@ N-1 -> world) can be added up from them.
 On a small shared machine the swarm's speed drifts within minutes; this figure drifts much
 less, but it is still best compared between runs made one after the other. It counts what runs
 hot in one process: in the swarm, each process wakes from cold caches and the same code takes
-several times as long (docs/performance.md). With ``--cpu-time`` each handler is timed by its
+about twice as long (docs/performance.md). With ``--cpu-time`` each handler is timed by its
 thread's CPU time: the time other processes take the cores, and the checkpoints' waits for the
 disk, drop out (what those processes do to the caches does not). With ``--cold-caches``, before
 each message (outside the timed part) a buffer larger than a core's L2 cache is written over
@@ -94,7 +94,8 @@ def l2_cache_bytes(default: int = 2 << 20) -> int:
         try:
             if (index / "level").read_text().strip() == "2":
                 size = (index / "size").read_text().strip()
-                return int(size[:-1]) << 10 if size.endswith("K") else int(size)
+                shift = {"K": 10, "M": 20}.get(size[-1:], 0)
+                return int(size[:-1] if shift else size) << shift
         except (OSError, ValueError):
             pass
     return default
