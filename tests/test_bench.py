@@ -107,13 +107,17 @@ def test_the_handlers_harness_cools_the_caches_before_each_message_outside_its_t
 
 
 def test_the_handler_floor_times_every_handler_on_real_observations():
-    """``bench.handler_floor``: a run's observations reach every handler, which accepts them, and
-    each is timed warm and cooled."""
-    from bench.handler_floor import HANDLERS, observations, time_calls
-    from bench.node_cpu import CacheEvictor
+    """``bench.handler_floor``: what it times are a run's real observations, which the codec
+    accepts for every agent; each handler is called once a payload, cooled before each call
+    when told."""
+    from bench.handler_floor import HANDLERS, RUN_ID, observations, time_calls
+    from nnql_swarm.protocol.messages import Observation, parse
 
     payloads = observations(4, 1)
-    assert len(payloads) > 4 and all(isinstance(p, bytes) for p in payloads)
+    decoded = [parse(p, Observation, RUN_ID) for p in payloads]
+    assert {obs.agent for obs in decoded} == set(range(4))
+    assert [obs.tick for obs in decoded] == sorted(obs.tick for obs in decoded)
     for handler in HANDLERS.values():
-        assert time_calls(handler, payloads[:20]) >= 0.0
-        assert time_calls(handler, payloads[:5], CacheEvictor()) >= 0.0
+        cooled = []
+        assert time_calls(handler, payloads[:5], lambda: cooled.append(1)) >= 0.0
+        assert len(cooled) == 5
