@@ -24,9 +24,12 @@ table's updates write all over them, which in one compact array costs a cache li
 numba's cache knows only the file of each compiled function, not those of the functions it calls:
 an edited learner would leave a stale compiled simulator behind. So the cache lives in a directory
 named by a digest of every kernel source (:func:`cache_directory`), unless ``NUMBA_CACHE_DIR``
-says otherwise.
+says otherwise. Within it, numba knows a source by its content's digest, and each source folder
+by its name (:class:`KernelCacheLocator`), not by its place on the disk: any checkout of the same
+sources loads what another compiled.
 """
 
+import functools
 import hashlib
 import os
 from pathlib import Path
@@ -66,8 +69,36 @@ if COMPILED:
     import numba
     from numba import njit, prange
 
+    from numba.core.caching import UserProvidedCacheLocator
+
+    class KernelCacheLocator(UserProvidedCacheLocator):
+        """numba's locator of ``NUMBA_CACHE_DIR``, keyed by what a source is rather than where:
+        numba files a source under a folder named by the path of its folder on this disk, and
+        takes it for changed when its time of change does; here the folder is named by its name
+        alone (``learning``, ``sim``...), and a source is known by its content's digest. The
+        directory is already one version of every kernel source (:func:`cache_directory`), so a
+        second checkout of the same sources (a fresh clone, a worktree) loads what the first
+        compiled, rather than compiling it again."""
+
+        def __init__(self, py_func, py_file: str) -> None:
+            super().__init__(py_func, py_file)
+            self._source = Path(py_file)
+
+        @classmethod
+        def get_suitable_cache_subpath(cls, py_file: str) -> str:
+            return Path(py_file).resolve().parent.name
+
+        def get_source_stamp(self) -> str:
+            return _source_digest(self._source)
+
+    @functools.cache
+    def _source_digest(path: Path) -> str:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+
     # numba reads its environment once, at its own import, which may have come first
     numba.config.CACHE_DIR = os.environ.setdefault("NUMBA_CACHE_DIR", str(cache_directory()))
+    numba.config.CACHE_LOCATOR_CLASSES = os.environ.setdefault(
+        "NUMBA_CACHE_LOCATOR_CLASSES", f"{__name__}.{KernelCacheLocator.__name__}")
 
     def kernel(function):
         """Compile a kernel function (cached on disk beside its source)."""

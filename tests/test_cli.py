@@ -147,6 +147,41 @@ def test_the_kernel_cache_is_the_sources_own_even_when_numba_was_imported_first(
     assert done.stdout.strip() == "True", done.stderr
 
 
+KERNEL_SOURCE = """from nnql_swarm.protocol.jit import kernel
+
+
+@kernel
+def twice(x):
+    return {factor} * x
+"""
+
+
+def test_a_second_checkout_of_the_same_kernel_sources_loads_what_the_first_compiled(tmp_path):
+    """numba's cache is keyed by a source's folder name and content (``protocol.jit``), not by
+    where the checkout is nor when its files were written: a fresh clone does not compile
+    again what another clone of the same sources compiled; an edited source does."""
+    probe = ("import sys; sys.path.insert(0, sys.argv[1]); from room import kernels; "
+             "from nnql_swarm.protocol.jit import cached; before = cached(kernels.twice); "
+             "kernels.twice(2); print(before, cached(kernels.twice))")
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "cache"), "NNQL_KERNEL": "compiled"}
+    env.pop("NUMBA_CACHE_LOCATOR_CLASSES", None)  # as a fresh shell has it
+
+    def checkout(name: str, factor: int) -> str:
+        room = tmp_path / name / "room"
+        room.mkdir(parents=True)
+        (room / "__init__.py").write_text("")
+        (room / "kernels.py").write_text(KERNEL_SOURCE.format(factor=factor))
+        done = subprocess.run([sys.executable, "-c", probe, str(room.parent)], env=env,
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 0, done.stderr
+        return done.stdout.strip()
+
+    assert checkout("first", 2) == "False True"  # compiled, then cached
+    time.sleep(0.01)  # the second checkout's files are written later
+    assert checkout("second", 2) == "True True"  # found in the cache before any call
+    assert checkout("edited", 3) == "False True"  # another source: compiled anew
+
+
 def test_compiling_is_announced_before_the_progress_bar(monkeypatch, capsys):
     monkeypatch.setattr(runs, "compiled_simulator", lambda: False)
     config = SwarmConfig(n_agents=2, width=5, height=5, episodes=1, max_steps=10)
