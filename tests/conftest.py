@@ -32,9 +32,9 @@ GROUP_SUFFIX = re.compile(r"@[^@\[\]]+$")
 
 
 def pytest_sessionstart(session):
-    """Compile the simulator's kernel here, once, if numba's cache does not hold it (a fresh
-    clone: the cache knows a source by its path and time, ``protocol.jit``), before the
-    workers start: else the first tests to play it (the experiment's command, in a process of its
+    """Compile the simulator's kernel here, once, if numba's cache does not hold it (the first
+    checkout of these kernel sources on this machine, ``protocol.jit``), before the workers
+    start: else the first tests to play it (the experiment's command, in a process of its
     own) each compiled it at once, several times half a minute on a loaded machine, and ran past
     their time-outs. In the controller only: a worker finds it cached."""
     if hasattr(session.config, "workerinput"):
