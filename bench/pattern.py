@@ -28,7 +28,17 @@ What the recording leaves out makes the ceiling higher, never lower: the asks fo
 a neighbour with no standing query yet (counted, and few after the first episode), the replies
 to asks for a tick already decided, the end-of-episode checkpoints.
 
+With ``--work-us``, the replay's handlers also work, so that the ratio is told as a function of
+what a handler may cost: each agent, once it may decide, and the world, on each intent it
+counts, keep their core for that many microseconds of their own thread's CPU time
+(:func:`busy`) before they go on (``--working agents`` or ``world``: one side only). A spin touches almost no memory, as a handler compiled over a
+few compact arrays would not: the curve is the budget such a handler has, in the processes,
+for the ratio the swarm is to reach (the swarm's own handlers cost some 150 us a decision and
+as much an intent, hot in one thread, ``bench/node_cpu.py``).
+
     python -m bench.pattern --agents 8,64 --repeats 3
+    python -m bench.pattern --agents 8,64 --repeats 3 --work-us 0,10,25,50,100,150
+    python -m bench.pattern --agents 64 --repeats 3 --work-us 25,50 --working world
 """
 
 import argparse
@@ -48,6 +58,7 @@ from bench.procstat import TimedTicks
 START_TIMEOUT_S = 120.0
 _HEAD = struct.Struct("<qi")  # tick, sender (an answer's; 0 in the others)
 OPENED = -2  # the tick of a standing query's first reply: it is open
+WORKING = ("both", "agents", "world")
 
 
 @dataclass(frozen=True)
@@ -183,16 +194,26 @@ def record(config) -> Pattern:
     return pattern
 
 
+def busy(seconds: float) -> None:
+    """Keep the core for ``seconds`` of this thread's own CPU time (not the wall clock's: time
+    another process holds the core is not work): the stand-in for a handler's work."""
+    if seconds > 0:
+        end = time.thread_time() + seconds
+        while time.thread_time() < end:
+            pass
+
+
 def _payload(tick: int, size: int, sender: int = 0) -> bytes:
     head = _HEAD.pack(tick, sender)
     return head + bytes(max(size - len(head), 0))
 
 
 def agent(me: int, script: dict[int, Decision], recorded, transport,
-          timeout_s: float = START_TIMEOUT_S) -> None:
+          timeout_s: float = START_TIMEOUT_S, work_s: float = 0.0) -> None:
     """One agent of the replay: at each tick, once its observation and awaited answers are in,
-    it sends what it sent at the tick it plays (``recorded(tick)``: :func:`played`);
-    it leaves on a negative tick (:func:`replay` stops it if its world gave up)."""
+    it works ``work_s`` (:func:`busy`), then sends what it sent at the tick it plays
+    (``recorded(tick)``: :func:`played`); it leaves on a negative tick (:func:`replay` stops it
+    if its world gave up)."""
     from nnql_swarm.transport.callbacks import callback
     from nnql_swarm.transport.runtime import declare_lockstep_publisher
     from nnql_swarm.transport.settings import open_session
@@ -226,6 +247,7 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
                 return
             observed.discard(tick)
             heard.pop(tick, None)
+            busy(work_s)
             for kind, to, size in decision.sends:
                 if kind == "answer":
                     reply(to, _payload(tick, size, me))
@@ -299,9 +321,11 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
 
 
 def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, total: int,
-          timed_from: int, transport, results, timeout_s: float = START_TIMEOUT_S) -> None:
+          timed_from: int, transport, results, timeout_s: float = START_TIMEOUT_S,
+          work_s: float = 0.0) -> None:
     """The replay's clock: ``total`` ticks, each the observations of the tick it plays
-    (``recorded(tick)``, into ``ticks``) out and its intents in; puts ``(ticks a second from
+    (``recorded(tick)``, into ``ticks``) out and its intents in, working ``work_s`` on each
+    intent (:func:`busy`); puts ``(ticks a second from
     ``timed_from``, the time every agent was ready, the machine's busy CPU microseconds a tick
     from ``timed_from``)`` on ``results``."""
     from nnql_swarm.transport.callbacks import callback
@@ -334,6 +358,7 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
             tick, _ = _HEAD.unpack_from(sample.payload.to_bytes())
             if tick != state["tick"]:
                 return
+            busy(work_s)
             state["heard"] += 1
             if state["heard"] == ticks[recorded(tick)][1]:
                 open_tick(tick + 1)
@@ -366,9 +391,12 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
 
 
 def replay(pattern: Pattern, topology: str, timed_ticks: int,
-           timeout_s: float | None = None) -> dict:
+           timeout_s: float | None = None, work_us: float = 0.0,
+           working: str = "both") -> dict:
     """One replay of ``pattern``, its ticks from the second episode on played until
-    ``timed_ticks`` are timed: ``rate`` (ticks a second over those; nan if its agents were not
+    ``timed_ticks`` are timed, each handler that carries the model working ``work_us`` (each
+    agent's decision, each intent the world counts: :func:`busy`; ``working``: ``both``, or
+    only the ``agents`` or the ``world``): ``rate`` (ticks a second over those; nan if its agents were not
     ready within ``timeout_s``, by default :data:`START_TIMEOUT_S` or half a second an agent,
     or it stalled for five times that), ``startup_s`` (until every agent was ready),
     ``cpu_us`` (the machine's busy CPU microseconds a tick over the timed ticks)."""
@@ -396,9 +424,10 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
     recorded = partial(played, timed_from=pattern.timed_from, recorded=len(pattern.ticks))
     processes.append(ctx.Process(target=world, args=(
         pattern.n, clock, recorded, total, pattern.timed_from, layout.world(), results,
-        timeout_s)))
+        timeout_s, work_us / 1e6 if working in ("both", "world") else 0.0)))
+    agent_work_s = work_us / 1e6 if working in ("both", "agents") else 0.0
     processes += [ctx.Process(target=agent, args=(i, scripts[i], recorded, layout.agent(),
-                                                  timeout_s))
+                                                  timeout_s, agent_work_s))
                   for i in range(pattern.n)]
     launched = time.time()
     for i, p in enumerate(processes):
@@ -428,11 +457,23 @@ def main() -> int:
                    "recorded ticks from the second episode on, again and again) and in each "
                    "bare loop")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--work-us", default="0", help="comma-separated microseconds of CPU each "
+                   "agent's decision and each of the world's intents cost in the replay (busy "
+                   "spinning): one row each")
+    p.add_argument("--working", choices=WORKING, default="both",
+                   help="whose handlers work: every agent's decision and the world's intents, "
+                        "or only one side's")
     add_preset_option(p)
     args = p.parse_args()
     sizes = agent_sizes(p, args.agents)
     if args.repeats < 1 or args.episodes < 2 or args.ticks < 1:
         p.error("need --repeats >= 1, --episodes >= 2 and --ticks >= 1")
+    try:
+        works = [float(w) for w in args.work_us.split(",")]
+    except ValueError:
+        p.error(f"--work-us takes comma-separated microseconds, not {args.work_us!r}")
+    if any(not 0 <= w < 1e6 for w in works):
+        p.error(f"--work-us must be between 0 and 1,000,000 microseconds, not {args.work_us}")
     rows = []
     for n in sizes:
         side = grid_side(n)
@@ -449,26 +490,33 @@ def main() -> int:
               f"{pattern.asks} asks for one tick and {pattern.late_replies} late replies "
               f"left out", file=sys.stderr, flush=True)
         topology = embedded_topology(n)
-        replays, bares = [], []
-        for repeat in range(args.repeats):
-            replays.append(replay(pattern, topology, args.ticks))
+        replays: dict[float, list[dict]] = {w: [] for w in works}
+        bares: list[dict] = []
+        for repeat in range(args.repeats):  # each repeat's bare loop among its replays
+            for w in works:
+                replays[w].append(replay(pattern, topology, args.ticks, work_us=w,
+                                         working=args.working))
+                print(f"  {n} agents, repeat {repeat + 1}, {w:g} us a handler: the pattern "
+                      f"{replays[w][-1]['rate']:.0f} ticks/s", file=sys.stderr, flush=True)
             bares.append(bare_once(n, args.ticks, topology))
-            print(f"  {n} agents, repeat {repeat + 1}: the pattern {replays[-1]['rate']:.0f} "
-                  f"ticks/s, bare {bares[-1]['rate']:.0f}", file=sys.stderr, flush=True)
-        ratios = [r["rate"] / b["rate"] for r, b in zip(replays, bares)]
-        rows.append((n, topology, pattern, statistics.median(r["rate"] for r in replays),
-                     statistics.median(b["rate"] for b in bares), statistics.median(ratios),
-                     replays, bares))
+            print(f"  {n} agents, repeat {repeat + 1}: bare {bares[-1]['rate']:.0f} ticks/s",
+                  file=sys.stderr, flush=True)
+        for w in works:
+            ratios = [r["rate"] / b["rate"] for r, b in zip(replays[w], bares)]
+            rows.append((n, topology, pattern, w, statistics.median(r["rate"] for r in replays[w]),
+                         statistics.median(b["rate"] for b in bares), statistics.median(ratios),
+                         replays[w], bares))
     print(f"preset {args.preset}, {args.episodes} episodes of at most {args.max_steps} steps, "
-          f"medians of {args.repeats}")
-    print("| agents | topology | hops a tick (bare: 2) | answers a tick | the pattern, ticks/s | "
-          "bare, ticks/s | ratio | CPU us a tick, the pattern | bare | runs (pattern; bare) |")
-    print("| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
-    for n, topology, pattern, rate, bare, ratio, replays, bares in rows:
+          f"medians of {args.repeats}; working: {args.working}")
+    print("| agents | topology | hops a tick (bare: 2) | answers a tick | work a handler, us | "
+          "the pattern, ticks/s | bare, ticks/s | ratio | CPU us a tick, the pattern | bare | "
+          "runs (pattern; bare) |")
+    print("| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
+    for n, topology, pattern, w, rate, bare, ratio, replays_w, bares in rows:
         print(f"| {n} | {topology} | {pattern.hops_per_tick():.2f} | "
-              f"{pattern.answers_per_tick():.2f} | {rate:.0f} | {bare:.0f} | {ratio:.2f} | "
-              f"{median(replays, 'cpu_us'):.0f} | {median(bares, 'cpu_us'):.0f} | "
-              f"{' '.join(format(r['rate'], '.0f') for r in replays)}; "
+              f"{pattern.answers_per_tick():.2f} | {w:g} | {rate:.0f} | {bare:.0f} | "
+              f"{ratio:.2f} | {median(replays_w, 'cpu_us'):.0f} | {median(bares, 'cpu_us'):.0f} | "
+              f"{' '.join(format(r['rate'], '.0f') for r in replays_w)}; "
               f"{' '.join(format(b['rate'], '.0f') for b in bares)} |")
     return 0
 

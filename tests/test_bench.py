@@ -5,6 +5,7 @@ collision of a frozen episode with the simulator's own neighbour rows."""
 import pkgutil
 import subprocess
 import sys
+import time
 from collections import Counter
 
 import zenoh
@@ -70,6 +71,21 @@ def test_the_swarms_message_pattern_is_recorded_from_its_handlers_and_replays_th
     assert pattern.recorded(len(pattern.ticks)) == pattern.timed_from
     result = replay(pattern, "mesh", timed_ticks=300, timeout_s=20)
     assert result["rate"] > 0, "the replay stalled"
+    working = replay(pattern, "mesh", timed_ticks=300, timeout_s=20, work_us=100)
+    assert working["rate"] > 0, "the replay stalled with its handlers working"
+
+
+def test_a_replayed_handler_works_for_the_cpu_time_it_is_given():
+    """``bench.pattern --work-us``: :func:`busy` holds the thread for the CPU time it is given,
+    on the thread's own clock (time another process holds the core is not work), and no more
+    than the clock's reading adds."""
+    from bench.pattern import busy
+
+    for seconds in (0.0, 0.002, 0.02):
+        cpu = time.thread_time()
+        busy(seconds)
+        spent = time.thread_time() - cpu
+        assert seconds <= spent < seconds + 0.005, (seconds, spent)
 
 
 def test_the_handlers_harness_cools_the_caches_before_each_message_outside_its_timing(tmp_path):
