@@ -128,16 +128,13 @@ def plain_python():
 
 
 def run_schedules(count: int, seed_base: int, agents: int = 8, workers: int = 2,
-                  on_done: Callable[[list[Result]], None] | None = None, *,
-                  spawned: bool = False) -> list[Result]:
+                  on_done: Callable[[list[Result]], None] | None = None) -> list[Result]:
     """Run schedules ``seed_base .. seed_base + count - 1``; their results in seed order.
-    ``on_done(results)`` is called as each chunk of schedules completes. They run in ``workers``
-    processes spawned in plain Python (:func:`plain_python`), or in this one where one worker
-    or one chunk makes that pointless, unless ``spawned``."""
+    ``on_done(results)`` is called as each chunk of schedules completes."""
     seeds = list(range(seed_base, seed_base + count))
     chunks = [(seeds[i:i + CHUNK], agents) for i in range(0, count, CHUNK)]
     results: list[Result] = []
-    if not spawned and (workers <= 1 or len(chunks) == 1):
+    if workers <= 1 or len(chunks) == 1:
         for chunk in chunks:
             chunk_results = _run_chunk(chunk)
             results.extend(chunk_results)
