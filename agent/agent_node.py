@@ -102,6 +102,7 @@ class AgentNode(ProtocolAdapter):
         self.lock = threading.RLock()
         self.stopping = False
         self.failure: BaseException | None = None
+        self.handler_cpu = {}
         self.publisher: zenoh.Publisher | None = None
         self.queries: dict[int, zenoh.Query] = {}
         self.next_query = 0
@@ -236,7 +237,8 @@ class AgentNode(ProtocolAdapter):
             raise self.failure
 
     def stats(self) -> dict:
-        return {**self.protocol.stats(), "resumed": self.resumed}
+        return {**self.protocol.stats(), "resumed": self.resumed,
+                "handler_cpu": self.handler_cpu_stats()}
 
 
 def run_agent(options: AgentOptions, brain: AgentBrain | None = None,

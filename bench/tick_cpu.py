@@ -5,13 +5,19 @@ Runs ``launch/swarm.py`` (embedded Zenoh, recording off) with the options given 
 and reads each process's user + system time from ``/proc/<pid>/stat`` at two episode ends
 (after ``--warm-up`` episodes, start-up excluded, and ``--episodes`` episodes later). Prints
 microseconds of CPU per tick by process, their sum, and that sum as a share of what the machine's
-cores offer in a tick: near 1, the tick waits for CPU, not for messages.
+cores offer in a tick: near 1, the tick waits for CPU, not for messages. Then, from the
+processes' stats once they have stopped (``handler_cpu``: every input the node fed its machine,
+``transport.adapter``), what each kind of input cost a call there, on the processes' own
+caches, in the machine and in carrying out its effects (for the agents, the median agent's),
+over the whole run: to set beside ``bench/node_cpu.py``'s figures, hot in one thread.
 
     python -m bench.tick_cpu --episodes 25 -- --preset shield-nnql --agents 8
 """
 
 import argparse
+import json
 import os
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -89,6 +95,7 @@ def main() -> int:
         finally:
             swarm.terminate()
             swarm.wait()
+        handlers = handler_costs(out / "stats")
     ticks = last - first
     costs = sorted(((b[0], 1e6 * (b[1] - before[pid][1]) / ticks) for pid, b in after.items()
                     if b is not None and before.get(pid) is not None), key=lambda c: -c[1])
@@ -101,7 +108,28 @@ def main() -> int:
             print(f"  {name:<28} {us:7.0f}")
     print(f"  {'all processes':<28} {total:7.0f}  ({total / (cores * tick_us):.2f} of {cores} "
           f"cores' {cores * tick_us:.0f})")
+    print("CPU microseconds a call of each input, in its process, over the whole run "
+          "(the agents: the median agent's):")
+    print(f"  {'input':<28} {'calls':>9} {'machine':>8} {'effects':>8}")
+    for (role, name), (calls, machine, effects) in sorted(handlers.items()):
+        print(f"  {role + ' ' + name:<28} {calls:9.0f} {machine:8.1f} {effects:8.1f}")
     return 0
+
+
+def handler_costs(stats_dir: Path) -> dict[tuple[str, str], tuple[float, float, float]]:
+    """``(role, input) -> (calls, machine us, effects us)`` from the processes' stats files: the
+    world's, and the median over the agents that fed that input."""
+    per: dict[tuple[str, str], list[dict]] = {}
+    for path in sorted(stats_dir.glob("*.json")):
+        role = "world" if path.stem == "world" else "agent" if path.stem.startswith("agent-") \
+            else None
+        if role is None:
+            continue
+        for name, cost in json.loads(path.read_text()).get("handler_cpu", {}).items():
+            per.setdefault((role, name), []).append(cost)
+    return {key: tuple(statistics.median(c[field] for c in costs)
+                       for field in ("calls", "machine_us", "effects_us"))
+            for key, costs in per.items()}
 
 
 if __name__ == "__main__":

@@ -61,6 +61,23 @@ def test_no_process_refuses_a_message_another_made(distributed_run):
         assert stats["rejected"] == {} and stats["accepted"] > 0, (name, stats)
 
 
+def test_every_process_counts_what_each_input_cost_it(distributed_run):
+    """The stats carry each input's calls and its CPU time a call, in the machine and in its
+    effects (``transport.adapter``): every agent decided on observations, and the world heard
+    an intent from each agent at each tick it decided."""
+    out, _ = distributed_run
+    rows = read_episodes(out / "episodes.csv")
+    world = json.loads(stats_path(out, "world").read_text())["handler_cpu"]
+    assert world["on_intent"]["calls"] >= sum(int(r["agent_steps"]) for r in rows) > 0
+    assert world["on_intent"]["machine_us"] > 0
+    for agent in range(8):
+        costs = json.loads(stats_path(out, f"agent-{agent}").read_text())["handler_cpu"]
+        observed = costs["on_observation"]
+        assert observed["calls"] >= len(rows), (agent, costs)
+        assert observed["machine_us"] > 0 and observed["effects_us"] > 0, (agent, costs)
+        assert {"calls", "machine_us", "effects_us"} == set(costs["on_liveliness"])
+
+
 def test_recording_verifies(distributed_run):
     out, _ = distributed_run
     rerun = os.path.join(os.path.dirname(sys.executable), "rerun")

@@ -34,8 +34,12 @@ class ProtocolAdapter:
     of vanishing into Zenoh's thread. The main thread takes the node's queue of ``events``
     (:meth:`next_event`) and fires the protocol's timer (:meth:`fire_timer_if_due`).
 
-    A node sets ``lock``, ``stopping``, ``failure``, ``protocol``, ``events`` and ``_do``, and
-    says how it stops."""
+    What each input costs is kept as it goes (:attr:`handler_cpu`, :meth:`handler_cpu_stats`):
+    its thread's CPU time in the machine and in carrying out the effects, which is what a
+    process's handlers cost where it runs, on whatever caches it finds.
+
+    A node sets ``lock``, ``stopping``, ``failure``, ``protocol``, ``events``, ``_do`` and
+    ``handler_cpu`` (empty), and says how it stops."""
 
     lock: threading.RLock
     stopping: bool
@@ -43,20 +47,41 @@ class ProtocolAdapter:
     protocol: Machine  # a node declares the machine it drives
     events: queue.SimpleQueue
     _do: dict[type, Callable]
+    handler_cpu: dict[str, list]  # input -> [calls, CPU s in the machine, CPU s in its effects]
 
     def stop(self) -> None:
         raise NotImplementedError
 
     def feed(self, handler: Callable, *args) -> None:
-        """``handler(*args, now)``, a protocol input, then its effects."""
+        """``handler(*args, now)``, a protocol input, then its effects; the CPU time each took
+        is added to :attr:`handler_cpu` under the input's name."""
+        clock = time.thread_time
         with self.lock:
             if self.stopping:
                 return
+            started = clock()
             try:
-                self.perform(handler(*args, time.monotonic()))
+                effects = handler(*args, time.monotonic())
+                decided = clock()
+                self.perform(effects)
             except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
                 self.failure = error
                 self.stop()
+                return
+            spent = self.handler_cpu.get(handler.__name__)
+            if spent is None:
+                spent = self.handler_cpu[handler.__name__] = [0, 0.0, 0.0]
+            spent[0] += 1
+            spent[1] += decided - started
+            spent[2] += clock() - decided
+
+    def handler_cpu_stats(self) -> dict[str, dict]:
+        """What each input cost so far, for the process's stats: its calls, and the
+        microseconds of its thread's CPU time a call took in the machine and in carrying out the
+        effects (``bench/tick_cpu.py`` prints them)."""
+        return {name: {"calls": calls, "machine_us": round(1e6 * machine / calls, 1),
+                       "effects_us": round(1e6 * effects / calls, 1)}
+                for name, (calls, machine, effects) in sorted(self.handler_cpu.items())}
 
     def perform(self, effects: list) -> None:
         do = self._do

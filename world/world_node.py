@@ -92,6 +92,7 @@ class WorldNode(ProtocolAdapter):
         self.lock = threading.RLock()
         self.stopping = False
         self.failure: BaseException | None = None
+        self.handler_cpu = {}
         self.write_failed = False  # an episode's checkpoint or row could not be written
         self.on_tick = on_tick
         self.publishers: list[zenoh.Publisher] = []
@@ -233,7 +234,7 @@ def run_world(options: WorldOptions,
             log.error("%s", error)
             return 1
     node.trace.save()
-    stats = node.protocol.stats()
+    stats = {**node.protocol.stats(), "handler_cpu": node.handler_cpu_stats()}
     if stats["startup_s"] is not None:
         stats["started_at"] = node.created_at + stats["startup_s"]  # seconds since the epoch
     write_json_atomic(stats_path(options.out_dir, "world"), stats)
