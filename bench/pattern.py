@@ -31,10 +31,11 @@ to asks for a tick already decided, the end-of-episode checkpoints.
 With ``--work-us``, the replay's handlers also work, so that the ratio is told as a function of
 what a handler may cost: each agent, once it may decide, and the world, on each intent it
 counts, keep their core for that many microseconds of their own thread's CPU time
-(:func:`busy`) before they go on (``--working agents`` or ``world``: one side only). A spin touches almost no memory, as a handler compiled over a
-few compact arrays would not: the curve is the budget such a handler has, in the processes,
-for the ratio the swarm is to reach (the swarm's own handlers cost some 150 us a decision and
-as much an intent, hot in one thread, ``bench/node_cpu.py``).
+(:func:`busy`) before they go on (``--working agents`` or ``world``: one side only). A spin
+touches almost no memory, as a handler compiled over a few compact arrays would not: the curve
+is the budget such a handler has, in the processes, for the ratio the swarm is to reach (the
+swarm's own handlers cost some 200 to 300 us a decision and 100 an intent in its processes,
+``bench/tick_cpu.py``).
 
     python -m bench.pattern --agents 8,64 --repeats 3
     python -m bench.pattern --agents 8,64 --repeats 3 --work-us 0,10,25,50,100,150
@@ -396,10 +397,10 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
     """One replay of ``pattern``, its ticks from the second episode on played until
     ``timed_ticks`` are timed, each handler that carries the model working ``work_us`` (each
     agent's decision, each intent the world counts: :func:`busy`; ``working``: ``both``, or
-    only the ``agents`` or the ``world``): ``rate`` (ticks a second over those; nan if its agents were not
-    ready within ``timeout_s``, by default :data:`START_TIMEOUT_S` or half a second an agent,
-    or it stalled for five times that), ``startup_s`` (until every agent was ready),
-    ``cpu_us`` (the machine's busy CPU microseconds a tick over the timed ticks)."""
+    only the ``agents`` or the ``world``): ``rate`` (ticks a second over those; nan if its
+    agents were not ready within ``timeout_s``, by default :data:`START_TIMEOUT_S` or half a
+    second an agent, or it stalled for five times that), ``startup_s`` (until every agent was
+    ready), ``cpu_us`` (the machine's busy CPU microseconds a tick over the timed ticks)."""
     if timeout_s is None:
         timeout_s = max(START_TIMEOUT_S, pattern.n / 2)
     from bench.lockstep import stop_all
@@ -415,6 +416,7 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
         for a, decision in tp.decisions.items():
             scripts[a][tick] = decision
     clock = [(tp.observations, tp.intents) for tp in pattern.ticks]
+    work_s = work_us / 1e6
     processes = []
     if layout.router() is not None:
         from bench.lockstep import router
@@ -424,10 +426,10 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
     recorded = partial(played, timed_from=pattern.timed_from, recorded=len(pattern.ticks))
     processes.append(ctx.Process(target=world, args=(
         pattern.n, clock, recorded, total, pattern.timed_from, layout.world(), results,
-        timeout_s, work_us / 1e6 if working in ("both", "world") else 0.0)))
-    agent_work_s = work_us / 1e6 if working in ("both", "agents") else 0.0
+        timeout_s, work_s if working != "agents" else 0.0)))
     processes += [ctx.Process(target=agent, args=(i, scripts[i], recorded, layout.agent(),
-                                                  timeout_s, agent_work_s))
+                                                  timeout_s,
+                                                  work_s if working != "world" else 0.0))
                   for i in range(pattern.n)]
     launched = time.time()
     for i, p in enumerate(processes):
