@@ -238,6 +238,7 @@ class AgentNode(ProtocolAdapter):
 
     def stats(self) -> dict:
         return {**self.protocol.stats(), "resumed": self.resumed,
+                "decides": self.brain.decides,
                 "handler_cpu": self.handler_cpu_stats()}
 
 

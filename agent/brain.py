@@ -15,18 +15,18 @@ read as one whose intent is unknown, from its current cell. A QL agent asks nobo
 
 import numpy as np
 
+from nnql_swarm.agent import ahead
+from nnql_swarm.learning.decision import OUT_ACTION, OUT_FIELDS, OUT_ORDERED, OUT_WRITTEN
 from nnql_swarm.learning.fields import (
     LP_READING, LP_SHIELD, LP_STILL_SHIELD, NB_FIELDS, READ_DAQL, READINGS, Grid, Sight,
 )
-from nnql_swarm.learning.learner import (
-    announce_order, decide, draw_noise, finish, make_way, preference_ranks,
-)
+from nnql_swarm.learning.learner import draw_noise, make_way
 from nnql_swarm.learning.neighbours import NeighbourRows
-from nnql_swarm.learning.record import record_outcome, write_updates
+from nnql_swarm.learning.record import write_updates
 from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import floats, ints, rows
+from nnql_swarm.protocol.jit import floats, rows
 from nnql_swarm.protocol.messages import Observation
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 
@@ -49,24 +49,33 @@ class AgentBrain:
             raise ValueError("a lookahead n > 1 is played by the simulator only (--in-process)")
         self.agent = agent
         self.config = config
-        self.learner = Learner(config)
+        self._decide, self.decides = ahead.decision()
+        """The decision's kernel (``learning.decision.agent_decision``) and how it runs here:
+        compiled ahead of time, by numba, or in plain Python (``agent.ahead``)."""
+        arrays = self.decides != ahead.PLAIN  # its buffers: arrays where it is compiled
+        self._arrays = arrays
+        self.learner = Learner(config, arrays)
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
         self.order: tuple[int, ...] = ()  # this tick's moves by preference (--arbitration pibt)
         self._pibt = config.arbitration == "pibt"
-        self._ranks = ints([0] * N_ACTIONS)  # an array where the kernel is compiled
+        ints = (lambda values: np.array(values, dtype=np.int64)) if arrays else list
+        self._ranks = ints([0] * N_ACTIONS)
+        self._outcome = ints([0] * OUT_FIELDS)
         self.rejected_updates = 0  # shared-table entries refused (outside, or uneven groups)
         self.reads_intents = config.algo in NEGOTIATING_ALGOS
         self.rng = stream_rng(config.seed, AGENT_STREAM, agent)
         self._random_actions = np.zeros(config.max_steps, dtype=np.int64)
         self._ties = np.zeros((config.max_steps, N_ACTIONS))
-        self._noise: tuple[list[int], list[list[float]]] | None = None
+        self._noise: tuple = (self._random_actions, self._ties)
+        """The episode's noise as the kernel reads it: the arrays, or their values as lists."""
         self._noise_episode = -1
         self._prepared = (-1, -1)  # the observation prepared last (episode, tick)
         self._seen: tuple = (-1, {}, None)  # DAQL: last tick's cells, and the agent's own
         self._was_at: tuple[int, int] | None = None  # DAQL: the agent's cell a tick ago
         self._rows = NeighbourRows(config)
-        self._grid = Grid(config.width, config.height, self._rows.wall_x, self._rows.wall_y, 0,
-                          len(self._rows.wall_x))
+        self._wall_x, self._wall_y = ints(self._rows.wall_x), ints(self._rows.wall_y)
+        self._grid = Grid(config.width, config.height, self._wall_x, self._wall_y, 0,
+                          len(self._wall_x))
 
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         """The neighbours whose intents this agent decides with, of those it waits for
@@ -90,45 +99,42 @@ class AgentBrain:
                 or self._noise_episode == obs.episode):
             return
         draw_noise(self.rng, self._random_actions, self._ties)
-        self._noise = (self._random_actions.tolist(), self._ties.tolist())
+        if not self._arrays:  # plain Python reads lists several times faster
+            self._noise = (self._random_actions.tolist(), self._ties.tolist())
         self._noise_episode = obs.episode
 
     def act(self, obs: Observation, answers: dict[int, int]) -> int:
-        """Learn from the last action's rewards and choose this tick's action: STAY at an
-        episode's end or once arrived, unless it must make way (``learning.learner.make_way``,
-        the ``step-aside`` on-target rule)."""
-        learner, shared = self.learner, self.config.shared
+        """Learn from the last action's rewards and choose this tick's action
+        (``learning.decision.agent_decision``): STAY at an episode's end or once arrived, unless
+        it must make way (``learning.learner.make_way``, the ``step-aside`` on-target rule)."""
+        learner, config, outcome = self.learner, self.config, self._outcome
         self.prepare(obs)
-        record_outcome(learner.state, learner.state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
         (x, y), (gx, gy) = obs.position, obs.goal
-        stops = (obs.arrived and not self.config.lifelong) or obs.episode_end
+        stops = (obs.arrived and not config.lifelong) or obs.episode_end
         near = self._neighbour_rows(obs, {} if stops else answers, not stops)
-        nb, m = rows(near, NB_FIELDS), len(near)
-        sight = Sight(x, y, gx, gy, nb, m, obs.step == 0)
-        self.order = ()
-        if stops:
-            written = finish(learner.buffers, self._grid, sight, not shared)
-            action = STAY
-            if not obs.episode_end and self._pibt:  # it offers to stay; the world may push it
-                assert self._noise is not None, "prepare draws the episode's noise"
-                preference_ranks(learner.values, floats(self._noise[1][obs.step]), learner.wmap,
-                                 x, y, self.config.width, self.config.height, STAY, False,
-                                 self._ranks, 0, nb, m)
-                self.order = self._ordered()
-            elif not obs.episode_end and self.config.step_aside:
-                action = self._make_way(obs, answers)
-        else:
-            noise = self._noise
-            assert noise is not None, "prepare draws the episode's noise before a decision"
-            random_actions, ties = noise
-            action, written = decide(learner.buffers, self._grid, sight, random_actions[obs.step],
-                                     floats(ties[obs.step]), not shared)
-            if self._pibt:
-                action = announce_order(learner.buffers, self._grid, sight, action,
-                                        floats(ties[obs.step]), self._ranks, 0)
-                self.order = self._ordered()
-        self.learned = (learner.record(),) if shared and written else ()
+        reads_noise = not stops or (self._pibt and not obs.episode_end)
+        assert self._noise_episode >= 0 or not reads_noise, "prepare draws the episode's noise"
+        step = obs.step if reads_noise else 0
+        random_actions, ties = self._noise
+        self._decide(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
+                     learner.state, learner.state_f, learner.wmap, learner.rec, learner.rec_f,
+                     learner.values, config.width, config.height, self._wall_x, self._wall_y,
+                     x, y, gx, gy, self._nb(near), len(near), obs.step == 0, obs.reward_ds,
+                     obs.reward_ca, obs.arrived, stops, obs.episode_end, self._pibt,
+                     not config.shared, random_actions[step], ties[step], self._ranks, outcome)
+        action = outcome[OUT_ACTION]
+        self.order = self._ordered() if outcome[OUT_ORDERED] else ()
+        if stops and not obs.episode_end and not self._pibt and config.step_aside:
+            action = self._make_way(obs, answers)
+        self.learned = (learner.record(),) if config.shared and outcome[OUT_WRITTEN] else ()
         return int(action)
+
+    def _nb(self, near: list[list[int]]):
+        """The neighbour rows as the kernel reads them: an array ``(m, NB_FIELDS)``, or the
+        lists themselves in plain Python."""
+        if not self._arrays:
+            return near
+        return np.array(near, dtype=np.int64).reshape(len(near), NB_FIELDS)
 
     def _ordered(self) -> tuple[int, ...]:
         """The moves in the order of this tick's ranks (``learning.learner.preference_ranks``)."""
@@ -138,7 +144,7 @@ class AgentBrain:
         """An arrived agent's move under ``step-aside``: it stays unless a neighbour it waited
         for announced moving into its cell."""
         noise = self._noise
-        assert noise is not None, "prepare draws the episode's noise before a decision"
+        assert self._noise_episode >= 0, "prepare draws the episode's noise before a decision"
         near = self._neighbour_rows(obs, answers, True)
         (x, y), (gx, gy) = obs.position, obs.goal
         sight = Sight(x, y, gx, gy, rows(near, NB_FIELDS), len(near), False)

@@ -8,7 +8,8 @@ preparation), unless it finds it in place; so the server runs it first, as a chi
 A forked process starts with the server's memory as its own, page for page, until it writes to a
 page. So the server collects its garbage and then freezes every object it holds
 (``gc.freeze``): a child's collections never walk them, which would write to each object's
-header and so copy every page of them into the child. And it hands the heap the import left free
+header and so copy every page of them into the child. It loads the agents' decision compiled
+ahead of time (``agent.ahead``) for them too. And it hands the heap the import left free
 back to the system (glibc's ``malloc_trim``), or every child would start with it resident.
 """
 
@@ -18,6 +19,7 @@ import gc
 import os
 from multiprocessing import process, spawn
 
+from nnql_swarm.agent import ahead
 from nnql_swarm.launch.processes import MAIN_VARIABLE
 
 
@@ -48,4 +50,5 @@ def tidy() -> None:
 
 
 serve_main()
+ahead.decision()  # the agents' decision compiled ahead of time, loaded once for every child
 tidy()

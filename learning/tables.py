@@ -11,7 +11,7 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.known_map import fresh_map, known_cells, map_size, restore_known
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.jit import floats, ints, python_values
+from nnql_swarm.protocol.jit import COMPILED, python_values
 
 
 class Learner:
@@ -19,14 +19,16 @@ class Learner:
 
     The two tables are views of one array, ``Q_DS``'s rows first (:attr:`entries`, flat, is how
     a shared table's updates name its Q-values), a numpy array whether the kernel is compiled or
-    not (``protocol.jit``); the other buffers are Python lists in plain Python, among them the
-    walls it has seen and its way to its goal (``wmap``, ``learning.known_map``), which the agent
-    derives from the run's map (``config.walls()``) and its own positions: the world sends no
-    walls."""
+    not (``protocol.jit``); the other buffers are arrays too where ``arrays`` (by default, where
+    the kernel is compiled; in an agent that decides ahead of time, ``agent.ahead``), else Python
+    lists. Among them are the walls it has seen and its way to its goal (``wmap``,
+    ``learning.known_map``), which the agent derives from the run's map (``config.walls()``) and
+    its own positions: the world sends no walls."""
 
-    def __init__(self, config: SwarmConfig) -> None:
+    def __init__(self, config: SwarmConfig, arrays: bool = COMPILED) -> None:
         reading = READINGS[config.algo]
         params, params_f = learner_params(config)
+        ints, floats = (_int_array, _float_array) if arrays else (list, list)
         self.params, self.params_f = ints(params), floats(params_f)
         both = np.full((N_STATES + ca_rows(reading, config.known_state), N_ACTIONS),
                        float(config.optimistic))
@@ -73,3 +75,11 @@ class Learner:
         """The learning record just written, as it travels: its integers and its two rewards."""
         ints = python_values(self.rec)
         return tuple(ints[:REC_PAIRS + 2 * ints[REC_COUNT]]), tuple(python_values(self.rec_f))
+
+
+def _int_array(values) -> np.ndarray:
+    return np.array(values, dtype=np.int64)
+
+
+def _float_array(values) -> np.ndarray:
+    return np.array(values, dtype=np.float64)

@@ -1,0 +1,136 @@
+"""The agent's decision compiled ahead of time: an extension module that an agent process
+imports without numba.
+
+An agent process runs the kernel functions in plain Python (``protocol.jit``), since loading
+numba and its LLVM would take an agent from some 40 MiB to 160. numba's ``pycc`` compiles
+chosen functions, with fixed signatures, into an extension module that needs only numpy at run
+time. This module builds the agent's decision (``learning.decision.agent_decision``) so, into
+the kernel cache (``protocol.jit.cache_directory``: one directory per version of every kernel
+source), once per version; and finds it there for the brain (:func:`decision`). A process that
+does not find it (not built yet, or built where no C compiler was) decides in plain Python: the
+same function, the same decisions, slower.
+
+    python -m nnql_swarm.agent.ahead     # build it (the launcher does, where it is missing)
+
+``NNQL_AHEAD=off`` (:data:`SWITCH`) makes a process decide in plain Python regardless.
+"""
+
+import contextlib
+import fcntl
+import functools
+import importlib.machinery
+import importlib.util
+import logging
+import os
+import subprocess
+import sys
+import tempfile
+import warnings
+from pathlib import Path
+from types import ModuleType
+from typing import Callable, Iterator
+
+from nnql_swarm.learning.decision import SIGNATURE, agent_decision
+from nnql_swarm.protocol.jit import COMPILED, MODE_VARIABLE, cache_directory
+
+log = logging.getLogger(__name__)
+
+MODULE = "nnql_agent_kernels"
+"""The extension module's name (it is imported under this name, from the kernel cache)."""
+
+PLAIN, AHEAD, JIT = "python", "ahead-of-time", "numba"
+"""How this process makes a decision (:func:`decision`): in plain Python, by the module compiled
+ahead of time, or compiled by numba (a process that runs the kernels compiled)."""
+
+SWITCH = "NNQL_AHEAD"
+"""``NNQL_AHEAD=off`` in a process's environment: it decides in plain Python even where the
+module is built (to compare the two, ``bench.paired --a-env NNQL_AHEAD=off``)."""
+
+
+def module_path() -> Path:
+    """Where the extension module of the current kernel sources is, or is to be built."""
+    return cache_directory() / (MODULE + importlib.machinery.EXTENSION_SUFFIXES[0])
+
+
+def load() -> ModuleType | None:
+    """The extension module of the current kernel sources, if it was built (None otherwise, or
+    if it cannot be loaded, which is logged)."""
+    path = module_path()
+    if not path.exists():
+        return None
+    try:
+        spec = importlib.util.spec_from_file_location(MODULE, path)
+        assert spec is not None and spec.loader is not None
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    except ImportError as error:
+        log.warning("the agent's decision compiled ahead of time cannot be loaded (%s); "
+                    "deciding in plain Python", error)
+        return None
+    return module
+
+
+@functools.cache
+def decision() -> tuple[Callable, str]:
+    """The function this process decides with (``learning.decision.agent_decision``, compiled or
+    not) and how it runs (:data:`PLAIN`, :data:`AHEAD`, :data:`JIT`). Looked up once."""
+    if COMPILED:
+        return agent_decision, JIT
+    module = None if os.environ.get(SWITCH) == "off" else load()
+    if module is None:
+        return agent_decision, PLAIN
+    return module.agent_decision, AHEAD
+
+
+@contextlib.contextmanager
+def _locked(directory: Path) -> Iterator[None]:
+    """Hold the cache directory's build lock: processes that build at once build once."""
+    with open(directory / (MODULE + ".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
+
+
+def build() -> Path:
+    """Compile the extension module into the kernel cache, unless it is there; its path. Needs
+    numba, so a process that runs the kernels compiled."""
+    if not COMPILED:
+        raise RuntimeError(f"building ahead of time needs numba: run it with {MODE_VARIABLE} unset")
+    target = module_path()
+    target.parent.mkdir(parents=True, exist_ok=True)
+    with _locked(target.parent):
+        if target.exists():
+            return target
+        with warnings.catch_warnings():  # pycc is pending deprecation in numba, and says so
+            warnings.simplefilter("ignore")
+            from numba.pycc import CC
+        with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
+            cc = CC(MODULE, source_module=__name__)
+            cc.output_dir = scratch
+            cc.export("agent_decision", SIGNATURE)(agent_decision.py_func)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                cc.compile()
+            os.replace(Path(scratch) / cc.output_file, target)
+    return target
+
+
+def ensure() -> bool:
+    """Build the extension module where it is missing, in a child process that loads numba (this
+    one need not), saying so; whether it is there. A failed build is logged, and the agents
+    decide in plain Python."""
+    if module_path().exists():
+        return True
+    print("Compiling the agents' decision ahead of time (once per version of the kernel "
+          "sources; some 15 s)...", file=sys.stderr, flush=True)
+    env = {**os.environ, MODE_VARIABLE: "compiled"}
+    done = subprocess.run([sys.executable, "-m", __name__], env=env, capture_output=True,
+                          text=True)
+    if done.returncode != 0:
+        log.warning("the agents' decision could not be compiled ahead of time; they decide in "
+                    "plain Python:\n%s", done.stderr.strip()[-2000:])
+        return False
+    return module_path().exists()
+
+
+if __name__ == "__main__":
+    print(build())

@@ -1,0 +1,106 @@
+"""The agent's decision compiled ahead of time (``agent.ahead``): built once into the kernel
+cache, even by several processes at once; loaded by a process that runs the kernels in plain
+Python, without numba; and deciding exactly as plain Python does, over the real handlers of a
+whole run."""
+
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from nnql_swarm.agent import ahead
+from nnql_swarm.protocol.jit import cache_directory
+
+PROBE = ("import sys; from nnql_swarm.agent import ahead; "
+         "print(ahead.decision()[1]); print('numba' in sys.modules)")
+
+RUN = """
+import hashlib, sys
+from pathlib import Path
+from bench import node_cpu
+from bench.harness import DEFAULT_PRESET, swarm_config
+from nnql_swarm.agent import ahead
+config = swarm_config(DEFAULT_PRESET, run_id="ahead", n_agents=8, episodes=8, max_steps=100,
+                      width=11, height=11)
+wire = hashlib.sha256()
+def on_send(number, kind, sender, receiver, item, cause):
+    payload = getattr(item, "payload", b"")
+    wire.update(repr((number, kind, sender, receiver)).encode() + bytes(payload))
+ticks, _ = node_cpu.run(config, Path(sys.argv[1]), False, on_send=on_send)
+print(ticks, wire.hexdigest(), ahead.decision()[1])
+"""
+
+
+def plain(env: dict[str, str]) -> dict[str, str]:
+    return {**os.environ, **env, "NNQL_KERNEL": "python"}
+
+
+def checkpoints(out: Path) -> str:
+    """A digest of a run's checkpoints (every agent's tables, known walls, counts)."""
+    digest = hashlib.sha256()
+    for path in sorted((out / "checkpoints").rglob("*")):
+        if path.is_file():
+            digest.update(path.name.encode() + path.read_bytes())
+    return digest.hexdigest()
+
+
+@pytest.fixture(scope="module")
+def built() -> Path:
+    """The module of these kernel sources, built if missing (as the launcher does)."""
+    assert ahead.ensure(), "the agents' decision could not be compiled ahead of time"
+    return ahead.module_path()
+
+
+def test_a_plain_process_loads_the_built_decision_without_numba(built):
+    done = subprocess.run([sys.executable, "-c", PROBE], env=plain({}), capture_output=True,
+                          text=True, timeout=120)
+    assert done.stdout.split() == [ahead.AHEAD, "False"], done.stderr
+
+
+def test_without_the_module_or_with_it_switched_off_a_process_decides_in_plain_python(
+        built, tmp_path):
+    for env in ({ahead.SWITCH: "off"}, {"XDG_CACHE_HOME": str(tmp_path / "no-cache")}):
+        done = subprocess.run([sys.executable, "-c", PROBE], env=plain(env),
+                              capture_output=True, text=True, timeout=120)
+        assert done.stdout.split() == [ahead.PLAIN, "False"], (env, done.stderr)
+
+
+def test_the_decision_compiled_ahead_of_time_decides_as_plain_python_does(built, tmp_path):
+    """The real handlers of a whole run (``bench.node_cpu``: the world and 8 agents in one
+    process, every message delivered in order), once deciding ahead of time and once in plain
+    Python: the same ticks, every message the same, the same checkpoints (the agents' tables
+    among them), bit for bit."""
+    runs = {}
+    for how, env in ((ahead.AHEAD, {}), (ahead.PLAIN, {ahead.SWITCH: "off"})):
+        out = tmp_path / how
+        done = subprocess.run([sys.executable, "-c", RUN, str(out)], env=plain(env),
+                              capture_output=True, text=True, timeout=300)
+        assert done.returncode == 0, done.stderr
+        ticks, messages, decided = done.stdout.split()
+        assert decided == how and int(ticks) > 8
+        runs[how] = (ticks, messages, checkpoints(out))
+    assert runs[ahead.AHEAD] == runs[ahead.PLAIN]
+
+
+@pytest.mark.full
+def test_processes_that_build_at_once_build_one_module_into_a_fresh_cache(tmp_path):
+    """Into an empty cache (``XDG_CACHE_HOME``; numba's own cache of compiled kernels kept), two
+    builders at once: both succeed, one module results, and a plain process decides with it."""
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "NNQL_KERNEL": "compiled",
+           "NUMBA_CACHE_DIR": str(cache_directory())}
+    builders = [subprocess.Popen([sys.executable, "-m", "nnql_swarm.agent.ahead"], env=env,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                for _ in range(2)]
+    outputs = [builder.communicate(timeout=600) for builder in builders]
+    assert [builder.returncode for builder in builders] == [0, 0], outputs
+    built = {Path(stdout.strip()) for stdout, _ in outputs}
+    assert len(built) == 1 and next(iter(built)).is_relative_to(tmp_path), outputs
+    assert [p.name for p in next(iter(built)).parent.iterdir() if p.suffix == ".so"] \
+        == [next(iter(built)).name]
+    done = subprocess.run([sys.executable, "-c", PROBE], env=plain({"XDG_CACHE_HOME":
+                                                                    str(tmp_path)}),
+                          capture_output=True, text=True, timeout=120)
+    assert done.stdout.split() == [ahead.AHEAD, "False"], done.stderr
