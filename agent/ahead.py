@@ -114,22 +114,33 @@ def build() -> Path:
     return target
 
 
+def failure_path() -> Path:
+    """Where a failed build of the current kernel sources says why: none is tried again."""
+    return module_path().with_suffix(".failed")
+
+
 def ensure() -> bool:
     """Build the extension module where it is missing, in a child process that loads numba (this
-    one need not), saying so; whether it is there. A failed build is logged, and the agents
-    decide in plain Python."""
+    one need not), saying so; whether it is there. A failed build is logged, and noted beside
+    it (:func:`failure_path`), so that no later process tries it again; the agents decide in
+    plain Python."""
     if module_path().exists():
         return True
+    failed = failure_path()
+    if failed.exists():
+        return False
     print("Compiling the agents' decision ahead of time (once per version of the kernel "
           "sources; some 15 s)...", file=sys.stderr, flush=True)
     env = {**os.environ, MODE_VARIABLE: "compiled"}
     done = subprocess.run([sys.executable, "-m", __name__], env=env, capture_output=True,
                           text=True)
-    if done.returncode != 0:
-        log.warning("the agents' decision could not be compiled ahead of time; they decide in "
-                    "plain Python:\n%s", done.stderr.strip()[-2000:])
+    if done.returncode != 0 or not module_path().exists():
+        failed.parent.mkdir(parents=True, exist_ok=True)
+        failed.write_text(done.stderr)
+        log.warning("the agents' decision could not be compiled ahead of time, so they decide in "
+                    "plain Python (why: %s; delete it to try again)", failed)
         return False
-    return module_path().exists()
+    return True
 
 
 if __name__ == "__main__":

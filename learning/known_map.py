@@ -72,6 +72,8 @@ def fresh_map(wmap) -> None:
 
 def known_cells(wmap, width: int, height: int) -> list[int]:
     """The known walls' cells (``y * W + x``, ascending): what a checkpoint keeps."""
+    if isinstance(wmap, np.ndarray):
+        return np.flatnonzero(wmap[MAP_HEADER:MAP_HEADER + width * height]).tolist()
     return [c for c in range(width * height) if wmap[MAP_HEADER + c] != 0]
 
 

@@ -1,5 +1,5 @@
 """Session hooks: the simulator's kernel is compiled once, before any test, where numba's cache
-does not hold it; the ``browser`` tests run where Chromium and Playwright are, and are
+does not hold it, and the agents' decision ahead of time where it is not built; the ``browser`` tests run where Chromium and Playwright are, and are
 deselected elsewhere, with one line in the summary saying why; under pytest-xdist
 (``--dist loadgroup``, as ``make test`` and ``make test-all`` run it), the tests that must share
 a worker are grouped onto one, and the longest work is handed out first (``durations.json``)."""
@@ -36,15 +36,19 @@ def pytest_sessionstart(session):
     checkout of these kernel sources on this machine, ``protocol.jit``), before the workers
     start: else the first tests to play it (the experiment's command, in a process of its
     own) each compiled it at once, several times half a minute on a loaded machine, and ran past
-    their time-outs. In the controller only: a worker finds it cached."""
+    their time-outs. The same for the agents' decision compiled ahead of time (``agent.ahead``),
+    which every process that starts a swarm would otherwise build, or wait for, at once. In the
+    controller only: a worker finds both cached."""
     if hasattr(session.config, "workerinput"):
         return
+    from nnql_swarm.agent import ahead
     from nnql_swarm.launch.cli import prepare_simulator
     from nnql_swarm.protocol.config import SwarmConfig
     from nnql_swarm.sim.runs import swarm_world
 
     config = SwarmConfig(n_agents=2, width=5, height=5, episodes=1, max_steps=10)
     prepare_simulator(swarm_world(config), config)  # says so when it compiles
+    ahead.ensure()  # says so when it compiles
 
 
 def pytest_addoption(parser):

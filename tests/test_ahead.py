@@ -104,3 +104,26 @@ def test_processes_that_build_at_once_build_one_module_into_a_fresh_cache(tmp_pa
                                                                     str(tmp_path)}),
                           capture_output=True, text=True, timeout=120)
     assert done.stdout.split() == [ahead.AHEAD, "False"], done.stderr
+
+
+@pytest.mark.full
+def test_a_build_that_fails_is_said_once_and_leaves_the_agents_deciding_in_plain_python(
+        tmp_path):
+    """Where the C compiler fails (``CC=false``), the launcher's build says why in a warning,
+    notes the failure in the cache, and no later process tries again: they decide in plain
+    Python."""
+    ensure = ("import logging, sys; logging.basicConfig(); from nnql_swarm.agent import ahead; "
+              "print(ahead.ensure(), ahead.decision()[1])")
+    env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "NNQL_KERNEL": "python", "CC": "false",
+           "NUMBA_CACHE_DIR": str(cache_directory())}
+    first = subprocess.run([sys.executable, "-c", ensure], env=env, capture_output=True,
+                           text=True, timeout=600)
+    assert first.stdout.split() == ["False", ahead.PLAIN], first.stderr
+    assert "Compiling the agents' decision" in first.stderr
+    assert "could not be compiled ahead of time" in first.stderr
+    failed = list(tmp_path.rglob("*.failed"))
+    assert len(failed) == 1 and failed[0].read_text().strip()
+    again = subprocess.run([sys.executable, "-c", ensure], env=env, capture_output=True,
+                           text=True, timeout=60)
+    assert again.stdout.split() == ["False", ahead.PLAIN], again.stderr
+    assert "Compiling" not in again.stderr and "could not" not in again.stderr
