@@ -52,25 +52,29 @@ def record_entries(ints) -> list[int]:
 def write_updates(entries: np.ndarray, groups) -> int:
     """Write a shared table's updates (groups of entry indices and their values,
     ``protocol.messages.Updates``) into a learner's Q-values, both tables flat
-    (``learning.tables.Learner.entries``), a group at a time; returns how many it refused: those
-    outside its tables, and every entry of a group whose values are not as many as its entries.
-    (The world names an entry twice only with the same value, its value once the tick's records
-    are all applied: ``world.shared_table``.)"""
-    end = len(entries)
+    (``learning.tables.Learner.entries``); returns how many it refused: those outside its
+    tables, and every entry of a group whose values are not as many as its entries. The groups
+    are written in one assignment: the world names an entry twice only with the same value, its
+    value once the tick's records are all applied (``world.shared_table``), so the order does
+    not matter."""
     refused = 0
-    for indices, values in groups:
-        if len(indices) != len(values):
-            refused += max(len(indices), len(values))
+    indices: list[int] = []
+    values: list[float] = []
+    for group_indices, group_values in groups:
+        if len(group_indices) != len(group_values):
+            refused += max(len(group_indices), len(group_values))
             continue
-        if not indices:
-            continue
-        where = np.array(indices, dtype=np.int64)
-        if max(indices) < end:
-            entries[where] = values
-        else:
-            inside = where < end
-            entries[where[inside]] = np.array(values, dtype=np.float64)[inside]
-            refused += len(indices) - int(inside.sum())
+        indices += group_indices
+        values += group_values
+    if not indices:
+        return refused
+    where = np.array(indices, dtype=np.int64)
+    if max(indices) < len(entries):
+        entries[where] = values
+    else:
+        inside = where < len(entries)
+        entries[where[inside]] = np.array(values, dtype=np.float64)[inside]
+        refused += len(indices) - int(inside.sum())
     return refused
 
 
