@@ -52,7 +52,6 @@ import logging
 from nnql_swarm.agent import negotiation
 from nnql_swarm.agent.answering import AHEAD_TICKS, QueryAnswering
 from nnql_swarm.agent.phases import TRANSITIONS, WAITING, Event, OpenAsk, Pending, Phase
-from nnql_swarm.learning import neighbours
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, START_S_PER_AGENT, SwarmConfig
@@ -102,6 +101,7 @@ class AgentMachine(QueryAnswering, Machine):
         self.agent = agent
         self.config = config
         self.brain = brain
+        self.planner = negotiation.Planner(config)
         self.n = config.n_agents
         self.sender = agent_sender(agent)
         self.timeout_s = (config.tick_deadline_s / 2 if negotiation_timeout_s is None
@@ -119,7 +119,7 @@ class AgentMachine(QueryAnswering, Machine):
         self.decided_short: dict[int, int] = {}  # episode -> its decisions short of an intent
         self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
         self.decided_waiters = []  # whom the decided tick's answer goes to by stream
-        self.decided_near: list[tuple[int, int, int]] = []  # negotiation.streamed, decided tick
+        self.decided_near: list[tuple[int, int, int]] = []  # the decided tick's Plan.near
         self.decided_answer = None
         self.decided_payload = b""
         self.held = []
@@ -169,7 +169,7 @@ class AgentMachine(QueryAnswering, Machine):
             if self.streams.get(j) == open_ask.generation:
                 del self.streams[j]
                 if (p is not None and self.phase is Phase.NEGOTIATING and p.deadline > now
-                        and j in p.asks and j not in self._intents_of(p.obs.tick).answered):
+                        and j in p.plan.asks and j not in self._intents_of(p.obs.tick).answered):
                     self._ask(j, p.obs.tick, p.deadline - now)  # not by the stream
         elif open_ask.agent not in self.peers_seen:  # gone: no answer is coming
             self._refused(open_ask, now)
@@ -304,11 +304,12 @@ class AgentMachine(QueryAnswering, Machine):
                 and obs.episode != self.quiet_episode and not self._resync(obs)):
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
-        awaited, asks = negotiation.plan_for(obs, self.config)
+        plan = self.planner(obs)
+        awaited, asks = plan.awaited, plan.asks
         needed = self.brain.neighbours_to_ask(obs, awaited)
-        staying = {j: STAY for j in neighbours.staying(obs, self.config)}
+        staying = {j: STAY for j in plan.staying}
         if not awaited:
-            self._decide(obs, staying)
+            self._decide(obs, plan, staying)
             return
         tick = obs.tick
         got = self._intents_of(tick)
@@ -316,7 +317,7 @@ class AgentMachine(QueryAnswering, Machine):
             if j not in got.answered and j not in self.streams:
                 self._ask(j, tick, self.timeout_s)
         self._go(Event.AWAITS)
-        self.pending = Pending(obs, awaited, needed, asks, now + self.timeout_s, staying)
+        self.pending = Pending(obs, plan, needed, now + self.timeout_s, staying)
         self.brain.prepare(obs)  # while the answers are on their way
         self._advance(now)
 
@@ -353,13 +354,13 @@ class AgentMachine(QueryAnswering, Machine):
         remaining = p.deadline - now
         refused = p.refused
         if self.phase is Phase.NEGOTIATING:
-            if remaining > 0 and not all(j in got.answered or j in refused for j in p.asks):
+            if remaining > 0 and not all(j in got.answered or j in refused for j in p.plan.asks):
                 return
-            for j in p.asks:
+            for j in p.plan.asks:
                 if j not in got.answered:
                     self.streams.pop(j, None)  # it did not answer in time: open a fresh one
             self._go(Event.ANSWERS_IN)
-            p.missing = [j for j in p.awaited if j not in got.actions and j not in refused]
+            p.missing = [j for j in p.plan.awaited if j not in got.actions and j not in refused]
             if p.missing and remaining > 0:
                 for j in p.missing:
                     self._ask(j, p.obs.tick, remaining)
@@ -376,9 +377,10 @@ class AgentMachine(QueryAnswering, Machine):
         if any(j not in known for j in p.needed):  # timed out, or refused: may differ
             episode = p.obs.episode
             self.decided_short[episode] = self.decided_short.get(episode, 0) + 1
-        self._decide(p.obs, {**p.staying, **{j: known[j] for j in p.needed if j in known}})
+        answers = {**p.staying, **{j: known[j] for j in p.needed if j in known}}
+        self._decide(p.obs, p.plan, answers)
 
-    def _decide(self, obs: Observation, answers: dict[int, int]) -> None:
+    def _decide(self, obs: Observation, plan: negotiation.Plan, answers: dict[int, int]) -> None:
         """Decide ``obs`` with the ``answers`` of the neighbours the brain waits for; answer
         for it, relaying every intent learned for the tick; checkpoint at an episode's end;
         tell the world."""
@@ -397,9 +399,9 @@ class AgentMachine(QueryAnswering, Machine):
         self.decided_tick, self.decided_answer = tick, answer
         if obs.arrived and self.config.quiet_settled:  # quiet from the next tick (world.engine)
             self.quiet_episode = obs.episode
-        self.decided_waiters = negotiation.standing_answers(obs, self.config)
+        self.decided_waiters = plan.answered
         if self.negotiates:
-            self.decided_near = negotiation.streamed(obs, self.config)
+            self.decided_near = plan.near
         self.decided_payload = encode(answer)
         trace.mark(ENCODED, tick)
         self.intents = {t: got for t, got in self.intents.items() if t > tick}
@@ -448,7 +450,7 @@ class AgentMachine(QueryAnswering, Machine):
 
     def _open_streams(self, since: int) -> None:
         """Open a standing query on the intent key of every agent near enough to be asked soon
-        (``negotiation.streamed``) that has none; those agents end them once it is far
+        (``negotiation.Plan.near``) that has none; those agents end them once it is far
         (``agent.answering``)."""
         streams, peers = self.streams, self.peers_seen
         new = [j for j, _, _ in self.decided_near if j not in streams and j in peers]

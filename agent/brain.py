@@ -15,7 +15,7 @@ read as one whose intent is unknown, from its current cell. A QL agent asks nobo
 
 import numpy as np
 
-from nnql_swarm.agent import ahead
+from nnql_swarm.learning import ahead
 from nnql_swarm.learning.decision import OUT_ACTION, OUT_FIELDS, OUT_ORDERED, OUT_WRITTEN
 from nnql_swarm.learning.fields import (
     LP_READING, LP_SHIELD, LP_STILL_SHIELD, NB_FIELDS, READ_DAQL, READINGS, Grid, Sight,
@@ -51,7 +51,7 @@ class AgentBrain:
         self.config = config
         self._decide, self.decides = ahead.decision()
         """The decision's kernel (``learning.decision.agent_decision``) and how it runs here:
-        compiled ahead of time, by numba, or in plain Python (``agent.ahead``)."""
+        compiled ahead of time, by numba, or in plain Python (``learning.ahead``)."""
         arrays = self.decides != ahead.PLAIN  # its buffers: arrays where it is compiled
         self._arrays = arrays
         self.learner = Learner(config, arrays)

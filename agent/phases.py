@@ -4,6 +4,7 @@
 import enum
 from dataclasses import dataclass, field
 
+from nnql_swarm.agent.negotiation import Plan
 from nnql_swarm.protocol.phase_machine import Named
 from nnql_swarm.protocol.messages import Observation
 
@@ -46,17 +47,16 @@ starts a new negotiation."""
 
 @dataclass
 class Pending:
-    """An observation whose decision waits for intents: whose (``awaited``), which of them the
-    brain decides with (``needed``), whom this agent asked (``asks``), until when, the intents
-    it knows without asking (``staying``: parked neighbours, ``neighbours.staying``), and, once
-    the answers are in, the ones it then asked for directly because no answer brought them
-    (``missing``); neighbours that cannot answer (gone, or refusing the tick) are waited for no
-    more (``refused``)."""
+    """An observation whose decision waits for intents, with its plan (``agent.negotiation.Plan``:
+    whose intents it awaits, whom it asked...): which of them the brain decides with
+    (``needed``), until when, the intents it knows without asking (``staying``: parked
+    neighbours), and, once the answers are in, the ones it then asked for directly because no
+    answer brought them (``missing``); neighbours that cannot answer (gone, or refusing the
+    tick) are waited for no more (``refused``)."""
 
     obs: Observation
-    awaited: list[int]
+    plan: Plan
     needed: list[int]
-    asks: list[int]
     deadline: float
     staying: dict[int, int]
     missing: list[int] = field(default_factory=list)

@@ -6,9 +6,9 @@ and every agent, each message delivered in order) with the parts of an agent's w
 the thread's CPU clock: its machine's handling of an observation and of an answer as wholes, and
 inside them the decision (``AgentBrain.act``, with ``prepare``: the shared table's updates
 written, the episode's noise drawn), the codec's decoding of each message, the negotiation's
-plan (whom to wait for and ask, ``agent.negotiation.plan_for``), whom to answer
-(``standing_answers``), the parked neighbours known to stay (``learning.neighbours.staying``),
-the agents near enough to stream (``streamed``) and the encoding of answers and intents. Each
+plan (``agent.negotiation.Planner``: whom to wait for and ask, whom to answer, the parked
+neighbours known to stay, the agents near enough to stream) and the encoding of answers and
+intents. Each
 part's CPU time summed over the run, by observation, so the parts of one observation add up
 (a part also called on answers, as decoding, counts there too). Each timer costs about half a
 microsecond a call. Where the next microseconds are:
@@ -28,8 +28,8 @@ os.environ.setdefault("NNQL_KERNEL", "python")  # as in the swarm's processes, u
 
 from bench import node_cpu  # noqa: E402
 from bench.harness import add_preset_option, grid_side, swarm_config  # noqa: E402
-from nnql_swarm.agent import agent_machine, ahead, brain, negotiation  # noqa: E402
-from nnql_swarm.learning import neighbours  # noqa: E402
+from nnql_swarm.agent import agent_machine, brain, negotiation  # noqa: E402
+from nnql_swarm.learning import ahead  # noqa: E402
 from nnql_swarm.protocol import inbox  # noqa: E402
 
 PARTS = (
@@ -38,10 +38,7 @@ PARTS = (
     ("the decision (act)", brain.AgentBrain, "act"),
     ("prepare (updates, noise)", brain.AgentBrain, "prepare"),
     ("decoding messages", inbox.Inbox, "decode"),
-    ("whom to wait for and ask", negotiation, "plan_for"),
-    ("whom to answer", negotiation, "standing_answers"),
-    ("parked, known to stay", neighbours, "staying"),
-    ("whom to stream", negotiation, "streamed"),
+    ("the negotiation's plan", negotiation.Planner, "__call__"),
     ("encoding", agent_machine, "encode"),
 )
 """``(name, owner, attribute)``: each part, timed where the agent's machine calls it."""

@@ -16,7 +16,7 @@ from multiprocessing.context import ForkServerContext, SpawnContext
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from nnql_swarm.agent import ahead
+from nnql_swarm.learning import ahead
 from nnql_swarm.protocol.jit import plain_python_environment
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.runfiles import EXIT_NO_SPACE, out_of_space
@@ -55,7 +55,7 @@ def process_context() -> SpawnContext | ForkServerContext:
     here, with the environment now. A child of the server has the server's environment, not its
     launcher's: a launcher whose environment has changed since it started the server (a test
     setting a variable for one run) spawns its processes, as do systems without a forkserver.
-    The agents' decision is first compiled ahead of time where it is not yet (``agent.ahead``)."""
+    The agents' decision is first compiled ahead of time where it is not yet (``learning.ahead``)."""
     global _SERVED
     ahead.ensure()
     os.environ.update(plain_python_environment())

@@ -9,7 +9,7 @@ A forked process starts with the server's memory as its own, page for page, unti
 page. So the server collects its garbage and then freezes every object it holds
 (``gc.freeze``): a child's collections never walk them, which would write to each object's
 header and so copy every page of them into the child. It loads the agents' decision compiled
-ahead of time (``agent.ahead``) for them too. And it hands the heap the import left free
+ahead of time (``learning.ahead``) for them too. And it hands the heap the import left free
 back to the system (glibc's ``malloc_trim``), or every child would start with it resident.
 """
 
@@ -19,7 +19,7 @@ import gc
 import os
 from multiprocessing import process, spawn
 
-from nnql_swarm.agent import ahead
+from nnql_swarm.learning import ahead
 from nnql_swarm.launch.processes import MAIN_VARIABLE
 
 

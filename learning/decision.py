@@ -6,7 +6,7 @@ completed, and either the choice (Eq. 6-8, with the announced order under ``--ar
 pibt``) or, for an agent that stops (arrived, or the episode ended), the order it offers while
 it stays. Its arguments are the learner's buffers, the grid's and the sight's fields one by one,
 rather than the named tuples of ``learning.fields``, so that it can be compiled ahead of time
-with a fixed signature (:data:`SIGNATURE`; ``agent.ahead``): an agent process, which must not
+with a fixed signature (:data:`SIGNATURE`; ``learning.ahead``): an agent process, which must not
 load numba, then makes the whole decision in one compiled call, where in plain Python it is
 several dozen small functions. Plain, compiled by numba or ahead of time, it is the same code.
 """

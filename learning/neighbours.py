@@ -5,14 +5,17 @@ the same when it checks the agent's learning record (``world.records``). Each ro
 one kernel, :func:`neighbour_row`, which the simulator's ``sim.episode.neighbour_rows`` calls
 too."""
 
+import numpy as np
+
 from nnql_swarm.learning.fields import (
     NB_FIELDS, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED, NB_PREV_X, NB_PREV_Y,
     NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, reach,
 )
 from nnql_swarm.learning.known_map import check_cell_order
+from nnql_swarm.learning.plan import awaited_into, staying_into
 from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sees, target_x, target_y, within
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import inline_kernel, ints
+from nnql_swarm.protocol.jit import COMPILED, inline_kernel, ints, python_values
 
 
 @inline_kernel
@@ -46,7 +49,7 @@ write_row = getattr(neighbour_row, "py_func", neighbour_row)
 """:func:`neighbour_row` as plain Python, on a list row (the agent's rows are lists, whether or
 not the kernel is compiled in this process)."""
 from nnql_swarm.protocol.messages import Observation
-from nnql_swarm.protocol.ranks import awaits_answer, in_reach, priority_rank, waits_for
+from nnql_swarm.protocol.ranks import in_reach
 
 
 def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
@@ -56,31 +59,38 @@ def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
 
 
 def awaited_cells(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]]:
-    """:func:`awaited` as ``(id, x, y)``."""
+    """:func:`awaited` as ``(id, x, y)`` (``learning.plan.awaited_into``)."""
     if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
         return []
-    meet, arrived = config.meet_only, obs.arrived and not config.step_aside
-    if meet and arrived:
-        return []  # what awaits_answer says of every neighbour, without asking it
-    (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
-    tick, parked = obs.tick, obs.parked
-    return [(j, jx, jy) for j, jx, jy in within(obs.neighbours, x, y, radius)
-            if (other := priority_rank(j, tick, n)) < rank  # a cheap cut: higher-ranked only
-            and awaits_answer(rank, other, x, y, jx, jy, radius, meet, arrived, j in parked)]
+    neighbours, (x, y) = obs.neighbours, obs.position
+    out = ints([0] * len(neighbours))
+    count = awaited_into(_rows(neighbours), len(neighbours), ints(obs.parked), len(obs.parked),
+                         x, y, obs.rank, obs.tick, config.n_agents, config.interaction_radius,
+                         config.meet_only, obs.arrived and not config.step_aside, out)
+    return [neighbours[i] for i in python_values(out)[:count]]
 
 
 def staying(obs: Observation, config: SwarmConfig) -> list[int]:
     """Under the ``meet`` rule, the parked neighbours whose intents the observing agent knows
     without waiting: those ``protocol.ranks.waits_for`` names among the parked ones of the
-    observation, each of which stays on its goal (its intent is STAY)."""
+    observation, each of which stays on its goal (its intent is STAY;
+    ``learning.plan.staying_into``)."""
     if (not (config.meet_only and obs.parked) or config.algo not in NEGOTIATING_ALGOS
             or obs.episode_end):
         return []
-    (x, y), n, radius, rank = obs.position, config.n_agents, config.interaction_radius, obs.rank
-    parked = set(obs.parked)
-    return [j for j, jx, jy in within(obs.neighbours, x, y, radius)
-            if j in parked
-            and waits_for(True, rank, priority_rank(j, obs.tick, n), x, y, jx, jy, radius, True)]
+    neighbours, (x, y) = obs.neighbours, obs.position
+    out = ints([0] * len(neighbours))
+    count = staying_into(_rows(neighbours), len(neighbours), ints(obs.parked), len(obs.parked),
+                         x, y, obs.rank, obs.tick, config.n_agents, config.interaction_radius,
+                         out)
+    return [neighbours[i][0] for i in python_values(out)[:count]]
+
+
+def _rows(neighbours):
+    """An observation's neighbours as the kernel reads them: an array ``(k, 3)`` where it is
+    compiled, else the tuples themselves."""
+    return np.array(neighbours, dtype=np.int64).reshape(len(neighbours), 3) if COMPILED \
+        else neighbours
 
 
 class NeighbourRows:

@@ -20,7 +20,7 @@ class Learner:
     The two tables are views of one array, ``Q_DS``'s rows first (:attr:`entries`, flat, is how
     a shared table's updates name its Q-values), a numpy array whether the kernel is compiled or
     not (``protocol.jit``); the other buffers are arrays too where ``arrays`` (by default, where
-    the kernel is compiled; in an agent that decides ahead of time, ``agent.ahead``), else Python
+    the kernel is compiled; in an agent that decides ahead of time, ``learning.ahead``), else Python
     lists. Among them are the walls it has seen and its way to its goal (``wmap``,
     ``learning.known_map``), which the agent derives from the run's map (``config.walls()``) and
     its own positions: the world sends no walls."""

@@ -57,6 +57,7 @@ def waits_for(reads_intents, rank, other_rank, x, y, other_x, other_y, radius, m
             and in_reach(x, y, other_x, other_y, radius, meet_only))
 
 
+@kernel
 def awaits_answer(rank, other_rank, x, y, other_x, other_y, radius, meet_only, parked,
                   other_parked):
     """Whether an agent that reads intents waits for the other's answer before deciding: it

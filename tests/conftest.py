@@ -36,12 +36,12 @@ def pytest_sessionstart(session):
     checkout of these kernel sources on this machine, ``protocol.jit``), before the workers
     start: else the first tests to play it (the experiment's command, in a process of its
     own) each compiled it at once, several times half a minute on a loaded machine, and ran past
-    their time-outs. The same for the agents' decision compiled ahead of time (``agent.ahead``),
+    their time-outs. The same for the agents' decision compiled ahead of time (``learning.ahead``),
     which every process that starts a swarm would otherwise build, or wait for, at once. In the
     controller only: a worker finds both cached."""
     if hasattr(session.config, "workerinput"):
         return
-    from nnql_swarm.agent import ahead
+    from nnql_swarm.learning import ahead
     from nnql_swarm.launch.cli import prepare_simulator
     from nnql_swarm.protocol.config import SwarmConfig
     from nnql_swarm.sim.runs import swarm_world

@@ -1,4 +1,4 @@
-"""The agent's decision compiled ahead of time (``agent.ahead``): built once into the kernel
+"""The agent's decision compiled ahead of time (``learning.ahead``): built once into the kernel
 cache, even by several processes at once; loaded by a process that runs the kernels in plain
 Python, without numba; and deciding exactly as plain Python does, over the real handlers of a
 whole run."""
@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from nnql_swarm.agent import ahead
+from nnql_swarm.learning import ahead
 from nnql_swarm.protocol.jit import cache_directory
 
-PROBE = ("import sys; from nnql_swarm.agent import ahead; "
+PROBE = ("import sys; from nnql_swarm.learning import ahead; "
          "print(ahead.decision()[1]); print('numba' in sys.modules)")
 
 RUN = """
@@ -22,7 +22,7 @@ import hashlib, sys
 from pathlib import Path
 from bench import node_cpu
 from bench.harness import DEFAULT_PRESET, swarm_config
-from nnql_swarm.agent import ahead
+from nnql_swarm.learning import ahead
 config = swarm_config(DEFAULT_PRESET, run_id="ahead", n_agents=8, episodes=8, max_steps=100,
                       width=11, height=11)
 wire = hashlib.sha256()
@@ -91,7 +91,7 @@ def test_processes_that_build_at_once_build_one_module_into_a_fresh_cache(tmp_pa
     builders at once: both succeed, one module results, and a plain process decides with it."""
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "NNQL_KERNEL": "compiled",
            "NUMBA_CACHE_DIR": str(cache_directory())}
-    builders = [subprocess.Popen([sys.executable, "-m", "nnql_swarm.agent.ahead"], env=env,
+    builders = [subprocess.Popen([sys.executable, "-m", "nnql_swarm.learning.ahead"], env=env,
                                  stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
                 for _ in range(2)]
     outputs = [builder.communicate(timeout=600) for builder in builders]
@@ -112,7 +112,7 @@ def test_a_build_that_fails_is_said_once_and_leaves_the_agents_deciding_in_plain
     """Where the C compiler fails (``CC=false``), the launcher's build says why in a warning,
     notes the failure in the cache, and no later process tries again: they decide in plain
     Python."""
-    ensure = ("import logging, sys; logging.basicConfig(); from nnql_swarm.agent import ahead; "
+    ensure = ("import logging, sys; logging.basicConfig(); from nnql_swarm.learning import ahead; "
               "print(ahead.ensure(), ahead.decision()[1])")
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "NNQL_KERNEL": "python", "CC": "false",
            "NUMBA_CACHE_DIR": str(cache_directory())}

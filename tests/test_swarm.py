@@ -11,7 +11,8 @@ import time
 import numpy as np
 import pytest
 
-from nnql_swarm.agent import agent_checkpoint, ahead
+from nnql_swarm.agent import agent_checkpoint
+from nnql_swarm.learning import ahead
 from nnql_swarm.learning.saved import read_fields
 from nnql_swarm.world import world_checkpoint
 from nnql_swarm.agent.brain import AgentBrain
@@ -80,7 +81,7 @@ def test_every_process_counts_what_each_input_cost_it(distributed_run):
 
 def test_every_agent_decided_by_its_decision_compiled_ahead_of_time(distributed_run):
     """The launcher builds the agents' decision ahead of time where it is missing
-    (``agent.ahead``), and every agent process, which runs no numba, decides with it."""
+    (``learning.ahead``), and every agent process, which runs no numba, decides with it."""
     out, _ = distributed_run
     for agent in range(8):
         stats = json.loads(stats_path(out, f"agent-{agent}").read_text())

@@ -42,7 +42,8 @@ from nnql_swarm.learning.fields import (
     READ_DAQL, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL, REWARD_WORLD, RF_FIELDS,
     RF_R_DS, learner_params, record_size, state_size,
 )
-from nnql_swarm.learning.neighbours import NeighbourRows, awaited, staying
+from nnql_swarm.learning.neighbours import NeighbourRows
+from nnql_swarm.learning.planner import Planner
 from nnql_swarm.learning.readings import read_rows, uses_map
 from nnql_swarm.learning.record import complete, record_outcome
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
@@ -94,6 +95,7 @@ class RecordCheck:
     def __init__(self, config: SwarmConfig) -> None:
         self.config = config
         self.rows = NeighbourRows(config)
+        self.planner = Planner(config)  # whom an agent waited for, as it planned it
         params, params_f = learner_params(config)
         self.map_fields = bool(uses_map(ints(params)))
         if self.map_fields:  # destination seeking read on the agent's known map: see could_write
@@ -129,8 +131,8 @@ class RecordCheck:
         key = (obs.agent, obs.tick)
         known = self._negotiation.get(key)
         if known is None:  # kept for this tick and the next: a record reads both
-            known = self._negotiation[key] = (awaited(obs, self.config),
-                                              {j: STAY for j in staying(obs, self.config)})
+            plan = self.planner(obs)
+            known = self._negotiation[key] = (plan.awaited, {j: STAY for j in plan.staying})
             self._negotiation.pop((obs.agent, obs.tick - 2), None)
         return known
 

@@ -1,16 +1,17 @@
-"""The agent's decision compiled ahead of time: an extension module that an agent process
+"""The agent's kernels compiled ahead of time: an extension module that an agent process
 imports without numba.
 
 An agent process runs the kernel functions in plain Python (``protocol.jit``), since loading
 numba and its LLVM would take an agent from some 40 MiB to 160. numba's ``pycc`` compiles
 chosen functions, with fixed signatures, into an extension module that needs only numpy at run
-time. This module builds the agent's decision (``learning.decision.agent_decision``) so, into
-the kernel cache (``protocol.jit.cache_directory``: one directory per version of every kernel
-source), once per version; and finds it there for the brain (:func:`decision`). A process that
-does not find it (not built yet, or built where no C compiler was) decides in plain Python: the
-same function, the same decisions, slower.
+time. This module builds an agent's per-observation kernels so (:data:`EXPORTS`: its decision,
+``learning.decision.agent_decision``, and its negotiation's plan,
+``learning.plan.negotiation_plan``), into the kernel cache (``protocol.jit.cache_directory``: one
+directory per version of every kernel source), once per version; and finds them there
+(:func:`compiled`). A process that does not find it (not built yet, or built where no C compiler
+was) runs them in plain Python: the same functions, the same results, slower.
 
-    python -m nnql_swarm.agent.ahead     # build it (the launcher does, where it is missing)
+    python -m nnql_swarm.learning.ahead     # build it (the launcher does, where it is missing)
 
 ``NNQL_AHEAD=off`` (:data:`SWITCH`) makes a process decide in plain Python regardless.
 """
@@ -31,12 +32,19 @@ from types import ModuleType
 from typing import Callable, Iterator
 
 from nnql_swarm.learning.decision import SIGNATURE, agent_decision
+from nnql_swarm.learning.plan import PLAN_SIGNATURE, negotiation_plan
 from nnql_swarm.protocol.jit import COMPILED, MODE_VARIABLE, cache_directory
 
 log = logging.getLogger(__name__)
 
 MODULE = "nnql_agent_kernels"
 """The extension module's name (it is imported under this name, from the kernel cache)."""
+
+EXPORTS: dict[str, tuple[Callable, str]] = {
+    "agent_decision": (agent_decision, SIGNATURE),
+    "negotiation_plan": (negotiation_plan, PLAN_SIGNATURE),
+}
+"""Each kernel the module holds, by name: the function and its signature."""
 
 PLAIN, AHEAD, JIT = "python", "ahead-of-time", "numba"
 """How this process makes a decision (:func:`decision`): in plain Python, by the module compiled
@@ -71,15 +79,26 @@ def load() -> ModuleType | None:
 
 
 @functools.cache
-def decision() -> tuple[Callable, str]:
-    """The function this process decides with (``learning.decision.agent_decision``, compiled or
-    not) and how it runs (:data:`PLAIN`, :data:`AHEAD`, :data:`JIT`). Looked up once."""
+def compiled(name: str) -> tuple[Callable, str]:
+    """The kernel :data:`EXPORTS` names ``name``, as this process runs it, and how
+    (:data:`PLAIN`, :data:`AHEAD`, :data:`JIT`). Looked up once."""
+    function = EXPORTS[name][0]
     if COMPILED:
-        return agent_decision, JIT
-    module = None if os.environ.get(SWITCH) == "off" else load()
+        return function, JIT
+    module = _module()
     if module is None:
-        return agent_decision, PLAIN
-    return module.agent_decision, AHEAD
+        return function, PLAIN
+    return getattr(module, name), AHEAD
+
+
+@functools.cache
+def _module() -> ModuleType | None:
+    return None if os.environ.get(SWITCH) == "off" else load()
+
+
+def decision() -> tuple[Callable, str]:
+    """The agent's decision (``learning.decision.agent_decision``), as :func:`compiled`."""
+    return compiled("agent_decision")
 
 
 @contextlib.contextmanager
@@ -106,7 +125,8 @@ def build() -> Path:
         with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
             cc = CC(MODULE, source_module=__name__)
             cc.output_dir = scratch
-            cc.export("agent_decision", SIGNATURE)(agent_decision.py_func)
+            for name, (function, signature) in EXPORTS.items():
+                cc.export(name, signature)(getattr(function, "py_func"))
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 cc.compile()

@@ -1,0 +1,209 @@
+"""Whom an agent waits for, asks, answers, knows to stay and streams at an observation: kernel
+functions over its neighbours as rows ``(id, x, y)``.
+
+The rules are ``protocol.ranks``' (:func:`~nnql_swarm.protocol.ranks.awaits_answer`,
+``waits_for``); what they mean for the negotiation, ``agent.negotiation``'s docstring. Every
+function here reads the observation's neighbours ``nb`` (its first ``k`` rows, in id order) and
+the ids of its parked ones (``parked``, the first ``p``), and writes the indices into ``nb`` of
+those it finds into ``out``, in the order the rule gives; it returns how many. Scratch buffers
+(``xs``, ``ys``, ``ranks``...) have room for every neighbour and the agent itself.
+:func:`negotiation_plan` is all of them at once, for the agent: it is compiled ahead of time
+with the agent's decision (``learning.ahead``), so that an agent plans its tick in one call.
+"""
+
+from nnql_swarm.protocol.jit import kernel
+from nnql_swarm.protocol.ranks import awaits_answer, priority_rank, waits_for
+
+P_AWAITED, P_ASKS, P_STAYING, P_ANSWERED, P_STREAMED, PLAN_PARTS = 0, 1, 2, 3, 4, 5
+"""The rows of :func:`negotiation_plan`'s ``out`` and ``counts``: whose intents the agent waits
+for; whom of them it asks; the parked neighbours it knows stay; whom it answers through their
+standing queries; the agents it streams with."""
+
+S_XS, S_YS, S_RANKS, S_PARKED, S_CELL, S_WAITERS, S_WAITER_RANKS, S_MEMBERS, S_ORDER, \
+    S_COVERED, S_ASKS, SCRATCH = range(12)
+"""The rows of the scratch buffer, each with room for every neighbour and the agent: cells,
+ranks and whether parked of the agents a plan reads; each one's row in ``nb``; the waiters and
+their ranks; an ask's members, their order and which are covered; the asks."""
+
+
+@kernel
+def near(nb, i, x, y, distance):
+    """Whether neighbour row ``i`` is at most ``distance`` king's moves from ``(x, y)``."""
+    return abs(nb[i][1] - x) <= distance and abs(nb[i][2] - y) <= distance
+
+
+@kernel
+def is_parked(j, parked, p):
+    """Whether ``j`` is among the first ``p`` ids of ``parked``."""
+    for q in range(p):
+        if parked[q] == j:
+            return True
+    return False
+
+
+@kernel
+def awaited_into(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrived, out):
+    """The neighbours whose intents an agent of ``rank`` at ``(x, y)`` waits for, in id order:
+    higher-ranked, within ``radius``, whose answer it awaits (``awaits_answer``; ``arrived``: it
+    has arrived and may not step aside). None under ``meet`` once arrived."""
+    if meet and arrived:
+        return 0
+    count = 0
+    for i in range(k):
+        if near(nb, i, x, y, radius):
+            j = nb[i][0]
+            other = priority_rank(j, tick, n)
+            if other < rank and awaits_answer(rank, other, x, y, nb[i][1], nb[i][2], radius,
+                                              meet, arrived, is_parked(j, parked, p)):
+                out[count] = i
+                count += 1
+    return count
+
+
+@kernel
+def staying_into(nb, k, parked, p, x, y, rank, tick, n, radius, out):
+    """Under ``meet``, the parked neighbours whose intents (STAY) the agent knows without
+    waiting: those ``waits_for`` names, in id order."""
+    count = 0
+    for i in range(k):
+        j = nb[i][0]
+        if near(nb, i, x, y, radius) and is_parked(j, parked, p) and waits_for(
+                True, rank, priority_rank(j, tick, n), x, y, nb[i][1], nb[i][2], radius, True):
+            out[count] = i
+            count += 1
+    return count
+
+
+@kernel
+def asks_into(members, m, xs, ys, ranks, radius, meet, order, covered, out):
+    """The fewest of ``members`` (indices into ``xs``, ``ys``, ``ranks``: cells and ranks) to
+    ask, lowest-ranked first, whose answers, with what each relays, bring every member's intent:
+    each asked member covers those it waits for itself (``waits_for``). Ranks are distinct."""
+    for s in range(m):
+        order[s] = members[s]
+        covered[s] = 0
+    for s in range(1, m):  # by rank, the lowest first (the largest number)
+        v = order[s]
+        t = s
+        while t > 0 and ranks[order[t - 1]] < ranks[v]:
+            order[t] = order[t - 1]
+            t -= 1
+        order[t] = v
+    count = 0
+    for s in range(m):
+        q = order[s]
+        if covered[s] != 0:
+            continue
+        out[count] = q
+        count += 1
+        covered[s] = 1
+        for t in range(m):
+            u = order[t]
+            if waits_for(True, ranks[q], ranks[u], xs[q], ys[q], xs[u], ys[u], radius, meet):
+                covered[t] = 1
+    return count
+
+
+@kernel
+def answered_into(nb, k, parked, p, x, y, rank, tick, n, radius, meet, plans_known, scratch,
+                  out):
+    """The neighbours that the agent answers through their standing queries, the next in rank
+    first: those that wait for it (lower-ranked, within ``radius``, awaiting its answer) whose
+    plan (:func:`asks_into`) asks it, where the agent can tell (``plans_known``: it sees every
+    agent its waiters wait for); else every one that waits for it."""
+    waiters, waiter_ranks = scratch[S_WAITERS], scratch[S_WAITER_RANKS]
+    w = 0
+    for i in range(k):
+        if near(nb, i, x, y, radius):
+            j = nb[i][0]
+            r = priority_rank(j, tick, n)
+            if r > rank and awaits_answer(r, rank, nb[i][1], nb[i][2], x, y, radius, meet,
+                                          is_parked(j, parked, p), False):
+                t = w  # kept in rank order, the next below the agent first
+                while t > 0 and waiter_ranks[t - 1] > r:
+                    waiters[t], waiter_ranks[t] = waiters[t - 1], waiter_ranks[t - 1]
+                    t -= 1
+                waiters[t], waiter_ranks[t] = i, r
+                w += 1
+    if w == 0 or not plans_known:
+        for s in range(w):
+            out[s] = waiters[s]
+        return w
+    xs, ys, ranks = scratch[S_XS], scratch[S_YS], scratch[S_RANKS]
+    parks, cell = scratch[S_PARKED], scratch[S_CELL]
+    c = 0  # the waiters and those they wait for: within twice the radius, then the agent
+    for i in range(k):
+        if near(nb, i, x, y, 2 * radius):
+            xs[c], ys[c] = nb[i][1], nb[i][2]
+            ranks[c] = priority_rank(nb[i][0], tick, n)
+            parks[c] = 1 if is_parked(nb[i][0], parked, p) else 0
+            cell[c] = i
+            c += 1
+    xs[c], ys[c], ranks[c], parks[c], cell[c] = x, y, rank, 0, -1
+    me = c
+    c += 1
+    members, asks = scratch[S_MEMBERS], scratch[S_ASKS]
+    answered = 0
+    for s in range(w):
+        at = 0
+        while cell[at] != waiters[s]:
+            at += 1
+        m = 0
+        for t in range(c):
+            if ranks[t] < ranks[at] and awaits_answer(ranks[at], ranks[t], xs[at], ys[at], xs[t],
+                                                      ys[t], radius, meet, False, parks[t] != 0):
+                members[m] = t
+                m += 1
+        a = asks_into(members, m, xs, ys, ranks, radius, meet, scratch[S_ORDER],
+                      scratch[S_COVERED], asks)
+        for t in range(a):
+            if asks[t] == me:
+                out[answered] = waiters[s]
+                answered += 1
+    return answered
+
+
+@kernel
+def streamed_into(nb, k, x, y, distance, out):
+    """The neighbours within ``distance``, in id order."""
+    count = 0
+    for i in range(k):
+        if near(nb, i, x, y, distance):
+            out[count] = i
+            count += 1
+    return count
+
+
+@kernel
+def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrived, negotiating,
+                     stays, plans_known, stream_reach, scratch, out, counts):
+    """An agent's whole plan at an observation, each part into its row of ``out`` (``P_*``) and
+    its count into ``counts``: whom it waits for (:func:`awaited_into`) and asks
+    (:func:`asks_into`, as indices into ``nb`` too), whom it knows to stay where ``stays``
+    (:func:`staying_into`), whom it answers (:func:`answered_into`), all only where it
+    ``negotiates``; and whom it streams with, within ``stream_reach`` (:func:`streamed_into`)."""
+    for part in range(PLAN_PARTS):
+        counts[part] = 0
+    if negotiating:
+        a = awaited_into(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrived,
+                         out[P_AWAITED])
+        counts[P_AWAITED] = a
+        if a > 0:
+            xs, ys, ranks = scratch[S_XS], scratch[S_YS], scratch[S_RANKS]
+            for i in range(k):
+                xs[i], ys[i] = nb[i][1], nb[i][2]
+                ranks[i] = priority_rank(nb[i][0], tick, n)
+            counts[P_ASKS] = asks_into(out[P_AWAITED], a, xs, ys, ranks, radius, meet,
+                                       scratch[S_ORDER], scratch[S_COVERED], out[P_ASKS])
+        if stays:
+            counts[P_STAYING] = staying_into(nb, k, parked, p, x, y, rank, tick, n, radius,
+                                             out[P_STAYING])
+        if not (meet and arrived):
+            counts[P_ANSWERED] = answered_into(nb, k, parked, p, x, y, rank, tick, n, radius,
+                                               meet, plans_known, scratch, out[P_ANSWERED])
+    counts[P_STREAMED] = streamed_into(nb, k, x, y, stream_reach, out[P_STREAMED])
+
+
+PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, b1, b1, b1, b1, b1, "
+                  "i8, i8[:, ::1], i8[:, ::1], i8[::1])")
+""":func:`negotiation_plan`'s types, as compiled ahead of time."""

@@ -1,0 +1,103 @@
+"""An agent's plan of each observation: whom it waits for, asks, answers, knows to stay and
+streams with (:class:`Plan`), worked out by ``learning.plan.negotiation_plan`` in one call,
+compiled ahead of time where it is built (``learning.ahead``). The agent plans its ticks with it
+(``agent.negotiation`` says what each part means to the negotiation); the world reads the same
+plan of an observation when it checks the learning record decided on it (``world.records``)."""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from nnql_swarm.learning import ahead
+from nnql_swarm.learning.plan import (
+    P_ANSWERED, P_ASKS, P_AWAITED, P_STAYING, P_STREAMED, PLAN_PARTS, SCRATCH,
+)
+from nnql_swarm.protocol.actions import VIEW_RADIUS
+from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
+from nnql_swarm.protocol.jit import python_values
+from nnql_swarm.protocol.messages import Observation
+
+
+STREAM_MARGIN = 4
+"""How far beyond the interaction radius an agent keeps standing queries open (cells, Chebyshev):
+two agents close in on each other by at most two cells a tick, so one that comes this near is
+streamed a tick or two before it can be asked."""
+
+
+def plans_are_known(config: SwarmConfig) -> bool:
+    """Whether a decider sees every agent that an agent within its reach waits for, and so can
+    tell whose plan (:attr:`Plan.asks`) asks it: the grid fits in the view, or twice the
+    interaction radius does."""
+    return (max(config.width, config.height) <= VIEW_RADIUS + 1
+            or 2 * config.interaction_radius <= VIEW_RADIUS)
+
+
+class Plan(NamedTuple):
+    """What an agent does about its neighbours at an observation (``learning.plan``)."""
+
+    awaited: list[int]
+    """Whose intents it waits for (``learning.neighbours.awaited``), in id order."""
+    asks: list[int]
+    """Whom of them it asks, the lowest-ranked first: the fewest whose answers, with what they
+    relay, bring every awaited intent."""
+    staying: list[int]
+    """Under ``meet``, the parked neighbours whose intents, STAY, it knows without waiting."""
+    answered: list[int]
+    """Whom it answers through their standing queries at this tick, the next in rank first:
+    those whose plan asks it (:func:`plans_are_known`), or else every agent that waits for
+    it."""
+    near: list[tuple[int, int, int]]
+    """The agents it keeps standing queries open on, and whose standing queries on it it keeps:
+    those within the interaction radius and :data:`STREAM_MARGIN` (at most the view), the only
+    ones it can soon ask or be asked by."""
+
+
+class Planner:
+    """One agent's :class:`Plan` of each observation: ``learning.plan.negotiation_plan`` in one
+    call, compiled ahead of time where it is built (``learning.ahead``), over buffers kept."""
+
+    def __init__(self, config: SwarmConfig) -> None:
+        self._plan, how = ahead.compiled("negotiation_plan")
+        self._arrays = how != ahead.PLAIN
+        size = config.n_agents + 1  # every neighbour and the agent
+        self._scratch: np.ndarray | list[list[int]]
+        self._out: np.ndarray | list[list[int]]
+        self._counts: np.ndarray | list[int]
+        if self._arrays:
+            self._scratch = np.zeros((SCRATCH, size), dtype=np.int64)
+            self._out = np.zeros((PLAN_PARTS, size), dtype=np.int64)
+            self._counts = np.zeros(PLAN_PARTS, dtype=np.int64)
+        else:
+            self._scratch = [[0] * size for _ in range(SCRATCH)]
+            self._out = [[0] * size for _ in range(PLAN_PARTS)]
+            self._counts = [0] * PLAN_PARTS
+        self._config = config
+        self._negotiates = config.algo in NEGOTIATING_ALGOS
+        self._plans_known = plans_are_known(config)
+        self._reach = min(VIEW_RADIUS, config.interaction_radius + STREAM_MARGIN)
+
+    def __call__(self, obs: Observation) -> Plan:
+        config, neighbours, parked = self._config, obs.neighbours, obs.parked
+        k, (x, y) = len(neighbours), obs.position
+        meet = config.meet_only
+        nb: object
+        parked_ids: object
+        if self._arrays:
+            nb = np.array(neighbours, dtype=np.int64).reshape(k, 3)
+            parked_ids = np.array(parked, dtype=np.int64)
+        else:
+            nb, parked_ids = neighbours, parked
+        negotiates = self._negotiates and not obs.episode_end
+        self._plan(nb, k, parked_ids, len(parked), x, y, obs.rank, obs.tick, config.n_agents,
+                   config.interaction_radius, meet, obs.arrived and not config.step_aside,
+                   negotiates, meet and len(parked) > 0, self._plans_known, self._reach,
+                   self._scratch, self._out, self._counts)
+        counts = python_values(self._counts)
+        rows = [python_values(self._out[part][:counts[part]]) for part in range(PLAN_PARTS)]
+        return Plan([neighbours[i][0] for i in rows[P_AWAITED]],
+                    [neighbours[i][0] for i in rows[P_ASKS]],
+                    [neighbours[i][0] for i in rows[P_STAYING]],
+                    [neighbours[i][0] for i in rows[P_ANSWERED]],
+                    [neighbours[i] for i in rows[P_STREAMED]])
+
+
