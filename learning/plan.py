@@ -179,9 +179,9 @@ def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrive
                      stays, plans_known, stream_reach, scratch, out, counts):
     """An agent's whole plan at an observation, each part into its row of ``out`` (``P_*``) and
     its count into ``counts``: whom it waits for (:func:`awaited_into`) and asks
-    (:func:`asks_into`, as indices into ``nb`` too), whom it knows to stay where ``stays``
-    (:func:`staying_into`), whom it answers (:func:`answered_into`), all only where it
-    ``negotiates``; and whom it streams with, within ``stream_reach`` (:func:`streamed_into`)."""
+    (:func:`asks_into`), whom it knows to stay where ``stays`` (:func:`staying_into`), whom it
+    answers (:func:`answered_into`), all only where it ``negotiates``, as ids; and whom it
+    streams with, within ``stream_reach`` (:func:`streamed_into`), as indices into ``nb``."""
     for part in range(PLAN_PARTS):
         counts[part] = 0
     if negotiating:
@@ -202,6 +202,10 @@ def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrive
             counts[P_ANSWERED] = answered_into(nb, k, parked, p, x, y, rank, tick, n, radius,
                                                meet, plans_known, scratch, out[P_ANSWERED])
     counts[P_STREAMED] = streamed_into(nb, k, x, y, stream_reach, out[P_STREAMED])
+    for part in range(P_STREAMED):  # the agents, by id
+        row = out[part]
+        for s in range(counts[part]):
+            row[s] = nb[row[s]][0]
 
 
 PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, b1, b1, b1, b1, b1, "
