@@ -176,19 +176,20 @@ def streamed_into(nb, k, x, y, distance, out):
 
 @kernel
 def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrived, negotiating,
-                     stays, plans_known, stream_reach, scratch, out, counts):
+                     stays, plans_known, stream_reach, whole, scratch, out, counts):
     """An agent's whole plan at an observation, each part into its row of ``out`` (``P_*``) and
     its count into ``counts``: whom it waits for (:func:`awaited_into`) and asks
     (:func:`asks_into`), whom it knows to stay where ``stays`` (:func:`staying_into`), whom it
     answers (:func:`answered_into`), all only where it ``negotiates``, as ids; and whom it
-    streams with, within ``stream_reach`` (:func:`streamed_into`), as indices into ``nb``."""
+    streams with, within ``stream_reach`` (:func:`streamed_into`), as indices into ``nb``.
+    Unless ``whole``, only whom it waits for and knows to stay (what the world reads)."""
     for part in range(PLAN_PARTS):
         counts[part] = 0
     if negotiating:
         a = awaited_into(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrived,
                          out[P_AWAITED])
         counts[P_AWAITED] = a
-        if a > 0:
+        if a > 0 and whole:
             xs, ys, ranks = scratch[S_XS], scratch[S_YS], scratch[S_RANKS]
             for i in range(k):
                 xs[i], ys[i] = nb[i][1], nb[i][2]
@@ -198,10 +199,11 @@ def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrive
         if stays:
             counts[P_STAYING] = staying_into(nb, k, parked, p, x, y, rank, tick, n, radius,
                                              out[P_STAYING])
-        if not (meet and arrived):
+        if whole and not (meet and arrived):
             counts[P_ANSWERED] = answered_into(nb, k, parked, p, x, y, rank, tick, n, radius,
                                                meet, plans_known, scratch, out[P_ANSWERED])
-    counts[P_STREAMED] = streamed_into(nb, k, x, y, stream_reach, out[P_STREAMED])
+    if whole:
+        counts[P_STREAMED] = streamed_into(nb, k, x, y, stream_reach, out[P_STREAMED])
     for part in range(P_STREAMED):  # the agents, by id
         row = out[part]
         for s in range(counts[part]):
@@ -209,5 +211,5 @@ def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrive
 
 
 PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, b1, b1, b1, b1, b1, "
-                  "i8, i8[:, ::1], i8[:, ::1], i8[::1])")
+                  "i8, b1, i8[:, ::1], i8[:, ::1], i8[::1])")
 """:func:`negotiation_plan`'s types, as compiled ahead of time."""

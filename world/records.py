@@ -95,7 +95,7 @@ class RecordCheck:
     def __init__(self, config: SwarmConfig) -> None:
         self.config = config
         self.rows = NeighbourRows(config)
-        self.planner = Planner(config)  # whom an agent waited for, as it planned it
+        self.planner = Planner(config, whole=False)  # whom an agent waited for, as it planned
         params, params_f = learner_params(config)
         self.map_fields = bool(uses_map(ints(params)))
         if self.map_fields:  # destination seeking read on the agent's known map: see could_write
