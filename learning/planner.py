@@ -74,7 +74,7 @@ class Planner:
             self._scratch = [[0] * size for _ in range(SCRATCH)]
             self._out = [[0] * size for _ in range(PLAN_PARTS)]
             self._counts = [0] * PLAN_PARTS
-        self._config, self._whole = config, whole
+        self._config, self.whole = config, whole
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._plans_known = plans_are_known(config)
         self._reach = min(VIEW_RADIUS, config.interaction_radius + STREAM_MARGIN)
@@ -95,7 +95,7 @@ class Planner:
         self._plan(nb, k, parked_ids, len(parked), x, y, obs.rank, obs.tick, config.n_agents,
                    config.interaction_radius, meet, obs.arrived and not config.step_aside,
                    negotiates, meet and len(parked) > 0, self._plans_known, self._reach,
-                   self._whole, self._scratch, self._out, self._counts)
+                   self.whole, self._scratch, self._out, self._counts)
         counts, out = python_values(self._counts), self._out
         parts = [python_values(out[part][:count]) if count else [] for part, count in
                  enumerate(counts)]
