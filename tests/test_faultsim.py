@@ -208,8 +208,8 @@ def test_a_broken_protocol_is_caught_and_reported_with_the_seed_that_reproduces_
         monkeypatch, capsys):
     decide = AgentMachine._decide
 
-    def forgetful(self, obs, answers):  # a bug: an agent relays a wrong intent now and then
-        decide(self, obs, answers)
+    def forgetful(self, obs, plan, answers):  # a bug: an agent relays a wrong intent now and then
+        decide(self, obs, plan, answers)
         answer = self.decided_answer
         if answer.relayed and obs.tick % 3 == 2:
             (j, action), *rest = answer.relayed
