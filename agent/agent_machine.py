@@ -305,6 +305,10 @@ class AgentMachine(QueryAnswering, Machine):
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
         plan = self.planner(obs)
+        if plan is None:  # forged: compiled kernels must not read past their buffers
+            self.inbox.reject("bad-field:neighbours", f"tick {obs.tick}: not this run's agents "
+                                                      "on its grid")
+            return
         awaited, asks = plan.awaited, plan.asks
         needed = self.brain.neighbours_to_ask(obs, awaited)
         staying = {j: STAY for j in plan.staying}

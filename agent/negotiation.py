@@ -47,17 +47,19 @@ __all__ = ["STREAM_MARGIN", "Plan", "Planner", "TickIntents", "plan_for", "plans
 def plan_for(obs: Observation, config: SwarmConfig) -> tuple[list[int], list[int]]:
     """``(awaited, asks)`` for one observation: whose intents to learn, and whom to ask."""
     plan = Planner(config)(obs)
-    return plan.awaited, plan.asks
+    return ([], []) if plan is None else (plan.awaited, plan.asks)
 
 
 def streamed(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]]:
     """:attr:`Plan.near` of one observation."""
-    return Planner(config)(obs).near
+    plan = Planner(config)(obs)
+    return [] if plan is None else plan.near
 
 
 def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
     """:attr:`Plan.answered` of one observation."""
-    return Planner(config)(obs).answered
+    plan = Planner(config)(obs)
+    return [] if plan is None else plan.answered
 
 
 @dataclass

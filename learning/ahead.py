@@ -13,7 +13,7 @@ was) runs them in plain Python: the same functions, the same results, slower.
 
     python -m nnql_swarm.learning.ahead     # build it (the launcher does, where it is missing)
 
-``NNQL_AHEAD=off`` (:data:`SWITCH`) makes a process decide in plain Python regardless.
+``NNQL_AHEAD=off`` (:data:`SWITCH`) makes a process run them in plain Python regardless.
 """
 
 import contextlib
@@ -47,12 +47,13 @@ EXPORTS: dict[str, tuple[Callable, str]] = {
 """Each kernel the module holds, by name: the function and its signature."""
 
 PLAIN, AHEAD, JIT = "python", "ahead-of-time", "numba"
-"""How this process makes a decision (:func:`decision`): in plain Python, by the module compiled
-ahead of time, or compiled by numba (a process that runs the kernels compiled)."""
+"""How this process runs a kernel of :data:`EXPORTS` (:func:`compiled`): in plain Python, by the
+module compiled ahead of time, or compiled by numba (a process that runs the kernels compiled)."""
 
 SWITCH = "NNQL_AHEAD"
-"""``NNQL_AHEAD=off`` in a process's environment: it decides in plain Python even where the
-module is built (to compare the two, ``bench.paired --a-env NNQL_AHEAD=off``)."""
+"""``NNQL_AHEAD=off`` in a process's environment: it runs the kernels of :data:`EXPORTS` in plain
+Python even where the module is built (to compare the two, ``bench.paired --a-env
+NNQL_AHEAD=off``)."""
 
 
 def module_path() -> Path:
@@ -72,8 +73,8 @@ def load() -> ModuleType | None:
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
     except ImportError as error:
-        log.warning("the agent's decision compiled ahead of time cannot be loaded (%s); "
-                    "deciding in plain Python", error)
+        log.warning("the agents' kernels compiled ahead of time cannot be loaded (%s); "
+                    "running them in plain Python", error)
         return None
     return module
 
@@ -142,23 +143,23 @@ def failure_path() -> Path:
 def ensure() -> bool:
     """Build the extension module where it is missing, in a child process that loads numba (this
     one need not), saying so; whether it is there. A failed build is logged, and noted beside
-    it (:func:`failure_path`), so that no later process tries it again; the agents decide in
-    plain Python."""
+    it (:func:`failure_path`), so that no later process tries it again; the agents run the
+    kernels in plain Python."""
     if module_path().exists():
         return True
     failed = failure_path()
     if failed.exists():
         return False
-    print("Compiling the agents' decision ahead of time (once per version of the kernel "
-          "sources; some 15 s)...", file=sys.stderr, flush=True)
+    print("Compiling the agents' decision and plan ahead of time (once per version of the "
+          "kernel sources; some 15 s)...", file=sys.stderr, flush=True)
     env = {**os.environ, MODE_VARIABLE: "compiled"}
     done = subprocess.run([sys.executable, "-m", __name__], env=env, capture_output=True,
                           text=True)
     if done.returncode != 0 or not module_path().exists():
         failed.parent.mkdir(parents=True, exist_ok=True)
         failed.write_text(done.stderr)
-        log.warning("the agents' decision could not be compiled ahead of time, so they decide in "
-                    "plain Python (why: %s; delete it to try again)", failed)
+        log.warning("the agents' decision and plan could not be compiled ahead of time, so they "
+                    "run in plain Python (why: %s; delete it to try again)", failed)
         return False
     return True
 

@@ -19,6 +19,10 @@ P_AWAITED, P_ASKS, P_STAYING, P_ANSWERED, P_STREAMED, PLAN_PARTS = 0, 1, 2, 3, 4
 for; whom of them it asks; the parked neighbours it knows stay; whom it answers through their
 standing queries; the agents it streams with."""
 
+P_FITS = PLAN_PARTS
+"""The last of ``counts``: 1 if the observation's neighbours are the run's agents on its grid
+(:func:`fits_run`), else 0 and no plan."""
+
 S_XS, S_YS, S_RANKS, S_PARKED, S_CELL, S_WAITERS, S_WAITER_RANKS, S_MEMBERS, S_ORDER, \
     S_COVERED, S_ASKS, SCRATCH = range(12)
 """The rows of the scratch buffer, each with room for every neighbour and the agent: cells,
@@ -39,6 +43,20 @@ def is_parked(j, parked, p):
         if parked[q] == j:
             return True
     return False
+
+
+@kernel
+def fits_run(nb, k, parked, p, n, width, height):
+    """Whether every neighbour is one of the run's ``n`` agents on its grid, and every parked id
+    one of its agents (the codec checks that none is negative): compiled code reads its buffers
+    unchecked, so a forged observation must not reach it."""
+    for i in range(k):
+        if nb[i][0] >= n or nb[i][1] >= width or nb[i][2] >= height:
+            return False
+    for q in range(p):
+        if parked[q] >= n:
+            return False
+    return True
 
 
 @kernel
@@ -175,16 +193,20 @@ def streamed_into(nb, k, x, y, distance, out):
 
 
 @kernel
-def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrived, negotiating,
-                     stays, plans_known, stream_reach, whole, scratch, out, counts):
+def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, width, height, radius, meet, arrived,
+                     negotiating, stays, plans_known, stream_reach, whole, scratch, out, counts):
     """An agent's whole plan at an observation, each part into its row of ``out`` (``P_*``) and
     its count into ``counts``: whom it waits for (:func:`awaited_into`) and asks
     (:func:`asks_into`), whom it knows to stay where ``stays`` (:func:`staying_into`), whom it
     answers (:func:`answered_into`), all only where it ``negotiates``, as ids; and whom it
     streams with, within ``stream_reach`` (:func:`streamed_into`), as indices into ``nb``.
-    Unless ``whole``, only whom it waits for and knows to stay (what the world reads)."""
+    Unless ``whole``, only whom it waits for and knows to stay (what the world reads). Nothing
+    where the neighbours are not the run's agents on its grid (``counts[P_FITS]`` 0)."""
     for part in range(PLAN_PARTS):
         counts[part] = 0
+    counts[P_FITS] = 1 if fits_run(nb, k, parked, p, n, width, height) else 0
+    if counts[P_FITS] == 0:
+        return
     if negotiating:
         a = awaited_into(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrived,
                          out[P_AWAITED])
@@ -210,6 +232,6 @@ def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, radius, meet, arrive
             row[s] = nb[row[s]][0]
 
 
-PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, b1, b1, b1, b1, b1, "
-                  "i8, b1, i8[:, ::1], i8[:, ::1], i8[::1])")
+PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, i8, i8, b1, b1, b1, "
+                  "b1, b1, i8, b1, i8[:, ::1], i8[:, ::1], i8[::1])")
 """:func:`negotiation_plan`'s types, as compiled ahead of time."""

@@ -11,7 +11,7 @@ import numpy as np
 
 from nnql_swarm.learning import ahead
 from nnql_swarm.learning.plan import (
-    P_ANSWERED, P_ASKS, P_AWAITED, P_STAYING, P_STREAMED, PLAN_PARTS, SCRATCH,
+    P_ANSWERED, P_ASKS, P_AWAITED, P_FITS, P_STAYING, P_STREAMED, PLAN_PARTS, SCRATCH,
 )
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
@@ -69,20 +69,26 @@ class Planner:
         if self._arrays:
             self._scratch = np.zeros((SCRATCH, size), dtype=np.int64)
             self._out = np.zeros((PLAN_PARTS, size), dtype=np.int64)
-            self._counts = np.zeros(PLAN_PARTS, dtype=np.int64)
+            self._counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
         else:
             self._scratch = [[0] * size for _ in range(SCRATCH)]
             self._out = [[0] * size for _ in range(PLAN_PARTS)]
-            self._counts = [0] * PLAN_PARTS
+            self._counts = [0] * (PLAN_PARTS + 1)
         self._config, self.whole = config, whole
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._plans_known = plans_are_known(config)
         self._reach = min(VIEW_RADIUS, config.interaction_radius + STREAM_MARGIN)
 
-    def __call__(self, obs: Observation) -> Plan:
+    def __call__(self, obs: Observation) -> Plan | None:
+        """The plan of ``obs``; None where it does not fit the run: more neighbours than its
+        agents, a cell off its grid, an agent or rank it has not (the kernels, compiled, would
+        read past their buffers)."""
         config, neighbours, parked = self._config, obs.neighbours, obs.parked
-        k, (x, y) = len(neighbours), obs.position
-        meet = config.meet_only
+        k, (x, y), (gx, gy) = len(neighbours), obs.position, obs.goal
+        n, width, height, meet = config.n_agents, config.width, config.height, config.meet_only
+        if (k >= n or len(parked) >= n or obs.rank >= n or max(x, gx) >= width
+                or max(y, gy) >= height):
+            return None
         nb: object
         parked_ids: object
         if self._arrays:
@@ -92,12 +98,14 @@ class Planner:
         else:
             nb, parked_ids = neighbours, parked
         negotiates = self._negotiates and not obs.episode_end
-        self._plan(nb, k, parked_ids, len(parked), x, y, obs.rank, obs.tick, config.n_agents,
+        self._plan(nb, k, parked_ids, len(parked), x, y, obs.rank, obs.tick, n, width, height,
                    config.interaction_radius, meet, obs.arrived and not config.step_aside,
                    negotiates, meet and len(parked) > 0, self._plans_known, self._reach,
                    self.whole, self._scratch, self._out, self._counts)
         counts, out = python_values(self._counts), self._out
+        if not counts[P_FITS]:
+            return None
         parts = [python_values(out[part][:count]) if count else [] for part, count in
-                 enumerate(counts)]
+                 enumerate(counts[:PLAN_PARTS])]
         return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
                     [neighbours[i] for i in parts[P_STREAMED]])

@@ -3,6 +3,7 @@
 import dataclasses
 
 import msgpack
+import msgspec
 import pytest
 
 from nnql_swarm.agent.brain import AgentBrain
@@ -270,6 +271,29 @@ def test_bad_input_is_counted_never_raised():
     assert kinds(protocol.on_liveliness("nnql/proto/alive/agent/0042", True, 0.0)) == []
     assert protocol.on_answer(12345, b"garbage", 0.0) == []
     assert protocol.inbox.total_rejected >= 10
+
+
+def test_an_observation_that_does_not_fit_the_run_is_refused_before_any_kernel_reads_it():
+    """The codec bounds ids and cells by the wire's limits, not by the run's; the decision and
+    the plan, compiled, read their buffers unchecked: so an observation naming an agent the run
+    has not, or a cell off its grid, is refused and counted, and decides nothing."""
+    protocol = ready()
+    assert CONFIG.width == CONFIG.height == 11
+
+    def forged(**fields) -> bytes:
+        obs = Observation(run="proto", tick=0, sender=WORLD_SENDER, agent=0, episode=0, step=0,
+                          position=(1, 1), goal=(5, 5), neighbours=((1, 2, 2),), rank=0,
+                          reward_ds=0.0, reward_ca=0.0, collided=False, arrived=False,
+                          episode_end=False)
+        return encode(msgspec.structs.replace(obs, **fields))
+
+    for fields in ({"neighbours": ((7, 2, 2),)}, {"neighbours": ((1, 40, 2),)},
+                   {"neighbours": ((1, 2, 2), (2, 3, 3), (4, 1, 2))}, {"position": (11, 1)},
+                   {"goal": (5, 300)}, {"parked": (9,)}, {"rank": 5}):
+        assert kinds(protocol.on_observation(forged(**fields), 0.0)) == [], fields
+    assert protocol.inbox.rejections["bad-field:neighbours"] == 7
+    assert protocol.decided_tick == -1
+    assert "SendIntent" in kinds(protocol.on_observation(forged(), 0.0)), "the honest one decides"
 
 
 def test_a_neighbour_that_is_gone_or_refuses_the_tick_is_waited_for_no_more():

@@ -132,6 +132,7 @@ class RecordCheck:
         known = self._negotiation.get(key)
         if known is None:  # kept for this tick and the next: a record reads both
             plan = self.planner(obs)
+            assert plan is not None, "the world's own observations fit its run"
             known = self._negotiation[key] = (plan.awaited, {j: STAY for j in plan.staying})
             self._negotiation.pop((obs.agent, obs.tick - 2), None)
         return known
