@@ -1,7 +1,7 @@
-"""The agent's decision compiled ahead of time (``learning.ahead``): built once into the kernel
-cache, even by several processes at once; loaded by a process that runs the kernels in plain
-Python, without numba; and deciding exactly as plain Python does, over the real handlers of a
-whole run."""
+"""The agents' decision and negotiation plan compiled ahead of time (``learning.ahead``): built
+once into the kernel cache, even by several processes at once; loaded by a process that runs the
+kernels in plain Python, without numba; and deciding and planning exactly as plain Python does,
+over the real handlers of a whole run."""
 
 import hashlib
 import os
