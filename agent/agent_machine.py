@@ -391,7 +391,7 @@ class AgentMachine(QueryAnswering, Machine):
         out, trace, tick = self._out, self.trace, obs.tick
         trace.mark(DECIDE, tick)
         refused = self.brain.rejected_updates
-        action = self.brain.act(obs, answers)
+        action = self.brain.act(obs, answers, (plan.cells, plan.parked))
         trace.mark(ACTED, tick)
         if self.brain.rejected_updates != refused:
             self.inbox.reject("bad-update", f"{self.brain.rejected_updates - refused} shared-table "

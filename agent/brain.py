@@ -21,8 +21,8 @@ from nnql_swarm.learning.fields import (
     LP_READING, LP_SHIELD, LP_STILL_SHIELD, NB_FIELDS, READ_DAQL, READINGS, Grid, Sight,
 )
 from nnql_swarm.learning.learner import draw_noise, make_way
-from nnql_swarm.learning.neighbours import NeighbourRows
 from nnql_swarm.learning.record import write_updates
+from nnql_swarm.learning.rows import NeighbourRows
 from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
@@ -73,7 +73,7 @@ class AgentBrain:
         self._seen: tuple = (-1, {}, None)  # DAQL: last tick's cells, and the agent's own
         self._was_at: tuple[int, int] | None = None  # DAQL: the agent's cell a tick ago
         self._rows = NeighbourRows(config)
-        self._wall_x, self._wall_y = ints(self._rows.wall_x), ints(self._rows.wall_y)
+        self._wall_x, self._wall_y = ints(self._rows.wall_x.tolist()), ints(self._rows.wall_y.tolist())
         self._grid = Grid(config.width, config.height, self._wall_x, self._wall_y, 0,
                           len(self._wall_x))
 
@@ -103,15 +103,17 @@ class AgentBrain:
             self._noise = (self._random_actions.tolist(), self._ties.tolist())
         self._noise_episode = obs.episode
 
-    def act(self, obs: Observation, answers: dict[int, int]) -> int:
+    def act(self, obs: Observation, answers: dict[int, int], seen: tuple = (None, None)) -> int:
         """Learn from the last action's rewards and choose this tick's action
         (``learning.decision.agent_decision``): STAY at an episode's end or once arrived, unless
-        it must make way (``learning.learner.make_way``, the ``step-aside`` on-target rule)."""
+        it must make way (``learning.learner.make_way``, the ``step-aside`` on-target rule).
+        ``seen``: the observation's neighbours and parked ids as the kernels read them, where the
+        caller has them (``learning.planner.Plan``)."""
         learner, config, outcome = self.learner, self.config, self._outcome
         self.prepare(obs)
         (x, y), (gx, gy) = obs.position, obs.goal
         stops = (obs.arrived and not config.lifelong) or obs.episode_end
-        near = self._neighbour_rows(obs, {} if stops else answers, not stops)
+        near = self._neighbour_rows(obs, {} if stops else answers, not stops, seen)
         reads_noise = not stops or (self._pibt and not obs.episode_end)
         assert self._noise_episode >= 0 or not reads_noise, "prepare draws the episode's noise"
         step = obs.step if reads_noise else 0
@@ -129,10 +131,10 @@ class AgentBrain:
         self.learned = (learner.record(),) if config.shared and outcome[OUT_WRITTEN] else ()
         return int(action)
 
-    def _nb(self, near: list[list[int]]):
+    def _nb(self, near):
         """The neighbour rows as the kernel reads them: an array ``(m, NB_FIELDS)``, or the
         lists themselves in plain Python."""
-        if not self._arrays:
+        if not self._arrays or isinstance(near, np.ndarray):
             return near
         return np.array(near, dtype=np.int64).reshape(len(near), NB_FIELDS)
 
@@ -150,12 +152,12 @@ class AgentBrain:
         sight = Sight(x, y, gx, gy, rows(near, NB_FIELDS), len(near), False)
         return make_way(sight, self.config.n_agents, self._grid, floats(noise[1][obs.step]))
 
-    def _neighbour_rows(self, obs: Observation, answers: dict[int, int],
-                        announcing: bool) -> list[list[int]]:
+    def _neighbour_rows(self, obs: Observation, answers: dict[int, int], announcing: bool,
+                        seen: tuple = (None, None)):
         """The learner's neighbour rows for this observation (:class:`NeighbourRows`), with
         DAQL's memory of the tick before."""
         previous = self._previous_cells(obs)
-        return self._rows(obs, answers, announcing, previous, self._was_at)
+        return self._rows(obs, answers, announcing, previous, self._was_at, *seen)
 
     def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:
         """DAQL's (the still shield's, and the hindrance's under ``--arbitration pibt``) memory:

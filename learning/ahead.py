@@ -1,12 +1,13 @@
-"""The agent's kernels compiled ahead of time: an extension module that an agent process
-imports without numba.
+"""The swarm processes' kernels compiled ahead of time: an extension module that an agent or the
+world imports without numba.
 
-An agent process runs the kernel functions in plain Python (``protocol.jit``), since loading
+The swarm's processes run the kernel functions in plain Python (``protocol.jit``), since loading
 numba and its LLVM would take an agent from some 40 MiB to 160. numba's ``pycc`` compiles
 chosen functions, with fixed signatures, into an extension module that needs only numpy at run
-time. This module builds an agent's per-observation kernels so (:data:`EXPORTS`: its decision,
-``learning.decision.agent_decision``, and its negotiation's plan,
-``learning.plan.negotiation_plan``), into the kernel cache (``protocol.jit.cache_directory``: one
+time. This module builds the per-observation kernels so (:data:`EXPORTS`: an agent's decision,
+``learning.decision.agent_decision``, its negotiation's plan, ``learning.plan.negotiation_plan``,
+and its neighbour rows, ``learning.neighbours.neighbour_rows_into``; the world's check of a
+learning record, ``learning.expected.expected_record``), into the kernel cache (``protocol.jit.cache_directory``: one
 directory per version of every kernel source), once per version; and finds them there
 (:func:`compiled`). A process that does not find it (not built yet, or built where no C compiler
 was) runs them in plain Python: the same functions, the same results, slower.
@@ -32,17 +33,21 @@ from types import ModuleType
 from typing import Callable, Iterator
 
 from nnql_swarm.learning.decision import SIGNATURE, agent_decision
+from nnql_swarm.learning.expected import EXPECTED_SIGNATURE, expected_record
+from nnql_swarm.learning.neighbours import ROWS_SIGNATURE, neighbour_rows_into
 from nnql_swarm.learning.plan import PLAN_SIGNATURE, negotiation_plan
 from nnql_swarm.protocol.jit import COMPILED, MODE_VARIABLE, cache_directory
 
 log = logging.getLogger(__name__)
 
-MODULE = "nnql_agent_kernels"
+MODULE = "nnql_ahead_kernels"
 """The extension module's name (it is imported under this name, from the kernel cache)."""
 
 EXPORTS: dict[str, tuple[Callable, str]] = {
     "agent_decision": (agent_decision, SIGNATURE),
     "negotiation_plan": (negotiation_plan, PLAN_SIGNATURE),
+    "neighbour_rows_into": (neighbour_rows_into, ROWS_SIGNATURE),
+    "expected_record": (expected_record, EXPECTED_SIGNATURE),
 }
 """Each kernel the module holds, by name: the function and its signature."""
 
@@ -73,7 +78,7 @@ def load() -> ModuleType | None:
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
     except ImportError as error:
-        log.warning("the agents' kernels compiled ahead of time cannot be loaded (%s); "
+        log.warning("the kernels compiled ahead of time cannot be loaded (%s); "
                     "running them in plain Python", error)
         return None
     return module
@@ -143,14 +148,14 @@ def failure_path() -> Path:
 def ensure() -> bool:
     """Build the extension module where it is missing, in a child process that loads numba (this
     one need not), saying so; whether it is there. A failed build is logged, and noted beside
-    it (:func:`failure_path`), so that no later process tries it again; the agents run the
+    it (:func:`failure_path`), so that no later process tries it again; the processes run the
     kernels in plain Python."""
     if module_path().exists():
         return True
     failed = failure_path()
     if failed.exists():
         return False
-    print("Compiling the agents' decision and plan ahead of time (once per version of the "
+    print("Compiling the agents' and the world's kernels ahead of time (once per version of the "
           "kernel sources; some 15 s)...", file=sys.stderr, flush=True)
     env = {**os.environ, MODE_VARIABLE: "compiled"}
     done = subprocess.run([sys.executable, "-m", __name__], env=env, capture_output=True,
@@ -158,7 +163,7 @@ def ensure() -> bool:
     if done.returncode != 0 or not module_path().exists():
         failed.parent.mkdir(parents=True, exist_ok=True)
         failed.write_text(done.stderr)
-        log.warning("the agents' decision and plan could not be compiled ahead of time, so they "
+        log.warning("the swarm's kernels could not be compiled ahead of time, so they "
                     "run in plain Python (why: %s; delete it to try again)", failed)
         return False
     return True

@@ -1,21 +1,22 @@
 """The neighbours as a learner reads them at an observation: whose intents it waits for
 (:func:`awaited`), whose it knows without waiting (:func:`staying`), and their rows
-(:class:`NeighbourRows`, ``learning.fields.NB_*``). The agent decides with them; the world reads
-the same when it checks the agent's learning record (``world.records``). Each row is written by
-one kernel, :func:`neighbour_row`, which the simulator's ``sim.episode.neighbour_rows`` calls
-too."""
+(``learning.fields.NB_*``), all of them written by one kernel, :func:`neighbour_rows_into`
+(``learning.rows.NeighbourRows`` runs it), each by :func:`neighbour_row`, which the simulator's
+``sim.episode.neighbour_rows`` calls too. The agent decides with them; the world reads the same
+when it checks the agent's learning record (``world.records``)."""
 
 import numpy as np
 
 from nnql_swarm.learning.fields import (
-    NB_FIELDS, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED, NB_PREV_X, NB_PREV_Y,
-    NB_STATE_X, NB_STATE_Y, NB_X, NB_Y, reach,
+    NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X,
+    NB_STATE_Y, NB_X, NB_Y,
 )
-from nnql_swarm.learning.known_map import check_cell_order
-from nnql_swarm.learning.plan import awaited_into, staying_into
-from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sees, target_x, target_y, within
+from nnql_swarm.learning.plan import awaited_into, is_parked, staying_into
+from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import COMPILED, inline_kernel, ints, python_values
+from nnql_swarm.protocol.jit import COMPILED, inline_kernel, ints, kernel, python_values
+from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.ranks import in_reach
 
 
 @inline_kernel
@@ -46,10 +47,54 @@ def neighbour_row(row, j, jx, jy, known, action, parked, px, py, width, height):
 
 
 write_row = getattr(neighbour_row, "py_func", neighbour_row)
-""":func:`neighbour_row` as plain Python, on a list row (the agent's rows are lists, whether or
-not the kernel is compiled in this process)."""
-from nnql_swarm.protocol.messages import Observation
-from nnql_swarm.protocol.ranks import in_reach
+""":func:`neighbour_row` as plain Python, on a list row (the simulator's lookahead, tests)."""
+
+
+@kernel
+def neighbour_rows_into(nb, k, limit, wide, keep, parked, p, x, y, far, answer, prev_x, prev_y,
+                        was_x, was_y, knows_walls, wall_ids, n_walls, wall_far, radius, meet,
+                        width, height, out):
+    """Write the learner's neighbour rows of an observation into ``out``; return how many.
+
+    First the neighbours (``nb``'s first ``k`` rows ``(id, x, y)``, in id order) within ``far``
+    of the agent's cell ``(x, y)`` and within ``limit``, or within ``wide`` where ``keep[id]``
+    is set: each with its announced move where ``answer[id]`` holds one (-1: unknown), parked if
+    among ``parked``'s first ``p`` ids, and its cell a tick ago ``(prev_x[id], prev_y[id])``
+    (-1: not seen). Then the walls (``wall_ids``: the id of the wall on each cell, ``y * width
+    + x``, -1 for none; ``n_walls`` of them) within ``wall_far``, in cell order, each known to
+    stay where ``knows_walls`` and it is within the negotiation's reach (``radius``, ``meet``),
+    as the simulator reads a scripted obstacle, and seen a tick ago where the agent's cell then
+    (``(was_x, was_y)``, -1: none) saw it."""
+    m = 0
+    near = min(far, limit)
+    kept = min(far, wide)
+    for i in range(k):
+        j = nb[i][0]
+        jx = nb[i][1]
+        jy = nb[i][2]
+        d = max(abs(jx - x), abs(jy - y))
+        if d > near and (d > kept or keep[j] == 0):
+            continue
+        action = answer[j]
+        neighbour_row(out[m], j, jx, jy, action >= 0, STAY if action < 0 else action,
+                      is_parked(j, parked, p), prev_x[j], prev_y[j], width, height)
+        m += 1
+    if n_walls > 0:
+        for cy in range(max(0, y - wall_far), min(height, y + wall_far + 1)):
+            for cx in range(max(0, x - wall_far), min(width, x + wall_far + 1)):
+                j = wall_ids[cy * width + cx]
+                if j < 0:
+                    continue
+                seen = was_x >= 0 and sees(was_x, was_y, cx, cy)
+                neighbour_row(out[m], j, cx, cy, knows_walls and in_reach(x, y, cx, cy, radius, meet),
+                              STAY, False, cx if seen else -1, cy if seen else -1, width, height)
+                m += 1
+    return m
+
+
+ROWS_SIGNATURE = ("i8(i8[:, ::1], i8, i8, i8, i8[::1], i8[::1], i8, i8, i8, i8, i8[::1], i8[::1], "
+                  "i8[::1], i8, i8, b1, i8[::1], i8, i8, i8, b1, i8, i8, i8[:, ::1])")
+""":func:`neighbour_rows_into`'s types, as compiled ahead of time (``learning.ahead``)."""
 
 
 def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
@@ -91,66 +136,3 @@ def _rows(neighbours):
     compiled, else the tuples themselves."""
     return np.array(neighbours, dtype=np.int64).reshape(len(neighbours), 3) if COMPILED \
         else neighbours
-
-
-class NeighbourRows:
-    """The learner's neighbour rows (``learning.fields.NB_*``) for an observation: what an agent
-    reads its neighbours as, and what the world reads them as when it checks the agent's learning
-    record (``world.records``)."""
-
-    def __init__(self, config: SwarmConfig) -> None:
-        self.config = config
-        self.reads_intents = config.algo in NEGOTIATING_ALGOS
-        self.reach = reach(config.interaction_radius)
-        walls = config.walls().tolist()
-        check_cell_order(walls)
-        self._walls = {y * config.width + x: config.n_agents + k
-                       for k, (x, y) in enumerate(walls)}
-        self._walls_near: dict[tuple[int, int], list[tuple[int, int, int]]] = {}
-        self.wall_x, self.wall_y = ints([x for x, _ in walls]), ints([y for _, y in walls])
-        """The walls' cells, in cell order, as the known map reads them (``learning.known_map``)."""
-
-    def __call__(self, obs: Observation, answers: dict[int, int], announcing: bool,
-                 previous: dict[int, tuple[int, int]],
-                 was_at: tuple[int, int] | None) -> list[list[int]]:
-        """The visible neighbours within the learner's reach (``learning.fields.reach``: no other
-        can change its decision or its learning) in id order, each with its announced move where
-        it answered (``answers``), and its cell a tick ago where DAQL remembers it
-        (``previous``); then the walls within reach, each known to stay where it is within the
-        negotiation radius (as the simulator reads a scripted obstacle), unless nobody announces
-        (``announcing``: not at an episode's end, nor once arrived), and seen a tick ago where
-        the agent's cell then (``was_at``) saw it."""
-        w, h = self.config.width, self.config.height
-        parked = set(obs.parked)
-        (x, y), far = obs.position, self.reach
-        rows = []
-        for j, jx, jy in within(obs.neighbours, x, y, far):
-            action = answers.get(j)
-            px, py = previous.get(j, (-1, -1))
-            row = [0] * NB_FIELDS
-            write_row(row, j, jx, jy, action is not None, STAY if action is None else action,
-                      j in parked, px, py, w, h)
-            rows.append(row)
-        if self._walls:
-            knows = announcing and self.reads_intents
-            radius, meet = self.config.interaction_radius, self.config.meet_only
-            for j, jx, jy in self._walls_within(x, y):
-                px, py = (jx, jy) if was_at is not None and sees(*was_at, jx, jy) else (-1, -1)
-                row = [0] * NB_FIELDS
-                write_row(row, j, jx, jy, knows and in_reach(x, y, jx, jy, radius, meet), STAY,
-                          False, px, py, w, h)
-                rows.append(row)
-        return rows
-
-    def _walls_within(self, x: int, y: int) -> list[tuple[int, int, int]]:
-        """The walls within reach and view of cell ``(x, y)`` as ``(id, x, y)`` in id order
-        (cell order), once per cell."""
-        near = self._walls_near.get((x, y))
-        if near is None:
-            w, h, far = self.config.width, self.config.height, min(self.reach, VIEW_RADIUS)
-            near = [(self._walls[cy * w + cx], cx, cy)
-                    for cy in range(max(0, y - far), min(h, y + far + 1))
-                    for cx in range(max(0, x - far), min(w, x + far + 1))
-                    if cy * w + cx in self._walls]
-            self._walls_near[(x, y)] = near
-        return near

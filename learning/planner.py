@@ -51,6 +51,11 @@ class Plan(NamedTuple):
     """The agents it keeps standing queries open on, and whose standing queries on it it keeps:
     those within the interaction radius and :data:`STREAM_MARGIN` (at most the view), the only
     ones it can soon ask or be asked by."""
+    cells: object
+    """The observation's neighbours ``(id, x, y)`` as the kernels read them: an array ``(k, 3)``
+    where they are compiled, else the tuples (``learning.rows.NeighbourRows`` reads them too)."""
+    parked: object
+    """Its parked ids, likewise."""
 
 
 class Planner:
@@ -83,6 +88,30 @@ class Planner:
         """The plan of ``obs``; None where it does not fit the run: more neighbours than its
         agents, a cell off its grid, an agent or rank it has not (the kernels, compiled, would
         read past their buffers)."""
+        read = self._run(obs)
+        if read is None:
+            return None
+        counts, out = python_values(self._counts), self._out
+        parts = [python_values(out[part][:count]) if count else [] for part, count in
+                 enumerate(counts[:PLAN_PARTS])]
+        return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
+                    [obs.neighbours[i] for i in parts[P_STREAMED]], *read)
+
+    def waits(self, obs: Observation) -> tuple | None:
+        """What the world reads of the plan of ``obs`` (the planner not :attr:`whole`), as
+        arrays: whom the agent waits for, whom it knows to stay, and the observation's
+        neighbours ``(k, 3)`` and parked ids as the plan read them; None where it does not fit
+        the run."""
+        read = self._run(obs)
+        if read is None:
+            return None
+        counts, out = self._counts, self._out
+        return (np.array(out[P_AWAITED][:counts[P_AWAITED]], dtype=np.int64),
+                np.array(out[P_STAYING][:counts[P_STAYING]], dtype=np.int64), *read)
+
+    def _run(self, obs: Observation) -> tuple | None:
+        """Run the kernel on ``obs``: its neighbours and parked ids as it read them, or None
+        where ``obs`` does not fit the run."""
         config, neighbours, parked = self._config, obs.neighbours, obs.parked
         k, (x, y), (gx, gy) = len(neighbours), obs.position, obs.goal
         n, width, height, meet = config.n_agents, config.width, config.height, config.meet_only
@@ -102,10 +131,6 @@ class Planner:
                    config.interaction_radius, meet, obs.arrived and not config.step_aside,
                    negotiates, meet and len(parked) > 0, self._plans_known, self._reach,
                    self.whole, self._scratch, self._out, self._counts)
-        counts, out = python_values(self._counts), self._out
-        if not counts[P_FITS]:
+        if not self._counts[P_FITS]:
             return None
-        parts = [python_values(out[part][:count]) if count else [] for part, count in
-                 enumerate(counts[:PLAN_PARTS])]
-        return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
-                    [neighbours[i] for i in parts[P_STREAMED]])
+        return nb, parked_ids

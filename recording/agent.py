@@ -257,13 +257,13 @@ class TimedBrain(AgentBrain):
         self._asked_at = time.perf_counter()
         return asked
 
-    def act(self, obs: Observation, answers: dict[int, int]) -> int:
+    def act(self, obs: Observation, answers: dict[int, int], seen: tuple = (None, None)) -> int:
         if self._asked:  # answers may hold more: the arrived neighbours known to stay
             self.latencies_s.append(time.perf_counter() - self._asked_at)
             self.unanswered += len(self._asked - answers.keys())
             self._asked = set()
         self.last_tick = obs.tick
-        return super().act(obs, answers)
+        return super().act(obs, answers, seen)
 
     def take_timings(self) -> tuple[list[float], int]:
         """The episode's latencies and unanswered count, reset for the next episode."""

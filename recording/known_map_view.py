@@ -11,7 +11,7 @@ to its goal; none where the known map cuts it off).
 Nothing is reported by the agent: :class:`KnownMapViz` replays the agent's observations, as the
 world makes them at each tick (its cell, its goal, the others in view and which of them are
 parked), through the learner's own kernel (``learning.learner.observe_map`` on a buffer of its
-own, with the neighbour rows of ``agent.brain.NeighbourRows``), and follows the path with
+own, with the neighbour rows of ``learning.rows.NeighbourRows``), and follows the path with
 ``learning.known_map.waypoint_move``, the move the waypoint state reads. A run resumed from a
 checkpoint starts this replay afresh: its known walls are those seen since the resume.
 """
@@ -19,7 +19,7 @@ checkpoint starts this replay afresh: its known walls are those seen since the r
 import numpy as np
 import rerun as rr
 
-from nnql_swarm.learning.neighbours import NeighbourRows
+from nnql_swarm.learning.rows import NeighbourRows
 from nnql_swarm.learning.known_map import (
     MAP_HEADER, MAP_KNOWN, MAP_PARKED, SECTIONS, fresh_map, map_size, path_length, waypoint_move,
 )

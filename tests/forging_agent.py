@@ -24,8 +24,8 @@ class ForgingBrain(AgentBrain):
         super().__init__(agent, config)
         self.from_tick, self.mute = from_tick, mute
 
-    def act(self, obs, answers):
-        action = super().act(obs, answers)
+    def act(self, obs, answers, seen=(None, None)):
+        action = super().act(obs, answers, seen)
         if self.learned and obs.tick >= self.from_tick:
             self.learned = () if self.mute else (forged(self.learned[0]),)
         return action

@@ -1,6 +1,7 @@
-"""The agents' decision and negotiation plan compiled ahead of time (``learning.ahead``): built
-once into the kernel cache, even by several processes at once; loaded by a process that runs the
-kernels in plain Python, without numba; and deciding and planning exactly as plain Python does,
+"""The swarm's kernels compiled ahead of time (``learning.ahead``: the agents' decision,
+negotiation plan and neighbour rows, the world's check of a learning record): built once into the
+kernel cache, even by several processes at once; loaded by a process that runs the kernels in
+plain Python, without numba; and deciding, planning and checking exactly as plain Python does,
 over the real handlers of a whole run."""
 
 import hashlib
@@ -70,8 +71,9 @@ def test_without_the_module_or_with_it_switched_off_a_process_decides_in_plain_p
 
 def test_the_decision_compiled_ahead_of_time_decides_as_plain_python_does(built, tmp_path):
     """The real handlers of a whole run (``bench.node_cpu``: the world and 8 agents in one
-    process, every message delivered in order), once deciding ahead of time and once in plain
-    Python: the same ticks, every message the same, the same checkpoints (the agents' tables
+    process, every message delivered in order), once with the kernels compiled ahead of time and
+    once in plain Python: the same ticks, every message the same (a record the world's check
+    refused would change the table's updates it sends), the same checkpoints (the agents' tables
     among them), bit for bit."""
     runs = {}
     for how, env in ((ahead.AHEAD, {}), (ahead.PLAIN, {ahead.SWITCH: "off"})):
@@ -119,7 +121,7 @@ def test_a_build_that_fails_is_said_once_and_leaves_the_agents_deciding_in_plain
     first = subprocess.run([sys.executable, "-c", ensure], env=env, capture_output=True,
                            text=True, timeout=600)
     assert first.stdout.split() == ["False", ahead.PLAIN], first.stderr
-    assert "Compiling the agents' decision" in first.stderr
+    assert "Compiling the agents' and the world's kernels" in first.stderr
     assert "could not be compiled ahead of time" in first.stderr
     failed = list(tmp_path.rglob("*.failed"))
     assert len(failed) == 1 and failed[0].read_text().strip()

@@ -1,6 +1,6 @@
 """The neighbour rows are written by one function (``learning.neighbours.neighbour_row``): the
-agent's rows (``NeighbourRows``, which the world reads too when it checks a learning record) and
-the simulator's (``sim.episode.neighbour_rows``) alike; no other code writes a row's fields (the
+agent's rows (``neighbour_rows_into``, run by ``learning.rows.NeighbourRows``, which the world
+reads too when it checks a learning record) and the simulator's (``sim.episode.neighbour_rows``) alike; no other code writes a row's fields (the
 simulator's lookahead overwrites only the cell the state reads). That both give the same runs is
 the parity tests' (``tests/test_swarm.py``)."""
 
@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from nnql_swarm.learning import neighbours
+from nnql_swarm.learning.rows import NeighbourRows
 from nnql_swarm.learning.fields import (
     NB_FIELDS, NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_ROW,
     NB_STATE_X, NB_STATE_Y, NB_X, NB_Y,
@@ -37,7 +38,7 @@ def test_only_neighbour_row_writes_a_rows_fields():
     assert written["NB_ROW"] == {"learning/readings.py"}  # the Q_CA row, read after
     sources = {path: (ROOT / path).read_text() for path in ("sim/episode.py", rows)}
     assert "neighbour_row(row," in sources["sim/episode.py"]
-    assert sources[rows].count("write_row(row,") == 2  # the agents', then the walls'
+    assert sources[rows].count("neighbour_row(out[m],") == 2  # the agents', then the walls'
 
 
 def test_a_row_holds_the_cell_a_known_move_goes_to_and_the_cell_seen_before():
@@ -52,23 +53,32 @@ def test_a_row_holds_the_cell_a_known_move_goes_to_and_the_cell_seen_before():
             NB_PREV_X, NB_PREV_Y, NB_ROW) == tuple(range(NB_FIELDS))
 
 
-def test_the_agents_rows_are_neighbour_rows(monkeypatch):
-    """Every row of an agent's observation (neighbours, then walls) comes from one call."""
+def test_the_agents_rows_are_its_neighbours_in_reach_then_the_walls_compiled_or_not():
+    """An agent's rows of an observation, from one call: the neighbours within reach with their
+    answers, parked flags and cells a tick ago, then the walls, each known to stay within the
+    negotiation's reach and seen where the agent's cell a tick ago saw it; the same whether the
+    kernel is compiled or plain Python."""
     rows_of_map = ["." * 8] * 8
     rows_of_map[1] = "..@....."
-    config = SwarmConfig(n_agents=3, width=8, height=8, map_rows=tuple(rows_of_map),
+    config = SwarmConfig(n_agents=4, width=8, height=8, map_rows=tuple(rows_of_map),
                          interaction_radius=2)
-    reader = neighbours.NeighbourRows(config)
+    reader = NeighbourRows(config)
     obs = Observation(run="rows", tick=5, sender=WORLD_SENDER, agent=0, episode=0, step=5,
-                      position=(3, 1), goal=(0, 0), neighbours=((1, 3, 2), (2, 7, 7)), rank=2,
-                      reward_ds=0.0, reward_ca=10.0, collided=False, arrived=False,
+                      position=(3, 1), goal=(0, 0), neighbours=((1, 3, 2), (2, 7, 7), (3, 4, 1)),
+                      rank=2, reward_ds=0.0, reward_ca=10.0, collided=False, arrived=False,
                       episode_end=False, parked=(1,))
-    calls = []
-    monkeypatch.setattr(neighbours, "write_row",
-                        lambda row, *args: (calls.append(args), neighbours.neighbour_row(
-                            row, *args) if not hasattr(neighbours.neighbour_row, "py_func")
-                            else neighbours.neighbour_row.py_func(row, *args)))
-    rows = reader(obs, {1: STAY}, True, {}, None)
-    assert len(calls) == len(rows) >= 2
-    assert rows[0] == [1, 3, 2, 1, 3, 2, 3, 2, 1, -1, -1, 0]  # known to stay, parked
-    assert [3, 2, 1] == rows[-1][:3] and rows[-1][NB_ID] == config.n_agents  # the wall
+    expected = [[1, 3, 2, 1, 3, 2, 3, 2, 1, -1, -1, 0],  # known to stay, parked
+                [3, 4, 1, 1, 3, 1, 3, 1, 0, 4, 0, 0],  # announced LEFT, seen at (4, 0)
+                [4, 2, 1, 1, 2, 1, 2, 1, 0, 2, 1, 0]]  # the wall: known to stay, seen before
+    got = reader(obs, {1: STAY, 3: LEFT}, True, {3: (4, 0)}, (3, 0))
+    assert [list(map(int, row)) for row in got] == expected  # agent 2 is beyond reach
+    plain = np.zeros((reader.size, NB_FIELDS), dtype=np.int64)  # its callees may be compiled
+    n = config.n_agents
+    m = neighbours.neighbour_rows_into.__dict__.get("py_func", neighbours.neighbour_rows_into)(
+        obs.neighbours, 3, reader.reach, reader.reach, [0] * n, obs.parked, 1, 3, 1, reader.reach,
+        [-1, STAY, -1, LEFT], [-1, -1, -1, 4], [-1, -1, -1, 0], 3, 0, True,
+        reader.wall_ids.tolist(), reader.n_walls, reader.wall_far, 2, config.meet_only, 8, 8,
+        plain)
+    assert plain[:m].tolist() == expected
+    unannounced = reader(obs, {}, False, {}, None)
+    assert [int(v) for v in unannounced[-1][:4]] == [4, 2, 1, 0]  # nobody announces: unknown

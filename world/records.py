@@ -33,22 +33,26 @@ so a record costs one reading of its neighbours and one ``complete``
 """
 
 from dataclasses import dataclass
+from itertools import chain
 
 import msgspec
+import numpy as np
 
-from nnql_swarm.learning.fields import (
-    DS_GOAL, LF_FIELDS, LP_DS_REWARD, LP_DS_STATE, LP_READING, LS_ACTION, LS_COUNT, LS_GOAL,
-    LS_NEIGHBOURS, LS_PENDING, LS_PER_NEIGHBOUR, LS_X, LS_Y, NB_FIELDS, NB_ID, NB_ROW, NB_X, NB_Y,
-    READ_DAQL, REC_COUNT, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REC_TERMINAL, REWARD_WORLD, RF_FIELDS,
-    RF_R_DS, learner_params, record_size, state_size,
+from nnql_swarm.learning import ahead
+from nnql_swarm.learning.expected import (
+    E_COMPLETED, E_FIELDS, E_WRITTEN, complete_pending,
 )
-from nnql_swarm.learning.neighbours import NeighbourRows
-from nnql_swarm.learning.planner import Planner
+from nnql_swarm.learning.fields import (
+    DS_GOAL, LF_FIELDS, LP_DS_REWARD, LP_DS_STATE, LP_READING, NB_FIELDS, NB_ID, NB_X, NB_Y,
+    READ_DAQL, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REWARD_WORLD, RF_FIELDS, RF_R_DS,
+    learner_params, record_size, state_size,
+)
 from nnql_swarm.learning.readings import read_rows, uses_map
-from nnql_swarm.learning.record import complete, record_outcome
-from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, offset_state, within
+from nnql_swarm.learning.planner import Planner
+from nnql_swarm.learning.rows import NeighbourRows
+from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, within
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.jit import floats, ints, python_values, rows
+from nnql_swarm.protocol.jit import python_values
 from nnql_swarm.protocol.messages import Observation
 
 FORGED = "forged-record"
@@ -63,11 +67,12 @@ UNCHECKED = "unchecked-record"
 @dataclass(frozen=True)
 class Decision:
     """What the world saw of one agent's decision at a tick: the observation it sent the agent,
-    every agent's intent as it heard them (None: missed), and the agent's observation of the tick
-    before (DAQL remembers its neighbours' cells then), if it was sent one."""
+    every agent's intent as it heard them (an action each, -1 where it missed it), and the
+    agent's observation of the tick before (DAQL remembers its neighbours' cells then), if it was
+    sent one."""
 
     obs: Observation
-    intents: tuple
+    intents: np.ndarray
     before: Observation | None
 
 
@@ -89,27 +94,41 @@ def decides(obs: Observation, lifelong: bool) -> bool:
     return not _stops(obs, lifelong)
 
 
+def _cells(neighbours) -> np.ndarray:
+    """An observation's neighbours ``(id, x, y)`` as an array ``(k, 3)``."""
+    return np.fromiter(chain.from_iterable(neighbours), dtype=np.int64,
+                       count=3 * len(neighbours)).reshape(len(neighbours), 3)
+
+
 class RecordCheck:
-    """The records of one run's agents checked against the transitions the world saw."""
+    """The records of one run's agents checked against the transitions the world saw. The
+    intents it reads are arrays of an action per agent, -1 where the world did not hear it."""
 
     def __init__(self, config: SwarmConfig) -> None:
         self.config = config
         self.rows = NeighbourRows(config)
         self.planner = Planner(config, whole=False)  # whom an agent waited for, as it planned
+        self._expected, _ = ahead.compiled("expected_record")
+        ints = lambda values: np.array(values, dtype=np.int64)  # noqa: E731
         params, params_f = learner_params(config)
-        self.map_fields = bool(uses_map(ints(params)))
+        self.params, self.params_f = ints(params), np.array(params_f, dtype=np.float64)
+        self.map_fields = bool(uses_map(self.params))
         if self.map_fields:  # destination seeking read on the agent's known map: see could_write
-            params[LP_DS_STATE], params[LP_DS_REWARD] = DS_GOAL, REWARD_WORLD
-        self.params, self.params_f = ints(params), floats(params_f)
+            self.params[LP_DS_STATE], self.params[LP_DS_REWARD] = DS_GOAL, REWARD_WORLD
         self.still_terminal = config.still_terminal
         self.lifelong = config.lifelong
-        self._no_map = ints([0])
-        self.daql = params[LP_READING] == READ_DAQL
+        self.daql = bool(self.params[LP_READING] == READ_DAQL)
         self.radius = config.interaction_radius
-        bodies = config.n_bodies  # the learner's buffers, for complete
-        self._state, self._state_f = ints([0] * state_size(bodies)), floats([0.0] * LF_FIELDS)
-        self._rec, self._rec_f = ints([0] * record_size(bodies)), floats([0.0] * RF_FIELDS)
-        self._negotiation: dict[tuple, tuple] = {}  # (agent, tick) -> (awaited, staying)
+        n, bodies, size = config.n_agents, config.n_bodies, self.rows.size
+        self._no_map = ints([0])
+        self._state, self._state_f = ints([0] * state_size(bodies)), np.zeros(LF_FIELDS)
+        self._rec, self._rec_f = ints([0] * record_size(bodies)), np.zeros(RF_FIELDS)
+        self._answer, self._prev_x, self._prev_y, self._keep = (ints([0] * n) for _ in range(4))
+        self._scratch = np.zeros((size, NB_FIELDS), dtype=np.int64)  # rows read at a decision
+        self._completed = np.zeros((size, NB_FIELDS), dtype=np.int64)
+        self._counts = ints([0] * E_FIELDS)
+        self._none, self._no_ids = np.zeros((0, 3), dtype=np.int64), ints([])
+        self._negotiation: dict[tuple, tuple] = {}  # (agent, tick) -> its plan's parts, arrays
         self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
 
     # What an agent could have heard, and read its neighbours as.
@@ -120,27 +139,30 @@ class RecordCheck:
         awaited neighbours (any of which may not have answered in time)."""
         if stops:
             return {}, []
-        waited, known = self._negotiated(obs)
-        known = dict(known)
-        known.update((j, intents[j]) for j in waited if intents[j] is not None)
+        waited, staying = (python_values(part) for part in self._negotiated(obs)[:2])
+        known = {j: STAY for j in staying}
+        known.update((j, int(intents[j])) for j in waited if intents[j] >= 0)
         return known, waited
 
-    def _negotiated(self, obs: Observation) -> tuple[list[int], dict]:
+    def _negotiated(self, obs: Observation) -> tuple:
         """Whom the agent waits for at ``obs`` and the arrived neighbours it knows stay
-        (``agent.negotiation``), worked out once per observation."""
+        (``agent.negotiation``), as arrays, with its neighbours ``(k, 3)`` and parked ids as
+        the plan read them: worked out once per observation."""
         key = (obs.agent, obs.tick)
         known = self._negotiation.get(key)
         if known is None:  # kept for this tick and the next: a record reads both
-            plan = self.planner(obs)
-            assert plan is not None, "the world's own observations fit its run"
-            known = self._negotiation[key] = (plan.awaited, {j: STAY for j in plan.staying})
+            known = self._negotiation[key] = self.planner.waits(obs)
+            assert known is not None, "the world's own observations fit its run"
             self._negotiation.pop((obs.agent, obs.tick - 2), None)
         return known
 
     def ready(self, obs: Observation, intents) -> bool:
         """Whether ``intents`` (the tick's so far) hold every intent the agent that was sent
         ``obs`` may have decided with: then its record can be checked before the tick closes."""
-        return _stops(obs, self.lifelong) or all(intents[j] is not None for j in self._negotiated(obs)[0])
+        if _stops(obs, self.lifelong):
+            return True
+        awaited = self._negotiated(obs)[0]
+        return len(awaited) == 0 or bool(intents[awaited].min() >= 0)
 
     def _memories(self, obs: Observation, before: Observation | None, sure: bool) -> list:
         """DAQL's memories of the tick before, ``(previous cells, own cell then)``: those of
@@ -149,72 +171,84 @@ class RecordCheck:
         if not self.daql:
             return [({}, None)]
         options: list[tuple[dict[int, tuple[int, int]], tuple[int, int] | None]] = []
-        if before is not None and before.tick == obs.tick - 1 and obs.step > 0:
+        if self._remembers(obs, before):
+            assert before is not None
             options.append(({j: (x, y) for j, x, y in before.neighbours}, before.position))
         if not (sure and options):
             options.append(({}, None))
         return options
 
+    def _remembers(self, obs: Observation, before: Observation | None) -> bool:
+        """Whether DAQL, at ``obs``, remembers ``before``: that tick's, of the same episode."""
+        return (self.daql and before is not None and before.tick == obs.tick - 1
+                and obs.step > 0)
+
     def _read(self, obs: Observation, answers: dict, stops: bool, memory) -> list[list[int]]:
         """The neighbour rows with their Q_CA rows read (``NB_ROW``), as the agent reads them."""
         near = self.rows(obs, answers, not stops, *memory)
-        nb = rows(near, NB_FIELDS)
         x, y = obs.position
-        read_rows(self.params, x, y, nb, len(near))
-        return [list(row) for row in python_values(nb)] if len(near) else []
+        read_rows(self.params, x, y, near, len(near))
+        return [list(row) for row in python_values(near)] if len(near) else []
 
     # The record.
 
     def expected(self, decision: Decision, obs: Observation,
                  intents) -> tuple[tuple[int, ...], tuple[float, ...]]:
         """The record the agent's transition from ``decision`` to ``obs`` writes, had every
-        awaited answer come at both ticks (``intents``: this tick's, as the world heard them)."""
-        before = decision.obs
-        (x, y), radius = before.position, self.radius
+        awaited answer come at both ticks (``intents``: this tick's, as the world heard them):
+        ``learning.expected.expected_record``, the rows the agent decided with read at the last
+        record's completion where it was checked then."""
+        before, config, counts = decision.obs, self.config, self._counts
+        (bx, by), (bgx, bgy), (ox, oy), (ogx, ogy) = before.position, before.goal, obs.position, \
+            obs.goal
+        b_awaited, b_staying, b_nb, b_parked = self._negotiated(before)
         known = self._decided.get(before.agent)
         if known is not None and known[0] == before.tick:
-            decided = known[1]  # read as the last record's completion, every intent then in
+            decided, n_decided = known[1], len(known[1])  # every intent then was in
         else:
-            answers, _ = self._answers(before, decision.intents, False)
-            decided = self._read(_only(before, within(before.neighbours, x, y, radius)), answers,
-                                 False, self._memories(before, decision.before, True)[0])
-        pending = [(row[NB_ID], row[NB_ROW], row[NB_X], row[NB_Y]) for row in decided
-                   if chebyshev(x, y, row[NB_X], row[NB_Y]) <= radius]
-        ids = {entry[0] for entry in pending}
+            decided, n_decided = self._scratch, -1
+        memory, was_x, was_y, mem_k = self._none, -1, -1, 0
+        if self._remembers(before, decision.before):
+            assert decision.before is not None
+            memory = _cells(decision.before.neighbours)
+            (was_x, was_y), mem_k = decision.before.position, len(memory)
         stops = _stops(obs, self.lifelong)
-        answers, _ = self._answers(obs, intents, stops)
-        (x, y) = obs.position
-        near = [n for n in within(obs.neighbours, x, y, radius + 2)  # s' is at most 2 further
-                if n[0] in ids or chebyshev(x, y, n[1], n[2]) <= radius]  # or the next s
-        completed = self._read(_only(obs, near), answers, stops,
-                               self._memories(obs, before, True)[0])
+        if stops:
+            awaited, staying, nb, parked = self._no_ids, self._no_ids, _cells(obs.neighbours), \
+                np.array(obs.parked, dtype=np.int64)  # it waits for nobody
+        else:
+            awaited, staying, nb, parked = self._negotiated(obs)
+        rows = self.rows
+        self._expected(self.params, self.params_f, self._state, self._state_f, self._no_map,
+                       self._rec, self._rec_f, config.width, config.height, config.n_agents,
+                       self.radius, rows.reach, config.meet_only, rows.reads_intents,
+                       rows.wall_ids, rows.n_walls, rows.wall_far, self.map_fields,
+                       self.still_terminal, b_nb, len(b_nb), b_parked, len(b_parked), bx, by,
+                       bgx, bgy, int(decision.intents[before.agent]), decision.intents,
+                       b_awaited, len(b_awaited), b_staying, len(b_staying), memory, mem_k,
+                       was_x, was_y, decided, n_decided, nb, len(nb), parked, len(parked), ox,
+                       oy, ogx, ogy, obs.reward_ds, obs.reward_ca, obs.arrived, stops, intents,
+                       awaited, len(awaited), staying, len(staying),
+                       self._remembers(obs, before), self._answer, self._prev_x, self._prev_y,
+                       self._keep, self._completed, counts)
         if not stops:
-            self._decided[obs.agent] = (obs.tick, completed)
-        return self._complete(decision, obs, pending, completed)
+            self._decided[obs.agent] = (obs.tick, self._completed[:counts[E_COMPLETED]].copy())
+        return (tuple(self._rec[:counts[E_WRITTEN]].tolist()), tuple(self._rec_f.tolist()))
 
     def _complete(self, decision: Decision, obs: Observation, pending, completed):
-        """``learning.record.complete`` on the agent's pending transition: its decision's goal
-        state, action and neighbours in Eq. 6 (``pending``: ``(id, Q_CA row, x, y)`` each), and
-        its outcome, completed with the neighbour rows of ``obs`` (``completed``)."""
+        """``learning.expected.complete_pending``: the agent's pending transition from its
+        decision (``pending``: the rows it decided with) completed with the neighbour rows of
+        ``obs`` (``completed``)."""
         before = decision.obs
-        (x, y), (gx, gy) = before.position, before.goal
-        state, state_f, rec, rec_f = self._state, self._state_f, self._rec, self._rec_f
-        state[LS_PENDING], state[LS_GOAL] = 1, offset_state(gx - x, gy - y)
-        state[LS_ACTION], state[LS_COUNT] = decision.intents[before.agent], len(pending)
-        state[LS_X], state[LS_Y] = x, y
-        for k, (neighbour, row, cx, cy) in enumerate(pending):
-            at = LS_NEIGHBOURS + LS_PER_NEIGHBOUR * k
-            state[at], state[at + 1], state[at + 2], state[at + 3] = neighbour, row, cx, cy
-        record_outcome(state, state_f, obs.reward_ds, obs.reward_ca, obs.arrived)
-        (x, y), (gx, gy) = obs.position, obs.goal
-        complete(self.params, self.params_f, state, state_f, self._no_map, x, y, gx, gy,
-                 rows(completed, NB_FIELDS), len(completed), self.config.width,
-                 self.config.height, rec, rec_f)
-        if self.map_fields:  # a step that went nowhere is terminal by its cell
-            still = self.still_terminal and (x, y) == tuple(before.position)
-            rec[REC_TERMINAL] = 1 if obs.arrived or still else 0
-        written = REC_PAIRS + 2 * int(rec[REC_COUNT])
-        return tuple(python_values(rec[:written])), tuple(python_values(rec_f))
+        (bx, by), (bgx, bgy), (ox, oy), (ogx, ogy) = before.position, before.goal, obs.position, \
+            obs.goal
+        written = complete_pending(
+            self.params, self.params_f, self._state, self._state_f, self._no_map, bx, by, bgx,
+            bgy, int(decision.intents[before.agent]), pending, len(pending), self.radius,
+            obs.reward_ds, obs.reward_ca, obs.arrived, ox, oy, ogx, ogy, completed,
+            len(completed), self.config.width, self.config.height, self.map_fields,
+            self.still_terminal, self._rec, self._rec_f)
+        return tuple(python_values(self._rec[:written])), tuple(python_values(self._rec_f))
 
     def _readings(self, obs: Observation, intents, stops: bool, before: Observation | None,
                   sure: bool, neighbour: int) -> list[list[int]]:
@@ -225,8 +259,8 @@ class RecordCheck:
         choices = [dict(known)]
         if neighbour in waited:
             choices = [{k: a for k, a in known.items() if k != neighbour}]
-            heard = intents[neighbour]
-            moves = range(N_ACTIONS) if heard is None else (heard,)
+            heard = int(intents[neighbour])
+            moves = range(N_ACTIONS) if heard < 0 else (heard,)
             choices += [{**choices[0], neighbour: a} for a in moves]
         found = []
         for answers in choices:
@@ -269,14 +303,17 @@ class RecordCheck:
         pairs = set()
         for row in self._readings(before, decision.intents, False, decision.before, False,
                                   neighbour):
-            entry = (neighbour, row[NB_ROW], row[NB_X], row[NB_Y])
             after: list[list[int] | None] = list(
                 self._readings(obs, intents, stops, before, False, neighbour))
             for following in after or [None]:
-                completed = [] if following is None else [following]
-                rec = self._complete(decision, obs, [entry], completed)
+                completed = self._rows_of([] if following is None else [following])
+                rec = self._complete(decision, obs, self._rows_of([row]), completed)
                 pairs.add(rec[0][REC_PAIRS:REC_PAIRS + 2])
         return pairs
+
+    @staticmethod
+    def _rows_of(rows: list[list[int]]) -> np.ndarray:
+        return np.array(rows, dtype=np.int64).reshape(len(rows), NB_FIELDS)
 
 
 def _map_fields_taken(expected, integers, values):

@@ -41,6 +41,8 @@ it against (``unchecked-record``) is refused too. Its intent counts either way.
 import enum
 import logging
 
+import numpy as np
+
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import STAY
 from nnql_swarm.protocol.config import START_S_PER_AGENT, SwarmConfig
@@ -139,6 +141,7 @@ class WorldMachine(Machine):
             self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
             self.next_shutdown = now
         self.actions: list[int | None] = []  # the open tick's intents, by agent
+        self.intents = np.full(0, -1, dtype=np.int64)  # the same, -1 for none (world.records)
         self.orders: list[tuple[int, ...] | None] = []  # and their orders (--arbitration pibt)
         self.heard: set[int] = set()  # the agents whose intent for the open tick came
         self.learned: dict[int, tuple] = {}  # the accepted learning records that came with them
@@ -218,7 +221,7 @@ class WorldMachine(Machine):
         else:
             self.heard.add(intent.agent)
             if actions[intent.agent] is None:  # a settled agent's action is STAY already
-                actions[intent.agent] = intent.action
+                actions[intent.agent] = self.intents[intent.agent] = intent.action
                 self.orders[intent.agent] = intent.order
             self.awaited.discard(intent.agent)
             if intent.record:
@@ -310,12 +313,13 @@ class WorldMachine(Machine):
         """Send every agent its observation of the current tick; start waiting for intents."""
         out = self._out
         actions = self.actions = [None] * self.n
+        intents = self.intents = np.full(self.n, -1, dtype=np.int64)
         self.orders = [()] * self.n
         self.awaited = set(self.alive)
         if self.to_resync:
             self.world.unsettle(self.to_resync)
         for agent in self.world.settled:
-            actions[agent] = STAY
+            actions[agent] = intents[agent] = STAY
             self.awaited.discard(agent)
         self.heard = set()
         self.learned = {}
@@ -373,10 +377,10 @@ class WorldMachine(Machine):
         elif (decision is None or obs is None or obs.episode != decision.obs.episode
               or obs.tick != decision.obs.tick + 1):
             reason = UNCHECKED
-        elif not (final or check.ready(obs, self.actions)):
+        elif not (final or check.ready(obs, self.intents)):
             self.unchecked.add(agent)
             return
-        elif check.could_write(record, decision, obs, self.actions):
+        elif check.could_write(record, decision, obs, self.intents):
             self.unchecked.discard(agent)
             return
         else:
@@ -392,7 +396,7 @@ class WorldMachine(Machine):
         decisions, for the next tick's records."""
         for agent in sorted(self.unchecked):
             self._check_record(agent, True)
-        intents, heard = tuple(self.actions), self.heard
+        intents, heard = self.intents, self.heard
         self.decisions = {agent: Decision(obs, intents, self.sent_before.get(agent))
                           for agent, obs in self.sent.items()
                           if agent in heard and decides(obs, self.config.lifelong)}
