@@ -159,6 +159,11 @@ def apply_record(q_ds, q_ca, rec, rec_f, alpha, gamma):
         values[action] = current + alpha * (target - current)
 
 
+APPLY_SIGNATURE = "void(f8[:, ::1], f8[:, ::1], i8[::1], f8[::1], f8, f8)"
+""":func:`apply_record`'s types, as compiled ahead of time (``learning.ahead``): the world applies
+a shared table's records with it."""
+
+
 @kernel
 def record_outcome(state, state_f, r_ds, r_ca, arrived):
     """Store the rewards of the last action, and whether it reached the goal (terminal)."""

@@ -3,8 +3,9 @@
 Each agent's intent carries its learning record of the tick. The world checks that every record
 fits the tables (:meth:`SharedTable.accepts`, as it takes the intent) and is the one the agent's
 own transition wrote (``world.records``) and, when the tick closes, applies those it believes
-in agent-id order with the learner's own ``apply_record``, the very step the simulator applies
-to its one table (``sim.episode``). The next observations then tell every agent which entries
+in agent-id order with the learner's own ``apply_record`` (compiled ahead of time where it is
+built, ``learning.ahead``), the very step the simulator applies to its one table
+(``sim.episode``). The next observations then tell every agent which entries
 changed and their new values (:meth:`SharedTable.apply` returns them, in the order the records
 wrote them), and each agent writes them into its copy (``learning.record.write_updates``). All
 copies stay equal to this one and to the simulator's, and a tick costs every agent one write per
@@ -22,7 +23,8 @@ from typing import NamedTuple
 import numpy as np
 
 from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA
-from nnql_swarm.learning.record import apply_record, record_entries, record_is_valid
+from nnql_swarm.learning import ahead
+from nnql_swarm.learning.record import record_entries, record_is_valid
 from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import floats, ints
@@ -55,6 +57,10 @@ class SharedTable:
 
     def __init__(self, config: SwarmConfig) -> None:
         self._learner = Learner(config)  # the tables an agent starts with, and its alpha, gamma
+        self._apply, how = ahead.compiled("apply_record")
+        self._record_buffers = (ints, floats) if how == ahead.PLAIN else (
+            lambda values: np.array(values, dtype=np.int64),
+            lambda values: np.array(values, dtype=np.float64))
         self.alpha = self._learner.params_f[FP_ALPHA]
         self.gamma = self._learner.params_f[FP_GAMMA]
 
@@ -69,10 +75,11 @@ class SharedTable:
         order; the entries each one wrote, with their values once all are applied."""
         learner = self._learner
         q_ds, q_ca = learner.q_ds, learner.q_ca
+        as_ints, as_floats = self._record_buffers
         written: list[int] = []
         for agent in sorted(learned):
             integers, values = learned[agent]
-            apply_record(q_ds, q_ca, ints(integers), floats(values), self.alpha, self.gamma)
+            self._apply(q_ds, q_ca, as_ints(integers), as_floats(values), self.alpha, self.gamma)
             written.extend(record_entries(integers))
         return self.current(written)
 
