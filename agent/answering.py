@@ -6,7 +6,7 @@ A query for a decided tick is answered at once; one for a coming tick (at most
 answered the next in rank first; one for an older tick, or too far ahead, or one too many, is
 refused with a reason and counted. A standing query (``?since=T;from=<id>``, one per asker: a
 newer one replaces it) stays open and is answered at every decided tick whose plan asks this
-agent, until its asker has not been near (``agent.negotiation.streamed``) for
+agent, until its asker has not been near (``learning.planner.Plan.near``) for
 :data:`STANDING_UNSEEN_TICKS` decided ticks: then this agent ends it (its asker, which opens one
 on every agent near it, opens another when they come near again). So an agent holds the
 standing queries of the agents around it, not of the whole swarm. The state lives on the
@@ -47,7 +47,7 @@ class QueryAnswering(Machine):
     decided_answer: Answer | None  # set with decided_tick
     decided_payload: bytes
     decided_waiters: list[int]  # whom the decided tick's answer goes to by stream
-    decided_near: list[tuple[int, int, int]]  # negotiation.streamed at the decided tick
+    decided_near: list[tuple[int, int, int]]  # Plan.near at the decided tick
     held: list[tuple[int, int, int]]  # (tick, asker's rank, query)
     standing: dict[int, int]  # asker -> its standing query on this agent
     standing_seen: dict[int, int]  # asker -> the last decided tick it was near

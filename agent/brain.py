@@ -6,7 +6,7 @@ simulator (``sim.episode``) runs compiled, so that for the same seed the distrib
 simulator play the same run.
 
 Negotiation: at every tick an agent that reads intents waits for the intents of its higher-ranked
-neighbours within reach (``learning.neighbours.awaited``, by ``protocol.ranks.waits_for``; how it
+neighbours within reach (``learning.planner.Plan.awaited``, by ``protocol.ranks.waits_for``; how it
 learns them is that module's plan), and decides with those of them it needs
 (:meth:`AgentBrain.neighbours_to_ask`), with whatever came back
 (:meth:`AgentBrain.act`), and then answers for itself. A neighbour whose intent did not come is
@@ -23,7 +23,7 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.learner import draw_noise, make_way
 from nnql_swarm.learning.record import write_updates
 from nnql_swarm.learning.rows import NeighbourRows
-from nnql_swarm.learning.tables import Learner
+from nnql_swarm.learning.tables import Learner, buffer_makers
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import floats, rows
@@ -52,13 +52,12 @@ class AgentBrain:
         self._decide, self.decides = ahead.decision()
         """The decision's kernel (``learning.decision.agent_decision``) and how it runs here:
         compiled ahead of time, by numba, or in plain Python (``learning.ahead``)."""
-        arrays = self.decides != ahead.PLAIN  # its buffers: arrays where it is compiled
-        self._arrays = arrays
-        self.learner = Learner(config, arrays)
+        self._arrays = self.decides != ahead.PLAIN  # its buffers: arrays where it is compiled
+        self.learner = Learner(config, self._arrays)
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
         self.order: tuple[int, ...] = ()  # this tick's moves by preference (--arbitration pibt)
         self._pibt = config.arbitration == "pibt"
-        ints = (lambda values: np.array(values, dtype=np.int64)) if arrays else list
+        ints, _ = buffer_makers(self._arrays)
         self._ranks = ints([0] * N_ACTIONS)
         self._outcome = ints([0] * OUT_FIELDS)
         self.rejected_updates = 0  # shared-table entries refused (outside, or uneven groups)
@@ -79,7 +78,7 @@ class AgentBrain:
 
     def neighbours_to_ask(self, obs: Observation, awaited: list[int]) -> list[int]:
         """The neighbours whose intents this agent decides with, of those it waits for
-        (``awaited``, ``learning.neighbours.awaited``): none at an episode's end, nor once it
+        (``awaited``, ``learning.planner.Plan.awaited``): none at an episode's end, nor once it
         has parked on its goal (``SwarmConfig.step_aside`` off), where it stays (it still waits,
         to relay them down the chain); an arrived agent that may step aside needs them to make way."""
         if (obs.arrived and not self.config.step_aside) or obs.episode_end \

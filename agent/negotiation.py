@@ -1,7 +1,7 @@
 """Whom an nnQL agent asks for intents, so that it learns every intent it must wait for. Pure.
 
 At each tick an nnQL agent waits for the intents of its higher-ranked neighbours within reach
-(:func:`awaited`, by the one rule of ``protocol.ranks.waits_for``). It need not ask each of them:
+(:attr:`Plan.awaited`, by the one rule of ``protocol.ranks.waits_for``). It need not ask each of them:
 an answer relays every intent its sender learned while negotiating (``protocol.messages.Answer``),
 and that sender waited for *its* visible higher-ranked neighbours in turn. Positions are in the
 observation, so an agent can tell exactly whom a neighbour sees, and so what its answer will bring.
@@ -18,12 +18,12 @@ ones directly (``agent.agent_node``). Why a chain: ``docs/design.md``.
 Under the paper's ``reach`` rule an agent that has arrived still waits for the awaited intents,
 although it needs none of them, so that it can relay them down the chain. Under ``meet`` nobody
 waits for a parked agent: every observation that shows it says it is parked, so its intent,
-STAY, is known (:func:`staying`), and it waits for nobody in turn. At an episode's end nobody
+STAY, is known (:attr:`Plan.staying`), and it waits for nobody in turn. At an episode's end nobody
 negotiates.
 
 Each agent keeps a *standing* query open on the intent key of every agent near enough to be
-asked soon (:func:`streamed`: within the interaction radius and a margin), and a decider answers
-through it exactly the agents whose plan asks it (:func:`standing_answers`): the negotiation
+asked soon (:attr:`Plan.near`: within the interaction radius and a margin), and a decider answers
+through it exactly the agents whose plan asks it (:attr:`Plan.answered`): the negotiation
 then costs one message per planned ask, instead of a query, an answer and the query's end. A
 decider ends the standing query of an agent that has not been that near for a while
 (``agent.answering.STANDING_UNSEEN_TICKS``), so an agent holds the queries of the agents around
@@ -37,29 +37,8 @@ plans.
 from dataclasses import dataclass, field
 
 from nnql_swarm.learning.planner import STREAM_MARGIN, Plan, Planner, plans_are_known
-from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.messages import Observation
 
-__all__ = ["STREAM_MARGIN", "Plan", "Planner", "TickIntents", "plan_for", "plans_are_known",
-           "standing_answers", "streamed"]
-
-
-def plan_for(obs: Observation, config: SwarmConfig) -> tuple[list[int], list[int]]:
-    """``(awaited, asks)`` for one observation: whose intents to learn, and whom to ask."""
-    plan = Planner(config)(obs)
-    return ([], []) if plan is None else (plan.awaited, plan.asks)
-
-
-def streamed(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]]:
-    """:attr:`Plan.near` of one observation."""
-    plan = Planner(config)(obs)
-    return [] if plan is None else plan.near
-
-
-def standing_answers(obs: Observation, config: SwarmConfig) -> list[int]:
-    """:attr:`Plan.answered` of one observation."""
-    plan = Planner(config)(obs)
-    return [] if plan is None else plan.answered
+__all__ = ["STREAM_MARGIN", "Plan", "Planner", "TickIntents", "plans_are_known"]
 
 
 @dataclass

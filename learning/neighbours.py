@@ -1,21 +1,16 @@
-"""The neighbours as a learner reads them at an observation: whose intents it waits for
-(:func:`awaited`), whose it knows without waiting (:func:`staying`), and their rows
-(``learning.fields.NB_*``), all of them written by one kernel, :func:`neighbour_rows_into`
-(``learning.rows.NeighbourRows`` runs it), each by :func:`neighbour_row`, which the simulator's
-``sim.episode.neighbour_rows`` calls too. The agent decides with them; the world reads the same
-when it checks the agent's learning record (``world.records``)."""
-
-import numpy as np
+"""The neighbours as a learner reads them at an observation, as rows (``learning.fields.NB_*``):
+all of them written by one kernel, :func:`neighbour_rows_into` (``learning.rows.NeighbourRows``
+runs it for the agent, ``learning.expected.expected_record`` for the world's check of a learning
+record), each by :func:`neighbour_row`, which the simulator's ``sim.episode.neighbour_rows`` calls
+too. Whom an agent waits for and knows to stay is ``learning.plan``'s."""
 
 from nnql_swarm.learning.fields import (
     NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X,
     NB_STATE_Y, NB_X, NB_Y,
 )
-from nnql_swarm.learning.plan import awaited_into, is_parked, staying_into
+from nnql_swarm.learning.plan import is_parked
 from nnql_swarm.protocol.actions import STAY, sees, target_x, target_y
-from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import COMPILED, inline_kernel, ints, kernel, python_values
-from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.jit import inline_kernel, kernel
 from nnql_swarm.protocol.ranks import in_reach
 
 
@@ -95,44 +90,3 @@ def neighbour_rows_into(nb, k, limit, wide, keep, parked, p, x, y, far, answer, 
 ROWS_SIGNATURE = ("i8(i8[:, ::1], i8, i8, i8, i8[::1], i8[::1], i8, i8, i8, i8, i8[::1], i8[::1], "
                   "i8[::1], i8, i8, b1, i8[::1], i8, i8, i8, b1, i8, i8, i8[:, ::1])")
 """:func:`neighbour_rows_into`'s types, as compiled ahead of time (``learning.ahead``)."""
-
-
-def awaited(obs: Observation, config: SwarmConfig) -> list[int]:
-    """The neighbours whose intents the observing agent waits for at this tick (none for QL, and
-    none at an episode's end, where everybody stays)."""
-    return [j for j, _, _ in awaited_cells(obs, config)]
-
-
-def awaited_cells(obs: Observation, config: SwarmConfig) -> list[tuple[int, int, int]]:
-    """:func:`awaited` as ``(id, x, y)`` (``learning.plan.awaited_into``)."""
-    if config.algo not in NEGOTIATING_ALGOS or obs.episode_end:
-        return []
-    neighbours, (x, y) = obs.neighbours, obs.position
-    out = ints([0] * len(neighbours))
-    count = awaited_into(_rows(neighbours), len(neighbours), ints(obs.parked), len(obs.parked),
-                         x, y, obs.rank, obs.tick, config.n_agents, config.interaction_radius,
-                         config.meet_only, obs.arrived and not config.step_aside, out)
-    return [neighbours[i] for i in python_values(out)[:count]]
-
-
-def staying(obs: Observation, config: SwarmConfig) -> list[int]:
-    """Under the ``meet`` rule, the parked neighbours whose intents the observing agent knows
-    without waiting: those ``protocol.ranks.waits_for`` names among the parked ones of the
-    observation, each of which stays on its goal (its intent is STAY;
-    ``learning.plan.staying_into``)."""
-    if (not (config.meet_only and obs.parked) or config.algo not in NEGOTIATING_ALGOS
-            or obs.episode_end):
-        return []
-    neighbours, (x, y) = obs.neighbours, obs.position
-    out = ints([0] * len(neighbours))
-    count = staying_into(_rows(neighbours), len(neighbours), ints(obs.parked), len(obs.parked),
-                         x, y, obs.rank, obs.tick, config.n_agents, config.interaction_radius,
-                         out)
-    return [neighbours[i][0] for i in python_values(out)[:count]]
-
-
-def _rows(neighbours):
-    """An observation's neighbours as the kernel reads them: an array ``(k, 3)`` where it is
-    compiled, else the tuples themselves."""
-    return np.array(neighbours, dtype=np.int64).reshape(len(neighbours), 3) if COMPILED \
-        else neighbours

@@ -37,7 +37,7 @@ class Plan(NamedTuple):
     """What an agent does about its neighbours at an observation (``learning.plan``)."""
 
     awaited: list[int]
-    """Whose intents it waits for (``learning.neighbours.awaited``), in id order."""
+    """Whose intents it waits for (``learning.plan.awaited_into``), in id order."""
     asks: list[int]
     """Whom of them it asks, the lowest-ranked first: the fewest whose answers, with what they
     relay, bring every awaited intent."""

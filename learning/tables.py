@@ -28,7 +28,7 @@ class Learner:
     def __init__(self, config: SwarmConfig, arrays: bool = COMPILED) -> None:
         reading = READINGS[config.algo]
         params, params_f = learner_params(config)
-        ints, floats = (_int_array, _float_array) if arrays else (list, list)
+        ints, floats = buffer_makers(arrays)
         self.params, self.params_f = ints(params), floats(params_f)
         both = np.full((N_STATES + ca_rows(reading, config.known_state), N_ACTIONS),
                        float(config.optimistic))
@@ -77,9 +77,15 @@ class Learner:
         return tuple(ints[:REC_PAIRS + 2 * ints[REC_COUNT]]), tuple(python_values(self.rec_f))
 
 
-def _int_array(values) -> np.ndarray:
+def int_array(values) -> np.ndarray:
     return np.array(values, dtype=np.int64)
 
 
-def _float_array(values) -> np.ndarray:
+def float_array(values) -> np.ndarray:
     return np.array(values, dtype=np.float64)
+
+
+def buffer_makers(arrays: bool) -> tuple:
+    """How kernel buffers are made from values, integers and floats: numpy arrays where the
+    kernels are compiled (``arrays``), else lists."""
+    return (int_array, float_array) if arrays else (list, list)

@@ -10,7 +10,7 @@ the goals moving on to the next. The next tick shows where everybody ended up.
 
 The negotiation is derived by the world, not reported by the agents: at tick ``t`` an agent that
 reads intents and has not arrived waits for the answer of every neighbour that
-``protocol.ranks.awaits_answer`` names, the rule ``learning.neighbours.awaited`` applies too. How each intent reached it (its own query, or relayed down the chain,
+``protocol.ranks.awaits_answer`` names, the rule ``learning.plan.awaited_into`` applies too. How each intent reached it (its own query, or relayed down the chain,
 ``agent.negotiation``) and whether it came in time is known only to the agent; the agents log
 that themselves (``recording.agent``).
 

@@ -8,13 +8,27 @@ import numpy as np
 import pytest
 
 from nnql_swarm.agent import negotiation
-from nnql_swarm.learning import neighbours
+from nnql_swarm.agent.negotiation import Planner
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.actions import N_ACTIONS, RIGHT, STAY, sees, target_x, target_y
 from nnql_swarm.protocol.config import ALGOS, SwarmConfig
 from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
 from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank, waits_for
 from nnql_swarm.recording.world import negotiation_pairs
+
+
+def plan_for(obs: Observation, c: SwarmConfig) -> tuple[list[int], list[int]]:
+    """Whom the agent that was sent ``obs`` waits for, and whom of them it asks."""
+    plan = Planner(c)(obs)
+    assert plan is not None, "these observations fit their runs"
+    return plan.awaited, plan.asks
+
+
+def standing_answers(obs: Observation, c: SwarmConfig) -> list[int]:
+    """Whom the agent that was sent ``obs`` answers through their standing queries."""
+    plan = Planner(c)(obs)
+    assert plan is not None, "these observations fit their runs"
+    return plan.answered
 
 
 def config(n: int, algo: str = "nnql", radius: int = 10, wait_rule: str = "reach",
@@ -49,7 +63,7 @@ def test_everyone_in_view_makes_a_chain_of_one_query_each():
     n, tick = 8, 5
     cells = {i: (i, i % 3) for i in range(n)}
     for agent in range(n):
-        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells), config(n))
+        waiting_for, asks = plan_for(observe(agent, tick, n, cells), config(n))
         rank = priority_rank(agent, tick, n)
         assert len(waiting_for) == rank
         assert asks == ([] if rank == 0 else [(agent - 1) % n])  # the one ranked just above
@@ -65,19 +79,19 @@ def test_the_plan_covers_every_awaited_intent_on_sparse_grids(seed, radius, wait
     cells = dict(enumerate(spots))
     c = config(n, radius=radius, wait_rule=wait_rule)
     parked = set(rng.sample(range(n), 3))
-    asked_by = {a: negotiation.plan_for(observe(a, tick, n, cells, arrived=parked), c)[1]
+    asked_by = {a: plan_for(observe(a, tick, n, cells, arrived=parked), c)[1]
                 for a in cells}
     for agent in cells:
-        waiting_for, asks = negotiation.plan_for(observe(agent, tick, n, cells, arrived=parked), c)
+        waiting_for, asks = plan_for(observe(agent, tick, n, cells, arrived=parked), c)
         assert set(asks) <= set(waiting_for)
         assert set(waiting_for) <= learned(agent, tick, n, cells, asked_by)
 
 
 def test_nobody_negotiates_for_ql_or_at_an_episode_end():
     cells = {0: (0, 0), 1: (1, 0)}
-    assert negotiation.plan_for(observe(1, 0, 2, cells), config(2)) == ([0], [0])
-    assert negotiation.plan_for(observe(1, 0, 2, cells), config(2, "ql")) == ([], [])
-    assert negotiation.plan_for(observe(1, 0, 2, cells, episode_end=True), config(2)) == ([], [])
+    assert plan_for(observe(1, 0, 2, cells), config(2)) == ([0], [0])
+    assert plan_for(observe(1, 0, 2, cells), config(2, "ql")) == ([], [])
+    assert plan_for(observe(1, 0, 2, cells, episode_end=True), config(2)) == ([], [])
 
 
 @pytest.mark.parametrize("wait_rule", WAIT_RULES)
@@ -95,9 +109,9 @@ def test_standing_answers_go_to_exactly_the_plans_that_ask_them(seed, radius, si
     known = negotiation.plans_are_known(c)
     assert known == (radius <= 5 or side <= 11)
     parked = set(rng.sample(range(n), 3))
-    plans = {a: negotiation.plan_for(observe(a, tick, n, cells, arrived=parked), c) for a in cells}
+    plans = {a: plan_for(observe(a, tick, n, cells, arrived=parked), c) for a in cells}
     for p in cells:
-        answered = negotiation.standing_answers(observe(p, tick, n, cells, arrived=parked), c)
+        answered = standing_answers(observe(p, tick, n, cells, arrived=parked), c)
         expected = [a for a in cells if p in plans[a][1 if known else 0]]
         assert sorted(answered) == expected
         assert answered == sorted(answered, key=lambda a: priority_rank(a, tick, n))
@@ -125,7 +139,7 @@ def test_the_agent_the_plan_and_the_recording_agree_on_whom_an_agent_waits_for(a
         for i in range(n):
             obs = observe(i, tick, n, cells, arrived={j for j in range(n) if arrived[j]},
                           parks=not c.step_aside)
-            asked = brains[i].neighbours_to_ask(obs, neighbours.awaited(obs, c))
+            asked = brains[i].neighbours_to_ask(obs, Planner(c)(obs).awaited)
             assert set(asked) == set(asked_ones[askers == i].tolist())
         waited += len(askers)
     assert (waited > 0) == (algo in ("nnql", "nnql-dir")), "only intent readers wait"
@@ -173,10 +187,10 @@ def test_the_meet_rule_waits_for_exactly_the_outranking_neighbours_that_could_co
 
 def test_the_meet_rule_leaves_out_a_neighbour_two_cells_off_along_both_axes():
     cells = {0: (5, 5), 1: (7, 7), 2: (6, 6)}  # ranks at tick 0: 0, 1, 2
-    reach = negotiation.plan_for(observe(1, 0, 3, cells), config(3, radius=2))
-    meet = negotiation.plan_for(observe(1, 0, 3, cells), config(3, radius=2, wait_rule="meet"))
+    reach = plan_for(observe(1, 0, 3, cells), config(3, radius=2))
+    meet = plan_for(observe(1, 0, 3, cells), config(3, radius=2, wait_rule="meet"))
     assert reach[0] == [0] and meet[0] == []
-    assert negotiation.plan_for(observe(2, 0, 3, cells),
+    assert plan_for(observe(2, 0, 3, cells),
                                 config(3, radius=2, wait_rule="meet"))[0] == [0, 1]
 
 
@@ -187,14 +201,14 @@ def test_under_the_meet_rule_nobody_waits_for_an_arrived_agent_and_it_waits_for_
     cells = {0: (5, 5), 1: (6, 5), 2: (6, 6)}  # ranks at tick 0: 0, 1, 2; all could meet
     meet, reach = config(3, radius=2, wait_rule="meet"), config(3, radius=2)
     obs = {a: observe(a, 0, 3, cells, arrived={1}) for a in cells}
-    assert negotiation.plan_for(obs[2], meet) == ([0], [0])
-    assert neighbours.staying(obs[2], meet) == [1]
-    assert negotiation.plan_for(obs[1], meet) == ([], [])  # arrived: waits for nobody
-    assert negotiation.standing_answers(obs[1], meet) == []  # and nobody waits for it
-    assert negotiation.standing_answers(obs[0], meet) == [2]
-    assert negotiation.plan_for(obs[2], reach) == ([0, 1], [1])
-    assert neighbours.staying(obs[2], reach) == []
-    assert negotiation.plan_for(obs[1], reach) == ([0], [0])  # to relay 0's intent to 2
+    assert plan_for(obs[2], meet) == ([0], [0])
+    assert Planner(meet)(obs[2]).staying == [1]
+    assert plan_for(obs[1], meet) == ([], [])  # arrived: waits for nobody
+    assert standing_answers(obs[1], meet) == []  # and nobody waits for it
+    assert standing_answers(obs[0], meet) == [2]
+    assert plan_for(obs[2], reach) == ([0, 1], [1])
+    assert Planner(reach)(obs[2]).staying == []
+    assert plan_for(obs[1], reach) == ([0], [0])  # to relay 0's intent to 2
 
 
 @pytest.mark.parametrize("on_target", ["park", "step-aside"])
@@ -207,7 +221,7 @@ def test_an_arrived_agent_makes_way_only_when_it_may_step_aside(on_target):
     cells = {0: (5, 5), 1: (6, 5)}
     obs = observe(1, tick, n, cells, arrived={1}, parks=not c.step_aside)
     brain = AgentBrain(1, c)
-    asked = brain.neighbours_to_ask(obs, neighbours.awaited(obs, c))
+    asked = brain.neighbours_to_ask(obs, Planner(c)(obs).awaited)
     action = brain.act(obs, {0: RIGHT} if asked else {})
     if not c.step_aside:
         assert (asked, action) == ([], STAY)

@@ -50,6 +50,7 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.readings import read_rows, uses_map
 from nnql_swarm.learning.planner import Planner
 from nnql_swarm.learning.rows import NeighbourRows
+from nnql_swarm.learning.tables import float_array, int_array
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, within
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import python_values
@@ -109,9 +110,9 @@ class RecordCheck:
         self.rows = NeighbourRows(config)
         self.planner = Planner(config, whole=False)  # whom an agent waited for, as it planned
         self._expected, _ = ahead.compiled("expected_record")
-        ints = lambda values: np.array(values, dtype=np.int64)  # noqa: E731
+        ints = int_array  # the kernel's buffers are arrays, compiled or not
         params, params_f = learner_params(config)
-        self.params, self.params_f = ints(params), np.array(params_f, dtype=np.float64)
+        self.params, self.params_f = ints(params), float_array(params_f)
         self.map_fields = bool(uses_map(self.params))
         if self.map_fields:  # destination seeking read on the agent's known map: see could_write
             self.params[LP_DS_STATE], self.params[LP_DS_REWARD] = DS_GOAL, REWARD_WORLD
@@ -151,8 +152,9 @@ class RecordCheck:
         key = (obs.agent, obs.tick)
         known = self._negotiation.get(key)
         if known is None:  # kept for this tick and the next: a record reads both
-            known = self._negotiation[key] = self.planner.waits(obs)
-            assert known is not None, "the world's own observations fit its run"
+            plan = self.planner.waits(obs)
+            assert plan is not None, "the world's own observations fit its run"
+            known = self._negotiation[key] = plan
             self._negotiation.pop((obs.agent, obs.tick - 2), None)
         return known
 

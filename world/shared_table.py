@@ -25,9 +25,8 @@ import numpy as np
 from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA
 from nnql_swarm.learning import ahead
 from nnql_swarm.learning.record import record_entries, record_is_valid
-from nnql_swarm.learning.tables import Learner
+from nnql_swarm.learning.tables import Learner, buffer_makers
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.jit import floats, ints
 from nnql_swarm.protocol.messages import MAX_AGENTS
 
 Updates = tuple[tuple[tuple[int, ...], tuple[float, ...]], ...]
@@ -58,9 +57,7 @@ class SharedTable:
     def __init__(self, config: SwarmConfig) -> None:
         self._learner = Learner(config)  # the tables an agent starts with, and its alpha, gamma
         self._apply, how = ahead.compiled("apply_record")
-        self._record_buffers = (ints, floats) if how == ahead.PLAIN else (
-            lambda values: np.array(values, dtype=np.int64),
-            lambda values: np.array(values, dtype=np.float64))
+        self._record_buffers = buffer_makers(how != ahead.PLAIN)
         self.alpha = self._learner.params_f[FP_ALPHA]
         self.gamma = self._learner.params_f[FP_GAMMA]
 
