@@ -50,7 +50,7 @@ def test_effects_are_carried_out_in_order_an_episodes_checkpoint_before_its_inte
 
 def test_a_bug_in_a_handler_on_zenohs_thread_stops_the_agent_instead_of_vanishing(tmp_path):
     class BrokenBrain(AgentBrain):
-        def act(self, obs, answers):
+        def act(self, obs, answers, seen=(None, None)):
             raise RuntimeError("a bug in the brain")
 
     settings = TransportSettings(mode="peer")
