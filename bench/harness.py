@@ -80,7 +80,7 @@ def stay_agent_main(agent: int, config: SwarmConfig, transport: TransportSetting
     from nnql_swarm.protocol.actions import STAY
 
     class StayBrain(AgentBrain):
-        def act(self, obs, answers) -> int:
+        def act(self, obs, answers, seen=(None, None)) -> int:
             return STAY
 
     sys.exit(run_agent(AgentOptions(agent, config, transport, out), StayBrain(agent, config)))

@@ -188,7 +188,7 @@ class _Session:
 
 
 class _LearnNothing(AgentBrain):
-    def act(self, obs, answers) -> int:
+    def act(self, obs, answers, seen=(None, None)) -> int:
         return STAY
 
 
