@@ -79,10 +79,13 @@ class Planner:
             self._scratch = [[0] * size for _ in range(SCRATCH)]
             self._out = [[0] * size for _ in range(PLAN_PARTS)]
             self._counts = [0] * (PLAN_PARTS + 1)
-        self._config, self.whole = config, whole
+        self.whole = whole
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._plans_known = plans_are_known(config)
         self._reach = min(VIEW_RADIUS, config.interaction_radius + STREAM_MARGIN)
+        self._n, self._width, self._height = config.n_agents, config.width, config.height
+        self._radius, self._meet = config.interaction_radius, config.meet_only
+        self._parks_still = not config.step_aside  # an arrived agent waits for nobody
 
     def __call__(self, obs: Observation) -> Plan | None:
         """The plan of ``obs``; None where it does not fit the run: more neighbours than its
@@ -112,11 +115,11 @@ class Planner:
     def _run(self, obs: Observation) -> tuple | None:
         """Run the kernel on ``obs``: its neighbours and parked ids as it read them, or None
         where ``obs`` does not fit the run."""
-        config, neighbours, parked = self._config, obs.neighbours, obs.parked
-        k, (x, y), (gx, gy) = len(neighbours), obs.position, obs.goal
-        n, width, height, meet = config.n_agents, config.width, config.height, config.meet_only
-        if (k >= n or len(parked) >= n or obs.rank >= n or max(x, gx) >= width
-                or max(y, gy) >= height):
+        neighbours, parked, n = obs.neighbours, obs.parked, self._n
+        k, p, (x, y), (gx, gy) = len(neighbours), len(parked), obs.position, obs.goal
+        width, height, meet = self._width, self._height, self._meet
+        if (k >= n or p >= n or obs.rank >= n or x >= width or gx >= width or y >= height
+                or gy >= height):
             return None
         nb: object
         parked_ids: object
@@ -126,11 +129,10 @@ class Planner:
             parked_ids = np.array(parked, dtype=np.int64)
         else:
             nb, parked_ids = neighbours, parked
-        negotiates = self._negotiates and not obs.episode_end
-        self._plan(nb, k, parked_ids, len(parked), x, y, obs.rank, obs.tick, n, width, height,
-                   config.interaction_radius, meet, obs.arrived and not config.step_aside,
-                   negotiates, meet and len(parked) > 0, self._plans_known, self._reach,
-                   self.whole, self._scratch, self._out, self._counts)
+        self._plan(nb, k, parked_ids, p, x, y, obs.rank, obs.tick, n, width, height,
+                   self._radius, meet, obs.arrived and self._parks_still,
+                   self._negotiates and not obs.episode_end, meet and p > 0, self._plans_known,
+                   self._reach, self.whole, self._scratch, self._out, self._counts)
         if not self._counts[P_FITS]:
             return None
         return nb, parked_ids
