@@ -7,8 +7,9 @@ chosen functions, with fixed signatures, into an extension module that needs onl
 time. This module builds the per-observation kernels so (:data:`EXPORTS`: an agent's decision,
 ``learning.decision.agent_decision``, its negotiation's plan, ``learning.plan.negotiation_plan``,
 and its neighbour rows, ``learning.neighbours.neighbour_rows_into``; the world's check of a
-learning record, ``learning.expected.expected_record``, and the step that applies one to the
-shared table, ``learning.record.apply_record``), into the kernel cache (``protocol.jit.cache_directory``: one
+learning record, ``learning.expected.expected_record``, with every agent's plan of a tick at once,
+``learning.plan.world_plans``, and the step that applies a record to the shared table,
+``learning.record.apply_record``), into the kernel cache (``protocol.jit.cache_directory``: one
 directory per version of every kernel source), once per version; and finds them there
 (:func:`compiled`). A process that does not find it (not built yet, or built where no C compiler
 was) runs them in plain Python: the same functions, the same results, slower.
@@ -36,7 +37,9 @@ from typing import Callable, Iterator
 from nnql_swarm.learning.decision import SIGNATURE, agent_decision
 from nnql_swarm.learning.expected import EXPECTED_SIGNATURE, expected_record
 from nnql_swarm.learning.neighbours import ROWS_SIGNATURE, neighbour_rows_into
-from nnql_swarm.learning.plan import PLAN_SIGNATURE, negotiation_plan
+from nnql_swarm.learning.plan import (
+    PLAN_SIGNATURE, WORLD_PLANS_SIGNATURE, negotiation_plan, world_plans,
+)
 from nnql_swarm.learning.record import APPLY_SIGNATURE, apply_record
 from nnql_swarm.protocol.jit import COMPILED, MODE_VARIABLE, cache_directory
 
@@ -51,6 +54,7 @@ EXPORTS: dict[str, tuple[Callable, str]] = {
     "neighbour_rows_into": (neighbour_rows_into, ROWS_SIGNATURE),
     "expected_record": (expected_record, EXPECTED_SIGNATURE),
     "apply_record": (apply_record, APPLY_SIGNATURE),
+    "world_plans": (world_plans, WORLD_PLANS_SIGNATURE),
 }
 """Each kernel the module holds, by name: the function and its signature."""
 

@@ -8,9 +8,11 @@ the ids of its parked ones (``parked``, the first ``p``), and writes the indices
 those it finds into ``out``, in the order the rule gives; it returns how many. Scratch buffers
 (``xs``, ``ys``, ``ranks``...) have room for every neighbour and the agent itself.
 :func:`negotiation_plan` is all of them at once, for the agent: it is compiled ahead of time
-with the agent's decision (``learning.ahead``), so that an agent plans its tick in one call.
+with the agent's decision (``learning.ahead``), so that an agent plans its tick in one call;
+:func:`world_plans` is every agent's plan at once as the world reads it, from the cells of all.
 """
 
+from nnql_swarm.protocol.actions import sees
 from nnql_swarm.protocol.jit import kernel
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank, waits_for
 
@@ -235,3 +237,50 @@ def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, width, height, radiu
 PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, i8, i8, b1, b1, b1, "
                   "b1, b1, i8, b1, i8[:, ::1], i8[:, ::1], i8[::1])")
 """:func:`negotiation_plan`'s types, as compiled ahead of time."""
+
+
+@kernel
+def world_plans(xs, ys, arrived, n, sees_all, parks, tick, width, height, radius, meet,
+                parks_still, negotiating, nbs, ks, parkeds, ps, scratch, out, counts, awaited,
+                n_awaited, staying, n_staying):
+    """What the world reads of every agent's plan at a tick (:func:`negotiation_plan`, not
+    whole), from the ``n`` agents' cells ``(xs, ys)`` and whether each has ``arrived``, as the
+    tick's observations show them: each agent's neighbours are the others it sees (every other
+    where ``sees_all``: the grid fits in the view) in id order, into ``nbs[i]``'s first
+    ``ks[i]`` rows ``(id, x, y)``; its parked ones those of them that arrived, where arrived
+    agents park (``parks``), into ``parkeds[i]``'s first ``ps[i]``; whom it waits for into
+    ``awaited[i]``'s first ``n_awaited[i]``, and whom it knows to stay into ``staying[i]``'s
+    first ``n_staying[i]``, as ids."""
+    for i in range(n):
+        nb = nbs[i]
+        parked = parkeds[i]
+        k = 0
+        p = 0
+        for j in range(n):
+            if j == i or not (sees_all or sees(xs[i], ys[i], xs[j], ys[j])):
+                continue
+            nb[k][0] = j
+            nb[k][1] = xs[j]
+            nb[k][2] = ys[j]
+            k += 1
+            if parks and arrived[j] != 0:
+                parked[p] = j
+                p += 1
+        ks[i] = k
+        ps[i] = p
+        negotiation_plan(nb, k, parked, p, xs[i], ys[i], priority_rank(i, tick, n), tick, n,
+                         width, height, radius, meet, arrived[i] != 0 and parks_still,
+                         negotiating, meet and p > 0, False, 0, False, scratch, out, counts)
+        n_awaited[i] = counts[P_AWAITED]
+        for s in range(counts[P_AWAITED]):
+            awaited[i][s] = out[P_AWAITED][s]
+        n_staying[i] = counts[P_STAYING]
+        for s in range(counts[P_STAYING]):
+            staying[i][s] = out[P_STAYING][s]
+
+
+WORLD_PLANS_SIGNATURE = (
+    "void(i8[::1], i8[::1], i8[::1], i8, b1, b1, i8, i8, i8, i8, b1, b1, b1, i8[:, :, ::1], "
+    "i8[::1], i8[:, ::1], i8[::1], i8[:, ::1], i8[:, ::1], i8[::1], i8[:, ::1], i8[::1], "
+    "i8[:, ::1], i8[::1])")
+""":func:`world_plans`' types, as compiled ahead of time (``learning.ahead``)."""

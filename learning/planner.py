@@ -68,17 +68,18 @@ class Planner:
         self._plan, how = ahead.compiled("negotiation_plan")
         self._arrays = how != ahead.PLAIN
         size = config.n_agents + 1  # every neighbour and the agent
-        self._scratch: np.ndarray | list[list[int]]
-        self._out: np.ndarray | list[list[int]]
-        self._counts: np.ndarray | list[int]
+        self.scratch: np.ndarray | list[list[int]]
+        """The kernel's buffers (``learning.plan``), which the world's plans use too."""
+        self.out: np.ndarray | list[list[int]]
+        self.counts: np.ndarray | list[int]
         if self._arrays:
-            self._scratch = np.zeros((SCRATCH, size), dtype=np.int64)
-            self._out = np.zeros((PLAN_PARTS, size), dtype=np.int64)
-            self._counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
+            self.scratch = np.zeros((SCRATCH, size), dtype=np.int64)
+            self.out = np.zeros((PLAN_PARTS, size), dtype=np.int64)
+            self.counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
         else:
-            self._scratch = [[0] * size for _ in range(SCRATCH)]
-            self._out = [[0] * size for _ in range(PLAN_PARTS)]
-            self._counts = [0] * (PLAN_PARTS + 1)
+            self.scratch = [[0] * size for _ in range(SCRATCH)]
+            self.out = [[0] * size for _ in range(PLAN_PARTS)]
+            self.counts = [0] * (PLAN_PARTS + 1)
         self.whole = whole
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._plans_known = plans_are_known(config)
@@ -94,7 +95,7 @@ class Planner:
         read = self._run(obs)
         if read is None:
             return None
-        counts, out = python_values(self._counts), self._out
+        counts, out = python_values(self.counts), self.out
         parts = [python_values(out[part][:count]) if count else [] for part, count in
                  enumerate(counts[:PLAN_PARTS])]
         return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
@@ -108,7 +109,7 @@ class Planner:
         read = self._run(obs)
         if read is None:
             return None
-        counts, out = self._counts, self._out
+        counts, out = self.counts, self.out
         return (np.array(out[P_AWAITED][:counts[P_AWAITED]], dtype=np.int64),
                 np.array(out[P_STAYING][:counts[P_STAYING]], dtype=np.int64), *read)
 
@@ -132,7 +133,7 @@ class Planner:
         self._plan(nb, k, parked_ids, p, x, y, obs.rank, obs.tick, n, width, height,
                    self._radius, meet, obs.arrived and self._parks_still,
                    self._negotiates and not obs.episode_end, meet and p > 0, self._plans_known,
-                   self._reach, self.whole, self._scratch, self._out, self._counts)
-        if not self._counts[P_FITS]:
+                   self._reach, self.whole, self.scratch, self.out, self.counts)
+        if not self.counts[P_FITS]:
             return None
         return nb, parked_ids

@@ -19,10 +19,10 @@ from nnql_swarm.sim.schedule import FORGE, Fault, draw_schedule
 from nnql_swarm.world.records import BARRED, FORGED, UNCHECKED, RecordCheck
 
 
-def shared_schedule(seed: int, preset: str, faults=()):
-    """Schedule ``seed``'s run, with ``preset`` (sharing one table) and ``faults``."""
+def shared_schedule(seed: int, preset: str, faults=(), **options):
+    """Schedule ``seed``'s run, with ``preset`` (sharing one table), ``options`` and ``faults``."""
     schedule = draw_schedule(seed)
-    config = replace(schedule.config, **{**PRESETS[preset], "shared": True})
+    config = replace(schedule.config, **{**PRESETS[preset], "shared": True, **options})
     return replace(schedule, config=config, faults=tuple(faults))
 
 
@@ -197,3 +197,34 @@ def _without_records_when_forging(monkeypatch) -> None:
         original(sim, i, out)
 
     monkeypatch.setattr(SimSwarm, "_agent_effects", effects)
+
+
+@pytest.mark.parametrize("preset, options", [
+    ("nnql", {}), ("path-nnql", {}), ("daql", {}), ("shield-nnql", {}),
+    ("pibt-nnql", {"on_target": "step-aside", "tasks": "lifelong"}),
+])
+def test_the_plans_the_world_works_out_for_a_tick_are_each_observations_own(monkeypatch, preset,
+                                                                             options):
+    """The world reads every agent's plan of a tick at once, from the cells and arrivals of all
+    (``RecordCheck.plan_tick``): for every observation of runs with faults, the neighbours and
+    parked ids it reads, whom the agent waits for and whom it knows to stay are those the
+    agent's own planner works out of the observation."""
+    seen = []
+    tick_plan = RecordCheck._negotiated
+
+    def negotiated(check, obs):
+        assert obs.tick in check._tick_plans  # the world planned every tick it sends
+        from_tick = tick_plan(check, obs)
+        own = check.planner.waits(obs)
+        assert own is not None
+        assert [part.tolist() for part in from_tick] == [list(map(list, part)) if part.ndim == 2
+                                                          else part.tolist() for part in own]
+        seen.append((obs.agent, len(from_tick[3])))
+        return from_tick
+
+    monkeypatch.setattr(RecordCheck, "_negotiated", negotiated)
+    for seed in (3, 4, 7):
+        run_schedule(shared_schedule(seed, preset, draw_schedule(seed).faults, episodes=3,
+                                     max_steps=30, **options))  # long enough to arrive
+    assert len(seen) > 100 and len({agent for agent, _ in seen}) > 2
+    assert any(parked for _, parked in seen) == ("on_target" not in options)  # some park

@@ -136,6 +136,15 @@ class SwarmWorld:
         n = self.config.n_agents
         return tuple(zip(python_values(self._x)[:n], python_values(self._y)[:n]))
 
+    def sight(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, bool]:
+        """What this tick's observations show of the agents, as arrays by agent id: their cells'
+        ``x`` and ``y``, and whether each has arrived (1) or not (0); and whether every agent
+        sees every other (the grid fits in the view)."""
+        n = self.config.n_agents
+        x, y = (np.array(python_values(values)[:n], dtype=np.int64) for values in (self._x, self._y))
+        arrived = np.array(self._outcome[3][:n], dtype=np.int64)  # what _observation reads
+        return x, y, arrived, self._sees_all
+
     @property
     def arrived_flags(self) -> tuple[bool, ...]:
         """Whether each agent has arrived, by agent id."""

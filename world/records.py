@@ -52,7 +52,7 @@ from nnql_swarm.learning.planner import Planner
 from nnql_swarm.learning.rows import NeighbourRows
 from nnql_swarm.learning.tables import float_array, int_array
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, within
-from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import python_values
 from nnql_swarm.protocol.messages import Observation
 
@@ -130,6 +130,10 @@ class RecordCheck:
         self._counts = ints([0] * E_FIELDS)
         self._none, self._no_ids = np.zeros((0, 3), dtype=np.int64), ints([])
         self._negotiation: dict[tuple, tuple] = {}  # (agent, tick) -> its plan's parts, arrays
+        self._plans, _ = ahead.compiled("world_plans")
+        self._tick_plans: dict[int, tuple] = {}  # tick -> every agent's plan (plan_tick)
+        self._parks = not config.step_aside  # arrived agents park: wait for nobody, and stay
+        self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
 
     # What an agent could have heard, and read its neighbours as.
@@ -145,10 +149,35 @@ class RecordCheck:
         known.update((j, int(intents[j])) for j in waited if intents[j] >= 0)
         return known, waited
 
+    def plan_tick(self, tick: int, x: np.ndarray, y: np.ndarray, arrived: np.ndarray,
+                  sees_all: bool, ending: bool) -> None:
+        """Work out what the world reads of every agent's plan at ``tick`` at once
+        (``learning.plan.world_plans``), from the agents' cells and arrivals as the tick's
+        observations show them (``SwarmWorld.sight``): kept for this tick and the next."""
+        config, n = self.config, self.config.n_agents
+        nbs, parkeds = np.empty((n, n, 3), dtype=np.int64), np.empty((n, n), dtype=np.int64)
+        awaited, staying = np.empty((n, n), dtype=np.int64), np.empty((n, n), dtype=np.int64)
+        ks, ps, n_awaited, n_staying = (np.empty(n, dtype=np.int64) for _ in range(4))
+        planner = self.planner
+        self._plans(x, y, arrived, n, sees_all, self._parks, tick, config.width, config.height,
+                    self.radius, config.meet_only, self._parks,
+                    self._negotiates and not ending, nbs, ks, parkeds, ps, planner.scratch,
+                    planner.out, planner.counts, awaited, n_awaited, staying, n_staying)
+        self._tick_plans[tick] = (nbs, ks.tolist(), parkeds, ps.tolist(), awaited,
+                                  n_awaited.tolist(), staying, n_staying.tolist())
+        self._tick_plans.pop(tick - 2, None)
+
     def _negotiated(self, obs: Observation) -> tuple:
         """Whom the agent waits for at ``obs`` and the arrived neighbours it knows stay
         (``agent.negotiation``), as arrays, with its neighbours ``(k, 3)`` and parked ids as
-        the plan read them: worked out once per observation."""
+        the plan read them: from the tick's plans (:meth:`plan_tick`), else worked out once
+        for the observation."""
+        plans = self._tick_plans.get(obs.tick)
+        if plans is not None:
+            nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = plans
+            i = obs.agent
+            return (awaited[i, :n_awaited[i]], staying[i, :n_staying[i]], nbs[i, :ks[i]],
+                    parkeds[i, :ps[i]])
         key = (obs.agent, obs.tick)
         known = self._negotiation.get(key)
         if known is None:  # kept for this tick and the next: a record reads both

@@ -327,6 +327,8 @@ class WorldMachine(Machine):
         self.tick_start = now
         self.tick_deadline = now + self.config.tick_deadline_s
         self.sent_before, self.sent = self.sent, {}
+        if self.records is not None:  # what it reads of everyone's plan, for their records
+            self.records.plan_tick(self.world.tick, *self.world.sight(), self.world.ending)
         out.append(SendObservations(self._encoded(self.world.observations_by_rank())))
 
     def _encoded(self, observations):
