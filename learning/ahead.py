@@ -163,7 +163,7 @@ def ensure() -> bool:
     if failed.exists():
         return False
     print("Compiling the agents' and the world's kernels ahead of time (once per version of the "
-          "kernel sources; some 15 s)...", file=sys.stderr, flush=True)
+          "kernel sources; some 20 s)...", file=sys.stderr, flush=True)
     env = {**os.environ, MODE_VARIABLE: "compiled"}
     done = subprocess.run([sys.executable, "-m", __name__], env=env, capture_output=True,
                           text=True)
