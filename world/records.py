@@ -6,8 +6,9 @@ Where the agents share one table, each intent carries the sender's learning reco
 agent at the tick it decided (its cell, goal and neighbours, who had arrived) and at the next
 (where it ended up, its rewards, whether it arrived), the intent it announced, and every intent
 of both ticks as the world heard them. :class:`RecordCheck` rebuilds the record from that with
-the agent's own code, the rows of ``learning.neighbours.NeighbourRows`` read and completed by
-``learning.readings.read_rows`` and ``complete``, and compares.
+the agent's own code (``learning.expected.expected_record``: the rows of
+``learning.neighbours.neighbour_rows_into`` read and completed by ``learning.readings.read_rows``
+and ``complete``, in one call compiled ahead of time), and compares.
 
 What it cannot know is which of the intents an agent waited for reached it in time (a neighbour
 whose answer did not come is read as one whose intent is unknown), nor, where the world missed
@@ -27,8 +28,10 @@ faulty tick makes anyway.
 
 Its cost: it reads only the neighbours a record names (those within the interaction radius at
 the decision, and the same ones for ``s'``), and the rows an agent decided with at a tick are
-those the check of its record of that tick read (kept for one tick, with whom it waited for),
-so a record costs one reading of its neighbours and one ``complete``
+those the check of its record of that tick read (kept for one tick), so a record costs one
+reading of its neighbours and one ``complete``, in one compiled call; whom each agent waited for
+and knew to stay, the world works out for every agent of a tick at once
+(:meth:`RecordCheck.plan_tick`, ``learning.plan.world_plans``) as it sends the observations
 (``bench/record_check.py``).
 """
 
