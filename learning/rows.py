@@ -47,10 +47,7 @@ class NeighbourRows:
         self._out = self._buffer(self.size, NB_FIELDS)
         self._answer, self._prev_x, self._prev_y, self._keep = (
             self._buffer(n) for _ in range(4))
-        if not self.arrays:
-            self._wall_ids: object = wall_ids.tolist()
-        else:
-            self._wall_ids = wall_ids
+        self._wall_ids: object = wall_ids if self.arrays else wall_ids.tolist()
 
     def _buffer(self, size: int, width: int = 0):
         if self.arrays:
