@@ -38,19 +38,13 @@ PARTS = (
     ("the decision (act)", brain.AgentBrain, "act"),
     ("prepare (updates, noise)", brain.AgentBrain, "prepare"),
     ("decoding messages", inbox.Inbox, "decode"),
-    ("the negotiation's plan", negotiation.Planner, "__call__"),  # the agents' only: below
+    ("the negotiation's plan", negotiation.Planner, "__call__"),
     ("encoding", agent_machine, "encode"),
 )
 """``(name, owner, attribute)``: each part, timed where the agent's machine calls it."""
 
-_PLAN = negotiation.Planner.__call__
-"""Planned by the world too, to check a record, but then not whole: not the agent's."""
-
-
 def timed(spent: list[int], function):
     def part(*args, **kwargs):
-        if function is _PLAN and not args[0].whole:  # the world's check of a record
-            return function(*args, **kwargs)
         start = time.thread_time_ns()
         try:
             return function(*args, **kwargs)

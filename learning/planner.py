@@ -62,25 +62,21 @@ class Planner:
     """One agent's :class:`Plan` of each observation: ``learning.plan.negotiation_plan`` in one
     call, compiled ahead of time where it is built (``learning.ahead``), over buffers kept."""
 
-    def __init__(self, config: SwarmConfig, whole: bool = True) -> None:
-        """``whole``: every part of the plan; else only :attr:`Plan.awaited` and
-        :attr:`Plan.staying` (the others empty), what the world reads of an agent's plan."""
+    def __init__(self, config: SwarmConfig) -> None:
         self._plan, how = ahead.compiled("negotiation_plan")
         self._arrays = how != ahead.PLAIN
         size = config.n_agents + 1  # every neighbour and the agent
-        self.scratch: np.ndarray | list[list[int]]
-        """The kernel's buffers (``learning.plan``), which the world's plans use too."""
-        self.out: np.ndarray | list[list[int]]
-        self.counts: np.ndarray | list[int]
+        self._scratch: np.ndarray | list[list[int]]  # the kernel's buffers (learning.plan)
+        self._out: np.ndarray | list[list[int]]
+        self._counts: np.ndarray | list[int]
         if self._arrays:
-            self.scratch = np.zeros((SCRATCH, size), dtype=np.int64)
-            self.out = np.zeros((PLAN_PARTS, size), dtype=np.int64)
-            self.counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
+            self._scratch = np.zeros((SCRATCH, size), dtype=np.int64)
+            self._out = np.zeros((PLAN_PARTS, size), dtype=np.int64)
+            self._counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
         else:
-            self.scratch = [[0] * size for _ in range(SCRATCH)]
-            self.out = [[0] * size for _ in range(PLAN_PARTS)]
-            self.counts = [0] * (PLAN_PARTS + 1)
-        self.whole = whole
+            self._scratch = [[0] * size for _ in range(SCRATCH)]
+            self._out = [[0] * size for _ in range(PLAN_PARTS)]
+            self._counts = [0] * (PLAN_PARTS + 1)
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._plans_known = plans_are_known(config)
         self._reach = min(VIEW_RADIUS, config.interaction_radius + STREAM_MARGIN)
@@ -95,23 +91,11 @@ class Planner:
         read = self._run(obs)
         if read is None:
             return None
-        counts, out = python_values(self.counts), self.out
+        counts, out = python_values(self._counts), self._out
         parts = [python_values(out[part][:count]) if count else [] for part, count in
                  enumerate(counts[:PLAN_PARTS])]
         return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
                     [obs.neighbours[i] for i in parts[P_STREAMED]], *read)
-
-    def waits(self, obs: Observation) -> tuple | None:
-        """What the world reads of the plan of ``obs`` (the planner not :attr:`whole`), as
-        arrays: whom the agent waits for, whom it knows to stay, and the observation's
-        neighbours ``(k, 3)`` and parked ids as the plan read them; None where it does not fit
-        the run."""
-        read = self._run(obs)
-        if read is None:
-            return None
-        counts, out = self.counts, self.out
-        return (np.array(out[P_AWAITED][:counts[P_AWAITED]], dtype=np.int64),
-                np.array(out[P_STAYING][:counts[P_STAYING]], dtype=np.int64), *read)
 
     def _run(self, obs: Observation) -> tuple | None:
         """Run the kernel on ``obs``: its neighbours and parked ids as it read them, or None
@@ -130,10 +114,11 @@ class Planner:
             parked_ids = np.array(parked, dtype=np.int64)
         else:
             nb, parked_ids = neighbours, parked
+        whole = True  # every part of the plan (the world reads only some: learning.plan)
         self._plan(nb, k, parked_ids, p, x, y, obs.rank, obs.tick, n, width, height,
                    self._radius, meet, obs.arrived and self._parks_still,
                    self._negotiates and not obs.episode_end, meet and p > 0, self._plans_known,
-                   self._reach, self.whole, self.scratch, self.out, self.counts)
-        if not self.counts[P_FITS]:
+                   self._reach, whole, self._scratch, self._out, self._counts)
+        if not self._counts[P_FITS]:
             return None
         return nb, parked_ids

@@ -50,8 +50,8 @@ from nnql_swarm.learning.fields import (
     READ_DAQL, REC_GOAL, REC_NEXT_GOAL, REC_PAIRS, REWARD_WORLD, RF_FIELDS, RF_R_DS,
     learner_params, record_size, state_size,
 )
+from nnql_swarm.learning.plan import PLAN_PARTS, SCRATCH
 from nnql_swarm.learning.readings import read_rows, uses_map
-from nnql_swarm.learning.planner import Planner
 from nnql_swarm.learning.rows import NeighbourRows
 from nnql_swarm.learning.tables import float_array, int_array
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, within
@@ -111,7 +111,6 @@ class RecordCheck:
     def __init__(self, config: SwarmConfig) -> None:
         self.config = config
         self.rows = NeighbourRows(config)
-        self.planner = Planner(config, whole=False)  # whom an agent waited for, as it planned
         self._expected, _ = ahead.compiled("expected_record")
         ints = int_array  # the kernel's buffers are arrays, compiled or not
         params, params_f = learner_params(config)
@@ -132,8 +131,10 @@ class RecordCheck:
         self._completed = np.zeros((size, NB_FIELDS), dtype=np.int64)
         self._counts = ints([0] * E_FIELDS)
         self._none, self._no_ids = np.zeros((0, 3), dtype=np.int64), ints([])
-        self._negotiation: dict[tuple, tuple] = {}  # (agent, tick) -> its plan's parts, arrays
         self._plans, _ = ahead.compiled("world_plans")
+        self._plan_scratch = np.zeros((SCRATCH, n + 1), dtype=np.int64)  # world_plans' buffers
+        self._plan_out = np.zeros((PLAN_PARTS, n + 1), dtype=np.int64)
+        self._plan_counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
         self._tick_plans: dict[int, tuple] = {}  # tick -> every agent's plan (plan_tick)
         self._parks = not config.step_aside  # arrived agents park: wait for nobody, and stay
         self._negotiates = config.algo in NEGOTIATING_ALGOS
@@ -161,11 +162,10 @@ class RecordCheck:
         nbs, parkeds = np.empty((n, n, 3), dtype=np.int64), np.empty((n, n), dtype=np.int64)
         awaited, staying = np.empty((n, n), dtype=np.int64), np.empty((n, n), dtype=np.int64)
         ks, ps, n_awaited, n_staying = (np.empty(n, dtype=np.int64) for _ in range(4))
-        planner = self.planner
         self._plans(x, y, arrived, n, sees_all, self._parks, tick, config.width, config.height,
                     self.radius, config.meet_only, self._parks,
-                    self._negotiates and not ending, nbs, ks, parkeds, ps, planner.scratch,
-                    planner.out, planner.counts, awaited, n_awaited, staying, n_staying)
+                    self._negotiates and not ending, nbs, ks, parkeds, ps, self._plan_scratch,
+                    self._plan_out, self._plan_counts, awaited, n_awaited, staying, n_staying)
         self._tick_plans[tick] = (nbs, ks.tolist(), parkeds, ps.tolist(), awaited,
                                   n_awaited.tolist(), staying, n_staying.tolist())
         self._tick_plans.pop(tick - 2, None)
@@ -173,22 +173,14 @@ class RecordCheck:
     def _negotiated(self, obs: Observation) -> tuple:
         """Whom the agent waits for at ``obs`` and the arrived neighbours it knows stay
         (``agent.negotiation``), as arrays, with its neighbours ``(k, 3)`` and parked ids as
-        the plan read them: from the tick's plans (:meth:`plan_tick`), else worked out once
-        for the observation."""
+        the plan read them: from the plans of its tick (:meth:`plan_tick`), which the world
+        works out as it sends the tick's observations and keeps while a record may read them."""
         plans = self._tick_plans.get(obs.tick)
-        if plans is not None:
-            nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = plans
-            i = obs.agent
-            return (awaited[i, :n_awaited[i]], staying[i, :n_staying[i]], nbs[i, :ks[i]],
-                    parkeds[i, :ps[i]])
-        key = (obs.agent, obs.tick)
-        known = self._negotiation.get(key)
-        if known is None:  # kept for this tick and the next: a record reads both
-            plan = self.planner.waits(obs)
-            assert plan is not None, "the world's own observations fit its run"
-            known = self._negotiation[key] = plan
-            self._negotiation.pop((obs.agent, obs.tick - 2), None)
-        return known
+        assert plans is not None, f"tick {obs.tick} checked without its plans"
+        nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = plans
+        i = obs.agent
+        return (awaited[i, :n_awaited[i]], staying[i, :n_staying[i]], nbs[i, :ks[i]],
+                parkeds[i, :ps[i]])
 
     def ready(self, obs: Observation, intents) -> bool:
         """Whether ``intents`` (the tick's so far) hold every intent the agent that was sent
