@@ -387,8 +387,8 @@ def test_an_intent_of_a_settled_agent_is_taken_once_and_moves_nothing():
     protocol.world.settled = frozenset({0})  # as the engine has it after agent 0 arrived
     protocol._out = []
     protocol._open_tick(1.0)
-    assert protocol.awaited == {1} and protocol.actions == [STAY, None]
-    assert kinds(intent(protocol, 0, 1.1, action=UP)) == [] and protocol.actions[0] == STAY
+    assert protocol.awaited == {1} and protocol.intents.tolist() == [STAY, -1]
+    assert kinds(intent(protocol, 0, 1.1, action=UP)) == [] and protocol.intents[0] == STAY
     intent(protocol, 0, 1.2)
     assert protocol.inbox.rejections["duplicate-intent"] == 1
     assert "TickClosed" in kinds(intent(protocol, 1, 1.3))
@@ -405,7 +405,7 @@ def test_a_settled_agent_that_came_back_is_waited_for_to_be_sent_the_table():
     [batch] = [e for e in protocol._out if isinstance(e, SendObservations)]
     assert CONFIG.quiet_settled  # agent 0, settled, is quiet: it gets no observation
     assert {o.agent: o.settled for o, _ in batch.observations} == {1: False}
-    assert protocol.awaited == {1} and protocol.actions == [STAY, None]
+    assert protocol.awaited == {1} and protocol.intents.tolist() == [STAY, -1]
 
 
 def test_a_quiet_agent_hears_the_table_entries_it_missed_at_its_next_observation():

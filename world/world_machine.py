@@ -140,8 +140,7 @@ class WorldMachine(Machine):
             self.phase = Phase.CLOSING
             self.leave_by = now + SHUTDOWN_REPEAT_S  # time for the agents' tokens to come
             self.next_shutdown = now
-        self.actions: list[int | None] = []  # the open tick's intents, by agent
-        self.intents = np.full(0, -1, dtype=np.int64)  # the same, -1 for none (world.records)
+        self.intents = np.full(0, -1, dtype=np.int64)  # the open tick's actions, -1 for none
         self.orders: list[tuple[int, ...] | None] = []  # and their orders (--arbitration pibt)
         self.heard: set[int] = set()  # the agents whose intent for the open tick came
         self.learned: dict[int, tuple] = {}  # the accepted learning records that came with them
@@ -176,7 +175,7 @@ class WorldMachine(Machine):
         elif alive:
             self.alive.add(agent)
             self.deserted_by = None
-            if phase is Phase.TICK_OPEN and self.actions[agent] is None:
+            if phase is Phase.TICK_OPEN and self.intents[agent] < 0:
                 self.awaited.add(agent)
             out.append(Log(logging.INFO, "agent %d is alive", (agent,)))
             if phase is Phase.TICK_OPEN and agent in self.joined:  # restarted: from a checkpoint
@@ -204,7 +203,7 @@ class WorldMachine(Machine):
         intent = self.inbox.decode(payload, Intent, key_agent=key_agent)
         if intent is None:
             return
-        tick, actions = self.world.tick, self.actions
+        tick, intents = self.world.tick, self.intents
         if intent.agent >= self.n:
             self.inbox.reject("unknown-agent", f"agent {intent.agent}")
         elif self.phase is not Phase.TICK_OPEN or intent.tick < tick:
@@ -220,8 +219,8 @@ class WorldMachine(Machine):
             self.inbox.reject("duplicate-intent", f"agent {intent.agent} tick {tick}")
         else:
             self.heard.add(intent.agent)
-            if actions[intent.agent] is None:  # a settled agent's action is STAY already
-                actions[intent.agent] = self.intents[intent.agent] = intent.action
+            if intents[intent.agent] < 0:  # a settled agent's action is STAY already
+                intents[intent.agent] = intent.action
                 self.orders[intent.agent] = intent.order
             self.awaited.discard(intent.agent)
             if intent.record:
@@ -312,14 +311,13 @@ class WorldMachine(Machine):
     def _open_tick(self, now: float) -> None:
         """Send every agent its observation of the current tick; start waiting for intents."""
         out = self._out
-        actions = self.actions = [None] * self.n
         intents = self.intents = np.full(self.n, -1, dtype=np.int64)
         self.orders = [()] * self.n
         self.awaited = set(self.alive)
         if self.to_resync:
             self.world.unsettle(self.to_resync)
         for agent in self.world.settled:
-            actions[agent] = intents[agent] = STAY
+            intents[agent] = STAY
             self.awaited.discard(agent)
         self.heard = set()
         self.learned = {}
@@ -349,7 +347,8 @@ class WorldMachine(Machine):
         out, world = self._out, self.world
         self.trace.mark(CLOSE, world.tick)
         learned = self._checked_records() if self.records is not None else self.learned
-        report = world.apply(self.actions, learned, self.orders)
+        actions = [None if a < 0 else a for a in self.intents.tolist()]  # None: missed
+        report = world.apply(actions, learned, self.orders)
         self.slowest = max(self.slowest, now - self.tick_start)
         if not world.finished:
             self._go(Event.TICK_CLOSED)
