@@ -9,7 +9,9 @@ Theory of operation. The machine is in one ``Phase`` at a time, moved only by ``
 (``agent.phases``; ``protocol.phase_machine`` runs an input):
 
 - ``PEERS``: until it has seen every other agent's liveliness token (or given up waiting, at
-  ``ready_by``), observations are kept in order, and handled once it is ``IDLE``.
+  ``ready_by``), observations are kept in order, and handled once it is ``IDLE``. Where it is
+  told to (``rejoin_deaf_s``), an agent that has heard no other agent by ``deaf_by`` takes its
+  session for deaf and stops, for its node to open another (``Stopped.rejoin``).
 - ``IDLE``: waiting for an observation, in tick order. One whose decision awaits no intent (as
   ``agent.negotiation`` plans it) is decided at once; otherwise the agent is ``NEGOTIATING``.
 - ``NEGOTIATING``: it learns the intents of the visible higher-ranked neighbours from the
@@ -94,10 +96,11 @@ class AgentMachine(QueryAnswering, Machine):
 
     def __init__(self, agent: int, config: SwarmConfig, brain, now: float,
                  negotiation_timeout_s: float | None = None, trace: TickTrace = _NO_TRACE,
-                 world_wait_s: float = WORLD_WAIT_S) -> None:
+                 world_wait_s: float = WORLD_WAIT_S, rejoin_deaf_s: float = 0.0) -> None:
         """``brain`` is an ``agent.brain.AgentBrain`` (fresh, or restored from a checkpoint);
         ``trace`` only records the time of each step (``protocol.trace``), never decides;
-        ``world_wait_s``: how long a world that left may stay away."""
+        ``world_wait_s``: how long a world that left may stay away; ``rejoin_deaf_s``: how long
+        its session may hear no other agent before it stops to rejoin (0: as long as it takes)."""
         self.agent = agent
         self.config = config
         self.brain = brain
@@ -112,6 +115,8 @@ class AgentMachine(QueryAnswering, Machine):
         self.inbox = Inbox(config.run_id, EffectLog(self))
         self.phase = Phase.IDLE if self.n == 1 else Phase.PEERS
         self.ready_by = now + max(PEER_WAIT_S, START_S_PER_AGENT * self.n)
+        self.rejoin_deaf_s = rejoin_deaf_s
+        self.deaf_by = now + rejoin_deaf_s if rejoin_deaf_s > 0 and self.n > 1 else None
         self.early: list = []  # observations that came while waiting for the peers, in order
         self.peers_seen: set[int] = set()
         self.pending: Pending | None = None  # while NEGOTIATING or ASKING_MISSING
@@ -190,6 +195,8 @@ class AgentMachine(QueryAnswering, Machine):
             self.inbox.reject("unknown-agent", str(key))
         elif alive:
             self.peers_seen.add(agent)
+            if agent != self.agent:
+                self.deaf_by = None  # the session hears the others
             if self.phase is Phase.PEERS and self._every_peer_seen():
                 self._become_ready(now)
         else:
@@ -232,13 +239,18 @@ class AgentMachine(QueryAnswering, Machine):
 
     @an_input
     def on_timer(self, now: float) -> None:
-        """Time has come to ``now``: start without the peers not seen, end a negotiation, or
-        stop waiting for a world that left."""
+        """Time has come to ``now``: start without the peers not seen (or stop to rejoin, having
+        heard none), end a negotiation, or stop waiting for a world that left."""
         if self.world_back_by is not None and now >= self.world_back_by:
             self._out.append(Log(logging.ERROR, "no world for %.0f s (--world-wait): taken for "
                                                 "gone for good; stopping", (self.world_wait_s,)))
             self.world_lost = True
             self._stop(by_world=False)
+            return
+        if self.phase is Phase.PEERS and self.deaf_by is not None and now >= self.deaf_by:
+            self._out.append(Log(logging.WARNING, "heard no other agent in %.0f s: opening the "
+                                                  "session again", (self.rejoin_deaf_s,)))
+            self._stop(by_world=False, rejoin=True)
             return
         if self.phase is Phase.PEERS and now >= self.ready_by:
             self._out.append(Log(logging.WARNING, "only saw agents %s; negotiating with whoever "
@@ -257,7 +269,7 @@ class AgentMachine(QueryAnswering, Machine):
         """When :meth:`on_timer` is next due (None: no timer)."""
         phase = self.phase
         if phase is Phase.PEERS:
-            due: float | None = self.ready_by
+            due: float | None = min(self.ready_by, self.deaf_by or self.ready_by)
         else:
             p = self._negotiation()
             due = None if p is None else p.deadline
@@ -489,7 +501,7 @@ class AgentMachine(QueryAnswering, Machine):
         if p is not None and p.obs.tick == answer.tick:
             self._advance(now)
 
-    def _stop(self, by_world: bool) -> None:
+    def _stop(self, by_world: bool, rejoin: bool = False) -> None:
         self._drop_held()
         for query in self.standing.values():
             self._out.append(EndQuery(query))
@@ -497,4 +509,4 @@ class AgentMachine(QueryAnswering, Machine):
         self.standing_seen = {}
         self.pending = None
         self._go(Event.STOP)
-        self._out.append(Stopped(by_world))
+        self._out.append(Stopped(by_world, rejoin))

@@ -15,13 +15,16 @@ a lock of its own (eclipse-zenoh/zenoh#1092: when a peer dies, Zenoh ends the as
 that lock while the main thread, holding the node's, ends that peer's standing query, and one
 waited for the other forever). The main thread handles that queue and the machine's timers,
 sleeping on the queue until the next timer is due, at most ``transport.adapter.POLL_S``.
+
+A session that hears no other agent before the run begins (``rejoin_deaf_s``) is closed and
+another opened, :data:`REJOINS` times at most (:func:`run_agent`).
 """
 
 import logging
 import queue
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -54,6 +57,10 @@ EXIT_STOPPED = 130
 """Exit code of an agent stopped by a signal rather than by the world's shutdown."""
 
 _PUT = zenoh.SampleKind.PUT
+
+REJOINS = 2
+"""How many times an agent whose session heard no other agent opens another before it keeps the
+last one (``TransportSettings.rejoin_deaf_s``)."""
 
 
 @dataclass(frozen=True)
@@ -97,7 +104,8 @@ class AgentNode(ProtocolAdapter):
         self.trace = trace.TickTrace.from_env(f"agent-{self.agent}")
         self.protocol = AgentMachine(self.agent, self.config, brain, time.monotonic(),
                                      options.negotiation_timeout_s, self.trace,
-                                     options.world_wait_s)
+                                     options.world_wait_s, options.transport.rejoin_deaf_s)
+        self.rejoin = False  # its session heard no other agent: open another (run_agent)
         self.events: queue.SimpleQueue = queue.SimpleQueue()
         self.lock = threading.RLock()
         self.stopping = False
@@ -196,6 +204,7 @@ class AgentNode(ProtocolAdapter):
 
     def _stopped(self, effect: Stopped) -> None:
         self.stopping = True
+        self.rejoin = effect.rejoin
         self.events.put(("stop", None))
 
     # The main thread.
@@ -249,15 +258,21 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
     ``on_episode_end(brain, episode)`` runs after each episode's checkpoint and intent (e.g. Rerun
     heat maps).
     """
-    try:
-        session = open_session(options.transport)
-    except TransportError as error:
-        log.error("%s", error)
-        return EXIT_TRANSPORT
-    with closing(session):
-        node = AgentNode(options, session, brain, on_episode_end)
-        stop_on_signals(node)
-        node.run()
+    for rejoins in range(REJOINS + 1):
+        if rejoins == REJOINS:  # the last session: kept, deaf or not
+            options = replace(options, transport=replace(options.transport, rejoin_deaf_s=0.0))
+        try:
+            session = open_session(options.transport)
+        except TransportError as error:
+            log.error("%s", error)
+            return EXIT_TRANSPORT
+        with closing(session):
+            node = AgentNode(options, session, brain, on_episode_end)
+            stop_on_signals(node)
+            node.run()
+        if not node.rejoin:
+            break
+        brain = node.brain  # as it was: nothing ran yet
     node.trace.save()
     write_json_atomic(stats_path(options.out_dir, f"agent-{options.agent}"), node.stats())
     inbox = node.protocol.inbox

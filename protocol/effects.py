@@ -81,9 +81,12 @@ class EpisodeEnded(NamedTuple):
 
 
 class Stopped(NamedTuple):
-    """The agent is done: the world said so (``by_world``), or it was stopped."""
+    """The agent is done: the world said so (``by_world``), or it was stopped; or (``rejoin``)
+    its session heard no other agent before the run began: the node opens a new session and
+    starts again."""
 
     by_world: bool
+    rejoin: bool = False
 
 
 # The world's effects.

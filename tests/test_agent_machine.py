@@ -90,6 +90,27 @@ def test_the_wait_for_peers_grows_with_a_large_swarm():
     assert WorldMachine(CONFIG, 5.0).timer() == 5.0 + STARTUP_TIMEOUT_S
 
 
+def test_an_agent_that_hears_no_other_agent_stops_to_rejoin_where_told_to():
+    """A session that hears no other agent's token by ``rejoin_deaf_s`` (at 512 agents a few
+    sessions heard nobody, nor did anyone hear them) is taken for deaf: the agent stops to open
+    another. Hearing any other agent, or being told nothing, it waits for the peers as ever."""
+    own = keys.alive_key("proto", keys.ROLE_AGENT, 0)
+    deaf = AgentMachine(0, CONFIG, AgentBrain(0, CONFIG), now=5.0, rejoin_deaf_s=3.0)
+    assert deaf.timer() == 8.0
+    deaf.on_liveliness(own, True, 5.5)  # its own token, which it hears without the hub
+    assert deaf.on_timer(7.9) == [] and not deaf.stopped
+    effects = deaf.on_timer(8.0)
+    assert effects[-1] == Stopped(False, rejoin=True) and deaf.stopped
+    assert "heard no other agent" in effects[0].message
+    hearing = AgentMachine(0, CONFIG, AgentBrain(0, CONFIG), now=5.0, rejoin_deaf_s=3.0)
+    hearing.on_liveliness(keys.alive_key("proto", keys.ROLE_AGENT, 2), True, 6.0)
+    assert hearing.timer() == 5.0 + PEER_WAIT_S and hearing.on_timer(8.0) == []
+    told_nothing = AgentMachine(0, CONFIG, AgentBrain(0, CONFIG), now=5.0)
+    assert told_nothing.timer() == 5.0 + PEER_WAIT_S and told_nothing.on_timer(8.0) == []
+    alone = SwarmConfig(run_id="proto", n_agents=1)
+    assert AgentMachine(0, alone, AgentBrain(0, alone), now=5.0, rejoin_deaf_s=3.0).deaf_by is None
+
+
 def test_an_agent_asks_and_decides_once_the_answer_is_in_or_the_time_is_up():
     protocol = ready(agent=1)
     # tick 0: agent 0 ranks first, agent 1 second; agent 1 sees agent 0 and waits for it

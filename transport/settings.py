@@ -49,6 +49,9 @@ class TransportSettings:
     """Gossip scouting on or off; None leaves it to Zenoh (on) or to the config file."""
     connect_timeout_s: float = 0.0
     """How long a client keeps retrying its first connect (Zenoh's client default: not at all)."""
+    rejoin_deaf_s: float = 0.0
+    """An agent that is a client of the world as hub: how long its session may hear no other
+    agent before the start before it opens another (``agent.agent_machine``); 0: not done."""
 
     def zenoh_config(self) -> zenoh.Config:
         """The ``zenoh.Config``: the file first (if any), then these settings on top, and

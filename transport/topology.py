@@ -25,6 +25,13 @@ connect at once to a world still starting up on a busy machine are refused, and 
 by default does not retry."""
 
 
+REJOIN_DEAF_S = 30.0
+"""How long an agent that is a client of the world as hub may hear no other agent before it
+opens its session again (``TransportSettings.rejoin_deaf_s``): of 512 agents joining at once on
+two cores, a few in each run were heard by nobody and heard nobody, for good (Zenoh 1.10 lost
+their declarations at the hub; docs/performance.md, "At scale")."""
+
+
 def embedded_topology(n_agents: int) -> str:
     """The launcher's one-machine topology for a swarm of ``n_agents``."""
     return "hub-peer" if n_agents >= HUB_FROM_AGENTS else "mesh"
@@ -74,4 +81,5 @@ class EmbeddedLayout:
         if t == "star-peers":
             return TransportSettings(mode="peer", connect=(self.endpoint,), gossip=False)
         return TransportSettings(mode="client", connect=(self.endpoint,),
-                                 connect_timeout_s=HUB_CONNECT_S)
+                                 connect_timeout_s=HUB_CONNECT_S,
+                                 rejoin_deaf_s=0.0 if t == "router" else REJOIN_DEAF_S)
