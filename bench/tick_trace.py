@@ -8,8 +8,12 @@ sent it to the one that got it) to the world closing the tick after the last int
 90th percentiles in microseconds. With the paper's preset (``--preset nnql``, radius 10) the
 negotiation is one chain of every agent; with the default (radius 2) the waits are only among
 agents in reach: fewer answers a tick, several short chains side by side (docs/performance.md).
+Then the whole ticks by where they fall in their episode: an episode's end tick (every agent
+observes it and checkpoints before its intent), the first tick of the next (everyone placed
+anew), the others, with each one's share of the time measured.
 
     python -m bench.tick_trace --agents 8 --episodes 15
+    python -m bench.tick_trace --agents 64 --episodes 8
 """
 
 import argparse
@@ -21,7 +25,9 @@ import tempfile
 from collections import defaultdict
 from pathlib import Path
 
-from bench.harness import add_preset_option, measured_rate, run_distributed, swarm_config
+from bench.harness import (
+    add_preset_option, grid_side, measured_rate, run_distributed, swarm_config,
+)
 from nnql_swarm.protocol import trace
 from nnql_swarm.world.metrics import read_episodes
 
@@ -95,6 +101,22 @@ def tick_steps(world: dict[int, dict], agents: dict[int, dict[int, dict]],
     return out
 
 
+PLACES = ("an episode's end tick", "the first tick of the next", "every other tick")
+
+
+def ticks_by_place(world: dict[int, dict], ends: set[int], ticks: list[int]) -> dict:
+    """Each whole tick of ``ticks`` (the world's first observation of it to the next one's), in
+    seconds, by where it falls: the end tick of an episode (``ends``), the first tick of the
+    next, the others."""
+    out: dict[str, list[float]] = {place: [] for place in PLACES}
+    for tick in ticks:
+        w, after = world.get(tick, {}), world.get(tick + 1, {})
+        if trace.OBS_SENT in w and trace.OBS_SENT in after:
+            place = PLACES[0] if tick in ends else PLACES[1] if tick - 1 in ends else PLACES[2]
+            out[place].append(after[trace.OBS_SENT] - w[trace.OBS_SENT])
+    return out
+
+
 def read_trace(directory: Path, n_agents: int) -> tuple[dict, dict]:
     """The world's and every agent's marks, by tick, from ``directory``."""
     def load(name: str):
@@ -115,15 +137,19 @@ def main() -> int:
     args = p.parse_args()
     if args.agents < 2 or args.episodes < 2:
         p.error("need at least 2 agents and 2 episodes (the first one is warm-up)")
+    side = grid_side(args.agents)  # about 16 cells an agent, as bench.scale
     config = swarm_config(args.preset, run_id="trace", n_agents=args.agents,
-                          episodes=args.episodes, max_steps=args.max_steps)
+                          episodes=args.episodes, max_steps=args.max_steps, width=side,
+                          height=side)
     with tempfile.TemporaryDirectory() as tmp:
         marks, out = Path(tmp) / "marks", Path(tmp) / "run"
         os.environ[trace.TRACE_ENV] = str(marks)  # the spawned processes inherit it
         run_distributed(config, out, record=False)
         world, agents = read_trace(marks, args.agents)
-        warm_up = int(read_episodes(out / "episodes.csv")[0]["end_tick"])
-        steps = tick_steps(world, agents, [t for t in sorted(world) if t > warm_up])
+        ends = [int(row["end_tick"]) for row in read_episodes(out / "episodes.csv")]
+        timed = [t for t in sorted(world) if t > ends[0]]
+        steps = tick_steps(world, agents, timed)
+        places = ticks_by_place(world, set(ends), timed)
         rate = measured_rate(out)
     print(f"{args.agents} agents, {rate:.0f} ticks/s after the first episode; microseconds:")
     print(f"{'step':<66} {'median':>7} {'p90':>7} {'n':>6}")
@@ -131,6 +157,14 @@ def main() -> int:
         if values:
             print(f"{step:<66} {1e6 * statistics.median(values):>7.0f} "
                   f"{1e6 * percentile(values, 0.9):>7.0f} {len(values):>6}")
+    total = sum(map(sum, places.values()))
+    print(f"\n{'whole ticks, by where they fall':<40} {'median':>7} {'p90':>7} {'n':>6} "
+          f"{'share of the time':>18}")
+    for place, values in places.items():
+        if values:
+            print(f"{place:<40} {1e6 * statistics.median(values):>7.0f} "
+                  f"{1e6 * percentile(values, 0.9):>7.0f} {len(values):>6} "
+                  f"{sum(values) / total:>18.2f}")
     return 0
 
 
