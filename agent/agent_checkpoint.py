@@ -61,7 +61,7 @@ def checkpoint_path(directory: Path, agent: int) -> Path:
     return Path(directory) / f"agent-{agent}.ckpt"
 
 
-def save(path: Path, brain: Saved, episode: int) -> None:
+def save(path: "Path | slotfile.SlotFile", brain: Saved, episode: int) -> None:
     """Write the brain's learned state after ``episode``; readers see the old file or the new."""
     q_ds, q_ca = brain.learner.tables()
     slotfile.write(path, {"q_ds": q_ds, "q_ca": q_ca,

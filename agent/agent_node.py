@@ -44,6 +44,7 @@ from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, stats_path, write_json
 from nnql_swarm.transport.adapter import ProtocolAdapter, stop_on_signals
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
+from nnql_swarm.transport.slotfile import SlotFile
 from nnql_swarm.transport.settings import (
     EXIT_NO_WORLD, EXIT_TRANSPORT, TransportError, TransportSettings, closing, open_session,
 )
@@ -95,6 +96,7 @@ class AgentNode(ProtocolAdapter):
         self.on_episode_end = on_episode_end
         self.checkpoint_file = agent_checkpoint.checkpoint_path(options.out_dir / CHECKPOINT_DIR,
                                                           self.agent)
+        self._checkpoint_slots = SlotFile(self.checkpoint_file)  # written by this process only
         brain, self.resumed = start_brain(self.agent, self.config, self.checkpoint_file,
                                           options.resume, brain, options.resume_episode)
         if self.resumed is not None:
@@ -193,7 +195,7 @@ class AgentNode(ProtocolAdapter):
             query.drop()
 
     def _checkpoint(self, effect: Checkpoint) -> None:
-        agent_checkpoint.save(self.checkpoint_file, self.brain, effect.episode)
+        agent_checkpoint.save(self._checkpoint_slots, self.brain, effect.episode)
 
     def _episode_ended(self, effect: EpisodeEnded) -> None:
         if self.on_episode_end is not None:

@@ -1,6 +1,8 @@
 """transport.slotfile: the record rewritten in place, whole whatever is cut short; and the world's
 checkpoint, which keeps the table of the episode before for a world killed before its row."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -86,6 +88,40 @@ def test_what_msgpack_cannot_carry_is_refused_before_anything_is_written(tmp_pat
     with pytest.raises(TypeError):
         slotfile.write(path, {"q_ds": np.array([object()], dtype=object)})
     assert slotfile.read(path)["episode"] == 1
+
+
+def test_a_slot_file_reads_its_slots_once_and_then_remembers_them(tmp_path, monkeypatch):
+    path = tmp_path / "x.ckpt"
+    slotfile.write(path, record(1))  # a file another process wrote: episode 1 in slot 0
+    reads = []
+    real = slotfile._records
+    monkeypatch.setattr(slotfile, "_records", lambda data: reads.append(1) or real(data))
+    slots = slotfile.SlotFile(path)
+    for episode in (2, 3, 4):
+        slots.write(record(episode))
+        assert [r["episode"] for r in slotfile.read_all(path)] == [episode, episode - 1]
+    assert len(reads) == 1 + 3, "the slots read at the first write only (and by each read)"
+
+
+def test_a_slot_file_whose_write_failed_reads_its_slots_again(tmp_path, monkeypatch):
+    path = tmp_path / "x.ckpt"
+    slots = slotfile.SlotFile(path)
+    for episode in (1, 2):
+        slots.write(record(episode))
+
+    pwrite = os.pwrite
+
+    def full(fd, data, offset):
+        pwrite(fd, data[:500], offset)  # torn: the disk filled up half way
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(slotfile.os, "pwrite", full)
+    with pytest.raises(OSError):
+        slots.write(record(3))  # over episode 1's slot, which it tore
+    monkeypatch.undo()
+    assert slotfile.read(path)["episode"] == 2
+    slots.write(record(4))  # must go over the torn slot, never over episode 2
+    assert [r["episode"] for r in slotfile.read_all(path)] == [4, 2]
 
 
 def test_the_record_before_the_newest_is_kept_until_the_next_write(tmp_path):

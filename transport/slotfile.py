@@ -89,7 +89,8 @@ def _records(data: bytes) -> tuple[int, list[tuple[int, bytes] | None]]:
     return size, records
 
 
-def _create(path: Path, payload: bytes, sequence: int) -> None:
+def _create(path: Path, payload: bytes, sequence: int) -> int:
+    """Write a new file whose first slot holds ``payload``; its slot size."""
     size = _slot_size(payload)
     tmp = path.with_name(path.name + ".tmp")
     slot = _SLOT.pack(MAGIC, sequence, len(payload), zlib.crc32(payload)) + payload
@@ -98,34 +99,59 @@ def _create(path: Path, payload: bytes, sequence: int) -> None:
         f.flush()
         os.fsync(f.fileno())
     os.replace(tmp, path)
+    return size
 
 
-def write(path: Path, fields: dict) -> None:
-    """Make ``fields`` the file's record (see the module docstring)."""
-    path = Path(path)
-    payload = _pack(fields)
-    try:
-        fd = os.open(path, os.O_RDWR)
-    except FileNotFoundError:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        _create(path, payload, 0)
-        return
-    try:
-        size, records = _records(os.pread(fd, os.fstat(fd).st_size, 0))
-    except SlotFileError:  # not one of ours: replaced whole
-        size, records = 0, [None, None]
-    sequences = [-1 if r is None else r[0] for r in records]
-    newest = max(sequences)
-    try:
-        if _SLOT.size + len(payload) > size:  # outgrown, or not a slot file: a new file
-            _create(path, payload, newest + 1)
+class SlotFile:
+    """One file written again and again by one process: what its slots hold is read from the
+    disk at the first write and remembered after, so a write is the payload's one ``pwrite``
+    and ``fdatasync``, not a read and check of both slots as well. Nobody else may write the
+    file meanwhile (a run's files are its own: ``transport.runfiles``)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._slots: tuple[int, list[int]] | None = None  # slot size, each slot's sequence
+
+    def write(self, fields: dict) -> None:
+        """Make ``fields`` the file's record (see the module docstring)."""
+        path = self.path
+        payload = _pack(fields)
+        try:
+            fd = os.open(path, os.O_RDWR)
+        except FileNotFoundError:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            self._slots = (_create(path, payload, 0), [0, -1])
             return
-        target = 1 if sequences[0] == newest and newest >= 0 else 0  # never the newest whole
-        slot = _SLOT.pack(MAGIC, newest + 1, len(payload), zlib.crc32(payload)) + payload
-        os.pwrite(fd, slot, _HEADER.size + target * size)
-        os.fdatasync(fd)
-    finally:
-        os.close(fd)
+        try:
+            size, sequences = self._slots or self._read_slots(fd)
+            newest = max(sequences)
+            if _SLOT.size + len(payload) > size:  # outgrown, or not a slot file: a new file
+                self._slots = (_create(path, payload, newest + 1), [newest + 1, -1])
+                return
+            target = 1 if sequences[0] == newest and newest >= 0 else 0  # never the newest whole
+            slot = _SLOT.pack(MAGIC, newest + 1, len(payload), zlib.crc32(payload)) + payload
+            self._slots = None  # unknown until the write is done
+            os.pwrite(fd, slot, _HEADER.size + target * size)
+            os.fdatasync(fd)
+            sequences[target] = newest + 1
+            self._slots = (size, sequences)
+        finally:
+            os.close(fd)
+
+    @staticmethod
+    def _read_slots(fd: int) -> tuple[int, list[int]]:
+        """The slot size and each slot's sequence (-1: no whole record) as the disk has them."""
+        try:
+            size, records = _records(os.pread(fd, os.fstat(fd).st_size, 0))
+        except SlotFileError:  # not one of ours: replaced whole
+            return 0, [-1, -1]
+        return size, [-1 if r is None else r[0] for r in records]
+
+
+def write(target: "Path | SlotFile", fields: dict) -> None:
+    """Make ``fields`` the record of ``target``: a path (its slots read from the disk first), or
+    a :class:`SlotFile` that remembers them."""
+    (target if isinstance(target, SlotFile) else SlotFile(target)).write(fields)
 
 
 def _payloads(path: Path) -> list[bytes]:

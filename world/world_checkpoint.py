@@ -23,7 +23,8 @@ def table_path(out_dir: Path) -> Path:
     return Path(out_dir) / CHECKPOINT_DIR / FILE
 
 
-def save(path: Path, state: SharedState, episode: int, config: SwarmConfig) -> None:
+def save(path: "Path | slotfile.SlotFile", state: SharedState, episode: int,
+         config: SwarmConfig) -> None:
     """Write the shared table after ``episode``; readers see the old file or the new."""
     records = [[agent, list(integers), list(rewards)] for agent, integers, rewards in state.records]
     slotfile.write(path, {"q_ds": state.q_ds, "q_ca": state.q_ca, "records": records,

@@ -38,6 +38,7 @@ from nnql_swarm.transport.runfiles import (
 from nnql_swarm.transport.adapter import ProtocolAdapter, stop_on_signals
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
+from nnql_swarm.transport.slotfile import SlotFile
 from nnql_swarm.transport.settings import (
     EXIT_TRANSPORT, TransportError, TransportSettings, closing, open_session,
 )
@@ -85,6 +86,7 @@ class WorldNode(ProtocolAdapter):
         self.trace = trace.TickTrace.from_env("world")
         self.created_at = time.time()  # wall clock, for the stats' start-up: the protocol's is monotonic
         self.table_file = world_checkpoint.table_path(options.out_dir)
+        self._table_slots = SlotFile(self.table_file)  # written by this process only
         self.protocol = WorldMachine(self.config, time.monotonic(), options.first_episode,
                                       options.first_tick, options.startup_timeout_s, self.trace,
                                       options.table, next_incarnation(options.out_dir))
@@ -199,7 +201,7 @@ class WorldNode(ProtocolAdapter):
                 self.before_row()
         if row.table is not None:
             assert isinstance(row.table, SharedState), row.table
-            world_checkpoint.save(self.table_file, row.table, row.row["episode"], self.config)
+            world_checkpoint.save(self._table_slots, row.table, row.row["episode"], self.config)
         if self.writer is None:
             self.writer = EpisodeWriter(self.options.out_dir / EPISODES_FILE)
         self.writer.write(row.row, row.duration_s, row.ticks, row.slowest_s, row.rejected)
