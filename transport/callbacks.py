@@ -10,7 +10,7 @@ read once, when this module is imported (so a process's children inherit it).
 - ``kept``: ``direct``, and that thread keeps its Python thread state from one callback to the
   next (:func:`keep_thread_state`).
 
-Figures for the three: docs/performance.md ("How Zenoh calls the handlers").
+Figures for the three: docs/design.md ("How Zenoh calls the handlers").
 """
 
 import ctypes

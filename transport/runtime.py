@@ -4,7 +4,7 @@ Every process runs Zenoh with one thread that waits on every socket, receives an
 (:data:`RUNTIME_DEFAULT`, unless ``ZENOH_RUNTIME`` is set). What a handler sends on that thread
 leaves once the handler returns, in one batch a link; so each link's queue holds
 :data:`QUEUE_BATCHES` batches, and the lockstep's publishers batch
-(:func:`declare_lockstep_publisher`). Figures: docs/performance.md, "One network thread".
+(:func:`declare_lockstep_publisher`). Figures: docs/design.md, "One network thread".
 """
 
 import zenoh
