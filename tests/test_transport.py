@@ -11,6 +11,8 @@ import threading
 import time
 from pathlib import Path
 
+import pytest
+
 from nnql_swarm.transport import callbacks, runtime
 from nnql_swarm.transport.ports import LOWEST_CHOSEN_PORT, _ephemeral_low, free_port
 from nnql_swarm.transport.settings import TransportError, TransportSettings, open_session
@@ -173,6 +175,51 @@ def test_the_runtime_default_leaves_a_users_setting_alone(monkeypatch):
     except TransportError:
         pass
     assert os.environ[runtime.RUNTIME_ENV] == "(rx: (worker_threads: 2))"
+
+
+def _zenoh_tables_read_after_closing_a_link(environment: dict, results) -> None:
+    """Two sessions linked on loopback, closed: how much of Zenoh's library's read-only data (its
+    unwinding tables among it) this fresh process then holds resident, in KiB."""
+    os.environ.update(environment)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with open_session(TransportSettings(listen=(endpoint,))), \
+            open_session(TransportSettings(connect=(endpoint,))):
+        time.sleep(0.5)  # the link is up
+    resident, zenoh_data = 0, False
+    with open("/proc/self/smaps") as smaps:
+        for line in smaps:
+            if "-" in line.split()[0]:  # a mapping's first line
+                zenoh_data = "zenoh" in line and " r--p " in line
+            elif zenoh_data and line.startswith("Rss:"):
+                resident += int(line.split()[1])
+    results.put(resident)
+
+
+def _zenoh_tables_read(environment: dict) -> int:
+    ctx = mp.get_context("spawn")
+    results = ctx.Queue()
+    saved = os.environ.pop(runtime.ERROR_BACKTRACES_ENV, None)  # the child's own setting only
+    try:
+        process = ctx.Process(target=_zenoh_tables_read_after_closing_a_link,
+                              args=(environment, results))
+        process.start()
+        resident = results.get(timeout=60)
+        process.join(10)
+    finally:
+        if saved is not None:
+            os.environ[runtime.ERROR_BACKTRACES_ENV] = saved
+    return resident
+
+
+def test_zenohs_errors_capture_no_backtrace_unless_the_user_asks():
+    """With ``RUST_BACKTRACE=1`` (as on many a developer's machine), each error Zenoh makes and
+    handles itself, here each link of a session closed, walks the stack and reads Zenoh's
+    unwinding tables, some 1 MiB of them resident after; a process that opens its sessions with
+    ``open_session`` does not (``transport.runtime.ERROR_BACKTRACES_ENV``), unless the user's
+    ``RUST_LIB_BACKTRACE`` asks for it."""
+    quiet = _zenoh_tables_read({"RUST_BACKTRACE": "1"})
+    asked = _zenoh_tables_read({"RUST_BACKTRACE": "1", runtime.ERROR_BACKTRACES_ENV: "1"})
+    assert quiet + 512 <= asked, f"Zenoh's read-only data resident: {quiet} KiB, asked {asked}"
 
 
 def _zenoh_shared_memory_mapped(results) -> None:

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 
 import zenoh
 
-from nnql_swarm.transport.runtime import QUEUE_BATCHES, RUNTIME_DEFAULT, RUNTIME_ENV
+from nnql_swarm.transport.runtime import (
+    ERROR_BACKTRACES_DEFAULT, ERROR_BACKTRACES_ENV, QUEUE_BATCHES, RUNTIME_DEFAULT, RUNTIME_ENV,
+)
 
 log = logging.getLogger("nnql.transport")
 
@@ -84,8 +86,10 @@ def open_session(settings: TransportSettings) -> zenoh.Session:
     """Open the process's Zenoh session; a failure becomes one clear TransportError.
 
     Zenoh reads :data:`~nnql_swarm.transport.runtime.RUNTIME_ENV` when its first session opens,
-    so it is set here."""
+    and Rust :data:`~nnql_swarm.transport.runtime.ERROR_BACKTRACES_ENV` at its first error, so
+    they are set here (where the user has not)."""
     os.environ.setdefault(RUNTIME_ENV, RUNTIME_DEFAULT)
+    os.environ.setdefault(ERROR_BACKTRACES_ENV, ERROR_BACKTRACES_DEFAULT)
     try:
         return zenoh.open(settings.zenoh_config())
     except zenoh.ZError as error:
