@@ -41,12 +41,12 @@ from nnql_swarm.protocol.effects import (
     Ask, Checkpoint, EndQuery, EpisodeEnded, Log, Reply, ReplyError, SendIntent, Stopped,
 )
 from nnql_swarm.transport.runfiles import CHECKPOINT_DIR, stats_path, write_json_atomic
-from nnql_swarm.transport.adapter import ProtocolAdapter, stop_on_signals
+from nnql_swarm.transport.adapter import ProtocolAdapter
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.slotfile import SlotFile
 from nnql_swarm.transport.settings import (
-    EXIT_NO_WORLD, EXIT_TRANSPORT, TransportError, TransportSettings, closing, open_session,
+    EXIT_NO_WORLD, EXIT_TRANSPORT, TransportSettings, run_in_session,
 )
 
 log = logging.getLogger("nnql.agent")
@@ -263,15 +263,11 @@ def run_agent(options: AgentOptions, brain: AgentBrain | None = None,
     for rejoins in range(REJOINS + 1):
         if rejoins == REJOINS:  # the last session: kept, deaf or not
             options = replace(options, transport=replace(options.transport, rejoin_deaf_s=0.0))
-        try:
-            session = open_session(options.transport)
-        except TransportError as error:
-            log.error("%s", error)
+        ran = run_in_session(options.transport, lambda session: AgentNode(
+            options, session, brain, on_episode_end))
+        if ran is None:
             return EXIT_TRANSPORT
-        with closing(session):
-            node = AgentNode(options, session, brain, on_episode_end)
-            stop_on_signals(node)
-            node.run()
+        node = ran[0]
         if not node.rejoin:
             break
         brain = node.brain  # as it was: nothing ran yet

@@ -52,6 +52,10 @@ class ProtocolAdapter:
     def stop(self) -> None:
         raise NotImplementedError
 
+    def run(self) -> object:
+        """Drive the machine on the main thread until the node stops; what the run ends with."""
+        raise NotImplementedError
+
     def feed(self, handler: Callable, *args) -> None:
         """``handler(*args, now)``, a protocol input, then its effects; the CPU time each took
         is added to :attr:`handler_cpu` under the input's name."""

@@ -11,12 +11,14 @@ on. Across machines, pass a Zenoh config file and/or listen and connect endpoint
 import json
 import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import TypeVar
 
 import zenoh
 
+from nnql_swarm.transport.adapter import ProtocolAdapter, stop_on_signals
 from nnql_swarm.transport.runtime import (
     ERROR_BACKTRACES_DEFAULT, ERROR_BACKTRACES_ENV, QUEUE_BATCHES, RUNTIME_DEFAULT, RUNTIME_ENV,
 )
@@ -110,3 +112,23 @@ def closing(session: zenoh.Session) -> Iterator[zenoh.Session]:
             session.close()
         except zenoh.ZError as error:
             log.warning("closing the Zenoh session: %s", str(error).split(" at /")[0])
+
+
+Node = TypeVar("Node", bound=ProtocolAdapter)
+
+
+def run_in_session(settings: TransportSettings, make_node: Callable[[zenoh.Session], Node]
+                   ) -> tuple[Node, object] | None:
+    """Open the process's session, make its node in it and run the node until it stops (a
+    signal stops it too), the session closed after: the node and what its run returned; None
+    where the session could not open, which is logged (the process exits with
+    :data:`EXIT_TRANSPORT`)."""
+    try:
+        session = open_session(settings)
+    except TransportError as error:
+        log.error("%s", error)
+        return None
+    with closing(session):
+        node = make_node(session)
+        stop_on_signals(node)
+        return node, node.run()

@@ -35,12 +35,12 @@ from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservat
 from nnql_swarm.transport.runfiles import (
     EPISODES_FILE, next_incarnation, stats_path, write_json_atomic,
 )
-from nnql_swarm.transport.adapter import ProtocolAdapter, stop_on_signals
+from nnql_swarm.transport.adapter import ProtocolAdapter
 from nnql_swarm.transport.callbacks import callback, enqueue
 from nnql_swarm.transport.runtime import declare_lockstep_publisher
 from nnql_swarm.transport.slotfile import SlotFile
 from nnql_swarm.transport.settings import (
-    EXIT_TRANSPORT, TransportError, TransportSettings, closing, open_session,
+    EXIT_TRANSPORT, TransportSettings, run_in_session,
 )
 from nnql_swarm.world import world_checkpoint
 from nnql_swarm.world.engine import SwarmWorld, TickReport
@@ -223,18 +223,14 @@ def run_world(options: WorldOptions,
     """Entry point of the world process; returns its exit code. ``before_row()`` is called
     before each episode's row is written (the recording makes the episode durable)."""
     try:
-        session = open_session(options.transport)
-    except TransportError as error:
+        ran = run_in_session(options.transport, lambda session: WorldNode(
+            options, session, on_tick, before_row))
+    except RunFailed as error:
         log.error("%s", error)
+        return 1
+    if ran is None:
         return EXIT_TRANSPORT
-    with closing(session):
-        node = WorldNode(options, session, on_tick, before_row)
-        stop_on_signals(node)
-        try:
-            completed = node.run()
-        except RunFailed as error:
-            log.error("%s", error)
-            return 1
+    node, completed = ran
     node.trace.save()
     stats = {**node.protocol.stats(), "handler_cpu": node.handler_cpu_stats()}
     if stats["startup_s"] is not None:
