@@ -9,7 +9,8 @@ time. This module builds the per-observation kernels so (:data:`EXPORTS`: an age
 and its neighbour rows, ``learning.neighbours.neighbour_rows_into``; the world's check of a
 learning record, ``learning.expected.expected_record``, with every agent's plan of a tick at once,
 ``learning.plan.world_plans``, and the step that applies a record to the shared table,
-``learning.record.apply_record``), into the kernel cache (``protocol.jit.cache_directory``: one
+``learning.record.apply_record``; and the write of the shared table's updates into an agent's
+copy, ``learning.record.write_entries``), into the kernel cache (``protocol.jit.cache_directory``: one
 directory per version of every kernel source), once per version; and finds them there
 (:func:`compiled`). A process that does not find it (not built yet, or built where no C compiler
 was) runs them in plain Python: the same functions, the same results, slower.
@@ -40,7 +41,7 @@ from nnql_swarm.learning.neighbours import ROWS_SIGNATURE, neighbour_rows_into
 from nnql_swarm.learning.plan import (
     PLAN_SIGNATURE, WORLD_PLANS_SIGNATURE, negotiation_plan, world_plans,
 )
-from nnql_swarm.learning.record import APPLY_SIGNATURE, apply_record
+from nnql_swarm.learning.record import APPLY_SIGNATURE, WRITE_SIGNATURE, apply_record, write_entries
 from nnql_swarm.protocol.jit import COMPILED, MODE_VARIABLE, cache_directory
 
 log = logging.getLogger(__name__)
@@ -55,6 +56,7 @@ EXPORTS: dict[str, tuple[Callable, str]] = {
     "expected_record": (expected_record, EXPECTED_SIGNATURE),
     "apply_record": (apply_record, APPLY_SIGNATURE),
     "world_plans": (world_plans, WORLD_PLANS_SIGNATURE),
+    "write_entries": (write_entries, WRITE_SIGNATURE),
 }
 """Each kernel the module holds, by name: the function and its signature."""
 

@@ -18,6 +18,7 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.readings import ds_reward, ds_state
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES, move_of
 from nnql_swarm.protocol.jit import kernel
+from nnql_swarm.protocol.messages import MAX_REWARD, unpack_group
 
 def record_is_valid(ints, floats, ca_table_rows: int) -> bool:
     """Whether a learning record received from another agent fits this learner's tables (a
@@ -49,33 +50,44 @@ def record_entries(ints) -> list[int]:
     return entries
 
 
-def write_updates(entries: np.ndarray, groups) -> int:
-    """Write a shared table's updates (groups of entry indices and their values,
+def write_updates(entries: np.ndarray, groups, write) -> int:
+    """Write a shared table's updates (groups of packed entry indices and their values,
     ``protocol.messages.Updates``) into a learner's Q-values, both tables flat
-    (``learning.tables.Learner.entries``); returns how many it refused: those outside its
-    tables, and every entry of a group whose values are not as many as its entries. The groups
-    are written in one assignment: the world names an entry twice only with the same value, its
-    value once the tick's records are all applied (``world.shared_table``), so the order does
-    not matter."""
+    (``learning.tables.Learner.entries``), by ``write`` (:func:`write_entries`, as the process
+    runs it: ``learning.ahead``); returns how many it refused: every entry of a group whose
+    values are not as many as its entries, and those :func:`write_entries` refuses. The world
+    names an entry twice only with the same value, its value once the tick's records are all
+    applied (``world.shared_table``), so the order does not matter."""
     refused = 0
-    indices: list[int] = []
-    values: list[float] = []
-    for group_indices, group_values in groups:
-        if len(group_indices) != len(group_values):
-            refused += max(len(group_indices), len(group_values))
-            continue
-        indices += group_indices
-        values += group_values
-    if not indices:
-        return refused
-    where = np.array(indices, dtype=np.int64)
-    if max(indices) < len(entries):
-        entries[where] = values
-    else:
-        inside = where < len(entries)
-        entries[where[inside]] = np.array(values, dtype=np.float64)[inside]
-        refused += len(indices) - int(inside.sum())
+    for group in groups:
+        indices, values = unpack_group(group)
+        if len(indices) != len(values):
+            refused += max(len(indices), len(values))
+        else:
+            refused += write(entries, indices, values, MAX_REWARD)
     return refused
+
+
+@kernel
+def write_entries(entries, indices, values, bound):
+    """Write ``values[k]`` into ``entries[indices[k]]`` for each k, in order; returns how many it
+    refused: those outside the tables, and values not finite or beyond ``bound`` either way."""
+    refused = 0
+    size = len(entries)
+    for k in range(len(indices)):
+        entry, value = indices[k], values[k]
+        if entry < size and -bound <= value <= bound:  # NaN fails both
+            entries[entry] = value
+        else:
+            refused += 1
+    return refused
+
+
+WRITE_SIGNATURE = ("i8(f8[::1], Array(uint16, 1, 'C', readonly=True), "
+                   "Array(float64, 1, 'C', readonly=True), f8)")
+""":func:`write_entries`'s types, as compiled ahead of time (``learning.ahead``): the entries and
+values as an observation's packed groups hold them (``protocol.messages.unpack_group``:
+read-only views of the payload)."""
 
 
 @kernel

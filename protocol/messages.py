@@ -19,18 +19,19 @@ subclass of :class:`Message` (of :class:`AgentMessage` if it names an agent) wit
 
 :func:`parse` checks, in order, and raises :class:`Rejected` with the reason in brackets: bytes
 (``not-bytes``); size, before unpacking (``oversize``); msgpack, with no maps and no ext types
-anywhere, no string or binary longer than MAX_STR_LEN and no array longer than MAX_AGENTS items
-(``not-msgpack``); an array at the top level (``not-array``; a map there is told by its first
-byte); the first item, if any, a tag of this version (``bad-version``) and of the kind expected
-(``wrong-kind``); exactly the kind's number of items (``wrong-length``); run id (``wrong-run``);
-each field's type and range, the first bad one named (``bad-field:<name>``); then the rules
-between fields: an agent-list naming an agent twice (``bad-field:<name>``), the sender
-(``forged-sender``: the world, or the agent the message is of, on its own key), the message's own
-agent in one of its agent-lists (``bad-field:<name>``). Types are strict: a bool is not an int, an
-int is not a bool; float fields take ints but must be finite. The decoder and the rules decide;
-when the decoder refuses, :func:`_rejection` reads the payload again, untyped, and each item with
-its field's own decoder, only to name the first rule broken. :class:`Inbox` turns a rejection
-into a counted, rate-limited log line and None, and never raises.
+anywhere, no string longer than MAX_STR_LEN, no binary longer than MAX_BIN_LEN and no array longer
+than MAX_AGENTS items (``not-msgpack``); an array at the top level (``not-array``; a map there is
+told by its first byte); the first item, if any, a tag of this version (``bad-version``) and of the
+kind expected (``wrong-kind``); exactly the kind's number of items (``wrong-length``); run id
+(``wrong-run``); each field's type and range, the first bad one named (``bad-field:<name>``); then
+the rules between fields: an agent-list naming an agent twice (``bad-field:<name>``), the sender
+(``forged-sender``: the world, or the agent the message is of, on its own key), a packing of the
+shared table's updates cut short (``bad-field:updates``), the message's own agent in one of its
+agent-lists (``bad-field:<name>``). Types are strict: a bool is not an int, an int is not a bool;
+float fields take ints but must be finite. The decoder and the rules decide; when the decoder
+refuses, :func:`_rejection` reads the payload again, untyped, and each item with its field's own
+decoder, only to name the first rule broken. :class:`Inbox` turns a rejection into a counted,
+rate-limited log line and None, and never raises.
 
 :func:`encode` packs a message (numpy scalars and arrays become plain values); it refuses only what
 msgpack cannot carry and a bad run id. It does not parse what it made: every receiver parses every
@@ -52,8 +53,8 @@ from msgspec import Meta
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 9
-"""9: the world's incarnation in observations and intents (``Observation.world``)."""
+PROTOCOL_VERSION = 10
+"""10: the shared table's updates packed (:data:`Updates`)."""
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -126,22 +127,49 @@ Learned = Annotated[tuple[Record, ...], Meta(max_length=1)]
 """The learning record an intent carries (none, or its sender's of this tick)."""
 MAX_TABLE_ENTRY = (N_STATES + MAX_TABLE_ROW) * N_ACTIONS
 """Above every entry index of a learner's two tables stacked (``learning.record.record_entries``)."""
-TableEntries = Annotated[tuple[Annotated[int, Meta(ge=0, lt=MAX_TABLE_ENTRY)], ...],
-                         Meta(max_length=MAX_AGENTS)]
-"""Q-values of the shared table by entry index (``learning.record.record_entries``)."""
-TableValues = Annotated[tuple[Reward, ...], Meta(max_length=MAX_AGENTS)]
-"""Their new values, finite, bounded as a reward is (a Q-value is at most a reward / (1 - gamma))."""
+ENTRY_TYPE, VALUE_TYPE = np.dtype("<u2"), np.dtype("<f8")
+"""How a group of the shared table's updates packs its entries and their values: little-endian
+unsigned 16-bit integers (every entry index is below :data:`MAX_TABLE_ENTRY`) and IEEE 754
+doubles, the values exactly as the world's table holds them."""
+assert MAX_TABLE_ENTRY <= np.iinfo(ENTRY_TYPE).max + 1, "an entry index must fit its packing"
+TableEntries = Annotated[bytes, Meta(max_length=ENTRY_TYPE.itemsize * MAX_AGENTS)]
+"""At most MAX_AGENTS entry indices of the shared table (``learning.record.record_entries``),
+packed as :data:`ENTRY_TYPE`."""
+TableValues = Annotated[bytes, Meta(max_length=VALUE_TYPE.itemsize * MAX_AGENTS)]
+"""Their new values, packed as :data:`VALUE_TYPE`; the receiver writes only those finite and
+bounded as a reward is (a Q-value is at most a reward / (1 - gamma)):
+``learning.record.write_entries``."""
+MAX_BIN_LEN = VALUE_TYPE.itemsize * MAX_AGENTS
+"""The longest binary the wire carries (a group's values)."""
 MAX_SYNC_GROUPS = 2
 """Groups of the whole table an observation carries at most beside the tick's, for an agent
 being resynchronised (``world.shared_table``)."""
 Updates = Annotated[tuple[tuple[TableEntries, TableValues], ...],
                     Meta(max_length=MAX_AGENTS + MAX_SYNC_GROUPS)]
 """The shared table's entries that the last tick's learning records changed, with their new
-values: groups of two sequences, the entries and their values, as many of each (the receiver
-refuses a group where they differ); the tick's in the order the records were applied (agent-id
-order), at most MAX_AGENTS entries a group; then, for an agent being resynchronised, up to
-:data:`MAX_SYNC_GROUPS` groups of the whole table's values. Two flat sequences a group, not a
-pair per entry: a pair each would cost the decoder a tuple per entry."""
+values: groups of two packed sequences (:func:`pack_updates`), the entries and their values, as
+many of each (the receiver refuses a group where they differ); the tick's in the order the
+records were applied (agent-id order), at most MAX_AGENTS entries a group; then, for an agent
+being resynchronised, up to :data:`MAX_SYNC_GROUPS` groups of the whole table's values. Packed,
+not a msgpack array of numbers: an observation of 64 agents carries some 150 entries, which an
+array made every agent decode into as many Python numbers, and the world encode for every agent.
+The codec checks that each packing is whole (``bad-field:updates``); the receiver, which writes
+the values in one compiled loop, checks each entry and value as it writes it."""
+
+
+def pack_updates(entries, values) -> tuple[tuple[bytes, bytes], ...]:
+    """Entries and their values (sequences or arrays of as many) as update groups of at most
+    MAX_AGENTS entries each."""
+    entries = np.asarray(entries, dtype=ENTRY_TYPE)
+    values = np.asarray(values, dtype=VALUE_TYPE)
+    return tuple((entries[k:k + MAX_AGENTS].tobytes(), values[k:k + MAX_AGENTS].tobytes())
+                 for k in range(0, len(entries), MAX_AGENTS))
+
+
+def unpack_group(group: tuple[bytes, bytes]) -> tuple[np.ndarray, np.ndarray]:
+    """An update group's entries and values as (read-only) arrays, without copying; may differ
+    in length where the group was forged."""
+    return np.frombuffer(group[0], ENTRY_TYPE), np.frombuffer(group[1], VALUE_TYPE)
 
 
 class Rejected(ValueError):
@@ -284,6 +312,10 @@ def _check_rules(msg: Message, key_agent: int | None) -> None:
                                             "key")
     elif msg.sender != WORLD_SENDER:
         raise Rejected("forged-sender", f"{cls.__name__} sent by {msg.sender!r}")
+    if isinstance(msg, Observation):
+        for entries, values in msg.updates:
+            if len(entries) % ENTRY_TYPE.itemsize or len(values) % VALUE_TYPE.itemsize:
+                raise Rejected("bad-field:updates", "a packing cut short")
     if isinstance(msg, Intent) and msg.order and (
             msg.order[0] != msg.action or len(set(msg.order)) != len(msg.order)):
         raise Rejected("bad-field:order", "not the action first, each move once")
@@ -303,7 +335,7 @@ _PLAIN = (int, float, bool, type(None))
 
 def _foreign(value) -> str | None:
     """What in an untyped decoded payload the wire never carries, or None: a map, an ext type,
-    a string or binary over MAX_STR_LEN, an array over MAX_AGENTS items."""
+    a string over MAX_STR_LEN, a binary over MAX_BIN_LEN, an array over MAX_AGENTS items."""
     stack = [value]
     while stack:
         v = stack.pop()
@@ -313,7 +345,7 @@ def _foreign(value) -> str | None:
                 return f"an array of {len(v)} items"
             stack.extend(v)
         elif t is str or t is bytes:
-            if len(v) > MAX_STR_LEN:
+            if len(v) > (MAX_STR_LEN if t is str else MAX_BIN_LEN):
                 return f"a {t.__name__} of length {len(v)}"
         elif t is dict:
             return "a map"

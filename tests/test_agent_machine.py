@@ -1,6 +1,7 @@
 """One agent's protocol machine, pure: inputs in, effects out, no network, no clock."""
 
 import dataclasses
+import math
 
 import msgpack
 import msgspec
@@ -18,7 +19,8 @@ from nnql_swarm.protocol.effects import Ask, Checkpoint, EndQuery, Log, Reply, S
 from nnql_swarm.protocol.phase_machine import PhaseError
 from nnql_swarm.world.world_machine import STARTUP_TIMEOUT_S, WorldMachine
 from nnql_swarm.protocol.messages import (
-    CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode, to_wire,
+    CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode,
+    pack_updates, to_wire,
 )
 
 CONFIG = SwarmConfig(run_id="proto", n_agents=3, episodes=10, max_steps=50)
@@ -339,21 +341,28 @@ def test_a_neighbour_that_is_gone_or_refuses_the_tick_is_waited_for_no_more():
 
 
 def test_shared_table_updates_are_written_and_entries_outside_the_tables_refused():
-    """Entries beyond this learner's tables are refused, and so is a whole group whose values
-    are not as many as its entries; the rest is written."""
+    """Entries beyond this learner's tables are refused, and values not finite or beyond a
+    reward's bounds, and a whole group whose values are not as many as its entries; the rest
+    is written."""
     assert CONFIG.shared
     protocol = ready()
+    [uneven] = pack_updates((8 * 5, 8 * 5 + 1), (3.0, 3.0))
     payload = encode(Observation(
         run="proto", tick=0, sender=WORLD_SENDER, agent=0, episode=0, step=0, position=(1, 1),
         goal=(5, 5), neighbours=(), rank=0, reward_ds=0.0, reward_ca=10.0, collided=False,
         arrived=False, episode_end=False,
-        updates=(((7 * 5 + 1, 441 * 5 + 3), (20.5, -1.5)), ((441 * 6 * 5,), (1.0,)),
-                 ((8 * 5, 8 * 5 + 1), (3.0,)))))
+        updates=(pack_updates((7 * 5 + 1, 441 * 5 + 3), (20.5, -1.5))
+                 + pack_updates((441 * 6 * 5,), (1.0,))
+                 + ((uneven[0], uneven[1][:8]),)
+                 + pack_updates((9 * 5, 9 * 5 + 1, 9 * 5 + 2, 9 * 5 + 3),
+                                (math.nan, math.inf, -2e6, 7.5)))))
     assert "SendIntent" in kinds(protocol.on_observation(payload, 0.0))
     q_ds, q_ca = protocol.brain.learner.tables()
-    assert q_ds[7, 1] == 20.5 and q_ca[0, 3] == -1.5
+    assert q_ds[7, 1] == 20.5 and q_ca[0, 3] == -1.5 and q_ds[9, 3] == 7.5
     assert q_ds[8, 0] == q_ds[8, 1] == CONFIG.optimistic, "the uneven group is not written"
+    assert (q_ds[9, :3] == CONFIG.optimistic).all(), "nor a value not finite, or out of bounds"
     assert protocol.inbox.rejections["bad-update"] == 1, "Q_CA has 882 rows here, not 2646"
+    assert protocol.brain.rejected_updates == 1 + 2 + 3
 
 
 def test_a_token_of_an_agent_outside_the_run_is_rejected_and_never_asked():

@@ -32,6 +32,8 @@ from nnql_swarm.protocol.messages import (
     Rejected,
     agent_sender,
     encode,
+    pack_updates,
+    unpack_group,
     parse,
     to_wire,
 )
@@ -126,7 +128,7 @@ def test_an_intent_with_its_order_of_moves_round_trips():
     for order in ((3,), (3, 0), (3, 0, 4), (3, 4, 2, 1, 0), (RIGHT, STAY, UP, DOWN, LEFT)):
         msg = intent(order=order)
         payload = encode(msg)
-        assert msgpack.unpackb(payload) == ["intent/9", RUN, 7, "agent/2", 2, 1, 3, [], list(order),
+        assert msgpack.unpackb(payload) == ["intent/10", RUN, 7, "agent/2", 2, 1, 3, [], list(order),
                                             0]
         for form in (bytes, bytearray, memoryview, zenoh.ZBytes):
             back = parse(form(payload), Intent, RUN, key_agent=2)
@@ -142,11 +144,11 @@ def test_an_intent_with_its_order_of_moves_round_trips():
 
 
 def test_wire_format_is_an_array_of_the_tag_and_fields_in_order():
-    assert PROTOCOL_VERSION == 9
+    assert PROTOCOL_VERSION == 10
     wire = msgpack.unpackb(encode(intent()))
-    assert wire == ["intent/9", RUN, 7, "agent/2", 2, 1, 3, [], [], 0]
-    assert msgpack.unpackb(encode(control())) == ["control/9", RUN, 7, WORLD_SENDER, "shutdown"]
-    assert msgpack.unpackb(encode(obs()))[0] == "obs/9"
+    assert wire == ["intent/10", RUN, 7, "agent/2", 2, 1, 3, [], [], 0]
+    assert msgpack.unpackb(encode(control())) == ["control/10", RUN, 7, WORLD_SENDER, "shutdown"]
+    assert msgpack.unpackb(encode(obs()))[0] == "obs/10"
     assert msgpack.unpackb(encode(obs(world=3)))[-1] == 3
     assert msgpack.unpackb(encode(answer()))[-1] == [[0, 4], [5, 0]]
     assert MESSAGES == KINDS
@@ -444,6 +446,11 @@ cells = st.tuples(coords, coords)
 rewards = st.floats(-1e6, 1e6, allow_nan=False) | st.integers(-(10**6), 10**6).map(float)
 
 
+_update_groups = st.integers(0, 4).flatmap(lambda k: st.tuples(
+    st.binary(min_size=2 * k, max_size=2 * k), st.binary(min_size=8 * k, max_size=8 * k)))
+"""A group of the shared table's updates, packed: its content is the receiver's to check."""
+
+
 @st.composite
 def observations(draw, run=None):
     agent = draw(agents)
@@ -454,6 +461,7 @@ def observations(draw, run=None):
         neighbours=tuple((i, draw(coords), draw(coords)) for i in ids), rank=draw(agents),
         reward_ds=draw(rewards), reward_ca=draw(rewards), collided=draw(st.booleans()),
         arrived=draw(st.booleans()), episode_end=draw(st.booleans()), settled=draw(st.booleans()),
+        updates=tuple(draw(st.lists(_update_groups, max_size=2))),
     )
 
 
@@ -579,15 +587,16 @@ _bad_record_ints = (_wrong_types.filter(lambda v: not isinstance(v, list))  # [0
 _bad_rewards = _wrong_types.filter(lambda v: not (isinstance(v, list) and len(v) == 2)) \
     | st.lists(_bad_reward, min_size=2, max_size=2) \
     | st.lists(st.floats(-1.0, 1.0), min_size=3, max_size=4)
-_entries = st.integers(0, (441 + 441 * 6) * 5 - 1)
+_not_binary = _wrong_types.filter(lambda v: not isinstance(v, bytes))
 _bad_updates = (
     _wrong_types.filter(lambda v: not isinstance(v, list) or v)
-    | st.tuples(_bad_int | _out_of(0, (441 + 441 * 6) * 5), st.floats(-1e6, 1e6))
-    .map(lambda t: [[[t[0]], [t[1]]]])
-    | st.tuples(_entries, _bad_reward).map(lambda t: [[[t[0]], [t[1]]]])
-    | _entries.map(lambda e: [[[e]]])  # entries without their values
+    | st.tuples(_not_binary, st.binary(max_size=8)).map(lambda t: [list(t)])  # entries unpacked
+    | st.tuples(st.binary(max_size=8), _not_binary).map(lambda t: [list(t)])  # values unpacked
+    | st.binary(max_size=8).map(lambda e: [[e]])  # entries without their values
     | _wrong_types.filter(lambda v: not isinstance(v, list) or v).map(lambda v: [v])
-    | _wrong_types.filter(lambda v: not isinstance(v, list)).map(lambda v: [[v, []]])
+    | st.binary(max_size=9).filter(lambda e: len(e) % 2).map(lambda e: [[e, b""]])  # cut short
+    | st.binary(max_size=15).filter(lambda v: len(v) % 8).map(lambda v: [[b"", v]])
+    | st.just([[bytes(2 * MAX_AGENTS + 2), bytes(8 * MAX_AGENTS + 8)]])  # a group too long
 )
 _bad_record = (
     _wrong_types.filter(lambda v: not isinstance(v, list) or v)
@@ -719,8 +728,8 @@ REFERENCE_KINDS = {  # the kind, then the fields in wire order
     Answer: "answer run tick sender agent episode action relayed",
     Control: "control run tick sender command",
 }
-REFERENCE_VERSION = "9"
-REFERENCE_TAGS = {"obs/9", "intent/9", "answer/9", "control/9"}  # protocol version 9
+REFERENCE_VERSION = "10"
+REFERENCE_TAGS = {"obs/10", "intent/10", "answer/10", "control/10"}  # protocol version 10
 FROM_AGENTS = (Intent, Answer)
 AGENT_LISTS = ("neighbours", "relayed")
 REFERENCE_FIELDS = {
@@ -739,10 +748,8 @@ REFERENCE_FIELDS = {
     "parked": lambda v: type(v) is list and len(v) <= MAX_AGENTS
     and all(_is_int(a, 0, MAX_AGENTS) for a in v),
     "updates": lambda v: type(v) is list and len(v) <= MAX_AGENTS + 2 and all(
-        type(g) is list and len(g) == 2 and type(g[0]) is list and type(g[1]) is list
-        and len(g[0]) <= MAX_AGENTS and len(g[1]) <= MAX_AGENTS
-        and all(_is_int(e, 0, (441 + 441 * 6) * 5) for e in g[0])
-        and all(_is_reward(x) for x in g[1]) for g in v),
+        type(g) is list and len(g) == 2 and type(g[0]) is bytes and type(g[1]) is bytes
+        and len(g[0]) <= 2 * MAX_AGENTS and len(g[1]) <= 8 * MAX_AGENTS for g in v),
     "order": lambda v: type(v) is list and len(v) <= 5 and all(_is_int(a, 0, 5) for a in v),
     "record": lambda v: type(v) is list and len(v) <= 1 and all(
         type(e) is list and len(e) == 2 and _is_record_ints(e[0]) and _is_reward_pair(e[1])
@@ -757,9 +764,10 @@ def _refuse(*_):
 
 def _strict_unpack(payload: bytes):
     """msgpack (the other library) with no maps, no ext types, and the protocol's lengths:
-    strings of at most 256 characters, binaries of 256 bytes, arrays of MAX_AGENTS items."""
+    strings of at most 256 characters, binaries of 8 bytes a value of MAX_AGENTS, arrays of
+    MAX_AGENTS items."""
     d = msgpack.unpackb(payload, raw=False, ext_hook=_refuse, max_ext_len=0, object_hook=_refuse,
-                        max_map_len=0, max_bin_len=256, max_array_len=MAX_AGENTS)
+                        max_map_len=0, max_bin_len=8 * MAX_AGENTS, max_array_len=MAX_AGENTS)
     stack = [d]
     while stack:
         v = stack.pop()
@@ -804,6 +812,8 @@ def reference_reason(payload: bytes, cls, run, key_agent=None) -> str | None:
         return "forged-sender"
     if cls in FROM_AGENTS and key_agent is not None and key_agent != m["agent"]:
         return "forged-sender"
+    if any(len(entries) % 2 or len(values) % 8 for entries, values in m.get("updates", ())):
+        return "bad-field:updates"  # packed entries of 2 bytes, values of 8: none cut short
     order = m.get("order")
     if order and (order[0] != m["action"] or sorted(set(order)) != sorted(order)):
         return "bad-field:order"  # an order: the action first, then each move at most once
@@ -953,25 +963,26 @@ def encoding_of(msg):
 
 
 def test_wire_bytes_are_pinned():
-    """The exact bytes of protocol version 8 (item order, int / float / bool types)."""
+    """The exact bytes of protocol version 10 (item order, int / float / bool / binary types)."""
     pinned = {
         obs():  # 20 items: an array 16 header; the world's incarnation last
-            "dc0014a56f62732f39a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
+            "dc0014a66f62732f3130a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
             "cb3fd0000000000000cb4024000000000000c2c2c29090c200",
-        obs(parked=(5,), updates=(((7, 2210), (0.5, 10)), ((), ())), world=2):
-            "dc0014a56f62732f39a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
-            "cb3fd0000000000000cb4024000000000000c2c2c2910592929207cd08a292cb3fe00000000000000a"
-            "929090c202",
+        obs(parked=(5,), updates=pack_updates((7, 2210), (0.5, 10)) + ((b"", b""),), world=2):
+            "dc0014a66f62732f3130a572756e2d3107a5776f726c6402010692030492090992930003059305010101"
+            "cb3fd0000000000000cb4024000000000000c2c2c29105"
+            "9292c4040700a208c410000000000000e03f0000000000002440"  # uint16 and float64, LE
+            "92c400c400c202",
         answer(run=RUN, tick=3, episode=0, action=1, relayed=((0, 4), (1, 0))):
-            "98a8616e737765722f39a572756e2d3103a76167656e742f3202000192920004920100",
+            "98a9616e737765722f3130a572756e2d3103a76167656e742f3202000192920004920100",
         intent():  # 10 items: the record, then the order, both empty, then the world's
-            "9aa8696e74656e742f39a572756e2d3107a76167656e742f32020103909000",
+            "9aa9696e74656e742f3130a572756e2d3107a76167656e742f32020103909000",
         intent(order=(3, 0, 4)):  # the order: the action (3) first, then 0, then 4
-            "9aa8696e74656e742f39a572756e2d3107a76167656e742f32020103909303000400",
+            "9aa9696e74656e742f3130a572756e2d3107a76167656e742f32020103909303000400",
         control():
-            "95a9636f6e74726f6c2f39a572756e2d3107a5776f726c64a873687574646f776e",
+            "95aa636f6e74726f6c2f3130a572756e2d3107a5776f726c64a873687574646f776e",
         control(run="r" * 64, tick=2**40):  # str 8 (as use_bin_type gives) and uint 64
-            "95a9636f6e74726f6c2f39d940" + "72" * 64
+            "95aa636f6e74726f6c2f3130d940" + "72" * 64
             + "cf0000010000000000a5776f726c64a873687574646f776e",
     }
     for msg, hexed in pinned.items():
@@ -979,7 +990,7 @@ def test_wire_bytes_are_pinned():
         assert parse(bytes.fromhex(hexed), type(msg), msg.run) == msg
         assert msgpack.unpackb(bytes.fromhex(hexed)) == [TAG[type(msg)], *_as_lists(values(msg))]
     assert msgpack.unpackb(bytes.fromhex(pinned[intent(order=(3, 0, 4))])) == [
-        "intent/9", RUN, 7, "agent/2", 2, 1, 3, [], [3, 0, 4], 0]
+        "intent/10", RUN, 7, "agent/2", 2, 1, 3, [], [3, 0, 4], 0]
 
 
 @given(any_message, st.sampled_from([bytes, bytearray, memoryview, zenoh.ZBytes]))
@@ -1013,9 +1024,11 @@ def test_numpy_values_lists_str_subclasses_and_ints_for_floats_go_on_the_wire_pl
 # Values a field may be given, valid or not, each tried in every field of every kind, both ways.
 _EDGES = [
     None, "", "x", "world", "agent/2", "shutdown", "obs/8", "intent/8", "control/8", "answer/8",
-    "obs/7", "intent/7", "intent/6", "control/7", "intent/10", "obs/9", "intent/9",
-    "x" * messages.MAX_STR_LEN,
-    "x" * (messages.MAX_STR_LEN + 1), b"x",
+    "obs/7", "intent/7", "intent/6", "control/7", "intent/10", "obs/9", "intent/9", "obs/10",
+    "intent/11", "x" * messages.MAX_STR_LEN,
+    "x" * (messages.MAX_STR_LEN + 1), b"x", b"", bytes(8), bytes(8 * MAX_AGENTS + 1),
+    ((b"\x07\x00", bytes(8)),), ((b"\x07", bytes(8)),), ((b"\x07\x00", bytes(7)),),
+    ((b"", b""), (b"", b"")), ((bytes(2 * MAX_AGENTS + 2), b""),), ((b"",),),
     0, 1, 2, 4, 5, -1, MAX_GRID - 1, MAX_GRID, MAX_AGENTS - 1, MAX_AGENTS, MAX_TICK - 1, MAX_TICK,
     2**63, 2**64 - 1, -(2**63), True, False, 0.0, -0.0, 1.0, 2.0, 0.25, 1e6, -1e6,
     math.nextafter(1e6, math.inf), -(10**6) - 1, math.nan, math.inf, -math.inf,
@@ -1220,7 +1233,7 @@ def test_a_new_kind_is_declared_by_its_class_alone(monkeypatch):
     assert msgpack.unpackb(encode(Plan(RUN, 7, "agent/2", 2, ())))[-1] == []
     good = Plan(RUN, 7, "agent/2", 2, ((0, 1, 1, True), (5, 2, 2, False)), (1, 4))
     payload = encode(good)
-    assert msgpack.unpackb(payload) == ["plan/9", RUN, 7, "agent/2", 2,
+    assert msgpack.unpackb(payload) == ["plan/10", RUN, 7, "agent/2", 2,
                                         [[0, 1, 1, True], [5, 2, 2, False]], [1, 4]]
     assert parse(payload, Plan, RUN, key_agent=2) == good
     for change, reason in [
@@ -1295,3 +1308,17 @@ def test_encode_and_parse_from_many_threads_at_once():
         results = list(pool.map(round_trip, msgs))
     assert [p for p, _ in results] == expected
     assert [m for _, m in results] == msgs
+
+
+def test_the_shared_tables_updates_travel_packed_and_a_packing_cut_short_is_refused():
+    """Protocol 10: each group of updates is two binaries, its entries as little-endian uint16
+    and their values as float64, at most MAX_AGENTS entries a group; a binary whose length is
+    not a whole number of them is refused."""
+    many = pack_updates(range(MAX_AGENTS + 1), [0.25] * (MAX_AGENTS + 1))
+    assert [len(unpack_group(group)[0]) for group in many] == [MAX_AGENTS, 1]
+    msg = obs(updates=pack_updates((7, 2210), (0.5, -1e6)))
+    assert parse(encode(msg), Observation, RUN) == msg
+    entries, values = unpack_group(msg.updates[0])
+    assert entries.tolist() == [7, 2210] and values.tolist() == [0.5, -1e6]
+    for cut in ((b"\x07", bytes(8)), (b"\x07\x00", bytes(7)), (b"", bytes(9))):
+        assert reason_of(encode(obs(updates=(cut,))), Observation) == "bad-field:updates"

@@ -6,12 +6,14 @@ import numpy as np
 import pytest
 
 from nnql_swarm.learning.tables import Learner
-from nnql_swarm.learning.record import write_updates
+from nnql_swarm.learning.record import write_entries, write_updates
 from nnql_swarm.protocol import keys
 from nnql_swarm.protocol.actions import DOWN, LEFT, RIGHT, STAY, UP
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
-from nnql_swarm.protocol.messages import CONTROL_SHUTDOWN, Intent, agent_sender, encode
+from nnql_swarm.protocol.messages import (
+    CONTROL_SHUTDOWN, Intent, agent_sender, encode, pack_updates, unpack_group,
+)
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
 from nnql_swarm.world.world_machine import (
     SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, TRANSITIONS, Event, Phase, WorldMachine,
@@ -231,7 +233,7 @@ def test_shared_records_are_checked_once_applied_in_the_world_and_their_changes_
     [closed] = [e for e in effects if isinstance(e, TickClosed)]
     assert closed.report.missed == ()
     [batch] = [e for e in effects if isinstance(e, SendObservations)]
-    assert [obs.updates for obs, _ in batch.observations] == [(((7 * 5 + 1,), (20.5,)),)] * 2
+    assert [obs.updates for obs, _ in batch.observations] == [pack_updates((7 * 5 + 1,), (20.5,))] * 2
     q_ds, _ = protocol.world.table.tables()
     assert q_ds[7, 1] == 20.5 and (q_ds == 25.0).sum() == q_ds.size - 1
 
@@ -281,7 +283,8 @@ def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_
     alive(protocol, 1, 0.3)
     assert protocol.world.syncing == (), "not before it shows it hears the observations"
     [batch] = [e for e in effects if isinstance(e, SendObservations)]
-    write_updates(stale.entries, dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates)
+    write_updates(stale.entries, dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates,
+                  write_entries)
     effects = tick(5)
     assert protocol.world.syncing == (1,)
     slices = 0
@@ -290,11 +293,12 @@ def test_an_agent_that_comes_back_is_sent_the_whole_table_until_its_copy_is_the_
         observed = {obs.agent: obs for obs, _ in batch.observations}
         assert len(observed[0].updates) <= 1, "the agent that stayed gets the tick's group only"
         slices += len(observed[1].updates) > 1
-        write_updates(stale.entries, observed[1].updates)
+        write_updates(stale.entries, observed[1].updates, write_entries)
         effects = tick(number)
     assert slices == -(-entries // 2048) and protocol.world.syncing == ()
     [batch] = [e for e in effects if isinstance(e, SendObservations)]
-    write_updates(stale.entries, dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates)
+    write_updates(stale.entries, dict((obs.agent, obs) for obs, _ in batch.observations)[1].updates,
+                  write_entries)
     world_q_ds, world_q_ca = protocol.world.table.tables()
     q_ds, q_ca = stale.tables()
     assert (world_q_ds != 25.0).sum() > 10, "the world learned meanwhile"
@@ -432,8 +436,9 @@ def test_a_quiet_agent_hears_the_table_entries_it_missed_at_its_next_observation
     [(tick, obs)] = sent_to_0
     assert len(written) == QUIET_CATCH_UP == 2 * (tick + 1) and obs.settled
     heard = {}
-    for indices, values in obs.updates:
-        heard.update(zip(indices, values))
+    for group in obs.updates:
+        indices, values = unpack_group(group)
+        heard.update(zip(indices.tolist(), values.tolist()))
     assert heard == written, "every missed entry, with its value now"
     world.settled = frozenset()  # the end tick: it is sent its observation as everyone
     world._updates = ()

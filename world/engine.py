@@ -34,7 +34,9 @@ import numpy as np
 from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import flags, floats, ints, python_values
-from nnql_swarm.protocol.messages import MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation
+from nnql_swarm.protocol.messages import (
+    MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation, unpack_group,
+)
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
     FIELD_COLUMNS, ROW_GOALS, TASK_COLUMNS, task_columns, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD,
@@ -207,12 +209,15 @@ class SwarmWorld:
         n, tick = self.config.n_agents, self.tick
         neighbours = self._neighbours()
         quiet = self.settled.difference(self._syncing)
+        changed = None  # the entries the tick's updates name, read once a quiet agent needs them
         for rank in range(n):
             agent = (rank + tick) % n  # the inverse of priority_rank
             if agent in quiet:
+                if changed is None:
+                    changed = [entry for group in self._updates
+                               for entry in unpack_group(group)[0].tolist()]
                 unheard = self._unheard.setdefault(agent, set())
-                for entries, _ in self._updates:
-                    unheard.update(entries)
+                unheard.update(changed)
                 if len(unheard) < QUIET_CATCH_UP:
                     continue
             yield self._observation(agent, neighbours(agent))

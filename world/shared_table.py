@@ -27,10 +27,10 @@ from nnql_swarm.learning import ahead
 from nnql_swarm.learning.record import record_entries, record_is_valid
 from nnql_swarm.learning.tables import Learner, buffer_makers
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.messages import MAX_AGENTS
+from nnql_swarm.protocol.messages import pack_updates
 
-Updates = tuple[tuple[tuple[int, ...], tuple[float, ...]], ...]
-"""Groups of entry indices and their new values (``protocol.messages.Updates``)."""
+Updates = tuple[tuple[bytes, bytes], ...]
+"""Groups of packed entry indices and their new values (``protocol.messages.Updates``)."""
 
 
 class SharedState(NamedTuple):
@@ -42,13 +42,6 @@ class SharedState(NamedTuple):
     q_ds: np.ndarray
     q_ca: np.ndarray
     records: tuple[tuple[int, tuple[int, ...], tuple[float, ...]], ...] = ()
-
-
-def _groups(indices: list[int], values: list[float]) -> Updates:
-    """Entries and their values as update groups of at most :data:`MAX_AGENTS` entries (the
-    most a group holds)."""
-    return tuple((tuple(indices[k:k + MAX_AGENTS]), tuple(values[k:k + MAX_AGENTS]))
-                 for k in range(0, len(indices), MAX_AGENTS))
 
 
 class SharedTable:
@@ -87,13 +80,13 @@ class SharedTable:
 
     def current(self, entries: list[int]) -> Updates:
         """The current values of ``entries``, as update groups."""
-        return _groups(entries, self._learner.entries[entries].tolist())
+        return pack_updates(entries, self._learner.entries[entries])
 
     def chunk(self, start: int, count: int) -> Updates:
         """The current values of entries ``start`` to ``start + count - 1`` (fewer at the end),
         as update groups."""
         stop = min(start + count, self.entries)
-        return _groups(list(range(start, stop)), self._learner.entries[start:stop].tolist())
+        return pack_updates(range(start, stop), self._learner.entries[start:stop])
 
     def tables(self) -> tuple[np.ndarray, np.ndarray]:
         """``Q_DS`` and ``Q_CA`` as arrays (copies)."""
