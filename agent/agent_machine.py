@@ -130,6 +130,7 @@ class AgentMachine(QueryAnswering, Machine):
         self.held = []
         self.standing = {}
         self.standing_seen: dict[int, int] = {}
+        self.standing_review_at = self.standing_reviewed = -1
         self.intents: dict[int, negotiation.TickIntents] = {}  # tick -> what was learned of it
         self.asks: dict[int, OpenAsk] = {}
         self.next_ask = 0

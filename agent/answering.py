@@ -12,7 +12,9 @@ on every agent near it, opens another when they come near again). So an agent ho
 standing queries of the agents around it, not of the whole swarm. The state lives on the
 machine, which sets it; :class:`QueryAnswering` declares what it reads and writes: ``held``,
 ``standing``, ``standing_seen``, and the decided tick's ``decided_tick``, ``decided_answer``,
-its ``decided_payload``, ``decided_waiters`` and ``decided_near``.
+its ``decided_payload``, ``decided_waiters`` and ``decided_near``; and, for itself, when the
+standing queries are next looked over for one to end (``standing_review_at``,
+``standing_reviewed``).
 """
 
 from nnql_swarm.protocol import keys
@@ -51,6 +53,8 @@ class QueryAnswering(Machine):
     held: list[tuple[int, int, int]]  # (tick, asker's rank, query)
     standing: dict[int, int]  # asker -> its standing query on this agent
     standing_seen: dict[int, int]  # asker -> the last decided tick it was near
+    standing_review_at: int  # no standing query can end before this decided tick
+    standing_reviewed: int  # the decided tick of the last look, to tell a world come back
 
     @any_phase_input
     def on_query(self, query: int, parameters, now: float) -> None:
@@ -107,13 +111,19 @@ class QueryAnswering(Machine):
         if old is not None:
             out.append(EndQuery(old))
         self.standing[asker] = query
-        self.standing_seen[asker] = max(since - 1, self.decided_tick)
+        last = self.standing_seen[asker] = max(since - 1, self.decided_tick)
+        if last > self.decided_tick:  # from a tick ahead: counted from the next decision
+            self.standing_review_at = -1
+        else:
+            self.standing_review_at = min(self.standing_review_at,
+                                          last + STANDING_UNSEEN_TICKS + 1)
         if since <= self.decided_tick and asker in self.decided_waiters:
             self._out.append(self._decided_reply(query))
 
     def _answer_standing_queries(self) -> None:
         """Answer the standing queries owed at the decided tick, the next in rank first, and
-        end those of askers away for :data:`STANDING_UNSEEN_TICKS`."""
+        end those of askers away for :data:`STANDING_UNSEEN_TICKS`: looked over only from the
+        first tick at which one can be (or after a world that came back replayed the ticks)."""
         standing, seen, out, tick = self.standing, self.standing_seen, self._out, self.decided_tick
         for asker in self.decided_waiters:
             query = standing.get(asker)
@@ -122,12 +132,17 @@ class QueryAnswering(Machine):
         for j, _, _ in self.decided_near:
             if j in seen:
                 seen[j] = tick
+        replayed = tick < self.standing_reviewed  # a world that came back replays tick numbers
+        self.standing_reviewed = tick
+        if tick < self.standing_review_at and not replayed:
+            return
         for asker, last in list(seen.items()):
-            if last > tick:  # a world that came back replays tick numbers
+            if last > tick:
                 seen[asker] = tick
             elif tick - last > STANDING_UNSEEN_TICKS:
                 del seen[asker]
                 out.append(EndQuery(standing.pop(asker)))
+        self.standing_review_at = min(seen.values(), default=tick) + STANDING_UNSEEN_TICKS + 1
 
     def _answer_held(self) -> None:
         """Answer what was asked for the decided tick, the next in rank first: its decision

@@ -9,8 +9,13 @@ calls to take about 0.2 s. With ``--baseline FILE``, another version of ``protoc
 messages, in alternating order, after both are checked to give the same bytes and messages; the
 ratio is the median of each repeat's own baseline / current ratio (above 1: the current is faster).
 
+``--updates N`` gives the observation N entries of the shared table's updates, as a
+64-agent observation carries some 150 (packed where the codec packs them, protocol 10 on; a
+sequence of numbers each before).
+
     python -m bench.codec --repeats 5 --neighbours 4
     python -m bench.codec --repeats 9 --baseline /tmp/messages_main.py
+    python -m bench.codec --repeats 9 --neighbours 24 --updates 150 --baseline /tmp/messages_v9.py
 """
 
 import argparse
@@ -26,14 +31,25 @@ from nnql_swarm.protocol import messages
 RUN = "bench"
 
 
-def samples(codec: ModuleType, neighbours: int) -> list:
+def updates(codec: ModuleType, count: int) -> tuple:
+    """``count`` entries of the shared table and their values, as ``codec`` carries them."""
+    entries, values = range(7, 7 + 13 * count, 13), [25.0 - k / 8 for k in range(count)]
+    if not count:
+        return ()
+    if hasattr(codec, "pack_updates"):
+        return codec.pack_updates(entries, values)
+    return ((tuple(entries), tuple(values)),)  # protocol 9 and before: numbers
+
+
+def samples(codec: ModuleType, neighbours: int, entries: int = 0) -> list:
     """One typical message of each kind, for agent 0 (relaying as many intents as it sees)."""
     others = range(1, neighbours + 1)
     return [
         codec.Observation(run=RUN, tick=1234, sender=codec.WORLD_SENDER, agent=0, episode=12,
                           step=34, position=(3, 4), goal=(9, 1),
                           neighbours=tuple((j, j, 5) for j in others), rank=2, reward_ds=-0.25,
-                          reward_ca=0.0, collided=False, arrived=False, episode_end=False),
+                          reward_ca=0.0, collided=False, arrived=False, episode_end=False,
+                          updates=updates(codec, entries)),
         codec.Answer(run=RUN, tick=1234, sender=codec.agent_sender(0), agent=0, episode=12,
                      action=3, relayed=tuple((j, j % 5) for j in others)),
         codec.Intent(run=RUN, tick=1234, sender=codec.agent_sender(0), agent=0, episode=12,
@@ -83,12 +99,14 @@ def main() -> int:
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--neighbours", type=int, default=4,
                    help="agents in the observation's neighbours and the answer's relayed intents")
+    p.add_argument("--updates", type=int, default=0,
+                   help="entries of the shared table's updates in the observation")
     p.add_argument("--baseline", type=Path, help="another protocol/messages.py to time alongside")
     args = p.parse_args()
     codecs = [messages] + ([load(args.baseline)] if args.baseline else [])
     print(f"{'kind':>12} {'op':>7} {'µs':>6}" + (f" {'baseline µs':>11} {'ratio':>6}"
                                                   if args.baseline else "") + "  bytes")
-    for msgs in zip(*(samples(codec, args.neighbours) for codec in codecs)):
+    for msgs in zip(*(samples(codec, args.neighbours, args.updates) for codec in codecs)):
         payloads = [codec.encode(msg) for codec, msg in zip(codecs, msgs)]
         same_version = len({codec.PROTOCOL_VERSION for codec in codecs}) == 1
         assert not same_version or len(set(payloads)) == 1, "the baseline gives other bytes"

@@ -187,11 +187,33 @@ def test_standing_queries_go_to_the_agents_near_and_end_once_they_are_far():
         assert not any(isinstance(e, EndQuery) for e in effects)
     # and ends it once agent 1 has been farther for STANDING_UNSEEN_TICKS decided ticks
     ended = []
-    for tick in range(STANDING_UNSEEN_TICKS + 3, 2 * STANDING_UNSEEN_TICKS + 4):
-        ended += [e for e in answerer.on_observation(observation(tick, others=[(1, *far)]), 0.4)
-                  if isinstance(e, EndQuery)]
-    assert ended == [EndQuery(stream.ask)] and answerer.standing == {}
+    for tick in range(STANDING_UNSEEN_TICKS + 3, 2 * STANDING_UNSEEN_TICKS + 6):
+        ended += [(tick, e) for e in answerer.on_observation(
+            observation(tick, others=[(1, *far)]), 0.4) if isinstance(e, EndQuery)]
+    last_near = STANDING_UNSEEN_TICKS + 2
+    assert ended == [(last_near + STANDING_UNSEEN_TICKS + 1, EndQuery(stream.ask))]
+    assert answerer.standing == {}
     assert asker.on_ask_end(stream.ask, 0.5) == [] and asker.streams == {2: 2}
+
+
+def test_a_standing_query_is_ended_counting_from_the_ticks_a_world_that_came_back_replays():
+    """A world that comes back (``--resume``) numbers its ticks again from its checkpoint: an
+    asker last near at a later tick is taken as near at the first replayed tick, so its standing
+    query ends STANDING_UNSEEN_TICKS decided ticks after that one, not never; one opened
+    since a tick ahead is counted from the decided tick likewise."""
+    answerer = ready(agent=0)
+    for tick in range(300, 303):
+        answerer.on_observation(observation(tick, others=[(1, 2, 2)]), 0.1)
+    assert answerer.on_query(7, "since=303;from=1", 0.2) == []
+    assert answerer.on_query(8, "since=900;from=2", 0.2) == []  # far ahead
+    answerer.on_world(False, 1.0)
+    answerer.on_world(True, 2.0)
+    ended = []
+    for tick in range(0, STANDING_UNSEEN_TICKS + 3):
+        ended += [(tick, e) for e in answerer.on_observation(observation(tick), 3.0)
+                  if isinstance(e, EndQuery)]
+    assert sorted(ended, key=lambda e: e[1].query) == [
+        (STANDING_UNSEEN_TICKS + 1, EndQuery(7)), (STANDING_UNSEEN_TICKS + 1, EndQuery(8))]
 
 
 def test_a_settled_agent_sends_the_world_no_intent_unless_it_has_a_record():
