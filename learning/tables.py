@@ -73,8 +73,9 @@ class Learner:
 
     def record(self) -> tuple[tuple[int, ...], tuple[float, float]]:
         """The learning record just written, as it travels: its integers and its two rewards."""
-        ints = python_values(self.rec)
-        return tuple(ints[:REC_PAIRS + 2 * ints[REC_COUNT]]), tuple(python_values(self.rec_f))
+        rec = self.rec
+        written = python_values(rec[:REC_PAIRS + 2 * int(rec[REC_COUNT])])
+        return tuple(written), tuple(python_values(self.rec_f))
 
 
 def int_array(values) -> np.ndarray:
