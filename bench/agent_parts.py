@@ -7,8 +7,9 @@ the thread's CPU clock: its machine's handling of an observation and of an answe
 inside them the decision (``AgentBrain.act``, with ``prepare``: the shared table's updates
 written, the episode's noise drawn), the codec's decoding of each message, the negotiation's
 plan (``agent.negotiation.Planner``: whom to wait for and ask, whom to answer, the parked
-neighbours known to stay, the agents near enough to stream) and the encoding of answers and
-intents. Each
+neighbours known to stay, the agents near enough to stream), the answers through the standing
+queries it holds and their review (``AgentMachine._answer_standing_queries``) and the encoding
+of answers and intents. Each
 part's CPU time summed over the run, by observation, so the parts of one observation add up
 (a part also called on answers, as decoding, counts there too). Each timer costs about half a
 microsecond a call. Where the next microseconds are:
@@ -39,6 +40,7 @@ PARTS = (
     ("prepare (updates, noise)", brain.AgentBrain, "prepare"),
     ("decoding messages", inbox.Inbox, "decode"),
     ("the negotiation's plan", negotiation.Planner, "__call__"),
+    ("the standing queries answered", agent_machine.AgentMachine, "_answer_standing_queries"),
     ("encoding", agent_machine, "encode"),
 )
 """``(name, owner, attribute)``: each part, timed where the agent's machine calls it."""
