@@ -40,7 +40,7 @@ PARTS = (
     ("prepare (updates, noise)", brain.AgentBrain, "prepare"),
     ("decoding messages", inbox.Inbox, "decode"),
     ("the negotiation's plan", negotiation.Planner, "__call__"),
-    ("the standing queries answered", agent_machine.AgentMachine, "_answer_standing_queries"),
+    ("standing queries answered", agent_machine.AgentMachine, "_answer_standing_queries"),
     ("encoding", agent_machine, "encode"),
 )
 """``(name, owner, attribute)``: each part, timed where the agent's machine calls it."""
