@@ -10,9 +10,9 @@ and its neighbour rows, ``learning.neighbours.neighbour_rows_into``; the world's
 learning record, ``learning.expected.expected_record``, with every agent's plan of a tick at once,
 ``learning.plan.world_plans``, and the step that applies a record to the shared table,
 ``learning.record.apply_record``; and the write of the shared table's updates into an agent's
-copy, ``learning.record.write_entries``), into the kernel cache (``protocol.jit.cache_directory``: one
-directory per version of every kernel source), once per version; and finds them there
-(:func:`compiled`). A process that does not find it (not built yet, or built where no C compiler
+copy, ``learning.record.write_entries``), into the kernel cache
+(``protocol.jit.cache_directory``: one directory per version of every kernel source), once per
+version; and finds them there (:func:`compiled`). A process that does not find it (not built yet, or built where no C compiler
 was) runs them in plain Python: the same functions, the same results, slower.
 
     python -m nnql_swarm.learning.ahead     # build it (the launcher does, where it is missing)

@@ -50,21 +50,24 @@ def record_entries(ints) -> list[int]:
     return entries
 
 
-def write_updates(entries: np.ndarray, groups, write) -> int:
+def write_updates(entries: np.ndarray, groups, write, arrays: bool = True) -> int:
     """Write a shared table's updates (groups of packed entry indices and their values,
     ``protocol.messages.Updates``) into a learner's Q-values, both tables flat
     (``learning.tables.Learner.entries``), by ``write`` (:func:`write_entries`, as the process
-    runs it: ``learning.ahead``); returns how many it refused: every entry of a group whose
-    values are not as many as its entries, and those :func:`write_entries` refuses. The world
-    names an entry twice only with the same value, its value once the tick's records are all
-    applied (``world.shared_table``), so the order does not matter."""
+    runs it: ``learning.ahead``; in plain Python, ``arrays`` False, it reads lists); returns how
+    many it refused: every entry of a group whose values are not as many as its entries, and
+    those :func:`write_entries` refuses. The world names an entry twice only with the same
+    value, its value once the tick's records are all applied (``world.shared_table``), so the
+    order does not matter."""
     refused = 0
     for group in groups:
         indices, values = unpack_group(group)
         if len(indices) != len(values):
             refused += max(len(indices), len(values))
-        else:
+        elif arrays:
             refused += write(entries, indices, values, MAX_REWARD)
+        else:
+            refused += write(entries, indices.tolist(), values.tolist(), MAX_REWARD)
     return refused
 
 

@@ -15,10 +15,11 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.known_map import fresh_map, map_size
 from nnql_swarm.learning.learner import choose, decide, finish, make_way, planned_cell
 from nnql_swarm.learning.readings import ca_row, shield_mask
-from nnql_swarm.learning.record import apply_record, record_outcome
+from nnql_swarm.learning.record import apply_record, record_outcome, write_entries, write_updates
 from nnql_swarm.experiment.paper import PaperSettings, RunSpec, run_batch
 from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, N_STATES, RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.messages import pack_updates
 
 NEVER = 10**9
 """A random step so large that no action is random."""
@@ -368,3 +369,20 @@ def test_an_arrived_agent_makes_way_only_for_an_announced_move_into_its_cell():
     assert way(np.array([pusher, wall, stranger, below]), 4, ties) == LEFT
     other_wall = neighbour(10, 1, 2, next_cell=(1, 2))
     assert way(np.array([pusher, wall, other_wall, below]), 4, ties) == STAY
+
+
+def test_the_shared_tables_updates_are_written_alike_compiled_and_in_plain_python():
+    """``write_updates``: compiled, over the payload's arrays, and in plain Python, over lists,
+    the same entries written and the same refused: outside the tables, not finite, beyond a
+    reward's bounds, or in a group whose values are not as many as its entries."""
+    plain = write_entries.__dict__.get("py_func", write_entries)
+    [uneven] = pack_updates((5, 6), (1.0, 1.0))
+    groups = (pack_updates((3, 9, 4, 12, 7, 8), (0.5, 2.0, math.nan, -7.25, -math.inf, 1e6 + 1))
+              + ((uneven[0], uneven[1][:8]),) + pack_updates((1, 3), (-1e6, 1e6)))
+    written = []
+    for write, arrays in ((write_entries, True), (plain, False)):
+        entries = np.zeros(10)
+        assert write_updates(entries, groups, write, arrays) == 4 + 2
+        written.append(entries)
+    assert written[0].tolist() == written[1].tolist() == [
+        0.0, -1e6, 0.0, 1e6, 0.0, 0.0, 0.0, 0.0, 0.0, 2.0]
