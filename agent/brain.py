@@ -54,8 +54,7 @@ class AgentBrain:
         compiled ahead of time, by numba, or in plain Python (``learning.ahead``)."""
         self._arrays = self.decides != ahead.PLAIN  # its buffers: arrays where it is compiled
         self.learner = Learner(config, self._arrays)
-        self._write_entries, writes = ahead.compiled("write_entries")
-        self._writes_arrays = writes != ahead.PLAIN
+        self._write_entries, _ = ahead.compiled("write_entries")  # as the decision runs
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
         self.order: tuple[int, ...] = ()  # this tick's moves by preference (--arbitration pibt)
         self._pibt = config.arbitration == "pibt"
@@ -96,7 +95,7 @@ class AgentBrain:
         self._prepared = (obs.episode, obs.tick)
         if self.config.shared and obs.updates:
             self.rejected_updates += write_updates(self.learner.entries, obs.updates,
-                                                   self._write_entries, self._writes_arrays)
+                                                   self._write_entries, self._arrays)
         if ((obs.arrived and not self.config.step_aside) or obs.episode_end
                 or self._noise_episode == obs.episode):
             return
