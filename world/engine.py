@@ -35,7 +35,7 @@ from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import flags, floats, ints, python_values
 from nnql_swarm.protocol.messages import (
-    MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation, unpack_group,
+    MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation,
 )
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
@@ -47,6 +47,7 @@ from nnql_swarm.world.arbiter import Arbiter
 from nnql_swarm.world.tasks import goal_sequences, renew_goals
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
+from nnql_swarm.world.unheard import UnheardEntries
 
 SYNC_ENTRIES = MAX_SYNC_GROUPS * MAX_AGENTS
 """Table entries sent with each observation of an agent being resynchronised (2,048: about
@@ -121,7 +122,7 @@ class SwarmWorld:
             self._updates = self.table.apply({agent: (integers, rewards)
                                               for agent, integers, rewards in table.records})
         self._syncing: dict[int, int] = {}  # agent -> the first table entry it is sent next
-        self._unheard: dict[int, set[int]] = {}  # quiet agent -> the entries it missed
+        self._unheard = UnheardEntries(QUIET_CATCH_UP)  # what each quiet agent missed
         self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
@@ -166,7 +167,7 @@ class SwarmWorld:
         self.goals = scenario.goals
         self.ending = False
         self.settled: frozenset[int] = frozenset()  # see the module docstring
-        self._unheard = {}
+        self._unheard.clear()
         n, bodies = c.n_agents, c.n_bodies
         self._x[:] = scenario.starts[:, 0].tolist() + self._wall_x
         self._y[:] = scenario.starts[:, 1].tolist() + self._wall_y
@@ -209,17 +210,12 @@ class SwarmWorld:
         n, tick = self.config.n_agents, self.tick
         neighbours = self._neighbours()
         quiet = self.settled.difference(self._syncing)
-        changed = None  # the entries the tick's updates name, read once a quiet agent needs them
+        if quiet:
+            self._unheard.log_tick(self._updates)
         for rank in range(n):
             agent = (rank + tick) % n  # the inverse of priority_rank
-            if agent in quiet:
-                if changed is None:
-                    changed = [entry for group in self._updates
-                               for entry in unpack_group(group)[0].tolist()]
-                unheard = self._unheard.setdefault(agent, set())
-                unheard.update(changed)
-                if len(unheard) < QUIET_CATCH_UP:
-                    continue
+            if agent in quiet and self._unheard.quiet(agent):
+                continue
             yield self._observation(agent, neighbours(agent))
 
     def _observation(self, i: int, neighbours: tuple[tuple[int, int, int], ...]) -> Observation:
@@ -227,7 +223,7 @@ class SwarmWorld:
         r_ds, r_ca, collided, arrived = self._outcome
         parked = tuple(j for j, _, _ in neighbours if arrived[j]) if not c.step_aside else ()
         updates = self._updates
-        unheard = self._unheard.pop(i, None)
+        unheard = self._unheard.pop(i)
         if unheard or i in self._syncing:
             table = self.table
             assert table is not None, "only a shared table leaves entries to send"

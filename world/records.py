@@ -31,8 +31,8 @@ the decision, and the same ones for ``s'``), and the rows an agent decided with 
 those the check of its record of that tick read (kept for one tick), so a record costs one
 reading of its neighbours and one ``complete``, in one compiled call; whom each agent waited for
 and knew to stay, the world works out for every agent of a tick at once
-(:meth:`RecordCheck.plan_tick`, ``learning.plan.world_plans``) as it sends the observations
-(``bench/record_check.py``).
+(:meth:`RecordCheck.plan_tick`, ``learning.plan.world_plans``) when the tick's first record needs
+them, not while every agent waits for the tick's observations (``bench/record_check.py``).
 """
 
 from dataclasses import dataclass
@@ -131,11 +131,12 @@ class RecordCheck:
         self._completed = np.zeros((size, NB_FIELDS), dtype=np.int64)
         self._counts = ints([0] * E_FIELDS)
         self._none, self._no_ids = np.zeros((0, 3), dtype=np.int64), ints([])
-        self._plans, _ = ahead.compiled("world_plans")
+        self._plan_kernel, _ = ahead.compiled("world_plans")
         self._plan_scratch = np.zeros((SCRATCH, n + 1), dtype=np.int64)  # world_plans' buffers
         self._plan_out = np.zeros((PLAN_PARTS, n + 1), dtype=np.int64)
         self._plan_counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
-        self._tick_plans: dict[int, tuple] = {}  # tick -> every agent's plan (plan_tick)
+        self._tick_sights: dict[int, tuple] = {}  # tick -> what its plans are worked out from
+        self._tick_plans: dict[int, tuple] = {}  # tick -> every agent's plan, once worked out
         self._parks = not config.step_aside  # arrived agents park: wait for nobody, and stay
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
@@ -155,29 +156,45 @@ class RecordCheck:
 
     def plan_tick(self, tick: int, x: np.ndarray, y: np.ndarray, arrived: np.ndarray,
                   sees_all: bool, ending: bool) -> None:
-        """Work out what the world reads of every agent's plan at ``tick`` at once
-        (``learning.plan.world_plans``), from the agents' cells and arrivals as the tick's
-        observations show them (``SwarmWorld.sight``): kept for this tick and the next."""
+        """Keep what the world reads of every agent's plan at ``tick``: the agents' cells and
+        arrivals as the tick's observations show them (``SwarmWorld.sight``), for this tick and
+        the next. The plans themselves (``learning.plan.world_plans``, every agent's at once) are
+        worked out when a record first reads them (:meth:`_negotiated`), not as the tick's
+        observations are sent: between the last intent of a tick and the next observations every
+        agent waits for the world."""
+        self._tick_sights[tick] = (x, y, arrived, sees_all, ending)
+        self._tick_sights.pop(tick - 2, None)
+        self._tick_plans.pop(tick - 2, None)
+
+    def _plans(self, tick: int) -> tuple:
+        """Every agent's plan at ``tick`` (:meth:`plan_tick`), worked out at the first call."""
+        plans = self._tick_plans.get(tick)
+        if plans is None:
+            sight = self._tick_sights.pop(tick, None)
+            assert sight is not None, f"tick {tick} checked without its plans"
+            plans = self._tick_plans[tick] = self._world_plans(tick, *sight)
+        return plans
+
+    def _world_plans(self, tick: int, x: np.ndarray, y: np.ndarray, arrived: np.ndarray,
+                     sees_all: bool, ending: bool) -> tuple:
         config, n = self.config, self.config.n_agents
         nbs, parkeds = np.empty((n, n, 3), dtype=np.int64), np.empty((n, n), dtype=np.int64)
         awaited, staying = np.empty((n, n), dtype=np.int64), np.empty((n, n), dtype=np.int64)
         ks, ps, n_awaited, n_staying = (np.empty(n, dtype=np.int64) for _ in range(4))
-        self._plans(x, y, arrived, n, sees_all, self._parks, tick, config.width, config.height,
-                    self.radius, config.meet_only, self._parks,
-                    self._negotiates and not ending, nbs, ks, parkeds, ps, self._plan_scratch,
-                    self._plan_out, self._plan_counts, awaited, n_awaited, staying, n_staying)
-        self._tick_plans[tick] = (nbs, ks.tolist(), parkeds, ps.tolist(), awaited,
-                                  n_awaited.tolist(), staying, n_staying.tolist())
-        self._tick_plans.pop(tick - 2, None)
+        self._plan_kernel(x, y, arrived, n, sees_all, self._parks, tick, config.width,
+                          config.height, self.radius, config.meet_only, self._parks,
+                          self._negotiates and not ending, nbs, ks, parkeds, ps,
+                          self._plan_scratch, self._plan_out, self._plan_counts, awaited,
+                          n_awaited, staying, n_staying)
+        return (nbs, ks.tolist(), parkeds, ps.tolist(), awaited, n_awaited.tolist(), staying,
+                n_staying.tolist())
 
     def _negotiated(self, obs: Observation) -> tuple:
         """Whom the agent waits for at ``obs`` and the arrived neighbours it knows stay
         (``agent.negotiation``), as arrays, with its neighbours ``(k, 3)`` and parked ids as
         the plan read them: from the plans of its tick (:meth:`plan_tick`), which the world
-        works out as it sends the tick's observations and keeps while a record may read them."""
-        plans = self._tick_plans.get(obs.tick)
-        assert plans is not None, f"tick {obs.tick} checked without its plans"
-        nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = plans
+        keeps while a record may read them."""
+        nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = self._plans(obs.tick)
         i = obs.agent
         return (awaited[i, :n_awaited[i]], staying[i, :n_staying[i]], nbs[i, :ks[i]],
                 parkeds[i, :ps[i]])

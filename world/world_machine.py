@@ -154,7 +154,7 @@ class WorldMachine(Machine):
         self.records = RecordCheck(config) if shared else None  # see _checked_records
         self.sent: dict = {}  # the open tick's observations, by agent, as they are sent
         self.sent_before: dict = {}  # the last tick's
-        self.decisions: dict[int, Decision] = {}  # the last tick's deciders, by agent
+        self.deciders: tuple = ({}, self.intents, set(), {})  # see _decision
         self.barred: set[int] = set()  # agents that sent a forged record since they started
         self.forged_at: list[tuple[int, int]] = []  # (agent, tick) of each forged record refused
         self.unchecked: set[int] = set()  # the open tick's records still to check
@@ -372,7 +372,7 @@ class WorldMachine(Machine):
         counted (a forged one bars the agent's later records until it restarts)."""
         record, check = self.learned[agent], self.records
         assert check is not None  # records are checked only where the swarm shares one table
-        decision, obs = self.decisions.get(agent), self.sent.get(agent)
+        decision, obs = self._decision(agent), self.sent.get(agent)
         if agent in self.barred:
             reason = BARRED
         elif (decision is None or obs is None or obs.episode != decision.obs.episode
@@ -393,15 +393,23 @@ class WorldMachine(Machine):
         self.inbox.reject(reason, f"agent {agent} at tick {self.world.tick}: {record!r:.100}")
 
     def _checked_records(self) -> dict[int, tuple]:
-        """The open tick's records, every one checked (:meth:`_check_record`); then this tick's
-        decisions, for the next tick's records."""
+        """The open tick's records, every one checked (:meth:`_check_record`); then what this
+        tick's decisions are read from, for the next tick's records (:meth:`_decision`)."""
         for agent in sorted(self.unchecked):
             self._check_record(agent, True)
-        intents, heard = self.intents, self.heard
-        self.decisions = {agent: Decision(obs, intents, self.sent_before.get(agent))
-                          for agent, obs in self.sent.items()
-                          if agent in heard and decides(obs, self.config.lifelong)}
+        self.deciders = (self.sent, self.intents, self.heard, self.sent_before)
         return self.learned
+
+    def _decision(self, agent: int) -> Decision | None:
+        """What the world saw of ``agent``'s decision at the last closed tick, where it heard
+        the agent decide: read when its record comes, not as the tick closes (every agent
+        waits for the world then). ``deciders``: that tick's observations, intents, agents
+        heard, and the observations of the tick before."""
+        sent, intents, heard, sent_before = self.deciders
+        obs = sent.get(agent)
+        if obs is None or agent not in heard or not decides(obs, self.config.lifelong):
+            return None
+        return Decision(obs, intents, sent_before.get(agent))
 
     def _close_run(self, now: float) -> None:
         """The run is complete: tell the agents until every live one has left (and
