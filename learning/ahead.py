@@ -8,8 +8,8 @@ time. This module builds the per-observation kernels so (:data:`EXPORTS`: an age
 ``learning.decision.agent_decision``, its negotiation's plan, ``learning.plan.negotiation_plan``,
 and its neighbour rows, ``learning.neighbours.neighbour_rows_into``; the world's check of a
 learning record, ``learning.expected.expected_record``, with every agent's plan of a tick at once,
-``learning.plan.world_plans``, and the step that applies a record to the shared table,
-``learning.record.apply_record``; and the write of the shared table's updates into an agent's
+``learning.plan.world_plans``, and the step that applies a tick's records to the shared table,
+``learning.record.apply_records``; and the write of the shared table's updates into an agent's
 copy, ``learning.record.write_entries``), into the kernel cache
 (``protocol.jit.cache_directory``: one directory per version of every kernel source), once per
 version; and finds them there (:func:`compiled`). A process that does not find it (not built yet, or built where no C compiler
@@ -41,7 +41,7 @@ from nnql_swarm.learning.neighbours import ROWS_SIGNATURE, neighbour_rows_into
 from nnql_swarm.learning.plan import (
     PLAN_SIGNATURE, WORLD_PLANS_SIGNATURE, negotiation_plan, world_plans,
 )
-from nnql_swarm.learning.record import APPLY_SIGNATURE, WRITE_SIGNATURE, apply_record, write_entries
+from nnql_swarm.learning.record import APPLY_SIGNATURE, WRITE_SIGNATURE, apply_records, write_entries
 from nnql_swarm.protocol.jit import COMPILED, MODE_VARIABLE, cache_directory
 
 log = logging.getLogger(__name__)
@@ -54,7 +54,7 @@ EXPORTS: dict[str, tuple[Callable, str]] = {
     "negotiation_plan": (negotiation_plan, PLAN_SIGNATURE),
     "neighbour_rows_into": (neighbour_rows_into, ROWS_SIGNATURE),
     "expected_record": (expected_record, EXPECTED_SIGNATURE),
-    "apply_record": (apply_record, APPLY_SIGNATURE),
+    "apply_records": (apply_records, APPLY_SIGNATURE),
     "world_plans": (world_plans, WORLD_PLANS_SIGNATURE),
     "write_entries": (write_entries, WRITE_SIGNATURE),
 }

@@ -39,15 +39,19 @@ def record_is_valid(ints, floats, ca_table_rows: int) -> bool:
             and max(following) + N_STATES * (blocks - 1) < ca_table_rows)
 
 
-def record_entries(ints) -> list[int]:
-    """The table entries a (valid) learning record writes, in the order :func:`apply_record`
-    writes them. An entry is named by its index among both tables stacked, five actions a row:
-    Q_DS's 441 rows, then Q_CA's (how a shared table's updates travel)."""
-    action = ints[REC_ACTION]
-    entries = [ints[REC_GOAL] * N_ACTIONS + action]
-    for k in range(ints[REC_COUNT]):
-        entries.append((N_STATES + ints[REC_PAIRS + 2 * k]) * N_ACTIONS + action)
-    return entries
+@kernel
+def record_entries_into(rec, out, at):
+    """Write the table entries a (valid) learning record writes into ``out`` from ``at`` on, in
+    the order :func:`apply_record` writes them; returns where they end. An entry is named by its
+    index among both tables stacked, five actions a row: Q_DS's 441 rows, then Q_CA's (how a
+    shared table's updates travel)."""
+    action = rec[REC_ACTION]
+    out[at] = rec[REC_GOAL] * N_ACTIONS + action
+    at += 1
+    for k in range(rec[REC_COUNT]):
+        out[at] = (N_STATES + rec[REC_PAIRS + 2 * k]) * N_ACTIONS + action
+        at += 1
+    return at
 
 
 def write_updates(entries: np.ndarray, groups, write, arrays: bool = True) -> int:
@@ -174,9 +178,22 @@ def apply_record(q_ds, q_ca, rec, rec_f, alpha, gamma):
         values[action] = current + alpha * (target - current)
 
 
-APPLY_SIGNATURE = "void(f8[:, ::1], f8[:, ::1], i8[::1], f8[::1], f8, f8)"
-""":func:`apply_record`'s types, as compiled ahead of time (``learning.ahead``): the world applies
-a shared table's records with it."""
+@kernel
+def apply_records(q_ds, q_ca, ints, starts, floats, count, alpha, gamma, written):
+    """Apply ``count`` valid records in order (record ``r``: its integers
+    ``ints[starts[r]:starts[r + 1]]``, its rewards ``floats[r]``) by :func:`apply_record`, and
+    write the entries each one wrote into ``written``, in order; returns how many."""
+    at = 0
+    for r in range(count):
+        rec = ints[starts[r]:starts[r + 1]]
+        apply_record(q_ds, q_ca, rec, floats[r], alpha, gamma)
+        at = record_entries_into(rec, written, at)
+    return at
+
+
+APPLY_SIGNATURE = "i8(f8[:, ::1], f8[:, ::1], i8[::1], i8[::1], f8[:, ::1], i8, f8, f8, i8[::1])"
+""":func:`apply_records`'s types, as compiled ahead of time (``learning.ahead``): the world applies
+a tick's records of a shared table with it."""
 
 
 @kernel

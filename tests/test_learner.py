@@ -1,7 +1,10 @@
 """The learner kernel: TD updates (Eq. 9, 10) by hand, the neighbour-state readings, Eq. 6-8,
 ties, the random step, the interaction radius, the shield, and the runs it plays."""
 
+import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -15,10 +18,13 @@ from nnql_swarm.learning.fields import (
 from nnql_swarm.learning.known_map import fresh_map, map_size
 from nnql_swarm.learning.learner import choose, decide, finish, make_way, planned_cell
 from nnql_swarm.learning.readings import ca_row, shield_mask
-from nnql_swarm.learning.record import apply_record, record_outcome, write_entries, write_updates
+from nnql_swarm.learning.record import (
+    apply_record, apply_records, record_outcome, write_entries, write_updates,
+)
 from nnql_swarm.experiment.paper import PaperSettings, RunSpec, run_batch
 from nnql_swarm.protocol.actions import DOWN, LEFT, N_ACTIONS, N_STATES, RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.jit import plain_python_environment
 from nnql_swarm.protocol.messages import pack_updates
 
 NEVER = 10**9
@@ -106,6 +112,52 @@ def test_apply_record_is_eq_9_then_eq_10_per_neighbour():
     rec[2] = 1  # terminal: no future
     apply_record(q_ds, q_ca, rec, np.array([1.0, 10.0]), 0.9, 0.6)
     assert q_ds[7, RIGHT] == pytest.approx(0.5 + 0.9 * (1.0 - 0.5))
+
+
+_RECORDS = [([7, RIGHT, 0, 9, 1, 2, 3, 4, 11, -1], [1.0, 10.0]),
+            ([9, UP, 1, 9, 5, 1, 3, 12], [-0.5, 2.0]),  # Q_CA row 3 again, and blocks of 5
+            ([7, RIGHT, 0, 7, 1, 0], [0.25, 0.0])]  # Q_DS row 7 again, no neighbour
+_APPLIED_IN_PLAIN_PYTHON = """
+import json, sys
+import numpy as np
+from nnql_swarm.learning.record import apply_records
+records, q_ds, q_ca = json.loads(sys.stdin.read())
+q_ds, q_ca = np.array(q_ds), np.array(q_ca)
+flat = [value for ints, _ in records for value in ints]
+starts = [0]
+for ints, _ in records:
+    starts.append(starts[-1] + len(ints))
+written = [0] * len(flat)
+n = apply_records(q_ds, q_ca, flat, starts, [floats for _, floats in records], len(records),
+                  0.9, 0.6, written)
+print(json.dumps([written[:n], q_ds.tolist(), q_ca.tolist()]))
+"""
+
+
+def test_a_ticks_records_are_applied_in_order_in_one_call_compiled_and_in_plain_python():
+    """``apply_records``: the records one after the other by ``apply_record``, each entry they
+    wrote named in the order they wrote it (both tables stacked, five actions a row): compiled
+    over arrays, and in plain Python (a process that runs the kernels uncompiled) over lists."""
+    expected_ds, expected_ca = np.zeros((N_STATES, N_ACTIONS)), np.zeros((N_STATES * 5, 5))
+    expected_ds[9], expected_ca[4] = [1.0, 2.0, 3.0, 0.0, -1.0], [0.0, 5.0, 0.0, 0.0, 0.0]
+    start_ds, start_ca = expected_ds.copy(), expected_ca.copy()
+    for ints, floats in _RECORDS:
+        apply_record(expected_ds, expected_ca, np.array(ints), np.array(floats), 0.9, 0.6)
+    entries = [7 * N_ACTIONS + RIGHT, (N_STATES + 3) * N_ACTIONS + RIGHT,
+               (N_STATES + 11) * N_ACTIONS + RIGHT, 9 * N_ACTIONS + UP,
+               (N_STATES + 3) * N_ACTIONS + UP, 7 * N_ACTIONS + RIGHT]
+    q_ds, q_ca = start_ds.copy(), start_ca.copy()
+    flat = np.array([value for ints, _ in _RECORDS for value in ints])
+    written = np.zeros(len(flat), dtype=np.int64)
+    n = apply_records(q_ds, q_ca, flat, np.array([0, 10, 18, 24]),
+                      np.array([floats for _, floats in _RECORDS]), 3, 0.9, 0.6, written)
+    assert written[:n].tolist() == entries
+    assert q_ds.tolist() == expected_ds.tolist() and q_ca.tolist() == expected_ca.tolist()
+    plain = subprocess.run([sys.executable, "-c", _APPLIED_IN_PLAIN_PYTHON],
+                           input=json.dumps([_RECORDS, start_ds.tolist(), start_ca.tolist()]),
+                           env=plain_python_environment(), capture_output=True, text=True,
+                           check=True)
+    assert json.loads(plain.stdout) == [entries, expected_ds.tolist(), expected_ca.tolist()]
 
 
 def test_one_step_updates_both_tables_as_eq_9_and_10():

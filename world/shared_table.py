@@ -3,9 +3,9 @@
 Each agent's intent carries its learning record of the tick. The world checks that every record
 fits the tables (:meth:`SharedTable.accepts`, as it takes the intent) and is the one the agent's
 own transition wrote (``world.records``) and, when the tick closes, applies those it believes
-in agent-id order with the learner's own ``apply_record`` (compiled ahead of time where it is
-built, ``learning.ahead``), the very step the simulator applies to its one table
-(``sim.episode``). The next observations then tell every agent which entries
+in agent-id order with the learner's own ``apply_record`` (all of a tick's in one call of
+``apply_records``, compiled ahead of time where it is built, ``learning.ahead``), the very step
+the simulator applies to its one table (``sim.episode``). The next observations then tell every agent which entries
 changed and their new values (:meth:`SharedTable.apply` returns them, in the order the records
 wrote them), and each agent writes them into its copy (``learning.record.write_updates``). All
 copies stay equal to this one and to the simulator's, and a tick costs every agent one write per
@@ -18,14 +18,16 @@ them, and every later change reaches the agent as an update, so once the last sl
 its copy equals this one.
 """
 
+from itertools import accumulate, chain
 from typing import NamedTuple
 
 import numpy as np
 
 from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA
 from nnql_swarm.learning import ahead
-from nnql_swarm.learning.record import record_entries, record_is_valid
-from nnql_swarm.learning.tables import Learner, buffer_makers
+from nnql_swarm.learning.fields import RF_FIELDS
+from nnql_swarm.learning.record import record_is_valid
+from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import pack_updates
 
@@ -49,8 +51,8 @@ class SharedTable:
 
     def __init__(self, config: SwarmConfig) -> None:
         self._learner = Learner(config)  # the tables an agent starts with, and its alpha, gamma
-        self._apply, how = ahead.compiled("apply_record")
-        self._record_buffers = buffer_makers(how != ahead.PLAIN)
+        self._apply, how = ahead.compiled("apply_records")
+        self._arrays = how != ahead.PLAIN  # the kernel reads arrays, else lists
         self.alpha = self._learner.params_f[FP_ALPHA]
         self.gamma = self._learner.params_f[FP_GAMMA]
 
@@ -63,22 +65,34 @@ class SharedTable:
     def apply(self, learned: dict[int, tuple]) -> Updates:
         """Apply the accepted records of a tick (``agent -> (integers, rewards)``) in agent-id
         order; the entries each one wrote, with their values once all are applied."""
+        if not learned:
+            return ()
+        records = [learned[agent] for agent in sorted(learned)]
+        starts = [0, *accumulate(len(integers) for integers, _ in records)]
+        ints = chain.from_iterable(integers for integers, _ in records)
+        floats = chain.from_iterable(rewards for _, rewards in records)
+        count, total = len(records), starts[-1]
         learner = self._learner
-        q_ds, q_ca = learner.q_ds, learner.q_ca
-        as_ints, as_floats = self._record_buffers
-        written: list[int] = []
-        for agent in sorted(learned):
-            integers, values = learned[agent]
-            self._apply(q_ds, q_ca, as_ints(integers), as_floats(values), self.alpha, self.gamma)
-            written.extend(record_entries(integers))
-        return self.current(written)
+        if self._arrays:
+            written = np.empty(total, dtype=np.int64)  # a record writes fewer entries than ints
+            n = self._apply(learner.q_ds, learner.q_ca, np.fromiter(ints, np.int64, total),
+                            np.array(starts, dtype=np.int64),
+                            np.fromiter(floats, np.float64, RF_FIELDS * count).reshape(count, -1),
+                            count, self.alpha, self.gamma, written)
+            return self.current(written[:n])
+        rewards = list(floats)
+        written_list = [0] * total
+        n = self._apply(learner.q_ds, learner.q_ca, list(ints), starts,
+                        [rewards[k:k + RF_FIELDS] for k in range(0, len(rewards), RF_FIELDS)],
+                        count, self.alpha, self.gamma, written_list)
+        return self.current(written_list[:n])
 
     @property
     def entries(self) -> int:
         """How many Q-values both tables hold (entry indices are 0 to this - 1)."""
         return len(self._learner.entries)
 
-    def current(self, entries: list[int]) -> Updates:
+    def current(self, entries) -> Updates:
         """The current values of ``entries``, as update groups."""
         return pack_updates(entries, self._learner.entries[entries])
 
