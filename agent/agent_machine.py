@@ -124,7 +124,7 @@ class AgentMachine(QueryAnswering, Machine):
         self.decided_short: dict[int, int] = {}  # episode -> its decisions short of an intent
         self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
         self.decided_waiters = []  # whom the decided tick's answer goes to by stream
-        self.decided_near: list[tuple[int, int, int]] = []  # the decided tick's Plan.near
+        self.decided_near: list[int] = []  # the decided tick's Plan.near
         self.decided_answer = None
         self.decided_payload = b""
         self.held = []
@@ -470,7 +470,7 @@ class AgentMachine(QueryAnswering, Machine):
         (``negotiation.Plan.near``) that has none; those agents end them once it is far
         (``agent.answering``)."""
         streams, peers = self.streams, self.peers_seen
-        new = [j for j, _, _ in self.decided_near if j not in streams and j in peers]
+        new = [j for j in self.decided_near if j not in streams and j in peers]
         if not new or since >= keys.MAX_TICK:
             return
         params = keys.standing_query_params(since, self.agent)

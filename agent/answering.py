@@ -49,7 +49,7 @@ class QueryAnswering(Machine):
     decided_answer: Answer | None  # set with decided_tick
     decided_payload: bytes
     decided_waiters: list[int]  # whom the decided tick's answer goes to by stream
-    decided_near: list[tuple[int, int, int]]  # Plan.near at the decided tick
+    decided_near: list[int]  # Plan.near at the decided tick
     held: list[tuple[int, int, int]]  # (tick, asker's rank, query)
     standing: dict[int, int]  # asker -> its standing query on this agent
     standing_seen: dict[int, int]  # asker -> the last decided tick it was near
@@ -129,7 +129,7 @@ class QueryAnswering(Machine):
             query = standing.get(asker)
             if query is not None:
                 out.append(self._decided_reply(query))
-        for j, _, _ in self.decided_near:
+        for j in self.decided_near:
             if j in seen:
                 seen[j] = tick
         replayed = tick < self.standing_reviewed  # a world that came back replays tick numbers

@@ -26,8 +26,8 @@ from nnql_swarm.learning.rows import NeighbourRows
 from nnql_swarm.learning.tables import Learner, buffer_makers
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import floats, rows
-from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.jit import floats, python_values, rows
+from nnql_swarm.protocol.messages import Observation, unpack_neighbours
 from nnql_swarm.protocol.seeding import AGENT_STREAM, stream_rng
 
 
@@ -157,19 +157,21 @@ class AgentBrain:
                         seen: tuple = (None, None)):
         """The learner's neighbour rows for this observation (:class:`NeighbourRows`), with
         DAQL's memory of the tick before."""
-        previous = self._previous_cells(obs)
+        previous = self._previous_cells(obs, seen[0])
         return self._rows(obs, answers, announcing, previous, self._was_at, *seen)
 
-    def _previous_cells(self, obs: Observation) -> dict[int, tuple[int, int]]:
+    def _previous_cells(self, obs: Observation, cells=None) -> dict[int, tuple[int, int]]:
         """DAQL's (the still shield's, and the hindrance's under ``--arbitration pibt``) memory:
         the neighbours' cells at the previous tick of this episode, where they were in view, and
-        the agent's own then (:attr:`_was_at`); and this tick's, for the next."""
+        the agent's own then (:attr:`_was_at`); and this tick's, for the next (``cells``: the
+        observation's neighbours as the plan read them, where the caller has them)."""
         params = self.learner.params
         if params[LP_READING] != READ_DAQL and not (params[LP_SHIELD] and params[LP_STILL_SHIELD]) \
                 and not self._pibt:
             return {}
-        tick, cells, was_at = self._seen
+        tick, before, was_at = self._seen
         recent = tick == obs.tick - 1 and obs.step > 0
         self._was_at = was_at if recent else None
-        self._seen = (obs.tick, {j: (jx, jy) for j, jx, jy in obs.neighbours}, obs.position)
-        return cells if recent else {}
+        rows = python_values(unpack_neighbours(obs.neighbours) if cells is None else cells)
+        self._seen = (obs.tick, {j: (jx, jy) for j, jx, jy in rows}, obs.position)
+        return before if recent else {}

@@ -11,11 +11,12 @@ ratio is the median of each repeat's own baseline / current ratio (above 1: the 
 
 ``--updates N`` gives the observation N entries of the shared table's updates, as a
 64-agent observation carries some 150 (packed where the codec packs them, protocol 10 on; a
-sequence of numbers each before).
+sequence of numbers each before); ``--neighbours K``, K neighbours (packed from protocol 11 on;
+an array of ``(id, x, y)`` arrays before).
 
     python -m bench.codec --repeats 5 --neighbours 4
     python -m bench.codec --repeats 9 --baseline /tmp/messages_main.py
-    python -m bench.codec --repeats 9 --neighbours 24 --updates 150 --baseline /tmp/messages_v9.py
+    python -m bench.codec --repeats 9 --neighbours 24 --updates 150 --baseline /tmp/messages_v10.py
 """
 
 import argparse
@@ -41,13 +42,21 @@ def updates(codec: ModuleType, count: int) -> tuple:
     return ((tuple(entries), tuple(values)),)  # protocol 9 and before: numbers
 
 
+def seen(codec: ModuleType, neighbours) -> object:
+    """An observation's neighbours ``(id, x, y)`` as ``codec`` carries them."""
+    if hasattr(codec, "pack_neighbours"):
+        return codec.pack_neighbours(neighbours)
+    return tuple(neighbours)  # protocol 10 and before: arrays
+
+
 def samples(codec: ModuleType, neighbours: int, entries: int = 0) -> list:
     """One typical message of each kind, for agent 0 (relaying as many intents as it sees)."""
     others = range(1, neighbours + 1)
     return [
         codec.Observation(run=RUN, tick=1234, sender=codec.WORLD_SENDER, agent=0, episode=12,
                           step=34, position=(3, 4), goal=(9, 1),
-                          neighbours=tuple((j, j, 5) for j in others), rank=2, reward_ds=-0.25,
+                          neighbours=seen(codec, [(j, j, 5) for j in others]), rank=2,
+                          reward_ds=-0.25,
                           reward_ca=0.0, collided=False, arrived=False, episode_end=False,
                           updates=updates(codec, entries)),
         codec.Answer(run=RUN, tick=1234, sender=codec.agent_sender(0), agent=0, episode=12,

@@ -26,10 +26,11 @@ P_FITS = PLAN_PARTS
 (:func:`fits_run`), else 0 and no plan."""
 
 S_XS, S_YS, S_RANKS, S_PARKED, S_CELL, S_WAITERS, S_WAITER_RANKS, S_MEMBERS, S_ORDER, \
-    S_COVERED, S_ASKS, SCRATCH = range(12)
+    S_COVERED, S_ASKS, S_SEEN, SCRATCH = range(13)
 """The rows of the scratch buffer, each with room for every neighbour and the agent: cells,
 ranks and whether parked of the agents a plan reads; each one's row in ``nb``; the waiters and
-their ranks; an ask's members, their order and which are covered; the asks."""
+their ranks; an ask's members, their order and which are covered; the asks; by agent id, which
+are among the neighbours (:func:`fits_run`: all 0 between calls)."""
 
 
 @kernel
@@ -48,17 +49,29 @@ def is_parked(j, parked, p):
 
 
 @kernel
-def fits_run(nb, k, parked, p, n, width, height):
-    """Whether every neighbour is one of the run's ``n`` agents on its grid, and every parked id
-    one of its agents (the codec checks that none is negative): compiled code reads its buffers
-    unchecked, so a forged observation must not reach it."""
+def fits_run(nb, k, parked, p, agent, n, width, height, seen):
+    """Whether every neighbour is one of the run's ``n`` agents on its grid, none twice and none
+    the agent itself (``agent``), and every parked id one of its agents: compiled code reads its
+    buffers unchecked, so a forged observation must not reach it. Ids and cells are never
+    negative (the wire packs them unsigned). ``seen``: ``n`` zeros, left so."""
     for i in range(k):
         if nb[i][0] >= n or nb[i][1] >= width or nb[i][2] >= height:
             return False
     for q in range(p):
         if parked[q] >= n:
             return False
-    return True
+    fits = True
+    listed = 0
+    for i in range(k):
+        j = nb[i][0]
+        if j == agent or seen[j] != 0:
+            fits = False
+            break
+        seen[j] = 1
+        listed += 1
+    for i in range(listed):
+        seen[nb[i][0]] = 0
+    return fits
 
 
 @kernel
@@ -195,18 +208,21 @@ def streamed_into(nb, k, x, y, distance, out):
 
 
 @kernel
-def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, width, height, radius, meet, arrived,
-                     negotiating, stays, plans_known, stream_reach, whole, scratch, out, counts):
+def negotiation_plan(nb, k, parked, p, agent, x, y, rank, tick, n, width, height, radius, meet,
+                     arrived, negotiating, stays, plans_known, stream_reach, whole, scratch, out,
+                     counts):
     """An agent's whole plan at an observation, each part into its row of ``out`` (``P_*``) and
     its count into ``counts``: whom it waits for (:func:`awaited_into`) and asks
     (:func:`asks_into`), whom it knows to stay where ``stays`` (:func:`staying_into`), whom it
     answers (:func:`answered_into`), all only where it ``negotiates``, as ids; and whom it
     streams with, within ``stream_reach`` (:func:`streamed_into`), as indices into ``nb``.
     Unless ``whole``, only whom it waits for and knows to stay (what the world reads). Nothing
-    where the neighbours are not the run's agents on its grid (``counts[P_FITS]`` 0)."""
+    where the neighbours are not the run's agents on its grid, each once and other than
+    ``agent`` (``counts[P_FITS]`` 0: :func:`fits_run`)."""
     for part in range(PLAN_PARTS):
         counts[part] = 0
-    counts[P_FITS] = 1 if fits_run(nb, k, parked, p, n, width, height) else 0
+    counts[P_FITS] = 1 if fits_run(nb, k, parked, p, agent, n, width, height,
+                                   scratch[S_SEEN]) else 0
     if counts[P_FITS] == 0:
         return
     if negotiating:
@@ -234,8 +250,8 @@ def negotiation_plan(nb, k, parked, p, x, y, rank, tick, n, width, height, radiu
             row[s] = nb[row[s]][0]
 
 
-PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, i8, i8, b1, b1, b1, "
-                  "b1, b1, i8, b1, i8[:, ::1], i8[:, ::1], i8[::1])")
+PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, i8, i8, i8, b1, b1, "
+                  "b1, b1, b1, i8, b1, i8[:, ::1], i8[:, ::1], i8[::1])")
 """:func:`negotiation_plan`'s types, as compiled ahead of time."""
 
 
@@ -268,7 +284,7 @@ def world_plans(xs, ys, arrived, n, sees_all, parks, tick, width, height, radius
                 p += 1
         ks[i] = k
         ps[i] = p
-        negotiation_plan(nb, k, parked, p, xs[i], ys[i], priority_rank(i, tick, n), tick, n,
+        negotiation_plan(nb, k, parked, p, i, xs[i], ys[i], priority_rank(i, tick, n), tick, n,
                          width, height, radius, meet, arrived[i] != 0 and parks_still,
                          negotiating, meet and p > 0, False, 0, False, scratch, out, counts)
         n_awaited[i] = counts[P_AWAITED]

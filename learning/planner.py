@@ -4,7 +4,6 @@ compiled ahead of time where it is built (``learning.ahead``). The agent plans i
 (``agent.negotiation`` says what each part means to the negotiation); the world reads the same
 plan of an observation when it checks the learning record decided on it (``world.records``)."""
 
-from itertools import chain
 from typing import NamedTuple
 
 import numpy as np
@@ -16,7 +15,7 @@ from nnql_swarm.learning.plan import (
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import python_values
-from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.messages import Observation, unpack_ids, unpack_neighbours
 
 
 STREAM_MARGIN = 4
@@ -47,13 +46,13 @@ class Plan(NamedTuple):
     """Whom it answers through their standing queries at this tick, the next in rank first:
     those whose plan asks it (:func:`plans_are_known`), or else every agent that waits for
     it."""
-    near: list[tuple[int, int, int]]
+    near: list[int]
     """The agents it keeps standing queries open on, and whose standing queries on it it keeps:
     those within the interaction radius and :data:`STREAM_MARGIN` (at most the view), the only
-    ones it can soon ask or be asked by."""
+    ones it can soon ask or be asked by, in id order."""
     cells: object
     """The observation's neighbours ``(id, x, y)`` as the kernels read them: an array ``(k, 3)``
-    where they are compiled, else the tuples (``learning.rows.NeighbourRows`` reads them too)."""
+    where they are compiled, else lists (``learning.rows.NeighbourRows`` reads them too)."""
     parked: object
     """Its parked ids, likewise."""
 
@@ -86,36 +85,34 @@ class Planner:
 
     def __call__(self, obs: Observation) -> Plan | None:
         """The plan of ``obs``; None where it does not fit the run: more neighbours than its
-        agents, a cell off its grid, an agent or rank it has not (the kernels, compiled, would
-        read past their buffers)."""
+        agents, a neighbour twice or the agent itself, a cell off its grid, an agent or rank it
+        has not (the kernels, compiled, would read past their buffers)."""
         read = self._run(obs)
         if read is None:
             return None
         counts, out = python_values(self._counts), self._out
         parts = [python_values(out[part][:count]) if count else [] for part, count in
                  enumerate(counts[:PLAN_PARTS])]
-        return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
-                    [obs.neighbours[i] for i in parts[P_STREAMED]], *read)
+        nb, streamed = read[0], parts[P_STREAMED]
+        near = python_values(nb[streamed, 0]) if self._arrays else [nb[i][0] for i in streamed]
+        return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED], near,
+                    *read)
 
     def _run(self, obs: Observation) -> tuple | None:
         """Run the kernel on ``obs``: its neighbours and parked ids as it read them, or None
         where ``obs`` does not fit the run."""
-        neighbours, parked, n = obs.neighbours, obs.parked, self._n
-        k, p, (x, y), (gx, gy) = len(neighbours), len(parked), obs.position, obs.goal
+        nb, parked_ids = unpack_neighbours(obs.neighbours), unpack_ids(obs.parked)
+        n, k, p, (x, y), (gx, gy) = self._n, len(nb), len(parked_ids), obs.position, obs.goal
         width, height, meet = self._width, self._height, self._meet
         if (k >= n or p >= n or obs.rank >= n or x >= width or gx >= width or y >= height
                 or gy >= height):
             return None
-        nb: object
-        parked_ids: object
         if self._arrays:
-            nb = np.fromiter(chain.from_iterable(neighbours), dtype=np.int64,
-                             count=3 * k).reshape(k, 3)  # np.array of tuples: 4 times slower
-            parked_ids = np.array(parked, dtype=np.int64)
+            nb, parked_ids = nb.astype(np.int64), parked_ids.astype(np.int64)
         else:
-            nb, parked_ids = neighbours, parked
+            nb, parked_ids = nb.tolist(), parked_ids.tolist()
         whole = True  # every part of the plan (the world reads only some: learning.plan)
-        self._plan(nb, k, parked_ids, p, x, y, obs.rank, obs.tick, n, width, height,
+        self._plan(nb, k, parked_ids, p, obs.agent, x, y, obs.rank, obs.tick, n, width, height,
                    self._radius, meet, obs.arrived and self._parks_still,
                    self._negotiates and not obs.episode_end, meet and p > 0, self._plans_known,
                    self._reach, whole, self._scratch, self._out, self._counts)

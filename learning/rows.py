@@ -4,8 +4,6 @@
 reads the same when it checks a learning record the slow way (``world.records``; its usual way
 reads them inside ``learning.expected.expected_record``)."""
 
-from itertools import chain
-
 import numpy as np
 
 from nnql_swarm.learning import ahead
@@ -13,7 +11,7 @@ from nnql_swarm.learning.fields import NB_FIELDS, reach
 from nnql_swarm.learning.known_map import check_cell_order
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.messages import Observation, unpack_ids, unpack_neighbours
 
 
 class NeighbourRows:
@@ -67,19 +65,20 @@ class NeighbourRows:
         neighbours and parked ids as the kernel reads them, where the caller has them
         (``learning.planner.Plan``). Fresh rows: an array ``(m, NB_FIELDS)`` where the kernel is
         compiled (:attr:`arrays`), else lists."""
-        config, neighbours, (x, y) = self.config, obs.neighbours, obs.position
+        config, (x, y) = self.config, obs.position
         answer, prev_x, prev_y = self._answer, self._prev_x, self._prev_y
-        k = len(neighbours)
+        if cells is None:
+            cells, parked = unpack_neighbours(obs.neighbours), unpack_ids(obs.parked)
+            if self.arrays:
+                cells, parked = cells.astype(np.int64), parked.astype(np.int64)
+            else:
+                cells, parked = cells.tolist(), parked.tolist()
+        k = len(cells)
         if self.arrays:
-            if cells is None:
-                cells = np.fromiter(chain.from_iterable(neighbours), dtype=np.int64,
-                                    count=3 * k).reshape(k, 3)
-                parked = np.array(obs.parked, dtype=np.int64)
             answer.fill(-1)
             prev_x.fill(-1)
             prev_y.fill(-1)
         else:
-            cells, parked = neighbours, obs.parked
             answer[:] = prev_x[:] = prev_y[:] = [-1] * config.n_agents
         for j, action in answers.items():
             answer[j] = action

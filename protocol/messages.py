@@ -10,8 +10,8 @@ annotations are the schema (msgspec types with :class:`msgspec.Meta` bounds: ``C
 them apart by their tag; the rules between fields (:func:`_check_rules`) follow in Python.
 
 To add a field, write one annotated line in the class where its item goes in the array; with a
-default, as the last line, existing constructor calls need no change (a per-neighbour "parked"
-flag: ``Neighbours = agent_list(Coord, Coord, bool)``; planned moves: ``plan:
+default, as the last line, existing constructor calls need no change (the tick of each relayed
+intent: ``Relayed = agent_list(Action, Count)``; planned moves: ``plan:
 Annotated[tuple[Action, ...], Meta(max_length=8)] = ()`` at the end of ``Intent``). A field of one
 entry per agent (:func:`agent_list`) is named in its class's ``agent_lists``. A new kind is a
 subclass of :class:`Message` (of :class:`AgentMessage` if it names an agent) with its own
@@ -25,9 +25,9 @@ told by its first byte); the first item, if any, a tag of this version (``bad-ve
 kind expected (``wrong-kind``); exactly the kind's number of items (``wrong-length``); run id
 (``wrong-run``); each field's type and range, the first bad one named (``bad-field:<name>``); then
 the rules between fields: an agent-list naming an agent twice (``bad-field:<name>``), the sender
-(``forged-sender``: the world, or the agent the message is of, on its own key), a packing of the
-shared table's updates cut short (``bad-field:updates``), the message's own agent in one of its
-agent-lists (``bad-field:<name>``). Types are strict: a bool is not an int, an int is not a bool;
+(``forged-sender``: the world, or the agent the message is of, on its own key), a packing cut
+short (an observation's neighbours, parked ids or shared table's updates: ``bad-field:<name>``),
+an intent's order, the message's own agent in one of its agent-lists (``bad-field:<name>``). Types are strict: a bool is not an int, an int is not a bool;
 float fields take ints but must be finite. The decoder and the rules decide; when the decoder
 refuses, :func:`_rejection` reads the payload again, untyped, and each item with its field's own
 decoder, only to name the first rule broken. :class:`Inbox` turns a rejection into a counted,
@@ -53,8 +53,9 @@ from msgspec import Meta
 from nnql_swarm.protocol.actions import N_ACTIONS, N_STATES
 from nnql_swarm.protocol.keys import MAX_AGENTS, MAX_TICK, validate_run_id
 
-PROTOCOL_VERSION = 10
-"""10: the shared table's updates packed (:data:`Updates`)."""
+PROTOCOL_VERSION = 11
+"""11: an observation's neighbours and parked ids packed (:data:`Neighbours`, :data:`Parked`);
+10: the shared table's updates packed (:data:`Updates`)."""
 MAX_GRID = 1024
 """Coordinates are 0 .. MAX_GRID - 1 on each axis."""
 MAX_PAYLOAD_BYTES = 64 * 1024
@@ -105,15 +106,26 @@ def agent_list(*rest) -> object:
 
 
 if TYPE_CHECKING:  # what a type checker reads: agent_list's tuples, without msgspec's limits
-    Neighbours = tuple[tuple[int, int, int], ...]
     Relayed = tuple[tuple[int, int], ...]
 else:
-    Neighbours = agent_list(Coord, Coord)
-    """``(id, x, y)`` of each visible other agent."""
     Relayed = agent_list(Action)
     """``(id, action)`` of each relayed intent."""
-Parked = Annotated[tuple[AgentId, ...], Meta(max_length=MAX_AGENTS)]
-"""The ids of the visible others that are parked on their goals."""
+CELL_TYPE = np.dtype("<u2")
+"""How an observation packs its neighbours ``(id, x, y)`` and parked ids: little-endian unsigned
+16-bit integers (every agent id is below MAX_AGENTS, every coordinate below MAX_GRID)."""
+assert max(MAX_AGENTS, MAX_GRID) <= np.iinfo(CELL_TYPE).max + 1, "an id and a cell must fit"
+NEIGHBOUR_ITEMS = 3
+"""A neighbour's integers: its id, then its cell's ``x`` and ``y``."""
+Neighbours = Annotated[bytes, Meta(max_length=NEIGHBOUR_ITEMS * CELL_TYPE.itemsize * MAX_AGENTS)]
+"""The visible other agents, ``(id, x, y)`` each, in id order, packed (:func:`pack_neighbours`).
+Packed, not a msgpack array of arrays: an observation of 64 agents carries some 24, which every
+agent decoded into as many Python tuples and made an array again for its kernels. The codec
+checks that the packing is whole (``bad-field:neighbours``); the receiver's plan checks that
+each is one of the run's agents on its grid, none twice and not the receiver itself
+(``learning.plan.fits_run``), before any compiled kernel reads them."""
+Parked = Annotated[bytes, Meta(max_length=CELL_TYPE.itemsize * MAX_AGENTS)]
+"""The ids of the visible others that are parked on their goals, packed (:func:`pack_ids`); the
+receiver's plan checks each is one of the run's agents."""
 
 MAX_TABLE_ROW = N_STATES * (N_ACTIONS + 1)
 """Above every Q-table row index of a learner (the largest table: offsets x 6 move codes)."""
@@ -166,6 +178,28 @@ def pack_updates(entries, values) -> tuple[tuple[bytes, bytes], ...]:
                  for k in range(0, len(entries), MAX_AGENTS))
 
 
+def pack_neighbours(neighbours) -> bytes:
+    """Neighbours ``(id, x, y)`` (a sequence of triples, or an array ``(k, 3)``) as the wire
+    carries them."""
+    return np.asarray(neighbours, dtype=CELL_TYPE).tobytes()
+
+
+def pack_ids(ids) -> bytes:
+    """Agent ids (a sequence, or an array) as the wire carries them."""
+    return np.asarray(ids, dtype=CELL_TYPE).tobytes()
+
+
+def unpack_neighbours(packed: bytes) -> np.ndarray:
+    """Packed neighbours as a (read-only) array ``(k, 3)`` of ``(id, x, y)``, without copying;
+    the packing must be whole (the codec checks it)."""
+    return np.frombuffer(packed, CELL_TYPE).reshape(-1, NEIGHBOUR_ITEMS)
+
+
+def unpack_ids(packed: bytes) -> np.ndarray:
+    """Packed agent ids as a (read-only) array, without copying."""
+    return np.frombuffer(packed, CELL_TYPE)
+
+
 def unpack_group(group: tuple[bytes, bytes]) -> tuple[np.ndarray, np.ndarray]:
     """An update group's entries and values as (read-only) arrays, without copying; may differ
     in length where the group was forged."""
@@ -215,15 +249,13 @@ class Observation(AgentMessage, tag=tag("obs"), frozen=True):
     collided: bool
     arrived: bool
     episode_end: bool
-    parked: Parked = ()
+    parked: Parked = b""
     updates: Updates = ()  # where the swarm shares one table
     settled: bool = False  # parked since an earlier tick: the world expects no intent (engine)
     world: Count = 0
     """The world's incarnation (``transport.runfiles.next_incarnation``: one more each time a
     run's world starts): an intent names the one it was decided for, so that a world started
     again takes no intent decided for the world before it."""
-
-    agent_lists = ("neighbours",)
 
 
 class Intent(AgentMessage, tag=tag("intent"), frozen=True):
@@ -313,6 +345,10 @@ def _check_rules(msg: Message, key_agent: int | None) -> None:
     elif msg.sender != WORLD_SENDER:
         raise Rejected("forged-sender", f"{cls.__name__} sent by {msg.sender!r}")
     if isinstance(msg, Observation):
+        if len(msg.neighbours) % (NEIGHBOUR_ITEMS * CELL_TYPE.itemsize):
+            raise Rejected("bad-field:neighbours", "a packing cut short")
+        if len(msg.parked) % CELL_TYPE.itemsize:
+            raise Rejected("bad-field:parked", "a packing cut short")
         for entries, values in msg.updates:
             if len(entries) % ENTRY_TYPE.itemsize or len(values) % VALUE_TYPE.itemsize:
                 raise Rejected("bad-field:updates", "a packing cut short")

@@ -29,7 +29,7 @@ from nnql_swarm.learning.readings import uses_map
 from nnql_swarm.protocol.actions import VIEW_RADIUS, target_x, target_y, within
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import ints, rows
-from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
+from nnql_swarm.protocol.messages import WORLD_SENDER, Observation, pack_ids, pack_neighbours
 from nnql_swarm.recording.columns import time_columns
 from nnql_swarm.recording.palette import WALL_COLOUR
 from nnql_swarm.recording.world import WALL_HALF, WALL_LINE
@@ -92,10 +92,11 @@ class KnownMapViz:
         c, i = self.config, self.agent
         (x, y), (gx, gy) = cells[i], goal
         others = [(j, jx, jy) for j, (jx, jy) in enumerate(cells) if j != i]
-        neighbours = tuple(within(others, x, y, VIEW_RADIUS))
-        parked = tuple(j for j, _, _ in neighbours if arrived[j])
+        neighbours = within(others, x, y, VIEW_RADIUS)
+        parked = [j for j, _, _ in neighbours if arrived[j]]
         obs = Observation(c.run_id, tick, WORLD_SENDER, i, episode, 0, (x, y), (gx, gy),
-                          neighbours, 0, 0.0, 0.0, False, bool(arrived[i]), False, parked)
+                          pack_neighbours(neighbours), 0, 0.0, 0.0, False, bool(arrived[i]),
+                          False, pack_ids(parked))
         near = self.rows(obs, {}, False, {}, None)
         grid = Grid(c.width, c.height, self.rows.wall_x, self.rows.wall_y, 0,
                     len(self.rows.wall_x))

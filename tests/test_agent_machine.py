@@ -20,7 +20,7 @@ from nnql_swarm.protocol.phase_machine import PhaseError
 from nnql_swarm.world.world_machine import STARTUP_TIMEOUT_S, WorldMachine
 from nnql_swarm.protocol.messages import (
     CONTROL_SHUTDOWN, WORLD_SENDER, Answer, Control, Observation, agent_sender, encode,
-    pack_updates, to_wire,
+    pack_ids, pack_neighbours, pack_updates, to_wire,
 )
 
 CONFIG = SwarmConfig(run_id="proto", n_agents=3, episodes=10, max_steps=50)
@@ -30,7 +30,7 @@ def observation(tick: int, agent: int = 0, episode_end: bool = False, others=())
     """Agent ``agent``'s observation at ``tick``; ``others``: visible ``(id, x, y)``."""
     return encode(Observation(
         run="proto", tick=tick, sender=WORLD_SENDER, agent=agent, episode=0, step=tick % 50,
-        position=(1, 1), goal=(5, 5), neighbours=tuple(others),
+        position=(1, 1), goal=(5, 5), neighbours=pack_neighbours(others),
         rank=(agent - tick) % CONFIG.n_agents, reward_ds=0.0, reward_ca=10.0, collided=False,
         arrived=False, episode_end=episode_end))
 
@@ -225,8 +225,8 @@ def test_a_settled_agent_sends_the_world_no_intent_unless_it_has_a_record():
     def settled(tick: int, arrived_before: bool) -> bytes:
         return encode(Observation(
             run="proto", tick=tick, sender=WORLD_SENDER, agent=0, episode=0, step=tick,
-            position=(5, 5), goal=(5, 5), neighbours=((1, 6, 6),), rank=0, reward_ds=0.0,
-            reward_ca=10.0, collided=False, arrived=True, episode_end=False,
+            position=(5, 5), goal=(5, 5), neighbours=pack_neighbours([(1, 6, 6)]), rank=0,
+            reward_ds=0.0, reward_ca=10.0, collided=False, arrived=True, episode_end=False,
             settled=arrived_before))
 
     moving = protocol.on_observation(observation(0, others=[(1, 6, 6)]), 0.0)
@@ -248,7 +248,7 @@ def test_once_arrived_under_meet_a_skipped_tick_is_no_gap(wait_rule):
     def at(tick: int, episode: int = 0, arrived: bool = True, end: bool = False) -> bytes:
         return encode(Observation(
             run="proto", tick=tick, sender=WORLD_SENDER, agent=0, episode=episode, step=tick,
-            position=(5, 5), goal=(5, 5), neighbours=(), rank=0, reward_ds=0.0, reward_ca=10.0,
+            position=(5, 5), goal=(5, 5), neighbours=b"", rank=0, reward_ds=0.0, reward_ca=10.0,
             collided=False, arrived=arrived, episode_end=end))
 
     protocol.on_observation(at(3), 0.0)
@@ -319,24 +319,35 @@ def test_bad_input_is_counted_never_raised():
 
 
 def test_an_observation_that_does_not_fit_the_run_is_refused_before_any_kernel_reads_it():
-    """The codec bounds ids and cells by the wire's limits, not by the run's; the decision and
-    the plan, compiled, read their buffers unchecked: so an observation naming an agent the run
-    has not, or a cell off its grid, is refused and counted, and decides nothing."""
+    """The codec bounds ids and cells by the wire's limits, not by the run's, and checks only
+    that the packed neighbours are whole; the decision and the plan, compiled, read their buffers
+    unchecked: so an observation naming an agent the run has not, a cell off its grid, a
+    neighbour twice or the agent itself, is refused and counted, and decides nothing."""
     protocol = ready()
     assert CONFIG.width == CONFIG.height == 11
 
     def forged(**fields) -> bytes:
         obs = Observation(run="proto", tick=0, sender=WORLD_SENDER, agent=0, episode=0, step=0,
-                          position=(1, 1), goal=(5, 5), neighbours=((1, 2, 2),), rank=0,
-                          reward_ds=0.0, reward_ca=0.0, collided=False, arrived=False,
+                          position=(1, 1), goal=(5, 5), neighbours=pack_neighbours([(1, 2, 2)]),
+                          rank=0, reward_ds=0.0, reward_ca=0.0, collided=False, arrived=False,
                           episode_end=False)
         return encode(msgspec.structs.replace(obs, **fields))
 
-    for fields in ({"neighbours": ((7, 2, 2),)}, {"neighbours": ((1, 40, 2),)},
-                   {"neighbours": ((1, 2, 2), (2, 3, 3), (4, 1, 2))}, {"position": (11, 1)},
-                   {"goal": (5, 300)}, {"parked": (9,)}, {"rank": 5}):
+    for fields in ({"neighbours": [(7, 2, 2)]}, {"neighbours": [(1, 40, 2)]},
+                   {"neighbours": [(1, 2, 2), (2, 3, 3), (4, 1, 2)]},
+                   {"neighbours": [(1, 2, 2), (1, 3, 3)]}, {"neighbours": [(2, 3, 3), (1, 2, 2),
+                                                                           (2, 1, 1)]},
+                   {"neighbours": [(1, 2, 2), (0, 1, 2)]}, {"neighbours": [(1, 65535, 2)]},
+                   {"position": (11, 1)}, {"goal": (5, 300)}, {"parked": [9]}, {"rank": 5}):
+        if "neighbours" in fields:
+            fields = {"neighbours": pack_neighbours(fields["neighbours"])}
+        if "parked" in fields:
+            fields = {"parked": pack_ids(fields["parked"])}
         assert kinds(protocol.on_observation(forged(**fields), 0.0)) == [], fields
-    assert protocol.inbox.rejections["bad-field:neighbours"] == 7
+    assert protocol.inbox.rejections["bad-field:neighbours"] == 11
+    assert kinds(protocol.on_observation(forged(neighbours=pack_neighbours([(1, 2, 2)])[:5]),
+                                         0.0)) == [], "a packing cut short: the codec's"
+    assert protocol.inbox.rejections["bad-field:neighbours"] == 12
     assert protocol.decided_tick == -1
     assert "SendIntent" in kinds(protocol.on_observation(forged(), 0.0)), "the honest one decides"
 
@@ -371,7 +382,7 @@ def test_shared_table_updates_are_written_and_entries_outside_the_tables_refused
     [uneven] = pack_updates((8 * 5, 8 * 5 + 1), (3.0, 3.0))
     payload = encode(Observation(
         run="proto", tick=0, sender=WORLD_SENDER, agent=0, episode=0, step=0, position=(1, 1),
-        goal=(5, 5), neighbours=(), rank=0, reward_ds=0.0, reward_ca=10.0, collided=False,
+        goal=(5, 5), neighbours=b"", rank=0, reward_ds=0.0, reward_ca=10.0, collided=False,
         arrived=False, episode_end=False,
         updates=(pack_updates((7 * 5 + 1, 441 * 5 + 3), (20.5, -1.5))
                  + pack_updates((441 * 6 * 5,), (1.0,))

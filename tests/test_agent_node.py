@@ -21,7 +21,7 @@ def observation(tick: int, episode_end: bool = False) -> SimpleNamespace:
     """What the handler reads of a zenoh.Sample (one cannot be built by hand)."""
     return SimpleNamespace(payload=encode(Observation(
         run="node", tick=tick, sender=WORLD_SENDER, agent=0, episode=0, step=tick % 50,
-        position=(1, 1), goal=(5, 5), neighbours=(), rank=0, reward_ds=0.0, reward_ca=10.0,
+        position=(1, 1), goal=(5, 5), neighbours=b"", rank=0, reward_ds=0.0, reward_ca=10.0,
         collided=False, arrived=False, episode_end=episode_end)))
 
 

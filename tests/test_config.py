@@ -43,7 +43,7 @@ def test_the_bounds_are_the_codecs_own():
     at_bound = SwarmConfig(goal_reward=MAX_REWARD * (1 - SwarmConfig().gamma))
     assert at_bound.q_bound() == pytest.approx(MAX_REWARD)
     obs = Observation(run="r", tick=0, sender=WORLD_SENDER, agent=0, episode=0, step=0,
-                      position=(0, 0), goal=(1, 1), neighbours=(), rank=0,
+                      position=(0, 0), goal=(1, 1), neighbours=b"", rank=0,
                       reward_ds=at_bound.goal_reward, reward_ca=0.0, collided=False,
                       arrived=True, episode_end=False)
     assert parse(encode(obs), Observation, "r").reward_ds == at_bound.goal_reward

@@ -167,7 +167,8 @@ def test_ten_thousand_schedules_pass(capsys):
 @pytest.mark.parametrize("algo, grid, walls", [
     ("nnql", (11, 11), 0.0), ("nnql", (30, 14), 0.0), ("ql", (11, 11), 0.0),
     ("nnql-dir", (16, 16), 0.0), ("nnql", (14, 14), 0.25), ("daql", (14, 14), 0.25),
-    ("ql", (24, 24), 0.2), ("path-nnql", (19, 19), 0.2), ("shield-nnql", (14, 14), 0.25)])
+    ("ql", (24, 24), 0.2), ("path-nnql", (19, 19), 0.2), ("shield-nnql", (14, 14), 0.25),
+    ("pibt-nnql", (9, 9), 0.0)])
 def test_without_faults_the_simulator_gives_the_in_process_run_file_for_file(tmp_path, algo, grid,
                                                                              walls):
     learning = PRESETS[algo] if algo in PRESETS else dict(

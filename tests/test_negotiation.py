@@ -12,7 +12,7 @@ from nnql_swarm.agent.negotiation import Planner
 from nnql_swarm.agent.brain import AgentBrain
 from nnql_swarm.protocol.actions import N_ACTIONS, RIGHT, STAY, sees, target_x, target_y
 from nnql_swarm.protocol.config import ALGOS, SwarmConfig
-from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
+from nnql_swarm.protocol.messages import WORLD_SENDER, Observation, pack_ids, pack_neighbours
 from nnql_swarm.protocol.ranks import WAIT_RULES, priority_rank, waits_for
 from nnql_swarm.recording.world import negotiation_pairs
 
@@ -45,10 +45,10 @@ def observe(agent: int, tick: int, n: int, cells: dict[int, tuple[int, int]],
     seen = tuple((j, x, y) for j, (x, y) in sorted(cells.items())
                  if j != agent and sees(*me, x, y))
     return Observation(run="neg", tick=tick, sender=WORLD_SENDER, agent=agent, episode=0, step=0,
-                       position=me, goal=(0, 0), neighbours=seen,
+                       position=me, goal=(0, 0), neighbours=pack_neighbours(seen),
                        rank=priority_rank(agent, tick, n), reward_ds=0.0, reward_ca=0.0,
                        collided=False, arrived=agent in arrived, episode_end=episode_end,
-                       parked=tuple(j for j, _, _ in seen if j in arrived and parks))
+                       parked=pack_ids([j for j, _, _ in seen if j in arrived and parks]))
 
 
 def learned(agent: int, tick: int, n: int, cells, asked_by: dict[int, list[int]]) -> set[int]:

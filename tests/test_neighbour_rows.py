@@ -18,7 +18,7 @@ from nnql_swarm.learning.fields import (
 )
 from nnql_swarm.protocol.actions import LEFT, STAY, UP
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
+from nnql_swarm.protocol.messages import WORLD_SENDER, Observation, pack_ids, pack_neighbours
 from tests.swarm_helpers import ROOT
 
 WRITES = re.compile(r"\[(NB_[A-Z_]+)\]\s*=(?!=)")
@@ -64,9 +64,10 @@ def test_the_agents_rows_are_its_neighbours_in_reach_then_the_walls_compiled_or_
                          interaction_radius=2)
     reader = NeighbourRows(config)
     obs = Observation(run="rows", tick=5, sender=WORLD_SENDER, agent=0, episode=0, step=5,
-                      position=(3, 1), goal=(0, 0), neighbours=((1, 3, 2), (2, 7, 7), (3, 4, 1)),
+                      position=(3, 1), goal=(0, 0),
+                      neighbours=pack_neighbours([(1, 3, 2), (2, 7, 7), (3, 4, 1)]),
                       rank=2, reward_ds=0.0, reward_ca=10.0, collided=False, arrived=False,
-                      episode_end=False, parked=(1,))
+                      episode_end=False, parked=pack_ids([1]))
     expected = [[1, 3, 2, 1, 3, 2, 3, 2, 1, -1, -1, 0],  # known to stay, parked
                 [3, 4, 1, 1, 3, 1, 3, 1, 0, 4, 0, 0],  # announced LEFT, seen at (4, 0)
                 [4, 2, 1, 1, 2, 1, 2, 1, 0, 2, 1, 0]]  # the wall: known to stay, seen before
@@ -75,7 +76,8 @@ def test_the_agents_rows_are_its_neighbours_in_reach_then_the_walls_compiled_or_
     plain = np.zeros((reader.size, NB_FIELDS), dtype=np.int64)  # its callees may be compiled
     n = config.n_agents
     m = neighbours.neighbour_rows_into.__dict__.get("py_func", neighbours.neighbour_rows_into)(
-        obs.neighbours, 3, reader.reach, reader.reach, [0] * n, obs.parked, 1, 3, 1, reader.reach,
+        [[1, 3, 2], [2, 7, 7], [3, 4, 1]], 3, reader.reach, reader.reach, [0] * n, [1], 1, 3, 1,
+        reader.reach,
         [-1, STAY, -1, LEFT], [-1, -1, -1, 4], [-1, -1, -1, 0], 3, 0, True,
         reader.wall_ids.tolist(), reader.n_walls, reader.wall_far, 2, config.meet_only, 8, 8,
         plain)

@@ -22,7 +22,7 @@ from nnql_swarm.recording.curves import log_experiment
 from nnql_swarm.transport.runfiles import PARTS_DIR
 from nnql_swarm.protocol.actions import RIGHT, STAY, UP, offset_state
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.messages import WORLD_SENDER, Observation
+from nnql_swarm.protocol.messages import WORLD_SENDER, Observation, pack_ids, pack_neighbours
 from nnql_swarm.transport.ports import free_port
 from tests.swarm_helpers import group_pids, run_swarm, start_swarm
 from nnql_swarm.world.metrics import read_episodes
@@ -246,9 +246,10 @@ def test_a_timed_brain_counts_only_the_asked_neighbours_that_did_not_answer():
     rule): they are not answers, and they make no asked neighbour answered."""
     brain = TimedBrain(3, SwarmConfig(n_agents=6))
     obs = Observation(run="run", tick=9, sender=WORLD_SENDER, agent=3, episode=0, step=9,
-                      position=(4, 4), goal=(0, 0), neighbours=((0, 4, 5), (1, 5, 4), (2, 3, 4)),
+                      position=(4, 4), goal=(0, 0),
+                      neighbours=pack_neighbours([(0, 4, 5), (1, 5, 4), (2, 3, 4)]),
                       rank=0, reward_ds=0.0, reward_ca=0.0, collided=False, arrived=False,
-                      episode_end=False, parked=(2,))
+                      episode_end=False, parked=pack_ids([2]))
     brain.prepare(obs)
     assert brain.neighbours_to_ask(obs, [0, 1]) == [0, 1]
     brain.act(obs, {0: STAY, 2: STAY})  # 1 did not answer; 2 has arrived

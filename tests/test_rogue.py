@@ -39,7 +39,7 @@ OPTIONS = ("--agents", str(AGENTS), "--episodes", str(EPISODES), "--max-steps", 
 def forged_payloads(agent: int) -> dict[str, list[bytes]]:
     """Every kind of bad message, for an observation key and an intent key of ``agent``."""
     obs = Observation(run=RUN_ID, tick=1, sender=WORLD_SENDER, agent=agent, episode=0, step=0,
-                      position=(1, 1), goal=(2, 2), neighbours=(), rank=0, reward_ds=0.0,
+                      position=(1, 1), goal=(2, 2), neighbours=b"", rank=0, reward_ds=0.0,
                       reward_ca=0.0, collided=False, arrived=False, episode_end=False)
     intent = Intent(run=RUN_ID, tick=1, sender=agent_sender(agent), agent=agent, episode=0, action=1)
     garbage = [b"", b"\x00\xff\xfe garbage", b"\xc1", os.urandom(64), b"\x92\x01", b"x" * 100_000]

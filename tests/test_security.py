@@ -157,7 +157,7 @@ def intent(agent: int, action: int = 1, tick: int = 1) -> bytes:
 
 def observation(agent: int, tick: int = 1) -> bytes:
     return encode(Observation(run=RUN_ID, tick=tick, sender=WORLD_SENDER, agent=agent, episode=0,
-                              step=0, position=(1, 1), goal=(2, 2), neighbours=(), rank=0,
+                              step=0, position=(1, 1), goal=(2, 2), neighbours=b"", rank=0,
                               reward_ds=0.0, reward_ca=0.0, collided=False, arrived=False,
                               episode_end=False))
 

@@ -35,7 +35,7 @@ from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.jit import flags, floats, ints, python_values
 from nnql_swarm.protocol.messages import (
-    MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation,
+    CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation,
 )
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules import (
@@ -126,6 +126,7 @@ class SwarmWorld:
         self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
+        self._others: np.ndarray | None = None  # where everybody sees everybody: all but oneself
         self._start_episode(first_episode)
 
     @property
@@ -218,10 +219,10 @@ class SwarmWorld:
                 continue
             yield self._observation(agent, neighbours(agent))
 
-    def _observation(self, i: int, neighbours: tuple[tuple[int, int, int], ...]) -> Observation:
+    def _observation(self, i: int, seen: tuple[bytes, bytes]) -> Observation:
+        """Agent ``i``'s observation; ``seen``: its neighbours and parked ones, packed."""
         c = self.config
         r_ds, r_ca, collided, arrived = self._outcome
-        parked = tuple(j for j, _, _ in neighbours if arrived[j]) if not c.step_aside else ()
         updates = self._updates
         unheard = self._unheard.pop(i)
         if unheard or i in self._syncing:
@@ -233,9 +234,9 @@ class SwarmWorld:
                 updates += table.chunk(self._syncing[i], SYNC_ENTRIES)
         # Positional, in Observation's field order: keywords cost a fifth of this call.
         return Observation(c.run_id, self.tick, WORLD_SENDER, i, self.episode, self.step,
-                           self._cells[i], self._goal_cells[i], neighbours,
+                           self._cells[i], self._goal_cells[i], seen[0],
                            priority_rank(i, self.tick, c.n_agents), r_ds[i], r_ca[i],
-                           collided[i], arrived[i], self.ending, parked, updates,
+                           collided[i], arrived[i], self.ending, seen[1], updates,
                            i in self.settled, self.incarnation)
 
     def unsettle(self, agents: set[int]) -> None:
@@ -256,17 +257,25 @@ class SwarmWorld:
         """The agents still being sent the whole table."""
         return tuple(sorted(self._syncing))
 
-    def _neighbours(self) -> Callable[[int], tuple[tuple[int, int, int], ...]]:
-        """Each agent's visible others as ``(id, x, y)`` in id order, by agent id: worked out
-        for an agent only when it is sent an observation (a settled agent is not), from one
-        sight matrix of everyone."""
+    def _neighbours(self) -> Callable[[int], tuple[bytes, bytes]]:
+        """Each agent's visible others ``(id, x, y)`` in id order, and the ids of those parked
+        (arrived, where arrived agents park), packed as the wire carries them, by agent id:
+        worked out for an agent only when it is sent an observation (a settled agent is not),
+        from one sight matrix of everyone."""
         n = self.config.n_agents
         xs, ys = python_values(self._x)[:n], python_values(self._y)[:n]
-        everyone = tuple(zip(range(len(xs)), xs, ys))
+        everyone = np.array((range(n), xs, ys), dtype=CELL_TYPE).T.copy()  # rows (id, x, y)
         if self._sees_all:
-            return lambda i: everyone[:i] + everyone[i + 1:]
-        seen = sight_matrix(xs, ys)
-        return lambda i: tuple([everyone[j] for j in np.flatnonzero(seen[i]).tolist()])
+            if self._others is None:
+                self._others = ~np.eye(n, dtype=bool)
+            seen = self._others
+        else:
+            seen = sight_matrix(xs, ys)
+        if self.config.step_aside:  # arrived agents do not park
+            return lambda i: (everyone[seen[i]].tobytes(), b"")
+        arrived = np.array(self._outcome[3][:n], dtype=bool)  # as the observations show it
+        ids = everyone[:, 0]
+        return lambda i: (everyone[seen[i]].tobytes(), ids[seen[i] & arrived].tobytes())
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
               orders: list[tuple[int, ...] | None] | None = None) -> TickReport:

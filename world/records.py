@@ -36,7 +36,6 @@ them, not while every agent waits for the tick's observations (``bench/record_ch
 """
 
 from dataclasses import dataclass
-from itertools import chain
 
 import msgspec
 import numpy as np
@@ -57,7 +56,9 @@ from nnql_swarm.learning.tables import float_array, int_array
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, within
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import python_values
-from nnql_swarm.protocol.messages import Observation
+from nnql_swarm.protocol.messages import (
+    Observation, pack_neighbours, unpack_ids, unpack_neighbours,
+)
 
 FORGED = "forged-record"
 """A record that is not the one the agent's transition wrote: refused, and the agent's later
@@ -83,7 +84,7 @@ class Decision:
 def _only(obs: Observation, neighbours) -> Observation:
     """``obs`` with only ``neighbours`` in view: the rows of the others are not needed (each
     neighbour's row is its own), and building them is most of a check's cost."""
-    return msgspec.structs.replace(obs, neighbours=tuple(neighbours))
+    return msgspec.structs.replace(obs, neighbours=pack_neighbours(neighbours))
 
 
 def _stops(obs: Observation, lifelong: bool) -> bool:
@@ -98,10 +99,9 @@ def decides(obs: Observation, lifelong: bool) -> bool:
     return not _stops(obs, lifelong)
 
 
-def _cells(neighbours) -> np.ndarray:
+def _cells(obs: Observation) -> np.ndarray:
     """An observation's neighbours ``(id, x, y)`` as an array ``(k, 3)``."""
-    return np.fromiter(chain.from_iterable(neighbours), dtype=np.int64,
-                       count=3 * len(neighbours)).reshape(len(neighbours), 3)
+    return unpack_neighbours(obs.neighbours).astype(np.int64)
 
 
 class RecordCheck:
@@ -216,7 +216,8 @@ class RecordCheck:
         options: list[tuple[dict[int, tuple[int, int]], tuple[int, int] | None]] = []
         if self._remembers(obs, before):
             assert before is not None
-            options.append(({j: (x, y) for j, x, y in before.neighbours}, before.position))
+            cells = unpack_neighbours(before.neighbours).tolist()
+            options.append(({j: (x, y) for j, x, y in cells}, before.position))
         if not (sure and options):
             options.append(({}, None))
         return options
@@ -253,12 +254,12 @@ class RecordCheck:
         memory, was_x, was_y, mem_k = self._none, -1, -1, 0
         if self._remembers(before, decision.before):
             assert decision.before is not None
-            memory = _cells(decision.before.neighbours)
+            memory = _cells(decision.before)
             (was_x, was_y), mem_k = decision.before.position, len(memory)
         stops = _stops(obs, self.lifelong)
         if stops:
-            awaited, staying, nb, parked = self._no_ids, self._no_ids, _cells(obs.neighbours), \
-                np.array(obs.parked, dtype=np.int64)  # it waits for nobody
+            awaited, staying, nb, parked = self._no_ids, self._no_ids, _cells(obs), \
+                unpack_ids(obs.parked).astype(np.int64)  # it waits for nobody
         else:
             awaited, staying, nb, parked = self._negotiated(obs)
         rows = self.rows
@@ -327,7 +328,8 @@ class RecordCheck:
             return False
         before = decision.obs
         (x, y), radius = before.position, self.radius
-        rows_before = self._read(_only(before, within(before.neighbours, x, y, radius)), {},
+        near = within(unpack_neighbours(before.neighbours).tolist(), x, y, radius)
+        rows_before = self._read(_only(before, near), {},
                                  False, ({}, None))
         pending = [row[NB_ID] for row in rows_before
                    if chebyshev(x, y, row[NB_X], row[NB_Y]) <= radius]
