@@ -84,7 +84,11 @@ def main() -> int:
         command = [sys.executable, str(ROOT / "launch" / "swarm.py"), *args.swarm_options,
                    "--episodes", str(args.warm_up + args.episodes + 2), "--no-record",
                    "--no-progress", "--out", str(out)]
-        swarm = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL)
+        # This tree's package, not the one the editable install maps (to time a tree beside
+        # another, run this module from each in turn).
+        path = os.pathsep.join(filter(None, (str(ROOT), os.environ.get("PYTHONPATH"))))
+        swarm = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.DEVNULL,
+                                 env={**os.environ, "PYTHONPATH": path})
         try:
             first = wait_rows(rows, args.warm_up, swarm)
             before = {pid: process_cpu(pid) for pid in descendants(swarm.pid)}

@@ -122,7 +122,8 @@ class SwarmWorld:
             self._updates = self.table.apply({agent: (integers, rewards)
                                               for agent, integers, rewards in table.records})
         self._syncing: dict[int, int] = {}  # agent -> the first table entry it is sent next
-        self._unheard = UnheardEntries(QUIET_CATCH_UP)  # what each quiet agent missed
+        self._unheard = UnheardEntries(  # what each quiet agent missed
+            QUIET_CATCH_UP, 0 if self.table is None else self.table.entries)
         self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
@@ -229,7 +230,7 @@ class SwarmWorld:
             table = self.table
             assert table is not None, "only a shared table leaves entries to send"
             if unheard:
-                updates = table.current(sorted(unheard)) + updates
+                updates = table.current(unheard) + updates
             if i in self._syncing:
                 updates += table.chunk(self._syncing[i], SYNC_ENTRIES)
         # Positional, in Observation's field order: keywords cost a fifth of this call.

@@ -1,65 +1,80 @@
 """The shared table's entries that each quiet agent has not heard of (``world.engine``): exact,
-and cheap on the ticks where an agent stays quiet. Pure.
+and at a cost a tick that does not grow with the quiet agents. Pure.
 
 A quiet agent is sent no observation, so every tick's updates are entries it misses; it is sent
 one again once :attr:`UnheardEntries.catch_up` distinct entries wait, with their current values.
-Each tick's updates are logged once for all quiet agents (as the packed groups the observations
-carry), and an agent's set takes them in only when they could bring it to the catch-up count:
-its size plus every entry logged since counts each entry at most once more than it is. Until
-then a quiet tick costs an agent a comparison, not a set update per entry; the set, and so when
-the agent is sent an observation, is the same.
+An agent is quiet at every tick from the one it went quiet at to its next observation, so what it
+missed is every entry changed at a tick of that stretch. The ticks at which anyone is quiet are
+logged (:meth:`~UnheardEntries.log_tick`) with, for every entry, the last logged tick that
+changed it, and how many entries each logged tick was the last to change: how many an agent
+missed is how many were last changed at or after the tick it went quiet, one lookup a tick,
+where a set of its own took in every entry of every tick. Only an agent that leaves the quiet
+while others stay (a restarted one, sent the whole table) has its entries read back from the log.
 """
 
-from nnql_swarm.protocol.messages import ENTRY_TYPE, unpack_group
+import numpy as np
+
+from nnql_swarm.protocol.messages import unpack_group
 
 Groups = tuple[tuple[bytes, bytes], ...]
 """A tick's updates as packed groups (``protocol.messages.pack_updates``)."""
 
 
 class UnheardEntries:
-    """What each quiet agent missed, from the tick it went quiet to its next observation."""
+    """What each quiet agent missed, from the tick it went quiet to its next observation; for a
+    table of ``entries`` entries."""
 
-    def __init__(self, catch_up: int) -> None:
+    def __init__(self, catch_up: int, entries: int) -> None:
         self.catch_up = catch_up
+        self._entries = entries
+        self.clear()
+
+    def clear(self) -> None:
+        """Nobody is quiet any more (a new episode starts): forget the log."""
         self._log: list[Groups] = []  # each logged tick's updates, in order
-        self._logged = [0]  # entries logged before each tick of the log, and after the last
-        self._missed: dict[int, list] = {}  # agent -> [entries, log ticks taken in, missed]
+        self._last = np.full(self._entries, -1, dtype=np.int64)  # entry -> last logged tick
+        self._lasts = np.zeros(8, dtype=np.int64)  # logged tick -> entries it changed last
+        self._since: list[int] = []  # logged tick -> entries changed at it or later
+        self._quiet: dict[int, list[int]] = {}  # agent -> [first, last] logged tick it is quiet
 
     def log_tick(self, updates: Groups) -> None:
         """This tick's updates, missed by the agents quiet at it (:meth:`quiet`)."""
-        if not self._missed:  # nobody misses what was logged before
+        if not self._quiet and self._log:  # nobody misses what was logged before
             self.clear()
+        tick = len(self._log)
         self._log.append(updates)
-        self._logged.append(self._logged[-1] + sum(len(entries) for entries, _ in updates)
-                            // ENTRY_TYPE.itemsize)
+        if tick == len(self._lasts):
+            self._lasts = np.concatenate([self._lasts, np.zeros_like(self._lasts)])
+        changed = [unpack_group(group)[0] for group in updates]
+        if changed:
+            entries = np.unique(np.concatenate(changed))
+            before = self._last[entries]
+            np.subtract.at(self._lasts, before[before >= 0], 1)
+            self._lasts[tick] = len(entries)
+            self._last[entries] = tick
+        self._since = np.cumsum(self._lasts[tick::-1])[::-1].tolist()
 
     def quiet(self, agent: int) -> bool:
         """``agent`` is quiet at the tick logged last: whether it is to stay so (fewer than
         :attr:`catch_up` entries wait for it)."""
-        missed = self._missed.get(agent)
-        if missed is None:
-            missed = self._missed[agent] = [set(), len(self._log) - 1, 0]
-        missed[2] = len(self._log)
-        entries, taken, through = missed
-        if len(entries) + self._logged[through] - self._logged[taken] < self.catch_up:
-            return True
-        return len(self._take_in(missed)) < self.catch_up
+        tick = len(self._log) - 1
+        stretch = self._quiet.get(agent)
+        if stretch is None:
+            stretch = self._quiet[agent] = [tick, tick]
+        stretch[1] = tick
+        return self._since[stretch[0]] < self.catch_up
 
-    def pop(self, agent: int) -> set[int]:
-        """The entries ``agent`` missed, which its observation now brings: it has heard them."""
-        if agent not in self._missed:
-            return set()
-        return self._take_in(self._missed.pop(agent))
-
-    def clear(self) -> None:
-        """Nobody is quiet any more (a new episode starts): forget the log."""
-        self._log, self._logged, self._missed = [], [0], {}
-
-    def _take_in(self, missed: list) -> set[int]:
-        """An agent's entries, with those of the ticks it missed since they were last taken in."""
-        entries, taken, through = missed
-        for updates in self._log[taken:through]:
+    def pop(self, agent: int) -> list[int]:
+        """The entries ``agent`` missed, in order, which its observation now brings: it has
+        heard them."""
+        stretch = self._quiet.pop(agent, None)
+        if stretch is None:
+            return []
+        first, last = stretch
+        if last == len(self._log) - 1:  # quiet until the tick logged last: no later change
+            return np.flatnonzero(self._last >= first).tolist()
+        missed: set[int] = set()  # it left the quiet while others stayed: read the log back
+        for updates in self._log[first:last + 1]:
             for group in updates:
-                entries.update(unpack_group(group)[0].tolist())
-        missed[1] = through
-        return entries
+                missed.update(unpack_group(group)[0].tolist())
+        return sorted(missed)
