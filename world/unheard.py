@@ -12,6 +12,8 @@ where a set of its own took in every entry of every tick. Only an agent that lea
 while others stay (a restarted one, sent the whole table) has its entries read back from the log.
 """
 
+from itertools import accumulate
+
 import numpy as np
 
 from nnql_swarm.protocol.messages import unpack_group
@@ -33,7 +35,7 @@ class UnheardEntries:
         """Nobody is quiet any more (a new episode starts): forget the log."""
         self._log: list[Groups] = []  # each logged tick's updates, in order
         self._last = np.full(self._entries, -1, dtype=np.int64)  # entry -> last logged tick
-        self._lasts = np.zeros(8, dtype=np.int64)  # logged tick -> entries it changed last
+        self._lasts: list[int] = []  # logged tick -> entries it changed last
         self._since: list[int] = []  # logged tick -> entries changed at it or later
         self._quiet: dict[int, list[int]] = {}  # agent -> [first, last] logged tick it is quiet
 
@@ -41,18 +43,18 @@ class UnheardEntries:
         """This tick's updates, missed by the agents quiet at it (:meth:`quiet`)."""
         if not self._quiet and self._log:  # nobody misses what was logged before
             self.clear()
-        tick = len(self._log)
+        tick, lasts = len(self._log), self._lasts
         self._log.append(updates)
-        if tick == len(self._lasts):
-            self._lasts = np.concatenate([self._lasts, np.zeros_like(self._lasts)])
-        changed = [unpack_group(group)[0] for group in updates]
-        if changed:
-            entries = np.unique(np.concatenate(changed))
-            before = self._last[entries]
-            np.subtract.at(self._lasts, before[before >= 0], 1)
-            self._lasts[tick] = len(entries)
-            self._last[entries] = tick
-        self._since = np.cumsum(self._lasts[tick::-1])[::-1].tolist()
+        changed: set[int] = set()
+        for group in updates:
+            changed.update(unpack_group(group)[0].tolist())
+        entries = np.fromiter(changed, dtype=np.int64, count=len(changed))
+        for before in self._last[entries].tolist():
+            if before >= 0:
+                lasts[before] -= 1
+        lasts.append(len(changed))
+        self._last[entries] = tick
+        self._since = list(accumulate(reversed(lasts)))[::-1]
 
     def quiet(self, agent: int) -> bool:
         """``agent`` is quiet at the tick logged last: whether it is to stay so (fewer than
