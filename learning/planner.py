@@ -15,7 +15,7 @@ from nnql_swarm.learning.plan import (
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import python_values
-from nnql_swarm.protocol.messages import Observation, unpack_ids, unpack_neighbours
+from nnql_swarm.protocol.messages import CELL_TYPE, NEIGHBOUR_ITEMS, Observation
 
 
 STREAM_MARGIN = 4
@@ -30,6 +30,20 @@ def plans_are_known(config: SwarmConfig) -> bool:
     interaction radius does."""
     return (max(config.width, config.height) <= VIEW_RADIUS + 1
             or 2 * config.interaction_radius <= VIEW_RADIUS)
+
+
+def unpack_seen(obs: Observation, arrays: bool) -> tuple:
+    """An observation's neighbours ``(id, x, y)`` and parked ids as the kernels read them:
+    arrays ``(k, 3)`` and ``(p,)`` where they are compiled (``arrays``; both made from the
+    payload's packings at once), else lists."""
+    k = len(obs.neighbours) // (NEIGHBOUR_ITEMS * CELL_TYPE.itemsize)
+    both = np.frombuffer(obs.neighbours + obs.parked, CELL_TYPE)
+    if arrays:
+        both = both.astype(np.int64)
+        return both[:NEIGHBOUR_ITEMS * k].reshape(k, NEIGHBOUR_ITEMS), both[NEIGHBOUR_ITEMS * k:]
+    values = both.tolist()
+    return ([values[i:i + NEIGHBOUR_ITEMS] for i in range(0, NEIGHBOUR_ITEMS * k, NEIGHBOUR_ITEMS)],
+            values[NEIGHBOUR_ITEMS * k:])
 
 
 class Plan(NamedTuple):
@@ -93,24 +107,22 @@ class Planner:
         counts, out = python_values(self._counts), self._out
         parts = [python_values(out[part][:count]) if count else [] for part, count in
                  enumerate(counts[:PLAN_PARTS])]
-        nb, streamed = read[0], parts[P_STREAMED]
-        near = python_values(nb[streamed, 0]) if self._arrays else [nb[i][0] for i in streamed]
-        return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED], near,
-                    *read)
+        streamed = parts[P_STREAMED]
+        if streamed:
+            ids = python_values(read[0][:, 0]) if self._arrays else [row[0] for row in read[0]]
+            streamed = [ids[i] for i in streamed]
+        return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
+                    streamed, *read)
 
     def _run(self, obs: Observation) -> tuple | None:
         """Run the kernel on ``obs``: its neighbours and parked ids as it read them, or None
         where ``obs`` does not fit the run."""
-        nb, parked_ids = unpack_neighbours(obs.neighbours), unpack_ids(obs.parked)
+        nb, parked_ids = unpack_seen(obs, self._arrays)
         n, k, p, (x, y), (gx, gy) = self._n, len(nb), len(parked_ids), obs.position, obs.goal
         width, height, meet = self._width, self._height, self._meet
         if (k >= n or p >= n or obs.rank >= n or x >= width or gx >= width or y >= height
                 or gy >= height):
             return None
-        if self._arrays:
-            nb, parked_ids = nb.astype(np.int64), parked_ids.astype(np.int64)
-        else:
-            nb, parked_ids = nb.tolist(), parked_ids.tolist()
         whole = True  # every part of the plan (the world reads only some: learning.plan)
         self._plan(nb, k, parked_ids, p, obs.agent, x, y, obs.rank, obs.tick, n, width, height,
                    self._radius, meet, obs.arrived and self._parks_still,

@@ -9,9 +9,10 @@ import numpy as np
 from nnql_swarm.learning import ahead
 from nnql_swarm.learning.fields import NB_FIELDS, reach
 from nnql_swarm.learning.known_map import check_cell_order
+from nnql_swarm.learning.planner import unpack_seen
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.messages import Observation, unpack_ids, unpack_neighbours
+from nnql_swarm.protocol.messages import Observation
 
 
 class NeighbourRows:
@@ -68,11 +69,7 @@ class NeighbourRows:
         config, (x, y) = self.config, obs.position
         answer, prev_x, prev_y = self._answer, self._prev_x, self._prev_y
         if cells is None:
-            cells, parked = unpack_neighbours(obs.neighbours), unpack_ids(obs.parked)
-            if self.arrays:
-                cells, parked = cells.astype(np.int64), parked.astype(np.int64)
-            else:
-                cells, parked = cells.tolist(), parked.tolist()
+            cells, parked = unpack_seen(obs, self.arrays)
         k = len(cells)
         if self.arrays:
             answer.fill(-1)

@@ -76,7 +76,7 @@ def test_the_agents_rows_are_its_neighbours_in_reach_then_the_walls_compiled_or_
     plain = np.zeros((reader.size, NB_FIELDS), dtype=np.int64)  # its callees may be compiled
     n = config.n_agents
     m = neighbours.neighbour_rows_into.__dict__.get("py_func", neighbours.neighbour_rows_into)(
-        [[1, 3, 2], [2, 7, 7], [3, 4, 1]], 3, reader.reach, reader.reach, [0] * n, [1], 1, 3, 1,
+        ((1, 3, 2), (2, 7, 7), (3, 4, 1)), 3, reader.reach, reader.reach, [0] * n, (1,), 1, 3, 1,
         reader.reach,
         [-1, STAY, -1, LEFT], [-1, -1, -1, 4], [-1, -1, -1, 0], 3, 0, True,
         reader.wall_ids.tolist(), reader.n_walls, reader.wall_far, 2, config.meet_only, 8, 8,
