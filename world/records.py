@@ -50,6 +50,7 @@ from nnql_swarm.learning.fields import (
     learner_params, record_size, state_size,
 )
 from nnql_swarm.learning.plan import PLAN_PARTS, SCRATCH
+from nnql_swarm.learning.planner import unpack_seen
 from nnql_swarm.learning.readings import read_rows, uses_map
 from nnql_swarm.learning.rows import NeighbourRows
 from nnql_swarm.learning.tables import float_array, int_array
@@ -57,7 +58,7 @@ from nnql_swarm.protocol.actions import N_ACTIONS, STAY, chebyshev, within
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
 from nnql_swarm.protocol.jit import python_values
 from nnql_swarm.protocol.messages import (
-    Observation, pack_neighbours, unpack_ids, unpack_neighbours,
+    Observation, pack_neighbours, unpack_neighbours,
 )
 
 FORGED = "forged-record"
@@ -97,11 +98,6 @@ def decides(obs: Observation, lifelong: bool) -> bool:
     """Whether an agent that was sent ``obs`` and announced an intent decided on it (and so left
     a transition for its next record)."""
     return not _stops(obs, lifelong)
-
-
-def _cells(obs: Observation) -> np.ndarray:
-    """An observation's neighbours ``(id, x, y)`` as an array ``(k, 3)``."""
-    return unpack_neighbours(obs.neighbours).astype(np.int64)
 
 
 class RecordCheck:
@@ -254,12 +250,12 @@ class RecordCheck:
         memory, was_x, was_y, mem_k = self._none, -1, -1, 0
         if self._remembers(before, decision.before):
             assert decision.before is not None
-            memory = _cells(decision.before)
+            memory = unpack_seen(decision.before, True)[0]
             (was_x, was_y), mem_k = decision.before.position, len(memory)
         stops = _stops(obs, self.lifelong)
         if stops:
-            awaited, staying, nb, parked = self._no_ids, self._no_ids, _cells(obs), \
-                unpack_ids(obs.parked).astype(np.int64)  # it waits for nobody
+            awaited, staying = self._no_ids, self._no_ids  # it waits for nobody
+            nb, parked = unpack_seen(obs, True)
         else:
             awaited, staying, nb, parked = self._negotiated(obs)
         rows = self.rows

@@ -23,11 +23,10 @@ from typing import NamedTuple
 
 import numpy as np
 
-from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA
 from nnql_swarm.learning import ahead
-from nnql_swarm.learning.fields import RF_FIELDS
+from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA
 from nnql_swarm.learning.record import record_is_valid
-from nnql_swarm.learning.tables import Learner
+from nnql_swarm.learning.tables import Learner, buffer_makers
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import pack_updates
 
@@ -52,7 +51,7 @@ class SharedTable:
     def __init__(self, config: SwarmConfig) -> None:
         self._learner = Learner(config)  # the tables an agent starts with, and its alpha, gamma
         self._apply, how = ahead.compiled("apply_records")
-        self._arrays = how != ahead.PLAIN  # the kernel reads arrays, else lists
+        self._buffers = buffer_makers(how != ahead.PLAIN)  # its buffers: arrays, else lists
         self.alpha = self._learner.params_f[FP_ALPHA]
         self.gamma = self._learner.params_f[FP_GAMMA]
 
@@ -69,23 +68,13 @@ class SharedTable:
             return ()
         records = [learned[agent] for agent in sorted(learned)]
         starts = [0, *accumulate(len(integers) for integers, _ in records)]
-        ints = chain.from_iterable(integers for integers, _ in records)
-        floats = chain.from_iterable(rewards for _, rewards in records)
-        count, total = len(records), starts[-1]
-        learner = self._learner
-        if self._arrays:
-            written = np.empty(total, dtype=np.int64)  # a record writes fewer entries than ints
-            n = self._apply(learner.q_ds, learner.q_ca, np.fromiter(ints, np.int64, total),
-                            np.array(starts, dtype=np.int64),
-                            np.fromiter(floats, np.float64, RF_FIELDS * count).reshape(count, -1),
-                            count, self.alpha, self.gamma, written)
-            return self.current(written[:n])
-        rewards = list(floats)
-        written_list = [0] * total
-        n = self._apply(learner.q_ds, learner.q_ca, list(ints), starts,
-                        [rewards[k:k + RF_FIELDS] for k in range(0, len(rewards), RF_FIELDS)],
-                        count, self.alpha, self.gamma, written_list)
-        return self.current(written_list[:n])
+        as_ints, as_floats = self._buffers
+        written = as_ints([0] * starts[-1])  # a record writes fewer entries than its integers
+        n = self._apply(self._learner.q_ds, self._learner.q_ca,
+                        as_ints(list(chain.from_iterable(integers for integers, _ in records))),
+                        as_ints(starts), as_floats([list(rewards) for _, rewards in records]),
+                        len(records), self.alpha, self.gamma, written)
+        return self.current(written[:n])
 
     @property
     def entries(self) -> int:
