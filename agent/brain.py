@@ -58,7 +58,7 @@ class AgentBrain:
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
         self.order: tuple[int, ...] = ()  # this tick's moves by preference (--arbitration pibt)
         self._pibt = config.arbitration == "pibt"
-        ints, _ = buffer_makers(self._arrays)
+        ints, _, _ = buffer_makers(self._arrays)
         self._ranks = ints([0] * N_ACTIONS)
         self._outcome = ints([0] * OUT_FIELDS)
         self.rejected_updates = 0  # shared-table entries refused (outside, or uneven groups)

@@ -81,7 +81,8 @@ def classify(batch: Batch, run: int, first_tick: int, steps: int, tally: Counter
             rank = (i - tick) % learners
             decided = np.array([j >= learners or (j - tick) % learners < rank for j in range(n)])
             bodies = Bodies(x, y, goal_x, goal_y, learns, arrived, np.zeros(n, dtype=np.int64))
-            moves = Moves(actions, decided, prev_x, prev_y, np.zeros(n, dtype=np.int64))
+            moves = Moves(actions, decided, prev_x, prev_y, np.zeros(n, dtype=np.int64),
+                          np.zeros(n, dtype=bool))
             m = rows_of(i, tick, rules, bodies, moves, batch.q_ds[run], nb, params, options,
                         True)
             rows = {int(nb[k][0]): nb[k] for k in range(m)}

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from nnql_swarm.learning import ahead
+from nnql_swarm.world.rules_ahead import RULES
 from nnql_swarm.protocol.jit import plain_python_environment
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.transport.runfiles import EXIT_NO_SPACE, out_of_space
@@ -55,9 +56,11 @@ def process_context() -> SpawnContext | ForkServerContext:
     here, with the environment now. A child of the server has the server's environment, not its
     launcher's: a launcher whose environment has changed since it started the server (a test
     setting a variable for one run) spawns its processes, as do systems without a forkserver.
-    The agents' decision is first compiled ahead of time where it is not yet (``learning.ahead``)."""
+    The kernels the processes run compiled ahead of time are first built where they are not yet
+    (``learning.ahead``, ``world.rules_ahead``)."""
     global _SERVED
-    ahead.ensure()
+    for module in (ahead.KERNELS, RULES):
+        module.ensure()
     os.environ.update(plain_python_environment())
     os.environ.update(main_to_serve())
     environment = dict(os.environ)

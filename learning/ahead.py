@@ -1,19 +1,20 @@
-"""The swarm processes' kernels compiled ahead of time: an extension module that an agent or the
+"""The swarm processes' kernels compiled ahead of time: extension modules that an agent or the
 world imports without numba.
 
 The swarm's processes run the kernel functions in plain Python (``protocol.jit``), since loading
 numba and its LLVM would take an agent from some 40 MiB to 160. numba's ``pycc`` compiles
 chosen functions, with fixed signatures, into an extension module that needs only numpy at run
-time. This module builds the per-observation kernels so (:data:`EXPORTS`: an agent's decision,
+time (:class:`AheadModule`: built into the kernel cache, ``protocol.jit.cache_directory``, one
+directory per version of every kernel source, once per version, and found there). This module's
+(:data:`KERNELS`) holds the per-observation kernels (:data:`EXPORTS`: an agent's decision,
 ``learning.decision.agent_decision``, its negotiation's plan, ``learning.plan.negotiation_plan``,
 and its neighbour rows, ``learning.neighbours.neighbour_rows_into``; the world's check of a
 learning record, ``learning.expected.expected_record``, with every agent's plan of a tick at once,
 ``learning.plan.world_plans``, and the step that applies a tick's records to the shared table,
 ``learning.record.apply_records``; and the write of the shared table's updates into an agent's
-copy, ``learning.record.write_entries``), into the kernel cache
-(``protocol.jit.cache_directory``: one directory per version of every kernel source), once per
-version; and finds them there (:func:`compiled`). A process that does not find it (not built yet, or built where no C compiler
-was) runs them in plain Python: the same functions, the same results, slower.
+copy, ``learning.record.write_entries``); the world's step has a module of its own
+(``world.rules_ahead``). A process that does not find a module (not built yet, or built where no C
+compiler was) runs its kernels in plain Python: the same functions, the same results, slower.
 
     python -m nnql_swarm.learning.ahead     # build it (the launcher does, where it is missing)
 
@@ -22,7 +23,6 @@ was) runs them in plain Python: the same functions, the same results, slower.
 
 import contextlib
 import fcntl
-import functools
 import importlib.machinery
 import importlib.util
 import logging
@@ -61,54 +61,134 @@ EXPORTS: dict[str, tuple[Callable, str]] = {
 """Each kernel the module holds, by name: the function and its signature."""
 
 PLAIN, AHEAD, JIT = "python", "ahead-of-time", "numba"
-"""How this process runs a kernel of :data:`EXPORTS` (:func:`compiled`): in plain Python, by the
-module compiled ahead of time, or compiled by numba (a process that runs the kernels compiled)."""
+"""How this process runs a kernel compiled ahead of time (:meth:`AheadModule.compiled`): in plain
+Python, by the module compiled ahead of time, or compiled by numba (a process that runs the
+kernels compiled)."""
 
 SWITCH = "NNQL_AHEAD"
-"""``NNQL_AHEAD=off`` in a process's environment: it runs the kernels of :data:`EXPORTS` in plain
-Python even where the module is built (to compare the two, ``bench.paired --a-env
+"""``NNQL_AHEAD=off`` in a process's environment: it runs the kernels of every :class:`AheadModule`
+in plain Python even where it is built (to compare the two, ``bench.paired --a-env
 NNQL_AHEAD=off``)."""
 
 
-def module_path() -> Path:
-    """Where the extension module of the current kernel sources is, or is to be built."""
-    return cache_directory() / (MODULE + importlib.machinery.EXTENSION_SUFFIXES[0])
+class AheadModule:
+    """One extension module of kernels compiled ahead of time: its name, the kernels it holds
+    (``exports``: by name, the function and its signature), the module that builds it when run
+    with ``python -m`` (``builder``), and what it holds, in words (``holds``, said when it is
+    built). Built into the kernel cache once per version of the kernel sources."""
+
+    def __init__(self, name: str, exports: dict[str, tuple[Callable, str]], builder: str,
+                 holds: str) -> None:
+        self.name, self.exports, self.builder, self.holds = name, exports, builder, holds
+        self._kernels: dict[str, tuple[Callable, str]] = {}
+        self._loaded: list[ModuleType | None] = []  # the module, once looked for
+
+    def path(self) -> Path:
+        """Where the module of the current kernel sources is, or is to be built."""
+        return cache_directory() / (self.name + importlib.machinery.EXTENSION_SUFFIXES[0])
+
+    def load(self) -> ModuleType | None:
+        """The module of the current kernel sources, if it was built (None otherwise, or if it
+        cannot be loaded, which is logged)."""
+        path = self.path()
+        if not path.exists():
+            return None
+        try:
+            spec = importlib.util.spec_from_file_location(self.name, path)
+            assert spec is not None and spec.loader is not None
+            module = importlib.util.module_from_spec(spec)
+            spec.loader.exec_module(module)
+        except ImportError as error:
+            log.warning("the kernels compiled ahead of time cannot be loaded (%s); "
+                        "running them in plain Python", error)
+            return None
+        return module
+
+    def compiled(self, name: str) -> tuple[Callable, str]:
+        """The kernel ``name`` of :attr:`exports`, as this process runs it, and how
+        (:data:`PLAIN`, :data:`AHEAD`, :data:`JIT`). Looked up once."""
+        found = self._kernels.get(name)
+        if found is None:
+            function = self.exports[name][0]
+            if COMPILED:
+                found = function, JIT
+            else:
+                if not self._loaded:
+                    self._loaded.append(None if os.environ.get(SWITCH) == "off" else self.load())
+                module = self._loaded[0]
+                found = (function, PLAIN) if module is None else (getattr(module, name), AHEAD)
+            self._kernels[name] = found
+        return found
+
+    def build(self) -> Path:
+        """Compile the module into the kernel cache, unless it is there; its path. Needs numba,
+        so a process that runs the kernels compiled."""
+        if not COMPILED:
+            raise RuntimeError(f"building ahead of time needs numba: run it with "
+                               f"{MODE_VARIABLE} unset")
+        target = self.path()
+        target.parent.mkdir(parents=True, exist_ok=True)
+        with _locked(target.parent, self.name):
+            if target.exists():
+                return target
+            with warnings.catch_warnings():  # pycc is pending deprecation in numba, and says so
+                warnings.simplefilter("ignore")
+                from numba.pycc import CC
+            with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
+                cc = CC(self.name, source_module=self.builder)
+                cc.output_dir = scratch
+                for name, (function, signature) in self.exports.items():
+                    cc.export(name, signature)(getattr(function, "py_func"))
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    cc.compile()
+                os.replace(Path(scratch) / cc.output_file, target)
+        return target
+
+    def failure_path(self) -> Path:
+        """Where a failed build of the current kernel sources says why: none is tried again."""
+        return self.path().with_suffix(".failed")
+
+    def ensure(self) -> bool:
+        """Build the module where it is missing, in a child process that loads numba (this one
+        need not), saying so; whether it is there. A failed build is logged, and noted beside it
+        (:meth:`failure_path`), so that no later process tries it again; the processes run the
+        kernels in plain Python."""
+        if self.path().exists():
+            return True
+        failed = self.failure_path()
+        if failed.exists():
+            return False
+        print(f"Compiling {self.holds} ahead of time (once per version of the kernel sources; "
+              f"some 20 s)...", file=sys.stderr, flush=True)
+        env = {**os.environ, MODE_VARIABLE: "compiled"}
+        done = subprocess.run([sys.executable, "-m", self.builder], env=env,
+                              capture_output=True, text=True)
+        if done.returncode != 0 or not self.path().exists():
+            failed.parent.mkdir(parents=True, exist_ok=True)
+            failed.write_text(done.stderr)
+            log.warning("%s could not be compiled ahead of time, so they run in plain Python "
+                        "(why: %s; delete it to try again)", self.holds, failed)
+            return False
+        return True
 
 
-def load() -> ModuleType | None:
-    """The extension module of the current kernel sources, if it was built (None otherwise, or
-    if it cannot be loaded, which is logged)."""
-    path = module_path()
-    if not path.exists():
-        return None
-    try:
-        spec = importlib.util.spec_from_file_location(MODULE, path)
-        assert spec is not None and spec.loader is not None
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    except ImportError as error:
-        log.warning("the kernels compiled ahead of time cannot be loaded (%s); "
-                    "running them in plain Python", error)
-        return None
-    return module
+@contextlib.contextmanager
+def _locked(directory: Path, name: str) -> Iterator[None]:
+    """Hold a module's build lock in the cache directory: processes that build it at once build
+    it once."""
+    with open(directory / (name + ".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
 
 
-@functools.cache
+KERNELS = AheadModule(MODULE, EXPORTS, __name__, "the agents' and the world's kernels")
+"""The module of :data:`EXPORTS`."""
+
+
 def compiled(name: str) -> tuple[Callable, str]:
-    """The kernel :data:`EXPORTS` names ``name``, as this process runs it, and how
-    (:data:`PLAIN`, :data:`AHEAD`, :data:`JIT`). Looked up once."""
-    function = EXPORTS[name][0]
-    if COMPILED:
-        return function, JIT
-    module = _module()
-    if module is None:
-        return function, PLAIN
-    return getattr(module, name), AHEAD
-
-
-@functools.cache
-def _module() -> ModuleType | None:
-    return None if os.environ.get(SWITCH) == "off" else load()
+    """The kernel of :data:`EXPORTS` named ``name``, as :meth:`AheadModule.compiled`."""
+    return KERNELS.compiled(name)
 
 
 def decision() -> tuple[Callable, str]:
@@ -116,67 +196,5 @@ def decision() -> tuple[Callable, str]:
     return compiled("agent_decision")
 
 
-@contextlib.contextmanager
-def _locked(directory: Path) -> Iterator[None]:
-    """Hold the cache directory's build lock: processes that build at once build once."""
-    with open(directory / (MODULE + ".lock"), "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        yield
-
-
-def build() -> Path:
-    """Compile the extension module into the kernel cache, unless it is there; its path. Needs
-    numba, so a process that runs the kernels compiled."""
-    if not COMPILED:
-        raise RuntimeError(f"building ahead of time needs numba: run it with {MODE_VARIABLE} unset")
-    target = module_path()
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with _locked(target.parent):
-        if target.exists():
-            return target
-        with warnings.catch_warnings():  # pycc is pending deprecation in numba, and says so
-            warnings.simplefilter("ignore")
-            from numba.pycc import CC
-        with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
-            cc = CC(MODULE, source_module=__name__)
-            cc.output_dir = scratch
-            for name, (function, signature) in EXPORTS.items():
-                cc.export(name, signature)(getattr(function, "py_func"))
-            with warnings.catch_warnings():
-                warnings.simplefilter("ignore")
-                cc.compile()
-            os.replace(Path(scratch) / cc.output_file, target)
-    return target
-
-
-def failure_path() -> Path:
-    """Where a failed build of the current kernel sources says why: none is tried again."""
-    return module_path().with_suffix(".failed")
-
-
-def ensure() -> bool:
-    """Build the extension module where it is missing, in a child process that loads numba (this
-    one need not), saying so; whether it is there. A failed build is logged, and noted beside
-    it (:func:`failure_path`), so that no later process tries it again; the processes run the
-    kernels in plain Python."""
-    if module_path().exists():
-        return True
-    failed = failure_path()
-    if failed.exists():
-        return False
-    print("Compiling the agents' and the world's kernels ahead of time (once per version of the "
-          "kernel sources; some 20 s)...", file=sys.stderr, flush=True)
-    env = {**os.environ, MODE_VARIABLE: "compiled"}
-    done = subprocess.run([sys.executable, "-m", __name__], env=env, capture_output=True,
-                          text=True)
-    if done.returncode != 0 or not module_path().exists():
-        failed.parent.mkdir(parents=True, exist_ok=True)
-        failed.write_text(done.stderr)
-        log.warning("the swarm's kernels could not be compiled ahead of time, so they "
-                    "run in plain Python (why: %s; delete it to try again)", failed)
-        return False
-    return True
-
-
 if __name__ == "__main__":
-    print(build())
+    print(KERNELS.build())

@@ -28,7 +28,7 @@ class Learner:
     def __init__(self, config: SwarmConfig, arrays: bool = COMPILED) -> None:
         reading = READINGS[config.algo]
         params, params_f = learner_params(config)
-        ints, floats = buffer_makers(arrays)
+        ints, floats, _ = buffer_makers(arrays)
         self.params, self.params_f = ints(params), floats(params_f)
         both = np.full((N_STATES + ca_rows(reading, config.known_state), N_ACTIONS),
                        float(config.optimistic))
@@ -86,7 +86,11 @@ def float_array(values) -> np.ndarray:
     return np.array(values, dtype=np.float64)
 
 
+def flag_array(values) -> np.ndarray:
+    return np.array(values, dtype=np.bool_)
+
+
 def buffer_makers(arrays: bool) -> tuple:
-    """How kernel buffers are made from values, integers and floats: numpy arrays where the
-    kernels are compiled (``arrays``), else lists."""
-    return (int_array, float_array) if arrays else (list, list)
+    """How kernel buffers are made from values, integers, floats and flags: numpy arrays where
+    the kernels are compiled (``arrays``), else lists."""
+    return (int_array, float_array, flag_array) if arrays else (list, list, list)

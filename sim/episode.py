@@ -37,11 +37,8 @@ from nnql_swarm.protocol.actions import N_ACTIONS, STAY, sees
 from nnql_swarm.protocol.jit import Buffer, batch_kernel, inline_kernel, kernel, prange
 from nnql_swarm.protocol.ranks import SCRIPTED_RANK, priority_rank, waits_for
 from nnql_swarm.world.pibt import plan
-from nnql_swarm.world.tasks import renew_goals
-from nnql_swarm.world.rules import (
-    Bodies, Outcome, Rules, Scratch, Score, field_costs, refusal_rewards, shared_cells,
-    swaps_through, world_step,
-)
+from nnql_swarm.world.rules import Bodies, Outcome, Rules, Scratch, Score, field_costs
+from nnql_swarm.world.step import play_step
 
 ORACLE_SCRATCH = 13
 """Rows of a run's oracle scratch (``world.pibt.plan``: occupant, reserved, order, blocked,
@@ -141,12 +138,14 @@ class Noise(NamedTuple):
 
 class Moves(NamedTuple):
     """A tick's negotiation, per body: its action, whether it is fixed yet, its cell a tick
-    ago (-1 at an episode's first), and in a lifelong run which of its goals comes next."""
+    ago (-1 at an episode's first), and in a lifelong run which of its goals comes next and
+    whether it reached one this step (``world.step.play_step``)."""
     actions: Buffer
     decided: Buffer
     prev_x: Buffer
     prev_y: Buffer
     next_goal: Buffer
+    reached: Buffer
 
 
 class OracleScratch(NamedTuple):
@@ -237,7 +236,7 @@ def run_episode(rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
             Bodies(bodies.x[r], bodies.y[r], bodies.goal_x[r], bodies.goal_y[r], bodies.learns,
                    bodies.arrived[r], bodies.arrival[r]),
             Moves(moves.actions[r], moves.decided[r], moves.prev_x[r], moves.prev_y[r],
-                  moves.next_goal[r]),
+                  moves.next_goal[r], moves.reached[r]),
             Outcome(outcome.before_x[r], outcome.before_y[r], outcome.collided[r],
                     outcome.r_ds[r], outcome.r_ca[r]),
             Scratch(scratch.occupancy[r], scratch.blocked[r]),
@@ -394,16 +393,10 @@ def _episode(r, rules, runs, agents, scenario, noise, bodies, moves, outcome, sc
         for i in range(n):
             prev_x[i] = x[i]
             prev_y[i] = y[i]
-        everyone = world_step(world, bodies, actions, outcome, scratch, score)
-        if pibt:
-            refusal_rewards(ranks, actions, bodies.learns, learners, r_ca, row_f)
-        if lifelong:
-            renew_goals(goal_x, goal_y, arrived, learners, scenario.tasks, rules.task_count,
-                        next_goal, row)
-        out[OUT_VIOLATIONS] += shared_cells(x, y, n, width, scratch.occupancy)
-        if count_swaps:
-            out[OUT_VIOLATIONS] += swaps_through(outcome.before_x, outcome.before_y, x, y, n, width,
-                                                 scratch.occupancy)
+        everyone, on_shared_cells, swapped = play_step(
+            world, bodies, actions, outcome, scratch, score, learners, pibt, ranks, lifelong,
+            scenario.tasks, rules.task_count, next_goal, moves.reached)
+        out[OUT_VIOLATIONS] += on_shared_cells + swapped
         if record:
             for i in range(n):
                 trace[step, i, TR_ACTION] = actions[i]

@@ -171,7 +171,7 @@ class Batch:
         self._bodies = Bodies(_ints(r, n), _ints(r, n), _ints(r, n), _ints(r, n), self.learns,
                               np.zeros((r, n), dtype=bool), _ints(r, n))
         self._moves = Moves(_ints(r, n), np.zeros((r, n), dtype=bool), _ints(r, n), _ints(r, n),
-                            _ints(r, n))
+                            _ints(r, n), np.zeros((r, n), dtype=bool))
         self._outcome = Outcome(_ints(r, n), _ints(r, n), np.zeros((r, n), dtype=bool),
                                 np.zeros((r, n)), np.zeros((r, n)))
         self._scratch = Scratch(_ints(r, cells), np.zeros((r, n), dtype=bool))

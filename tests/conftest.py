@@ -36,19 +36,21 @@ def pytest_sessionstart(session):
     checkout of these kernel sources on this machine, ``protocol.jit``), before the workers
     start: else the first tests to play it (the experiment's command, in a process of its
     own) each compiled it at once, several times half a minute on a loaded machine, and ran past
-    their time-outs. The same for the agents' decision compiled ahead of time (``learning.ahead``),
-    which every process that starts a swarm would otherwise build, or wait for, at once. In the
-    controller only: a worker finds both cached."""
+    their time-outs. The same for the kernels compiled ahead of time (``learning.ahead``,
+    ``world.rules_ahead``), which every process that starts a swarm would otherwise build, or
+    wait for, at once. In the controller only: a worker finds them cached."""
     if hasattr(session.config, "workerinput"):
         return
     from nnql_swarm.learning import ahead
+    from nnql_swarm.world.rules_ahead import RULES
     from nnql_swarm.launch.cli import prepare_simulator
     from nnql_swarm.protocol.config import SwarmConfig
     from nnql_swarm.sim.runs import swarm_world
 
     config = SwarmConfig(n_agents=2, width=5, height=5, episodes=1, max_steps=10)
     prepare_simulator(swarm_world(config), config)  # says so when it compiles
-    ahead.ensure()  # says so when it compiles
+    for module in (ahead.KERNELS, RULES):
+        module.ensure()  # says so when it compiles
 
 
 def pytest_addoption(parser):

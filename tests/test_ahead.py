@@ -1,8 +1,8 @@
-"""The swarm's kernels compiled ahead of time (``learning.ahead``: the agents' decision,
-negotiation plan and neighbour rows, the world's check of a learning record): built once into the
-kernel cache, even by several processes at once; loaded by a process that runs the kernels in
-plain Python, without numba; and deciding, planning and checking exactly as plain Python does,
-over the real handlers of a whole run."""
+"""The swarm's kernels compiled ahead of time (``learning.ahead``: the agents' decision, negotiation
+plan and neighbour rows, the world's check of a learning record; ``world.rules_ahead``: the world's
+step): built once into the kernel cache, even by several processes at once; loaded by a process that
+runs the kernels in plain Python, without numba; and deciding, planning, checking and moving
+everyone exactly as plain Python does, over the real handlers of a whole run."""
 
 import hashlib
 import os
@@ -14,9 +14,12 @@ import pytest
 
 from nnql_swarm.learning import ahead
 from nnql_swarm.protocol.jit import cache_directory
+from nnql_swarm.world.rules_ahead import RULES
 
 PROBE = ("import sys; from nnql_swarm.learning import ahead; "
-         "print(ahead.decision()[1]); print('numba' in sys.modules)")
+         "from nnql_swarm.world.rules_ahead import RULES; "
+         "print(ahead.decision()[1]); print(RULES.compiled('world_move')[1]); "
+         "print('numba' in sys.modules)")
 
 RUN = """
 import hashlib, sys
@@ -24,6 +27,7 @@ from pathlib import Path
 from bench import node_cpu
 from bench.harness import DEFAULT_PRESET, swarm_config
 from nnql_swarm.learning import ahead
+from nnql_swarm.world.rules_ahead import RULES
 config = swarm_config(DEFAULT_PRESET, run_id="ahead", n_agents=8, episodes=8, max_steps=100,
                       width=11, height=11)
 wire = hashlib.sha256()
@@ -31,7 +35,7 @@ def on_send(number, kind, sender, receiver, item, cause):
     payload = getattr(item, "payload", b"")
     wire.update(repr((number, kind, sender, receiver)).encode() + bytes(payload))
 ticks, _ = node_cpu.run(config, Path(sys.argv[1]), False, on_send=on_send)
-print(ticks, wire.hexdigest(), ahead.decision()[1])
+print(ticks, wire.hexdigest(), ahead.decision()[1], RULES.compiled("world_move")[1])
 """
 
 
@@ -50,15 +54,16 @@ def checkpoints(out: Path) -> str:
 
 @pytest.fixture(scope="module")
 def built() -> Path:
-    """The module of these kernel sources, built if missing (as the launcher does)."""
-    assert ahead.ensure(), "the agents' decision could not be compiled ahead of time"
-    return ahead.module_path()
+    """The modules of these kernel sources, built if missing (as the launcher does)."""
+    assert RULES.ensure(), "the world's step could not be compiled ahead of time"
+    assert ahead.KERNELS.ensure(), "the agents' decision could not be compiled ahead of time"
+    return ahead.KERNELS.path()
 
 
 def test_a_plain_process_loads_the_built_decision_without_numba(built):
     done = subprocess.run([sys.executable, "-c", PROBE], env=plain({}), capture_output=True,
                           text=True, timeout=120)
-    assert done.stdout.split() == [ahead.AHEAD, "False"], done.stderr
+    assert done.stdout.split() == [ahead.AHEAD, ahead.AHEAD, "False"], done.stderr
 
 
 def test_without_the_module_or_with_it_switched_off_a_process_decides_in_plain_python(
@@ -66,7 +71,7 @@ def test_without_the_module_or_with_it_switched_off_a_process_decides_in_plain_p
     for env in ({ahead.SWITCH: "off"}, {"XDG_CACHE_HOME": str(tmp_path / "no-cache")}):
         done = subprocess.run([sys.executable, "-c", PROBE], env=plain(env),
                               capture_output=True, text=True, timeout=120)
-        assert done.stdout.split() == [ahead.PLAIN, "False"], (env, done.stderr)
+        assert done.stdout.split() == [ahead.PLAIN, ahead.PLAIN, "False"], (env, done.stderr)
 
 
 def test_the_decision_compiled_ahead_of_time_decides_as_plain_python_does(built, tmp_path):
@@ -81,8 +86,8 @@ def test_the_decision_compiled_ahead_of_time_decides_as_plain_python_does(built,
         done = subprocess.run([sys.executable, "-c", RUN, str(out)], env=plain(env),
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr
-        ticks, messages, decided = done.stdout.split()
-        assert decided == how and int(ticks) > 8
+        ticks, messages, decided, moved = done.stdout.split()
+        assert decided == moved == how and int(ticks) > 8
         runs[how] = (ticks, messages, checkpoints(out))
     assert runs[ahead.AHEAD] == runs[ahead.PLAIN]
 
@@ -90,7 +95,8 @@ def test_the_decision_compiled_ahead_of_time_decides_as_plain_python_does(built,
 @pytest.mark.full
 def test_processes_that_build_at_once_build_one_module_into_a_fresh_cache(tmp_path):
     """Into an empty cache (``XDG_CACHE_HOME``; numba's own cache of compiled kernels kept), two
-    builders at once: both succeed, one module results, and a plain process decides with it."""
+    builders at once: both succeed, one module results, and a plain process decides with it
+    (and moves everyone in plain Python: the world's module was not built)."""
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "NNQL_KERNEL": "compiled",
            "NUMBA_CACHE_DIR": str(cache_directory())}
     builders = [subprocess.Popen([sys.executable, "-m", "nnql_swarm.learning.ahead"], env=env,
@@ -105,7 +111,7 @@ def test_processes_that_build_at_once_build_one_module_into_a_fresh_cache(tmp_pa
     done = subprocess.run([sys.executable, "-c", PROBE], env=plain({"XDG_CACHE_HOME":
                                                                     str(tmp_path)}),
                           capture_output=True, text=True, timeout=120)
-    assert done.stdout.split() == [ahead.AHEAD, "False"], done.stderr
+    assert done.stdout.split() == [ahead.AHEAD, ahead.PLAIN, "False"], done.stderr
 
 
 @pytest.mark.full
@@ -115,7 +121,7 @@ def test_a_build_that_fails_is_said_once_and_leaves_the_agents_deciding_in_plain
     notes the failure in the cache, and no later process tries again: they decide in plain
     Python."""
     ensure = ("import logging, sys; logging.basicConfig(); from nnql_swarm.learning import ahead; "
-              "print(ahead.ensure(), ahead.decision()[1])")
+              "print(ahead.KERNELS.ensure(), ahead.decision()[1])")
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "NNQL_KERNEL": "python", "CC": "false",
            "NUMBA_CACHE_DIR": str(cache_directory())}
     first = subprocess.run([sys.executable, "-c", ensure], env=env, capture_output=True,

@@ -332,3 +332,49 @@ def test_the_sight_matrix_is_sees_between_every_two_cells(cells):
     for i, (ax, ay) in enumerate(cells):
         for j, (bx, by) in enumerate(cells):
             assert bool(seen[i, j]) == (i != j and sees(ax, ay, bx, by))
+
+
+def test_the_worlds_step_over_flat_buffers_moves_renews_goals_refuses_and_counts_the_invariants():
+    """``world.step.world_move``, the step the world process runs (compiled ahead of time where
+    it is built): the moves of :func:`world_step`, then a lifelong run's next goals (who reached
+    one, flagged), the reward of a refused first choice, and the invariants counted (none broken
+    here: the checks themselves are tested above)."""
+    from nnql_swarm.world.pibt import UNWANTED as UNWANTED_RANK
+    from nnql_swarm.world.step import MOVE_EVERYONE, MOVE_SHARED, MOVE_SWAPPED, world_move
+
+    def move(x, y, gx, gy, actions, count_swaps=False, refuse=False, ranks=(), lifelong=False,
+             tasks=(), next_goal=(0, 0)):
+        n = len(x)
+        buffers = {"x": ints(x), "y": ints(y), "gx": ints(gx), "gy": ints(gy),
+                   "arrived": np.zeros(n, bool), "arrival": ints([0] * n),
+                   "actions": ints(actions), "r_ca": np.zeros(n), "row": ints([0] * ROW_INTS),
+                   "row_f": np.zeros(ROW_FLOATS), "reached": np.zeros(n, bool),
+                   "next_goal": ints(next_goal), "out": ints([0, 0, 0])}
+        b = buffers
+        world_move(n, WIDTH, HEIGHT, count_swaps, False, GOAL_REWARD, STAY_REWARD, b["x"], b["y"],
+                   b["gx"], b["gy"], np.ones(n, bool), b["arrived"], b["arrival"], b["actions"],
+                   ints([0] * n), ints([0] * n), np.zeros(n, bool), np.zeros(n), b["r_ca"],
+                   ints([0] * WIDTH * HEIGHT), np.zeros(n, bool), b["row"], b["row_f"], n,
+                   refuse, ints(ranks), lifelong, ints(tasks), 2, b["next_goal"], b["reached"],
+                   b["out"])
+        return b
+
+    swap = move([0, 1], [0, 0], [4, 0], [3, 0], [RIGHT, LEFT])  # swaps do not count: they pass
+    assert (swap["x"].tolist(), swap["out"][MOVE_SWAPPED], swap["out"][MOVE_SHARED]) == (
+        [1, 0], 0, 0)
+    blocked = move([0, 1], [0, 0], [4, 0], [3, 0], [RIGHT, LEFT], count_swaps=True)
+    assert (blocked["x"].tolist(), blocked["out"][MOVE_SWAPPED]) == ([0, 1], 0)
+    arrive = move([0, 3], [0, 0], [1, 2], [0, 3], [RIGHT, LEFT], lifelong=True,
+                  tasks=[4, 3, 0, 0, 0, 0, 0, 0])  # agent 0 reaches (1, 0), then heads for (4, 3)
+    assert arrive["reached"].tolist() == [True, False] and not arrive["arrived"].any()
+    assert (arrive["gx"][0], arrive["gy"][0], arrive["next_goal"].tolist()) == (4, 3, [1, 0])
+    assert arrive["out"][MOVE_EVERYONE] == 0
+    done = move([0, 3], [0, 0], [1, 3], [0, 1], [RIGHT, DOWN])
+    assert done["out"][MOVE_EVERYONE] == 1 and done["arrived"].all()
+    ranks = [UNWANTED_RANK] * 2 * N_ACTIONS
+    ranks[0 * N_ACTIONS + RIGHT] = 0  # agent 0 wanted RIGHT first; it was given STAY
+    ranks[0 * N_ACTIONS + STAY] = 1
+    ranks[1 * N_ACTIONS + STAY] = 0
+    refused = move([0, 3], [0, 0], [4, 3], [3, 3], [STAY, STAY], refuse=True, ranks=ranks)
+    assert refused["r_ca"].tolist() == [0.0, CA_REWARD]
+    assert refused["row_f"][ROW_REWARD_CA] == CA_REWARD

@@ -20,10 +20,12 @@ hear of. Its next observation (at the end tick, or once :data:`QUIET_CATCH_UP` e
 waiting, which then says ``settled``) brings their current values, so that its copy is the
 world's again before it checkpoints or decides.
 
-The world keeps its state in the rules' buffers (plain lists; the world process runs the kernel
-uncompiled) and plays a tick with ``world.rules.world_step``, the very function the swarm
-simulator runs compiled. The buffers hold every body: the agents, then the run's walls
-(``protocol.walls``), which always stay and which nobody is told about (every process knows them).
+The world keeps its state in the rules' buffers and plays a tick with ``world.step.play_step``, the
+very function the swarm simulator runs compiled: in the world process, which runs the kernel
+uncompiled, through its form compiled ahead of time where it is built (``world.rules_ahead``; the
+buffers are arrays then), else in plain Python (lists). The buffers hold every body: the agents,
+then the run's walls (``protocol.walls``), which always stay and which nobody is told about (every
+process knows them).
 """
 
 from collections.abc import Callable, Iterator
@@ -33,18 +35,21 @@ import numpy as np
 
 from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.protocol.jit import flags, floats, ints, python_values
+from nnql_swarm.learning.ahead import AHEAD, PLAIN
+from nnql_swarm.learning.tables import buffer_makers
+from nnql_swarm.protocol.jit import Buffer, python_values
 from nnql_swarm.protocol.messages import (
     CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation,
 )
 from nnql_swarm.protocol.ranks import priority_rank
+from nnql_swarm.world.rules_ahead import RULES
 from nnql_swarm.world.rules import (
     FIELD_COLUMNS, ROW_GOALS, TASK_COLUMNS, task_columns, ROW_AGENT_STEPS, ROW_ARRIVED, ROW_COLLISIONS, ROW_FLOATS, ROW_INTS, ROW_REWARD,
-    ROW_STEPS, Bodies, Cell, Outcome, Rules, Scratch, Score, field_columns, field_costs,
-    refusal_rewards, shared_cells, swaps_through, world_step,
+    ROW_STEPS, Cell, field_columns, field_costs,
 )
 from nnql_swarm.world.arbiter import Arbiter
-from nnql_swarm.world.tasks import goal_sequences, renew_goals
+from nnql_swarm.world.step import MOVE_EVERYONE, MOVE_FIELDS, MOVE_SHARED, MOVE_SWAPPED
+from nnql_swarm.world.tasks import goal_sequences
 from nnql_swarm.world.scenario import swarm_episode
 from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
 from nnql_swarm.world.unheard import UnheardEntries
@@ -107,12 +112,18 @@ class SwarmWorld:
         n, bodies = config.n_agents, config.n_bodies
         walls = config.walls()
         self._wall_x, self._wall_y = walls[:, 0].tolist(), walls[:, 1].tolist()
+        self._step, how = RULES.compiled("world_move")  # world.step.world_move
+        self._ahead = how == AHEAD  # the rest of the rules run in plain Python, on lists
+        ints, floats, flags = self._makers = buffer_makers(how != PLAIN)
         self._x, self._y = ints([0] * bodies), ints([0] * bodies)
         self._goal_x, self._goal_y = ints([-1] * bodies), ints([-1] * bodies)
         self._learns = flags([True] * n + [False] * (bodies - n))
         self._before_x, self._before_y = ints([0] * bodies), ints([0] * bodies)
         self._occupancy = ints([0] * (config.width * config.height))
         self._blocked = flags([False] * bodies)
+        self._reached = flags([False] * n)  # who reached a goal this step (lifelong runs)
+        self._moved = ints([0] * MOVE_FIELDS)
+        self._tasks = self._next_goal = self._no_ranks = ints([])
         self._stays = [STAY] * (bodies - n)
         self.table = SharedTable(config) if config.shared else None
         self.arbiter = Arbiter(config) if config.arbitration == "pibt" else None
@@ -164,6 +175,7 @@ class SwarmWorld:
         c = self.config
         scenario = swarm_episode(c.seed, episode, c.width, c.height, c.n_agents,
                                  c.obstacle_density, c.map_rows, c.scenario)
+        ints, floats, flags = self._makers
         self.episode = episode
         self.step = 0
         self.goals = scenario.goals
@@ -307,8 +319,9 @@ class SwarmWorld:
         """The running episode's row of ``episodes.csv`` (its deterministic columns)."""
         row, reward = python_values(self._row), python_values(self._row_f)[ROW_REWARD]
         n = self.config.n_agents
-        on_goal, soc, makespan = field_costs(self._x, self._y, self._goal_x, self._goal_y, self._arrival, n,
-                            row[ROW_STEPS])
+        on_goal, soc, makespan = field_costs(
+            *(python_values(b) for b in (self._x, self._y, self._goal_x, self._goal_y,
+                                         self._arrival)), n, row[ROW_STEPS])
         return {"episode": self.episode, "steps": row[ROW_STEPS],
                 "collisions": row[ROW_COLLISIONS], "missed_intents": self._missed,
                 "reward_sum": reward, "arrived": row[ROW_ARRIVED],
@@ -333,42 +346,36 @@ class SwarmWorld:
 
     def _move(self, actions: list[int | None], missed: tuple[int, ...], records: dict | None,
               orders: list[tuple[int, ...] | None] | None) -> TickReport:
-        """A step of the episode: everyone moves at once; rewards, arrivals and the row."""
+        """A step of the episode: everyone moves at once; rewards, arrivals and the row
+        (``world.step.world_move``)."""
         c = self.config
+        n = c.n_agents
         arrived_before = self._outcome[3]  # as this tick's observations showed it
-        chosen = ints([STAY if a is None else a for a in actions] + self._stays)
-        rules = Rules(c.n_bodies, c.width, c.height, c.count_swaps, c.step_aside, c.goal_reward,
-                      c.stay_reward)
-        bodies = Bodies(self._x, self._y, self._goal_x, self._goal_y, self._learns,
-                        self._arrived, self._arrival)
-        outcome = Outcome(self._before_x, self._before_y, self._collided, self._r_ds, self._r_ca)
-        arbiter = self.arbiter
+        chosen = self._makers[0]([STAY if a is None else a for a in actions] + self._stays)
+        arbiter, ranks = self.arbiter, self._no_ranks
         if arbiter is not None:
-            told = orders or [()] * len(actions)
-            arbiter.settle(self._x, self._y, self._goal_x, self._goal_y, self._arrived,
-                           [None if a is None else o or (a,) for a, o in zip(actions, told)],
-                           chosen, self.step)
-        everyone = world_step(rules, bodies, chosen, outcome,
-                              Scratch(self._occupancy, self._blocked),
-                              Score(self._row, self._row_f))
-        if arbiter is not None:
-            refusal_rewards(arbiter.ranks, chosen, self._learns, c.n_agents, self._r_ca,
-                            self._row_f)
+            told = [None if a is None else o or (a,)
+                    for a, o in zip(actions, orders or [()] * len(actions))]
+            ranks = self._settle(arbiter, told, chosen)
+        moved = self._moved
+        self._step(c.n_bodies, c.width, c.height, c.count_swaps, c.step_aside, c.goal_reward,
+                   c.stay_reward, self._x, self._y, self._goal_x, self._goal_y, self._learns,
+                   self._arrived, self._arrival, chosen, self._before_x, self._before_y,
+                   self._collided, self._r_ds, self._r_ca, self._occupancy, self._blocked,
+                   self._row, self._row_f, n, arbiter is not None, ranks, c.lifelong,
+                   self._tasks, c.max_steps, self._next_goal, self._reached, moved)
         reached: list = []
         if c.lifelong:  # each agent that reached its goal has the next one at once
-            reached = python_values(self._arrived)
-            renew_goals(self._goal_x, self._goal_y, self._arrived, c.n_agents, self._tasks,
-                        c.max_steps, self._next_goal, self._row)
-            self._goal_cells = list(zip(python_values(self._goal_x)[:c.n_agents],
-                                        python_values(self._goal_y)[:c.n_agents]))
-        violations = self._check()
+            reached = python_values(self._reached)
+            self._goal_cells = list(zip(python_values(self._goal_x)[:n],
+                                        python_values(self._goal_y)[:n]))
+        violations = self._check(moved[MOVE_SHARED], moved[MOVE_SWAPPED])
         self._plain()
         if c.lifelong:  # the observations say who reached a goal: its last step was terminal
             self._outcome = (*self._outcome[:3], reached)
         self.step += 1
-        self.ending = (bool(everyone) and not c.lifelong) or self.step >= c.max_steps
+        self.ending = (moved[MOVE_EVERYONE] != 0 and not c.lifelong) or self.step >= c.max_steps
         collided = self._outcome[2]
-        n = c.n_agents
         self.settled = (frozenset() if self.ending or not c.quiet_settled
                         else frozenset(i for i in range(n) if arrived_before[i]))
         wanted = () if arbiter is None else arbiter.first_choices()
@@ -380,14 +387,27 @@ class SwarmWorld:
         self.tick += 1
         return report
 
-    def _check(self) -> tuple[str, ...]:
-        """The invariants every tick must hold: no shared cell, no swap-through (if counted)."""
-        c, n = self.config, self.config.n_bodies
+    def _settle(self, arbiter: Arbiter, orders: list, chosen) -> Buffer:
+        """The moves of priority inheritance into ``chosen`` (``world.arbiter``); the orders'
+        ranks, as the step reads them. Where the step is compiled ahead of time, the arbitration
+        still runs in plain Python, which reads lists faster than arrays."""
+        if not self._ahead:
+            arbiter.settle(self._x, self._y, self._goal_x, self._goal_y, self._arrived, orders,
+                           chosen, self.step)
+            return arbiter.ranks
+        moves, plain = chosen.tolist(), python_values
+        arbiter.settle(plain(self._x), plain(self._y), plain(self._goal_x), plain(self._goal_y),
+                       plain(self._arrived), orders, moves, self.step)
+        chosen[:] = moves
+        return self._makers[0](arbiter.ranks)
+
+    def _check(self, shared: int, swapped: int) -> tuple[str, ...]:
+        """The invariants every tick must hold, as the step counted them: no shared cell, no
+        swap-through (if counted)."""
         problems = []
-        if shared_cells(self._x, self._y, n, c.width, self._occupancy):
+        if shared:
             problems.append("two agents share a cell")
-        if c.count_swaps and swaps_through(self._before_x, self._before_y, self._x, self._y, n,
-                                           c.width, self._occupancy):
+        if swapped:
             problems.append("an agent swapped through another agent")
         self.violations += len(problems)
         return tuple(problems)

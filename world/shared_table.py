@@ -18,7 +18,6 @@ them, and every later change reaches the agent as an update, so once the last sl
 its copy equals this one.
 """
 
-from itertools import accumulate, chain
 from typing import NamedTuple
 
 import numpy as np
@@ -66,14 +65,18 @@ class SharedTable:
         order; the entries each one wrote, with their values once all are applied."""
         if not learned:
             return ()
-        records = [learned[agent] for agent in sorted(learned)]
-        starts = [0, *accumulate(len(integers) for integers, _ in records)]
-        as_ints, as_floats = self._buffers
-        written = as_ints([0] * starts[-1])  # a record writes fewer entries than its integers
-        n = self._apply(self._learner.q_ds, self._learner.q_ca,
-                        as_ints(list(chain.from_iterable(integers for integers, _ in records))),
-                        as_ints(starts), as_floats([list(rewards) for _, rewards in records]),
-                        len(records), self.alpha, self.gamma, written)
+        integers: list[int] = []
+        starts, rewards = [0], []
+        for agent in sorted(learned):
+            record = learned[agent]
+            integers += record[0]
+            starts.append(len(integers))
+            rewards.append(list(record[1]))
+        as_ints, as_floats, _ = self._buffers
+        written = as_ints([0] * len(integers))  # a record writes fewer entries than its integers
+        n = self._apply(self._learner.q_ds, self._learner.q_ca, as_ints(integers),
+                        as_ints(starts), as_floats(rewards), len(rewards), self.alpha,
+                        self.gamma, written)
         return self.current(written[:n])
 
     @property
