@@ -8,11 +8,12 @@ import pytest
 from nnql_swarm.learning.tables import Learner
 from nnql_swarm.learning.record import write_entries, write_updates
 from nnql_swarm.protocol import keys
-from nnql_swarm.protocol.actions import DOWN, LEFT, RIGHT, STAY, UP
+from nnql_swarm.protocol.actions import DOWN, LEFT, RIGHT, STAY, UP, sees
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.effects import Finished, Log, SendControl, SendObservations, TickClosed, WriteRow
 from nnql_swarm.protocol.messages import (
-    CONTROL_SHUTDOWN, Intent, agent_sender, encode, pack_updates, unpack_group,
+    CONTROL_SHUTDOWN, Intent, agent_sender, encode, pack_updates, unpack_group, unpack_ids,
+    unpack_neighbours,
 )
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
 from nnql_swarm.world.world_machine import (
@@ -472,3 +473,28 @@ def test_the_phases_move_only_as_the_transition_table_says():
     assert protocol.on_timer(9.0) == [] and protocol.stop(9.0) == [] and protocol.timer() is None
     finished = WorldMachine(CONFIG, now=0.0, first_episode=CONFIG.episodes)
     assert finished.phase is Phase.CLOSING  # resumed after the last row: only the goodbyes
+
+
+@pytest.mark.parametrize("on_target", ["park", "step-aside"])
+def test_every_observation_lists_whom_its_agent_sees_in_id_order_and_the_parked_among_them(
+        on_target):
+    """``SwarmWorld`` packs every agent's neighbours for the tick at once; each observation's
+    are those its agent sees (``protocol.actions.sees``, pair by pair), in id order, with the
+    arrived ones among them parked where arrived agents park."""
+    rng = np.random.default_rng(7)
+    for n, side in ((2, 4), (8, 11), (16, 16), (64, 32), (64, 40)):
+        world = SwarmWorld(SwarmConfig(n_agents=n, width=side, height=side, seed=1,
+                                       on_target=on_target))
+        for _ in range(5):
+            cells = rng.choice(side * side, n, replace=False)
+            xs, ys = (cells % side).tolist(), (cells // side).tolist()
+            world._x[:n], world._y[:n] = xs, ys
+            arrived = (rng.random(n) < 0.3).tolist()
+            world._outcome = (*world._outcome[:3], arrived)
+            for obs in world.observations():
+                i = obs.agent
+                near = [j for j in range(n) if j != i and sees(xs[i], ys[i], xs[j], ys[j])]
+                assert unpack_neighbours(obs.neighbours).tolist() == [
+                    [j, xs[j], ys[j]] for j in near]
+                assert unpack_ids(obs.parked).tolist() == (
+                    [] if on_target == "step-aside" else [j for j in near if arrived[j]])

@@ -30,6 +30,7 @@ process knows them).
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from itertools import compress
 
 import numpy as np
 
@@ -39,7 +40,7 @@ from nnql_swarm.learning.ahead import AHEAD, PLAIN
 from nnql_swarm.learning.tables import buffer_makers
 from nnql_swarm.protocol.jit import Buffer, python_values
 from nnql_swarm.protocol.messages import (
-    CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, WORLD_SENDER, Observation,
+    CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, NEIGHBOUR_ITEMS, WORLD_SENDER, Observation,
 )
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules_ahead import RULES
@@ -272,23 +273,36 @@ class SwarmWorld:
 
     def _neighbours(self) -> Callable[[int], tuple[bytes, bytes]]:
         """Each agent's visible others ``(id, x, y)`` in id order, and the ids of those parked
-        (arrived, where arrived agents park), packed as the wire carries them, by agent id:
-        worked out for an agent only when it is sent an observation (a settled agent is not),
-        from one sight matrix of everyone."""
+        (arrived, where arrived agents park), packed as the wire carries them, by agent id: from
+        one sight matrix of everyone, packed for everyone at once (an agent's are a slice of
+        them: two array operations a tick, not two an observation)."""
         n = self.config.n_agents
         xs, ys = python_values(self._x)[:n], python_values(self._y)[:n]
-        everyone = np.array((range(n), xs, ys), dtype=CELL_TYPE).T.copy()  # rows (id, x, y)
+        everyone = np.array((range(n), xs, ys), dtype=CELL_TYPE).T  # rows (id, x, y)
         if self._sees_all:
             if self._others is None:
                 self._others = ~np.eye(n, dtype=bool)
             seen = self._others
         else:
             seen = sight_matrix(xs, ys)
+        rows, columns = np.nonzero(seen)  # row by row: each agent's others in id order
+        ends = np.bincount(rows, minlength=n).cumsum().tolist()
+        packed = everyone[columns].tobytes()
+        size = NEIGHBOUR_ITEMS * CELL_TYPE.itemsize
         if self.config.step_aside:  # arrived agents do not park
-            return lambda i: (everyone[seen[i]].tobytes(), b"")
+            return lambda i: (packed[size * (ends[i - 1] if i else 0):size * ends[i]], b"")
         arrived = np.array(self._outcome[3][:n], dtype=bool)  # as the observations show it
-        ids = everyone[:, 0]
-        return lambda i: (everyone[seen[i]].tobytes(), ids[seen[i] & arrived].tobytes())
+        parked_seen = arrived[columns]
+        parked_ends = np.cumsum(parked_seen).tolist()
+        parked = columns[parked_seen].astype(CELL_TYPE).tobytes()
+        item = CELL_TYPE.itemsize
+
+        def seen_by(i: int) -> tuple[bytes, bytes]:
+            start = ends[i - 1] if i else 0
+            first = parked_ends[start - 1] if start else 0
+            return (packed[size * start:size * ends[i]],
+                    parked[item * first:item * parked_ends[ends[i] - 1] if ends[i] else 0])
+        return seen_by
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
               orders: list[tuple[int, ...] | None] | None = None) -> TickReport:
@@ -377,13 +391,13 @@ class SwarmWorld:
         self.ending = (moved[MOVE_EVERYONE] != 0 and not c.lifelong) or self.step >= c.max_steps
         collided = self._outcome[2]
         self.settled = (frozenset() if self.ending or not c.quiet_settled
-                        else frozenset(i for i in range(n) if arrived_before[i]))
+                        else frozenset(compress(range(n), arrived_before)))
         wanted = () if arbiter is None else arbiter.first_choices()
         report = TickReport(self.tick, self.episode, True, tuple(python_values(chosen)[:n]),
-                            tuple(i for i, hit in enumerate(collided[:n]) if hit), missed,
+                            tuple(compress(range(n), collided)), missed,
                             violations, None, None, records, wanted,
                             tuple(self._goal_cells) if c.lifelong else (),
-                            tuple(i for i in range(n) if reached[i]) if c.lifelong else ())
+                            tuple(compress(range(n), reached)) if c.lifelong else ())
         self.tick += 1
         return report
 

@@ -313,12 +313,12 @@ class WorldMachine(Machine):
         out = self._out
         intents = self.intents = np.full(self.n, -1, dtype=np.int64)
         self.orders = [()] * self.n
-        self.awaited = set(self.alive)
         if self.to_resync:
             self.world.unsettle(self.to_resync)
-        for agent in self.world.settled:
-            intents[agent] = STAY
-            self.awaited.discard(agent)
+        settled = self.world.settled
+        self.awaited = self.alive - settled
+        if settled:
+            intents[list(settled)] = STAY
         self.heard = set()
         self.learned = {}
         self.unchecked = set()
