@@ -291,17 +291,16 @@ class SwarmWorld:
         size = NEIGHBOUR_ITEMS * CELL_TYPE.itemsize
         if self.config.step_aside:  # arrived agents do not park
             return lambda i: (packed[size * (ends[i - 1] if i else 0):size * ends[i]], b"")
-        arrived = np.array(self._outcome[3][:n], dtype=bool)  # as the observations show it
-        parked_seen = arrived[columns]
-        parked_ends = np.cumsum(parked_seen).tolist()
-        parked = columns[parked_seen].astype(CELL_TYPE).tobytes()
+        arrived = np.array(self._outcome[3][:n], dtype=bool)[columns]  # as the observations show
+        parked_ends = np.bincount(rows[arrived], minlength=n).cumsum().tolist()
+        parked = columns[arrived].astype(CELL_TYPE).tobytes()
         item = CELL_TYPE.itemsize
 
         def seen_by(i: int) -> tuple[bytes, bytes]:
-            start = ends[i - 1] if i else 0
-            first = parked_ends[start - 1] if start else 0
-            return (packed[size * start:size * ends[i]],
-                    parked[item * first:item * parked_ends[ends[i] - 1] if ends[i] else 0])
+            if i == 0:
+                return packed[:size * ends[0]], parked[:item * parked_ends[0]]
+            return (packed[size * ends[i - 1]:size * ends[i]],
+                    parked[item * parked_ends[i - 1]:item * parked_ends[i]])
         return seen_by
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
