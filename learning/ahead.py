@@ -23,6 +23,7 @@ compiler was) runs its kernels in plain Python: the same functions, the same res
 
 import contextlib
 import fcntl
+import functools
 import importlib.machinery
 import importlib.util
 import logging
@@ -81,7 +82,6 @@ class AheadModule:
                  holds: str) -> None:
         self.name, self.exports, self.builder, self.holds = name, exports, builder, holds
         self._kernels: dict[str, tuple[Callable, str]] = {}
-        self._loaded: list[ModuleType | None] = []  # the module, once looked for
 
     def path(self) -> Path:
         """Where the module of the current kernel sources is, or is to be built."""
@@ -112,13 +112,18 @@ class AheadModule:
             function = self.exports[name][0]
             if COMPILED:
                 found = function, JIT
+            elif self._module is None:
+                found = function, PLAIN
             else:
-                if not self._loaded:
-                    self._loaded.append(None if os.environ.get(SWITCH) == "off" else self.load())
-                module = self._loaded[0]
-                found = (function, PLAIN) if module is None else (getattr(module, name), AHEAD)
+                found = getattr(self._module, name), AHEAD
             self._kernels[name] = found
         return found
+
+    @functools.cached_property
+    def _module(self) -> ModuleType | None:
+        """The module as this process uses it, looked for once: None where it is not built,
+        or switched off (:data:`SWITCH`)."""
+        return None if os.environ.get(SWITCH) == "off" else self.load()
 
     def build(self) -> Path:
         """Compile the module into the kernel cache, unless it is there; its path. Needs numba,

@@ -124,7 +124,8 @@ class SwarmWorld:
         self._blocked = flags([False] * bodies)
         self._reached = flags([False] * n)  # who reached a goal this step (lifelong runs)
         self._moved = ints([0] * MOVE_FIELDS)
-        self._tasks = self._next_goal = self._no_ranks = ints([])
+        self._tasks, self._next_goal = ints([]), ints([])  # a lifelong run's, per episode
+        self._no_ranks = ints([])  # the step's ranks where nobody announces an order
         self._stays = [STAY] * (bodies - n)
         self.table = SharedTable(config) if config.shared else None
         self.arbiter = Arbiter(config) if config.arbitration == "pibt" else None
