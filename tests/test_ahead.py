@@ -1,6 +1,6 @@
 """The swarm's kernels compiled ahead of time (``learning.ahead``: the agents' decision, negotiation
 plan and neighbour rows, the world's check of a learning record; ``world.rules_ahead``: the world's
-step): built once into the kernel cache, even by several processes at once; loaded by a process that
+step and its arbitration by priority inheritance): built once into the kernel cache, even by several processes at once; loaded by a process that
 runs the kernels in plain Python, without numba; and deciding, planning, checking and moving
 everyone exactly as plain Python does, over the real handlers of a whole run."""
 
@@ -13,29 +13,32 @@ from pathlib import Path
 import pytest
 
 from nnql_swarm.learning import ahead
+from nnql_swarm.protocol.config import DEFAULT_PRESET
 from nnql_swarm.protocol.jit import cache_directory
 from nnql_swarm.world.rules_ahead import RULES
 
 PROBE = ("import sys; from nnql_swarm.learning import ahead; "
          "from nnql_swarm.world.rules_ahead import RULES; "
          "print(ahead.decision()[1]); print(RULES.compiled('world_move')[1]); "
+         "print(RULES.compiled('pibt_plan')[1]); "
          "print('numba' in sys.modules)")
 
 RUN = """
 import hashlib, sys
 from pathlib import Path
 from bench import node_cpu
-from bench.harness import DEFAULT_PRESET, swarm_config
+from bench.harness import swarm_config
 from nnql_swarm.learning import ahead
 from nnql_swarm.world.rules_ahead import RULES
-config = swarm_config(DEFAULT_PRESET, run_id="ahead", n_agents=8, episodes=8, max_steps=100,
+config = swarm_config(sys.argv[2], run_id="ahead", n_agents=8, episodes=8, max_steps=100,
                       width=11, height=11)
 wire = hashlib.sha256()
 def on_send(number, kind, sender, receiver, item, cause):
     payload = getattr(item, "payload", b"")
     wire.update(repr((number, kind, sender, receiver)).encode() + bytes(payload))
 ticks, _ = node_cpu.run(config, Path(sys.argv[1]), False, on_send=on_send)
-print(ticks, wire.hexdigest(), ahead.decision()[1], RULES.compiled("world_move")[1])
+print(ticks, wire.hexdigest(), ahead.decision()[1], RULES.compiled("world_move")[1],
+      RULES.compiled("pibt_plan")[1])
 """
 
 
@@ -63,7 +66,7 @@ def built() -> Path:
 def test_a_plain_process_loads_the_built_decision_without_numba(built):
     done = subprocess.run([sys.executable, "-c", PROBE], env=plain({}), capture_output=True,
                           text=True, timeout=120)
-    assert done.stdout.split() == [ahead.AHEAD, ahead.AHEAD, "False"], done.stderr
+    assert done.stdout.split() == [ahead.AHEAD] * 3 + ["False"], done.stderr
 
 
 def test_without_the_module_or_with_it_switched_off_a_process_decides_in_plain_python(
@@ -71,23 +74,26 @@ def test_without_the_module_or_with_it_switched_off_a_process_decides_in_plain_p
     for env in ({ahead.SWITCH: "off"}, {"XDG_CACHE_HOME": str(tmp_path / "no-cache")}):
         done = subprocess.run([sys.executable, "-c", PROBE], env=plain(env),
                               capture_output=True, text=True, timeout=120)
-        assert done.stdout.split() == [ahead.PLAIN, ahead.PLAIN, "False"], (env, done.stderr)
+        assert done.stdout.split() == [ahead.PLAIN] * 3 + ["False"], (env, done.stderr)
 
 
-def test_the_decision_compiled_ahead_of_time_decides_as_plain_python_does(built, tmp_path):
+@pytest.mark.parametrize("preset", [DEFAULT_PRESET, "pibt-nnql"])
+def test_the_decision_compiled_ahead_of_time_decides_as_plain_python_does(built, tmp_path,
+                                                                          preset):
     """The real handlers of a whole run (``bench.node_cpu``: the world and 8 agents in one
     process, every message delivered in order), once with the kernels compiled ahead of time and
     once in plain Python: the same ticks, every message the same (a record the world's check
     refused would change the table's updates it sends), the same checkpoints (the agents' tables
-    among them), bit for bit."""
+    among them), bit for bit; by default and under priority inheritance (``pibt-nnql``: the
+    world's arbitration compiled too)."""
     runs = {}
     for how, env in ((ahead.AHEAD, {}), (ahead.PLAIN, {ahead.SWITCH: "off"})):
         out = tmp_path / how
-        done = subprocess.run([sys.executable, "-c", RUN, str(out)], env=plain(env),
+        done = subprocess.run([sys.executable, "-c", RUN, str(out), preset], env=plain(env),
                               capture_output=True, text=True, timeout=300)
         assert done.returncode == 0, done.stderr
-        ticks, messages, decided, moved = done.stdout.split()
-        assert decided == moved == how and int(ticks) > 8
+        ticks, messages, decided, moved, arbitrated = done.stdout.split()
+        assert decided == moved == arbitrated == how and int(ticks) > 8
         runs[how] = (ticks, messages, checkpoints(out))
     assert runs[ahead.AHEAD] == runs[ahead.PLAIN]
 
@@ -96,7 +102,7 @@ def test_the_decision_compiled_ahead_of_time_decides_as_plain_python_does(built,
 def test_processes_that_build_at_once_build_one_module_into_a_fresh_cache(tmp_path):
     """Into an empty cache (``XDG_CACHE_HOME``; numba's own cache of compiled kernels kept), two
     builders at once: both succeed, one module results, and a plain process decides with it
-    (and moves everyone in plain Python: the world's module was not built)."""
+    (and moves and arbitrates in plain Python: the world's module was not built)."""
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "NNQL_KERNEL": "compiled",
            "NUMBA_CACHE_DIR": str(cache_directory())}
     builders = [subprocess.Popen([sys.executable, "-m", "nnql_swarm.learning.ahead"], env=env,
@@ -111,7 +117,7 @@ def test_processes_that_build_at_once_build_one_module_into_a_fresh_cache(tmp_pa
     done = subprocess.run([sys.executable, "-c", PROBE], env=plain({"XDG_CACHE_HOME":
                                                                     str(tmp_path)}),
                           capture_output=True, text=True, timeout=120)
-    assert done.stdout.split() == [ahead.AHEAD, ahead.PLAIN, "False"], done.stderr
+    assert done.stdout.split() == [ahead.AHEAD, ahead.PLAIN, ahead.PLAIN, "False"], done.stderr
 
 
 @pytest.mark.full

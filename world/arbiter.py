@@ -6,19 +6,31 @@ An agent's order (``protocol.messages.Intent.order``) lists its moves by prefere
 intent offers only STAY (the agent stays unless pushed, and cannot be pushed: it is not there to
 be told). The arbitration's priorities carry over from step to step within an episode (PIBT's:
 :meth:`Arbiter.start_episode` sets them from the agents' shortest paths, as the simulator does).
+
+In the world process ``plan`` runs compiled ahead of time where it is built
+(``world.rules_ahead``, as the world's step does: its buffers are arrays then), else in plain
+Python (lists).
 """
 
-from nnql_swarm.protocol.jit import Buffer, flags, ints
+from nnql_swarm.learning.ahead import PLAIN
+from nnql_swarm.learning.tables import buffer_makers
+from nnql_swarm.protocol.jit import Buffer, python_values
 from nnql_swarm.protocol.actions import N_ACTIONS, STAY
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.world.pibt import UNWANTED, plan
+from nnql_swarm.world.pibt import UNWANTED
+from nnql_swarm.world.rules_ahead import RULES
 
 
 class Arbiter:
-    """One run's arbitration state: ``plan``'s scratch, the priorities, the orders' ranks."""
+    """One run's arbitration state: ``plan``'s scratch, the priorities, the orders' ranks; its
+    buffers are what the world's step reads (:attr:`arrays`: numpy arrays where ``plan`` is
+    compiled, else lists)."""
 
     def __init__(self, config: SwarmConfig) -> None:
         self.config = config
+        self._plan, how = RULES.compiled("pibt_plan")  # world.pibt.plan
+        self.arrays = how != PLAIN
+        ints, _, flags = buffer_makers(self.arrays)
         n, bodies = config.n_agents, config.n_bodies
         cells = config.width * config.height
         size = max(cells, bodies)
@@ -34,12 +46,13 @@ class Arbiter:
         self._swapper, self._first = slots(), slots()
         self._decided = flags([False] * bodies)
         self._goal_of = ints([-1] * n)  # the goal each agent's distances are for
-        self.ranks = ints([UNWANTED] * (bodies * N_ACTIONS))
+        self._unwanted = [UNWANTED] * (bodies * N_ACTIONS)
+        self.ranks = ints(self._unwanted)
         """Each body's rank of each move this step (0: its first choice)."""
 
     def first_choices(self) -> tuple[int, ...]:
         """Each agent's first choice of the step settled last (STAY for a missed intent)."""
-        ranks = self.ranks
+        ranks = python_values(self.ranks)
         return tuple(next(a for a in range(N_ACTIONS) if ranks[i * N_ACTIONS + a] == 0)
                      for i in range(self.config.n_agents))
 
@@ -54,14 +67,13 @@ class Arbiter:
         """Every agent's move this step into ``actions`` (the bodies' buffer; walls stay), from
         the agents' ``orders`` (None: missed)."""
         c, ranks = self.config, self.ranks
+        ranks[:] = self._unwanted
         for i, order in enumerate(orders):
             base = i * N_ACTIONS
-            for a in range(N_ACTIONS):
-                ranks[base + a] = UNWANTED
             for rank, a in enumerate(order or (STAY,)):
                 ranks[base + a] = rank
-        plan(x, y, goal_x, goal_y, arrived, c.n_bodies, c.n_agents, c.width, c.height,
-             c.step_aside, self.priority, self.closest, actions, self._distances,
-             self._occupant, self._reserved, self._decided, self._order, self._blocked,
-             self._queue, self._stack, self._tried, self._probe, self._swapper, self._first,
-             step, self._goal_of, True, ranks)
+        self._plan(x, y, goal_x, goal_y, arrived, c.n_bodies, c.n_agents, c.width, c.height,
+                   c.step_aside, self.priority, self.closest, actions, self._distances,
+                   self._occupant, self._reserved, self._decided, self._order, self._blocked,
+                   self._queue, self._stack, self._tried, self._probe, self._swapper,
+                   self._first, step, self._goal_of, True, ranks)

@@ -20,10 +20,11 @@ hear of. Its next observation (at the end tick, or once :data:`QUIET_CATCH_UP` e
 waiting, which then says ``settled``) brings their current values, so that its copy is the
 world's again before it checkpoints or decides.
 
-The world keeps its state in the rules' buffers and plays a tick with ``world.step.play_step``, the
-very function the swarm simulator runs compiled: in the world process, which runs the kernel
-uncompiled, through its form compiled ahead of time where it is built (``world.rules_ahead``; the
-buffers are arrays then), else in plain Python (lists). The buffers hold every body: the agents,
+The world keeps its state in the rules' buffers and plays a tick with ``world.step.play_step``
+(settled first, under ``--arbitration pibt``, by ``world.arbiter``), the very functions the swarm
+simulator runs compiled: in the world process, which runs the kernel uncompiled, through their
+form compiled ahead of time where it is built (``world.rules_ahead``; the buffers are arrays
+then), else in plain Python (lists). The buffers hold every body: the agents,
 then the run's walls (``protocol.walls``), which always stay and which nobody is told about (every
 process knows them).
 """
@@ -36,7 +37,7 @@ import numpy as np
 
 from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
-from nnql_swarm.learning.ahead import AHEAD, PLAIN
+from nnql_swarm.learning.ahead import PLAIN
 from nnql_swarm.learning.tables import buffer_makers
 from nnql_swarm.protocol.jit import Buffer, python_values
 from nnql_swarm.protocol.messages import (
@@ -114,7 +115,6 @@ class SwarmWorld:
         walls = config.walls()
         self._wall_x, self._wall_y = walls[:, 0].tolist(), walls[:, 1].tolist()
         self._step, how = RULES.compiled("world_move")  # world.step.world_move
-        self._ahead = how == AHEAD  # the rest of the rules run in plain Python, on lists
         ints, floats, flags = self._makers = buffer_makers(how != PLAIN)
         self._x, self._y = ints([0] * bodies), ints([0] * bodies)
         self._goal_x, self._goal_y = ints([-1] * bodies), ints([-1] * bodies)
@@ -402,18 +402,11 @@ class SwarmWorld:
         return report
 
     def _settle(self, arbiter: Arbiter, orders: list, chosen) -> Buffer:
-        """The moves of priority inheritance into ``chosen`` (``world.arbiter``); the orders'
-        ranks, as the step reads them. Where the step is compiled ahead of time, the arbitration
-        still runs in plain Python, which reads lists faster than arrays."""
-        if not self._ahead:
-            arbiter.settle(self._x, self._y, self._goal_x, self._goal_y, self._arrived, orders,
-                           chosen, self.step)
-            return arbiter.ranks
-        moves, plain = chosen.tolist(), python_values
-        arbiter.settle(plain(self._x), plain(self._y), plain(self._goal_x), plain(self._goal_y),
-                       plain(self._arrived), orders, moves, self.step)
-        chosen[:] = moves
-        return self._makers[0](arbiter.ranks)
+        """The moves of priority inheritance into ``chosen`` (``world.arbiter``, over the
+        world's buffers); the orders' ranks, as the step reads them."""
+        arbiter.settle(self._x, self._y, self._goal_x, self._goal_y, self._arrived, orders,
+                       chosen, self.step)
+        return arbiter.ranks
 
     def _check(self, shared: int, swapped: int) -> tuple[str, ...]:
         """The invariants every tick must hold, as the step counted them: no shared cell, no

@@ -411,6 +411,14 @@ def plan(x, y, goal_x, goal_y, arrived, bodies, n, width, height, step_aside, pr
                   tried, False, blocked, goal_x, goal_y, n, swapper, first, step, learned, ranks)
 
 
+PIBT_SIGNATURE = ("void(i8[::1], i8[::1], i8[::1], i8[::1], b1[::1], i8, i8, i8, i8, b1, i8[::1], "
+                  "i8[::1], i8[::1], i8[::1], i8[::1], i8[::1], b1[::1], i8[::1], i8[::1], "
+                  "i8[::1], i8[::1], i8[::1], i8[::1], i8[::1], i8[::1], i8, i8[::1], b1, "
+                  "i8[::1])")
+""":func:`plan`'s types, as compiled ahead of time for the world process (``world.rules_ahead``):
+every buffer a C-contiguous numpy array, integers ``int64``, flags ``bool``."""
+
+
 @kernel
 def _by_priority(order, count, priority):
     """Sort ``order[:count]`` by priority, the highest first (stable: among equals, by id)."""
