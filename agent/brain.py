@@ -49,12 +49,12 @@ class AgentBrain:
             raise ValueError("a lookahead n > 1 is played by the simulator only (--in-process)")
         self.agent = agent
         self.config = config
-        self._decide, self.decides = ahead.decision()
+        self._decide, self.decides = ahead.KERNELS.compiled("agent_decision")
         """The decision's kernel (``learning.decision.agent_decision``) and how it runs here:
         compiled ahead of time, by numba, or in plain Python (``learning.ahead``)."""
         self._arrays = self.decides != ahead.PLAIN  # its buffers: arrays where it is compiled
         self.learner = Learner(config, self._arrays)
-        self._write_entries, _ = ahead.compiled("write_entries")  # as the decision runs
+        self._write_entries, _ = ahead.KERNELS.compiled("write_entries")  # as the decision runs
         self.learned: tuple = ()  # this tick's learning record, for the intent (shared tables)
         self.order: tuple[int, ...] = ()  # this tick's moves by preference (--arbitration pibt)
         self._pibt = config.arbitration == "pibt"

@@ -71,7 +71,8 @@ def main(argv: list[str] | None = None) -> int:
     # The machine reads its collaborators through their modules, so each is timed in place.
     for name, owner, attribute in PARTS:
         setattr(owner, attribute, timed(spent[name], getattr(owner, attribute)))
-    print(f"{args.agents} agents, {args.preset}, deciding {ahead.decision()[1]}; "
+    deciding = ahead.KERNELS.compiled("agent_decision")[1]
+    print(f"{args.agents} agents, {args.preset}, deciding {deciding}; "
           "us of CPU an observation, each repeat (calls):")
     rows = {name: [] for name in spent}
     for _ in range(args.repeats):

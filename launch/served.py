@@ -50,5 +50,5 @@ def tidy() -> None:
 
 
 serve_main()
-ahead.decision()  # the agents' decision compiled ahead of time, loaded once for every child
+ahead.KERNELS.compiled("agent_decision")  # the agents' decision, loaded once for every child
 tidy()

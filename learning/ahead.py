@@ -191,15 +191,5 @@ KERNELS = AheadModule(MODULE, EXPORTS, __name__, "the agents' and the world's ke
 """The module of :data:`EXPORTS`."""
 
 
-def compiled(name: str) -> tuple[Callable, str]:
-    """The kernel of :data:`EXPORTS` named ``name``, as :meth:`AheadModule.compiled`."""
-    return KERNELS.compiled(name)
-
-
-def decision() -> tuple[Callable, str]:
-    """The agent's decision (``learning.decision.agent_decision``), as :func:`compiled`."""
-    return compiled("agent_decision")
-
-
 if __name__ == "__main__":
     print(KERNELS.build())

@@ -76,7 +76,7 @@ class Planner:
     call, compiled ahead of time where it is built (``learning.ahead``), over buffers kept."""
 
     def __init__(self, config: SwarmConfig) -> None:
-        self._plan, how = ahead.compiled("negotiation_plan")
+        self._plan, how = ahead.KERNELS.compiled("negotiation_plan")
         self._arrays = how != ahead.PLAIN
         size = config.n_agents + 1  # every neighbour and the agent
         self._scratch: np.ndarray | list[list[int]]  # the kernel's buffers (learning.plan)

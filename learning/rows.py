@@ -21,7 +21,7 @@ class NeighbourRows:
 
     def __init__(self, config: SwarmConfig) -> None:
         self.config = config
-        self._rows, how = ahead.compiled("neighbour_rows_into")
+        self._rows, how = ahead.KERNELS.compiled("neighbour_rows_into")
         self.arrays = how != ahead.PLAIN
         """Whether the rows are numpy arrays ``(m, NB_FIELDS)`` (the kernel compiled), else
         lists of lists."""

@@ -19,7 +19,8 @@ from nnql_swarm.world.rules_ahead import RULES
 
 PROBE = ("import sys; from nnql_swarm.learning import ahead; "
          "from nnql_swarm.world.rules_ahead import RULES; "
-         "print(ahead.decision()[1]); print(RULES.compiled('world_move')[1]); "
+         "print(ahead.KERNELS.compiled('agent_decision')[1]); "
+         "print(RULES.compiled('world_move')[1]); "
          "print(RULES.compiled('pibt_plan')[1]); "
          "print('numba' in sys.modules)")
 
@@ -37,8 +38,8 @@ def on_send(number, kind, sender, receiver, item, cause):
     payload = getattr(item, "payload", b"")
     wire.update(repr((number, kind, sender, receiver)).encode() + bytes(payload))
 ticks, _ = node_cpu.run(config, Path(sys.argv[1]), False, on_send=on_send)
-print(ticks, wire.hexdigest(), ahead.decision()[1], RULES.compiled("world_move")[1],
-      RULES.compiled("pibt_plan")[1])
+print(ticks, wire.hexdigest(), ahead.KERNELS.compiled("agent_decision")[1],
+      RULES.compiled("world_move")[1], RULES.compiled("pibt_plan")[1])
 """
 
 
@@ -127,7 +128,7 @@ def test_a_build_that_fails_is_said_once_and_leaves_the_agents_deciding_in_plain
     notes the failure in the cache, and no later process tries again: they decide in plain
     Python."""
     ensure = ("import logging, sys; logging.basicConfig(); from nnql_swarm.learning import ahead; "
-              "print(ahead.KERNELS.ensure(), ahead.decision()[1])")
+              "print(ahead.KERNELS.ensure(), ahead.KERNELS.compiled('agent_decision')[1])")
     env = {**os.environ, "XDG_CACHE_HOME": str(tmp_path), "NNQL_KERNEL": "python", "CC": "false",
            "NUMBA_CACHE_DIR": str(cache_directory())}
     first = subprocess.run([sys.executable, "-c", ensure], env=env, capture_output=True,

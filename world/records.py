@@ -107,7 +107,7 @@ class RecordCheck:
     def __init__(self, config: SwarmConfig) -> None:
         self.config = config
         self.rows = NeighbourRows(config)
-        self._expected, _ = ahead.compiled("expected_record")
+        self._expected, _ = ahead.KERNELS.compiled("expected_record")
         ints = int_array  # the kernel's buffers are arrays, compiled or not
         params, params_f = learner_params(config)
         self.params, self.params_f = ints(params), float_array(params_f)
@@ -127,7 +127,7 @@ class RecordCheck:
         self._completed = np.zeros((size, NB_FIELDS), dtype=np.int64)
         self._counts = ints([0] * E_FIELDS)
         self._none, self._no_ids = np.zeros((0, 3), dtype=np.int64), ints([])
-        self._plan_kernel, _ = ahead.compiled("world_plans")
+        self._plan_kernel, _ = ahead.KERNELS.compiled("world_plans")
         self._plan_scratch = np.zeros((SCRATCH, n + 1), dtype=np.int64)  # world_plans' buffers
         self._plan_out = np.zeros((PLAN_PARTS, n + 1), dtype=np.int64)
         self._plan_counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)

@@ -49,7 +49,7 @@ class SharedTable:
 
     def __init__(self, config: SwarmConfig) -> None:
         self._learner = Learner(config)  # the tables an agent starts with, and its alpha, gamma
-        self._apply, how = ahead.compiled("apply_records")
+        self._apply, how = ahead.KERNELS.compiled("apply_records")
         self._buffers = buffer_makers(how != ahead.PLAIN)  # its buffers: arrays, else lists
         self.alpha = self._learner.params_f[FP_ALPHA]
         self.gamma = self._learner.params_f[FP_GAMMA]
