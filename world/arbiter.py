@@ -23,14 +23,13 @@ from nnql_swarm.world.rules_ahead import RULES
 
 class Arbiter:
     """One run's arbitration state: ``plan``'s scratch, the priorities, the orders' ranks; its
-    buffers are what the world's step reads (:attr:`arrays`: numpy arrays where ``plan`` is
-    compiled, else lists)."""
+    buffers are of the kind the world's step reads (numpy arrays where ``plan`` is compiled, else
+    lists)."""
 
     def __init__(self, config: SwarmConfig) -> None:
         self.config = config
         self._plan, how = RULES.compiled("pibt_plan")  # world.pibt.plan
-        self.arrays = how != PLAIN
-        ints, _, flags = buffer_makers(self.arrays)
+        ints, _, flags = buffer_makers(how != PLAIN)
         n, bodies = config.n_agents, config.n_bodies
         cells = config.width * config.height
         size = max(cells, bodies)
