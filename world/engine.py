@@ -39,7 +39,7 @@ from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.learning.ahead import PLAIN
 from nnql_swarm.learning.tables import buffer_makers
-from nnql_swarm.protocol.jit import Buffer, python_values
+from nnql_swarm.protocol.jit import COMPILED, Buffer, python_values
 from nnql_swarm.protocol.messages import (
     CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, NEIGHBOUR_ITEMS, WORLD_SENDER, Observation,
 )
@@ -333,9 +333,10 @@ class SwarmWorld:
         """The running episode's row of ``episodes.csv`` (its deterministic columns)."""
         row, reward = python_values(self._row), python_values(self._row_f)[ROW_REWARD]
         n = self.config.n_agents
-        on_goal, soc, makespan = field_costs(
-            *(python_values(b) for b in (self._x, self._y, self._goal_x, self._goal_y,
-                                         self._arrival)), n, row[ROW_STEPS])
+        bodies: tuple = (self._x, self._y, self._goal_x, self._goal_y, self._arrival)
+        if not COMPILED:  # plain Python reads lists faster than arrays; numba reads arrays
+            bodies = tuple(python_values(b) for b in bodies)
+        on_goal, soc, makespan = field_costs(*bodies, n, row[ROW_STEPS])
         return {"episode": self.episode, "steps": row[ROW_STEPS],
                 "collisions": row[ROW_COLLISIONS], "missed_intents": self._missed,
                 "reward_sum": reward, "arrived": row[ROW_ARRIVED],
