@@ -24,9 +24,9 @@ The world keeps its state in the rules' buffers and plays a tick with ``world.st
 (settled first, under ``--arbitration pibt``, by ``world.arbiter``), the very functions the swarm
 simulator runs compiled: in the world process, which runs the kernel uncompiled, through their
 form compiled ahead of time where it is built (``world.rules_ahead``; the buffers are arrays
-then), else in plain Python (lists). The buffers hold every body: the agents,
-then the run's walls (``protocol.walls``), which always stay and which nobody is told about (every
-process knows them).
+then), else in plain Python (lists). The buffers hold every body: the agents, then the run's
+walls (``protocol.walls``), which always stay and which nobody is told about (every process
+knows them).
 """
 
 from collections.abc import Callable, Iterator
@@ -39,7 +39,7 @@ from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.learning.ahead import PLAIN
 from nnql_swarm.learning.tables import buffer_makers
-from nnql_swarm.protocol.jit import COMPILED, Buffer, python_values
+from nnql_swarm.protocol.jit import COMPILED, python_values
 from nnql_swarm.protocol.messages import (
     CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, NEIGHBOUR_ITEMS, WORLD_SENDER, Observation,
 )
@@ -287,22 +287,15 @@ class SwarmWorld:
         else:
             seen = sight_matrix(xs, ys)
         rows, columns = np.nonzero(seen)  # row by row: each agent's others in id order
-        ends = np.bincount(rows, minlength=n).cumsum().tolist()
         packed = everyone[columns].tobytes()
-        size = NEIGHBOUR_ITEMS * CELL_TYPE.itemsize
+        seen_at = _slices(rows, n, NEIGHBOUR_ITEMS * CELL_TYPE.itemsize)
         if self.config.step_aside:  # arrived agents do not park
-            return lambda i: (packed[size * (ends[i - 1] if i else 0):size * ends[i]], b"")
+            return lambda i: (packed[seen_at[i]:seen_at[i + 1]], b"")
         arrived = np.array(self._outcome[3][:n], dtype=bool)[columns]  # as the observations show
-        parked_ends = np.bincount(rows[arrived], minlength=n).cumsum().tolist()
         parked = columns[arrived].astype(CELL_TYPE).tobytes()
-        item = CELL_TYPE.itemsize
-
-        def seen_by(i: int) -> tuple[bytes, bytes]:
-            if i == 0:
-                return packed[:size * ends[0]], parked[:item * parked_ends[0]]
-            return (packed[size * ends[i - 1]:size * ends[i]],
-                    parked[item * parked_ends[i - 1]:item * parked_ends[i]])
-        return seen_by
+        parked_at = _slices(rows[arrived], n, CELL_TYPE.itemsize)
+        return lambda i: (packed[seen_at[i]:seen_at[i + 1]],
+                          parked[parked_at[i]:parked_at[i + 1]])
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
               orders: list[tuple[int, ...] | None] | None = None) -> TickReport:
@@ -368,10 +361,12 @@ class SwarmWorld:
         arrived_before = self._outcome[3]  # as this tick's observations showed it
         chosen = self._makers[0]([STAY if a is None else a for a in actions] + self._stays)
         arbiter, ranks = self.arbiter, self._no_ranks
-        if arbiter is not None:
+        if arbiter is not None:  # the moves of priority inheritance into chosen
             told = [None if a is None else o or (a,)
                     for a, o in zip(actions, orders or [()] * len(actions))]
-            ranks = self._settle(arbiter, told, chosen)
+            arbiter.settle(self._x, self._y, self._goal_x, self._goal_y, self._arrived, told,
+                           chosen, self.step)
+            ranks = arbiter.ranks
         moved = self._moved
         self._step(c.n_bodies, c.width, c.height, c.count_swaps, c.step_aside, c.goal_reward,
                    c.stay_reward, self._x, self._y, self._goal_x, self._goal_y, self._learns,
@@ -402,13 +397,6 @@ class SwarmWorld:
         self.tick += 1
         return report
 
-    def _settle(self, arbiter: Arbiter, orders: list, chosen) -> Buffer:
-        """The moves of priority inheritance into ``chosen`` (``world.arbiter``, over the
-        world's buffers); the orders' ranks, as the step reads them."""
-        arbiter.settle(self._x, self._y, self._goal_x, self._goal_y, self._arrived, orders,
-                       chosen, self.step)
-        return arbiter.ranks
-
     def _check(self, shared: int, swapped: int) -> tuple[str, ...]:
         """The invariants every tick must hold, as the step counted them: no shared cell, no
         swap-through (if counted)."""
@@ -419,3 +407,9 @@ class SwarmWorld:
             problems.append("an agent swapped through another agent")
         self.violations += len(problems)
         return tuple(problems)
+
+
+def _slices(rows: np.ndarray, n: int, size: int) -> list[int]:
+    """Where each agent's part of a packing made row by row (``rows``: the agent of each item,
+    in order; ``size`` bytes an item) lies: agent ``i``'s bytes are ``[at[i]:at[i + 1]]``."""
+    return [0, *(np.bincount(rows, minlength=n).cumsum() * size).tolist()]
