@@ -35,7 +35,7 @@ and knew to stay, the world works out for every agent of a tick at once
 them, not while every agent waits for the tick's observations (``bench/record_check.py``).
 """
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import msgspec
 import numpy as np
@@ -70,8 +70,7 @@ UNCHECKED = "unchecked-record"
 """A record the world has no decision of the agent's to check against: refused."""
 
 
-@dataclass(frozen=True)
-class Decision:
+class Decision(NamedTuple):
     """What the world saw of one agent's decision at a tick: the observation it sent the agent,
     every agent's intent as it heard them (an action each, -1 where it missed it), and the
     agent's observation of the tick before (DAQL remembers its neighbours' cells then), if it was
@@ -133,6 +132,7 @@ class RecordCheck:
         self._plan_counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
         self._tick_sights: dict[int, tuple] = {}  # tick -> what its plans are worked out from
         self._tick_plans: dict[int, tuple] = {}  # tick -> every agent's plan, once worked out
+        self._agent_plans: dict[int, dict[int, tuple]] = {}  # tick -> agent -> _negotiated's
         self._parks = not config.step_aside  # arrived agents park: wait for nobody, and stay
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
@@ -161,6 +161,7 @@ class RecordCheck:
         self._tick_sights[tick] = (x, y, arrived, sees_all, ending)
         self._tick_sights.pop(tick - 2, None)
         self._tick_plans.pop(tick - 2, None)
+        self._agent_plans.pop(tick - 2, None)
 
     def _plans(self, tick: int) -> tuple:
         """Every agent's plan at ``tick`` (:meth:`plan_tick`), worked out at the first call."""
@@ -189,11 +190,16 @@ class RecordCheck:
         """Whom the agent waits for at ``obs`` and the arrived neighbours it knows stay
         (``agent.negotiation``), as arrays, with its neighbours ``(k, 3)`` and parked ids as
         the plan read them: from the plans of its tick (:meth:`plan_tick`), which the world
-        keeps while a record may read them."""
-        nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = self._plans(obs.tick)
-        i = obs.agent
-        return (awaited[i, :n_awaited[i]], staying[i, :n_staying[i]], nbs[i, :ks[i]],
-                parkeds[i, :ps[i]])
+        keeps while a record may read them; each agent's taken once (a record reads its
+        agent's of its tick, and of the tick before, which the record before read)."""
+        tick, i = obs.tick, obs.agent
+        taken = self._agent_plans.setdefault(tick, {})
+        plan = taken.get(i)
+        if plan is None:
+            nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = self._plans(tick)
+            plan = taken[i] = (awaited[i, :n_awaited[i]], staying[i, :n_staying[i]],
+                               nbs[i, :ks[i]], parkeds[i, :ps[i]])
+        return plan
 
     def ready(self, obs: Observation, intents) -> bool:
         """Whether ``intents`` (the tick's so far) hold every intent the agent that was sent
