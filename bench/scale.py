@@ -67,7 +67,7 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
     agents = [mib for name, mib in peaks.items() if name.startswith("agent")]
     return {"rate": rate, "missed": sum(int(r["missed_intents"]) for r in rows[1:]),
             "missed_first": int(rows[0]["missed_intents"]),
-            "startup_s": startup,
+            "startup_s": startup, "ticks": sum(int(r["steps"]) + 1 for r in rows),
             "world_mib": peaks.get("world", math.nan), "agent_mib": max(agents, default=math.nan),
             "arrived": sum(int(r["arrived"]) for r in rows[1:]) / max(n * (len(rows) - 1), 1)}
 
