@@ -44,6 +44,7 @@ PARTS = (  # (name, what a shared object's path contains), the first that matche
     ("C library", ("libc.so", "libm.so", "ld-linux")),
 )
 OTHER = "other"
+ALL = "in all"
 
 
 def part_of(dso: str) -> str:
@@ -100,6 +101,12 @@ def per_tick_us(counts: collections.Counter, ticks: int) -> dict[str, float]:
     return {part: 1e6 * count / FREQUENCY / ticks for part, count in counts.items()}
 
 
+def median_of(splits: list[dict[str, float]], part: str) -> float:
+    """The median over runs of one part's microseconds a tick (:data:`ALL`: of every part's)."""
+    return statistics.median(sum(split.values()) if part == ALL else split.get(part, 0.0)
+                             for split in splits)
+
+
 def sampled(run, directory: Path) -> tuple[dict, dict[str, float]]:
     """``run()``'s result (with its ``ticks``) and its receiving threads' CPU a tick by part."""
     with MachineSamples(directory) as samples:
@@ -149,11 +156,8 @@ def main() -> int:
               f" ticks/s, bare loop {statistics.median(rates['bare']):.0f})")
         print("| part | swarm | bare loop | the swarm's more |")
         print("| --- | ---: | ---: | ---: |")
-        for part in [name for name, _ in PARTS] + [OTHER, "in all"]:
-            def median(splits: list[dict[str, float]]) -> float:
-                return statistics.median(
-                    sum(s.values()) if part == "in all" else s.get(part, 0.0) for s in splits)
-            s, b = median(swarm), median(bare)
+        for part in [name for name, _ in PARTS] + [OTHER, ALL]:
+            s, b = median_of(swarm, part), median_of(bare, part)
             print(f"| {part} | {s:.0f} | {b:.0f} | {s - b:.0f} |")
     return 0
 

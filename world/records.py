@@ -131,8 +131,8 @@ class RecordCheck:
         self._plan_out = np.zeros((PLAN_PARTS, n + 1), dtype=np.int64)
         self._plan_counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
         self._tick_sights: dict[int, tuple] = {}  # tick -> what its plans are worked out from
-        self._tick_plans: dict[int, tuple] = {}  # tick -> every agent's plan, once worked out
-        self._agent_plans: dict[int, dict[int, tuple]] = {}  # tick -> agent -> _negotiated's
+        self._tick_plans: dict[int, tuple] = {}  # tick -> every agent's plan, once worked out,
+        # and each agent's part of it as _negotiated took it
         self._parks = not config.step_aside  # arrived agents park: wait for nobody, and stay
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._decided: dict[int, tuple] = {}  # agent -> (tick, its rows as it decided then)
@@ -161,15 +161,15 @@ class RecordCheck:
         self._tick_sights[tick] = (x, y, arrived, sees_all, ending)
         self._tick_sights.pop(tick - 2, None)
         self._tick_plans.pop(tick - 2, None)
-        self._agent_plans.pop(tick - 2, None)
 
-    def _plans(self, tick: int) -> tuple:
-        """Every agent's plan at ``tick`` (:meth:`plan_tick`), worked out at the first call."""
+    def _plans(self, tick: int) -> tuple[tuple, dict[int, tuple]]:
+        """Every agent's plan at ``tick`` (:meth:`plan_tick`), worked out at the first call,
+        and the agents' parts of it taken so far (:meth:`_negotiated`)."""
         plans = self._tick_plans.get(tick)
         if plans is None:
             sight = self._tick_sights.pop(tick, None)
             assert sight is not None, f"tick {tick} checked without its plans"
-            plans = self._tick_plans[tick] = self._world_plans(tick, *sight)
+            plans = self._tick_plans[tick] = (self._world_plans(tick, *sight), {})
         return plans
 
     def _world_plans(self, tick: int, x: np.ndarray, y: np.ndarray, arrived: np.ndarray,
@@ -192,11 +192,11 @@ class RecordCheck:
         the plan read them: from the plans of its tick (:meth:`plan_tick`), which the world
         keeps while a record may read them; each agent's taken once (a record reads its
         agent's of its tick, and of the tick before, which the record before read)."""
-        tick, i = obs.tick, obs.agent
-        taken = self._agent_plans.setdefault(tick, {})
+        i = obs.agent
+        plans, taken = self._plans(obs.tick)
         plan = taken.get(i)
         if plan is None:
-            nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = self._plans(tick)
+            nbs, ks, parkeds, ps, awaited, n_awaited, staying, n_staying = plans
             plan = taken[i] = (awaited[i, :n_awaited[i]], staying[i, :n_staying[i]],
                                nbs[i, :ks[i]], parkeds[i, :ps[i]])
         return plan
