@@ -5,11 +5,12 @@ interpreter, numpy, the codec, our compiled kernels, Zenoh, the Linux kernel, th
 ``perf record`` samples the whole machine while ``bench/scale.py``'s swarm (the launcher's
 processes, the default preset, recording off) and then ``bench/lockstep.py``'s bare loop of as
 many agents run; each sample of a receiving thread (``rx-*``: every process hands Zenoh's
-runtimes to one, which receives, runs every handler and sends, docs/design.md) is put to the
-shared object it fell in, and the counts become microseconds of CPU a tick. The processes' main
-threads (start-up, the world's episode rows) are left out. So this counts what the hot
-benchmarks of one thread cannot: our code and Zenoh's as they run in the swarm, on caches the
-other processes cooled, with the kernel's share of every message.
+runtimes to one, which receives, runs every handler and sends, docs/design.md) taken while the
+ticks that each one's rate counts ran is put to the shared object it fell in, and the counts
+become microseconds of CPU a tick. Start-up, the swarm's first episode, the bare loop's warm-up
+and the processes' main threads are left out, as they are of the rates. So this counts what the
+hot benchmarks of one thread cannot: our code and Zenoh's as they run in the swarm, on caches
+the other processes cooled, with the kernel's share of every message.
 
     python -m bench.cpu_split --agents 8,64 --repeats 3
 
@@ -19,6 +20,7 @@ or ``kernel.perf_event_paranoid`` at most 0).
 
 import argparse
 import collections
+import math
 import re
 import shutil
 import signal
@@ -33,7 +35,8 @@ from bench.harness import add_preset_option, agent_sizes
 
 FREQUENCY = 1999  # samples a second a CPU: odd, so as not to beat with a periodic tick
 THREAD = re.compile(r"rx-\d+$")  # Zenoh's receiving threads, where every handler runs
-SAMPLE = re.compile(r"^\s*(?P<comm>.+?)\s+[0-9a-f]+\s+\((?P<dso>.*)\)\s*$")
+SAMPLE = re.compile(  # a line of ``perf script -F comm,time,ip,dso``
+    r"^\s*(?P<comm>.+?)\s+(?P<time>\d+\.\d+):\s+[0-9a-f]+\s+\((?P<dso>.*)\)\s*$")
 PARTS = (  # (name, what a shared object's path contains), the first that matches
     ("Python interpreter", ("libpython", "/bin/python")),
     ("numpy", ("numpy", "openblas")),
@@ -55,18 +58,22 @@ def part_of(dso: str) -> str:
     return OTHER
 
 
-def receiving_samples(script: str) -> collections.Counter:
-    """Samples of the receiving threads by part, from ``perf script -F comm,ip,dso``'s text."""
+def receiving_samples(script: str, window: tuple[float, float]) -> collections.Counter:
+    """Samples of the receiving threads taken within ``window`` (seconds since the epoch), by
+    part, from the text of ``perf script -F comm,time,ip,dso`` over a realtime-clocked record."""
+    began, ended = window
     counts: collections.Counter = collections.Counter()
     for line in script.splitlines():
         match = SAMPLE.match(line)
-        if match and THREAD.match(match["comm"].strip()):
+        if (match and THREAD.match(match["comm"].strip())
+                and began <= float(match["time"]) <= ended):
             counts[part_of(match["dso"])] += 1
     return counts
 
 
 class MachineSamples:
-    """``perf record`` over every CPU while the ``with`` block runs; :meth:`by_part` reads it."""
+    """``perf record`` over every CPU while the ``with`` block runs, its samples stamped by the
+    realtime clock (as ``time.time()``); :meth:`by_part` reads it."""
 
     def __init__(self, directory: Path) -> None:
         self.data = directory / "perf.data"
@@ -74,7 +81,8 @@ class MachineSamples:
 
     def __enter__(self) -> "MachineSamples":
         self._perf = subprocess.Popen(
-            ["perf", "record", "-a", "-q", "-F", str(FREQUENCY), "-o", str(self.data)],
+            ["perf", "record", "-a", "-q", "-k", "realtime", "-F", str(FREQUENCY),
+             "-o", str(self.data)],
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         time.sleep(1.0)  # perf opens its buffers on every CPU before the run starts
         if self._perf.poll() is not None:
@@ -88,12 +96,13 @@ class MachineSamples:
         if self._perf.returncode not in (0, -signal.SIGINT) or not self.data.exists():
             raise SystemExit(f"perf record failed: {errors.strip()}")
 
-    def by_part(self) -> collections.Counter:
-        done = subprocess.run(["perf", "script", "-i", str(self.data), "-F", "comm,ip,dso"],
+    def by_part(self, window: tuple[float, float]) -> collections.Counter:
+        """The receiving threads' samples within ``window`` by part (:func:`receiving_samples`)."""
+        done = subprocess.run(["perf", "script", "-i", str(self.data), "-F", "comm,time,ip,dso"],
                               capture_output=True, text=True)
         if done.returncode != 0:
             raise SystemExit(f"perf script failed: {done.stderr.strip()}")
-        return receiving_samples(done.stdout)
+        return receiving_samples(done.stdout, window)
 
 
 def per_tick_us(counts: collections.Counter, ticks: int) -> dict[str, float]:
@@ -108,10 +117,13 @@ def median_of(splits: list[dict[str, float]], part: str) -> float:
 
 
 def sampled(run, directory: Path) -> tuple[dict, dict[str, float]]:
-    """``run()``'s result (with its ``ticks``) and its receiving threads' CPU a tick by part."""
+    """``run()``'s result and its receiving threads' CPU a tick by part, over the ticks its
+    rate counts (the result's ``measured_ticks``, which ran within its ``window``)."""
     with MachineSamples(directory) as samples:
         result = run()
-    return result, per_tick_us(samples.by_part(), result["ticks"])
+    if any(math.isnan(t) for t in result["window"]):
+        raise SystemExit("the run did not finish its ticks: nothing to split")
+    return result, per_tick_us(samples.by_part(result["window"]), result["measured_ticks"])
 
 
 def main() -> int:
@@ -121,12 +133,16 @@ def main() -> int:
     p.add_argument("--repeats", type=int, default=3, help="runs of each, medians (default: 3)")
     p.add_argument("--episodes", type=int, default=6, help="the swarm's episodes (default: 6)")
     p.add_argument("--bare-ticks", type=int, default=2000, help="ticks of each bare loop")
+    p.add_argument("--bare-work", type=int, default=0, metavar="OBJECTS",
+                   help="objects of Python each bare agent reads before it answers "
+                        "(bench.lockstep's --python-work; default 0)")
     add_preset_option(p)
     args = p.parse_args()
     if shutil.which("perf") is None:
         p.error("perf is not installed (Debian: apt-get install linux-perf)")
-    if args.repeats < 1 or args.episodes < 1 or args.bare_ticks < 10:
-        p.error("--repeats and --episodes at least 1, --bare-ticks at least 10")
+    if args.repeats < 1 or args.episodes < 2 or args.bare_ticks < 10 or args.bare_work < 0:
+        p.error("--repeats at least 1, --episodes at least 2 (the first is not timed), "
+                "--bare-ticks at least 10, --bare-work at least 0")
 
     from bench import lockstep
     from bench.scale import swarm_once
@@ -144,8 +160,8 @@ def main() -> int:
                 swarm.append(split)
                 rates["swarm"].append(result["rate"])
             with tempfile.TemporaryDirectory() as tmp:
-                result, split = sampled(lambda: {**lockstep.run(n, topology, args.bare_ticks),
-                                                 "ticks": args.bare_ticks}, Path(tmp))
+                result, split = sampled(lambda: lockstep.run(
+                    n, topology, args.bare_ticks, args.bare_work), Path(tmp))
                 bare.append(split)
                 rates["bare"].append(result["rate"])
             print(f"  {n} agents, repeat {repeat + 1}: swarm {sum(swarm[-1].values()):.0f} us "
@@ -153,7 +169,9 @@ def main() -> int:
                   f"us ({rates['bare'][-1]:.0f} ticks/s)", file=sys.stderr, flush=True)
         print(f"\n{n} agents ({topology}, preset {args.preset}): the receiving threads' CPU, "
               f"us a tick, medians of {args.repeats} (swarm {statistics.median(rates['swarm']):.0f}"
-              f" ticks/s, bare loop {statistics.median(rates['bare']):.0f})")
+              f" ticks/s, bare loop {statistics.median(rates['bare']):.0f}"
+              + (f", its agents reading {args.bare_work} objects a tick" if args.bare_work else "")
+              + ")")
         print("| part | swarm | bare loop | the swarm's more |")
         print("| --- | ---: | ---: | ---: |")
         for part in [name for name, _ in PARTS] + [OTHER, ALL]:

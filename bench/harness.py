@@ -21,15 +21,23 @@ def grid_side(n: int) -> int:
     return SCALE_GRIDS.get(n, max(2, round(11 * math.sqrt(n / 8))))
 
 
-def measured_rate(out: Path) -> float:
-    """Ticks per second over every episode but the first (which includes start-up)."""
+def measured_ticks(out: Path) -> tuple[int, float, float]:
+    """The ticks a swarm's rate counts: every episode's but the first's (which includes
+    start-up). How many, and when they ran: their first's and last's seconds after the run's
+    first tick opened (episodes follow one another without a gap)."""
     # not at the top: the agents fork from a server that imported this module
     from nnql_swarm.world.metrics import read_episodes
 
-    rows = read_episodes(out / "episodes.csv")[1:]
-    ticks = sum(int(r["steps"]) + 1 for r in rows)
-    seconds = sum(float(r["duration_s"]) for r in rows)
-    return ticks / seconds
+    first, *rows = read_episodes(out / "episodes.csv")
+    began = float(first["duration_s"])
+    return (sum(int(r["steps"]) + 1 for r in rows), began,
+            began + sum(float(r["duration_s"]) for r in rows))
+
+
+def measured_rate(out: Path) -> float:
+    """Ticks per second over the ticks :func:`measured_ticks` counts."""
+    ticks, began, ended = measured_ticks(out)
+    return ticks / (ended - began)
 
 
 def run_distributed(config: SwarmConfig, out: Path, record: bool,

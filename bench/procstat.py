@@ -1,6 +1,7 @@
 """What running processes hold: resident memory, sampled from ``/proc/<pid>/status`` while they
 run, and the machine's busy CPU time (``/proc/stat``)."""
 
+import math
 import os
 import threading
 import time
@@ -32,16 +33,20 @@ def machine_busy_s() -> float:
 
 class TimedTicks:
     """The ticks a loop times from :meth:`start` on: their rate, and the machine's busy CPU
-    microseconds a tick (:func:`machine_busy_s`), by :meth:`measure`."""
+    microseconds a tick (:func:`machine_busy_s`), by :meth:`measure`; :attr:`window` is when
+    they ran, in seconds since the epoch (what a sampler of the whole machine keeps of them)."""
 
     def __init__(self) -> None:
         self.wall = self.busy = 0.0
+        self.window = (math.nan, math.nan)
 
     def start(self) -> None:
         self.wall, self.busy = time.perf_counter(), machine_busy_s()
+        self.window = (time.time(), math.nan)
 
     def measure(self, ticks: int) -> tuple[float, float]:
         """(ticks a second, busy CPU microseconds a tick) over ``ticks`` ticks since start."""
+        self.window = (self.window[0], time.time())
         return (ticks / (time.perf_counter() - self.wall),
                 1e6 * (machine_busy_s() - self.busy) / ticks)
 

@@ -45,7 +45,7 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
                topology: str, obstacle_density: float = 0.0, agent_target=None) -> dict:
     import tempfile
 
-    from bench.harness import grid_side, run_distributed, swarm_config
+    from bench.harness import grid_side, measured_ticks, run_distributed, swarm_config
     from bench.procstat import MemorySampler
     from nnql_swarm.transport.runfiles import stats_path
     from nnql_swarm.transport.topology import EmbeddedLayout
@@ -63,11 +63,13 @@ def swarm_once(n: int, preset: str, episodes: int, max_steps: int, seed: int,
         rows = read_episodes(out / "episodes.csv")
         world = json.loads(stats_path(out, "world").read_text())
         startup = world["started_at"] - launched
+        ticks, began, ended = measured_ticks(out)
         peaks = memory.peaks()
     agents = [mib for name, mib in peaks.items() if name.startswith("agent")]
     return {"rate": rate, "missed": sum(int(r["missed_intents"]) for r in rows[1:]),
             "missed_first": int(rows[0]["missed_intents"]),
-            "startup_s": startup, "ticks": sum(int(r["steps"]) + 1 for r in rows),
+            "startup_s": startup, "measured_ticks": ticks,
+            "window": (world["started_at"] + began, world["started_at"] + ended),
             "world_mib": peaks.get("world", math.nan), "agent_mib": max(agents, default=math.nan),
             "arrived": sum(int(r["arrived"]) for r in rows[1:]) / max(n * (len(rows) - 1), 1)}
 

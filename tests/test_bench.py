@@ -156,26 +156,37 @@ def test_the_agents_parts_are_timed_where_the_machine_calls_them():
 
 
 def test_the_cpu_split_counts_the_receiving_threads_samples_by_shared_object():
-    """``bench.cpu_split`` reads ``perf script -F comm,ip,dso``: only Zenoh's receiving threads
-    count (where every handler runs), each sample put to the part its shared object belongs to."""
+    """``bench.cpu_split`` reads ``perf script -F comm,time,ip,dso``: only Zenoh's receiving
+    threads count (where every handler runs), and only while the timed ticks ran, each sample put
+    to the part its shared object belongs to."""
     from bench.cpu_split import FREQUENCY, OTHER, per_tick_us, receiving_samples
 
     script = "\n".join([
-        "            rx-0  7f90a1b2c3d4 (/root/.pyenv/versions/3.11.7/lib/libpython3.11.so.1.0)",
-        "            rx-0  7f90a1b2c3d4 (/root/.pyenv/versions/3.11.7/lib/libpython3.11.so.1.0)",
-        "            rx-1  ffffffff82250979 ([kernel.kallsyms])",
-        "            rx-0  7f903c6c10c2 (/work/.venv/lib/python3.11/site-packages/zenoh/zenoh.abi3.so)",
-        "            rx-2  7f11 (/x/site-packages/numpy/core/_multiarray_umath.cpython-311-x86_64.so)",
-        "            rx-0  7f12 (/x/site-packages/msgspec/_core.cpython-311-x86_64-linux-gnu.so)",
-        "            rx-0  7f13 (/root/.cache/nnql/nnql_ahead_kernels.cpython-311-x86_64.so)",
-        "            rx-0  7f14 (/usr/lib/x86_64-linux-gnu/libc.so.6)",
-        "            rx-0  7f15 (/usr/lib/x86_64-linux-gnu/libz.so.1.2.13)",
-        "         swapper     0  ffffffff8224215b ([kernel.kallsyms])",  # idle: not a thread of ours
-        "  nnql-agent 5 pa  7f90a1b2c3d4 (/root/.pyenv/versions/3.11.7/lib/libpython3.11.so.1.0)",
-        "          python  7fd69f5c5c61 (/usr/lib/x86_64-linux-gnu/ld-linux-x86-64.so.2)",
+        "            rx-0 1796641630.100000:  7f90a1b2c3d4 (/root/.pyenv/versions/3.11.7/lib/"
+        "libpython3.11.so.1.0)",
+        "            rx-0 1796641630.200000:  7f90a1b2c3d4 (/root/.pyenv/versions/3.11.7/lib/"
+        "libpython3.11.so.1.0)",
+        "            rx-1 1796641630.300000:  ffffffff82250979 ([kernel.kallsyms])",
+        "            rx-0 1796641630.300001:  7f903c6c10c2 (/work/.venv/lib/python3.11/"
+        "site-packages/zenoh/zenoh.abi3.so)",
+        "            rx-2 1796641630.400000:  7f11 (/x/site-packages/numpy/core/"
+        "_multiarray_umath.cpython-311-x86_64.so)",
+        "            rx-0 1796641630.400000:  7f12 (/x/site-packages/msgspec/"
+        "_core.cpython-311-x86_64-linux-gnu.so)",
+        "            rx-0 1796641630.400000:  7f13 (/root/.cache/nnql/"
+        "nnql_ahead_kernels.cpython-311-x86_64.so)",
+        "            rx-0 1796641630.400000:  7f14 (/usr/lib/x86_64-linux-gnu/libc.so.6)",
+        "            rx-0 1796641630.400000:  7f15 (/usr/lib/x86_64-linux-gnu/libz.so.1.2.13)",
+        "            rx-0 1796641629.999999:  7f14 (/usr/lib/x86_64-linux-gnu/libc.so.6)",  # early
+        "            rx-0 1796641631.000001:  7f14 (/usr/lib/x86_64-linux-gnu/libc.so.6)",  # late
+        "         swapper     0 1796641630.400000:  ffffffff8224215b ([kernel.kallsyms])",  # idle
+        "  nnql-agent 5 pa 1796641630.400000:  7f90a1b2c3d4 (/root/.pyenv/versions/3.11.7/lib/"
+        "libpython3.11.so.1.0)",  # a main thread
+        "          python 1796641630.400000:  7fd69f5c5c61 (/usr/lib/x86_64-linux-gnu/"
+        "ld-linux-x86-64.so.2)",
         "not a sample line",
     ])
-    counts = receiving_samples(script)
+    counts = receiving_samples(script, (1796641630.0, 1796641631.0))
     assert counts == {"Python interpreter": 2, "Linux kernel": 1, "Zenoh": 1, "numpy": 1,
                       "msgspec (the codec)": 1, "our compiled kernels": 1, "C library": 1,
                       OTHER: 1}
