@@ -8,9 +8,12 @@ arrives, from Zenoh's callback; the world waits for every intent, then opens the
 its own callback. No negotiation, no codec, no rules, no learning: the floor under the swarm's
 tick, for the same number of processes and the same topology. Beside its ticks a second, the
 machine's busy CPU microseconds a tick (``CPU us``: every process's, Zenoh's threads and the
-kernel's, from ``/proc/stat``).
+kernel's, from ``/proc/stat``). With ``--python-work`` each agent first reads as many small
+Python objects (:func:`python_work`): a loop with as much Python as the swarm's, and none of its
+protocol.
 
     python -m bench.lockstep --agents 8,32,64 --repeats 3 --topology mesh
+    python -m bench.lockstep --agents 8 --repeats 3 --python-work 1000
 """
 
 import argparse
