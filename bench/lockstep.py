@@ -10,10 +10,11 @@ tick, for the same number of processes and the same topology. Beside its ticks a
 machine's busy CPU microseconds a tick (``CPU us``: every process's, Zenoh's threads and the
 kernel's, from ``/proc/stat``). With ``--python-work`` each agent first reads as many small
 Python objects (:func:`python_work`): a loop with as much Python as the swarm's, and none of its
-protocol.
+protocol; ``work us`` is what that costs a tick hot in one thread, every agent's together (as
+``bench.node_cpu`` times the swarm's handlers).
 
     python -m bench.lockstep --agents 8,32,64 --repeats 3 --topology mesh
-    python -m bench.lockstep --agents 8 --repeats 3 --python-work 1000
+    python -m bench.lockstep --agents 8 --repeats 3 --python-work 0,100,200,300,400
 """
 
 import argparse
@@ -21,6 +22,7 @@ import statistics
 import sys
 import threading
 import time
+import timeit
 from typing import Callable
 
 import msgpack
@@ -187,34 +189,50 @@ def stop_all(processes, grace_s: float = 5.0) -> None:
             p.join()
 
 
+def hot_us(objects: int, calls: int = 200, repeats: int = 5) -> float:
+    """Microseconds one call of :func:`python_work` over ``objects`` takes hot, in this process
+    (the best of ``repeats``)."""
+    if not objects:
+        return 0.0
+    work = python_work(objects)
+    return min(timeit.repeat(work, number=calls, repeat=repeats)) / calls * 1e6
+
+
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--agents", default="8,32", help="comma-separated agent counts")
     p.add_argument("--ticks", type=int, default=2000)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--topology", default="mesh", help=f"comma-separated: {', '.join(TOPOLOGIES)}")
-    p.add_argument("--python-work", type=int, default=0, metavar="OBJECTS",
-                   help="objects of Python each agent's handler reads before it answers "
-                        "(a stand-in for a handler's own work; default 0: none)")
+    p.add_argument("--python-work", default="0", metavar="OBJECTS",
+                   help="comma-separated: objects of Python each agent's handler reads before it "
+                        "answers (a stand-in for a handler's own work; default 0: none)")
     args = p.parse_args()
-    if args.python_work < 0:
-        p.error("--python-work is a number of objects, at least 0")
     topologies = args.topology.split(",")
     if any(t not in TOPOLOGIES for t in topologies):
         p.error(f"topologies are {', '.join(TOPOLOGIES)}")
-    print(f"{'agents':>6} {'topology':>11} {'ticks/s':>8} {'start s':>8} {'CPU us':>7}  runs")
+    try:
+        works = [int(v) for v in args.python_work.split(",")]
+    except ValueError:
+        works = [-1]
+    if any(w < 0 for w in works):
+        p.error("--python-work is comma-separated numbers of objects, each at least 0")
+    loops = [(t, w) for t in topologies for w in works]
+    hot = {w: hot_us(w) for w in works}
+    print(f"{'agents':>6} {'topology':>11} {'work us':>8} {'ticks/s':>8} {'start s':>8} "
+          f"{'CPU us':>7}  runs")
     for n in (int(v) for v in args.agents.split(",")):
-        results: dict[str, list[dict]] = {t: [] for t in topologies}
+        results: dict[tuple[str, int], list[dict]] = {loop: [] for loop in loops}
         for _ in range(args.repeats):
-            for t in topologies:  # interleaved, so a drifting machine disturbs them alike
-                results[t].append(run(n, t, args.ticks, args.python_work))
-                print(f"  {n} {t}: {results[t][-1]['rate']:.0f} ticks/s, start-up "
-                      f"{results[t][-1]['startup_s']:.1f} s", file=sys.stderr, flush=True)
-        for t in topologies:
-            rates = [r["rate"] for r in results[t]]
-            starts = [r["startup_s"] for r in results[t]]
-            cpu = [r["cpu_us"] for r in results[t]]
-            print(f"{n:>6} {t:>11} {statistics.median(rates):>8.0f} "
+            for t, w in loops:  # interleaved, so a drifting machine disturbs them alike
+                results[t, w].append(run(n, t, args.ticks, w))
+                print(f"  {n} {t}, work {w}: {results[t, w][-1]['rate']:.0f} ticks/s, start-up "
+                      f"{results[t, w][-1]['startup_s']:.1f} s", file=sys.stderr, flush=True)
+        for t, w in loops:
+            rates = [r["rate"] for r in results[t, w]]
+            starts = [r["startup_s"] for r in results[t, w]]
+            cpu = [r["cpu_us"] for r in results[t, w]]
+            print(f"{n:>6} {t:>11} {n * hot[w]:>8.0f} {statistics.median(rates):>8.0f} "
                   f"{statistics.median(starts):>8.2f} {statistics.median(cpu):>7.0f}  "
                   f"{' '.join(f'{x:.0f}' for x in rates)}",
                   flush=True)
