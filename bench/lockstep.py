@@ -45,7 +45,7 @@ def warm_up_ticks(ticks: int) -> int:
 
 def python_work(objects: int) -> Callable[[], int]:
     """A stand-in for a handler's Python: each call reads ``objects`` small dicts, scattered
-    over four times as many (about 0.07 us each, hot, on this project's 2-core VM)."""
+    over four times as many (what a call costs hot: :func:`hot_us`)."""
     store = [{"a": i, "b": [i, i + 1]} for i in range(4 * objects)]
 
     def work() -> int:
