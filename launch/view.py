@@ -6,7 +6,7 @@
 
 Where there is a screen (``DISPLAY`` or ``WAYLAND_DISPLAY`` set, or not Linux) this opens the
 native viewer. Where there is none, or with ``--web``, it runs Rerun's web viewer server
-(``rerun --serve-web``: the recording loaded into its gRPC server, the viewer served over HTTP),
+(``rerun --serve-web``: the recording sent into its gRPC server, the viewer served over HTTP),
 prints the URL to open (from another machine, or through an SSH tunnel of both ports) and serves
 until Ctrl-C. A run directory stands for its ``run.rrd``; a run cut short before its parts were
 merged, for its ``rerun-parts/*.rrd``; an experiment's directory, for ``swarm_curves.rrd``.
@@ -69,12 +69,15 @@ def has_display() -> bool:
 def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> int:
     """Serve ``files`` to the web viewer until Ctrl-C (or SIGTERM); returns the exit code.
 
-    ``rerun --serve-web`` serves the page and the recording on this machine only; in front of
-    it, on ``bind:web_port``, one origin for both (``recording.one_origin``), which a browser
-    elsewhere can read."""
+    ``rerun --serve-web`` serves the page and the recording on this machine only, the recording
+    sent into it once it listens (``recording.viewers.push_recordings``); in front of it, on
+    ``bind:web_port``, one origin for both (``recording.one_origin``), which a browser elsewhere
+    can read."""
     from nnql_swarm.recording.binary import rerun_binary
     from nnql_swarm.recording.one_origin import OneOrigin
-    from nnql_swarm.recording.viewers import public_host, stop_process, web_url
+    from nnql_swarm.recording.viewers import (
+        RecordingError, public_host, push_recordings, stop_process, web_url,
+    )
     from nnql_swarm.transport.ports import free_port
 
     for port in (web_port, grpc_port):
@@ -84,13 +87,17 @@ def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> in
     with tempfile.TemporaryFile("w+") as log:
         server = subprocess.Popen(
             [*rerun_binary(), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port",
-             str(page_port), "--port", str(grpc_port), *map(str, files)],
+             str(page_port), "--port", str(grpc_port)],
             stdout=log, stderr=log, start_new_session=True)
         previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
         front = None
         try:
             if not listening(server, "127.0.0.1", (grpc_port, page_port)):
                 raise ViewError(f"rerun --serve-web did not start: {last_line(log)}")
+            try:
+                push_recordings(files, grpc_port)
+            except RecordingError as error:
+                raise ViewError(str(error)) from None
             try:
                 front = OneOrigin(bind, web_port, page_port, grpc_port)
             except OSError as error:

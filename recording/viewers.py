@@ -1,5 +1,6 @@
 """Live viewers for a run: the native viewer spawned, or the web viewer served, with Rerun's own
-``rr.spawn``, ``rr.serve_grpc`` and ``rr.serve_web_viewer``; the viewer URLs and their checks."""
+``rr.spawn``, ``rr.serve_grpc`` and ``rr.serve_web_viewer``; saved recordings sent to a viewer's
+server; the viewer URLs and their checks."""
 
 import argparse
 import contextlib
@@ -8,6 +9,7 @@ import socket
 import subprocess
 import sys
 import time
+from pathlib import Path
 from urllib.parse import quote, urlparse
 
 from nnql_swarm.recording.binary import rerun_binary
@@ -152,6 +154,62 @@ def serve_web(run_id: str, grpc_port: int, web_port: int):
     address = web_url(public_host(), web_port)
     print(f"rerun: web viewer at {address}", file=sys.stderr)
     return stream, url, address, front
+
+
+def push_recordings(files: list[Path], port: int) -> None:
+    """Send saved recordings to the gRPC server on ``port`` of this machine (a ``rerun
+    --serve-web`` started without them), each as the file holds it (its own application and
+    recording ids, its blueprint) and as far as it can be read; returns once all is sent. Given
+    the files on its command line instead, Rerun 0.41's server keeps a core busy for as long as
+    it runs, once it has loaded them; fed this way it idles. Raises RecordingError for a file
+    that holds no recording."""
+    import rerun as rr
+
+    for path in files:
+        application, recording = _recording_ids(path)
+        # A stream of the file's own ids adds no recording of its own to the server.
+        stream = rr.RecordingStream(application, recording_id=recording, send_properties=False)
+        stream.connect_grpc(grpc_url(port))
+        _send_file(stream, path)
+
+
+def _recording_ids(path: Path) -> tuple[str, str]:
+    """The application and recording ids of the first recording in the file at ``path``. A file
+    cut off mid-message (its process killed) is read as far as it goes, as Rerun's importer
+    reads it: copied through it into a scratch file first."""
+    import tempfile
+    import warnings
+
+    import rerun as rr
+
+    def first(source: Path) -> tuple[str, str] | None:
+        with warnings.catch_warnings():  # a file without its footer is scanned whole, and said so
+            warnings.simplefilter("ignore")
+            stores = rr.chunk.RrdReader(source).recordings()  # empty recordings left out
+        return (stores[0].application_id, stores[0].recording_id) if stores else None
+
+    try:
+        found = first(path)
+    except Exception:  # noqa: BLE001 - Rerun's own error for a file cut off mid-message
+        with tempfile.TemporaryDirectory() as scratch:
+            copy = Path(scratch) / "readable.rrd"
+            stream = rr.RecordingStream(APP_ID, send_properties=False)
+            stream.save(copy)
+            _send_file(stream, path)
+            found = first(copy)
+    if found is None:
+        raise RecordingError(f"{path} holds no recording")
+    return found
+
+
+def _send_file(stream, path: Path) -> None:
+    """Send the file at ``path`` through ``stream`` (its sink set), as Rerun's importer reads it,
+    then close the stream."""
+    try:
+        stream.log_file_from_path(path)
+        stream.flush()  # waits for the file's importer too
+    finally:
+        stream.disconnect()
 
 
 def public_host() -> str:

@@ -14,6 +14,9 @@ from pathlib import Path
 import pytest
 
 from nnql_swarm.launch import view
+from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.recording.sinks import APP_ID
+from nnql_swarm.recording.viewers import RecordingError, _recording_ids
 from tests.swarm_helpers import ROOT, run_swarm
 
 pytestmark = pytest.mark.full  # real process trees: the whole suite's (make test-all)
@@ -25,6 +28,31 @@ def free_port() -> int:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         return probe.getsockname()[1]
+
+
+def children(pid: int) -> list[int]:
+    """The live processes whose parent is ``pid``."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        try:
+            stat = (entry / "stat").read_text()
+        except (OSError, ValueError):
+            continue
+        state, parent = stat[stat.rfind(")") + 2:].split()[:2]
+        if entry.name.isdigit() and int(parent) == pid and state != "Z":
+            found.append(int(entry.name))
+    return found
+
+
+def cpu_seconds(pid: int, over: float) -> float:
+    """The CPU time process ``pid`` takes in the next ``over`` seconds."""
+    def used() -> float:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+    before = used()
+    time.sleep(over)
+    return used() - before
 
 
 def headless() -> dict:
@@ -60,15 +88,32 @@ def test_headless_it_serves_the_web_viewer_and_prints_a_url_that_answers(tiny_ru
             assert page.status == 200 and b"<html" in page.read().lower()
         with socket.create_connection(("127.0.0.1", grpc), timeout=5):
             pass  # the gRPC server behind it
+        # The recording sent, the server idles (given the file itself, it kept a core busy).
+        [rerun] = children(server.pid)
+        assert cpu_seconds(rerun, over=3.0) < 0.5
         os.killpg(server.pid, signal.SIGINT)  # Ctrl-C in its terminal
         assert server.wait(timeout=10) == 0
         assert "Traceback" not in log.read_text()
     finally:
         if server.poll() is None:
+            for pid in children(server.pid):  # the rerun server, in a session of its own
+                os.kill(pid, signal.SIGKILL)
             os.killpg(server.pid, signal.SIGKILL)
             server.wait()
     for port in (web, grpc):  # the rerun server went with it
         assert not view.port_taken("127.0.0.1", port)
+
+
+def test_a_recording_cut_off_mid_message_is_sent_under_its_own_ids(tiny_run, tmp_path):
+    """A process killed mid-write leaves its part cut off: it is read as far as it goes."""
+    run_id = SwarmConfig.from_json((tiny_run / "config.json").read_text()).run_id
+    whole = (tiny_run / "run.rrd").read_bytes()
+    cut = tmp_path / "cut.rrd"
+    cut.write_bytes(whole[:len(whole) // 2 + 7])
+    assert _recording_ids(tiny_run / "run.rrd") == _recording_ids(cut) == (APP_ID, run_id)
+    cut.write_bytes(whole[:8])  # the header alone
+    with pytest.raises(RecordingError, match="holds no recording"):
+        _recording_ids(cut)
 
 
 def test_a_run_directory_stands_for_its_recording_or_its_parts(tmp_path, tiny_run):
