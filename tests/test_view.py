@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from bench.tick_cpu import descendants, process_cpu
 from nnql_swarm.launch import view
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.recording.sinks import APP_ID
@@ -28,31 +29,6 @@ def free_port() -> int:
     with socket.socket() as probe:
         probe.bind(("127.0.0.1", 0))
         return probe.getsockname()[1]
-
-
-def children(pid: int) -> list[int]:
-    """The live processes whose parent is ``pid``."""
-    found = []
-    for entry in Path("/proc").iterdir():
-        try:
-            stat = (entry / "stat").read_text()
-        except (OSError, ValueError):
-            continue
-        state, parent = stat[stat.rfind(")") + 2:].split()[:2]
-        if entry.name.isdigit() and int(parent) == pid and state != "Z":
-            found.append(int(entry.name))
-    return found
-
-
-def cpu_seconds(pid: int, over: float) -> float:
-    """The CPU time process ``pid`` takes in the next ``over`` seconds."""
-    def used() -> float:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-    before = used()
-    time.sleep(over)
-    return used() - before
 
 
 def headless() -> dict:
@@ -89,14 +65,17 @@ def test_headless_it_serves_the_web_viewer_and_prints_a_url_that_answers(tiny_ru
         with socket.create_connection(("127.0.0.1", grpc), timeout=5):
             pass  # the gRPC server behind it
         # The recording sent, the server idles (given the file itself, it kept a core busy).
-        [rerun] = children(server.pid)
-        assert cpu_seconds(rerun, over=3.0) < 0.5
+        [rerun] = descendants(server.pid)
+        before = process_cpu(rerun)
+        time.sleep(3.0)
+        after = process_cpu(rerun)
+        assert before is not None and after is not None and after[1] - before[1] < 0.5
         os.killpg(server.pid, signal.SIGINT)  # Ctrl-C in its terminal
         assert server.wait(timeout=10) == 0
         assert "Traceback" not in log.read_text()
     finally:
         if server.poll() is None:
-            for pid in children(server.pid):  # the rerun server, in a session of its own
+            for pid in descendants(server.pid):  # the rerun server, in a session of its own
                 os.kill(pid, signal.SIGKILL)
             os.killpg(server.pid, signal.SIGKILL)
             server.wait()
