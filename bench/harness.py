@@ -123,5 +123,11 @@ def agent_sizes(parser, text: str) -> list[int]:
 
 
 def swarm_config(preset: str, **fields) -> SwarmConfig:
-    """A benchmark's swarm config: the preset's learning options and the given fields."""
-    return SwarmConfig(**{**PRESETS[preset], **fields})
+    """A benchmark's swarm config: the preset's learning options and the given fields. One the
+    swarm cannot run (too many agents for the grid, a radius out of range: the benchmark's flags)
+    stops the benchmark with the config's reason, in one line (exit status 2, as a bad flag)."""
+    try:
+        return SwarmConfig(**{**PRESETS[preset], **fields})
+    except ValueError as error:
+        print(f"{Path(sys.argv[0]).name}: error: {error}", file=sys.stderr)
+        raise SystemExit(2) from None

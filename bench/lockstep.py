@@ -27,6 +27,7 @@ from typing import Callable
 
 import msgpack
 
+from bench.harness import agent_sizes
 from bench.procstat import MemorySampler, TimedTicks
 from nnql_swarm.launch.processes import process_context
 from nnql_swarm.transport.callbacks import callback
@@ -200,7 +201,8 @@ def hot_us(objects: int, calls: int = 200, repeats: int = 5) -> float:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--agents", default="8,32", help="comma-separated agent counts")
+    p.add_argument("--agents", type=lambda text: agent_sizes(p, text), default=[8, 32],
+                   help="comma-separated agent counts (default: 8,32)")
     p.add_argument("--ticks", type=int, default=2000)
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--topology", default="mesh", help=f"comma-separated: {', '.join(TOPOLOGIES)}")
@@ -221,7 +223,7 @@ def main() -> int:
     hot = {w: hot_us(w) for w in works}
     print(f"{'agents':>6} {'topology':>11} {'work us':>8} {'ticks/s':>8} {'start s':>8} "
           f"{'CPU us':>7}  runs")
-    for n in (int(v) for v in args.agents.split(",")):
+    for n in args.agents:
         results: dict[tuple[str, int], list[dict]] = {loop: [] for loop in loops}
         for _ in range(args.repeats):
             for t, w in loops:  # interleaved, so a drifting machine disturbs them alike

@@ -22,6 +22,7 @@ from dataclasses import replace
 
 os.environ.setdefault("NNQL_KERNEL", "python")  # as in the world process (unless told)
 
+from bench.harness import agent_sizes
 from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
 from nnql_swarm.sim.distributed import SimSwarm
 from nnql_swarm.sim.schedule import DEADLINE_S, Schedule
@@ -111,13 +112,14 @@ def one_run(agents: int, episodes: int, seed: int, preset: str = DEFAULT_PRESET)
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--agents", default="8,32")
+    parser.add_argument("--agents", type=lambda text: agent_sizes(parser, text), default=[8, 32],
+                        help="comma-separated agent counts (default: 8,32)")
     parser.add_argument("--episodes", type=int, default=5)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--preset", choices=tuple(PRESETS), default=DEFAULT_PRESET)
     args = parser.parse_args()
     print("agents  ticks  records/tick  check us/tick  us/record  apply us/tick  observe us/tick")
-    for agents in (int(a) for a in args.agents.split(",")):
+    for agents in args.agents:
         runs = [one_run(agents, args.episodes, seed, args.preset) for seed in range(args.repeats)]
 
         def per_tick(part: str) -> float:

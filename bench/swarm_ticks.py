@@ -22,25 +22,27 @@ import sys
 import tempfile
 from pathlib import Path
 
-
 from bench.harness import (
-    add_preset_option, run_distributed, run_local, stay_agent_main, swarm_config,
+    add_preset_option, agent_sizes, run_distributed, run_local, stay_agent_main, swarm_config,
 )
+from nnql_swarm.launch.cli import parse_grid
 
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--agents", default="8,16,32", help="comma-separated agent counts")
+    p.add_argument("--agents", type=lambda text: agent_sizes(p, text), default=[8, 16, 32],
+                   help="comma-separated agent counts (default: 8,16,32)")
     p.add_argument("--episodes", type=int, default=6)
     p.add_argument("--max-steps", type=int, default=100)
     p.add_argument("--repeats", type=int, default=3)
     add_preset_option(p)
-    p.add_argument("--grid", default="11x11")
+    p.add_argument("--grid", type=parse_grid, default=(11, 11),
+                   help="WIDTHxHEIGHT (default: 11x11, widened where the agents need more)")
     p.add_argument("--record", action="store_true", help="also write run.rrd (Rerun cost included)")
     args = p.parse_args()
-    width, height = (int(v) for v in args.grid.split("x"))
     print(f"{'agents':>6} {'mode':>12} {'ticks/s':>9} {'ms/tick':>8}  runs")
-    for n in (int(v) for v in args.agents.split(",")):
+    width, height = args.grid
+    for n in args.agents:
         config = swarm_config(args.preset, run_id=f"bench{n}", n_agents=n, episodes=args.episodes,
                               max_steps=args.max_steps, width=max(width, 2 * n // height + 1),
                               height=height)

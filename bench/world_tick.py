@@ -22,8 +22,10 @@ os.environ["NNQL_KERNEL"] = "python"  # as in the world process
 
 import numpy as np
 
+from bench.harness import agent_sizes, grid_side, swarm_config
+from nnql_swarm.launch.cli import parse_grid
 from nnql_swarm.protocol.actions import N_ACTIONS
-from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS, SwarmConfig
+from nnql_swarm.protocol.config import DEFAULT_PRESET, PRESETS
 from nnql_swarm.world.engine import SwarmWorld
 
 
@@ -46,19 +48,24 @@ def time_ticks(world: SwarmWorld, orders: list[list[tuple[int, ...]]]) -> tuple[
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--agents", default="8,32", help="comma-separated agent counts")
+    p.add_argument("--agents", type=lambda text: agent_sizes(p, text), default=[8, 32],
+                   help="comma-separated agent counts (default: 8,32)")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--ticks", type=int, default=2000, help="ticks timed per repeat")
-    p.add_argument("--grid", default="11x11")
+    p.add_argument("--grid", type=parse_grid,
+                   help="WIDTHxHEIGHT (default: the scale benchmark's grid for each agent count, "
+                        "11x11 for 8)")
     p.add_argument("--preset", choices=tuple(PRESETS), default=DEFAULT_PRESET,
                    help="learning options (pibt-nnql: the world arbitrates by priority "
                         "inheritance)")
     args = p.parse_args()
-    width, height = (int(v) for v in args.grid.split("x"))
+    grids = [args.grid or (grid_side(n), grid_side(n)) for n in args.agents]
+    configs = [swarm_config(args.preset, run_id="bench-run", n_agents=n, width=width,
+                            height=height, episodes=10**6)
+               for n, (width, height) in zip(args.agents, grids)]
     print(f"{'agents':>6} {'obs us':>7} {'apply us':>8} {'tick us':>8}")
-    for n in (int(v) for v in args.agents.split(",")):
-        config = SwarmConfig(run_id="bench-run", n_agents=n, width=width, height=height,
-                             episodes=10**6, **PRESETS[args.preset])
+    for config in configs:
+        n = config.n_agents
         rng = np.random.default_rng(0)
         orders = [[tuple(rng.permutation(N_ACTIONS).tolist()) for _ in range(n)]
                   for _ in range(args.ticks)]

@@ -28,6 +28,34 @@ def test_every_bench_module_imports():
     assert done.returncode == 0, done.stderr
 
 
+def test_every_bench_refuses_a_malformed_count_or_grid_in_one_line():
+    """A benchmark given ``--agents 8,x`` or ``--grid 3`` stops at its argument parser (exit 2,
+    a usage line), before it starts anything: no traceback."""
+    names = [module.name for module in pkgutil.iter_modules(bench.__path__)]
+    script = (
+        "import contextlib, importlib, io, sys\n"
+        "for name in sys.argv[1:]:\n"
+        "    main = getattr(importlib.import_module('bench.' + name), 'main', None)\n"
+        "    for flag in (['--agents', '8,x'], ['--grid', '3']):\n"
+        "        if main is None: continue\n"
+        "        sys.argv, err = [name, *flag], io.StringIO()\n"
+        "        try:\n"
+        "            with contextlib.redirect_stderr(err): main()\n"
+        "        except SystemExit as stop: code = stop.code\n"
+        "        else: code = 0\n"
+        "        print(name, flag[0], code, err.getvalue().strip().splitlines()[-1:])\n")
+    done = subprocess.run([sys.executable, "-c", script, *names], cwd=ROOT, capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.splitlines()
+    assert len(lines) >= 2 * 20, done.stdout
+    for line in lines:
+        name, flag, code, last = line.split(" ", 3)
+        assert code == "2" and "error" in last, line
+    assert any(line.startswith("world_tick --agents 2 ") and "comma-separated" in line
+               for line in lines), done.stdout
+
+
 def test_collisions_classifies_every_collision_of_a_frozen_episode():
     maps = MapsBenchmark(seeds=1, learners=("ql",))
     map_seed = maps.test_map_seeds(0)[0]
