@@ -13,13 +13,10 @@ merged, for its ``rerun-parts/*.rrd``; an experiment's directory, for ``swarm_cu
 """
 
 import os
-import re
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -69,14 +66,12 @@ def has_display() -> bool:
 def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> int:
     """Serve ``files`` to the web viewer until Ctrl-C (or SIGTERM); returns the exit code.
 
-    ``rerun --serve-web`` serves the page and the recording on this machine only, the recording
-    sent into it once it listens (``recording.viewers.push_recordings``); in front of it, on
-    ``bind:web_port``, one origin for both (``recording.one_origin``), which a browser elsewhere
-    can read."""
-    from nnql_swarm.recording.binary import rerun_binary
+    ``rerun --serve-web`` serves the page and the recording on this machine only
+    (``recording.viewers.saved_run_server``); in front of it, on ``bind:web_port``, one origin
+    for both (``recording.one_origin``), which a browser elsewhere can read."""
     from nnql_swarm.recording.one_origin import OneOrigin
     from nnql_swarm.recording.viewers import (
-        RecordingError, public_host, push_recordings, stop_process, web_url,
+        RecordingError, last_line, public_host, saved_run_server, web_url,
     )
     from nnql_swarm.transport.ports import free_port
 
@@ -84,70 +79,39 @@ def serve_web(files: list[Path], web_port: int, grpc_port: int, bind: str) -> in
         if port_taken(bind, port):
             raise ViewError(f"port {port} is in use; choose others with --web-port and --grpc-port")
     page_port = free_port()
-    with tempfile.TemporaryFile("w+") as log:
-        server = subprocess.Popen(
-            [*rerun_binary(), "--serve-web", "--bind", "127.0.0.1", "--web-viewer-port",
-             str(page_port), "--port", str(grpc_port)],
-            stdout=log, stderr=log, start_new_session=True)
-        previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
-        front = None
-        try:
-            if not listening(server, "127.0.0.1", (grpc_port, page_port)):
-                raise ViewError(f"rerun --serve-web did not start: {last_line(log)}")
-            try:
-                push_recordings(files, grpc_port)
-            except RecordingError as error:
-                raise ViewError(str(error)) from None
+    previous = {s: signal.signal(s, _stop) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        with tempfile.TemporaryFile("w+") as log, \
+                saved_run_server(files, grpc_port, page_port, log) as server:
             try:
                 front = OneOrigin(bind, web_port, page_port, grpc_port)
             except OSError as error:
                 raise ViewError(f"cannot listen on {bind}:{web_port}: "
                                 f"{error.strerror or error}") from None
-            local = "127.0.0.1" if bind in ("0.0.0.0", "::") else bind
-            here = web_url(local, web_port)
-            shown = ", ".join(str(f) for f in files)
-            if bind in ("0.0.0.0", "::"):
-                there = web_url(public_host(), web_port)
-                print(f"serving {shown} to the web viewer at {there} (on this machine: {here}); "
-                      f"Ctrl-C to stop", flush=True)
-            else:
-                print(f"serving {shown} to the web viewer at {here}; Ctrl-C to stop", flush=True)
-            server.wait()
-            raise ViewError(f"the web viewer server ended (exit code {server.returncode}): "
-                            f"{last_line(log)}")
-        except _Stopped:
-            print("stopped", file=sys.stderr)
-            return 0
-        finally:
-            for s, handler in previous.items():
-                signal.signal(s, handler)
-            if front is not None:
+            try:
+                local = "127.0.0.1" if bind in ("0.0.0.0", "::") else bind
+                here = web_url(local, web_port)
+                shown = ", ".join(str(f) for f in files)
+                if bind in ("0.0.0.0", "::"):
+                    there = web_url(public_host(), web_port)
+                    print(f"serving {shown} to the web viewer at {there} (on this machine: "
+                          f"{here}); Ctrl-C to stop", flush=True)
+                else:
+                    print(f"serving {shown} to the web viewer at {here}; Ctrl-C to stop",
+                          flush=True)
+                server.wait()
+                raise ViewError(f"the web viewer server ended (exit code {server.returncode}): "
+                                f"{last_line(log)}")
+            finally:
                 front.close()
-            stop_process(server)
-
-
-START_S = 15.0
-"""How long ``rerun --serve-web`` may take to listen on both ports."""
-
-
-def listening(server: subprocess.Popen, host: str, ports, timeout: float = START_S) -> bool:
-    """Whether the server listens on every port before ``timeout`` (False: it exited, or not)."""
-    deadline = time.monotonic() + timeout
-    waiting = list(ports)
-    while waiting and time.monotonic() < deadline and server.poll() is None:
-        try:
-            with socket.create_connection((host, waiting[0]), timeout=0.5):
-                waiting.pop(0)
-        except OSError:
-            time.sleep(0.2)
-    return not waiting and server.poll() is None
-
-
-def last_line(log) -> str:
-    """The last line the rerun server wrote, without its terminal colours."""
-    log.seek(0)
-    lines = re.sub(r"\x1b\[[0-9;]*m", "", log.read()).strip().splitlines()
-    return lines[-1] if lines else "no output"
+    except RecordingError as error:
+        raise ViewError(str(error)) from None
+    except _Stopped:
+        print("stopped", file=sys.stderr)
+        return 0
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 class _Stopped(Exception):

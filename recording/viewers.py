@@ -5,11 +5,13 @@ server; the viewer URLs and their checks."""
 import argparse
 import contextlib
 import os
+import re
 import socket
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import IO, Iterator
 from urllib.parse import quote, urlparse
 
 from nnql_swarm.recording.binary import rerun_binary
@@ -154,6 +156,49 @@ def serve_web(run_id: str, grpc_port: int, web_port: int):
     address = web_url(public_host(), web_port)
     print(f"rerun: web viewer at {address}", file=sys.stderr)
     return stream, url, address, front
+
+
+@contextlib.contextmanager
+def saved_run_server(files: list[Path], grpc_port: int, page_port: int,
+                     log: IO[str]) -> Iterator[subprocess.Popen]:
+    """``rerun --serve-web`` on this machine only, its gRPC server on ``grpc_port`` and the web
+    viewer's page on ``page_port``, serving ``files`` (none: an empty server that runs stream
+    to) until the block ends; it writes to ``log``. Started with no file, and the files sent
+    once it listens (:func:`push_recordings`: given on its command line, they keep a core busy).
+    Raises RecordingError where it does not listen within :data:`VIEWER_START_S`, with the last
+    line it wrote, or a file holds no recording."""
+    server = subprocess.Popen(
+        [*rerun_binary(), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port),
+         "--web-viewer-port", str(page_port)],
+        stdout=log, stderr=log, start_new_session=True)
+    try:
+        if not _listening(server, (grpc_port, page_port)):
+            raise RecordingError(f"rerun --serve-web did not start: {last_line(log)}")
+        push_recordings(files, grpc_port)
+        yield server
+    finally:
+        stop_process(server)
+
+
+def _listening(server: subprocess.Popen, ports) -> bool:
+    """Whether ``server`` listens on every one of ``ports`` of 127.0.0.1 within
+    :data:`VIEWER_START_S` (False: it exited first, or did not)."""
+    deadline = time.monotonic() + VIEWER_START_S
+    waiting = list(ports)
+    while waiting and time.monotonic() < deadline and server.poll() is None:
+        if reachable(grpc_url(waiting[0]), timeout=0.5):
+            waiting.pop(0)
+        else:
+            time.sleep(0.1)
+    return not waiting and server.poll() is None
+
+
+def last_line(log: IO[str]) -> str:
+    """The last line a rerun process wrote to ``log``, without its terminal colours."""
+    log.flush()
+    log.seek(0)
+    lines = re.sub(r"\x1b\[[0-9;]*m", "", log.read()).strip().splitlines()
+    return lines[-1] if lines else "no output"
 
 
 def push_recordings(files: list[Path], port: int) -> None:

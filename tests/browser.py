@@ -12,7 +12,6 @@ report the last failure.
 
 import io
 import os
-import subprocess
 import tempfile
 import time
 from contextlib import contextmanager
@@ -23,10 +22,7 @@ from urllib.parse import quote
 
 import numpy as np
 
-from nnql_swarm.recording.binary import rerun_binary
-from nnql_swarm.recording.viewers import (
-    grpc_url, push_recordings, stop_process, wait_until_reachable,
-)
+from nnql_swarm.recording.viewers import grpc_url, saved_run_server
 from nnql_swarm.transport.ports import free_port
 
 CHROMIUM = Path(os.environ.get("NNQL_CHROMIUM", "/usr/bin/chromium"))
@@ -70,23 +66,14 @@ class Viewer:
 
 @contextmanager
 def web_viewer(recording: Path | None, log: Path | None = None) -> Iterator[Viewer]:
-    """``rerun --serve-web`` on free ports, serving ``recording`` (or nothing), until the end: the
-    recording sent into it once it listens, as ``launch/view.py`` serves one."""
+    """``rerun --serve-web`` on free ports, serving ``recording`` (or nothing), until the end,
+    as ``launch/view.py`` serves one (``recording.viewers.saved_run_server``); its output kept
+    in ``log`` where given."""
     viewer = Viewer(web_port=free_port(), grpc_port=free_port())
-    command = [*rerun_binary(), "--serve-web", "--port", str(viewer.grpc_port),
-               "--web-viewer-port", str(viewer.web_port)]
-    out = open(log, "w") if log else subprocess.DEVNULL
-    server = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT)
-    try:
-        if not wait_until_reachable(grpc_url(viewer.grpc_port)):
-            raise RuntimeError(f"rerun --serve-web did not start: {' '.join(command)}")
-        if recording is not None:
-            push_recordings([recording], viewer.grpc_port)
+    files = [] if recording is None else [recording]
+    with (open(log, "w+") if log else tempfile.TemporaryFile("w+")) as out, \
+            saved_run_server(files, viewer.grpc_port, viewer.web_port, out):
         yield viewer
-    finally:
-        stop_process(server)
-        if log:
-            out.close()
 
 
 @contextmanager
