@@ -1,5 +1,7 @@
-"""Shared helpers of the swarm tests: start launch/swarm.py as a real process tree and read its run."""
+"""Shared helpers of the swarm tests: start launch/swarm.py as a real process tree and read its
+run; run launch/experiment.py and read its tables."""
 
+import csv
 import os
 import subprocess
 import sys
@@ -7,6 +9,19 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 SWARM = ROOT / "launch" / "swarm.py"
+EXPERIMENT = ROOT / "launch" / "experiment.py"
+
+
+def experiment(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run ``launch/experiment.py`` with ``args`` to completion, its output captured."""
+    return subprocess.run([sys.executable, str(EXPERIMENT), *args], cwd=ROOT, capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def read_csv(path: Path) -> list[dict]:
+    """A CSV file's rows, each by its header's names."""
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
 
 
 def swarm_command(out: Path, *options: str) -> list[str]:

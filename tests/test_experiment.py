@@ -1,8 +1,6 @@
 """The experiment CLI end to end (files, columns, determinism, bad options, Ctrl-C), its progress
 bar, its statistics and its tables."""
 
-import csv
-import io
 import json
 import math
 import os
@@ -10,7 +8,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -21,21 +18,9 @@ from nnql_swarm.experiment.report import (
 )
 from nnql_swarm.experiment.stats import mean_interval, t_quantile
 from nnql_swarm.launch.cli import progress
+from tests.swarm_helpers import EXPERIMENT, ROOT, experiment, read_csv
 
-REPO = Path(__file__).resolve().parent.parent
-SCRIPT = "launch/experiment.py"
 SHORT = ["--episodes", "20", "--seeds", "2", "--ks", "1,2"]
-
-
-def experiment(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, SCRIPT, *args], cwd=REPO, capture_output=True, text=True, timeout=timeout
-    )
-
-
-def read_csv(path: Path) -> list[dict]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
 
 
 def test_short_run_writes_every_file(tmp_path):
@@ -134,9 +119,9 @@ def test_ctrl_c_stops_cleanly_with_exit_130(tmp_path, workers):
     # terminal's foreground: a shell's background job (`make test &`) ignores it, and Python
     # then never raises KeyboardInterrupt.
     process = subprocess.Popen(
-        [sys.executable, SCRIPT, "--no-plots", "--workers", workers, "--seeds", "1000",
+        [sys.executable, str(EXPERIMENT), "--no-plots", "--workers", workers, "--seeds", "1000",
          "--out", str(tmp_path / "big")],
-        cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     deadline = time.monotonic() + 60
@@ -239,7 +224,7 @@ def test_the_distributed_swarm_plays_the_experiments_run_of_best_nnql(tmp_path):
     swarm = subprocess.run(
         [sys.executable, "launch/swarm.py", "--preset", "best-nnql", "--agents", "8", "--seed",
          "3", "--episodes", "25", "--no-record", "--no-progress", "--out", str(tmp_path / "dist")],
-        cwd=REPO, capture_output=True, text=True, timeout=300)
+        cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert swarm.returncode == 0, swarm.stderr
     ours = read_csv(out / "runs" / "best-nnql-s3" / "episodes.csv")
     theirs = read_csv(tmp_path / "dist" / "episodes.csv")

@@ -8,7 +8,6 @@ import signal
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,9 +22,8 @@ from nnql_swarm.world.rules import (
     FIELD_COLUMNS, GOAL_REWARD, ROW_FLOATS, ROW_INTS, STAY_REWARD, Bodies, Outcome, Rules, Scratch,
     Score, field_columns, field_costs, world_step,
 )
+from tests.swarm_helpers import EXPERIMENT, ROOT, experiment, read_csv
 
-REPO = Path(__file__).resolve().parent.parent
-SCRIPT = "launch/experiment.py"
 TINY = ["maps", "--seeds", "2", "--train-maps", "2", "--train-episodes", "5", "--test-maps", "1",
         "--instances", "2", "--agents", "4,6", "--scratch-episodes", "10", "--scratch-agents", "4"]
 
@@ -155,16 +153,6 @@ def test_the_table_reads_seeds_and_ratios_by_hand():
     assert table["oracle"]["soc_vs_oracle"] == 1.0
 
 
-def experiment(*args: str, timeout: float = 300) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, SCRIPT, *args], cwd=REPO, capture_output=True,
-                          text=True, timeout=timeout)
-
-
-def read_csv(path: Path) -> list[dict]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
 def test_a_tiny_benchmark_writes_its_table_episodes_and_curves(tmp_path):
     out = tmp_path / "maps"
     done = experiment(*TINY, "--out", str(out))
@@ -212,7 +200,7 @@ def test_bad_values_exit_2_with_one_line(args, message, tmp_path):
 def test_ctrl_c_keeps_every_episode_written(tmp_path):
     out = tmp_path / "big"
     process = subprocess.Popen(
-        [sys.executable, SCRIPT, "maps", "--seeds", "50", "--out", str(out)], cwd=REPO,
+        [sys.executable, str(EXPERIMENT), "maps", "--seeds", "50", "--out", str(out)], cwd=ROOT,
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     episodes = out / "maps_episodes.csv"

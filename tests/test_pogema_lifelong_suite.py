@@ -3,10 +3,7 @@ instances, throughput per family and variant beside the published figures
 (``experiment.published``) and against the oracle's, each instance the one the swarm plays from
 its ``.map`` and ``.goals``; a bad combination is one line."""
 
-import csv
 import math
-import subprocess
-import sys
 
 import pytest
 
@@ -15,22 +12,12 @@ from nnql_swarm.experiment.published import (
 )
 from nnql_swarm.world.pogema_instances import FAMILIES, INSTANCES, goals_files, read_lifelong
 from nnql_swarm.world.metrics import read_episodes
-from tests.swarm_helpers import ROOT, run_swarm
+from tests.swarm_helpers import experiment, read_csv, run_swarm
 
 VARIANTS = ("pibt-nnql", "ql", "oracle")
 TINY = ["maps", "--suite", "pogema", "--tasks", "lifelong", "--preset", "pibt-nnql", "--seeds",
         "1", "--train-maps", "1", "--train-episodes", "3", "--instances", "2", "--agents", "8",
         "--families", "random,mazes", "--scratch-agents", "8", "--scratch-episodes", "5"]
-
-
-def experiment(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "launch/experiment.py", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=600)
-
-
-def read_csv(path):
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
 
 
 def test_every_published_throughput_is_at_a_published_lifelong_count_and_has_its_source():

@@ -2,29 +2,15 @@
 family and variant beside the published figures (``experiment.published``), each instance the
 one the swarm plays from its ``.map`` and ``.scen``; bad values are one line."""
 
-import csv
-import subprocess
-import sys
-
 import pytest
 
 from nnql_swarm.experiment.published import CSR, METHODS, SOC_OVER_LOWER_BOUND, SOURCES
 from nnql_swarm.world.pogema_instances import FAMILIES, INSTANCES, scen_files
 from nnql_swarm.world.metrics import read_episodes
-from tests.swarm_helpers import ROOT, run_swarm
+from tests.swarm_helpers import experiment, read_csv, run_swarm
 
 TINY = ["maps", "--suite", "pogema", "--seeds", "1", "--train-maps", "1", "--train-episodes",
         "3", "--instances", "2", "--agents", "8"]
-
-
-def experiment(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "launch/experiment.py", *args], cwd=ROOT,
-                          capture_output=True, text=True, timeout=600)
-
-
-def read_csv(path):
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
 
 
 def test_every_published_figure_is_at_a_published_agent_count_and_has_its_source():
