@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 from importlib import metadata
+from pathlib import Path
 from typing import NoReturn
 
 from tqdm import tqdm
@@ -129,16 +130,33 @@ class _Lines:
         sys.stderr.flush()
 
 
-def make_directory(path) -> str | None:
-    """Create the folder ``path`` (and its parents) if it is not there; returns why it cannot be
-    (one line for a usage error), or None."""
+def results_folder(parser, out: Path | None, default_name: str, results, force: bool,
+                   plots: bool = False) -> Path:
+    """The folder an experiment writes its ``results`` (file names) into, made where it is not
+    there: ``out``, else ``runs/<default_name>-<date>-<time>``. Stops at the parser's one-line
+    error where it is a file, already holds one of the results (unless ``force``), cannot be
+    made, or ``plots`` are asked for without matplotlib."""
+    if out is None:
+        out = Path("runs") / time.strftime(f"{default_name}-%Y%m%d-%H%M%S")
+    if out.exists() and not out.is_dir():
+        parser.error(f"--out {out} exists and is not a directory")
+    held = [name for name in results if (out / name).exists()]
+    if held and not force:
+        parser.error(f"{out} already holds results ({', '.join(held)}); pass --force to overwrite")
+    if plots:
+        from nnql_swarm.experiment.figures import require_matplotlib
+
+        try:
+            require_matplotlib()
+        except RuntimeError as error:
+            parser.error(str(error))
     try:
-        os.makedirs(path, exist_ok=True)
+        os.makedirs(out, exist_ok=True)
     except FileExistsError:
-        return f"--out {path} is a file, not a folder"
+        parser.error(f"--out {out} is a file, not a folder")
     except OSError as error:
-        return f"cannot make the folder --out {path}: {error.strerror or error}"
-    return None
+        parser.error(f"cannot make the folder --out {out}: {error.strerror or error}")
+    return out
 
 
 COMPILING = "compiling the simulator (first run, about half a minute)..."

@@ -41,8 +41,8 @@ from nnql_swarm.sim.runs import swarm_world
 from nnql_swarm.launch.experiment_maps import run_maps
 from nnql_swarm.launch.cli import (
     DefaultsHelpFormatter, EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, comma_choices,
-    make_directory, parse_grid, parse_workers, prepare_simulator, program_name, progress,
-    raise_terminated,
+    parse_grid, parse_workers, prepare_simulator, program_name, progress,
+    raise_terminated, results_folder,
 )
 from nnql_swarm.recording.curves import log_swarm_curves
 
@@ -128,23 +128,8 @@ def resolve(args: argparse.Namespace, parser: OneLineParser) -> argparse.Namespa
         args.figure_k = max(args.ks)
     elif args.figure_k not in args.ks:
         parser.error(f"--figure-k {args.figure_k} is not among the random steps run ({args.ks})")
-    if args.out is None:
-        args.out = Path("runs") / time.strftime("experiment-%Y%m%d-%H%M%S")
-    if args.out.exists() and not args.out.is_dir():
-        parser.error(f"--out {args.out} exists and is not a directory")
-    held = [name for name in RESULT_FILES if (args.out / name).exists()]
-    if held and not args.force:
-        parser.error(f"{args.out} already holds results ({', '.join(held)}); pass --force to overwrite")
-    if not args.no_plots:
-        try:
-            from nnql_swarm.experiment.figures import require_matplotlib
-
-            require_matplotlib()
-        except RuntimeError as error:
-            parser.error(str(error))
-    unusable = make_directory(args.out)
-    if unusable:
-        parser.error(unusable)
+    args.out = results_folder(parser, args.out, "experiment", RESULT_FILES, args.force,
+                              plots=not args.no_plots)
     if args.workers is None:
         args.workers = os.cpu_count() or 1
     return args
@@ -281,22 +266,8 @@ def run_swarm(argv: list[str]) -> Path:
         experiment.config(experiment.variants[0], experiment.seed_base)
     except ValueError as error:
         parser.error(str(error))
-    out = args.out or Path("runs") / time.strftime("swarm-%Y%m%d-%H%M%S")
-    if out.exists() and not out.is_dir():
-        parser.error(f"--out {out} exists and is not a directory")
-    held = [name for name in (*TABLE_FILES, "config.json") if (out / name).exists()]
-    if held and not args.force:
-        parser.error(f"{out} already holds results ({', '.join(held)}); pass --force to overwrite")
-    if not args.no_plots:
-        try:
-            from nnql_swarm.experiment.figures import require_matplotlib
-
-            require_matplotlib()
-        except RuntimeError as error:
-            parser.error(str(error))
-    unusable = make_directory(out)
-    if unusable:
-        parser.error(unusable)
+    out = results_folder(parser, args.out, "swarm", (*TABLE_FILES, "config.json"), args.force,
+                         plots=not args.no_plots)
     runs = len(experiment.variants) * experiment.seeds
     first = experiment.config(experiment.variants[0], experiment.seed_base)
     prepare_simulator(swarm_world(first), first)

@@ -25,8 +25,8 @@ from nnql_swarm.protocol.config import (
 from nnql_swarm.recording.curves import log_swarm_curves
 from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.launch.cli import (
-    DefaultsHelpFormatter, OneLineParser, Terminated, bounded, comma_choices, make_directory,
-    parse_workers, prepare_simulator, program_name, progress,
+    DefaultsHelpFormatter, OneLineParser, Terminated, bounded, comma_choices,
+    parse_workers, prepare_simulator, program_name, progress, results_folder,
 )
 from nnql_swarm.world.terrain import MapError
 from nnql_swarm.world.pogema_instances import FAMILIES as POGEMA_FAMILIES
@@ -194,16 +194,8 @@ def run_maps(argv: list[str]) -> Path:
                    bench.train_agents, 1, False)
     except (ValueError, MapError) as error:
         parser.error(str(error))
-    out = args.out or Path("runs") / time.strftime("maps-%Y%m%d-%H%M%S")
-    if out.exists() and not out.is_dir():
-        parser.error(f"--out {out} exists and is not a directory")
-    held = [name for name in (*TABLE_FILES, "maps_episodes.csv", "config.json")
-            if (out / name).exists()]
-    if held and not args.force:
-        parser.error(f"{out} already holds results ({', '.join(held)}); pass --force to overwrite")
-    unusable = make_directory(out)
-    if unusable:
-        parser.error(unusable)
+    out = results_folder(parser, args.out, "maps",
+                         (*TABLE_FILES, "maps_episodes.csv", "config.json"), args.force)
     config = {"benchmark": {k: v for k, v in asdict(bench).items() if k != "presets"},
               "presets": {v: presets[v] for v in bench.variants}, "workers": args.workers,
               **({"pogema_dir": str(args.pogema_dir)} if bench.suite == "pogema" else {}),
