@@ -9,8 +9,9 @@ written, the episode's noise drawn), the codec's decoding of each message, the n
 plan (``agent.negotiation.Planner``: whom to wait for and ask, whom to answer, the parked
 neighbours known to stay, the agents near enough to stream), the answers through the standing
 queries it holds and their review (``AgentMachine._answer_standing_queries``) and the encoding
-of answers and intents. Each
-part's CPU time summed over the run, by observation, so the parts of one observation add up
+of answers and intents; and, inside the plan and the decision, the three kernels compiled ahead of
+time alone (:data:`KERNEL_PARTS`), so that what is left of those parts is the Python around them.
+Each part's CPU time summed over the run, by observation, so the parts of one observation add up
 (a part also called on answers, as decoding, counts there too). Each timer costs about half a
 microsecond a call. Where the next microseconds are:
 
@@ -45,6 +46,15 @@ PARTS = (
 )
 """``(name, owner, attribute)``: each part, timed where the agent's machine calls it."""
 
+KERNEL_PARTS = (
+    ("the plan's kernel", "negotiation_plan"),
+    ("the neighbour rows' kernel", "neighbour_rows_into"),
+    ("the decision's kernel", "agent_decision"),
+)
+"""``(name, kernel)``: the kernels of the plan and the decision, each timed as the process runs
+it (``learning.ahead``). The world's check of a record reads the rows' kernel too where a record
+is not the one a run without faults writes (``world.records``), which an honest run never asks."""
+
 def timed(spent: list[int], function):
     def part(*args, **kwargs):
         start = time.thread_time_ns()
@@ -71,6 +81,16 @@ def main(argv: list[str] | None = None) -> int:
     # The machine reads its collaborators through their modules, so each is timed in place.
     for name, owner, attribute in PARTS:
         setattr(owner, attribute, timed(spent[name], getattr(owner, attribute)))
+    spent.update((name, []) for name, _ in KERNEL_PARTS)
+    kernel_part = {kernel: name for name, kernel in KERNEL_PARTS}
+    compiled = ahead.KERNELS.compiled
+
+    def timed_kernel(kernel: str):  # each kernel is looked up once, as its holder is made
+        function, how = compiled(kernel)
+        part = kernel_part.get(kernel)
+        return (function, how) if part is None else (timed(spent[part], function), how)
+
+    ahead.KERNELS.compiled = timed_kernel  # type: ignore[method-assign]
     deciding = ahead.KERNELS.compiled("agent_decision")[1]
     print(f"{args.agents} agents, {args.preset}, deciding {deciding}; "
           "us of CPU an observation, each repeat (calls):")

@@ -170,17 +170,21 @@ def test_the_handler_floor_times_every_handler_on_real_observations():
 def test_the_agents_parts_are_timed_where_the_machine_calls_them():
     """``bench.agent_parts``: every part is timed on the real handlers of a run (in a process of
     its own: it wraps the machine's collaborators), and each observation is decided once."""
-    from bench.agent_parts import PARTS
+    from bench.agent_parts import KERNEL_PARTS, PARTS
 
     done = subprocess.run([sys.executable, "-m", "bench.agent_parts", "--agents", "4",
                            "--episodes", "2", "--repeats", "1"], cwd=ROOT, capture_output=True,
                           text=True, timeout=300)
     assert done.returncode == 0, done.stderr
     lines = {line[:30].strip(): line[30:].split() for line in done.stdout.splitlines()[1:]}
-    assert set(lines) == {name for name, _, _ in PARTS}, done.stdout
+    assert set(lines) == {name for name, _, _ in PARTS} | {name for name, _ in KERNEL_PARTS}, \
+        done.stdout
     calls = {name: int(figures[1].strip("()")) for name, figures in lines.items()}
     assert all(float(figures[0]) > 0 for figures in lines.values()), done.stdout
     assert calls["the decision (act)"] == calls["the observation, in all"] > 0, done.stdout
+    assert calls["the decision's kernel"] == calls["the decision (act)"], done.stdout
+    assert calls["the plan's kernel"] == calls["the negotiation's plan"], done.stdout
+    assert float(lines["the decision's kernel"][0]) < float(lines["the decision (act)"][0])
 
 
 def test_the_cpu_split_counts_the_receiving_threads_samples_by_shared_object():
