@@ -180,6 +180,13 @@ def prepare_simulator(world, run) -> None:
               flush=True)
 
 
+def report_written(out: Path, elapsed: float) -> None:
+    """The line an experiment ends with: where it wrote its files, and how long its simulation
+    took (in milliseconds under a second: a small run of the compiled simulator takes a few)."""
+    took = f"{elapsed * 1000:.0f} ms" if elapsed < 1 else f"{elapsed:.1f} s"
+    print(f"wrote {out}/ in {took} of simulation")
+
+
 def bounded(kind: type, low: float | None = None, high: float | None = None):
     """An argparse type: ``kind`` within ``[low, high]``."""
 

@@ -42,7 +42,7 @@ from nnql_swarm.launch.experiment_maps import run_maps
 from nnql_swarm.launch.cli import (
     DefaultsHelpFormatter, EXIT_INTERRUPTED, OneLineParser, Terminated, bounded, comma_choices,
     parse_grid, parse_workers, prepare_simulator, program_name, progress,
-    raise_terminated, results_folder,
+    raise_terminated, report_written, results_folder,
 )
 from nnql_swarm.recording.curves import log_swarm_curves
 
@@ -186,7 +186,7 @@ def run(args: argparse.Namespace) -> Path:
 
         write_figures(args.out, grid, args.figure_k)
     print(markdown)
-    print(f"wrote {args.out}/ in {elapsed:.1f} s of simulation")
+    report_written(args.out, elapsed)
     return args.out
 
 
@@ -291,7 +291,7 @@ def run_swarm(argv: list[str]) -> Path:
               "command": [Path(sys.argv[0]).name, *sys.argv[1:]]}
     (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
     print((out / "swarm_table.md").read_text())
-    print(f"wrote {out}/ in {elapsed:.1f} s of simulation")
+    report_written(out, elapsed)
     return out
 
 

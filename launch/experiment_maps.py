@@ -26,7 +26,7 @@ from nnql_swarm.recording.curves import log_swarm_curves
 from nnql_swarm.sim.runs import swarm_world, threads
 from nnql_swarm.launch.cli import (
     DefaultsHelpFormatter, OneLineParser, Terminated, bounded, comma_choices,
-    parse_workers, prepare_simulator, program_name, progress, results_folder,
+    parse_workers, prepare_simulator, program_name, progress, report_written, results_folder,
 )
 from nnql_swarm.world.terrain import MapError
 from nnql_swarm.world.pogema_instances import FAMILIES as POGEMA_FAMILIES
@@ -230,5 +230,5 @@ def run_maps(argv: list[str]) -> Path:
     config["elapsed_seconds"] = round(elapsed, 3)
     (out / "config.json").write_text(json.dumps(config, indent=2) + "\n")
     print((out / "maps_table.md").read_text())
-    print(f"wrote {out}/ in {elapsed:.1f} s of simulation")
+    report_written(out, elapsed)
     return out

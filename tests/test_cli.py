@@ -17,7 +17,7 @@ from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.sim import runs
 from nnql_swarm.sim.capacity import available_bytes, check_fits
 from nnql_swarm.sim.runs import compiled_simulator, swarm_world
-from nnql_swarm.launch.cli import COMPILING, prepare_simulator
+from nnql_swarm.launch.cli import COMPILING, prepare_simulator, report_written
 from tests.swarm_helpers import ROOT
 
 BIN = Path(sys.executable).parent
@@ -84,6 +84,15 @@ def help_of(*command: str) -> str:
     done = subprocess.run([*command, "--help"], capture_output=True, text=True, timeout=60, cwd="/")
     assert done.returncode == 0, done.stderr
     return done.stdout
+
+
+@pytest.mark.parametrize("elapsed, took", [(0.0334, "33 ms"), (0.9994, "999 ms"),
+                                            (1.0, "1.0 s"), (85.66, "85.7 s")])
+def test_an_experiment_ends_saying_where_it_wrote_and_how_long_it_simulated(capsys, elapsed,
+                                                                             took):
+    """A small run of the compiled simulator takes milliseconds: it is not said to take 0.0 s."""
+    report_written(Path("runs/x"), elapsed)
+    assert capsys.readouterr().out == f"wrote runs/x/ in {took} of simulation\n"
 
 
 def test_the_installed_experiment_names_itself():
