@@ -37,12 +37,23 @@ is the budget such a handler has, in the processes, for the ratio the swarm is t
 swarm's own handlers cost some 200 to 300 us a decision and 100 an intent in its processes,
 ``bench/tick_cpu.py``).
 
+With ``--kernels``, one more replay a size whose handlers do, instead of spinning, the least a
+handler compiled whole would still do, on the recorded run's own data (:class:`KernelWork`):
+each agent's decision decodes its observation with the codec, runs the plan's, the neighbour
+rows' and the decision's kernels compiled ahead of time on the arguments the agent last passed
+them, and encodes its intent; the world decodes each intent and runs the record check's kernel
+on the arguments of one of the run's last checks. Unlike a spin it touches what such a handler
+touches (the learner's tables, the buffers), on caches the other processes cooled; unlike the
+swarm it runs none of the machines' Python, no checks and no bookkeeping.
+
     python -m bench.pattern --agents 8,64 --repeats 3
     python -m bench.pattern --agents 8,64 --repeats 3 --work-us 0,10,25,50,100,150
+    python -m bench.pattern --agents 8,64 --repeats 3 --kernels
     python -m bench.pattern --agents 64 --repeats 3 --work-us 25,50 --working world
 """
 
 import argparse
+import contextlib
 import statistics
 import struct
 import sys
@@ -54,12 +65,15 @@ from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 
+from bench.kernel_work import KernelWork, capturing
 from bench.procstat import TimedTicks
 
 START_TIMEOUT_S = 120.0
 _HEAD = struct.Struct("<qi")  # tick, sender (an answer's; 0 in the others)
 OPENED = -2  # the tick of a standing query's first reply: it is open
 WORKING = ("both", "agents", "world")
+KERNELS_ROW = "kernels"
+"""The work of the ``--kernels`` row (:class:`KernelWork`), where the others give microseconds."""
 
 
 @dataclass(frozen=True)
@@ -137,9 +151,9 @@ class Pattern:
         return statistics.mean(hops) if hops else 0.0
 
 
-def record(config) -> Pattern:
+def record(config, work: KernelWork | None = None) -> Pattern:
     """The messages of a run of ``config`` through the real handlers (see the module
-    docstring)."""
+    docstring); with ``work``, what its compiled handlers would still do, kept into it."""
     from bench import node_cpu
     from nnql_swarm.protocol.messages import Answer, Intent, Observation, parse
 
@@ -155,9 +169,13 @@ def record(config) -> Pattern:
             msg = parse(item.payload, Observation, run_id)
             observations[msg.tick].append((receiver, len(item.payload)))
             episodes.setdefault(msg.tick, msg.episode)
+            if work is not None:
+                work.observations[receiver] = item.payload
         elif kind == "intent":
             msg = parse(item.payload, Intent, run_id)
             sends[sender, msg.tick].append((cause, "intent", None, len(item.payload)))
+            if work is not None and (msg.record or msg.agent not in work.intents):
+                work.intents[msg.agent] = item.payload  # one with a record, where it sent one
         elif kind == "answer":
             payload = item.ok.payload
             msg = parse(payload, Answer, run_id)
@@ -166,7 +184,8 @@ def record(config) -> Pattern:
         elif kind == "query" and "tick=" in item.parameters:
             asks_at[int(item.parameters.split("tick=")[1].split(";")[0])] += 1
 
-    with tempfile.TemporaryDirectory() as tmp:
+    with tempfile.TemporaryDirectory() as tmp, \
+            capturing(work) if work is not None else contextlib.nullcontext():
         ticks, _ = node_cpu.run(config, Path(tmp), False, on_send=on_send)
     pattern = Pattern(config.n_agents, [TickPattern() for _ in range(ticks)],
                       timed_from=min((t for t, e in episodes.items() if e >= 1), default=0))
@@ -210,9 +229,11 @@ def _payload(tick: int, size: int, sender: int = 0) -> bytes:
 
 
 def agent(me: int, script: dict[int, Decision], recorded, transport,
-          timeout_s: float = START_TIMEOUT_S, work_s: float = 0.0) -> None:
+          timeout_s: float = START_TIMEOUT_S, work_s: float = 0.0,
+          kernels: KernelWork | None = None) -> None:
     """One agent of the replay: at each tick, once its observation and awaited answers are in,
-    it works ``work_s`` (:func:`busy`), then sends what it sent at the tick it plays
+    it works ``work_s`` (:func:`busy`), or does its compiled decision's work where ``kernels``
+    holds one (:meth:`KernelWork.agent_work`), then sends what it sent at the tick it plays
     (``recorded(tick)``: :func:`played`); it leaves on a negative tick (:func:`replay` stops it
     if its world gave up)."""
     from nnql_swarm.transport.callbacks import callback
@@ -220,6 +241,7 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
     from nnql_swarm.transport.settings import open_session
     import zenoh
 
+    decide = (kernels.agent_work(me) if kernels is not None else None) or partial(busy, work_s)
     answerers = {a for d in script.values() for a in d.awaits}
     lock = threading.Lock()
     done, everyone_up, streamed = threading.Event(), threading.Event(), threading.Event()
@@ -248,7 +270,7 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
                 return
             observed.discard(tick)
             heard.pop(tick, None)
-            busy(work_s)
+            decide()
             for kind, to, size in decision.sends:
                 if kind == "answer":
                     reply(to, _payload(tick, size, me))
@@ -323,16 +345,18 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
 
 def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, total: int,
           timed_from: int, transport, results, timeout_s: float = START_TIMEOUT_S,
-          work_s: float = 0.0) -> None:
+          work_s: float = 0.0, kernels: KernelWork | None = None) -> None:
     """The replay's clock: ``total`` ticks, each the observations of the tick it plays
     (``recorded(tick)``, into ``ticks``) out and its intents in, working ``work_s`` on each
-    intent (:func:`busy`); puts ``(ticks a second from
+    intent (:func:`busy`), or doing a compiled handler's work where ``kernels`` holds it
+    (:meth:`KernelWork.world_work`); puts ``(ticks a second from
     ``timed_from``, the time every agent was ready, the machine's busy CPU microseconds a tick
     from ``timed_from``)`` on ``results``."""
     from nnql_swarm.transport.callbacks import callback
     from nnql_swarm.transport.runtime import declare_lockstep_publisher
     from nnql_swarm.transport.settings import open_session
 
+    count = (kernels.world_work() if kernels is not None else None) or partial(busy, work_s)
     ready: set[str] = set()
     everyone, finished = threading.Event(), threading.Event()
     state = {"tick": 0, "heard": 0}
@@ -359,7 +383,7 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
             tick, _ = _HEAD.unpack_from(sample.payload.to_bytes())
             if tick != state["tick"]:
                 return
-            busy(work_s)
+            count()
             state["heard"] += 1
             if state["heard"] == ticks[recorded(tick)][1]:
                 open_tick(tick + 1)
@@ -393,11 +417,12 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
 
 def replay(pattern: Pattern, topology: str, timed_ticks: int,
            timeout_s: float | None = None, work_us: float = 0.0,
-           working: str = "both") -> dict:
+           working: str = "both", kernels: KernelWork | None = None) -> dict:
     """One replay of ``pattern``, its ticks from the second episode on played until
     ``timed_ticks`` are timed, each handler that carries the model working ``work_us`` (each
-    agent's decision, each intent the world counts: :func:`busy`; ``working``: ``both``, or
-    only the ``agents`` or the ``world``): ``rate`` (ticks a second over those; nan if its
+    agent's decision, each intent the world counts: :func:`busy`), or doing a compiled
+    handler's work (``kernels``); ``working``: ``both``, or only the ``agents`` or the
+    ``world``: ``rate`` (ticks a second over those; nan if its
     agents were not ready within ``timeout_s``, by default :data:`START_TIMEOUT_S` or half a
     second an agent, or it stalled for five times that), ``startup_s`` (until every agent was
     ready), ``cpu_us`` (the machine's busy CPU microseconds a tick over the timed ticks)."""
@@ -424,13 +449,15 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
         processes.append(ctx.Process(target=router, args=(layout.router(),)))
     total = pattern.timed_from + timed_ticks
     recorded = partial(played, timed_from=pattern.timed_from, recorded=len(pattern.ticks))
+    world_works, agents_work = working != "agents", working != "world"
     processes.append(ctx.Process(target=world, args=(
         pattern.n, clock, recorded, total, pattern.timed_from, layout.world(), results,
-        timeout_s, work_s if working != "agents" else 0.0)))
-    processes += [ctx.Process(target=agent, args=(i, scripts[i], recorded, layout.agent(),
-                                                  timeout_s,
-                                                  work_s if working != "world" else 0.0))
-                  for i in range(pattern.n)]
+        timeout_s, work_s if world_works else 0.0,
+        kernels.part(None) if kernels is not None and world_works else None)))
+    processes += [ctx.Process(target=agent, args=(
+        i, scripts[i], recorded, layout.agent(), timeout_s, work_s if agents_work else 0.0,
+        kernels.part(i) if kernels is not None and agents_work else None))
+        for i in range(pattern.n)]
     launched = time.time()
     for i, p in enumerate(processes):
         p.start()
@@ -442,6 +469,11 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
         rate, startup, cpu_us = float("nan"), float("nan"), float("nan")
     stop_all(processes)
     return {"rate": rate, "startup_s": startup - launched, "cpu_us": cpu_us}
+
+
+def work_label(work: float | str) -> str:
+    """A row's work a handler: microseconds of spinning, or the compiled handler's."""
+    return f"{work:g} us" if isinstance(work, float) else work
 
 
 def main() -> int:
@@ -462,6 +494,9 @@ def main() -> int:
     p.add_argument("--work-us", default="0", help="comma-separated microseconds of CPU each "
                    "agent's decision and each of the world's intents cost in the replay (busy "
                    "spinning): one row each")
+    p.add_argument("--kernels", action="store_true",
+                   help="one more row a size: the handlers doing a compiled handler's least work "
+                        "on the run's own data (the codec and the kernels), not spinning")
     p.add_argument("--working", choices=WORKING, default="both",
                    help="whose handlers work: every agent's decision and the world's intents, "
                         "or only one side's")
@@ -476,7 +511,8 @@ def main() -> int:
         p.error(f"--work-us takes comma-separated microseconds, not {args.work_us!r}")
     if any(not 0 <= w < 1e6 for w in works):
         p.error(f"--work-us must be between 0 and 1,000,000 microseconds, not {args.work_us}")
-    rows = []
+    rows: list[tuple[int | float | str, ...]] = []
+    kinds: list[float | str] = [*works, *((KERNELS_ROW,) if args.kernels else ())]
     for n in sizes:
         side = grid_side(n)
         try:
@@ -485,38 +521,43 @@ def main() -> int:
                                   max_steps=args.max_steps, seed=args.seed)
         except ValueError as error:
             p.error(f"{n} agents: {error}")
-        pattern = record(config)
+        kernel_work = KernelWork(config.run_id) if args.kernels else None
+        pattern = record(config, kernel_work)
         print(f"  {n} agents: {len(pattern.ticks)} ticks recorded, {pattern.timed_from} in the "
               f"first episode; {pattern.answers_per_tick():.2f} answers and "
               f"{pattern.hops_per_tick():.2f} hops on the longest chain a tick; "
               f"{pattern.asks} asks for one tick and {pattern.late_replies} late replies "
               f"left out", file=sys.stderr, flush=True)
         topology = embedded_topology(n)
-        replays: dict[float, list[dict]] = {w: [] for w in works}
+        replays: dict[float | str, list[dict]] = {w: [] for w in kinds}
         bares: list[dict] = []
         for repeat in range(args.repeats):  # each repeat's bare loop among its replays
-            for w in works:
-                replays[w].append(replay(pattern, topology, args.ticks, work_us=w,
-                                         working=args.working))
-                print(f"  {n} agents, repeat {repeat + 1}, {w:g} us a handler: the pattern "
-                      f"{replays[w][-1]['rate']:.0f} ticks/s", file=sys.stderr, flush=True)
+            for w in kinds:
+                compiled = w == KERNELS_ROW
+                replays[w].append(replay(pattern, topology, args.ticks,
+                                         work_us=0.0 if compiled else float(w),
+                                         working=args.working,
+                                         kernels=kernel_work if compiled else None))
+                print(f"  {n} agents, repeat {repeat + 1}, {work_label(w)} a handler: the "
+                      f"pattern {replays[w][-1]['rate']:.0f} ticks/s", file=sys.stderr,
+                      flush=True)
             bares.append(bare_once(n, args.ticks, topology))
             print(f"  {n} agents, repeat {repeat + 1}: bare {bares[-1]['rate']:.0f} ticks/s",
                   file=sys.stderr, flush=True)
-        for w in works:
+        for w in kinds:
             ratios = [r["rate"] / b["rate"] for r, b in zip(replays[w], bares)]
             rows.append((n, topology, pattern, w, statistics.median(r["rate"] for r in replays[w]),
                          statistics.median(b["rate"] for b in bares), statistics.median(ratios),
                          replays[w], bares))
     print(f"preset {args.preset}, {args.episodes} episodes of at most {args.max_steps} steps, "
           f"medians of {args.repeats}; working: {args.working}")
-    print("| agents | topology | hops a tick (bare: 2) | answers a tick | work a handler, us | "
+    print("| agents | topology | hops a tick (bare: 2) | answers a tick | work a handler | "
           "the pattern, ticks/s | bare, ticks/s | ratio | CPU us a tick, the pattern | bare | "
           "runs (pattern; bare) |")
     print("| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | --- |")
     for n, topology, pattern, w, rate, bare, ratio, replays_w, bares in rows:
         print(f"| {n} | {topology} | {pattern.hops_per_tick():.2f} | "
-              f"{pattern.answers_per_tick():.2f} | {w:g} | {rate:.0f} | {bare:.0f} | "
+              f"{pattern.answers_per_tick():.2f} | {work_label(w)} | {rate:.0f} | {bare:.0f} | "
               f"{ratio:.2f} | {median(replays_w, 'cpu_us'):.0f} | {median(bares, 'cpu_us'):.0f} | "
               f"{' '.join(format(r['rate'], '.0f') for r in replays_w)}; "
               f"{' '.join(format(b['rate'], '.0f') for b in bares)} |")

@@ -77,16 +77,28 @@ def test_collisions_classifies_every_collision_of_a_frozen_episode():
 def test_the_swarms_message_pattern_is_recorded_from_its_handlers_and_replays_through_zenoh():
     """``bench.pattern``: 8 agents of the default preset negotiate (answers, chains longer than
     the bare loop's two hops); what each agent waited for is what its neighbours sent it when
-    they decided, so the replay of bare processes on loopback plays every tick to the end."""
+    they decided, so the replay of bare processes on loopback plays every tick to the end, its
+    handlers idle, spinning, or doing a compiled handler's work on the run's own data
+    (``--kernels``: each agent's last kernel calls, the world's last record checks)."""
     from bench.harness import swarm_config
+    from bench.kernel_work import AGENT_KERNELS, KernelWork
     from bench.pattern import record, replay
+    from nnql_swarm.agent.agent_machine import AgentMachine
     from nnql_swarm.protocol.config import DEFAULT_PRESET
 
     config = swarm_config(DEFAULT_PRESET, run_id="pattern-test", n_agents=8, width=11,
                           height=11, episodes=3, max_steps=100, seed=0)
-    real_callback = zenoh.handlers.Callback
-    pattern = record(config)
+    real_callback, real_init = zenoh.handlers.Callback, AgentMachine.__init__
+    work = KernelWork(config.run_id)
+    pattern = record(config, work)
     assert zenoh.handlers.Callback is real_callback, "the harness's stand-in stays inside it"
+    assert AgentMachine.__init__ is real_init, "the kernels' capture stays inside the record"
+    assert set(work.calls) == set(range(8)) and work.checks
+    assert all(set(work.calls[agent]) == set(AGENT_KERNELS) for agent in range(8))
+    for agent in range(8):
+        work.part(agent).agent_work(agent)()  # the decision's work, as the replay does it
+        assert set(work.part(agent).calls) == {agent}
+    work.part(None).world_work()()
     assert 0 < pattern.timed_from < len(pattern.ticks)
     assert pattern.answers_per_tick() > 0.5 and 2 < pattern.hops_per_tick() < 8
     for tick in pattern.ticks:
@@ -101,6 +113,8 @@ def test_the_swarms_message_pattern_is_recorded_from_its_handlers_and_replays_th
     assert result["rate"] > 0, "the replay stalled"
     working = replay(pattern, "mesh", timed_ticks=300, timeout_s=20, work_us=100)
     assert working["rate"] > 0, "the replay stalled with its handlers working"
+    compiled = replay(pattern, "mesh", timed_ticks=300, timeout_s=20, kernels=work)
+    assert compiled["rate"] > 0, "the replay stalled with its handlers running the kernels"
 
 
 def test_a_replayed_handler_works_for_the_cpu_time_it_is_given():
