@@ -37,18 +37,20 @@ is the budget such a handler has, in the processes, for the ratio the swarm is t
 swarm's own handlers cost some 200 to 300 us a decision and 100 an intent in its processes,
 ``bench/tick_cpu.py``).
 
-With ``--kernels``, one more replay a size whose handlers do, instead of spinning, the least a
+With ``--kernels``, one more replay for each ``--work-us`` whose handlers first do the least a
 handler compiled whole would still do, on the recorded run's own data (:class:`KernelWork`):
 each agent's decision decodes its observation with the codec, runs the plan's, the neighbour
 rows' and the decision's kernels compiled ahead of time on the arguments the agent last passed
 them, and encodes its intent; the world decodes each intent and runs the record check's kernel
 on the arguments of one of the run's last checks. Unlike a spin it touches what such a handler
 touches (the learner's tables, the buffers), on caches the other processes cooled; unlike the
-swarm it runs none of the machines' Python, no checks and no bookkeeping.
+swarm it runs none of the machines' Python, no checks and no bookkeeping. The spin after it
+stands for what Python of the machines such a handler would keep.
 
     python -m bench.pattern --agents 8,64 --repeats 3
     python -m bench.pattern --agents 8,64 --repeats 3 --work-us 0,10,25,50,100,150
     python -m bench.pattern --agents 8,64 --repeats 3 --kernels
+    python -m bench.pattern --agents 8,64 --repeats 3 --kernels --work-us 0,25,50
     python -m bench.pattern --agents 64 --repeats 3 --work-us 25,50 --working world
 """
 
@@ -72,8 +74,6 @@ START_TIMEOUT_S = 120.0
 _HEAD = struct.Struct("<qi")  # tick, sender (an answer's; 0 in the others)
 OPENED = -2  # the tick of a standing query's first reply: it is open
 WORKING = ("both", "agents", "world")
-KERNELS_ROW = "kernels"
-"""The work of the ``--kernels`` row (:class:`KernelWork`), where the others give microseconds."""
 
 
 @dataclass(frozen=True)
@@ -232,16 +232,16 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
           timeout_s: float = START_TIMEOUT_S, work_s: float = 0.0,
           kernels: KernelWork | None = None) -> None:
     """One agent of the replay: at each tick, once its observation and awaited answers are in,
-    it works ``work_s`` (:func:`busy`), or does its compiled decision's work where ``kernels``
-    holds one (:meth:`KernelWork.agent_work`), then sends what it sent at the tick it plays
-    (``recorded(tick)``: :func:`played`); it leaves on a negative tick (:func:`replay` stops it
-    if its world gave up)."""
+    it does its compiled decision's work where ``kernels`` holds one
+    (:meth:`KernelWork.agent_work`) and works ``work_s`` (:func:`busy`), then sends what it sent
+    at the tick it plays (``recorded(tick)``: :func:`played`); it leaves on a negative tick
+    (:func:`replay` stops it if its world gave up)."""
     from nnql_swarm.transport.callbacks import callback
     from nnql_swarm.transport.runtime import declare_lockstep_publisher
     from nnql_swarm.transport.settings import open_session
     import zenoh
 
-    decide = (kernels.agent_work(me) if kernels is not None else None) or partial(busy, work_s)
+    compiled = kernels.agent_work(me) if kernels is not None else None
     answerers = {a for d in script.values() for a in d.awaits}
     lock = threading.Lock()
     done, everyone_up, streamed = threading.Event(), threading.Event(), threading.Event()
@@ -270,7 +270,9 @@ def agent(me: int, script: dict[int, Decision], recorded, transport,
                 return
             observed.discard(tick)
             heard.pop(tick, None)
-            decide()
+            if compiled is not None:
+                compiled()
+            busy(work_s)
             for kind, to, size in decision.sends:
                 if kind == "answer":
                     reply(to, _payload(tick, size, me))
@@ -348,7 +350,7 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
           work_s: float = 0.0, kernels: KernelWork | None = None) -> None:
     """The replay's clock: ``total`` ticks, each the observations of the tick it plays
     (``recorded(tick)``, into ``ticks``) out and its intents in, working ``work_s`` on each
-    intent (:func:`busy`), or doing a compiled handler's work where ``kernels`` holds it
+    intent (:func:`busy`), after a compiled handler's work where ``kernels`` holds it
     (:meth:`KernelWork.world_work`); puts ``(ticks a second from
     ``timed_from``, the time every agent was ready, the machine's busy CPU microseconds a tick
     from ``timed_from``)`` on ``results``."""
@@ -356,7 +358,7 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
     from nnql_swarm.transport.runtime import declare_lockstep_publisher
     from nnql_swarm.transport.settings import open_session
 
-    count = (kernels.world_work() if kernels is not None else None) or partial(busy, work_s)
+    compiled = kernels.world_work() if kernels is not None else None
     ready: set[str] = set()
     everyone, finished = threading.Event(), threading.Event()
     state = {"tick": 0, "heard": 0}
@@ -383,7 +385,9 @@ def world(n: int, ticks: list[tuple[list[tuple[int, int]], int]], recorded, tota
             tick, _ = _HEAD.unpack_from(sample.payload.to_bytes())
             if tick != state["tick"]:
                 return
-            count()
+            if compiled is not None:
+                compiled()
+            busy(work_s)
             state["heard"] += 1
             if state["heard"] == ticks[recorded(tick)][1]:
                 open_tick(tick + 1)
@@ -420,8 +424,8 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
            working: str = "both", kernels: KernelWork | None = None) -> dict:
     """One replay of ``pattern``, its ticks from the second episode on played until
     ``timed_ticks`` are timed, each handler that carries the model working ``work_us`` (each
-    agent's decision, each intent the world counts: :func:`busy`), or doing a compiled
-    handler's work (``kernels``); ``working``: ``both``, or only the ``agents`` or the
+    agent's decision, each intent the world counts: :func:`busy`), after a compiled handler's
+    work where ``kernels`` holds it; ``working``: ``both``, or only the ``agents`` or the
     ``world``: ``rate`` (ticks a second over those; nan if its
     agents were not ready within ``timeout_s``, by default :data:`START_TIMEOUT_S` or half a
     second an agent, or it stalled for five times that), ``startup_s`` (until every agent was
@@ -471,9 +475,11 @@ def replay(pattern: Pattern, topology: str, timed_ticks: int,
     return {"rate": rate, "startup_s": startup - launched, "cpu_us": cpu_us}
 
 
-def work_label(work: float | str) -> str:
-    """A row's work a handler: microseconds of spinning, or the compiled handler's."""
-    return f"{work:g} us" if isinstance(work, float) else work
+def work_label(work: tuple[float, bool]) -> str:
+    """A row's work a handler: the compiled handler's, if it does it, and microseconds of
+    spinning."""
+    spin, compiled = work
+    return f"kernels + {spin:g} us" if compiled else f"{spin:g} us"
 
 
 def main() -> int:
@@ -495,8 +501,9 @@ def main() -> int:
                    "agent's decision and each of the world's intents cost in the replay (busy "
                    "spinning): one row each")
     p.add_argument("--kernels", action="store_true",
-                   help="one more row a size: the handlers doing a compiled handler's least work "
-                        "on the run's own data (the codec and the kernels), not spinning")
+                   help="one more row for each --work-us: the handlers first doing a compiled "
+                        "handler's least work on the run's own data (the codec and the "
+                        "kernels)")
     p.add_argument("--working", choices=WORKING, default="both",
                    help="whose handlers work: every agent's decision and the world's intents, "
                         "or only one side's")
@@ -512,7 +519,7 @@ def main() -> int:
     if any(not 0 <= w < 1e6 for w in works):
         p.error(f"--work-us must be between 0 and 1,000,000 microseconds, not {args.work_us}")
     rows: list[tuple[int | float | str, ...]] = []
-    kinds: list[float | str] = [*works, *((KERNELS_ROW,) if args.kernels else ())]
+    kinds = [(w, False) for w in works] + [(w, True) for w in works if args.kernels]
     for n in sizes:
         side = grid_side(n)
         try:
@@ -529,15 +536,13 @@ def main() -> int:
               f"{pattern.asks} asks for one tick and {pattern.late_replies} late replies "
               f"left out", file=sys.stderr, flush=True)
         topology = embedded_topology(n)
-        replays: dict[float | str, list[dict]] = {w: [] for w in kinds}
+        replays: dict[tuple[float, bool], list[dict]] = {w: [] for w in kinds}
         bares: list[dict] = []
         for repeat in range(args.repeats):  # each repeat's bare loop among its replays
             for w in kinds:
-                compiled = w == KERNELS_ROW
-                replays[w].append(replay(pattern, topology, args.ticks,
-                                         work_us=0.0 if compiled else float(w),
+                replays[w].append(replay(pattern, topology, args.ticks, work_us=w[0],
                                          working=args.working,
-                                         kernels=kernel_work if compiled else None))
+                                         kernels=kernel_work if w[1] else None))
                 print(f"  {n} agents, repeat {repeat + 1}, {work_label(w)} a handler: the "
                       f"pattern {replays[w][-1]['rate']:.0f} ticks/s", file=sys.stderr,
                       flush=True)
