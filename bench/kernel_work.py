@@ -107,7 +107,7 @@ def capturing(work: KernelWork):
         def call(*args):
             pending[agent][name] = args
             if name == AGENT_KERNELS[-1] and not args[deciding]:
-                work.calls[agent] = pending.pop(agent)
+                work.calls[agent].update(pending.pop(agent))
             return kernel(*args)
         return call
 
