@@ -48,6 +48,10 @@ def run_swarms(runs: dict, at_once: int = 2, timeout: float = 240) -> dict:
         return {name: future.result() for name, future in done.items()}
 
 
+FAILURE_LOG_LINES = 60
+"""How many of its last log lines a swarm that did not finish in time shows in the failure."""
+
+
 class SwarmProcess(subprocess.Popen):
     """A launched swarm whose output goes to files (a pipe nobody reads would block its logs)."""
 
@@ -63,8 +67,15 @@ class SwarmProcess(subprocess.Popen):
         return self.stderr_path.read_text()
 
     def finish(self, timeout: float) -> str:
-        """Wait for the swarm to exit; returns its stderr."""
-        self.wait(timeout=timeout)
+        """Wait for the swarm to exit; returns its stderr. A swarm still running after
+        ``timeout`` fails the test with the last lines it logged (its whole log stays in
+        :attr:`stderr_path` until pytest rotates its temporary folders)."""
+        try:
+            self.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            tail = "\n".join(self.stderr_text().splitlines()[-FAILURE_LOG_LINES:])
+            raise AssertionError(f"the swarm still ran after {timeout:g} s; the last lines of "
+                                 f"{self.stderr_path}:\n{tail}") from None
         return self.stderr_text()
 
 
