@@ -122,7 +122,8 @@ class AgentMachine(QueryAnswering, Machine):
         self.pending: Pending | None = None  # while NEGOTIATING or ASKING_MISSING
         self.decided_tick = -1
         self.decided_short: dict[int, int] = {}  # episode -> its decisions short of an intent
-        self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks
+        self.quiet_episode = -1  # the episode in which the world may skip this agent's ticks,
+        self.quiet_first_tick = -1  # and that episode's first tick (``_skipped_while_quiet``)
         self.decided_waiters = []  # whom the decided tick's answer goes to by stream
         self.decided_near: list[int] = []  # the decided tick's Plan.near
         self.decided_answer = None
@@ -307,6 +308,10 @@ class AgentMachine(QueryAnswering, Machine):
         if obs.agent != self.agent:
             self.inbox.reject("wrong-agent", f"observation for agent {obs.agent}")
             return
+        if self._past_its_episode(obs):
+            self.inbox.reject("future-tick", f"tick {obs.tick}, step {obs.step} of episode "
+                                             f"{obs.episode}: past that episode's ticks")
+            return
         p = self._negotiation()
         if p is not None and obs.tick == p.obs.tick + 1:
             self._decide_pending()  # the world has moved on (this agent stalled): decide now
@@ -314,7 +319,7 @@ class AgentMachine(QueryAnswering, Machine):
             self.inbox.reject("stale-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
         if (self.decided_tick >= 0 and obs.tick != self.decided_tick + 1
-                and obs.episode != self.quiet_episode and not self._resync(obs)):
+                and not self._skipped_while_quiet(obs) and not self._resync(obs)):
             self.inbox.reject("future-tick", f"tick {obs.tick} after {self.decided_tick}")
             return
         plan = self.planner(obs)
@@ -415,7 +420,7 @@ class AgentMachine(QueryAnswering, Machine):
                         tuple(sorted(known.items())))
         self.decided_tick, self.decided_answer = tick, answer
         if obs.arrived and self.config.quiet_settled:  # quiet from the next tick (world.engine)
-            self.quiet_episode = obs.episode
+            self.quiet_episode, self.quiet_first_tick = obs.episode, tick - obs.step
         self.decided_waiters = plan.answered
         if self.negotiates:
             self.decided_near = plan.near
@@ -437,6 +442,22 @@ class AgentMachine(QueryAnswering, Machine):
             out.append(EpisodeEnded(obs.episode))
         if self.negotiates and not obs.episode_end:  # a new episode places everyone anew
             self._open_streams(tick + 1)
+
+    def _past_its_episode(self, obs: Observation) -> bool:
+        """Whether no world of this run could send ``obs``: a step past ``max_steps``, an
+        episode past the run's, or a tick past the latest its episode can reach
+        (``SwarmConfig.episode_ticks``). An agent takes the first observation it gets at its
+        word, whatever its tick; this keeps a forged far tick from setting its clock."""
+        c = self.config
+        return (obs.step > c.max_steps or obs.episode >= c.episodes
+                or obs.tick - obs.step > obs.episode * c.episode_ticks)
+
+    def _skipped_while_quiet(self, obs: Observation) -> bool:
+        """Whether ``obs`` is a later tick of the episode in which this agent arrived, which the
+        world may reach without it: that episode's number and its first tick (``tick - step`` is
+        constant within an episode, ``world.engine``). A message forged with a far tick for that
+        episode must not move this agent's clock out of it."""
+        return obs.episode == self.quiet_episode and obs.tick - obs.step == self.quiet_first_tick
 
     def _resync(self, obs: Observation) -> bool:
         """After a gap (an observation lost on the way), follow the clock again once

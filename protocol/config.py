@@ -251,7 +251,7 @@ class SwarmConfig:
             (1 <= self.n_agents <= MAX_AGENTS, f"agents must be 1..{MAX_AGENTS}"),
             (self.episodes >= 1, "episodes must be at least 1"),
             (self.max_steps >= 1, "max steps must be at least 1"),
-            (self.episodes * (self.max_steps + 1) < MAX_TICK,
+            (self.episodes * self.episode_ticks < MAX_TICK,
              f"episodes x (max steps + 1) ticks must stay below {MAX_TICK}, the messages' "
              f"largest tick"),
             (2 <= self.width <= MAX_GRID and 2 <= self.height <= MAX_GRID,
@@ -380,6 +380,14 @@ class SwarmConfig:
         if self.map_rows:
             return sum(row.count("@") for row in self.map_rows)
         return wall_count(self.width, self.height, self.obstacle_density)
+
+    @property
+    def episode_ticks(self) -> int:
+        """The most ticks an episode takes (``world.engine``): its ``max_steps`` moves, then its
+        end tick. A run's ticks count from 0, so episode ``e`` begins at tick
+        ``e * episode_ticks`` at the latest (earlier where episodes end sooner, or where a
+        resumed world starts its clock afresh)."""
+        return self.max_steps + 1
 
     @property
     def lifelong(self) -> bool:

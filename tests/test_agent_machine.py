@@ -23,13 +23,15 @@ from nnql_swarm.protocol.messages import (
     pack_ids, pack_neighbours, pack_updates, to_wire,
 )
 
-CONFIG = SwarmConfig(run_id="proto", n_agents=3, episodes=10, max_steps=50)
+CONFIG = SwarmConfig(run_id="proto", n_agents=3, episodes=20, max_steps=50)
 
 
 def observation(tick: int, agent: int = 0, episode_end: bool = False, others=()) -> bytes:
-    """Agent ``agent``'s observation at ``tick``; ``others``: visible ``(id, x, y)``."""
+    """Agent ``agent``'s observation at ``tick``, in a run of episodes ``max_steps`` ticks
+    long; ``others``: visible ``(id, x, y)``."""
+    episode, step = divmod(tick, CONFIG.max_steps)
     return encode(Observation(
-        run="proto", tick=tick, sender=WORLD_SENDER, agent=agent, episode=0, step=tick % 50,
+        run="proto", tick=tick, sender=WORLD_SENDER, agent=agent, episode=episode, step=step,
         position=(1, 1), goal=(5, 5), neighbours=pack_neighbours(others),
         rank=(agent - tick) % CONFIG.n_agents, reward_ds=0.0, reward_ca=10.0, collided=False,
         arrived=False, episode_end=episode_end))
@@ -257,6 +259,47 @@ def test_once_arrived_under_meet_a_skipped_tick_is_no_gap(wait_rule):
     assert protocol.decided_tick == (9 if wait_rule == "meet" else 3)
     protocol.on_observation(at(20, episode=1, arrived=False), 0.2)
     assert protocol.decided_tick == (9 if wait_rule == "meet" else 3), "another episode: a gap"
+
+
+
+def at_step(tick: int, step: int, episode: int = 0, arrived: bool = True) -> bytes:
+    """Agent 0's observation at ``tick``, ``step`` of ``episode``, on its goal."""
+    return encode(Observation(
+        run="proto", tick=tick, sender=WORLD_SENDER, agent=0, episode=episode, step=step,
+        position=(5, 5), goal=(5, 5), neighbours=b"", rank=0, reward_ds=0.0, reward_ca=10.0,
+        collided=False, arrived=arrived, episode_end=False))
+
+
+def test_an_observation_no_world_of_the_run_could_send_sets_no_clock():
+    """An agent takes its first observation at its word, whatever its tick, but not one past
+    what its episode can reach (``SwarmConfig.episode_ticks`` a episode from tick 0), a step
+    past ``max_steps`` or an episode past the run's: the rogue test's ``tick=10**12``, sent
+    before the run's first tick, once stalled the agent for good."""
+    protocol = ready(agent=0)
+    last = CONFIG.episodes - 1
+    for forged in (at_step(10**12, 0), at_step(10**12, 10**12 - 1),
+                   at_step(CONFIG.max_steps + 1, CONFIG.max_steps + 1),
+                   at_step(2 * CONFIG.episode_ticks + 1, 0, episode=2),
+                   at_step(CONFIG.episodes * CONFIG.episode_ticks, 0, episode=CONFIG.episodes)):
+        assert kinds(protocol.on_observation(forged, 0.0)) == []
+    assert protocol.decided_tick == -1
+    assert protocol.inbox.rejections["future-tick"] == 5
+    protocol.on_observation(at_step(last * CONFIG.episode_ticks + 3, 3, episode=last), 0.1)
+    assert protocol.decided_tick == last * CONFIG.episode_ticks + 3, "the latest a run reaches"
+
+
+def test_a_far_tick_forged_for_the_quiet_episode_does_not_move_the_clock():
+    """Once arrived under ``meet``, a later tick of that episode is taken at once, but only one
+    of that episode: the same first tick (``tick - step``). Agents that arrived in an early
+    episode once took any tick forged for it, and stalled."""
+    protocol = ready(agent=0, config=dataclasses.replace(CONFIG, wait_rule="meet"))
+    protocol.on_observation(at_step(93, 3, episode=2), 0.0)  # episode 2 began at tick 90
+    assert protocol.decided_tick == 93
+    protocol.on_observation(at_step(100, 0, episode=2), 0.1)  # within reach, not from tick 90
+    assert protocol.decided_tick == 93
+    assert protocol.inbox.rejections["future-tick"] == 1
+    protocol.on_observation(at_step(97, 7, episode=2), 0.2)  # ticks 94 to 96 skipped by the world
+    assert protocol.decided_tick == 97
 
 
 def test_answers_from_before_the_world_left_do_not_count_for_the_world_that_comes_back():
