@@ -9,7 +9,7 @@ cores offer in a tick: near 1, the tick waits for CPU, not for messages. Then, f
 processes' stats once they have stopped (``handler_cpu``: every input the node fed its machine,
 ``transport.adapter``), what each kind of input cost a call there, on the processes' own
 caches, in the machine and in carrying out its effects (for the agents, the median agent's),
-over the whole run: to set beside ``bench/node_cpu.py``'s figures, hot in one thread.
+over the inputs timed in the whole run (one in eight): to set beside ``bench/node_cpu.py``'s figures, hot in one thread.
 
     python -m bench.tick_cpu --episodes 25 -- --preset shield-nnql --agents 8
 """
@@ -122,7 +122,8 @@ def main() -> int:
 
 def handler_costs(stats_dir: Path) -> dict[tuple[str, str], tuple[float, float, float]]:
     """``(role, input) -> (calls, machine us, effects us)`` from the processes' stats files: the
-    world's, and the median over the agents that fed that input."""
+    world's, and the median over the agents that fed that input (and timed it: one input in
+    ``transport.adapter.CPU_SAMPLE_EVERY`` is)."""
     per: dict[tuple[str, str], list[dict]] = {}
     for path in sorted(stats_dir.glob("*.json")):
         role = "world" if path.stem == "world" else "agent" if path.stem.startswith("agent-") \
@@ -131,9 +132,15 @@ def handler_costs(stats_dir: Path) -> dict[tuple[str, str], tuple[float, float, 
             continue
         for name, cost in json.loads(path.read_text()).get("handler_cpu", {}).items():
             per.setdefault((role, name), []).append(cost)
-    return {key: tuple(statistics.median(c[field] for c in costs)
+    return {key: tuple(median_of(c[field] for c in costs)
                        for field in ("calls", "machine_us", "effects_us"))
             for key, costs in per.items()}
+
+
+def median_of(values) -> float:
+    """The median of the values given (None: an input too rare to be timed), NaN if none is."""
+    known = [v for v in values if v is not None]
+    return statistics.median(known) if known else float("nan")
 
 
 if __name__ == "__main__":

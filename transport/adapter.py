@@ -11,6 +11,11 @@ import threading
 import time
 from typing import Callable, Protocol
 
+CPU_SAMPLE_EVERY = 8
+"""One input of each kind in this many is timed for :attr:`ProtocolAdapter.handler_cpu`: a
+thread's CPU clock is a system call (some 0.6 us here, three an input), which timing every input
+made 2 to 3 % of a tick's CPU (docs/performance.md, "What a handler may cost")."""
+
 POLL_S = 0.05
 """The longest a node's main thread sleeps on its queue: a timer set meanwhile on Zenoh's thread
 (a tick's deadline, a negotiation's time-out) is noticed at most this late, and so is a request
@@ -34,9 +39,9 @@ class ProtocolAdapter:
     of vanishing into Zenoh's thread. The main thread takes the node's queue of ``events``
     (:meth:`next_event`) and fires the protocol's timer (:meth:`fire_timer_if_due`).
 
-    What each input costs is kept as it goes (:attr:`handler_cpu`, :meth:`handler_cpu_stats`):
-    its thread's CPU time in the machine and in carrying out the effects, which is what a
-    process's handlers cost where it runs, on whatever caches it finds.
+    What each input costs is kept as it goes (:attr:`handler_cpu`, :meth:`handler_cpu_stats`),
+    sampled: its thread's CPU time in the machine and in carrying out the effects, which is what
+    a process's handlers cost where it runs, on whatever caches it finds.
 
     A node sets ``lock``, ``stopping``, ``failure``, ``protocol``, ``events``, ``_do`` and
     ``handler_cpu`` (empty), and says how it stops."""
@@ -47,7 +52,7 @@ class ProtocolAdapter:
     protocol: Machine  # a node declares the machine it drives
     events: queue.SimpleQueue
     _do: dict[type, Callable]
-    handler_cpu: dict[str, list]  # input -> [calls, CPU s in the machine, CPU s in its effects]
+    handler_cpu: dict[str, list]  # input -> [calls, calls timed, CPU s in the machine, in effects]
 
     def stop(self) -> None:
         raise NotImplementedError
@@ -57,35 +62,43 @@ class ProtocolAdapter:
         raise NotImplementedError
 
     def feed(self, handler: Callable, *args) -> None:
-        """``handler(*args, now)``, a protocol input, then its effects; the CPU time each took
-        is added to :attr:`handler_cpu` under the input's name."""
-        clock = time.thread_time
+        """``handler(*args, now)``, a protocol input, then its effects; one input of each kind
+        in :data:`CPU_SAMPLE_EVERY` adds the CPU time each took to :attr:`handler_cpu`."""
         with self.lock:
             if self.stopping:
                 return
-            started = clock()
+            name = handler.__name__
+            spent = self.handler_cpu.get(name)
+            if spent is None:
+                spent = self.handler_cpu[name] = [0, 0, 0.0, 0.0]
+            spent[0] += 1
             try:
+                if spent[0] % CPU_SAMPLE_EVERY:
+                    self.perform(handler(*args, time.monotonic()))
+                    return
+                clock = time.thread_time
+                started = clock()
                 effects = handler(*args, time.monotonic())
                 decided = clock()
                 self.perform(effects)
+                ended = clock()
             except Exception as error:  # noqa: BLE001 - re-raised by run() on the main thread
                 self.failure = error
                 self.stop()
                 return
-            spent = self.handler_cpu.get(handler.__name__)
-            if spent is None:
-                spent = self.handler_cpu[handler.__name__] = [0, 0.0, 0.0]
-            spent[0] += 1
-            spent[1] += decided - started
-            spent[2] += clock() - decided
+            spent[1] += 1
+            spent[2] += decided - started
+            spent[3] += ended - decided
 
     def handler_cpu_stats(self) -> dict[str, dict]:
         """What each input cost so far, for the process's stats: its calls, and the
         microseconds of its thread's CPU time a call took in the machine and in carrying out the
-        effects (``bench/tick_cpu.py`` prints them)."""
-        return {name: {"calls": calls, "machine_us": round(1e6 * machine / calls, 1),
-                       "effects_us": round(1e6 * effects / calls, 1)}
-                for name, (calls, machine, effects) in sorted(self.handler_cpu.items())}
+        effects, over the calls timed (``bench/tick_cpu.py`` prints them); None for an input
+        fed fewer than :data:`CPU_SAMPLE_EVERY` times."""
+        return {name: {"calls": calls,
+                       "machine_us": round(1e6 * machine / timed, 1) if timed else None,
+                       "effects_us": round(1e6 * effects / timed, 1) if timed else None}
+                for name, (calls, timed, machine, effects) in sorted(self.handler_cpu.items())}
 
     def perform(self, effects: list) -> None:
         do = self._do
