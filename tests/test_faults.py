@@ -6,6 +6,7 @@ once, no tick waits longer than the deadline, and no learned value is lost.
 
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -126,6 +127,9 @@ def test_a_stalled_agent_costs_at_most_the_deadline_and_its_stale_intents_are_re
     world = stats(out, "world")
     assert world["rejected"].get("stale-tick", 0) >= 1
     assert world["violations"] == 0
+    assert world["late_ticks"] >= 1
+    assert re.search(r"closed at its [\d.]+ s deadline without the intents of live agents "
+                     r"\[([\d, ]*, )?5(, [\d, ]*)?\]", stderr), "the world names the stalled agent"
     assert find_process("nnql-agent 5 stalled") == []
 
 

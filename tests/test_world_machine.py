@@ -1,5 +1,6 @@
 """The world's protocol machine, pure: the lockstep clock as inputs in, effects out."""
 
+import logging
 from dataclasses import replace
 
 import numpy as np
@@ -17,7 +18,8 @@ from nnql_swarm.protocol.messages import (
 )
 from nnql_swarm.world.engine import QUIET_CATCH_UP, SwarmWorld
 from nnql_swarm.world.world_machine import (
-    SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES, TRANSITIONS, Event, Phase, WorldMachine,
+    LATE_LOG_EVERY, LATE_LOG_FIRST, SHUTDOWN_QUIET_S, SHUTDOWN_REPEAT_S, SHUTDOWN_TRIES,
+    TRANSITIONS, Event, Phase, WorldMachine,
 )
 from nnql_swarm.protocol.phase_machine import PhaseError
 
@@ -79,8 +81,13 @@ def test_the_last_intent_closes_the_tick_and_a_missing_one_waits_for_the_deadlin
     assert protocol.world.tick == 1
     intent(protocol, 1, 0.3)
     assert protocol.on_timer(0.69) == [] and protocol.world.tick == 1
-    [closed] = [e for e in protocol.on_timer(0.7) if isinstance(e, TickClosed)]
+    effects = protocol.on_timer(0.7)
+    [closed] = [e for e in effects if isinstance(e, TickClosed)]
     assert closed.report.missed == (0,)
+    [late] = [e for e in effects if isinstance(e, Log) and e.level == logging.WARNING]
+    assert late.message % late.args == ("tick 1 closed at its 0.5 s deadline without the "
+                                        "intents of live agents [0] (1 such ticks)")
+    assert protocol.stats()["late_ticks"] == 1
     intent(protocol, 0, 0.8, tick=0)
     assert protocol.inbox.rejections["stale-tick"] == 1
 
@@ -90,6 +97,20 @@ def test_a_dead_agent_is_not_waited_for():
     intent(protocol, 0, 0.1)
     effects = alive(protocol, 1, 0.2, up=False)
     assert "TickClosed" in kinds(effects) and protocol.world.tick == 1
+    assert protocol.stats()["late_ticks"] == 0, "closed by the last live agent's intent"
+
+
+def test_ticks_closed_late_are_logged_the_first_few_then_every_hundredth():
+    protocol = WorldMachine(replace(CONFIG, episodes=50, max_steps=10), 0.0)
+    alive(protocol, 0, 0.0), alive(protocol, 1, 0.0)
+    now, logged = 0.0, []
+    for _ in range(LATE_LOG_EVERY + 1):
+        intent(protocol, 1, now)
+        now = protocol.timer()
+        logged += [e for e in protocol.on_timer(now)
+                   if isinstance(e, Log) and "deadline" in e.message]
+    assert protocol.stats()["late_ticks"] == LATE_LOG_EVERY + 1
+    assert [e.args[-1] for e in logged] == [*range(1, LATE_LOG_FIRST + 1), LATE_LOG_EVERY]
 
 
 def test_a_world_every_agent_left_ends_with_a_reason_unless_one_comes_back_in_time():

@@ -73,6 +73,12 @@ SHUTDOWN_QUIET_S = 0.1
 before it ends: a world that was stalled handles what queued meanwhile all at once, and an
 agent that came up in the meantime is told too."""
 
+LATE_LOG_FIRST = 3
+LATE_LOG_EVERY = 100
+"""A tick closed by its deadline without a live agent's intent is logged (which agents) for the
+first :data:`LATE_LOG_FIRST` such ticks, then every :data:`LATE_LOG_EVERY`-th: a run held to its
+deadline says why, and a long partition does not flood the log."""
+
 _NO_TRACE = TickTrace("world", None)
 
 
@@ -147,6 +153,7 @@ class WorldMachine(Machine):
         self.tick_start = 0.0
         self.tick_deadline = 0.0
         self.slowest = 0.0  # the episode's slowest tick so far, in seconds
+        self.late_ticks = 0  # ticks closed by their deadline without a live agent's intent
         self.episode_start = now
         self.episode_tick = self.world.tick
         self.agent_of_key: dict[str, int] = {}  # intent key -> its agent, parsed once
@@ -293,7 +300,7 @@ class WorldMachine(Machine):
                 "episode": self.world.episode, "accepted": self.inbox.accepted,
                 "rejected": dict(self.inbox.rejections), "violations": self.world.violations,
                 "forgers": sorted({agent for agent, _ in self.forged_at}),
-                "startup_s": self.startup_s}
+                "late_ticks": self.late_ticks, "startup_s": self.startup_s}
 
     # The clock.
 
@@ -346,6 +353,8 @@ class WorldMachine(Machine):
         """Apply the open tick, open the next (the agents think while this one is reported)."""
         out, world = self._out, self.world
         self.trace.mark(CLOSE, world.tick)
+        if self.awaited:
+            self._closed_late()
         learned = self._checked_records() if self.records is not None else self.learned
         actions = [None if a < 0 else a for a in self.intents.tolist()]  # None: missed
         report = world.apply(actions, learned, self.orders)
@@ -364,6 +373,17 @@ class WorldMachine(Machine):
             self.episode_start, self.episode_tick, self.slowest = now, world.tick, 0.0
         if world.finished:
             self._close_run(now)
+
+    def _closed_late(self) -> None:
+        """Count the open tick as closed by its deadline without the intents of the live agents
+        still awaited, and say which (:data:`LATE_LOG_FIRST`, :data:`LATE_LOG_EVERY`)."""
+        self.late_ticks += 1
+        late = self.late_ticks
+        if late <= LATE_LOG_FIRST or late % LATE_LOG_EVERY == 0:
+            self._out.append(Log(logging.WARNING, "tick %d closed at its %.3g s deadline without "
+                                                  "the intents of live agents %s (%d such ticks)",
+                                 (self.world.tick, self.config.tick_deadline_s,
+                                  sorted(self.awaited), late)))
 
     def _check_record(self, agent: int, final: bool) -> None:
         """Check agent ``agent``'s record of the open tick (``world.records``) against its
