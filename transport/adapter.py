@@ -13,8 +13,8 @@ from typing import Callable, Protocol
 
 CPU_SAMPLE_EVERY = 8
 """One input of each kind in this many is timed for :attr:`ProtocolAdapter.handler_cpu`: a
-thread's CPU clock is a system call (some 0.6 us here, three an input), which timing every input
-made 2 to 3 % of a tick's CPU (docs/performance.md, "What a handler may cost")."""
+thread's CPU clock is a system call, and three of them an input were 5 to 6 % of the handlers'
+CPU a tick (docs/performance.md, "What a handler may cost")."""
 
 POLL_S = 0.05
 """The longest a node's main thread sleeps on its queue: a timer set meanwhile on Zenoh's thread
