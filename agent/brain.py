@@ -110,11 +110,13 @@ class AgentBrain:
         it must make way (``learning.learner.make_way``, the ``step-aside`` on-target rule).
         ``seen``: the observation's neighbours and parked ids as the kernels read them, where the
         caller has them (``learning.planner.Plan``)."""
-        learner, config, outcome = self.learner, self.config, self._outcome
+        learner, config, outcome, rows = self.learner, self.config, self._outcome, self._rows
         self.prepare(obs)
         (x, y), (gx, gy) = obs.position, obs.goal
         stops = (obs.arrived and not config.lifelong) or obs.episode_end
-        near = self._neighbour_rows(obs, {} if stops else answers, not stops, seen)
+        previous = self._previous_cells(obs, seen[0])
+        cells, parked, was_x, was_y = rows.load(obs, {} if stops else answers, previous,
+                                                self._was_at, *seen)
         reads_noise = not stops or (self._pibt and not obs.episode_end)
         assert self._noise_episode >= 0 or not reads_noise, "prepare draws the episode's noise"
         step = obs.step if reads_noise else 0
@@ -122,22 +124,19 @@ class AgentBrain:
         self._decide(learner.q_ds, learner.q_ca, learner.params, learner.params_f,
                      learner.state, learner.state_f, learner.wmap, learner.rec, learner.rec_f,
                      learner.values, config.width, config.height, self._wall_x, self._wall_y,
-                     x, y, gx, gy, self._nb(near), len(near), obs.step == 0, obs.reward_ds,
-                     obs.reward_ca, obs.arrived, stops, obs.episode_end, self._pibt,
-                     not config.shared, random_actions[step], ties[step], self._ranks, outcome)
+                     x, y, gx, gy, cells, len(cells), rows.reach, rows.keep, parked, len(parked),
+                     rows.answer, rows.prev_x, rows.prev_y, was_x, was_y,
+                     not stops and rows.reads_intents, rows.wall_cells, rows.n_walls,
+                     rows.wall_far, config.interaction_radius, config.meet_only, rows.out,
+                     obs.step == 0, obs.reward_ds, obs.reward_ca, obs.arrived, stops,
+                     obs.episode_end, self._pibt, not config.shared, random_actions[step],
+                     ties[step], self._ranks, outcome)
         action = outcome[OUT_ACTION]
         self.order = self._ordered() if outcome[OUT_ORDERED] else ()
         if stops and not obs.episode_end and not self._pibt and config.step_aside:
             action = self._make_way(obs, answers)
         self.learned = (learner.record(),) if config.shared and outcome[OUT_WRITTEN] else ()
         return int(action)
-
-    def _nb(self, near):
-        """The neighbour rows as the kernel reads them: an array ``(m, NB_FIELDS)``, or the
-        lists themselves in plain Python."""
-        if not self._arrays or isinstance(near, np.ndarray):
-            return near
-        return np.array(near, dtype=np.int64).reshape(len(near), NB_FIELDS)
 
     def _ordered(self) -> tuple[int, ...]:
         """The moves in the order of this tick's ranks (``learning.learner.preference_ranks``)."""

@@ -9,7 +9,7 @@ written, the episode's noise drawn), the codec's decoding of each message, the n
 plan (``agent.negotiation.Planner``: whom to wait for and ask, whom to answer, the parked
 neighbours known to stay, the agents near enough to stream), the answers through the standing
 queries it holds and their review (``AgentMachine._answer_standing_queries``) and the encoding
-of answers and intents; and, inside the plan and the decision, the three kernels compiled ahead of
+of answers and intents; and, inside the plan and the decision, their two kernels compiled ahead of
 time alone (:data:`KERNEL_PARTS`), so that what is left of those parts is the Python around them.
 Each part's CPU time summed over the run, by observation, so the parts of one observation add up
 (a part also called on answers, as decoding, counts there too). Each timer costs about half a
@@ -48,12 +48,10 @@ PARTS = (
 
 KERNEL_PARTS = (
     ("the plan's kernel", "negotiation_plan"),
-    ("the neighbour rows' kernel", "neighbour_rows_into"),
     ("the decision's kernel", "agent_decision"),
 )
-"""``(name, kernel)``: the kernels of the plan and the decision, each timed as the process runs
-it (``learning.ahead``). The world's check of a record reads the rows' kernel too where a record
-is not the one a run without faults writes (``world.records``), which an honest run never asks."""
+"""``(name, kernel)``: the kernels of the plan and the decision (which reads the neighbour rows
+too), each timed as the process runs it (``learning.ahead``)."""
 
 def timed(spent: list[int], function):
     def part(*args, **kwargs):

@@ -10,7 +10,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 
 
-AGENT_KERNELS = ("negotiation_plan", "neighbour_rows_into", "agent_decision")
+AGENT_KERNELS = ("negotiation_plan", "agent_decision")
 """The kernels of an agent's decision, in the order it calls them (``learning.ahead``)."""
 CHECK_KERNEL = "expected_record"
 """The kernel of the world's check of a learning record."""
@@ -125,8 +125,7 @@ def capturing(work: KernelWork):
 
     def brain_init(self, agent, *args, **kwargs):
         inits[1](self, agent, *args, **kwargs)
-        self._rows._rows = keep(agent, AGENT_KERNELS[1], self._rows._rows)
-        self._decide = keep(agent, AGENT_KERNELS[2], self._decide)
+        self._decide = keep(agent, AGENT_KERNELS[1], self._decide)
 
     def check_init(self, *args, **kwargs):
         inits[2](self, *args, **kwargs)

@@ -214,11 +214,11 @@ def negotiation_plan(nb, k, parked, p, agent, x, y, rank, tick, n, width, height
     """An agent's whole plan at an observation, each part into its row of ``out`` (``P_*``) and
     its count into ``counts``: whom it waits for (:func:`awaited_into`) and asks
     (:func:`asks_into`), whom it knows to stay where ``stays`` (:func:`staying_into`), whom it
-    answers (:func:`answered_into`), all only where it ``negotiates``, as ids; and whom it
-    streams with, within ``stream_reach`` (:func:`streamed_into`), as indices into ``nb``.
-    Unless ``whole``, only whom it waits for and knows to stay (what the world reads). Nothing
-    where the neighbours are not the run's agents on its grid, each once and other than
-    ``agent`` (``counts[P_FITS]`` 0: :func:`fits_run`)."""
+    answers (:func:`answered_into`), all only where it ``negotiates``; and whom it streams
+    with, within ``stream_reach`` (:func:`streamed_into`); every part as ids. Unless ``whole``,
+    only whom it waits for and knows to stay (what the world reads). Nothing where the
+    neighbours are not the run's agents on its grid, each once and other than ``agent``
+    (``counts[P_FITS]`` 0: :func:`fits_run`)."""
     for part in range(PLAN_PARTS):
         counts[part] = 0
     counts[P_FITS] = 1 if fits_run(nb, k, parked, p, agent, n, width, height,
@@ -244,7 +244,7 @@ def negotiation_plan(nb, k, parked, p, agent, x, y, rank, tick, n, width, height
                                                meet, plans_known, scratch, out[P_ANSWERED])
     if whole:
         counts[P_STREAMED] = streamed_into(nb, k, x, y, stream_reach, out[P_STREAMED])
-    for part in range(P_STREAMED):  # the agents, by id
+    for part in range(PLAN_PARTS):  # the agents, by id
         row = out[part]
         for s in range(counts[part]):
             row[s] = nb[row[s]][0]

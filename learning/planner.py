@@ -107,12 +107,8 @@ class Planner:
         counts, out = python_values(self._counts), self._out
         parts = [python_values(out[part][:count]) if count else [] for part, count in
                  enumerate(counts[:PLAN_PARTS])]
-        streamed = parts[P_STREAMED]
-        if streamed:
-            ids = python_values(read[0][:, 0]) if self._arrays else [row[0] for row in read[0]]
-            streamed = [ids[i] for i in streamed]
         return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
-                    streamed, *read)
+                    parts[P_STREAMED], *read)
 
     def _run(self, obs: Observation) -> tuple | None:
         """Run the kernel on ``obs``: its neighbours and parked ids as it read them, or None

@@ -43,10 +43,12 @@ class NeighbourRows:
         """The walls' cells, in cell order, as the known map reads them (``learning.known_map``)."""
         self.size = n + min(self.n_walls, (2 * self.wall_far + 1) ** 2)
         """The most rows an observation has: every other agent, and the walls in reach."""
-        self._out = self._buffer(self.size, NB_FIELDS)
-        self._answer, self._prev_x, self._prev_y, self._keep = (
-            self._buffer(n) for _ in range(4))
-        self._wall_ids: object = wall_ids if self.arrays else wall_ids.tolist()
+        self.out = self._buffer(self.size, NB_FIELDS)
+        """The kernel's rows, written afresh at each call."""
+        self.answer, self.prev_x, self.prev_y, self.keep = (self._buffer(n) for _ in range(4))
+        """The kernel's inputs by agent id (:meth:`load`), -1 for none; ``keep``: none kept."""
+        self.wall_cells: object = wall_ids if self.arrays else wall_ids.tolist()
+        """:attr:`wall_ids` as the kernel reads them."""
 
     def _buffer(self, size: int, width: int = 0):
         if self.arrays:
@@ -65,27 +67,37 @@ class NeighbourRows:
         the agent's cell then (``was_at``) saw it. ``cells`` and ``parked``: the observation's
         neighbours and parked ids as the kernel reads them, where the caller has them
         (``learning.planner.Plan``). Fresh rows: an array ``(m, NB_FIELDS)`` where the kernel is
-        compiled (:attr:`arrays`), else lists."""
+        compiled (:attr:`arrays`), else lists. The agent's decision reads the same rows in its
+        own kernel (``learning.decision.agent_decision``), over :meth:`load`'s buffers."""
         config, (x, y) = self.config, obs.position
-        answer, prev_x, prev_y = self._answer, self._prev_x, self._prev_y
+        cells, parked, was_x, was_y = self.load(obs, answers, previous, was_at, cells, parked)
+        m = self._rows(cells, len(cells), self.reach, self.reach, self.keep, parked, len(parked),
+                       x, y, self.reach, self.answer, self.prev_x, self.prev_y, was_x, was_y,
+                       announcing and self.reads_intents, self.wall_cells, self.n_walls,
+                       self.wall_far, config.interaction_radius, config.meet_only, config.width,
+                       config.height, self.out)
+        out = self.out
+        return out[:m].copy() if self.arrays else [list(row) for row in out[:m]]
+
+    def load(self, obs: Observation, answers: dict[int, int],
+             previous: dict[int, tuple[int, int]], was_at: tuple[int, int] | None,
+             cells=None, parked=None) -> tuple:
+        """Write ``answers`` and ``previous`` into the kernel's buffers (:attr:`answer`,
+        :attr:`prev_x`, :attr:`prev_y`; -1 elsewhere); the neighbours and parked ids as the
+        kernel reads them (``cells`` and ``parked`` where the caller has them), and the cell
+        ``was_at`` as ``(was_x, was_y)`` (-1 for none)."""
+        answer, prev_x, prev_y = self.answer, self.prev_x, self.prev_y
         if cells is None:
             cells, parked = unpack_seen(obs, self.arrays)
-        k = len(cells)
         if self.arrays:
             answer.fill(-1)
             prev_x.fill(-1)
             prev_y.fill(-1)
         else:
-            answer[:] = prev_x[:] = prev_y[:] = [-1] * config.n_agents
+            answer[:] = prev_x[:] = prev_y[:] = [-1] * self.config.n_agents
         for j, action in answers.items():
             answer[j] = action
         for j, (px, py) in previous.items():
             prev_x[j], prev_y[j] = px, py
         was_x, was_y = (-1, -1) if was_at is None else was_at
-        m = self._rows(cells, k, self.reach, self.reach, self._keep, parked, len(parked), x, y,
-                       self.reach, answer, prev_x, prev_y, was_x, was_y,
-                       announcing and self.reads_intents, self._wall_ids, self.n_walls,
-                       self.wall_far, config.interaction_radius, config.meet_only, config.width,
-                       config.height, self._out)
-        out = self._out
-        return out[:m].copy() if self.arrays else [list(row) for row in out[:m]]
+        return cells, parked, was_x, was_y
