@@ -140,7 +140,9 @@ class SwarmWorld:
         self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
-        self._others: np.ndarray | None = None  # where everybody sees everybody: all but oneself
+        self._others: tuple | None = None  # where everybody sees everybody: _all_see_all
+        self._everyone = np.zeros((config.n_agents, NEIGHBOUR_ITEMS), dtype=CELL_TYPE)
+        self._everyone[:, 0] = np.arange(config.n_agents)  # each agent's row: (id, x, y)
         self._start_episode(first_episode)
 
     @property
@@ -159,7 +161,7 @@ class SwarmWorld:
         ``x`` and ``y``, and whether each has arrived (1) or not (0); and whether every agent
         sees every other (the grid fits in the view)."""
         n = self.config.n_agents
-        x, y = (np.array(python_values(values)[:n], dtype=np.int64) for values in (self._x, self._y))
+        x, y = (np.array(values[:n], dtype=np.int64) for values in (self._x, self._y))
         arrived = np.array(self._outcome[3][:n], dtype=np.int64)  # what _observation reads
         return x, y, arrived, self._sees_all
 
@@ -276,19 +278,18 @@ class SwarmWorld:
         """Each agent's visible others ``(id, x, y)`` in id order, and the ids of those parked
         (arrived, where arrived agents park), packed as the wire carries them, by agent id: from
         one sight matrix of everyone, packed for everyone at once (an agent's are a slice of
-        them: two array operations a tick, not two an observation)."""
+        them: two array operations a tick, not two an observation). Where everybody sees
+        everybody, who sees whom is worked out once (:meth:`_all_see_all`)."""
         n = self.config.n_agents
-        xs, ys = python_values(self._x)[:n], python_values(self._y)[:n]
-        everyone = np.array((range(n), xs, ys), dtype=CELL_TYPE).T  # rows (id, x, y)
+        everyone = self._everyone  # rows (id, x, y)
+        everyone[:, 1] = self._x[:n]
+        everyone[:, 2] = self._y[:n]
         if self._sees_all:
-            if self._others is None:
-                self._others = ~np.eye(n, dtype=bool)
-            seen = self._others
+            rows, columns, seen_at = self._all_see_all()
         else:
-            seen = sight_matrix(xs, ys)
-        rows, columns = np.nonzero(seen)  # row by row: each agent's others in id order
+            rows, columns = np.nonzero(sight_matrix(self._x[:n], self._y[:n]))
+            seen_at = _slices(rows, n, NEIGHBOUR_ITEMS * CELL_TYPE.itemsize)
         packed = everyone[columns].tobytes()
-        seen_at = _slices(rows, n, NEIGHBOUR_ITEMS * CELL_TYPE.itemsize)
         if self.config.step_aside:  # arrived agents do not park
             return lambda i: (packed[seen_at[i]:seen_at[i + 1]], b"")
         arrived = np.array(self._outcome[3][:n], dtype=bool)[columns]  # as the observations show
@@ -296,6 +297,15 @@ class SwarmWorld:
         parked_at = _slices(rows[arrived], n, CELL_TYPE.itemsize)
         return lambda i: (packed[seen_at[i]:seen_at[i + 1]],
                           parked[parked_at[i]:parked_at[i + 1]])
+
+    def _all_see_all(self) -> tuple[np.ndarray, np.ndarray, list[int]]:
+        """Where everybody sees everybody: each agent's others, row by row (the agent, the
+        other), and where each agent's part of their packing lies (:func:`_slices`)."""
+        if self._others is None:
+            n = self.config.n_agents
+            rows, columns = np.nonzero(~np.eye(n, dtype=bool))
+            self._others = rows, columns, _slices(rows, n, NEIGHBOUR_ITEMS * CELL_TYPE.itemsize)
+        return self._others
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
               orders: list[tuple[int, ...] | None] | None = None) -> TickReport:
