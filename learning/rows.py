@@ -1,8 +1,10 @@
 """The learner's neighbour rows of an observation (``learning.fields.NB_*``):
 ``learning.neighbours.neighbour_rows_into`` in one call, compiled ahead of time where it is built
-(``learning.ahead``), over buffers kept. The agent decides with them (``agent.brain``); the world
-reads the same when it checks a learning record the slow way (``world.records``; its usual way
-reads them inside ``learning.expected.expected_record``)."""
+(``learning.ahead``), over buffers kept. The agent decides with them: its decision's kernel reads
+them over this class's buffers (``agent.brain``, ``learning.decision.agent_decision``), and so
+does an arrived agent that makes way; the world reads the same when it checks a learning record
+the slow way (``world.records``; its usual way reads them inside
+``learning.expected.expected_record``)."""
 
 import numpy as np
 
