@@ -72,6 +72,10 @@ class AgentBrain:
         self._prepared = (-1, -1)  # the observation prepared last (episode, tick)
         self._seen: tuple = (-1, {}, None)  # DAQL: last tick's cells, and the agent's own
         self._was_at: tuple[int, int] | None = None  # DAQL: the agent's cell a tick ago
+        params = self.learner.params
+        self._remembers = (params[LP_READING] == READ_DAQL or self._pibt
+                           or bool(params[LP_SHIELD] and params[LP_STILL_SHIELD]))
+        """Whether a decision reads the cells of the tick before (:meth:`_previous_cells`)."""
         self._rows = NeighbourRows(config)
         self._wall_x, self._wall_y = ints(self._rows.wall_x.tolist()), ints(self._rows.wall_y.tolist())
         self._grid = Grid(config.width, config.height, self._wall_x, self._wall_y, 0,
@@ -164,9 +168,7 @@ class AgentBrain:
         the neighbours' cells at the previous tick of this episode, where they were in view, and
         the agent's own then (:attr:`_was_at`); and this tick's, for the next (``cells``: the
         observation's neighbours as the plan read them, where the caller has them)."""
-        params = self.learner.params
-        if params[LP_READING] != READ_DAQL and not (params[LP_SHIELD] and params[LP_STILL_SHIELD]) \
-                and not self._pibt:
+        if not self._remembers:
             return {}
         tick, before, was_at = self._seen
         recent = tick == obs.tick - 1 and obs.step > 0
