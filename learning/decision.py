@@ -2,12 +2,12 @@
 
 :func:`agent_decision` is what ``agent.brain.AgentBrain.act`` does with an observation: its
 neighbour rows read (``learning.neighbours.neighbour_rows_into``), the rewards of the last action
-stored, the pending transition completed, and either the choice (Eq. 6-8, with the announced order under ``--arbitration
-pibt``) or, for an agent that stops (arrived, or the episode ended), the order it offers while
-it stays. Its arguments are the learner's buffers, the grid's and the sight's fields one by one,
-rather than the named tuples of ``learning.fields``, so that it can be compiled ahead of time
-with a fixed signature (:data:`SIGNATURE`; ``learning.ahead``): an agent process, which must not
-load numba, then makes the whole decision in one compiled call, where in plain Python it is
+stored, the pending transition completed, and either the choice (Eq. 6-8, with the announced order
+under ``--arbitration pibt``) or, for an agent that stops (arrived, or the episode ended), the order
+it offers while it stays. Its arguments are the learner's buffers, the grid's and the sight's fields
+one by one, rather than the named tuples of ``learning.fields``, so that it can be compiled ahead of
+time with a fixed signature (:data:`SIGNATURE`; ``learning.ahead``): an agent process, which must
+not load numba, then makes the whole decision in one compiled call, where in plain Python it is
 several dozen small functions. Plain, compiled by numba or ahead of time, it is the same code.
 """
 

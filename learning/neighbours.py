@@ -1,8 +1,9 @@
 """The neighbours as a learner reads them at an observation, as rows (``learning.fields.NB_*``):
 all of them written by one kernel, :func:`neighbour_rows_into` (the agent's decision runs it,
 ``learning.decision.agent_decision``, and so does the world's check of a learning record,
-``learning.expected.expected_record``; ``learning.rows.NeighbourRows`` elsewhere), each by :func:`neighbour_row`, which the simulator's ``sim.episode.neighbour_rows`` calls
-too. Whom an agent waits for and knows to stay is ``learning.plan``'s."""
+``learning.expected.expected_record``; ``learning.rows.NeighbourRows`` elsewhere), each by
+:func:`neighbour_row`, which the simulator's ``sim.episode.neighbour_rows`` calls too. Whom an
+agent waits for and knows to stay is ``learning.plan``'s."""
 
 from nnql_swarm.learning.fields import (
     NB_ID, NB_KNOWN, NB_NEXT_X, NB_NEXT_Y, NB_PARKED, NB_PREV_X, NB_PREV_Y, NB_STATE_X,
