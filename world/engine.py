@@ -140,7 +140,10 @@ class SwarmWorld:
         self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
-        self._others: tuple | None = None  # where everybody sees everybody: _all_see_all
+        self._others: tuple | None = None  # there, who sees whom (rows, columns, slices)
+        if self._sees_all:  # never changes: worked out once
+            rows, columns = np.nonzero(~np.eye(config.n_agents, dtype=bool))
+            self._others = rows, columns, _slices(rows, config.n_agents, _SEEN_BYTES)
         self._everyone = np.zeros((config.n_agents, NEIGHBOUR_ITEMS), dtype=CELL_TYPE)
         self._everyone[:, 0] = np.arange(config.n_agents)  # each agent's row: (id, x, y)
         self._start_episode(first_episode)
@@ -279,16 +282,16 @@ class SwarmWorld:
         (arrived, where arrived agents park), packed as the wire carries them, by agent id: from
         one sight matrix of everyone, packed for everyone at once (an agent's are a slice of
         them: two array operations a tick, not two an observation). Where everybody sees
-        everybody, who sees whom is worked out once (:meth:`_all_see_all`)."""
+        everybody, who sees whom was worked out once, as the world was made."""
         n = self.config.n_agents
         everyone = self._everyone  # rows (id, x, y)
         everyone[:, 1] = self._x[:n]
         everyone[:, 2] = self._y[:n]
-        if self._sees_all:
-            rows, columns, seen_at = self._all_see_all()
+        if self._others is not None:
+            rows, columns, seen_at = self._others
         else:
             rows, columns = np.nonzero(sight_matrix(self._x[:n], self._y[:n]))
-            seen_at = _slices(rows, n, NEIGHBOUR_ITEMS * CELL_TYPE.itemsize)
+            seen_at = _slices(rows, n, _SEEN_BYTES)
         packed = everyone[columns].tobytes()
         if self.config.step_aside:  # arrived agents do not park
             return lambda i: (packed[seen_at[i]:seen_at[i + 1]], b"")
@@ -297,15 +300,6 @@ class SwarmWorld:
         parked_at = _slices(rows[arrived], n, CELL_TYPE.itemsize)
         return lambda i: (packed[seen_at[i]:seen_at[i + 1]],
                           parked[parked_at[i]:parked_at[i + 1]])
-
-    def _all_see_all(self) -> tuple[np.ndarray, np.ndarray, list[int]]:
-        """Where everybody sees everybody: each agent's others, row by row (the agent, the
-        other), and where each agent's part of their packing lies (:func:`_slices`)."""
-        if self._others is None:
-            n = self.config.n_agents
-            rows, columns = np.nonzero(~np.eye(n, dtype=bool))
-            self._others = rows, columns, _slices(rows, n, NEIGHBOUR_ITEMS * CELL_TYPE.itemsize)
-        return self._others
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
               orders: list[tuple[int, ...] | None] | None = None) -> TickReport:
@@ -417,6 +411,10 @@ class SwarmWorld:
             problems.append("an agent swapped through another agent")
         self.violations += len(problems)
         return tuple(problems)
+
+
+_SEEN_BYTES = NEIGHBOUR_ITEMS * CELL_TYPE.itemsize
+"""The bytes of one neighbour ``(id, x, y)`` in an observation's packing."""
 
 
 def _slices(rows: np.ndarray, n: int, size: int) -> list[int]:
