@@ -339,7 +339,7 @@ class AgentMachine(QueryAnswering, Machine):
             if j not in got.answered and j not in self.streams:
                 self._ask(j, tick, self.timeout_s)
         self._go(Event.AWAITS)
-        self.pending = Pending(obs, plan, needed, now + self.timeout_s, staying)
+        self.pending = Pending(obs, plan.kept(), needed, now + self.timeout_s, staying)
         self.brain.prepare(obs)  # while the answers are on their way
         self._advance(now)
 

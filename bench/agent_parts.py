@@ -47,7 +47,7 @@ PARTS = (
 """``(name, owner, attribute)``: each part, timed where the agent's machine calls it."""
 
 KERNEL_PARTS = (
-    ("the plan's kernel", "negotiation_plan"),
+    ("the plan's kernel", "agent_plan"),
     ("the decision's kernel", "agent_decision"),
 )
 """``(name, kernel)``: the kernels of the plan and the decision (which reads the neighbour rows

@@ -10,7 +10,7 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 
 
-AGENT_KERNELS = ("negotiation_plan", "agent_decision")
+AGENT_KERNELS = ("agent_plan", "agent_decision")
 """The kernels of an agent's decision, in the order it calls them (``learning.ahead``)."""
 CHECK_KERNEL = "expected_record"
 """The kernel of the world's check of a learning record."""

@@ -7,8 +7,9 @@ chosen functions, with fixed signatures, into an extension module that needs onl
 time (:class:`AheadModule`: built into the kernel cache, ``protocol.jit.cache_directory``, one
 directory per version of every kernel source, once per version, and found there). This module's
 (:data:`KERNELS`) holds the per-observation kernels (:data:`EXPORTS`: an agent's decision,
-``learning.decision.agent_decision``, its negotiation's plan, ``learning.plan.negotiation_plan``,
-and its neighbour rows, ``learning.neighbours.neighbour_rows_into``; the world's check of a
+``learning.decision.agent_decision``, its negotiation's plan, ``learning.plan.agent_plan``, an
+observation's neighbours as the kernels read them, ``learning.plan.unpack_seen_into``, and its
+neighbour rows, ``learning.neighbours.neighbour_rows_into``; the world's check of a
 learning record, ``learning.expected.expected_record``, with every agent's plan of a tick at once,
 ``learning.plan.world_plans``, and the step that applies a tick's records to the shared table,
 ``learning.record.apply_records``; and the write of the shared table's updates into an agent's
@@ -40,7 +41,8 @@ from nnql_swarm.learning.decision import SIGNATURE, agent_decision
 from nnql_swarm.learning.expected import EXPECTED_SIGNATURE, expected_record
 from nnql_swarm.learning.neighbours import ROWS_SIGNATURE, neighbour_rows_into
 from nnql_swarm.learning.plan import (
-    PLAN_SIGNATURE, WORLD_PLANS_SIGNATURE, negotiation_plan, world_plans,
+    PLAN_SIGNATURE, UNPACK_SIGNATURE, WORLD_PLANS_SIGNATURE, agent_plan, unpack_seen_into,
+    world_plans,
 )
 from nnql_swarm.learning.record import APPLY_SIGNATURE, WRITE_SIGNATURE, apply_records, write_entries
 from nnql_swarm.protocol.jit import COMPILED, MODE_VARIABLE, cache_directory
@@ -52,7 +54,8 @@ MODULE = "nnql_ahead_kernels"
 
 EXPORTS: dict[str, tuple[Callable, str]] = {
     "agent_decision": (agent_decision, SIGNATURE),
-    "negotiation_plan": (negotiation_plan, PLAN_SIGNATURE),
+    "agent_plan": (agent_plan, PLAN_SIGNATURE),
+    "unpack_seen_into": (unpack_seen_into, UNPACK_SIGNATURE),
     "neighbour_rows_into": (neighbour_rows_into, ROWS_SIGNATURE),
     "expected_record": (expected_record, EXPECTED_SIGNATURE),
     "apply_records": (apply_records, APPLY_SIGNATURE),

@@ -7,13 +7,15 @@ function here reads the observation's neighbours ``nb`` (its first ``k`` rows, i
 the ids of its parked ones (``parked``, the first ``p``), and writes the indices into ``nb`` of
 those it finds into ``out``, in the order the rule gives; it returns how many. Scratch buffers
 (``xs``, ``ys``, ``ranks``...) have room for every neighbour and the agent itself.
-:func:`negotiation_plan` is all of them at once, for the agent: it is compiled ahead of time
-with the agent's decision (``learning.ahead``), so that an agent plans its tick in one call;
+:func:`negotiation_plan` is all of them at once; :func:`agent_plan` is that for the agent, from
+its observation's packed neighbours (:func:`unpack_seen_into`), compiled ahead of time with the
+agent's decision (``learning.ahead``), so that an agent plans its tick in one call;
 :func:`world_plans` is every agent's plan at once as the world reads it, from the cells of all.
 """
 
 from nnql_swarm.protocol.actions import sees
 from nnql_swarm.protocol.jit import kernel
+from nnql_swarm.protocol.messages import NEIGHBOUR_ITEMS
 from nnql_swarm.protocol.ranks import awaits_answer, priority_rank, waits_for
 
 P_AWAITED, P_ASKS, P_STAYING, P_ANSWERED, P_STREAMED, PLAN_PARTS = 0, 1, 2, 3, 4, 5
@@ -250,9 +252,48 @@ def negotiation_plan(nb, k, parked, p, agent, x, y, rank, tick, n, width, height
             row[s] = nb[row[s]][0]
 
 
-PLAN_SIGNATURE = ("void(i8[:, ::1], i8, i8[::1], i8, i8, i8, i8, i8, i8, i8, i8, i8, i8, b1, b1, "
-                  "b1, b1, b1, i8, b1, i8[:, ::1], i8[:, ::1], i8[::1])")
-""":func:`negotiation_plan`'s types, as compiled ahead of time."""
+@kernel
+def unpack_seen_into(seen, k, p, nb, parked):
+    """An observation's neighbours and parked ids as the kernels read them: ``seen`` is its two
+    packings one after the other, as their integers (``protocol.messages.pack_neighbours``:
+    ``k`` neighbours of :data:`~nnql_swarm.protocol.messages.NEIGHBOUR_ITEMS` each, ``(id, x,
+    y)``; then ``p`` ids), into the first ``k`` rows of ``nb`` and the first ``p`` of
+    ``parked``."""
+    for i in range(k):
+        for item in range(NEIGHBOUR_ITEMS):
+            nb[i][item] = seen[NEIGHBOUR_ITEMS * i + item]
+    for q in range(p):
+        parked[q] = seen[NEIGHBOUR_ITEMS * k + q]
+
+
+UNPACK_SIGNATURE = "void(u2[::1], i8, i8, i8[:, ::1], i8[::1])"
+""":func:`unpack_seen_into`'s types, as compiled ahead of time (``learning.ahead``)."""
+
+
+@kernel
+def agent_plan(seen, k, p, agent, x, y, rank, tick, n, width, height, radius, meet, arrived,
+               negotiating, stays, plans_known, stream_reach, nb, parked, scratch, out, counts,
+               flat):
+    """An agent's whole plan at an observation (:func:`negotiation_plan`), from its packed
+    neighbours and parked ids (``seen``, ``k``, ``p``: :func:`unpack_seen_into`, into ``nb`` and
+    ``parked``): each part into its row of ``out`` and its count into ``counts``, and every part
+    one after the other into ``flat``, in ``P_*`` order; how many ids that is."""
+    unpack_seen_into(seen, k, p, nb, parked)
+    negotiation_plan(nb, k, parked, p, agent, x, y, rank, tick, n, width, height, radius, meet,
+                     arrived, negotiating, stays, plans_known, stream_reach, True, scratch, out,
+                     counts)
+    total = 0
+    for part in range(PLAN_PARTS):
+        row = out[part]
+        for s in range(counts[part]):
+            flat[total] = row[s]
+            total += 1
+    return total
+
+
+PLAN_SIGNATURE = ("i8(u2[::1], i8, i8, i8, i8, i8, i8, i8, i8, i8, i8, i8, b1, b1, b1, b1, b1, "
+                  "i8, i8[:, ::1], i8[::1], i8[:, ::1], i8[:, ::1], i8[::1], i8[::1])")
+""":func:`agent_plan`'s types, as compiled ahead of time."""
 
 
 @kernel

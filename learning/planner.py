@@ -1,5 +1,5 @@
 """An agent's plan of each observation: whom it waits for, asks, answers, knows to stay and
-streams with (:class:`Plan`), worked out by ``learning.plan.negotiation_plan`` in one call,
+streams with (:class:`Plan`), worked out by ``learning.plan.agent_plan`` in one call,
 compiled ahead of time where it is built (``learning.ahead``). The agent plans its ticks with it
 (``agent.negotiation`` says what each part means to the negotiation); the world reads the same
 plan of an observation when it checks the learning record decided on it (``world.records``)."""
@@ -33,17 +33,28 @@ def plans_are_known(config: SwarmConfig) -> bool:
 
 
 def unpack_seen(obs: Observation, arrays: bool) -> tuple:
-    """An observation's neighbours ``(id, x, y)`` and parked ids as the kernels read them:
-    arrays ``(k, 3)`` and ``(p,)`` where they are compiled (``arrays``; both made from the
-    payload's packings at once), else lists."""
-    k = len(obs.neighbours) // (NEIGHBOUR_ITEMS * CELL_TYPE.itemsize)
-    both = np.frombuffer(obs.neighbours + obs.parked, CELL_TYPE)
+    """An observation's neighbours ``(id, x, y)`` and parked ids as the kernels read them
+    (``learning.plan.unpack_seen_into``): fresh arrays ``(k, 3)`` and ``(p,)`` where they are
+    compiled (``arrays``), else lists."""
+    seen, k, p = _packed(obs, arrays)
     if arrays:
-        both = both.astype(np.int64)
-        return both[:NEIGHBOUR_ITEMS * k].reshape(k, NEIGHBOUR_ITEMS), both[NEIGHBOUR_ITEMS * k:]
-    values = both.tolist()
-    return ([values[i:i + NEIGHBOUR_ITEMS] for i in range(0, NEIGHBOUR_ITEMS * k, NEIGHBOUR_ITEMS)],
-            values[NEIGHBOUR_ITEMS * k:])
+        nb, parked = np.empty((k, NEIGHBOUR_ITEMS), dtype=np.int64), np.empty(p, dtype=np.int64)
+    else:
+        nb, parked = [[0] * NEIGHBOUR_ITEMS for _ in range(k)], [0] * p
+    ahead.KERNELS.compiled("unpack_seen_into")[0](seen, k, p, nb, parked)
+    return nb, parked
+
+
+def _packed(obs: Observation, arrays: bool) -> tuple:
+    """An observation's two packings one after the other as their integers (an array, or a
+    list where the kernels are not compiled), and how many neighbours and parked ids they
+    hold."""
+    seen = np.frombuffer(obs.neighbours + obs.parked, CELL_TYPE)
+    k = len(obs.neighbours) // _NEIGHBOUR_BYTES
+    return (seen if arrays else seen.tolist()), k, len(seen) - NEIGHBOUR_ITEMS * k
+
+
+_NEIGHBOUR_BYTES = NEIGHBOUR_ITEMS * CELL_TYPE.itemsize
 
 
 class Plan(NamedTuple):
@@ -66,30 +77,48 @@ class Plan(NamedTuple):
     ones it can soon ask or be asked by, in id order."""
     cells: object
     """The observation's neighbours ``(id, x, y)`` as the kernels read them: an array ``(k, 3)``
-    where they are compiled, else lists (``learning.rows.NeighbourRows`` reads them too)."""
+    where they are compiled, else lists (``learning.rows.NeighbourRows`` reads them too). Like
+    :attr:`parked`, the planner's own buffer until it plans again: :meth:`kept` copies them."""
     parked: object
     """Its parked ids, likewise."""
 
+    def kept(self) -> "Plan":
+        """This plan with its own copies of :attr:`cells` and :attr:`parked`, to be read after
+        the planner plans another observation."""
+        cells, parked = self.cells, self.parked
+        if isinstance(cells, np.ndarray):
+            return self._replace(cells=cells.copy(), parked=parked.copy())
+        return self._replace(cells=[list(row) for row in cells], parked=list(parked))
+
 
 class Planner:
-    """One agent's :class:`Plan` of each observation: ``learning.plan.negotiation_plan`` in one
-    call, compiled ahead of time where it is built (``learning.ahead``), over buffers kept."""
+    """One agent's :class:`Plan` of each observation: ``learning.plan.agent_plan`` in one call,
+    compiled ahead of time where it is built (``learning.ahead``), over buffers kept."""
 
     def __init__(self, config: SwarmConfig) -> None:
-        self._plan, how = ahead.KERNELS.compiled("negotiation_plan")
+        self._plan, how = ahead.KERNELS.compiled("agent_plan")
         self._arrays = how != ahead.PLAIN
         size = config.n_agents + 1  # every neighbour and the agent
         self._scratch: np.ndarray | list[list[int]]  # the kernel's buffers (learning.plan)
         self._out: np.ndarray | list[list[int]]
         self._counts: np.ndarray | list[int]
+        self._nb: np.ndarray | list[list[int]]  # the observation's neighbours, and parked ids
+        self._parked: np.ndarray | list[int]
+        self._flat: np.ndarray | list[int]  # every part of the plan, one after the other
         if self._arrays:
             self._scratch = np.zeros((SCRATCH, size), dtype=np.int64)
             self._out = np.zeros((PLAN_PARTS, size), dtype=np.int64)
             self._counts = np.zeros(PLAN_PARTS + 1, dtype=np.int64)
+            self._nb = np.zeros((size, NEIGHBOUR_ITEMS), dtype=np.int64)
+            self._parked = np.zeros(size, dtype=np.int64)
+            self._flat = np.zeros(PLAN_PARTS * size, dtype=np.int64)
         else:
             self._scratch = [[0] * size for _ in range(SCRATCH)]
             self._out = [[0] * size for _ in range(PLAN_PARTS)]
             self._counts = [0] * (PLAN_PARTS + 1)
+            self._nb = [[0] * NEIGHBOUR_ITEMS for _ in range(size)]
+            self._parked = [0] * size
+            self._flat = [0] * (PLAN_PARTS * size)
         self._negotiates = config.algo in NEGOTIATING_ALGOS
         self._plans_known = plans_are_known(config)
         self._reach = min(VIEW_RADIUS, config.interaction_radius + STREAM_MARGIN)
@@ -100,30 +129,27 @@ class Planner:
     def __call__(self, obs: Observation) -> Plan | None:
         """The plan of ``obs``; None where it does not fit the run: more neighbours than its
         agents, a neighbour twice or the agent itself, a cell off its grid, an agent or rank it
-        has not (the kernels, compiled, would read past their buffers)."""
-        read = self._run(obs)
-        if read is None:
-            return None
-        counts, out = python_values(self._counts), self._out
-        parts = [python_values(out[part][:count]) if count else [] for part, count in
-                 enumerate(counts[:PLAN_PARTS])]
-        return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
-                    parts[P_STREAMED], *read)
-
-    def _run(self, obs: Observation) -> tuple | None:
-        """Run the kernel on ``obs``: its neighbours and parked ids as it read them, or None
-        where ``obs`` does not fit the run."""
-        nb, parked_ids = unpack_seen(obs, self._arrays)
-        n, k, p, (x, y), (gx, gy) = self._n, len(nb), len(parked_ids), obs.position, obs.goal
+        has not (the kernels, compiled, would read past their buffers). Its :attr:`Plan.cells`
+        and :attr:`Plan.parked` are this planner's until its next call (:meth:`Plan.kept`)."""
+        seen, k, p = _packed(obs, self._arrays)
+        n, (x, y), (gx, gy) = self._n, obs.position, obs.goal
         width, height, meet = self._width, self._height, self._meet
         if (k >= n or p >= n or obs.rank >= n or x >= width or gx >= width or y >= height
                 or gy >= height):
             return None
-        whole = True  # every part of the plan (the world reads only some: learning.plan)
-        self._plan(nb, k, parked_ids, p, obs.agent, x, y, obs.rank, obs.tick, n, width, height,
-                   self._radius, meet, obs.arrived and self._parks_still,
-                   self._negotiates and not obs.episode_end, meet and p > 0, self._plans_known,
-                   self._reach, whole, self._scratch, self._out, self._counts)
-        if not self._counts[P_FITS]:
+        counts, flat = self._counts, self._flat
+        total = self._plan(seen, k, p, obs.agent, x, y, obs.rank, obs.tick, n, width, height,
+                           self._radius, meet, obs.arrived and self._parks_still,
+                           self._negotiates and not obs.episode_end, meet and p > 0,
+                           self._plans_known, self._reach, self._nb, self._parked,
+                           self._scratch, self._out, counts, flat)
+        sizes = python_values(counts)
+        if not sizes[P_FITS]:
             return None
-        return nb, parked_ids
+        ids = python_values(flat[:total]) if total else []
+        parts, start = [], 0
+        for size in sizes[:PLAN_PARTS]:
+            parts.append(ids[start:start + size])
+            start += size
+        return Plan(parts[P_AWAITED], parts[P_ASKS], parts[P_STAYING], parts[P_ANSWERED],
+                    parts[P_STREAMED], self._nb[:k], self._parked[:p])
