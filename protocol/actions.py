@@ -72,17 +72,6 @@ def sees(ax, ay, bx, by):
     return abs(bx - ax) <= VIEW_RADIUS and abs(by - ay) <= VIEW_RADIUS
 
 
-def sight_matrix(xs, ys) -> np.ndarray:
-    """:func:`sees` between every two of the cells ``(xs[i], ys[i])`` at once, as a boolean
-    ``(n, n)`` array (row ``i``: what the agent at cell ``i`` sees; the diagonal false): the world
-    finds everyone's neighbours with it in a few array operations instead of a call per pair."""
-    x, y = np.asarray(xs, dtype=np.int64), np.asarray(ys, dtype=np.int64)
-    seen = (np.abs(x[None, :] - x[:, None]) <= VIEW_RADIUS) & \
-        (np.abs(y[None, :] - y[:, None]) <= VIEW_RADIUS)
-    np.fill_diagonal(seen, False)
-    return seen
-
-
 @kernel
 def target_x(x, action, width):
     """The column an action aims at; a move off the grid aims at the current cell. (Kernels

@@ -322,16 +322,31 @@ def test_under_park_an_arrived_agent_stays_whatever_it_says():
 
 
 @settings(max_examples=60, deadline=None)
-@given(st.lists(st.tuples(st.integers(0, 40), st.integers(0, 40)), min_size=1, max_size=30))
-def test_the_sight_matrix_is_sees_between_every_two_cells(cells):
-    from nnql_swarm.protocol.actions import sees, sight_matrix
+@given(st.lists(st.tuples(st.integers(0, 40), st.integers(0, 40), st.booleans()), min_size=1,
+                max_size=30), st.booleans(), st.booleans())
+def test_every_agents_neighbours_are_packed_by_sees_between_every_two_cells(agents, sees_all,
+                                                                             parks):
+    """``world.sight.pack_seen``: agent ``i``'s slice of the packing holds exactly the others
+    it sees (``sees``; every other where the grid fits in the view) as ``(id, x, y)`` in id
+    order, and, where arrived agents park, the ids of the arrived ones among them."""
+    from nnql_swarm.protocol.actions import sees
+    from nnql_swarm.protocol.messages import CELL_TYPE, unpack_ids, unpack_neighbours
+    from nnql_swarm.world.sight import pack_seen
 
-    xs, ys = [x for x, _ in cells], [y for _, y in cells]
-    seen = sight_matrix(xs, ys)
-    assert seen.shape == (len(cells), len(cells))
-    for i, (ax, ay) in enumerate(cells):
-        for j, (bx, by) in enumerate(cells):
-            assert bool(seen[i, j]) == (i != j and sees(ax, ay, bx, by))
+    n = len(agents)
+    xs, ys = (np.array(values, dtype=np.int64) for values in list(zip(*agents))[:2])
+    arrived = np.array([a for _, _, a in agents], dtype=bool)
+    seen, parked = np.zeros(3 * n * (n - 1), CELL_TYPE), np.zeros(n * (n - 1), CELL_TYPE)
+    seen_at, parked_at = np.zeros(n + 1, np.int64), np.zeros(n + 1, np.int64)
+    pack_seen(xs, ys, arrived, n, sees_all, parks, seen, parked, seen_at, parked_at)
+    seen_bytes, parked_bytes = seen.tobytes(), parked.tobytes()
+    for i, (ax, ay, _) in enumerate(agents):
+        others = [(j, bx, by) for j, (bx, by, _) in enumerate(agents)
+                  if j != i and (sees_all or sees(ax, ay, bx, by))]
+        packed = seen_bytes[seen_at[i]:seen_at[i + 1]]
+        assert unpack_neighbours(packed).tolist() == [list(o) for o in others]
+        ids = unpack_ids(parked_bytes[parked_at[i]:parked_at[i + 1]]).tolist()
+        assert ids == ([j for j, _, _ in others if agents[j][2]] if parks else [])
 
 
 def test_the_worlds_step_over_flat_buffers_moves_renews_goals_refuses_and_counts_the_invariants():

@@ -499,8 +499,8 @@ def test_the_phases_move_only_as_the_transition_table_says():
 @pytest.mark.parametrize("on_target", ["park", "step-aside"])
 def test_every_observation_lists_whom_its_agent_sees_in_id_order_and_the_parked_among_them(
         on_target):
-    """``SwarmWorld`` packs every agent's neighbours for the tick at once; each observation's
-    are those its agent sees (``protocol.actions.sees``, pair by pair), in id order, with the
+    """``SwarmWorld`` packs every agent's neighbours for the tick at once
+    (``world.sight.pack_seen``); each observation's are those its agent sees (``protocol.actions.sees``, pair by pair), in id order, with the
     arrived ones among them parked where arrived agents park."""
     rng = np.random.default_rng(7)
     for n, side in ((2, 4), (8, 11), (16, 16), (64, 32), (64, 40)):
@@ -511,7 +511,8 @@ def test_every_observation_lists_whom_its_agent_sees_in_id_order_and_the_parked_
             xs, ys = (cells % side).tolist(), (cells // side).tolist()
             world._x[:n], world._y[:n] = xs, ys
             arrived = (rng.random(n) < 0.3).tolist()
-            world._outcome = (*world._outcome[:3], arrived)
+            world._arrived[:n] = arrived
+            world._plain()  # as a tick's step leaves it
             for obs in world.observations():
                 i = obs.agent
                 near = [j for j in range(n) if j != i and sees(xs[i], ys[i], xs[j], ys[j])]

@@ -35,7 +35,7 @@ from itertools import compress
 
 import numpy as np
 
-from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS, sight_matrix
+from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.learning.ahead import PLAIN
 from nnql_swarm.learning.tables import buffer_makers
@@ -53,6 +53,7 @@ from nnql_swarm.world.arbiter import Arbiter
 from nnql_swarm.world.step import MOVE_EVERYONE, MOVE_FIELDS, MOVE_SHARED, MOVE_SWAPPED
 from nnql_swarm.world.tasks import goal_sequences
 from nnql_swarm.world.scenario import swarm_episode
+from nnql_swarm.world.sight import ITEM_BYTES
 from nnql_swarm.world.shared_table import SharedState, SharedTable, Updates
 from nnql_swarm.world.unheard import UnheardEntries
 
@@ -140,12 +141,15 @@ class SwarmWorld:
         self._sync_from_next: set[int] = set()  # resynchronised since the last tick closed
         # On a grid that fits in the egocentric window, everybody always sees everybody.
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
-        self._others: tuple | None = None  # there, who sees whom (rows, columns, slices)
-        if self._sees_all:  # never changes: worked out once
-            rows, columns = np.nonzero(~np.eye(config.n_agents, dtype=bool))
-            self._others = rows, columns, _slices(rows, config.n_agents, _SEEN_BYTES)
-        self._everyone = np.zeros((config.n_agents, NEIGHBOUR_ITEMS), dtype=CELL_TYPE)
-        self._everyone[:, 0] = np.arange(config.n_agents)  # each agent's row: (id, x, y)
+        self._pack_seen, how = RULES.compiled("pack_seen")  # world.sight.pack_seen
+        pairs = n * (n - 1)  # the kernel's buffers: every agent may see every other
+        if how == PLAIN:
+            self._seen, self._parked = [0] * (NEIGHBOUR_ITEMS * pairs), [0] * pairs
+            self._seen_at, self._parked_at = [0] * (n + 1), [0] * (n + 1)
+        else:
+            self._seen = np.zeros(NEIGHBOUR_ITEMS * pairs, dtype=CELL_TYPE)
+            self._parked = np.zeros(pairs, dtype=CELL_TYPE)
+            self._seen_at, self._parked_at = (np.zeros(n + 1, dtype=np.int64) for _ in range(2))
         self._start_episode(first_episode)
 
     @property
@@ -216,6 +220,7 @@ class SwarmWorld:
     def _plain(self) -> None:
         """The state as Python values, for the observations."""
         self._cells = self.cells
+        self._shown_arrived = self._arrived  # the buffer of ``_outcome[3]``, for _neighbours
         self._outcome = (python_values(self._r_ds), python_values(self._r_ca),
                          python_values(self._collided), python_values(self._arrived))
 
@@ -279,27 +284,20 @@ class SwarmWorld:
 
     def _neighbours(self) -> Callable[[int], tuple[bytes, bytes]]:
         """Each agent's visible others ``(id, x, y)`` in id order, and the ids of those parked
-        (arrived, where arrived agents park), packed as the wire carries them, by agent id: from
-        one sight matrix of everyone, packed for everyone at once (an agent's are a slice of
-        them: two array operations a tick, not two an observation). Where everybody sees
-        everybody, who sees whom was worked out once, as the world was made."""
+        (arrived, as the observations show it, where arrived agents park), packed as the wire
+        carries them, by agent id: every agent's at once (``world.sight.pack_seen``), in one
+        ``bytes`` of each packing a tick, of which an agent's are slices."""
         n = self.config.n_agents
-        everyone = self._everyone  # rows (id, x, y)
-        everyone[:, 1] = self._x[:n]
-        everyone[:, 2] = self._y[:n]
-        if self._others is not None:
-            rows, columns, seen_at = self._others
-        else:
-            rows, columns = np.nonzero(sight_matrix(self._x[:n], self._y[:n]))
-            seen_at = _slices(rows, n, _SEEN_BYTES)
-        packed = everyone[columns].tobytes()
+        seen, parked, seen_at, parked_at = self._seen, self._parked, self._seen_at, self._parked_at
+        self._pack_seen(self._x, self._y, self._shown_arrived, n, self._sees_all,
+                        not self.config.step_aside, seen, parked, seen_at, parked_at)
+        seen_at, parked_at = python_values(seen_at), python_values(parked_at)
+        packed = _packed(seen, seen_at[n] // ITEM_BYTES)
         if self.config.step_aside:  # arrived agents do not park
             return lambda i: (packed[seen_at[i]:seen_at[i + 1]], b"")
-        arrived = np.array(self._outcome[3][:n], dtype=bool)[columns]  # as the observations show
-        parked = columns[arrived].astype(CELL_TYPE).tobytes()
-        parked_at = _slices(rows[arrived], n, CELL_TYPE.itemsize)
+        parked_ids = _packed(parked, parked_at[n] // ITEM_BYTES)
         return lambda i: (packed[seen_at[i]:seen_at[i + 1]],
-                          parked[parked_at[i]:parked_at[i + 1]])
+                          parked_ids[parked_at[i]:parked_at[i + 1]])
 
     def apply(self, actions: list[int | None], learned: dict | None = None,
               orders: list[tuple[int, ...] | None] | None = None) -> TickReport:
@@ -387,6 +385,7 @@ class SwarmWorld:
         self._plain()
         if c.lifelong:  # the observations say who reached a goal: its last step was terminal
             self._outcome = (*self._outcome[:3], reached)
+            self._shown_arrived = self._reached
         self.step += 1
         self.ending = (moved[MOVE_EVERYONE] != 0 and not c.lifelong) or self.step >= c.max_steps
         collided = self._outcome[2]
@@ -413,11 +412,9 @@ class SwarmWorld:
         return tuple(problems)
 
 
-_SEEN_BYTES = NEIGHBOUR_ITEMS * CELL_TYPE.itemsize
-"""The bytes of one neighbour ``(id, x, y)`` in an observation's packing."""
-
-
-def _slices(rows: np.ndarray, n: int, size: int) -> list[int]:
-    """Where each agent's part of a packing made row by row (``rows``: the agent of each item,
-    in order; ``size`` bytes an item) lies: agent ``i``'s bytes are ``[at[i]:at[i + 1]]``."""
-    return [0, *(np.bincount(rows, minlength=n).cumsum() * size).tolist()]
+def _packed(items, count: int) -> bytes:
+    """The first ``count`` of a packing's integers (``world.sight.pack_seen``'s buffer: an array
+    of them, or a list in plain Python) as the wire carries them."""
+    if isinstance(items, np.ndarray):
+        return items[:count].tobytes()
+    return np.array(items[:count], dtype=CELL_TYPE).tobytes()
