@@ -7,8 +7,9 @@ standing query, answer, intent) in the order it was sent, by calling the receive
 directly. What is timed is exactly our code on each message: decoding, checks, negotiation,
 learning, encoding, the world's rules, carrying out the effects; not Zenoh, the kernel or the
 scheduler. Each handler is timed apart (the last intent's includes closing the tick: the
-rules and the next observations), so the tick's critical path (world -> rank 0 -> ... -> rank
-N-1 -> world) can be added up from them.
+rules and the next observations; it is also timed on its own, as the closing intent: the world's
+stretch in which every agent waits for it), so the tick's critical path (world -> rank 0 -> ...
+-> rank N-1 -> world) can be added up from them.
 
 On a small shared machine the swarm's speed drifts within minutes; this figure drifts much
 less, but it is still best compared between runs made one after the other. It counts what runs
@@ -123,11 +124,14 @@ class Wire:
         self.owners: dict[str, int] = {}  # an agent's intent key -> the agent
         self.seconds: collections.Counter = collections.Counter()
         self.count: collections.Counter = collections.Counter()
+        self.closing_seconds, self.closing = 0.0, 0  # the intents that closed a tick, among them
         self.sent = 0
+        self.observations = 0  # observations sent so far
         self.handling, self.handler_of = -1, None  # the message being handled, its receiver
 
     def send(self, kind: str, handler, item, receiver: int | None = None) -> None:
         number, self.sent = self.sent, self.sent + 1
+        self.observations += kind == "observation"
         self.queue.append((kind, handler, item, number, receiver))
         if self.on_send is not None:
             self.on_send(number, kind, self.handler_of, receiver, item, self.handling)
@@ -138,10 +142,15 @@ class Wire:
             kind, handler, item, self.handling, self.handler_of = self.queue.popleft()
             if before_each is not None:
                 before_each()
+            observations = self.observations
             start = clock()
             handler(item)
-            self.seconds[kind] += clock() - start
+            spent = clock() - start
+            self.seconds[kind] += spent
             self.count[kind] += 1
+            if kind == "intent" and self.observations > observations:  # it closed the tick
+                self.closing_seconds += spent
+                self.closing += 1
         self.handling, self.handler_of = -1, None
 
 
@@ -286,6 +295,8 @@ def main() -> int:
             per_tick[kind].append(1e6 * wire.seconds[kind] / ticks)
         per_tick["whole tick"].append(1e6 * sum(wire.seconds.values()) / ticks)
         per_message = {k: 1e6 * wire.seconds[k] / wire.count[k] for k in wire.seconds}
+        if wire.closing:
+            per_message["closing intent"] = 1e6 * wire.closing_seconds / wire.closing
         for kind, us in per_message.items():
             per_tick[f"one {kind}"].append(us)
     caches = ", each message on cooled caches" if args.cold_caches else ""

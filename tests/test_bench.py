@@ -237,3 +237,31 @@ def test_the_cpu_split_counts_the_receiving_threads_samples_by_shared_object():
                       "msgspec (the codec)": 1, "our compiled kernels": 1, "C library": 1,
                       OTHER: 1}
     assert per_tick_us(counts, 10)["Python interpreter"] == 2e6 / FREQUENCY / 10
+
+
+def test_alternately_reads_each_figure_as_the_least_of_its_decimal_numbers():
+    from bench.alternately import figures
+
+    assert figures("8 agents, 267 ticks a repeat; us (median over repeats)\n"
+                   "  one observation            45.5  (45.4 45.6)\n"
+                   "  prepare (updates, noise)    4.3 (1668)     3.9 (1668)\n"
+                   "  nnql-agent 0                 153\n") == {
+        "one observation": 45.4, "prepare (updates, noise)": 3.9}
+
+
+def test_alternately_runs_a_benchmark_in_each_tree_by_turns_and_prints_each_figures_least():
+    """``bench.alternately`` on this tree against itself: every figure of the benchmark's output,
+    in both trees, with B over A; a directory that is not a checkout is refused in one line."""
+    command = [sys.executable, "-m", "bench.alternately", "--a-dir", str(ROOT), "--rounds", "2",
+               "--", "bench.node_cpu", "--agents", "2", "--episodes", "1", "--repeats", "1",
+               "--cpu-time"]
+    done = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr
+    rows = {line.split("  ")[1].strip(): line for line in done.stdout.splitlines()[2:]}
+    assert {"one observation", "one intent", "whole tick"} <= set(rows), done.stdout
+    a, b, ratio = rows["whole tick"].split()[2:5]
+    assert float(a) > 0 and float(b) > 0 and abs(float(ratio) - float(b) / float(a)) < 0.01
+    assert done.stderr.count("done") == 4, done.stderr  # two rounds, two trees
+    refused = subprocess.run([*command[:4], "/proc", *command[5:]], cwd=ROOT,
+                             capture_output=True, text=True, timeout=60)
+    assert refused.returncode == 2 and "not a checkout" in refused.stderr.splitlines()[-1]
