@@ -23,9 +23,9 @@ from typing import NamedTuple
 import numpy as np
 
 from nnql_swarm.learning import ahead
-from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA
+from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA, RF_FIELDS
 from nnql_swarm.learning.record import record_is_valid
-from nnql_swarm.learning.tables import Learner, buffer_makers
+from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.protocol.messages import pack_updates
 
@@ -50,7 +50,7 @@ class SharedTable:
     def __init__(self, config: SwarmConfig) -> None:
         self._learner = Learner(config)  # the tables an agent starts with, and its alpha, gamma
         self._apply, how = ahead.KERNELS.compiled("apply_records")
-        self._buffers = buffer_makers(how != ahead.PLAIN)  # its buffers: arrays, else lists
+        self._arrays = how != ahead.PLAIN  # its buffers: arrays, else lists
         self.alpha = self._learner.params_f[FP_ALPHA]
         self.gamma = self._learner.params_f[FP_GAMMA]
 
@@ -66,17 +66,22 @@ class SharedTable:
         if not learned:
             return ()
         integers: list[int] = []
-        starts, rewards = [0], []
+        starts: list[int] = [0]
+        rewards: list[float] = []  # every record's, one after the other
         for agent in sorted(learned):
             record = learned[agent]
             integers += record[0]
             starts.append(len(integers))
-            rewards.append(list(record[1]))
-        as_ints, as_floats, _ = self._buffers
-        written = as_ints([0] * len(integers))  # a record writes fewer entries than its integers
-        n = self._apply(self._learner.q_ds, self._learner.q_ca, as_ints(integers),
-                        as_ints(starts), as_floats(rewards), len(rewards), self.alpha,
-                        self.gamma, written)
+            rewards += record[1]
+        size = len(integers)  # a record writes fewer entries than its integers
+        if self._arrays:  # made from flat lists: numpy reads nested ones several times slower
+            ints, floats = np.array(integers, np.int64), np.array(rewards).reshape(-1, RF_FIELDS)
+            starts_, written = np.array(starts, np.int64), np.zeros(size, np.int64)
+        else:
+            ints, starts_, written = integers, starts, [0] * size
+            floats = [rewards[k:k + RF_FIELDS] for k in range(0, len(rewards), RF_FIELDS)]
+        n = self._apply(self._learner.q_ds, self._learner.q_ca, ints, starts_, floats,
+                        len(starts) - 1, self.alpha, self.gamma, written)
         return self.current(written[:n])
 
     @property
