@@ -43,7 +43,8 @@ Faults it survives: an observation lost on the way (it follows the clock again a
 the standing query is replaced, at once if it ends mid-negotiation), a neighbour that dies or
 refuses the tick (its ask ends unanswered, or with an error: it is waited for no more), a world
 that dies and comes back with its own clock (``--resume``: the agent starts afresh, and ignores
-whatever is still on its way from the world before; a world gone for longer than
+whatever is still on its way from the world before, never deciding again a tick it decided for
+that world: ``stale-tick``; a world gone for longer than
 ``world_wait_s`` is taken for gone for good: the agent stops, ``world_lost``), forged or
 malformed input (rejected and counted by reason, never raised). ``launch/faultsim.py`` runs it through thousands of seeded
 fault schedules (``sim``).
@@ -141,6 +142,8 @@ class AgentMachine(QueryAnswering, Machine):
         self.shutdown = False  # stopped by the world
         self.world_wait_s = world_wait_s
         self.world_back_by: float | None = None  # the world left: it must be back by then
+        self.decided_world = -1  # the world (its incarnation) whose tick it decided last
+        self.decided_before_left: dict[int, int] = {}  # a world that left -> its last tick decided
         self.world_lost = False  # stopped because it was not
 
     @property
@@ -216,6 +219,8 @@ class AgentMachine(QueryAnswering, Machine):
         self.world_back_by = None if alive else now + self.world_wait_s
         if not alive:
             self._out.append(Log(logging.INFO, "the world left; waiting for it to come back"))
+            before = self.decided_before_left
+            before[self.decided_world] = max(before.get(self.decided_world, -1), self.decided_tick)
             self.decided_tick = -1
             if self.phase is not Phase.STOPPED:
                 self._go(Event.WORLD_LEFT)
@@ -311,6 +316,8 @@ class AgentMachine(QueryAnswering, Machine):
         if self._past_its_episode(obs):
             self.inbox.reject("future-tick", f"tick {obs.tick}, step {obs.step} of episode "
                                              f"{obs.episode}: past that episode's ticks")
+            return
+        if self._before_the_world_left(obs):
             return
         p = self._negotiation()
         if p is not None and obs.tick == p.obs.tick + 1:
@@ -418,7 +425,7 @@ class AgentMachine(QueryAnswering, Machine):
         known = self.intents.get(tick, _NOTHING).actions
         answer = Answer(self.config.run_id, tick, self.sender, self.agent, obs.episode, action,
                         tuple(sorted(known.items())))
-        self.decided_tick, self.decided_answer = tick, answer
+        self.decided_tick, self.decided_answer, self.decided_world = tick, answer, obs.world
         if obs.arrived and self.config.quiet_settled:  # quiet from the next tick (world.engine)
             self.quiet_episode, self.quiet_first_tick = obs.episode, tick - obs.step
         self.decided_waiters = plan.answered
@@ -451,6 +458,20 @@ class AgentMachine(QueryAnswering, Machine):
         c = self.config
         return (obs.step > c.max_steps or obs.episode >= c.episodes
                 or obs.tick - obs.step > obs.episode * c.episode_ticks)
+
+    def _before_the_world_left(self, obs: Observation) -> bool:
+        """Whether ``obs`` is a tick this agent decided for its world before that world left
+        (a copy still on its way): refused and counted (``stale-tick``). Once the world left,
+        the agent takes its next observation at its word (:meth:`on_world`): the same world,
+        reached again, goes on from later ticks, and a world started again is another
+        incarnation (``Observation.world``), whose ticks are its own. So a world's tick is
+        decided once, and an intent announced for it never changes."""
+        last = self.decided_before_left.get(obs.world)
+        if last is not None and obs.tick <= last:
+            self.inbox.reject("stale-tick", f"tick {obs.tick} of world {obs.world}, decided "
+                                            f"before it left (tick {last})")
+            return True
+        return False
 
     def _skipped_while_quiet(self, obs: Observation) -> bool:
         """Whether ``obs`` is a later tick of the episode in which this agent arrived, which the

@@ -26,15 +26,17 @@ from nnql_swarm.protocol.messages import (
 CONFIG = SwarmConfig(run_id="proto", n_agents=3, episodes=20, max_steps=50)
 
 
-def observation(tick: int, agent: int = 0, episode_end: bool = False, others=()) -> bytes:
+def observation(tick: int, agent: int = 0, episode_end: bool = False, others=(),
+                world: int = 0) -> bytes:
     """Agent ``agent``'s observation at ``tick``, in a run of episodes ``max_steps`` ticks
-    long; ``others``: visible ``(id, x, y)``."""
+    long; ``others``: visible ``(id, x, y)``; ``world``: the incarnation of the world that
+    sends it (one more each time the run's world starts)."""
     episode, step = divmod(tick, CONFIG.max_steps)
     return encode(Observation(
         run="proto", tick=tick, sender=WORLD_SENDER, agent=agent, episode=episode, step=step,
         position=(1, 1), goal=(5, 5), neighbours=pack_neighbours(others),
         rank=(agent - tick) % CONFIG.n_agents, reward_ds=0.0, reward_ca=10.0, collided=False,
-        arrived=False, episode_end=episode_end))
+        arrived=False, episode_end=episode_end, world=world))
 
 
 def answer(tick: int, agent: int, action: int, relayed=()) -> bytes:
@@ -211,11 +213,33 @@ def test_a_standing_query_is_ended_counting_from_the_ticks_a_world_that_came_bac
     answerer.on_world(False, 1.0)
     answerer.on_world(True, 2.0)
     ended = []
-    for tick in range(0, STANDING_UNSEEN_TICKS + 3):
-        ended += [(tick, e) for e in answerer.on_observation(observation(tick), 3.0)
+    for tick in range(0, STANDING_UNSEEN_TICKS + 3):  # the world started again
+        ended += [(tick, e) for e in answerer.on_observation(observation(tick, world=1), 3.0)
                   if isinstance(e, EndQuery)]
     assert sorted(ended, key=lambda e: e[1].query) == [
         (STANDING_UNSEEN_TICKS + 1, EndQuery(7)), (STANDING_UNSEEN_TICKS + 1, EndQuery(8))]
+
+
+def test_a_tick_decided_before_the_world_left_is_never_decided_again():
+    """Once the world left, an agent takes its next observation at its word; a copy of a tick it
+    decided for that world, still on its way, is refused (``stale-tick``), so its announced
+    intent never changes (fault schedule 110146 of 16 agents: a duplicate arrived after the
+    world left, and the agent decided that tick again, differently). The same world reached
+    again goes on from later ticks; a world started again replays its ticks as its own."""
+    protocol = ready(agent=0)
+    for tick in range(3):
+        assert "SendIntent" in kinds(protocol.on_observation(observation(tick), 0.1))
+    protocol.on_world(False, 1.0)
+    assert kinds(protocol.on_observation(observation(2), 1.1)) == []
+    assert kinds(protocol.on_observation(observation(1), 1.1)) == []
+    assert protocol.inbox.rejections["stale-tick"] == 2 and protocol.decided_tick == -1
+    protocol.on_world(False, 1.2)  # the token again: what was decided is still known
+    assert kinds(protocol.on_observation(observation(2), 1.3)) == []
+    assert "SendIntent" in kinds(protocol.on_observation(observation(3), 1.4))  # the same world
+    protocol.on_world(False, 2.0)
+    protocol.on_world(True, 3.0)
+    assert "SendIntent" in kinds(protocol.on_observation(observation(1, world=1), 3.1))
+    assert protocol.decided_tick == 1 and protocol.inbox.rejections["stale-tick"] == 3
 
 
 def test_a_settled_agent_sends_the_world_no_intent_unless_it_has_a_record():
