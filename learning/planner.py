@@ -14,7 +14,7 @@ from nnql_swarm.learning.plan import (
 )
 from nnql_swarm.protocol.actions import VIEW_RADIUS
 from nnql_swarm.protocol.config import NEGOTIATING_ALGOS, SwarmConfig
-from nnql_swarm.protocol.jit import python_values
+from nnql_swarm.protocol.jit import Buffer, python_values
 from nnql_swarm.protocol.messages import CELL_TYPE, NEIGHBOUR_ITEMS, Observation
 
 
@@ -37,6 +37,8 @@ def unpack_seen(obs: Observation, arrays: bool) -> tuple:
     (``learning.plan.unpack_seen_into``): fresh arrays ``(k, 3)`` and ``(p,)`` where they are
     compiled (``arrays``), else lists."""
     seen, k, p = _packed(obs, arrays)
+    nb: Buffer
+    parked: Buffer
     if arrays:
         nb, parked = np.empty((k, NEIGHBOUR_ITEMS), dtype=np.int64), np.empty(p, dtype=np.int64)
     else:
@@ -86,8 +88,9 @@ class Plan(NamedTuple):
         """This plan with its own copies of :attr:`cells` and :attr:`parked`, to be read after
         the planner plans another observation."""
         cells, parked = self.cells, self.parked
-        if isinstance(cells, np.ndarray):
+        if isinstance(cells, np.ndarray) and isinstance(parked, np.ndarray):
             return self._replace(cells=cells.copy(), parked=parked.copy())
+        assert isinstance(cells, list) and isinstance(parked, list), "arrays, else lists"
         return self._replace(cells=[list(row) for row in cells], parked=list(parked))
 
 

@@ -39,7 +39,7 @@ from nnql_swarm.protocol.actions import STAY, VIEW_RADIUS
 from nnql_swarm.protocol.config import SwarmConfig
 from nnql_swarm.learning.ahead import PLAIN
 from nnql_swarm.learning.tables import buffer_makers
-from nnql_swarm.protocol.jit import COMPILED, python_values
+from nnql_swarm.protocol.jit import COMPILED, Buffer, python_values
 from nnql_swarm.protocol.messages import (
     CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, NEIGHBOUR_ITEMS, WORLD_SENDER, Observation,
 )
@@ -143,6 +143,10 @@ class SwarmWorld:
         self._sees_all = max(config.width, config.height) <= VIEW_RADIUS + 1
         self._pack_seen, how = RULES.compiled("pack_seen")  # world.sight.pack_seen
         pairs = n * (n - 1)  # the kernel's buffers: every agent may see every other
+        self._seen: Buffer
+        self._parked: Buffer
+        self._seen_at: Buffer
+        self._parked_at: Buffer
         if how == PLAIN:
             self._seen, self._parked = [0] * (NEIGHBOUR_ITEMS * pairs), [0] * pairs
             self._seen_at, self._parked_at = [0] * (n + 1), [0] * (n + 1)

@@ -27,6 +27,7 @@ from nnql_swarm.learning.fields import FP_ALPHA, FP_GAMMA, RF_FIELDS
 from nnql_swarm.learning.record import record_is_valid
 from nnql_swarm.learning.tables import Learner
 from nnql_swarm.protocol.config import SwarmConfig
+from nnql_swarm.protocol.jit import Buffer
 from nnql_swarm.protocol.messages import pack_updates
 
 Updates = tuple[tuple[bytes, bytes], ...]
@@ -74,6 +75,10 @@ class SharedTable:
             starts.append(len(integers))
             rewards += record[1]
         size = len(integers)  # a record writes fewer entries than its integers
+        ints: Buffer
+        floats: Buffer
+        starts_: Buffer
+        written: Buffer
         if self._arrays:  # made from flat lists: numpy reads nested ones several times slower
             ints, floats = np.array(integers, np.int64), np.array(rewards).reshape(-1, RF_FIELDS)
             starts_, written = np.array(starts, np.int64), np.zeros(size, np.int64)
