@@ -4,6 +4,7 @@ Every test checks what the issue promises: the run completes, every episode is r
 once, no tick waits longer than the deadline, and no learned value is lost.
 """
 
+import atexit
 import json
 import os
 import re
@@ -419,6 +420,12 @@ def test_a_recording_the_full_disk_refuses_stops_the_world_before_its_row(small_
     viz.close()
     assert time.monotonic() - started < 10
     assert "Traceback" not in capsys.readouterr().err
+    # The stream is left waiting on the full disk, in a thread that a world process's exit
+    # ends: a multiprocessing child leaves by os._exit, without exit hooks. This process would
+    # wait for it in Rerun's exit hook, for ever: pytest run alone did, after every test passed.
+    import rerun as rr
+
+    atexit.unregister(rr.rerun_shutdown)
 
 
 def rr_points(n: int):
