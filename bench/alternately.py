@@ -14,7 +14,10 @@ Each round runs the benchmark module after ``--`` once in each tree, A first in 
 B first in even ones. Every line of its output that starts with words and holds numbers with a
 decimal point is a figure, named by the words; its value in a run is the least of those numbers
 (the benchmark's repeats; or their median and the repeats). Printed for each figure: the least
-value in each tree, B's over A's, and every run's value. For costs (microseconds), not rates.
+value in each tree and B's over A's, the same of the medians, and every run's value. For costs
+(microseconds), not rates. Where the host is busy, the least of a few runs can rest on one lucky
+run: a run of one tree against itself (the same code in both) gave 1.15 at 8 agents with the host
+busy (8 December at 00:30). Trust a ratio whose runs' spread is small, and whose medians agree.
 
 Each tree runs its own code: the benchmark runs in the tree with ``PYTHONPATH`` on it, where its
 ``nnql_swarm`` package is (checked before the first round), and its kernels compiled ahead of
@@ -25,6 +28,7 @@ tree's processes run them in plain Python.
 import argparse
 import os
 import re
+import statistics
 import subprocess
 import sys
 from pathlib import Path
@@ -95,13 +99,15 @@ def main() -> int:
             print(f"round {r + 1} {name} done", file=sys.stderr, flush=True)
     print(f"{' '.join(command)}: the least of {args.rounds} runs a tree, alternately "
           f"(A {args.a_dir}, B {args.b_dir})")
-    print(f"  {'figure':<32} {'A':>9} {'B':>9} {'B/A':>6}")
+    print(f"  {'figure':<32} {'A least':>9} {'B least':>9} {'B/A':>6} {'A median':>9} "
+          f"{'B median':>9} {'B/A':>6}")
     for figure in values["A"]:
         a, b = values["A"][figure], values["B"].get(figure)
         if not b:
             continue
-        ratio = f"{min(b) / min(a):6.3f}" if min(a) else "     -"
-        print(f"  {figure:<32} {min(a):9.2f} {min(b):9.2f} {ratio}   "
+        pairs = ((min(a), min(b)), (statistics.median(a), statistics.median(b)))
+        cells = [f"{x:9.2f} {y:9.2f} " + (f"{y / x:6.3f}" if x else "     -") for x, y in pairs]
+        print(f"  {figure:<32} {cells[0]} {cells[1]}   "
               f"(A {' '.join(f'{v:g}' for v in a)}; B {' '.join(f'{v:g}' for v in b)})")
     return 0
 
