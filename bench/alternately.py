@@ -33,6 +33,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from nnql_swarm.protocol.jit import MODE_VARIABLE
+
 ROOT = Path(__file__).resolve().parent.parent
 FIGURE = re.compile(r"^\s*([A-Za-z][^\d]*?)\s+\(?-?\d")
 DECIMAL = re.compile(r"(?<![\w.])-?\d+\.\d+(?![\w.])")
@@ -51,10 +53,14 @@ def figures(output: str) -> dict[str, float]:
     return found
 
 
-def run(tree: Path, command: list[str]) -> str:
-    """``python -m <command>`` in ``tree``, on its own code; its output (a failure ends it all)."""
+def run(tree: Path, command: list[str], compiled: bool = False) -> str:
+    """``python -m <command>`` in ``tree``, on its own code; its output (a failure ends it all).
+    ``compiled``: with the kernels compiled by numba, whatever this process was told."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    if compiled:
+        env.pop(MODE_VARIABLE, None)
     done = subprocess.run([sys.executable, "-m", *command], cwd=tree, capture_output=True,
-                          text=True, env={**os.environ, "PYTHONPATH": str(tree)})
+                          text=True, env=env)
     if done.returncode != 0:
         last = done.stderr.strip().splitlines()[-1:] or ["no output"]
         raise SystemExit(f"alternately.py: {' '.join(command)} failed in {tree}: {last[0]}")
@@ -70,8 +76,8 @@ def prepare(tree: Path) -> None:
     if done.returncode != 0 or tree.resolve() not in package.parents:
         raise SystemExit(f"alternately.py: {tree} does not hold the nnql_swarm it would run "
                          f"({package})")
-    for builder in BUILDERS:
-        run(tree, [builder])
+    for builder in BUILDERS:  # they compile with numba
+        run(tree, [builder], compiled=True)
 
 
 def main() -> int:
