@@ -41,7 +41,7 @@ from nnql_swarm.learning.ahead import PLAIN
 from nnql_swarm.learning.tables import buffer_makers
 from nnql_swarm.protocol.jit import COMPILED, Buffer, python_values
 from nnql_swarm.protocol.messages import (
-    CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, NEIGHBOUR_ITEMS, WORLD_SENDER, Observation,
+    CELL_TYPE, MAX_AGENTS, MAX_SYNC_GROUPS, NEIGHBOUR_ITEMS, WORLD_SENDER, Observation, pack_ids,
 )
 from nnql_swarm.protocol.ranks import priority_rank
 from nnql_swarm.world.rules_ahead import RULES
@@ -147,6 +147,7 @@ class SwarmWorld:
         self._parked: Buffer
         self._seen_at: Buffer
         self._parked_at: Buffer
+        self._seen_arrays = how != PLAIN
         if how == PLAIN:
             self._seen, self._parked = [0] * (NEIGHBOUR_ITEMS * pairs), [0] * pairs
             self._seen_at, self._parked_at = [0] * (n + 1), [0] * (n + 1)
@@ -224,7 +225,6 @@ class SwarmWorld:
     def _plain(self) -> None:
         """The state as Python values, for the observations."""
         self._cells = self.cells
-        self._shown_arrived = self._arrived  # the buffer of ``_outcome[3]``, for _neighbours
         self._outcome = (python_values(self._r_ds), python_values(self._r_ca),
                          python_values(self._collided), python_values(self._arrived))
 
@@ -293,13 +293,15 @@ class SwarmWorld:
         ``bytes`` of each packing a tick, of which an agent's are slices."""
         n = self.config.n_agents
         seen, parked, seen_at, parked_at = self._seen, self._parked, self._seen_at, self._parked_at
-        self._pack_seen(self._x, self._y, self._shown_arrived, n, self._sees_all,
-                        not self.config.step_aside, seen, parked, seen_at, parked_at)
+        arrived = self._outcome[3]  # as the observations show it
+        self._pack_seen(self._x, self._y, np.array(arrived, dtype=bool) if self._seen_arrays
+                        else arrived, n, self._sees_all, not self.config.step_aside, seen,
+                        parked, seen_at, parked_at)
         seen_at, parked_at = python_values(seen_at), python_values(parked_at)
-        packed = _packed(seen, seen_at[n] // ITEM_BYTES)
+        packed = pack_ids(seen[:seen_at[n] // ITEM_BYTES])
         if self.config.step_aside:  # arrived agents do not park
             return lambda i: (packed[seen_at[i]:seen_at[i + 1]], b"")
-        parked_ids = _packed(parked, parked_at[n] // ITEM_BYTES)
+        parked_ids = pack_ids(parked[:parked_at[n] // ITEM_BYTES])
         return lambda i: (packed[seen_at[i]:seen_at[i + 1]],
                           parked_ids[parked_at[i]:parked_at[i + 1]])
 
@@ -389,7 +391,6 @@ class SwarmWorld:
         self._plain()
         if c.lifelong:  # the observations say who reached a goal: its last step was terminal
             self._outcome = (*self._outcome[:3], reached)
-            self._shown_arrived = self._reached
         self.step += 1
         self.ending = (moved[MOVE_EVERYONE] != 0 and not c.lifelong) or self.step >= c.max_steps
         collided = self._outcome[2]
@@ -415,10 +416,3 @@ class SwarmWorld:
         self.violations += len(problems)
         return tuple(problems)
 
-
-def _packed(items, count: int) -> bytes:
-    """The first ``count`` of a packing's integers (``world.sight.pack_seen``'s buffer: an array
-    of them, or a list in plain Python) as the wire carries them."""
-    if isinstance(items, np.ndarray):
-        return items[:count].tobytes()
-    return np.array(items[:count], dtype=CELL_TYPE).tobytes()
